@@ -181,11 +181,17 @@ def build(path: Path) -> Usd.Stage:
     return stage
 
 
+def write(path: Path) -> None:
+    """Generate the humanoid and save it to ``path`` (replacing any existing file)."""
+    path = Path(path)
+    if path.exists():
+        path.unlink()
+    stage = build(path)
+    stage.GetRootLayer().Save()
+
+
 if __name__ == "__main__":
     out = Path(__file__).with_name("humanoid.usda")
-    if out.exists():
-        out.unlink()
-    stage = build(out)
-    stage.GetRootLayer().Save()
+    write(out)
     total = sum(link.mass for link in links())
     print(f"wrote {out}: {len(links())} links, {len(links()) - 1} joints, {total:.1f} kg")

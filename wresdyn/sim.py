@@ -18,7 +18,7 @@ import numpy as np
 
 from .robot import Robot
 
-__all__ = ["SOLVERS", "explicit_pd_margin", "make_solver", "replay", "SimulationDiverged"]
+__all__ = ["SOLVERS", "explicit_pd_margin", "resolve_solver", "make_solver", "replay", "SimulationDiverged"]
 
 SOLVERS = ("auto", "featherstone", "mujoco")
 """Replay solvers: Newton ``SolverFeatherstone`` (explicit PD, differentiable) or ``SolverMuJoCo``
@@ -49,24 +49,29 @@ def explicit_pd_margin(robot: Robot, dt: float, q: np.ndarray | None = None) -> 
     return np.maximum(robot.kd * dt / (2.0 * m_eff), robot.kp * dt * dt / (4.0 * m_eff))
 
 
+def resolve_solver(robot: Robot, dt: float, kind: str = "auto") -> str:
+    """The concrete solver kind for ``kind`` ("auto" applies the explicit-PD criterion with a 2x margin)."""
+    if kind not in SOLVERS:
+        raise ValueError(f"unknown solver {kind!r}; choose from {SOLVERS}")
+    if kind not in ("auto", "featherstone"):
+        return kind
+    margin = explicit_pd_margin(robot, dt)
+    worst = int(np.argmax(margin))
+    if margin[worst] <= 0.5:
+        return "featherstone"
+    msg = (f"{robot.source.name}: explicit PD is near or past its stability limit at dt={dt} s on "
+           f"{robot.joint_names[worst]} (ratio {margin[worst]:.2f}; add armature or lower kd)")
+    if kind == "featherstone":
+        warnings.warn(msg + "; SolverFeatherstone may diverge", stacklevel=3)
+        return "featherstone"
+    return "mujoco"
+
+
 def make_solver(model, robot: Robot, dt: float, kind: str = "auto"):
     """Create the Newton solver for replay. See the module docstring for the choice."""
     import newton
 
-    if kind not in SOLVERS:
-        raise ValueError(f"unknown solver {kind!r}; choose from {SOLVERS}")
-    if kind in ("auto", "featherstone"):
-        margin = explicit_pd_margin(robot, dt)
-        worst = int(np.argmax(margin))
-        if margin[worst] > 0.5:
-            msg = (f"{robot.source.name}: explicit PD is near or past its stability limit at dt={dt} s on "
-                   f"{robot.joint_names[worst]} (ratio {margin[worst]:.2f}; add armature or lower kd)")
-            if kind == "featherstone":
-                warnings.warn(msg + "; SolverFeatherstone may diverge", stacklevel=2)
-            else:
-                kind = "mujoco"
-        else:
-            kind = "featherstone"
+    kind = resolve_solver(robot, dt, kind)
     if kind == "featherstone":
         return newton.solvers.SolverFeatherstone(model)
     cpu = not str(model.device).startswith("cuda")

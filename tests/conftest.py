@@ -1,0 +1,33 @@
+"""Shared fixtures: robots loaded once per test session."""
+
+import pytest
+
+QUADRUPED_GAINS = {"joint": [{"match": "*", "kp": 80.0, "kd": 2.0, "armature": 0.02}]}
+"""Gains for newton's quadruped.urdf, which has none (same as examples/gains/quadruped.toml, inline)."""
+
+
+def pytest_addoption(parser):
+    parser.addoption("--run-slow", action="store_true", help="also run tests marked slow")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--run-slow"):
+        return
+    skip = pytest.mark.skip(reason="slow: opt in with --run-slow")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
+
+
+@pytest.fixture(scope="session")
+def humanoid():
+    from wresdyn.robot import DEFAULT_ROBOT, load_robot
+
+    return load_robot(DEFAULT_ROBOT)
+
+
+@pytest.fixture(scope="session")
+def quadruped():
+    from wresdyn.robot import load_robot
+
+    return load_robot("newton:quadruped.urdf", gains=QUADRUPED_GAINS)

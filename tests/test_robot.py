@@ -1,0 +1,121 @@
+"""Robot loading: the project humanoid's description, gains overrides, and one-line errors on bad files."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wresdyn.robot import DEFAULT_ROBOT, RobotError, load_robot
+
+LEG = ["hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll"]
+ARM = ["shoulder_pitch", "shoulder_roll", "shoulder_yaw", "elbow"]
+
+
+def test_humanoid_description(humanoid):
+    r = humanoid
+    expected = [f"left_{j}" for j in LEG] + [f"right_{j}" for j in LEG] + ["waist_yaw"]
+    expected += [f"left_{j}" for j in ARM] + [f"right_{j}" for j in ARM]
+    assert r.joint_names == expected
+    assert r.n_dof == 21 and r.base == "fixed" and r.body_names[0] == "pelvis"
+    assert 30.0 <= r.body_mass.sum() <= 40.0
+    assert set(r.frames) == {"left_sole", "right_sole"}
+    assert np.all(r.lower < r.upper) and np.all(np.isfinite(r.lower))
+    legs = [r.joint_names.index(f"{s}_{j}") for s in ("left", "right") for j in ("hip_pitch", "hip_roll", "knee")]
+    # USD stores angular gains per degree in float32: allow that round-off around the bounds
+    assert np.all((r.kp[legs] >= 100.0 - 1e-3) & (r.kp[legs] <= 200.0 + 1e-3))
+    ankles_arms = [i for i, n in enumerate(r.joint_names) if "ankle" in n or any(a in n for a in ARM)]
+    assert np.all((r.kp[ankles_arms] >= 20.0 - 1e-3) & (r.kp[ankles_arms] <= 60.0 + 1e-3))
+    assert np.all(r.armature > 0.0) and np.all(np.isfinite(r.effort)) and np.all(r.kd > 0.0)
+    # inertias are physical: symmetric positive definite and satisfying the triangle inequality
+    for inertia in r.body_inertia:
+        w = np.linalg.eigvalsh(inertia)
+        assert w.min() > 0.0 and w[0] + w[1] >= w[2] - 1e-12
+
+
+def test_scene_generator_is_reproducible(tmp_path):
+    """The committed USD is what scenes/make_humanoid.py writes."""
+    sys.path.insert(0, str(DEFAULT_ROBOT.parent))
+    import make_humanoid
+
+    out = tmp_path / "humanoid.usda"
+    make_humanoid.write(out)
+    a = load_robot(out)
+    b = load_robot(DEFAULT_ROBOT)
+    assert a.joint_names == b.joint_names
+    for field in ("kp", "kd", "lower", "upper", "armature", "effort", "body_mass", "body_inertia", "joint_X_p"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+
+
+def test_gains_override_by_pattern(tmp_path):
+    cfg = tmp_path / "gains.toml"
+    cfg.write_text('[[joint]]\nmatch = "*"\nkp = 50.0\nkd = 1.5\n[[joint]]\nmatch = "*_knee"\nkp = 300.0\narmature = 0.05\n')
+    r = load_robot(DEFAULT_ROBOT, gains=cfg)
+    knee = [i for i, n in enumerate(r.joint_names) if n.endswith("_knee")]
+    other = [i for i in range(r.n_dof) if i not in knee]
+    assert np.all(r.kp[knee] == 300.0) and np.all(r.kp[other] == 50.0) and np.all(r.kd == 1.5)
+    assert np.allclose(r.armature[knee], 0.05)
+
+
+def test_robot_without_gains_gets_clear_message(quadruped):
+    bare = load_robot("newton:quadruped.urdf")
+    assert np.all(bare.kp == 0.0)
+    with pytest.raises(RobotError, match=r"no PD gains.*--gains"):
+        bare.check_gains()
+    quadruped.check_gains()  # the inline config supplies them
+
+
+@pytest.mark.parametrize(
+    "gains, match",
+    [
+        ('[[joint]]\nmatch = "nope_*"\nkp = 1.0\n', "matches no"),
+        ('[[joint]]\nmatch = "*"\nstiffness = 1.0\n', "unknown key"),
+        ('[[joint]]\nmatch = "*"\nkp = -1.0\n', "must be >= 0"),
+        ("[[joint]\nmatch = ", "malformed TOML"),
+        ('[[joint]]\nkp = 1.0\n', "needs a match"),
+    ],
+)
+def test_bad_gains_config(tmp_path, gains, match):
+    cfg = tmp_path / "gains.toml"
+    cfg.write_text(gains)
+    with pytest.raises(RobotError, match=match):
+        load_robot(DEFAULT_ROBOT, gains=cfg)
+
+
+def _usd(tmp_path, body: str) -> Path:
+    p = tmp_path / "robot.usda"
+    p.write_text('#usda 1.0\n(\n    upAxis = "Z"\n    metersPerUnit = 1\n)\n' + body)
+    return p
+
+
+def test_bad_robot_files(tmp_path):
+    with pytest.raises(RobotError, match="not found"):
+        load_robot(tmp_path / "missing.usda")
+    bad = tmp_path / "robot.txt"
+    bad.write_text("hello")
+    with pytest.raises(RobotError, match="unknown robot file type"):
+        load_robot(bad)
+    with pytest.raises(RobotError, match="cannot parse USD"):
+        load_robot(_usd(tmp_path, "def Xform \"a\" { this is not usd }\n"))
+    with pytest.raises(RobotError, match="cannot parse URDF"):
+        (tmp_path / "r.urdf").write_text("<robot name='r'><link name='a'>")
+        load_robot(tmp_path / "r.urdf")
+    empty = _usd(tmp_path, 'def Xform "world" {}\n')
+    with pytest.raises(RobotError, match="no articulation"):
+        load_robot(empty)
+    # a single rigid body and no joint is not an articulation either
+    lone = _usd(tmp_path, 'def Cube "box" (prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsCollisionAPI", "PhysicsMassAPI"]) { float physics:mass = 1 }\n')
+    with pytest.raises(RobotError, match="no articulation"):
+        load_robot(lone)
+    # newton's MJCF humanoid has multi-axis hinge groups, imported as D6 joints
+    with pytest.raises(RobotError, match="unsupported joint type D6"):
+        load_robot("newton:nv_humanoid.xml")
+
+
+def test_cli_errors_are_one_line_with_exit_2(tmp_path):
+    for target in (str(tmp_path / "missing.usda"), "newton:nv_humanoid.xml"):
+        res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "inspect", target], capture_output=True, text=True)
+        assert res.returncode == 2
+        lines = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn")]
+        assert len(lines) == 1 and "error:" in lines[0] and target.split(":")[-1] in lines[0]

@@ -1,0 +1,57 @@
+"""``wresdyn`` command line: one subcommand per pipeline stage.
+
+Each subcommand lives in its own module with ``add_arguments(parser)`` and ``run(args) -> int``; modules
+are imported only when their command runs, so ``wresdyn --help`` stays fast. Errors the user can fix
+(bad files, bad configs, a diverging simulation) print one line ``wresdyn <cmd>: error: ...`` and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    # name: (module, one-line help)
+    "inspect": ("wresdyn.commands.inspect", "print a robot's joint table and check it in Newton and MuJoCo"),
+    "demo": ("wresdyn.commands.demo", "run the main job on the embedded defaults"),
+}
+
+
+class UserError(Exception):
+    """An error caused by the user's input: reported in one line, exit code 2."""
+
+
+def _user_errors():
+    from .robot import RobotError
+    from .sim import SimulationDiverged
+
+    errs = [UserError, RobotError, SimulationDiverged, FileNotFoundError]
+    try:
+        from .dataset import DatasetError
+
+        errs.append(DatasetError)
+    except ImportError:
+        pass
+    return tuple(errs)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="wresdyn", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, (module, help_) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_, description=help_)
+        p.set_defaults(_module=module)
+        # argument definitions are cheap; import the module lazily only for its parser hook
+        importlib.import_module(module).add_arguments(p)
+    args = parser.parse_args(argv)
+    mod = importlib.import_module(args._module)
+    try:
+        return int(mod.run(args) or 0)
+    except _user_errors() as e:
+        print(f"wresdyn {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
