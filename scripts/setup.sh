@@ -4,7 +4,7 @@
 # PyTorch: on the project machines `pip install torch==2.13.0` takes a local CPU wheel; an unpinned
 # torch would download a multi-GB CUDA build. To use a GPU, install your CUDA build of torch into the
 # venv first (e.g. `.venv/bin/pip install torch --index-url https://download.pytorch.org/whl/cu128`)
-# and set WRESDYN_TORCH=skip; add the `gpu` extra for Newton's SolverMuJoCo on CUDA.
+# and set WRESDYN_TORCH=skip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 extras=${1:-dev}

@@ -119,3 +119,12 @@ def test_cli_errors_are_one_line_with_exit_2(tmp_path):
         assert res.returncode == 2
         lines = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn")]
         assert len(lines) == 1 and "error:" in lines[0] and target.split(":")[-1] in lines[0]
+
+
+def test_mjcf_and_urdf_load_through_newton(quadruped):
+    ant = load_robot("newton:nv_ant.xml", gains={"joint": [{"match": "*", "kp": 20.0, "kd": 0.5}]})
+    assert ant.n_dof == 8 and np.allclose(ant.armature, 0.01)  # armature read from the MJCF defaults
+    assert ant.joint_names[:2] == ["hip_1", "ankle_1"] and np.all(ant.kp == 20.0)
+    assert quadruped.n_dof == 12 and quadruped.joint_names[0] == "LF_HAA"
+    floating = load_robot("newton:quadruped.urdf", base="floating")
+    assert floating.joint_type[0] == "free" and floating.n_dof == 12
