@@ -98,8 +98,8 @@ def links() -> list[Link]:
     return base + _leg("left", 0.09) + _leg("right", 0.09) + torso + _arm("left", 0.13) + _arm("right", 0.13)
 
 
-PELVIS_HEIGHT = 0.72
-"""Pelvis height above the floor in the zero pose [m] (legs straight, soles on z = 0)."""
+PELVIS_HEIGHT = 0.80
+"""Pelvis height above the floor in the zero pose [m]: the leg chain is 0.80 m, so the soles are on z = 0."""
 
 
 def _box_inertia(m: float, size: tuple[float, float, float]) -> Gf.Vec3f:

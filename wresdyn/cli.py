@@ -15,6 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     # name: (module, one-line help)
     "inspect": ("wresdyn.commands.inspect", "print a robot's joint table and check it in Newton and MuJoCo"),
     "demo": ("wresdyn.commands.demo", "run the main job on the embedded defaults"),
+    "collect": ("wresdyn.commands.collect", "record a dataset on the simulated real robot (or import real logs)"),
 }
 
 

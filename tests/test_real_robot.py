@@ -1,0 +1,140 @@
+"""The simulated real robot: nominal parity with MuJoCo, each mismatch term, config parsing, the gap."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wresdyn.real_robot import Mismatch, MismatchError, RealRobot, collect, replay_gap
+
+RATE = 500.0
+DEFAULT_TOML = Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml"
+
+
+def _command(robot, seconds=0.6, seed=0):
+    """A smooth multisine about mid-range, well inside the limits, shape (T, n_dof)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * RATE))[:, None] / RATE
+    lo, hi = robot.lower, robot.upper
+    f = rng.uniform(0.5, 3.0, size=robot.n_dof)
+    return 0.5 * (lo + hi) + 0.2 * (hi - lo) * np.sin(2 * np.pi * f * t) * np.clip(t / 0.2, 0, 1)
+
+
+def test_nominal_is_exactly_mujoco_replay(humanoid):
+    """All mismatch off and substep = recording step: the same model and the same steps as mujoco_replay."""
+    from wresdyn.mujoco_model import build_mujoco, mujoco_replay
+
+    q_cmd = _command(humanoid)
+    q, qd, tau = RealRobot(humanoid, Mismatch(), RATE).record(q_cmd, settle=0.0)
+    q_ref, qd_ref = mujoco_replay(build_mujoco(humanoid, 1.0 / RATE), q_cmd, q_cmd[0])
+    np.testing.assert_array_equal(q, q_ref[:-1])
+    np.testing.assert_array_equal(qd, qd_ref[:-1])
+    assert Mismatch().is_nominal() and not Mismatch.load(DEFAULT_TOML).is_nominal()
+
+
+def test_mismatch_changes_the_model_fields(humanoid):
+    nominal = RealRobot(humanoid, Mismatch(), RATE).model
+    mm = Mismatch(friction=0.1, damping=0.5, armature_scale=2.0, mass_error=0.1, com_error=0.01, inertia_error=0.1,
+                  kp_scale=0.8, kd_scale=1.5, torque_limit_scale=0.5, seed=3)
+    m = RealRobot(humanoid, mm, RATE).model
+    np.testing.assert_allclose(m.dof_frictionloss, 0.1 * humanoid.effort)
+    np.testing.assert_allclose(m.dof_damping, 0.5 * humanoid.kd)
+    np.testing.assert_allclose(m.dof_armature, 2.0 * nominal.dof_armature)
+    np.testing.assert_allclose(m.actuator_gainprm[:, 0], 0.8 * humanoid.kp)
+    np.testing.assert_allclose(m.actuator_biasprm[:, 2], -1.5 * humanoid.kd)
+    np.testing.assert_allclose(m.actuator_forcerange[:, 1], 0.5 * humanoid.effort)
+    assert not np.allclose(m.body_mass, nominal.body_mass)
+    assert np.abs(m.body_ipos - nominal.body_ipos).max() > 1e-3
+    # one physical robot: the same seed draws the same link errors
+    np.testing.assert_array_equal(RealRobot(humanoid, mm, RATE).model.body_mass, m.body_mass)
+
+
+def test_delay_shifts_the_commands_exactly(humanoid):
+    """A delay of m recording steps is the nominal robot fed m extra steps of the first command."""
+    q_cmd = _command(humanoid, 0.3)
+    m = 3
+    delayed = RealRobot(humanoid, Mismatch(delay=m / RATE, substep=0.001), RATE).record(q_cmd)[0]
+    padded = np.concatenate([np.repeat(q_cmd[:1], m, axis=0), q_cmd])
+    nominal = RealRobot(humanoid, Mismatch(substep=0.001), RATE).record(padded)[0]
+    np.testing.assert_array_equal(delayed, nominal[: len(q_cmd)])
+
+
+def test_torque_saturation_and_sensors(humanoid):
+    q_cmd = _command(humanoid, 0.4)
+    q_cmd[50:] += 0.3 * np.sign(0.5 * (humanoid.lower + humanoid.upper) - q_cmd[50:])  # a step: large torques
+    clean = RealRobot(humanoid, Mismatch(torque_limit_scale=0.1), RATE)
+    q0, qd0, tau = clean.record(q_cmd)
+    assert (np.abs(tau) <= 0.1 * humanoid.effort * (1 + 1e-9)).all()
+    assert (np.abs(tau) >= 0.1 * humanoid.effort * 0.999).any(), "the step should saturate some joint"
+    res = 2.0 ** -12
+    noisy = RealRobot(humanoid, Mismatch(torque_limit_scale=0.1, position_noise=1e-3, velocity_noise=0.05,
+                                         encoder_resolution=res), RATE)
+    q, qd, _ = noisy.record(q_cmd, np.random.default_rng(0))
+    np.testing.assert_array_equal(q, np.round(q / res) * res)  # quantised
+    # the physics is the same, only the measurement differs: noise of the configured size
+    assert 0.8e-3 < (q - q0).std() < 1.2e-3
+    assert 0.04 < (qd - qd0).std() < 0.06
+    with pytest.raises(ValueError, match="Generator"):
+        noisy.record(q_cmd)
+
+
+def test_mismatch_config_file(tmp_path):
+    mm = Mismatch.load(DEFAULT_TOML)
+    assert mm.friction > 0 and mm.delay > 0 and mm.torque_limit_scale < 1 and mm.substep == 0.001
+    assert Mismatch.from_dict(mm.to_dict()) == mm
+    bad = tmp_path / "bad.toml"
+    for text, match in [("fricton = 0.1\n", "unknown key"), ("friction = -1.0\n", ">= 0"),
+                        ("friction = 'a lot'\n", "must be a number"), ("seed = 1.5\n", "integer"),
+                        ("kp_scale = 0.0\n", "> 0"), ("friction = \n", "malformed TOML")]:
+        bad.write_text(text)
+        with pytest.raises(MismatchError, match=match) as e:
+            Mismatch.load(bad)
+        assert str(bad) in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(MismatchError, match="not found"):
+        Mismatch.load(tmp_path / "missing.toml")
+
+
+def test_substep_must_divide_the_step(humanoid):
+    with pytest.raises(MismatchError, match="does not divide"):
+        RealRobot(humanoid, Mismatch(substep=0.0015), RATE)
+
+
+def test_default_mismatch_opens_a_gap_the_nominal_robot_does_not(humanoid):
+    """PD-only Newton replay against the recorded robot: with the default mismatch the gap is many times the
+    Newton-vs-MuJoCo integration difference of the nominal robot (a few 1e-3 rad)."""
+    counts = {"heldout": 1}
+    real = collect(humanoid, Mismatch.load(DEFAULT_TOML), counts, duration=1.0, seed=1).split("heldout")
+    nominal = collect(humanoid, Mismatch(substep=0.001), counts, duration=1.0, seed=1).split("heldout")
+    np.testing.assert_array_equal(real[0].q_cmd, nominal[0].q_cmd)  # same excitation, different robot
+    gap = replay_gap(humanoid, real + [_renamed(nominal[0])], RATE)["per_trajectory"]
+    assert gap["heldout_000"] > 0.03
+    assert gap["nominal"] < 0.01
+    assert gap["heldout_000"] > 5 * gap["nominal"]
+
+
+def _renamed(tr):
+    from dataclasses import replace
+
+    return replace(tr, name="nominal")
+
+
+def test_collect_command(tmp_path, capsys):
+    from wresdyn.cli import main
+    from wresdyn.dataset import load_dataset
+
+    out = tmp_path / "out"
+    args = ["collect", "--train", "1", "--heldout", "0", "--ood", "1", "--duration", "0.3", "--no-gap",
+            "--out", str(out)]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "[1/2] train_000" in printed and "[2/2] ood_000" in printed  # progress, one line per trajectory
+    ds = load_dataset(out / "dataset.npz")
+    assert [tr.split for tr in ds.trajectories] == ["train", "ood"]
+    assert ds.mismatch == Mismatch.load(DEFAULT_TOML).to_dict()
+    assert (out / "spectrum.png").stat().st_size > 0
+    bad = tmp_path / "bad.toml"
+    bad.write_text("delay_ms = 5\n")
+    assert main(["collect", "--mismatch", str(bad), "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("wresdyn collect: error:") and str(bad) in err and "\n" not in err
+    assert not (tmp_path / "x").exists()  # nothing written on a config error
