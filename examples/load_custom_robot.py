@@ -33,11 +33,11 @@ def main() -> int:
         robot = wresdyn.load_robot(args.robot, gains=args.gains)
         print(joint_table(robot))
         robot.check_gains()
-        agreement = pd_agreement(robot, seconds=args.seconds, integrator="Euler")
+        agreement = pd_agreement(robot, seconds=args.seconds)
     except wresdyn.RobotError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(f"Newton ({agreement.solver}) vs MuJoCo C over {args.seconds:g} s of PD replay: "
+    print(f"Newton ({agreement.solver}) vs MuJoCo C ({agreement.integrator}) over {args.seconds:g} s of PD replay: "
           f"max |dq| = {agreement.max_abs:.2e}, mean |dq| = {agreement.mean_abs:.2e}")
     return 0
 

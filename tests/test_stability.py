@@ -12,12 +12,13 @@ from wresdyn.validate import multisine_command
 DT = 0.002
 
 
-def test_humanoid_stable_for_10s_excitation(humanoid):
-    assert explicit_pd_margin(humanoid, DT).max() < 0.5
-    assert resolve_solver(humanoid, DT, "auto") == "featherstone"
+@pytest.mark.parametrize("solver", ["replay", "featherstone"])
+def test_humanoid_stable_for_10s_excitation(humanoid, solver):
+    assert explicit_pd_margin(humanoid, DT).max() < 0.5  # Featherstone's explicit PD is inside its region
+    assert resolve_solver(humanoid, DT, "auto") == "replay"
     # large, fast multisine: 60 % of each joint's half-range, components up to 3 Hz
     cmd = multisine_command(humanoid, 10.0, DT, amplitude=0.6, seed=7)
-    q, qd = replay(humanoid, cmd, cmd[0], dt=DT, solver="featherstone")
+    q, qd = replay(humanoid, cmd, cmd[0], dt=DT, solver=solver)
     assert np.isfinite(q).all() and np.isfinite(qd).all()
     assert np.abs(qd).max() < 50.0  # [rad/s] no runaway
     # PD follows the command: error well below the command's own motion (standing still scores 1.0;
@@ -34,7 +35,12 @@ def test_explicit_pd_criterion_predicts_featherstone_divergence():
         warnings.simplefilter("ignore")
         with pytest.raises(SimulationDiverged):
             replay(stiff, cmd, cmd[0], dt=DT, solver="featherstone")
-    # "auto" switches to SolverMuJoCo, whose implicit PD stays bounded on the same command
-    assert resolve_solver(stiff, DT, "auto") == "mujoco"
-    q, _ = replay(stiff, cmd, cmd[0], dt=DT, solver="auto")
-    assert np.isfinite(q).all() and np.abs(q[1:] - cmd).max() < 0.5
+    # the implicit-PD solvers stay bounded on the same command: "auto" (SolverReplay on a fixed base), and
+    # SolverMuJoCo, which "auto" picks on a floating base when the criterion fails
+    assert resolve_solver(stiff, DT, "auto") == "replay"
+    for solver in ("auto", "mujoco"):
+        q, _ = replay(stiff, cmd, cmd[0], dt=DT, solver=solver)
+        assert np.isfinite(q).all() and np.abs(q[1:] - cmd).max() < 0.5
+    floating = load_robot("newton:quadruped.urdf", base="floating",
+                          gains={"joint": [{"match": "*", "kp": 100.0, "kd": 20.0, "armature": 0.0}]})
+    assert resolve_solver(floating, DT, "auto") == "mujoco"

@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "inspect": ("wresdyn.commands.inspect", "print a robot's joint table and check it in Newton and MuJoCo"),
     "demo": ("wresdyn.commands.demo", "run the main job on the embedded defaults"),
     "collect": ("wresdyn.commands.collect", "record a dataset on the simulated real robot (or import real logs)"),
+    "bench": ("wresdyn.commands.bench", "env-steps/s of the replay workload: SolverReplay vs Featherstone, MuJoCo (issue 6)"),
 }
 
 

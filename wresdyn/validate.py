@@ -57,17 +57,20 @@ class PdAgreement:
     """Newton solver used."""
 
 
-def pd_agreement(robot: Robot, seconds: float = 2.0, dt: float = 0.002, integrator: str = "Euler",
+def pd_agreement(robot: Robot, seconds: float = 2.0, dt: float = 0.002, integrator: str | None = None,
                  solver: str = "auto") -> PdAgreement:
     """Replay one multisine command in Newton and in MuJoCo C from the same start and compare joint positions.
 
-    With ``integrator="Euler"`` MuJoCo integrates like Newton's Featherstone (semi-implicit Euler, explicit PD),
-    so the two should agree to float32 round-off; ``"implicitfast"`` differs by the O(dt) integration scheme.
+    ``integrator=None`` takes the MuJoCo integrator of the same scheme as the Newton solver, so the two agree to
+    float32 round-off: ``"Euler"`` (semi-implicit Euler, explicit PD) for Featherstone, ``"implicitfast"``
+    (implicit drive damping) for SolverReplay and SolverMuJoCo. Across schemes they differ by O(dt).
     """
     from .mujoco_model import build_mujoco, mujoco_replay
     from .sim import replay, resolve_solver
 
     robot.check_gains()
+    if integrator is None:
+        integrator = "Euler" if resolve_solver(robot, dt, solver) == "featherstone" else "implicitfast"
     cmd = multisine_command(robot, seconds, dt)
     q_newton, _ = replay(robot, cmd, cmd[0], dt=dt, solver=solver)
     q_mj, _ = mujoco_replay(build_mujoco(robot, dt, integrator), cmd, cmd[0])
