@@ -34,3 +34,17 @@ def test_load_custom_robot_without_gains_says_how_to_supply_them():
     res = _run("examples/load_custom_robot.py", "newton:quadruped.urdf")
     assert res.returncode == 2
     assert "no PD gains" in res.stderr and "--gains" in res.stderr and "nan" not in res.stdout.lower()
+
+
+@pytest.mark.parametrize("example", ["examples/ppo_vs_gradient.py", "examples/train_residual_ppo.py"])
+def test_learning_examples_smoke(tmp_path, example):
+    res = _run(example, "--test", "--out", tmp_path / "run")
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_demo_quick(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "demo", "--quick", "--out", str(tmp_path)],
+                         capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert res.returncode == 0, res.stderr[-2000:]
+    report = (tmp_path / "report.md").read_text()
+    assert "| gradient |" in report and "| ppo |" in report

@@ -16,7 +16,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "inspect": ("wresdyn.commands.inspect", "print a robot's joint table and check it in Newton and MuJoCo"),
     "demo": ("wresdyn.commands.demo", "run the main job on the embedded defaults"),
     "collect": ("wresdyn.commands.collect", "record a dataset on the simulated real robot (or import real logs)"),
-    "bench": ("wresdyn.commands.bench", "env-steps/s of the replay workload: SolverReplay vs Featherstone, MuJoCo (issue 6)"),
+    "train": ("wresdyn.commands.train", "learn a residual with PPO on a dataset's training split (resumable)"),
+    "eval": ("wresdyn.commands.eval", "replay held-out and OOD data open-loop: PD only vs PD + residual, report"),
+    "bench": ("wresdyn.commands.bench", "env-steps/s of the replay workload for every solver, same robot and worlds"),
+    "fit": ("wresdyn.commands.fit", "learn a residual by gradient descent through the differentiable simulation"),
+    "ablate": ("wresdyn.commands.ablate", "PPO vs gradient vs parametric x MLP/GRU x torque/delta action x seeds"),
 }
 
 

@@ -1,0 +1,105 @@
+"""Replay environment at tiny sizes: resets from the recording, PD replay parity, residual kinds, runaway."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from _tiny_data import make_dataset
+
+from wresdyn.replay_env import ReplayEnv, ReplayEnvConfig
+from wresdyn.residual import ResidualConfig
+from wresdyn.robot import DEFAULT_ROBOT, load_robot
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot(DEFAULT_ROBOT)
+
+
+@pytest.fixture(scope="module")
+def data(robot):
+    return make_dataset(robot, seconds=0.1, counts=(2, 1, 1))
+
+
+def make_env(robot, data, n=4, **cfg):
+    return ReplayEnv(robot, data.split("train"), data.rate_hz, n, ReplayEnvConfig(**cfg))
+
+
+def test_worlds_start_in_the_recorded_state(robot, data):
+    env = make_env(robot, data, horizon=8)
+    bank = env.bank
+    assert torch.equal(env.sim.q, bank.q[env.g])
+    assert torch.equal(env.sim.qd, bank.qd[env.g])
+    # each episode stays inside one trajectory and within the horizon
+    traj = torch.searchsorted(bank.start, env.g, right=True) - 1
+    assert (env.end <= bank.start[traj] + bank.length[traj] - 1).all()
+    assert ((env.end - env.g) <= 8).all() and ((env.end - env.g) >= 1).all()
+    obs = env.get_observations()
+    assert obs["policy"].shape == (4, 4 * robot.n_dof)
+    assert obs["critic"].shape == (4, 6 * robot.n_dof + 1)
+
+
+def test_zero_residual_is_the_plain_newton_pd_replay(robot, data):
+    from wresdyn.sim import replay
+
+    env = make_env(robot, data, n=1, horizon=50)
+    g0 = int(env.g[0])
+    steps = min(5, int(env.end[0]) - g0)
+    for _ in range(steps):
+        env.step(torch.zeros(1, robot.n_dof))
+    cmd = env.bank.q_cmd[g0:g0 + steps].double().numpy()
+    q, _ = replay(robot, cmd, env.bank.q[g0].double().numpy(), env.bank.qd[g0].double().numpy(), dt=env.dt,
+                  solver=env.env_cfg.solver)
+    # same solver, same float32 state: only the order of float operations may differ
+    np.testing.assert_allclose(env.q[0].numpy(), q[-1], atol=1e-5)
+
+
+def test_delta_action_equals_torque_of_the_same_authority(robot, data):
+    # explicit PD: kp (q_cmd + d - q) = kp (q_cmd - q) + kp d, and the delta scale is the torque scale / kp
+    envs = {}
+    for kind in ("torque", "delta_action"):
+        env = ReplayEnv(robot, data.split("train"), data.rate_hz, 2, ReplayEnvConfig(horizon=8),
+                        ResidualConfig(kind=kind), seed=3)
+        a = torch.linspace(-1.0, 1.0, robot.n_dof).repeat(2, 1)
+        env.step(a)
+        envs[kind] = env
+    torch.testing.assert_close(envs["torque"].q, envs["delta_action"].q, atol=1e-6, rtol=0)
+
+
+def test_a_diverging_world_is_reset_counted_and_hidden(robot, data):
+    env = make_env(robot, data, horizon=8)
+    ids = torch.tensor([1])
+    env.sim.set_state(ids, torch.full((1, robot.n_dof), float("nan")), torch.zeros(1, robot.n_dof))
+    obs, rew, dones, extras = env.step(torch.zeros(4, robot.n_dof))
+    assert env.diverged_total == 1
+    assert dones[1] == 1 and not extras["time_outs"][1]
+    assert rew[1] == 0.0 and torch.isfinite(rew).all()
+    assert all(torch.isfinite(v).all() for v in obs.values())
+    # the reset world is back on the recording
+    assert torch.equal(env.sim.q[1], env.bank.q[env.g[1]])
+    assert extras["log"]["Env/diverged"] == 1.0
+
+
+def test_runaway_from_the_recording_is_reset(robot, data):
+    env = make_env(robot, data, horizon=8, max_error=0.05)
+    q = env.bank.q[env.g[:1]] + 0.2
+    env.sim.set_state(torch.tensor([0]), q, env.bank.qd[env.g[:1]])
+    env.step(torch.zeros(4, robot.n_dof))
+    assert env.diverged_total == 1
+
+
+def test_episodes_time_out_at_the_horizon(robot, data):
+    env = make_env(robot, data, horizon=3)
+    seen_timeout = False
+    for _ in range(6):
+        _, _, dones, extras = env.step(torch.zeros(4, robot.n_dof))
+        seen_timeout |= bool(extras["time_outs"].any())
+        assert torch.equal(dones.bool(), extras["time_outs"])  # nothing diverges at zero residual
+        assert (env.episode_length_buf <= 3).all()
+    assert seen_timeout and env.diverged_total == 0
+
+
+def test_config_is_frozen():
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        ReplayEnvConfig().horizon = 3
