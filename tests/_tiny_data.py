@@ -4,44 +4,15 @@ The "real" robot is :func:`wresdyn.mujoco_model.build_mujoco` with extra joint f
 scaled PD gains (the sim-to-real gap a residual has to explain); it is driven open-loop by a smooth
 multisine command and its joint states are recorded every step, like a robot logging at ``rate_hz``.
 
-``Trajectory``/``Dataset`` come from :mod:`wresdyn.dataset` when it exists; until it lands, a temporary
-copy of just its dataclasses stands in (same fields, same meaning).
+The shipped real robot (:mod:`wresdyn.real_robot`) has more effects (delay, saturation, noise); this one is
+small and has a closed-form residual (``tests/test_evaluate.py::Oracle``), which the learner tests need.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-try:
-    from wresdyn.dataset import Dataset, Trajectory
-except ImportError:  # wresdyn/dataset.py is being written in parallel
-    from dataclasses import dataclass, field
-
-    @dataclass
-    class Trajectory:  # type: ignore[no-redef]
-        name: str
-        split: str
-        t: np.ndarray
-        q: np.ndarray
-        qd: np.ndarray
-        qdd: np.ndarray
-        q_cmd: np.ndarray
-        tau: np.ndarray | None = None
-
-    @dataclass
-    class Dataset:  # type: ignore[no-redef]
-        joint_names: list[str]
-        rate_hz: float
-        trajectories: list[Trajectory]
-        robot_file: str = ""
-        robot_sha256: str = ""
-        mismatch: dict = field(default_factory=dict)
-        seed: int | None = None
-        meta: dict = field(default_factory=dict)
-
-        def split(self, name: str) -> list[Trajectory]:
-            return [t for t in self.trajectories if t.split == name]
-
+from wresdyn.dataset import Dataset, Trajectory
 
 DEFAULT_MISMATCH = {"friction_frac": 0.02, "damping_frac": 0.01, "kp_scale": 0.9, "kd_scale": 1.2}
 """Real-robot perturbation: dry friction and viscous damping as fractions of each joint's effort limit

@@ -40,7 +40,7 @@ class AblationConfig:
     """Seeds per cell."""
     ppo_iterations: int = 60
     """PPO iterations per cell."""
-    gradient_iterations: int = 150
+    gradient_iterations: int = 2000
     """Gradient-fit iterations per cell (network and parametric)."""
     segments: int = 4
     """Evaluation points on each learning curve."""

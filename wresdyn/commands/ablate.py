@@ -26,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kinds", type=_tuple(str), default=("torque", "delta_action"), help="comma list")
     p.add_argument("--seeds", type=_tuple(int), default=(0, 1, 2), help="comma list of seeds")
     p.add_argument("--ppo-iterations", type=int, default=60, help="PPO iterations per cell")
-    p.add_argument("--gradient-iterations", type=int, default=150, help="gradient-fit iterations per cell")
+    p.add_argument("--gradient-iterations", type=int, default=2000, help="gradient-fit iterations per cell")
     p.add_argument("--segments", type=int, default=4, help="evaluation points per learning curve")
     p.add_argument("--solver", default="auto", help="simulation solver for training and evaluation")
     p.add_argument("--device", default="cpu", help="device (cpu, cuda:0)")
