@@ -111,11 +111,12 @@ def _gradient_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
     gc = GradFitConfig(residual=ResidualConfig(kind=cell["kind"], arch=cell["arch"] if cell["arch"] != "-" else "mlp"),
                        model="parametric" if cell["learner"] == "parametric" else "network",
                        seed=cell["seed"], solver=cfg.solver, device=cfg.device)
-    gc = dataclasses.replace(gc, **cfg.gradient_overrides)
+    # one schedule (curriculum, learning rate) over all segments: each segment stops at `until` and resumes
+    gc = dataclasses.replace(gc, iterations=cfg.gradient_iterations, **cfg.gradient_overrides)
     done_wall, done_steps = 0.0, 0
     for s in range(1, cfg.segments + 1):
         its = cfg.gradient_iterations * s // cfg.segments
-        policy, curve = fit(robot, dataset, dataclasses.replace(gc, iterations=its), out=out, log=lambda *_: None)
+        policy, curve = fit(robot, dataset, gc, out=out, log=lambda *_: None, until=its)
         wall, steps = curve[-1]["wall"], curve[-1]["sim_steps"]
         yield its, wall - done_wall, steps - done_steps, policy
         done_wall, done_steps = wall, steps

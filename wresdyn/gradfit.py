@@ -256,7 +256,7 @@ class _Windows:
 
 
 def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, eval_fn=None,
-        eval_every: int = 0):
+        eval_every: int = 0, until: int | None = None):
     """Fit a residual policy to ``dataset``'s training split by gradient descent through the simulation.
 
     Args:
@@ -266,6 +266,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         out: Optional run folder: ``checkpoint.pt`` (resumed if present), ``curve.json``.
         log: Progress printer.
         eval_fn: Optional ``eval_fn(policy) -> float`` (held-out error), called every ``eval_every`` iterations.
+        until: Stop (and checkpoint) after this many iterations of the ``cfg.iterations`` schedule (horizon
+            curriculum and learning rate), to resume later; ``None`` runs the whole schedule.
 
     Returns:
         ``(policy, curve)``: the trained :class:`~wresdyn.residual.ResidualPolicy` and the learning curve rows
@@ -293,7 +295,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         curve, start_it, sim_steps, wall0 = state["curve"], state["iteration"], state["sim_steps"], state["wall"]
         log(f"resumed from {ckpt} at iteration {start_it}")
     t0 = time.perf_counter() - wall0
-    for it in range(start_it, cfg.iterations):
+    stop = cfg.iterations if until is None else min(until, cfg.iterations)
+    for it in range(start_it, stop):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
             group["lr"] = cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations))
@@ -311,7 +314,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         if eval_fn is not None and eval_every and ((it + 1) % eval_every == 0 or it + 1 == cfg.iterations):
             row["heldout"] = float(eval_fn(policy))
         curve.append(row)
-        if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == cfg.iterations:
+        if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == stop:
             msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
             log(msg + (f"  held-out {row['heldout']:.4f} rad" if "heldout" in row else "") + f"  {row['wall']:.0f}s")
             if ckpt:
