@@ -8,12 +8,11 @@ import torch
 from _tiny_data import DEFAULT_MISMATCH, make_dataset
 
 from wresdyn.evaluate import evaluate_split, plot_fig3, rollout, write_report
-from wresdyn.robot import DEFAULT_ROBOT, load_robot
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot(DEFAULT_ROBOT)
+def robot(humanoid):
+    return humanoid
 
 
 @pytest.fixture(scope="module")

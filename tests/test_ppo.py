@@ -11,12 +11,11 @@ from _tiny_data import make_dataset
 from wresdyn.ppo import (PPOConfig, RunError, TrainConfig, config_from_dict, latest_checkpoint, load_policy, train)
 from wresdyn.replay_env import ReplayEnvConfig
 from wresdyn.residual import (GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript)
-from wresdyn.robot import DEFAULT_ROBOT, load_robot
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot(DEFAULT_ROBOT)
+def robot(humanoid):
+    return humanoid
 
 
 @pytest.fixture(scope="module")

@@ -9,12 +9,11 @@ from _tiny_data import make_dataset
 
 from wresdyn.replay_env import ReplayEnv, ReplayEnvConfig
 from wresdyn.residual import ResidualConfig
-from wresdyn.robot import DEFAULT_ROBOT, load_robot
 
 
 @pytest.fixture(scope="module")
-def robot():
-    return load_robot(DEFAULT_ROBOT)
+def robot(humanoid):
+    return humanoid
 
 
 @pytest.fixture(scope="module")

@@ -235,23 +235,28 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tup
 
 
 class _Windows:
-    """Uniform sampler of (trajectory, start) windows over the training split, as device tensors."""
+    """Uniform sampler of (trajectory, start) windows over the training split, as device tensors.
+
+    Trajectories may differ in length (imported logs do); the recordings live in the replay environment's
+    :class:`~wresdyn.replay_env.TrajectoryBank`.
+    """
 
     def __init__(self, trajectories, device: str) -> None:
-        f = lambda a: torch.as_tensor(np.stack(a), dtype=torch.float32, device=device)  # noqa: E731
-        lengths = {len(t.t) for t in trajectories}
-        # equal lengths stack; otherwise crop to the shortest (the shipped data has equal lengths)
-        n = min(lengths)
-        self.q, self.qd = f([t.q[:n] for t in trajectories]), f([t.qd[:n] for t in trajectories])
-        self.qdd, self.cmd = f([t.qdd[:n] for t in trajectories]), f([t.q_cmd[:n] for t in trajectories])
-        self.length = n
+        from .replay_env import TrajectoryBank
+
+        self.bank = TrajectoryBank(trajectories, device)
+        self.lengths = np.array([len(t.q) for t in trajectories])
+        self.starts = np.concatenate([[0], np.cumsum(self.lengths)[:-1]])
 
     def sample(self, rng: np.random.Generator, b: int, h: int):
-        traj = torch.as_tensor(rng.integers(0, self.q.shape[0], b), device=self.q.device)
-        start = torch.as_tensor(rng.integers(0, self.length - h, b), device=self.q.device)
-        steps = start[:, None] + torch.arange(h + 1, device=self.q.device)[None]
-        pick = lambda a: a[traj[:, None], steps]  # noqa: E731  (B, H+1, n)
-        q, qd, qdd, cmd = pick(self.q), pick(self.qd), pick(self.qdd), pick(self.cmd)
+        eligible = np.flatnonzero(self.lengths > h)
+        if len(eligible) == 0:
+            raise ValueError(f"every training trajectory is shorter than the {h + 1} samples a window needs")
+        traj = eligible[rng.integers(0, len(eligible), b)]
+        start = rng.integers(0, self.lengths[traj] - h, b)
+        dev = self.bank.q.device
+        rows = torch.as_tensor(self.starts[traj] + start, device=dev)[:, None] + torch.arange(h + 1, device=dev)[None]
+        q, qd, qdd, cmd = self.bank.q[rows], self.bank.qd[rows], self.bank.qdd[rows], self.bank.q_cmd[rows]  # (B, H+1, n)
         return q[:, 0], qd[:, 0], qdd[:, 0], cmd[:, :h], q[:, 1:], qd[:, 1:]
 
 
@@ -339,17 +344,11 @@ def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: 
     ``config.json`` carries the replay settings in the layout of a PPO run (``config.env``, ``config.residual``)
     plus the full gradient-fit config under ``gradfit``.
     """
-    import warnings
-
-    from .residual import export_onnx, export_torchscript
+    from .residual import export_run_files
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     policy = policy.cpu().eval()
-    export_torchscript(policy, out / "policy.pt")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        export_onnx(policy, out / "policy.onnx")
     kind = policy.kind
     arch = "parametric" if cfg.model == "parametric" else cfg.residual.arch
     residual = {**dataclasses.asdict(cfg.residual), "kind": kind}
@@ -359,8 +358,4 @@ def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: 
               "config": {"env": {"solver": cfg.solver, "substeps": 1}, "residual": residual},
               "gradfit": dataclasses.asdict(cfg), "data_path": str(data_path) if data_path else None}
     (out / "config.json").write_text(json.dumps(config, indent=2))
-    meta = {"kind": kind, "arch": arch, "joint_names": list(dataset.joint_names), "rate_hz": float(dataset.rate_hz),
-            "scale": [float(s) for s in policy.scale], "learner": config["learner"],
-            "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",
-            "output": "N*m added to the PD torque" if kind == "torque" else "rad added to q_cmd"}
-    (out / "residual.json").write_text(json.dumps(meta, indent=2))
+    export_run_files(policy, out, dataset, arch=arch, learner=config["learner"])

@@ -240,21 +240,10 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
 
 def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) -> None:
     """Write ``policy.pt`` (TorchScript), ``policy.onnx`` and ``residual.json`` for a trained actor."""
-    import warnings
-
-    from .residual import export_onnx, export_torchscript, policy_from_actor
+    from .residual import export_run_files, policy_from_actor
 
     policy = policy_from_actor(actor, mean, std, scale, cfg.residual.kind, cfg.residual.action_gain)
-    export_torchscript(policy, run_dir / "policy.pt")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the GRU batch-size warning does not apply: h_in is an input
-        export_onnx(policy, run_dir / "policy.onnx")
-    meta = {"kind": cfg.residual.kind, "arch": cfg.residual.arch, "joint_names": list(dataset.joint_names),
-            "rate_hz": float(dataset.rate_hz), "scale": [float(s) for s in scale],
-            "action_gain": cfg.residual.action_gain,
-            "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",
-            "output": "N*m added to the PD torque" if cfg.residual.kind == "torque" else "rad added to q_cmd"}
-    (run_dir / "residual.json").write_text(json.dumps(meta, indent=2))
+    export_run_files(policy, run_dir, dataset, arch=cfg.residual.arch, action_gain=cfg.residual.action_gain)
 
 
 def load_policy(run_dir: str | Path):

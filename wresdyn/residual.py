@@ -46,6 +46,7 @@ __all__ = [
     "policy_from_actor",
     "export_torchscript",
     "export_onnx",
+    "export_run_files",
 ]
 
 KINDS = ("torque", "delta_action")
@@ -284,3 +285,21 @@ def export_onnx(policy: ResidualPolicy, path: str | Path) -> Path:
     torch.onnx.export(module.eval(), args, str(path), input_names=names_in, output_names=names_out,
                       dynamic_axes=axes, opset_version=18, dynamo=False)
     return path
+
+
+def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, **meta) -> None:
+    """Write what ``wresdyn eval`` and a deployment read from a run folder: ``policy.pt`` (TorchScript),
+    ``policy.onnx`` and ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``)."""
+    import json
+    import warnings
+
+    run_dir = Path(run_dir)
+    export_torchscript(policy, run_dir / "policy.pt")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the GRU batch-size warning does not apply: h_in is an input
+        export_onnx(policy, run_dir / "policy.onnx")
+    info = {"kind": policy.kind, "joint_names": list(dataset.joint_names), "rate_hz": float(dataset.rate_hz),
+            "scale": [float(s) for s in policy.scale], **meta,
+            "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",
+            "output": "N*m added to the PD torque" if policy.kind == "torque" else "rad added to q_cmd"}
+    (run_dir / "residual.json").write_text(json.dumps(info, indent=2))

@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-KINDS = ("torque", "delta_action")  # wresdyn.residual.KINDS, repeated so --help does not import torch
-ARCHS = ("mlp", "gru")
+from .train import ARCHS, KINDS, load_data
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,7 +61,6 @@ def run(args: argparse.Namespace) -> int:
 
     from ..cli import UserError
     from ..gradfit import export_run, fit
-    from .train import load_data
 
     cfg = config_from_args(args)
     if cfg.iterations < 1 or cfg.windows < 1 or cfg.horizon < 1 or any(h < 1 for h in cfg.horizon_curriculum):
