@@ -56,3 +56,19 @@ def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
     mtime = (tmp_path / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime
     run_ablation(humanoid, data, cfg, tmp_path, log=lambda *_: None)
     assert (tmp_path / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime == mtime
+
+
+def test_parallel_cells_reproduce_the_sequential_run(tmp_path, humanoid, tiny_data):
+    """`--jobs`: cells in spawned worker processes (robot and data pickled) give the sequential figures."""
+    from wresdyn.dataset import load_dataset
+
+    data = load_dataset(tiny_data, robot=humanoid)
+    cfg = AblationConfig(learners=("gradient", "parametric"), archs=("mlp",), kinds=("torque",), seeds=(0,),
+                         gradient_iterations=3, segments=1, solver="featherstone",
+                         gradient_overrides={"windows": 2, "horizon_curriculum": (2,)})
+    seq = run_ablation(humanoid, data, cfg, tmp_path / "seq", log=lambda *_: None)
+    par = run_ablation(humanoid, data, cfg, tmp_path / "par", log=lambda *_: None, jobs=2)
+    assert [r["name"] for r in par] == [r["name"] for r in seq]
+    for a, b in zip(seq, par):
+        assert b["heldout"]["mean_abs_dq"] == pytest.approx(a["heldout"]["mean_abs_dq"], rel=1e-6)
+    assert (tmp_path / "par" / "table.md").is_file()

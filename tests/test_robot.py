@@ -128,3 +128,14 @@ def test_mjcf_and_urdf_load_through_newton(quadruped):
     assert quadruped.n_dof == 12 and quadruped.joint_names[0] == "LF_HAA"
     floating = load_robot("newton:quadruped.urdf", base="floating")
     assert floating.joint_type[0] == "free" and floating.n_dof == 12
+
+
+def test_robot_pickles_as_its_load_call(humanoid):
+    """Parallel workers receive robots by pickle: the copy is the same description, gains overrides included."""
+    import pickle
+
+    copy = pickle.loads(pickle.dumps(humanoid))
+    assert copy.joint_names == humanoid.joint_names and np.array_equal(copy.kp, humanoid.kp)
+    tuned = load_robot(DEFAULT_ROBOT, gains={"joint": [{"match": "*_knee", "kp": 123.0}]})
+    again = pickle.loads(pickle.dumps(tuned))
+    assert np.array_equal(again.kp, tuned.kp) and 123.0 in again.kp

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AblationConfig", "cells", "run_cell", "run_ablation", "table_markdown", "plot_curves"]
+__all__ = ["AblationConfig", "cells", "run_cell", "run_cells", "run_ablation", "write_summary", "table_markdown",
+           "plot_curves"]
 
 LEARNERS = ("ppo", "gradient", "parametric")
 
@@ -106,9 +107,10 @@ def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
 
 def _gradient_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
     from .gradfit import GradFitConfig, fit
-    from .residual import ResidualConfig
 
-    gc = GradFitConfig(residual=ResidualConfig(kind=cell["kind"], arch=cell["arch"] if cell["arch"] != "-" else "mlp"),
+    residual = dataclasses.replace(GradFitConfig().residual, kind=cell["kind"],
+                                   arch=cell["arch"] if cell["arch"] != "-" else "mlp")
+    gc = GradFitConfig(residual=residual,
                        model="parametric" if cell["learner"] == "parametric" else "network",
                        seed=cell["seed"], solver=cfg.solver, device=cfg.device)
     # one schedule (curriculum, learning rate) over all segments: each segment stops at `until` and resumes
@@ -148,18 +150,57 @@ def run_cell(cell: dict, robot, dataset, cfg: AblationConfig, out: str | Path, l
     return result
 
 
-def run_ablation(robot, dataset, cfg: AblationConfig, out: str | Path, log=print) -> list[dict]:
-    """Run (or resume) every cell; write ``table.md``, ``results.json`` and ``curves.png`` into ``out``."""
+def _worker_init() -> None:
+    import torch
+
+    torch.set_num_threads(1)  # one core per cell: the cells themselves are the parallelism
+
+
+def _run_task(task) -> dict:
+    cell, robot, dataset, cfg, out = task
+    return run_cell(cell, robot, dataset, cfg, out, log=lambda msg: print(msg, flush=True))
+
+
+def run_cells(tasks: list[tuple], jobs: int = 1, log=print) -> list[dict]:
+    """Run (or resume) cells, each task ``(cell, robot, dataset, cfg, out_dir)``; results in task order.
+
+    With ``jobs`` > 1 the cells run in that many worker processes (spawned, one torch thread each; the robot
+    and dataset travel by pickle, the robot as its :func:`~wresdyn.robot.load_robot` call). Each cell's
+    wall-clock is its own, so the figures match a sequential run on an idle core.
+    """
+    if jobs <= 1:
+        out = []
+        for i, task in enumerate(tasks, 1):
+            log(f"[{i}/{len(tasks)}] {task[0]['name']}")
+            out.append(run_cell(*task, log=log))
+        return out
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    results: list[dict | None] = [None] * len(tasks)
+    with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn"), initializer=_worker_init) as pool:
+        futures = {pool.submit(_run_task, task): i for i, task in enumerate(tasks)}
+        for n, fut in enumerate(as_completed(futures), 1):
+            i = futures[fut]
+            results[i] = fut.result()
+            log(f"[{n}/{len(tasks)}] {tasks[i][0]['name']} done: held-out {results[i]['heldout']['mean_abs_dq']:.4f} rad")
+    return results  # type: ignore[return-value]
+
+
+def write_summary(results: list[dict], cfg: AblationConfig, out: str | Path) -> None:
+    """Write ``results.json``, ``table.md`` and ``curves.png`` for finished cells into ``out``."""
     out = Path(out)
-    results = []
-    todo = cells(cfg)
-    t0 = time.perf_counter()
-    for i, cell in enumerate(todo, 1):
-        log(f"[{i}/{len(todo)}] {cell['name']}")
-        results.append(run_cell(cell, robot, dataset, cfg, out / cell["name"], log))
     (out / "results.json").write_text(json.dumps(results, indent=1))
     (out / "table.md").write_text(table_markdown(results, cfg))
     plot_curves(results, out / "curves.png")
+
+
+def run_ablation(robot, dataset, cfg: AblationConfig, out: str | Path, log=print, jobs: int = 1) -> list[dict]:
+    """Run (or resume) every cell, ``jobs`` at a time; write ``table.md``, ``results.json`` and ``curves.png``."""
+    out = Path(out)
+    t0 = time.perf_counter()
+    results = run_cells([(c, robot, dataset, cfg, out / c["name"]) for c in cells(cfg)], jobs, log)
+    write_summary(results, cfg, out)
     log(f"ablation done in {time.perf_counter() - t0:.0f} s: {out / 'table.md'}")
     return results
 

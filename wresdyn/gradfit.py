@@ -32,8 +32,10 @@ __all__ = ["GradFitConfig", "DiffReplay", "SimStep", "build_policy", "rollout", 
 class GradFitConfig:
     """Gradient fit settings (defaults: a small CPU run on the shipped data)."""
 
-    residual: ResidualConfig = ResidualConfig()
-    """Residual kind (torque / delta action) and network (MLP / GRU)."""
+    residual: ResidualConfig = ResidualConfig(fraction=0.5)
+    """Residual kind (torque / delta action) and network (MLP / GRU). Authority 0.5 of each effort limit (PPO's
+    default is 0.25): the shipped "real" robot's drives saturate at 20 % of the limit, and cancelling PD
+    torque beyond that needs the room (held-out 3.09x vs 2.97x at 0.25, both with ``obs_noise`` 0.1)."""
     model: str = "network"
     """``"network"`` (``residual``'s MLP or GRU) or ``"parametric"`` (per-joint gain scales, damping, friction,
     armature: :class:`wresdyn.parametric.ParametricResidual`, a torque residual)."""
@@ -65,6 +67,11 @@ class GradFitConfig:
     """Weight of |a_k − a_{k−1}|² in normalised action units (Table I action rate)."""
     grad_clip: float = 1.0
     """Global gradient-norm clip."""
+    obs_noise: float = 0.1
+    """Gaussian noise added to the policy's observation during training, in units of each channel's
+    normalising std (the simulation itself is not perturbed). A regulariser: with 16 training recordings the
+    network otherwise fits the training windows' states too closely (open-loop error 4x below PD-only on the
+    training trajectories against 2.9x held-out); 0 = off. Not applied to the parametric model."""
     solver: str = "auto"
     """Newton solver (:data:`wresdyn.sim.SOLVERS`); must be differentiable."""
     device: str = "cpu"
@@ -182,13 +189,16 @@ class SimStep(torch.autograd.Function):
         return (*out, None, None)
 
 
-def rollout(sim: DiffReplay, policy, q0, qd0, qdd0, q_cmd, truncation: int = 0):
+def rollout(sim: DiffReplay, policy, q0, qd0, qdd0, q_cmd, truncation: int = 0, obs_noise: float = 0.0,
+            generator: torch.Generator | None = None):
     """Differentiable open-loop replay of H steps with the residual in the loop.
 
     Args:
         q0, qd0, qdd0: Recorded start state [rad, rad/s, rad/s²], (B, n).
         q_cmd: Commands [rad], (B, H, n).
         truncation: Detach the simulated state (and a GRU's hidden state) every this many steps; 0 = never.
+        obs_noise: Std of Gaussian noise on the policy's observation, in units of ``policy.obs_std``.
+        generator: Torch generator of that noise.
 
     Returns:
         q, qd of the simulated steps 1..H, (B, H, n), and the normalised actions (B, H, n).
@@ -199,7 +209,10 @@ def rollout(sim: DiffReplay, policy, q0, qd0, qdd0, q_cmd, truncation: int = 0):
     qs, qds, actions = [], [], []
     scale = policy.scale
     for k in range(q_cmd.shape[1]):
-        res = policy(observation(q, qd, qdd, q_cmd[:, k]))
+        obs = observation(q, qd, qdd, q_cmd[:, k])
+        if obs_noise > 0.0:
+            obs = obs + obs_noise * policy.obs_std * torch.randn(obs.shape, generator=generator, device=obs.device)
+        res = policy(obs)
         actions.append(res / scale)
         if policy.kind == "torque":
             target, tau = q_cmd[:, k], res
@@ -290,6 +303,9 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     horizons = cfg.horizon_curriculum or (cfg.horizon,)
     sim = DiffReplay(robot, cfg.windows, max(horizons), dt, cfg.solver, cfg.device)
     windows = _Windows(train, cfg.device)
+    obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
+    noise_gen = torch.Generator(device=cfg.device)
+    noise_gen.manual_seed(cfg.seed)
     curve, start_it, sim_steps, wall0 = [], 0, 0, 0.0
     ckpt = Path(out) / "checkpoint.pt" if out else None
     if ckpt and ckpt.exists():
@@ -297,6 +313,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         policy.load_state_dict(state["policy"])
         optim.load_state_dict(state["optim"])
         rng.bit_generator.state = state["rng"]
+        if "noise_rng" in state:
+            noise_gen.set_state(state["noise_rng"].cpu())
         curve, start_it, sim_steps, wall0 = state["curve"], state["iteration"], state["sim_steps"], state["wall"]
         log(f"resumed from {ckpt} at iteration {start_it}")
     t0 = time.perf_counter() - wall0
@@ -306,7 +324,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         for group in optim.param_groups:
             group["lr"] = cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations))
         q0, qd0, qdd0, cmd, q_ref, qd_ref = windows.sample(rng, cfg.windows, h)
-        q, qd, actions = rollout(sim, policy, q0, qd0, qdd0, cmd, cfg.grad_truncation)
+        q, qd, actions = rollout(sim, policy, q0, qd0, qdd0, cmd, cfg.grad_truncation, obs_noise, noise_gen)
         loss, parts = window_loss(cfg, q, qd, actions, q_ref, qd_ref, policy.scale if policy.kind == "torque" else None)
         if not torch.isfinite(loss):
             raise FloatingPointError(f"gradient fit: non-finite loss at iteration {it} (simulation diverged)")
@@ -324,7 +342,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
             log(msg + (f"  held-out {row['heldout']:.4f} rad" if "heldout" in row else "") + f"  {row['wall']:.0f}s")
             if ckpt:
                 _save_atomic(ckpt, {"policy": policy.state_dict(), "optim": optim.state_dict(), "rng": rng.bit_generator.state,
-                                    "curve": curve, "iteration": it + 1, "sim_steps": sim_steps, "wall": row["wall"],
+                                    "noise_rng": noise_gen.get_state(), "curve": curve, "iteration": it + 1, "sim_steps": sim_steps, "wall": row["wall"],
                                     "config": dataclasses.asdict(cfg)})
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))

@@ -44,6 +44,14 @@ class Robot:
     fixed (``base == "fixed"``) or free (``base == "floating"``).
     """
 
+    def __reduce__(self):
+        """Pickle as the :func:`load_robot` call that made it: the receiving process (a worker of a parallel
+        ablation) loads the file again. The Newton builder itself holds Warp objects that do not pickle."""
+        args = getattr(self, "_load_args", None)
+        if args is None:
+            raise TypeError("only a Robot made by load_robot can be pickled")
+        return (load_robot, args)
+
     source: Path
     """Robot file the description was loaded from."""
     source_sha256: str
@@ -214,7 +222,9 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         raise RobotError(f"{path}: no articulation found (no bodies connected by joints)")
     if gains is not None:
         apply_overrides(builder, gains, source=path)
-    return _describe(builder, path, base)
+    robot = _describe(builder, path, base)
+    robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
+    return robot
 
 
 def _describe(builder, path: Path, base: str) -> Robot:

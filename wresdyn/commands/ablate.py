@@ -33,9 +33,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ppo-envs", type=int, default=None, help="override PPO's number of parallel envs")
     p.add_argument("--windows", type=int, default=None, help="override the gradient fit's parallel windows")
     p.add_argument("--horizon", type=int, default=None, help="override the gradient fit's window length [steps]")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="cells run in parallel worker processes, one core each (default 1)")
     p.add_argument("--delays", type=_tuple(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
+    p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
     p.add_argument("--delay-learner", default="gradient", help="learner of the delay sweep")
-    p.add_argument("--delay-trajectories", type=_tuple(int), default=(8, 4, 4),
+    p.add_argument("--delay-trajectories", type=_tuple(int), default=(16, 4, 4),
                    help="train,heldout,ood trajectories recorded per delay")
 
 
@@ -56,8 +59,9 @@ def run(args: argparse.Namespace) -> int:
                          ppo_overrides={"ppo.num_envs": args.ppo_envs} if args.ppo_envs else {},
                          gradient_overrides=grad)
     out = Path(args.out)
-    run_ablation(robot, dataset, cfg, out)
-    print((out / "table.md").read_text())
+    if not args.delays_only:
+        run_ablation(robot, dataset, cfg, out, jobs=args.jobs)
+        print((out / "table.md").read_text())
     if args.delays:
         _delay_sweep(robot, dataset, dataclasses.replace(cfg, learners=(args.delay_learner,), archs=("mlp", "gru"),
                                                          kinds=("torque",)), args, out)
@@ -69,14 +73,13 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
 
     import numpy as np
 
-    from ..ablation import run_ablation
+    from ..ablation import cells, run_cells, write_summary
     from ..dataset import load_dataset
     from ..real_robot import Mismatch, collect
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()
     n_train, n_held, n_ood = args.delay_trajectories
-    rows = ["| delay [ms] | PD-only held-out [rad] | MLP held-out [rad] | GRU held-out [rad] | GRU / MLP |",
-            "|---|---|---|---|---|"]
+    folders, tasks = {}, []
     for delay in args.delays:
         folder = out / f"delay_{1e3 * delay:g}ms"
         folder.mkdir(parents=True, exist_ok=True)
@@ -87,9 +90,16 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
             collect(robot, mismatch, {"train": n_train, "heldout": n_held, "ood": n_ood}, seed=dataset.seed or 0,
                     store_tau=False).save(path)
         data = load_dataset(path, robot=robot)
-        results = run_ablation(robot, data, cfg, folder)
-        by_arch = {a: np.mean([r["heldout"]["mean_abs_dq"] for r in results if r["arch"] == a]) for a in ("mlp", "gru")}
-        pd = results[0]["heldout_pd_only"]["mean_abs_dq"]
+        folders[delay] = (folder, len(tasks))
+        tasks += [(c, robot, data, cfg, folder / c["name"]) for c in cells(cfg)]
+    results = run_cells(tasks, args.jobs)  # every delay's cells in one pool
+    rows = ["| delay [ms] | PD-only held-out [rad] | MLP held-out [rad] | GRU held-out [rad] | GRU / MLP |",
+            "|---|---|---|---|---|"]
+    for delay, (folder, first) in folders.items():
+        res = results[first : first + len(cells(cfg))]
+        write_summary(res, cfg, folder)
+        by_arch = {a: np.mean([r["heldout"]["mean_abs_dq"] for r in res if r["arch"] == a]) for a in ("mlp", "gru")}
+        pd = res[0]["heldout_pd_only"]["mean_abs_dq"]
         rows.append(f"| {1e3 * delay:g} | {pd:.4f} | {by_arch['mlp']:.4f} | {by_arch['gru']:.4f} | "
                     f"{by_arch['gru'] / by_arch['mlp']:.2f} |")
     text = "\n".join(rows) + f"\n\nLearner: {cfg.learners[0]}, torque residual, seeds {list(cfg.seeds)}.\n"

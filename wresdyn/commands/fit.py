@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--horizon", type=int, default=None, help="final window length [steps]")
     p.add_argument("--curriculum", default=None, help="window lengths to step through, e.g. 2,4,8,16,32,64 ('' for none)")
     p.add_argument("--lr", type=float, default=None, help="initial Adam learning rate")
+    p.add_argument("--obs-noise", type=float, default=None,
+                   help="training noise on the network's observation, in normalising stds (0 = off)")
     p.add_argument("--solver", default=None, help="simulation solver (default: auto)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--seed", type=int, default=0, help="seed")
@@ -44,7 +46,8 @@ def config_from_args(args: argparse.Namespace):
     if args.fraction is not None:
         res["fraction"] = args.fraction
     kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("horizon", args.horizon),
-                            ("lr", args.lr), ("solver", args.solver)) if v is not None}
+                            ("lr", args.lr), ("solver", args.solver),
+                                            ("obs_noise", args.obs_noise)) if v is not None}
     if args.curriculum is not None:
         kw["horizon_curriculum"] = tuple(int(h) for h in args.curriculum.split(",") if h)
         if kw["horizon_curriculum"] and "horizon" not in kw:

@@ -1,0 +1,103 @@
+"""Throughput of the two learners on one device: PPO (env-steps/s, s per iteration) and the gradient fit.
+
+    python benchmarks/learners.py                                    # CPU: 256 PPO envs, 32 windows
+    python benchmarks/learners.py --device cuda:0 --envs 256,1024,4096,16384 --windows 32,256,1024,4096
+
+Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF, dt = 2 ms).
+
+- PPO: :func:`wresdyn.ppo.train` with the default config (24 steps per env per iteration, MLP 256-128-64,
+  5 epochs x 4 mini-batches) and ``--envs`` worlds, ``--ppo-iterations`` iterations after a 2-iteration
+  warm-up run. ``env`` = simulation + rewards + resets per env-step (:class:`ReplayEnv.step`), ``iteration``
+  = rollout collection + PPO update, as rsl-rl times them. Peers: every ``--solvers`` entry in the same run.
+- Gradient fit: :func:`wresdyn.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
+  curriculum), ``--grad-iterations`` iterations after 2 warm-up ones. One env-step = one window advanced one
+  step, forward and backward counted once each (as in ``curve.json``'s ``sim_steps``).
+
+Prints a table and writes JSON (``--json``). No CUDA graphs: the learners run as they do in training.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str) -> dict:
+    from wresdyn.ppo import default_config, train
+
+    cfg = default_config()
+    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),
+                              ppo=dataclasses.replace(cfg.ppo, num_envs=envs, device=device, save_interval=10**6))
+    with tempfile.TemporaryDirectory() as tmp:
+        train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=2)), Path(tmp) / "warm")
+        s = train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=iterations)),
+                  Path(tmp) / "run")
+    return {"learner": "ppo", "device": device, "solver": s["solver"], "size": envs, "iterations": iterations,
+            "s_per_iteration": s["s_per_iteration"], "env_steps_per_s": s["env_steps_per_s"],
+            "training_steps_per_s": s["training_steps_per_s"]}
+
+
+def _gradient(robot, dataset, device: str, windows: int, horizon: int, iterations: int) -> dict:
+    from wresdyn.gradfit import GradFitConfig, fit
+
+    cfg = GradFitConfig(windows=windows, horizon=horizon, horizon_curriculum=(), iterations=iterations + 2,
+                        device=device)
+    _, curve = fit(robot, dataset, cfg, log=lambda *_: None)
+    a, b = curve[1], curve[-1]  # exclude the first two iterations (compilation, allocation)
+    wall, steps = b["wall"] - a["wall"], b["sim_steps"] - a["sim_steps"]
+    return {"learner": "gradient", "device": device, "solver": "SolverReplay", "size": windows, "horizon": horizon,
+            "iterations": iterations, "s_per_iteration": wall / iterations, "env_steps_per_s": steps / wall,
+            "training_steps_per_s": steps / wall}
+
+
+def main() -> None:
+    import torch
+    import warp as wp
+
+    from wresdyn.dataset import load_dataset
+    from wresdyn.robot import DEFAULT_ROBOT, load_robot
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
+    p.add_argument("--envs", default="256", help="comma list of PPO env counts")
+    p.add_argument("--solvers", default="auto", help="comma list of PPO solvers (auto, featherstone, mujoco)")
+    p.add_argument("--ppo-iterations", type=int, default=10)
+    p.add_argument("--windows", default="32", help="comma list of gradient-fit window counts")
+    p.add_argument("--horizon", type=int, default=64, help="gradient-fit window length [steps]")
+    p.add_argument("--grad-iterations", type=int, default=10)
+    p.add_argument("--json", default=None, help="write the rows here")
+    args = p.parse_args()
+    wp.config.quiet = True
+    torch.set_num_threads(1)
+    robot = load_robot(DEFAULT_ROBOT)
+    dataset = load_dataset(args.data, robot=robot)
+    rows = []
+    for solver in args.solvers.split(","):
+        for envs in (int(x) for x in args.envs.split(",") if x):
+            t = time.perf_counter()
+            rows.append(_ppo(robot, dataset, args.device, envs, args.ppo_iterations, solver))
+            print(f"ppo {solver} {envs}: {time.perf_counter() - t:.0f} s", flush=True)
+    for w in (int(x) for x in args.windows.split(",") if x):
+        rows.append(_gradient(robot, dataset, args.device, w, args.horizon, args.grad_iterations))
+        print(f"gradient {w}: done", flush=True)
+    name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
+    print(f"\n{name}, {args.device}; humanoid 21 DoF, dt 2 ms")
+    print("| learner | solver | envs / windows | s per iteration | env-steps/s (env only) | env-steps/s (training) |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['learner']} | {r['solver']} | {r['size']} | {r['s_per_iteration']:.3f} | "
+              f"{r['env_steps_per_s'] / 1e3:.1f}k | {r['training_steps_per_s'] / 1e3:.1f}k |")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"device": name, "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
