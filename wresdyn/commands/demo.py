@@ -16,7 +16,7 @@ import argparse
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
     p.add_argument("--collect", action="store_true", help="record a fresh small dataset instead of the shipped one")
-    p.add_argument("--ppo-iterations", type=int, default=1000, help="PPO iterations (0.34 s each on 2 CPU cores)")
+    p.add_argument("--ppo-iterations", type=int, default=1000, help="PPO iterations (0.3-0.5 s each on 2 CPU cores)")
     p.add_argument("--fit-iterations", type=int, default=2000, help="gradient-fit iterations")
     p.add_argument("--quick", action="store_true", help="tiny sizes: a smoke run of a minute")
 
