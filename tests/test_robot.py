@@ -139,3 +139,14 @@ def test_robot_pickles_as_its_load_call(humanoid):
     tuned = load_robot(DEFAULT_ROBOT, gains={"joint": [{"match": "*_knee", "kp": 123.0}]})
     again = pickle.loads(pickle.dumps(tuned))
     assert np.array_equal(again.kp, tuned.kp) and 123.0 in again.kp
+
+
+def test_unpickling_a_robot_whose_file_changed_fails(tmp_path):
+    import pickle
+
+    path = tmp_path / "humanoid.usda"
+    path.write_text(DEFAULT_ROBOT.read_text())
+    blob = pickle.dumps(load_robot(path))
+    path.write_text(DEFAULT_ROBOT.read_text() + "\n# edited\n")
+    with pytest.raises(RobotError, match="changed since it was loaded"):
+        pickle.loads(blob)

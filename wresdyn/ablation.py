@@ -165,8 +165,8 @@ def run_cells(tasks: list[tuple], jobs: int = 1, log=print) -> list[dict]:
     """Run (or resume) cells, each task ``(cell, robot, dataset, cfg, out_dir)``; results in task order.
 
     With ``jobs`` > 1 the cells run in that many worker processes (spawned, one torch thread each; the robot
-    and dataset travel by pickle, the robot as its :func:`~wresdyn.robot.load_robot` call). Each cell's
-    wall-clock is its own, so the figures match a sequential run on an idle core.
+    and dataset travel by pickle, the robot as its :func:`~wresdyn.robot.load_robot` call). Each cell times
+    its own training only; cells that share a machine's memory and caches run slower than on an idle core.
     """
     if jobs <= 1:
         out = []

@@ -50,7 +50,7 @@ class Robot:
         args = getattr(self, "_load_args", None)
         if args is None:
             raise TypeError("only a Robot made by load_robot can be pickled")
-        return (load_robot, args)
+        return (_reload, (args, self.source_sha256))
 
     source: Path
     """Robot file the description was loaded from."""
@@ -224,6 +224,14 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         apply_overrides(builder, gains, source=path)
     robot = _describe(builder, path, base)
     robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
+    return robot
+
+
+def _reload(args: tuple, sha256: str) -> Robot:
+    """Unpickle a :class:`Robot`: load the file again and check it is still the same file."""
+    robot = load_robot(*args)
+    if robot.source_sha256 != sha256:
+        raise RobotError(f"{robot.source}: the robot file changed since it was loaded in the parent process")
     return robot
 
 
