@@ -102,3 +102,12 @@ def test_episodes_time_out_at_the_horizon(robot, data):
 def test_config_is_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
         ReplayEnvConfig().horizon = 3
+
+
+def test_observation_noise_reaches_the_policy_only(robot, data):
+    n = robot.n_dof
+    clean = make_env(robot, data, n=64, horizon=8).get_observations()
+    assert torch.equal(clean["policy"], clean["critic"][:, :4 * n])
+    noisy = make_env(robot, data, n=64, horizon=8, obs_noise=0.1).get_observations()
+    diff = noisy["policy"] - noisy["critic"][:, :4 * n]
+    assert 0.08 < float(diff.std()) < 0.12  # noise of 0.1 normalising std on the policy's view

@@ -47,6 +47,10 @@ class ReplayEnvConfig:
     """Runaway distance beyond a joint limit [rad]."""
     max_error: float = 1.0
     """Runaway distance from the recording, max over joints [rad]."""
+    obs_noise: float = 0.0
+    """Gaussian noise on the policy's (normalised) observation [normalising stds], a regulariser as in the
+    gradient fit (:attr:`wresdyn.gradfit.GradFitConfig.obs_noise`); the critic and the simulation see the
+    clean state. 0 = off."""
     critic_err_scale_q: float = 0.05
     """Scale of q − q_r in the critic's privileged observation [rad]."""
     critic_err_scale_qd: float = 0.5
@@ -233,9 +237,12 @@ class ReplayEnv(VecEnv):
 
     def get_observations(self) -> TensorDict:
         bank, g = self.bank, self.g
-        policy = (observation(self.q, self.qd, self.qdd, bank.q_cmd[g]) - self.obs_mean) / self.obs_std
+        clean = (observation(self.q, self.qd, self.qdd, bank.q_cmd[g]) - self.obs_mean) / self.obs_std
+        policy = clean
+        if self.env_cfg.obs_noise > 0.0:
+            policy = clean + self.env_cfg.obs_noise * torch.randn(clean.shape, device=self.device, generator=self.gen)
         left = ((self.end - g).float() / self.max_episode_length).unsqueeze(-1)
-        critic = torch.cat([policy, (self.q - bank.q[g]) / self.env_cfg.critic_err_scale_q,
+        critic = torch.cat([clean, (self.q - bank.q[g]) / self.env_cfg.critic_err_scale_q,
                             (self.qd - bank.qd[g]) / self.env_cfg.critic_err_scale_qd, left], dim=-1)
         return TensorDict({"policy": policy, "critic": critic}, batch_size=[self.num_envs], device=self.device)
 

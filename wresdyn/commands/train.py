@@ -18,6 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--num-envs", type=int, default=None, help="parallel replay worlds")
     p.add_argument("--steps-per-env", type=int, default=None, help="rollout steps per world per iteration")
     p.add_argument("--horizon", type=int, default=None, help="episode length [steps]")
+    p.add_argument("--obs-noise", type=float, default=None,
+                   help="noise on the policy's normalised observation during training [stds] (default 0)")
     p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
     p.add_argument("--solver", default=None, help="Newton solver for wresdyn.sim.make_solver (default: auto)")
     p.add_argument("--device", default=None, help="cpu or cuda:0 (default: cpu)")
@@ -34,7 +36,8 @@ def config_from_args(args: argparse.Namespace):
     from ..ppo import default_config
 
     cfg = default_config()
-    env = {k: v for k, v in (("horizon", args.horizon), ("solver", args.solver)) if v is not None}
+    env = {k: v for k, v in (("horizon", args.horizon), ("solver", args.solver), ("obs_noise", args.obs_noise))
+           if v is not None}
     res = {k: v for k, v in (("kind", args.residual), ("arch", args.arch), ("fraction", args.fraction)) if v is not None}
     ppo = {k: v for k, v in (("iterations", args.iterations), ("num_envs", args.num_envs),
                              ("num_steps_per_env", args.steps_per_env), ("device", args.device), ("seed", args.seed),
