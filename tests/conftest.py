@@ -27,6 +27,20 @@ def humanoid():
 
 
 @pytest.fixture(scope="session")
+def robot(humanoid):
+    """The robot of the learner tests (replay env, PPO, evaluation): the project humanoid."""
+    return humanoid
+
+
+@pytest.fixture(scope="session")
+def data(humanoid):
+    """A tiny recording of the humanoid: 2 train, 1 held-out, 1 OOD trajectory of 0.1 s (tests/_tiny_data.py)."""
+    from _tiny_data import make_dataset
+
+    return make_dataset(humanoid, seconds=0.1, counts=(2, 1, 1))
+
+
+@pytest.fixture(scope="session")
 def quadruped():
     from wresdyn.robot import load_robot
 

@@ -11,12 +11,7 @@ from wresdyn.evaluate import evaluate_split, plot_fig3, rollout, write_report
 
 
 @pytest.fixture(scope="module")
-def robot(humanoid):
-    return humanoid
-
-
-@pytest.fixture(scope="module")
-def data(robot):
+def data(robot):  # longer than the shared tiny recording, no training split
     return make_dataset(robot, seconds=0.3, counts=(0, 2, 1))
 
 

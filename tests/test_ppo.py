@@ -6,21 +6,10 @@ import json
 import numpy as np
 import pytest
 import torch
-from _tiny_data import make_dataset
 
 from wresdyn.ppo import (PPOConfig, RunError, TrainConfig, config_from_dict, latest_checkpoint, load_policy, train)
 from wresdyn.replay_env import ReplayEnvConfig
 from wresdyn.residual import (GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript)
-
-
-@pytest.fixture(scope="module")
-def robot(humanoid):
-    return humanoid
-
-
-@pytest.fixture(scope="module")
-def data(robot):
-    return make_dataset(robot, seconds=0.1, counts=(2, 1, 1))
 
 
 def tiny(arch="mlp", iterations=2, kind="torque"):

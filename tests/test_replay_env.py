@@ -5,20 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from _tiny_data import make_dataset
 
 from wresdyn.replay_env import ReplayEnv, ReplayEnvConfig
 from wresdyn.residual import ResidualConfig
-
-
-@pytest.fixture(scope="module")
-def robot(humanoid):
-    return humanoid
-
-
-@pytest.fixture(scope="module")
-def data(robot):
-    return make_dataset(robot, seconds=0.1, counts=(2, 1, 1))
 
 
 def make_env(robot, data, n=4, **cfg):

@@ -201,9 +201,16 @@ def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joint
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(title or traj.name)
     fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
+    """Write a matplotlib figure (parent folders created) and close it."""
+    import matplotlib.pyplot as plt
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
 
@@ -241,11 +248,7 @@ def plot_learning_curves(runs: dict[str, str | Path], path: str | Path) -> Path:
         ax.set_xlabel("PPO iteration")
         ax.legend()
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _fmt(m: dict | None) -> str:

@@ -79,6 +79,7 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()
     n_train, n_held, n_ood = args.delay_trajectories
+    grid = cells(cfg)
     folders, tasks = {}, []
     for delay in args.delays:
         folder = out / f"delay_{1e3 * delay:g}ms"
@@ -91,12 +92,12 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
                     store_tau=False).save(path)
         data = load_dataset(path, robot=robot)
         folders[delay] = (folder, len(tasks))
-        tasks += [(c, robot, data, cfg, folder / c["name"]) for c in cells(cfg)]
+        tasks += [(c, robot, data, cfg, folder / c["name"]) for c in grid]
     results = run_cells(tasks, args.jobs)  # every delay's cells in one pool
     rows = ["| delay [ms] | PD-only held-out [rad] | MLP held-out [rad] | GRU held-out [rad] | GRU / MLP |",
             "|---|---|---|---|---|"]
     for delay, (folder, first) in folders.items():
-        res = results[first : first + len(cells(cfg))]
+        res = results[first : first + len(grid)]
         write_summary(res, cfg, folder)
         by_arch = {a: np.mean([r["heldout"]["mean_abs_dq"] for r in res if r["arch"] == a]) for a in ("mlp", "gru")}
         pd = res[0]["heldout_pd_only"]["mean_abs_dq"]
