@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.ppo import (PPOConfig, RunError, TrainConfig, config_from_dict, latest_checkpoint, load_policy, train)
+from wresdyn.ppo import (PPOConfig, RunError, TrainConfig, apply_overrides, config_from_dict, default_config,
+                         latest_checkpoint, load_policy, train)
 from wresdyn.replay_env import ReplayEnvConfig
 from wresdyn.residual import (GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript)
 
@@ -27,6 +28,26 @@ def test_config_round_trips_through_json():
     assert config_from_dict(json.loads(json.dumps(dataclasses.asdict(cfg)))) == cfg
 
 
+def test_overrides_set_any_field_and_refuse_bad_ones(tmp_path):
+    import subprocess
+    import sys
+
+    cfg = apply_overrides(default_config(), ["ppo.desired_kl=0.05", "residual.hidden_dims=128,64", "env.horizon=500",
+                                             "residual.obs_normalization=false", "rewards.joint_pos_bonus=0"])
+    assert (cfg.ppo.desired_kl, cfg.residual.hidden_dims, cfg.env.horizon) == (0.05, (128, 64), 500)
+    assert cfg.residual.obs_normalization is False and cfg.rewards.joint_pos_bonus == 0.0
+    assert cfg.ppo.gamma == default_config().ppo.gamma  # nothing else moved
+    for bad, msg in (("ppo.nope=1", "no field 'nope'"), ("net.x=1", "unknown section"), ("ppo.num_envs=1.5", "not a int"),
+                     ("ppo.gamma", "SECTION.FIELD=VALUE")):
+        with pytest.raises(ValueError, match=msg):
+            apply_overrides(default_config(), [bad])
+    out = tmp_path / "never"
+    res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "train", "data/dataset.npz", "--out", str(out),
+                          "--set", "ppo.nope=1"], capture_output=True, text=True)
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn")]
+    assert res.returncode == 2 and len(lines) == 1 and "nope" in lines[0] and not out.exists()
+
+
 def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     run = tmp_path / "run"
     s = train(data, robot, tiny(iterations=2), run)
@@ -40,12 +61,22 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     assert s["iterations_this_session"] == 2
     assert latest_checkpoint(run).name == "model_2.pt"
     assert saved["iter"] == 0
+    # where and how a run goes on may change (a run started on a GPU goes on here), what it learns may not
+    saved_cfg = json.loads((run / "config.json").read_text())
+    saved_cfg["config"]["ppo"]["device"] = "cuda:3"
+    (run / "config.json").write_text(json.dumps(saved_cfg))
+    moved = dataclasses.replace(tiny(iterations=4), ppo=dataclasses.replace(
+        tiny(iterations=4).ppo, save_interval=2, torch_threads=2))
+    assert train(data, robot, moved, run)["iterations_this_session"] == 1
     # a different configuration is refused rather than silently mixed in
     with pytest.raises(RunError):
         train(data, robot, dataclasses.replace(tiny(iterations=3), rewards=dataclasses.replace(
             tiny().rewards, sigma_q=0.5)), run)
     with pytest.raises(RunError):
         train(data, robot, tiny(iterations=3), run, resume=False)
+    with pytest.raises(RunError):
+        train(data, robot, dataclasses.replace(tiny(iterations=5), ppo=dataclasses.replace(tiny().ppo, iterations=5,
+                                                                                            gamma=0.9)), run)
 
 
 def test_gru_trains_and_exported_policy_loads(robot, data, tmp_path):

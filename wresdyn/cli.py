@@ -60,4 +60,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # `python -m wresdyn.cli` runs this file as __main__; go through the package module so the commands'
+    # `from ..cli import UserError` is the class caught above
+    from wresdyn.cli import main as _main
+
+    sys.exit(_main())

@@ -20,8 +20,8 @@ from .replay_env import ReplayEnvConfig
 from .residual import ResidualConfig
 from .rewards import RewardConfig
 
-__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "runner_cfg", "train", "latest_checkpoint",
-           "load_policy", "RunError"]
+__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "apply_overrides", "runner_cfg", "train",
+           "latest_checkpoint", "load_policy", "RunError"]
 
 
 class RunError(ValueError):
@@ -73,6 +73,10 @@ class PPOConfig:
     machine two intra-op threads made a (256, 84) gather-and-normalise 600x slower (20 ms vs 31 us)."""
 
 
+RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads")
+""":class:`PPOConfig` fields a resumed run may change: how long, where and how it runs, not what it learns."""
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Everything a residual-learning run depends on besides the data."""
@@ -110,6 +114,46 @@ def config_from_dict(d: dict) -> TrainConfig:
         return cls(**kw)
 
     return build(TrainConfig, d)
+
+
+def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
+    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set``.
+
+    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type
+    (tuples as comma-separated numbers, booleans as true/false). Raises ``ValueError`` with a one-line
+    message for an unknown key or a value of the wrong type.
+    """
+    from dataclasses import replace
+
+    sections = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
+    changes: dict[str, dict] = {}
+    for item in items:
+        key, sep, text = str(item).partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not sep or not dot:
+            raise ValueError(f"override {item!r} is not SECTION.FIELD=VALUE (sections: {', '.join(sections)})")
+        if section not in sections:
+            raise ValueError(f"override {item!r}: unknown section {section!r}; choose from {', '.join(sections)}")
+        names = [f.name for f in fields(sections[section])]
+        if name not in names:
+            raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
+        changes.setdefault(section, {})[name] = _parse_like(getattr(sections[section], name), text.strip(), item)
+    return replace(cfg, **{s: replace(sections[s], **kw) for s, kw in changes.items()})
+
+
+def _parse_like(current, text: str, item):
+    """``text`` parsed as the type of ``current`` (bool, int, float, str, tuple of numbers)."""
+    try:
+        if isinstance(current, bool):
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return text.lower() in ("true", "1")
+        if isinstance(current, tuple):
+            kind = type(current[0]) if current else float
+            return tuple(kind(v) for v in text.split(",") if v.strip())
+        return type(current)(text)
+    except ValueError:
+        raise ValueError(f"override {item!r}: {text!r} is not a {type(current).__name__}") from None
 
 
 def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
@@ -194,7 +238,8 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     if ckpt is not None and cfg_path.is_file():
         old = json.loads(cfg_path.read_text())["config"]
         new = json.loads(json.dumps(saved["config"]))
-        old["ppo"].pop("iterations", None), new["ppo"].pop("iterations")  # a run may be extended
+        for key in RESUME_MAY_CHANGE:  # a run may be extended, or moved to another device or machine
+            old["ppo"].pop(key, None), new["ppo"].pop(key, None)
         if old != new:
             raise RunError(f"{run_dir} was trained with another configuration; resume with the same one "
                            "or choose another folder")

@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="cpu or cuda:0 (default: cpu)")
     p.add_argument("--seed", type=int, default=None, help="seed (default 0)")
     p.add_argument("--save-interval", type=int, default=None, help="checkpoint every N iterations")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override any field of the run configuration (wresdyn.ppo.TrainConfig), e.g. "
+                        "--set ppo.desired_kl=0.05 --set residual.hidden_dims=128,64; repeatable, applied last")
     p.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD trajectories afterwards (like `wresdyn eval`)")
 
@@ -33,7 +36,8 @@ def config_from_args(args: argparse.Namespace):
     """The default :class:`~wresdyn.ppo.TrainConfig` with the flags given on the command line applied."""
     from dataclasses import replace
 
-    from ..ppo import default_config
+    from ..cli import UserError
+    from ..ppo import apply_overrides, default_config
 
     cfg = default_config()
     env = {k: v for k, v in (("horizon", args.horizon), ("solver", args.solver), ("obs_noise", args.obs_noise))
@@ -42,7 +46,11 @@ def config_from_args(args: argparse.Namespace):
     ppo = {k: v for k, v in (("iterations", args.iterations), ("num_envs", args.num_envs),
                              ("num_steps_per_env", args.steps_per_env), ("device", args.device), ("seed", args.seed),
                              ("save_interval", args.save_interval)) if v is not None}
-    return replace(cfg, env=replace(cfg.env, **env), residual=replace(cfg.residual, **res), ppo=replace(cfg.ppo, **ppo))
+    cfg = replace(cfg, env=replace(cfg.env, **env), residual=replace(cfg.residual, **res), ppo=replace(cfg.ppo, **ppo))
+    try:
+        return apply_overrides(cfg, getattr(args, "overrides", []))
+    except ValueError as e:
+        raise UserError(str(e)) from None
 
 
 def load_data(data: str, robot_file: str | None = None):
