@@ -32,10 +32,9 @@ __all__ = ["GradFitConfig", "DiffReplay", "SimStep", "build_policy", "rollout", 
 class GradFitConfig:
     """Gradient fit settings (defaults: a small CPU run on the shipped data)."""
 
-    residual: ResidualConfig = ResidualConfig(fraction=0.5)
-    """Residual kind (torque / delta action) and network (MLP / GRU). Authority 0.5 of each effort limit (PPO's
-    default is 0.25): the shipped "real" robot's drives saturate at 20 % of the limit, and cancelling PD
-    torque beyond that needs the room (held-out 3.09x vs 2.97x at 0.25, both with ``obs_noise`` 0.1)."""
+    residual: ResidualConfig = ResidualConfig()
+    """Residual kind (torque / delta action), network (MLP / GRU) and authority (0.5 of each effort limit, as
+    for PPO: held-out 3.09x vs 2.97x at 0.25, both with ``obs_noise`` 0.1)."""
     model: str = "network"
     """``"network"`` (``residual``'s MLP or GRU) or ``"parametric"`` (per-joint gain scales, damping, friction,
     armature: :class:`wresdyn.parametric.ParametricResidual`, a torque residual)."""
