@@ -246,7 +246,8 @@ def plot_learning_curves(runs: dict[str, str | Path], path: str | Path) -> Path:
     axes[1].set_ylabel("training mean |Δq| [rad]")
     for ax in axes:
         ax.set_xlabel("PPO iteration")
-        ax.legend()
+        if ax.lines:  # runs without PPO logs (the gradient fit) draw nothing
+            ax.legend()
     fig.tight_layout()
     return save_figure(fig, path)
 
