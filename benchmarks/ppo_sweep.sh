@@ -6,14 +6,16 @@
 #   bash benchmarks/ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]
 #
 # SWEEP_FILE: one run per line, `NAME ARGS...`, ARGS passed to `wresdyn train` (e.g. --set ppo.desired_kl=0.06);
-# blank lines and lines starting with # are skipped. Environment: GPUS (number of GPUs, default 1; 0 runs on the CPU), WRESDYN (the
-# CLI, default `wresdyn`), WRESDYN_DATA (default data/dataset.npz). Prints one line per run: name, iterations
-# reached, held-out and OOD factor when evaluated.
+# blank lines and lines starting with # are skipped. Environment: GPUS (number of GPUs, default 1; 0 runs on
+# the CPU), WRESDYN (the CLI, default `wresdyn`), WRESDYN_DATA (default data/dataset.npz). Prints one line
+# per run: name, iterations reached, held-out and OOD factor when evaluated.
 set -uo pipefail
 sweep=${1:?usage: ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]}
 out=${2:?usage: ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]}
 iters=${3:?usage: ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]}
 limit=${4:-0}
+limiter=""
+[[ "$limit" -gt 0 ]] && limiter="timeout $limit"
 gpus=${GPUS:-1}
 data=${WRESDYN_DATA:-data/dataset.npz}
 w=${WRESDYN:-wresdyn}
@@ -26,13 +28,8 @@ while read -r name args; do
   dev=cpu
   [[ "$gpus" -gt 0 ]] && dev="cuda:$((i % gpus))"
   # shellcheck disable=SC2086
-  if [[ "$limit" -gt 0 ]]; then
-    timeout "$limit" $w train "$data" --device "$dev" --iterations "$iters" --save-interval 50 --out "$out/$name" \
-        --eval $args >> "$out/$name.log" 2>&1 &
-  else
-    $w train "$data" --device "$dev" --iterations "$iters" --save-interval 50 --out "$out/$name" --eval $args \
-        >> "$out/$name.log" 2>&1 &
-  fi
+  $limiter $w train "$data" --device "$dev" --iterations "$iters" --save-interval 50 --out "$out/$name" --eval $args \
+      >> "$out/$name.log" 2>&1 &
   pids+=($!)
   i=$((i + 1))
 done < "$sweep"

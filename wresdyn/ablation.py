@@ -71,13 +71,6 @@ def cells(cfg: AblationConfig) -> list[dict]:
     return out
 
 
-def _set_dotted(obj, dotted: str, value):
-    head, _, rest = dotted.partition(".")
-    if rest:
-        return dataclasses.replace(obj, **{head: _set_dotted(getattr(obj, head), rest, value)})
-    return dataclasses.replace(obj, **{head: value})
-
-
 def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> dict:
     from .evaluate import evaluate_split
 
@@ -87,20 +80,20 @@ def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> 
 
 
 def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
-    from .ppo import default_config, load_policy, train
+    from .ppo import default_config, load_policy, set_field, train
 
     tc = default_config()
     for key, value in cfg.ppo_overrides.items():
-        tc = _set_dotted(tc, key, value)
-    tc = _set_dotted(tc, "residual.arch", cell["arch"])
-    tc = _set_dotted(tc, "residual.kind", cell["kind"])
-    tc = _set_dotted(tc, "ppo.seed", cell["seed"])
-    tc = _set_dotted(tc, "ppo.device", cfg.device)
-    tc = _set_dotted(tc, "env.solver", cfg.solver)
-    tc = _set_dotted(tc, "ppo.save_interval", max(1, cfg.ppo_iterations // cfg.segments))
+        tc = set_field(tc, key, value)
+    tc = set_field(tc, "residual.arch", cell["arch"])
+    tc = set_field(tc, "residual.kind", cell["kind"])
+    tc = set_field(tc, "ppo.seed", cell["seed"])
+    tc = set_field(tc, "ppo.device", cfg.device)
+    tc = set_field(tc, "env.solver", cfg.solver)
+    tc = set_field(tc, "ppo.save_interval", max(1, cfg.ppo_iterations // cfg.segments))
     for s in range(1, cfg.segments + 1):
         its = cfg.ppo_iterations * s // cfg.segments
-        summary = train(dataset, robot, _set_dotted(tc, "ppo.iterations", its), out, resume=True)
+        summary = train(dataset, robot, set_field(tc, "ppo.iterations", its), out, resume=True)
         policy, _ = load_policy(out)
         yield its, summary["wall_s_this_session"], summary["env_steps_this_session"], policy
 

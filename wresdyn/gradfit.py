@@ -340,8 +340,9 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
             msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
             log(msg + (f"  held-out {row['heldout']:.4f} rad" if "heldout" in row else "") + f"  {row['wall']:.0f}s")
             if ckpt:
-                _save_atomic(ckpt, {"policy": policy.state_dict(), "optim": optim.state_dict(), "rng": rng.bit_generator.state,
-                                    "noise_rng": noise_gen.get_state(), "curve": curve, "iteration": it + 1, "sim_steps": sim_steps, "wall": row["wall"],
+                _save_atomic(ckpt, {"policy": policy.state_dict(), "optim": optim.state_dict(),
+                                    "rng": rng.bit_generator.state, "noise_rng": noise_gen.get_state(), "curve": curve,
+                                    "iteration": it + 1, "sim_steps": sim_steps, "wall": row["wall"],
                                     "config": dataclasses.asdict(cfg)})
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))

@@ -20,8 +20,8 @@ from .replay_env import ReplayEnvConfig
 from .residual import ResidualConfig
 from .rewards import RewardConfig
 
-__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "apply_overrides", "runner_cfg", "train",
-           "latest_checkpoint", "load_policy", "RunError"]
+__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "apply_overrides", "set_field",
+           "runner_cfg", "train", "latest_checkpoint", "load_policy", "RunError"]
 
 
 class RunError(ValueError):
@@ -125,10 +125,7 @@ def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
     (tuples as comma-separated numbers, booleans as true/false). Raises ``ValueError`` with a one-line
     message for an unknown key or a value of the wrong type.
     """
-    from dataclasses import replace
-
     sections = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
-    changes: dict[str, dict] = {}
     for item in items:
         key, sep, text = str(item).partition("=")
         section, dot, name = key.strip().partition(".")
@@ -139,8 +136,18 @@ def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
         names = [f.name for f in fields(sections[section])]
         if name not in names:
             raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
-        changes.setdefault(section, {})[name] = _parse_like(getattr(sections[section], name), text.strip(), item)
-    return replace(cfg, **{s: replace(sections[s], **kw) for s, kw in changes.items()})
+        cfg = set_field(cfg, f"{section}.{name}", _parse_like(getattr(sections[section], name), text.strip(), item))
+    return cfg
+
+
+def set_field(cfg, dotted: str, value):
+    """``cfg`` (a frozen dataclass) with the nested field at ``dotted`` (e.g. ``"ppo.seed"``) set to ``value``."""
+    from dataclasses import replace
+
+    head, _, rest = dotted.partition(".")
+    if rest:
+        return replace(cfg, **{head: set_field(getattr(cfg, head), rest, value)})
+    return replace(cfg, **{head: value})
 
 
 def _parse_like(current, text: str, item):

@@ -46,8 +46,7 @@ def config_from_args(args: argparse.Namespace):
     if args.fraction is not None:
         res["fraction"] = args.fraction
     kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("horizon", args.horizon),
-                            ("lr", args.lr), ("solver", args.solver),
-                                            ("obs_noise", args.obs_noise)) if v is not None}
+                            ("lr", args.lr), ("solver", args.solver), ("obs_noise", args.obs_noise)) if v is not None}
     if args.curriculum is not None:
         kw["horizon_curriculum"] = tuple(int(h) for h in args.curriculum.split(",") if h)
         if kw["horizon_curriculum"] and "horizon" not in kw:
