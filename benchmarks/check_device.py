@@ -12,9 +12,9 @@ import argparse
 import numpy as np
 import warp as wp
 
-from wresdyn.mujoco_model import build_mujoco
-from wresdyn.robot import DEFAULT_ROBOT, load_robot
-from wresdyn.solver import SolverReplay
+from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+from wresdyn.robot.mujoco_model import build_mujoco
+from wresdyn.sim.replay import SolverReplay
 
 DT = 0.002
 

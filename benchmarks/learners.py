@@ -5,11 +5,11 @@
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF, dt = 2 ms).
 
-- PPO: :func:`wresdyn.ppo.train` with the default config (24 steps per env per iteration, MLP 256-128-64,
+- PPO: :func:`wresdyn.learn.ppo.train` with the default config (24 steps per env per iteration, MLP 256-128-64,
   5 epochs x 4 mini-batches) and ``--envs`` worlds, ``--ppo-iterations`` iterations after a 2-iteration
   warm-up run. ``env`` = simulation + rewards + resets per env-step (:class:`ReplayEnv.step`), ``iteration``
   = rollout collection + PPO update, as rsl-rl times them. Peers: every ``--solvers`` entry in the same run.
-- Gradient fit: :func:`wresdyn.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
+- Gradient fit: :func:`wresdyn.learn.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
   curriculum), ``--grad-iterations`` iterations after 2 warm-up ones. One env-step = one window advanced one
   step, forward and backward counted once each (as in ``curve.json``'s ``sim_steps``).
 
@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str) -> dict:
-    from wresdyn.ppo import default_config, train
+    from wresdyn.learn.ppo import default_config, train
 
     cfg = default_config()
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),
@@ -45,7 +45,7 @@ def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str) -
 
 
 def _gradient(robot, dataset, device: str, windows: int, horizon: int, iterations: int) -> dict:
-    from wresdyn.gradfit import GradFitConfig, fit
+    from wresdyn.learn.gradfit import GradFitConfig, fit
 
     cfg = GradFitConfig(windows=windows, horizon=horizon, horizon_curriculum=(), iterations=iterations + 2,
                         device=device)
@@ -61,8 +61,8 @@ def main() -> None:
     import torch
     import warp as wp
 
-    from wresdyn.dataset import load_dataset
-    from wresdyn.robot import DEFAULT_ROBOT, load_robot
+    from wresdyn.data.dataset import load_dataset
+    from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default="cpu")

@@ -20,7 +20,7 @@ import argparse
 import sys
 
 import wresdyn
-from wresdyn.validate import joint_table, pd_agreement
+from wresdyn.sim.parity import joint_table, pd_agreement
 
 
 def main() -> int:

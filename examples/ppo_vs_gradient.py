@@ -14,8 +14,9 @@ import argparse
 import dataclasses
 
 import wresdyn
-from wresdyn.ablation import AblationConfig, run_ablation
-from wresdyn.dataset import load_dataset
+from wresdyn.data.dataset import load_dataset
+from wresdyn.evaluation.ablation import AblationConfig, run_ablation
+from wresdyn.paths import DEFAULT_DATASET
 
 
 def main() -> None:
@@ -25,7 +26,7 @@ def main() -> None:
     args = parser.parse_args()
 
     robot = wresdyn.load_robot(wresdyn.DEFAULT_ROBOT)
-    data = load_dataset(wresdyn.DEFAULT_ROBOT.parent.parent / "data" / "dataset.npz", robot=robot)
+    data = load_dataset(DEFAULT_DATASET, robot=robot)
     cfg = AblationConfig(learners=("ppo", "gradient"), archs=("mlp",), kinds=("torque",), seeds=(0,),
                          ppo_iterations=100, gradient_iterations=1000, segments=4)
     if args.test:

@@ -12,15 +12,15 @@ import argparse
 import dataclasses
 
 from wresdyn import load_robot
-from wresdyn.evaluate import evaluate_split, plot_fig3, write_report
-from wresdyn.ppo import default_config, load_policy, train
-from wresdyn.robot import DEFAULT_ROBOT
+from wresdyn.evaluation.evaluate import evaluate_split, plot_fig3, write_report
+from wresdyn.learn.ppo import default_config, load_policy, train
+from wresdyn.robot.description import DEFAULT_ROBOT
 
 
 def tiny_dataset(robot):
     """Two training, one held-out and one OOD trajectory of 0.5 s on the default mismatched "real" robot."""
-    from wresdyn.commands.collect import DEFAULT_MISMATCH
-    from wresdyn.real_robot import Mismatch, collect
+    from wresdyn.paths import DEFAULT_MISMATCH
+    from wresdyn.data.real_robot import Mismatch, collect
 
     return collect(robot, Mismatch.load(DEFAULT_MISMATCH), {"train": 2, "heldout": 1, "ood": 1}, duration=0.5)
 
@@ -39,7 +39,7 @@ def main() -> None:
     if args.test:
         dataset = tiny_dataset(robot)
     else:
-        from wresdyn.dataset import load_dataset
+        from wresdyn.data.dataset import load_dataset
 
         dataset = load_dataset(args.data, robot)
 

@@ -1,10 +1,10 @@
 """Tiny recorded datasets for learner tests: a perturbed MuJoCo robot plays the part of the real one.
 
-The "real" robot is :func:`wresdyn.mujoco_model.build_mujoco` with extra joint friction and damping and
+The "real" robot is :func:`wresdyn.robot.mujoco_model.build_mujoco` with extra joint friction and damping and
 scaled PD gains (the sim-to-real gap a residual has to explain); it is driven open-loop by a smooth
 multisine command and its joint states are recorded every step, like a robot logging at ``rate_hz``.
 
-The shipped real robot (:mod:`wresdyn.real_robot`) has more effects (delay, saturation, noise); this one is
+The shipped real robot (:mod:`wresdyn.data.real_robot`) has more effects (delay, saturation, noise); this one is
 small and has a closed-form residual (``tests/test_evaluate.py::Oracle``), which the learner tests need.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wresdyn.dataset import Dataset, Trajectory
+from wresdyn.data.dataset import Dataset, Trajectory
 
 DEFAULT_MISMATCH = {"friction_frac": 0.02, "damping_frac": 0.01, "kp_scale": 0.9, "kd_scale": 1.2}
 """Real-robot perturbation: dry friction and viscous damping as fractions of each joint's effort limit
@@ -21,7 +21,7 @@ DEFAULT_MISMATCH = {"friction_frac": 0.02, "damping_frac": 0.01, "kp_scale": 0.9
 
 def real_mujoco(robot, dt: float, mismatch: dict):
     """The "real" robot: the MuJoCo model of ``robot`` with ``mismatch`` applied."""
-    from wresdyn.mujoco_model import build_mujoco
+    from wresdyn.robot.mujoco_model import build_mujoco
 
     m = build_mujoco(robot, dt)
     effort = np.where(np.isfinite(robot.effort), robot.effort, 50.0)
@@ -50,7 +50,7 @@ def multisine(robot, seconds: float, dt: float, freq: tuple[float, float], ampli
 
 def record(robot, q_cmd: np.ndarray, dt: float, mismatch: dict, name: str, split: str):
     """Play ``q_cmd`` on the "real" robot from rest at ``q_cmd[0]`` and record a :class:`Trajectory`."""
-    from wresdyn.mujoco_model import mujoco_replay
+    from wresdyn.robot.mujoco_model import mujoco_replay
 
     q, qd = mujoco_replay(real_mujoco(robot, dt, mismatch), q_cmd[:-1], q_cmd[0])
     qdd = np.gradient(qd, dt, axis=0)

@@ -21,7 +21,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def humanoid():
-    from wresdyn.robot import DEFAULT_ROBOT, load_robot
+    from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 
     return load_robot(DEFAULT_ROBOT)
 
@@ -42,6 +42,6 @@ def data(humanoid):
 
 @pytest.fixture(scope="session")
 def quadruped():
-    from wresdyn.robot import load_robot
+    from wresdyn.robot.description import load_robot
 
     return load_robot("newton:quadruped.urdf", gains=QUADRUPED_GAINS)

@@ -4,10 +4,10 @@ import json
 
 import numpy as np
 import pytest
-
 from _tiny_data import make_dataset
-from wresdyn.ablation import AblationConfig, cells, run_ablation
+
 from wresdyn.cli import main
+from wresdyn.evaluation.ablation import AblationConfig, cells, run_ablation
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def test_fit_command_exports_a_run_that_eval_reads(tmp_path, tiny_data, model):
 
 
 def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
-    from wresdyn.dataset import load_dataset
+    from wresdyn.data.dataset import load_dataset
 
     full = AblationConfig()
     names = [c["name"] for c in cells(full)]
@@ -60,7 +60,7 @@ def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
 
 def test_parallel_cells_reproduce_the_sequential_run(tmp_path, humanoid, tiny_data):
     """`--jobs`: cells in spawned worker processes (robot and data pickled) give the sequential figures."""
-    from wresdyn.dataset import load_dataset
+    from wresdyn.data.dataset import load_dataset
 
     data = load_dataset(tiny_data, robot=humanoid)
     cfg = AblationConfig(learners=("gradient", "parametric"), archs=("mlp",), kinds=("torque",), seeds=(0,),

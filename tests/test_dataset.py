@@ -6,8 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.dataset import (SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd,
-                             load_dataset)
+from wresdyn.data.dataset import SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd, load_dataset
 
 RATE = 500.0
 NAMES = ["j_a", "j_b", "j_c"]
@@ -202,7 +201,7 @@ def test_unknown_split_query():
 
 def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
     """The real pipeline, tiny: same seed gives the same data, another seed other data, and the file is exact."""
-    from wresdyn.real_robot import Mismatch, collect
+    from wresdyn.data.real_robot import Mismatch, collect
 
     mm = Mismatch.load(Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml")
     counts = {"train": 1, "ood": 2}

@@ -7,7 +7,7 @@ import pytest
 import torch
 from _tiny_data import DEFAULT_MISMATCH, make_dataset
 
-from wresdyn.evaluate import evaluate_split, plot_fig3, rollout, write_report
+from wresdyn.evaluation.evaluate import evaluate_split, plot_fig3, rollout, write_report
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +33,7 @@ class Oracle(torch.nn.Module):
 
 
 def test_pd_only_rollout_is_the_plain_newton_replay(robot, data):
-    from wresdyn.sim import replay
+    from wresdyn.sim.solvers import replay
 
     traj = data.split("heldout")[0]
     for solver in ("replay", "featherstone"):

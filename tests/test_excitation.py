@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from wresdyn import excitation as ex
+from wresdyn.data import excitation as ex
 
 RATE = 500.0
 IK_ACCEPT = 1e-3
@@ -12,7 +12,7 @@ IK_ACCEPT = 1e-3
 
 @pytest.fixture(scope="module")
 def ik(humanoid):
-    from wresdyn.ik import FootIK
+    from wresdyn.data.ik import FootIK
 
     return FootIK(humanoid)
 
@@ -26,7 +26,7 @@ def _fk_independent(humanoid, q, frame):
     """Sole position by a fresh Pinocchio model and data, not the IK's own."""
     import pinocchio as pin
 
-    from wresdyn.pinocchio_model import build_pinocchio
+    from wresdyn.robot.pinocchio_model import build_pinocchio
 
     model = build_pinocchio(humanoid)
     data = model.createData()

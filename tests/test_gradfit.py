@@ -6,11 +6,11 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-
 from _tiny_data import make_dataset
-from wresdyn.gradfit import DiffReplay, GradFitConfig, SimStep, _Windows, build_policy, fit, rollout, window_loss
-from wresdyn.residual import ResidualConfig, obs_stats
-from wresdyn.robot import load_robot
+
+from wresdyn.learn.gradfit import DiffReplay, GradFitConfig, SimStep, _Windows, build_policy, fit, rollout, window_loss
+from wresdyn.learn.residual import ResidualConfig, obs_stats
+from wresdyn.robot.description import load_robot
 
 DT = 0.002
 FD_RTOL = 3e-2

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from wresdyn.dataset import DatasetError, load_dataset
-from wresdyn.logs import import_log, import_logs
+from wresdyn.data.dataset import DatasetError, load_dataset
+from wresdyn.data.logs import import_log, import_logs
 
 SIM_RATE = 500.0
 

@@ -9,10 +9,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from wresdyn.mujoco_model import build_mujoco, mujoco_replay
-from wresdyn.pinocchio_model import build_pinocchio
-from wresdyn.sim import replay
-from wresdyn.validate import multisine_command
+from wresdyn.robot.mujoco_model import build_mujoco, mujoco_replay
+from wresdyn.robot.pinocchio_model import build_pinocchio
+from wresdyn.sim.parity import multisine_command
+from wresdyn.sim.solvers import replay
 
 DT = 0.002
 
@@ -100,7 +100,7 @@ def test_tier2_floating_base_kinematics(humanoid):
     """Free-flyer conventions: Newton/Pinocchio [x y z qx qy qz qw] vs MuJoCo [x y z qw qx qy qz]."""
     import newton
 
-    from wresdyn.robot import load_robot
+    from wresdyn.robot.description import load_robot
 
     r = load_robot(humanoid.source, base="floating")
     assert r.joint_type[0] == "free"

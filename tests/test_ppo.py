@@ -7,10 +7,19 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.ppo import (PPOConfig, RunError, TrainConfig, apply_overrides, config_from_dict, default_config,
-                         latest_checkpoint, load_policy, train)
-from wresdyn.replay_env import ReplayEnvConfig
-from wresdyn.residual import (GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript)
+from wresdyn.learn.ppo import (
+    PPOConfig,
+    RunError,
+    TrainConfig,
+    apply_overrides,
+    config_from_dict,
+    default_config,
+    latest_checkpoint,
+    load_policy,
+    train,
+)
+from wresdyn.learn.replay_env import ReplayEnvConfig
+from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript
 
 
 def tiny(arch="mlp", iterations=2, kind="torque"):

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.real_robot import Mismatch, MismatchError, RealRobot, collect, replay_gap
+from wresdyn.data.real_robot import Mismatch, MismatchError, RealRobot, collect, replay_gap
 
 RATE = 500.0
 DEFAULT_TOML = Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml"
@@ -22,7 +22,7 @@ def _command(robot, seconds=0.6, seed=0):
 
 def test_nominal_is_exactly_mujoco_replay(humanoid):
     """All mismatch off and substep = recording step: the same model and the same steps as mujoco_replay."""
-    from wresdyn.mujoco_model import build_mujoco, mujoco_replay
+    from wresdyn.robot.mujoco_model import build_mujoco, mujoco_replay
 
     q_cmd = _command(humanoid)
     q, qd, tau = RealRobot(humanoid, Mismatch(), RATE).record(q_cmd, settle=0.0)
@@ -120,7 +120,7 @@ def _renamed(tr):
 
 def test_collect_command(tmp_path, capsys):
     from wresdyn.cli import main
-    from wresdyn.dataset import load_dataset
+    from wresdyn.data.dataset import load_dataset
 
     out = tmp_path / "out"
     args = ["collect", "--train", "1", "--heldout", "0", "--ood", "1", "--duration", "0.3", "--no-gap",

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.replay_env import ReplayEnv, ReplayEnvConfig
-from wresdyn.residual import ResidualConfig
+from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
+from wresdyn.learn.residual import ResidualConfig
 
 
 def make_env(robot, data, n=4, **cfg):
@@ -29,7 +29,7 @@ def test_worlds_start_in_the_recorded_state(robot, data):
 
 
 def test_zero_residual_is_the_plain_newton_pd_replay(robot, data):
-    from wresdyn.sim import replay
+    from wresdyn.sim.solvers import replay
 
     env = make_env(robot, data, n=1, horizon=50)
     g0 = int(env.g[0])

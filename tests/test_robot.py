@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.robot import DEFAULT_ROBOT, RobotError, load_robot
+from wresdyn.robot.description import DEFAULT_ROBOT, RobotError, load_robot
 
 LEG = ["hip_yaw", "hip_roll", "hip_pitch", "knee", "ankle_pitch", "ankle_roll"]
 ARM = ["shoulder_pitch", "shoulder_roll", "shoulder_yaw", "elbow"]

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wresdyn.robot import load_robot
-from wresdyn.solver import SolverReplay, TreeError
+from wresdyn.robot.description import load_robot
+from wresdyn.sim.replay import SolverReplay, TreeError
 
 DT = 0.002
 
@@ -89,7 +89,7 @@ def rollout(solver, q0, qd0, cmd, joint_f=None, dtype=np.float32):
 def mujoco_run(robot, q0, qd0, cmd):
     import mujoco
 
-    from wresdyn.mujoco_model import build_mujoco
+    from wresdyn.robot.mujoco_model import build_mujoco
 
     m = build_mujoco(robot, DT, "implicitfast")
     d = mujoco.MjData(m)
@@ -133,7 +133,7 @@ def test_floating_base_is_refused(humanoid):
 def test_mass_matrix_and_bias_match_mujoco(name, request):
     import mujoco
 
-    from wresdyn.mujoco_model import build_mujoco
+    from wresdyn.robot.mujoco_model import build_mujoco
 
     robot = request.getfixturevalue(name)
     # float32 kernels: entries of size ~1 carry ~1e-7 round-off through ~100 operations; float64 kernels
@@ -203,7 +203,7 @@ def test_two_second_trajectory_matches_mujoco_implicitfast(name, request):
 
 
 def test_implicit_damping_is_stable_where_explicit_pd_is_not():
-    from wresdyn.sim import explicit_pd_margin
+    from wresdyn.sim.solvers import explicit_pd_margin
 
     # no armature, high damping: kd dt / m_eff >> 2 on the knees, so explicit PD (SolverFeatherstone) diverges
     robot = load_robot("newton:quadruped.urdf", gains={"joint": [{"match": "*", "kp": 50.0, "kd": 10.0}]})
@@ -357,8 +357,8 @@ def test_step_tape_matches_rollout_tape_and_threads_agree(tri):
 
 
 def test_selectable_in_sim(humanoid):
-    """``solver="replay"`` in :mod:`wresdyn.sim` gives the same replay as the fused rollout."""
-    from wresdyn.sim import SOLVERS, make_solver, replay
+    """``solver="replay"`` in :mod:`wresdyn.sim.solvers` gives the same replay as the fused rollout."""
+    from wresdyn.sim.solvers import SOLVERS, make_solver, replay
 
     assert "replay" in SOLVERS
     assert isinstance(make_solver(humanoid.build_model(1, "cpu"), humanoid, DT, "replay"), SolverReplay)

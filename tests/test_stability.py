@@ -5,9 +5,9 @@ import warnings
 import numpy as np
 import pytest
 
-from wresdyn.robot import load_robot
-from wresdyn.sim import SimulationDiverged, explicit_pd_margin, replay, resolve_solver
-from wresdyn.validate import multisine_command
+from wresdyn.robot.description import load_robot
+from wresdyn.sim.parity import multisine_command
+from wresdyn.sim.solvers import SimulationDiverged, explicit_pd_margin, replay, resolve_solver
 
 DT = 0.002
 

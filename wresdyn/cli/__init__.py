@@ -1,0 +1,51 @@
+"""``wresdyn`` command line: one subcommand per pipeline stage.
+
+Each subcommand lives in its own module with ``add_arguments(parser)`` and ``run(args) -> int``; modules
+are imported only when their command runs, so ``wresdyn --help`` stays fast. Errors the user can fix
+(bad files, bad configs, a diverging simulation) print one line ``wresdyn <cmd>: error: ...`` and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    # name: (module, one-line help)
+    "inspect": ("wresdyn.cli.inspect", "print a robot's joint table and check it in Newton and MuJoCo"),
+    "demo": ("wresdyn.cli.demo", "run the main job on the embedded defaults"),
+    "collect": ("wresdyn.cli.collect", "record a dataset on the simulated real robot (or import real logs)"),
+    "train": ("wresdyn.cli.train", "learn a residual with PPO on a dataset's training split (resumable)"),
+    "eval": ("wresdyn.cli.eval", "replay held-out and OOD data open-loop: PD only vs PD + residual, report"),
+    "bench": ("wresdyn.cli.bench", "env-steps/s of the replay workload for every solver, same robot and worlds"),
+    "fit": ("wresdyn.cli.fit", "learn a residual by gradient descent through the differentiable simulation"),
+    "ablate": ("wresdyn.cli.ablate", "PPO vs gradient vs parametric x MLP/GRU x torque/delta action x seeds"),
+}
+
+
+class UserError(Exception):
+    """An error caused by the user's input: reported in one line, exit code 2."""
+
+
+def _user_errors():
+    from ..errors import SimulationDiverged, WresdynError
+
+    return (UserError, WresdynError, SimulationDiverged, FileNotFoundError)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="wresdyn", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, (module, help_) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_, description=help_)
+        p.set_defaults(_module=module)
+        # argument definitions are cheap; import the module lazily only for its parser hook
+        importlib.import_module(module).add_arguments(p)
+    args = parser.parse_args(argv)
+    mod = importlib.import_module(args._module)
+    try:
+        return int(mod.run(args) or 0)
+    except _user_errors() as e:
+        print(f"wresdyn {args.command}: error: {e}", file=sys.stderr)
+        return 2

@@ -1,0 +1,110 @@
+"""``wresdyn ablate``: PPO vs gradient vs parametric × MLP/GRU × torque/delta action × seeds, on one dataset.
+
+Writes ``OUT/table.md`` (held-out and OOD mean |Δq|, mean ± std over seeds, wall-clock, simulated steps),
+``OUT/results.json`` and ``OUT/curves.png`` (held-out error against wall-clock and against simulated steps).
+Each cell checkpoints; running the same command again resumes. ``--delays 0,0.005,0.01`` adds the delay sweep:
+for each actuator delay the data are recorded again with the default mismatch (delay replaced) and MLP vs GRU
+are compared in ``OUT/delay_<ms>ms/``, summarised in ``OUT/delay_sweep.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _tuple(kind):
+    return lambda s: tuple(kind(x) for x in s.split(",") if x)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", default=None, help="dataset (.npz; default: data/dataset.npz)")
+    p.add_argument("--robot", default=None, help="robot file (default: scenes/humanoid.usda)")
+    p.add_argument("--out", default="runs/ablation", help="output folder")
+    p.add_argument("--learners", type=_tuple(str), default=("ppo", "gradient", "parametric"), help="comma list")
+    p.add_argument("--archs", type=_tuple(str), default=("mlp", "gru"), help="comma list: mlp,gru")
+    p.add_argument("--kinds", type=_tuple(str), default=("torque", "delta_action"), help="comma list")
+    p.add_argument("--seeds", type=_tuple(int), default=(0, 1, 2), help="comma list of seeds")
+    p.add_argument("--ppo-iterations", type=int, default=60, help="PPO iterations per cell")
+    p.add_argument("--gradient-iterations", type=int, default=2000, help="gradient-fit iterations per cell")
+    p.add_argument("--segments", type=int, default=4, help="evaluation points per learning curve")
+    p.add_argument("--solver", default="auto", help="simulation solver for training and evaluation")
+    p.add_argument("--device", default="cpu", help="device (cpu, cuda:0)")
+    p.add_argument("--ppo-envs", type=int, default=None, help="override PPO's number of parallel envs")
+    p.add_argument("--windows", type=int, default=None, help="override the gradient fit's parallel windows")
+    p.add_argument("--horizon", type=int, default=None, help="override the gradient fit's window length [steps]")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="cells run in parallel worker processes, one core each (default 1)")
+    p.add_argument("--delays", type=_tuple(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
+    p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
+    p.add_argument("--delay-learner", default="gradient", help="learner of the delay sweep")
+    p.add_argument("--delay-trajectories", type=_tuple(int), default=(16, 4, 4),
+                   help="train,heldout,ood trajectories recorded per delay")
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from ..data.dataset import load_dataset
+    from ..evaluation.ablation import AblationConfig, run_ablation
+    from ..paths import DEFAULT_DATASET
+    from ..robot.description import DEFAULT_ROBOT, load_robot
+
+    robot = load_robot(args.robot or DEFAULT_ROBOT)
+    data_path = Path(args.data) if args.data else DEFAULT_DATASET
+    dataset = load_dataset(data_path, robot=robot)
+    grad = {k: v for k, v in {"windows": args.windows, "horizon": args.horizon}.items() if v is not None}
+    cfg = AblationConfig(learners=args.learners, archs=args.archs, kinds=args.kinds, seeds=args.seeds,
+                         ppo_iterations=args.ppo_iterations, gradient_iterations=args.gradient_iterations,
+                         segments=args.segments, solver=args.solver, device=args.device,
+                         ppo_overrides={"ppo.num_envs": args.ppo_envs} if args.ppo_envs else {},
+                         gradient_overrides=grad)
+    out = Path(args.out)
+    if not args.delays_only:
+        run_ablation(robot, dataset, cfg, out, jobs=args.jobs)
+        print((out / "table.md").read_text())
+    if args.delays:
+        _delay_sweep(robot, dataset, dataclasses.replace(cfg, learners=(args.delay_learner,), archs=("mlp", "gru"),
+                                                         kinds=("torque",)), args, out)
+    return 0
+
+
+def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
+    import dataclasses
+
+    import numpy as np
+
+    from ..data.dataset import load_dataset
+    from ..data.real_robot import Mismatch, collect
+    from ..evaluation.ablation import cells, run_cells, write_summary
+
+    base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()
+    n_train, n_held, n_ood = args.delay_trajectories
+    grid = cells(cfg)
+    folders, tasks = {}, []
+    for delay in args.delays:
+        folder = out / f"delay_{1e3 * delay:g}ms"
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / "dataset.npz"
+        if not path.is_file():
+            mismatch = dataclasses.replace(base, delay=delay)
+            print(f"recording data with actuator delay {1e3 * delay:g} ms")
+            collect(robot, mismatch, {"train": n_train, "heldout": n_held, "ood": n_ood}, seed=dataset.seed or 0,
+                    store_tau=False).save(path)
+        data = load_dataset(path, robot=robot)
+        folders[delay] = (folder, len(tasks))
+        tasks += [(c, robot, data, cfg, folder / c["name"]) for c in grid]
+    results = run_cells(tasks, args.jobs)  # every delay's cells in one pool
+    rows = ["| delay [ms] | PD-only held-out [rad] | MLP held-out [rad] | GRU held-out [rad] | GRU / MLP |",
+            "|---|---|---|---|---|"]
+    for delay, (folder, first) in folders.items():
+        res = results[first : first + len(grid)]
+        write_summary(res, cfg, folder)
+        by_arch = {a: np.mean([r["heldout"]["mean_abs_dq"] for r in res if r["arch"] == a]) for a in ("mlp", "gru")}
+        pd = res[0]["heldout_pd_only"]["mean_abs_dq"]
+        rows.append(f"| {1e3 * delay:g} | {pd:.4f} | {by_arch['mlp']:.4f} | {by_arch['gru']:.4f} | "
+                    f"{by_arch['gru'] / by_arch['mlp']:.2f} |")
+    text = "\n".join(rows) + f"\n\nLearner: {cfg.learners[0]}, torque residual, seeds {list(cfg.seeds)}.\n"
+    (out / "delay_sweep.md").write_text(text)
+    print(text)
+

@@ -1,0 +1,92 @@
+"""``wresdyn fit DATA``: learn a residual by gradient descent through the differentiable simulation.
+
+The run folder has the same layout as a ``wresdyn train`` (PPO) run: ``config.json``, ``checkpoint.pt``
+(resumed when present), ``curve.json``, and the exported residual ``policy.pt`` (TorchScript), ``policy.onnx``
+and ``residual.json``, so ``wresdyn eval RUN`` evaluates either kind of run identically.
+``--model parametric`` fits the classical baseline (per-joint gains, damping, friction, armature) instead of a
+network and writes the identified parameters to ``parameters.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from .train import ARCHS, KINDS
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
+    p.add_argument("--out", default="runs/fit", help="run folder; an existing checkpoint is resumed (default: runs/fit)")
+    p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
+    p.add_argument("--model", choices=("network", "parametric"), default="network", help="residual network or the parametric baseline")
+    p.add_argument("--residual", choices=KINDS, default="torque", help="torque (paper) or delta_action (ASAP)")
+    p.add_argument("--arch", choices=ARCHS, default="mlp", help="network: mlp (ELU) or gru (GRU + MLP)")
+    p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
+    p.add_argument("--iterations", type=int, default=None, help="optimiser steps")
+    p.add_argument("--windows", type=int, default=None, help="parallel windows (worlds) per step")
+    p.add_argument("--horizon", type=int, default=None, help="final window length [steps]")
+    p.add_argument("--curriculum", default=None, help="window lengths to step through, e.g. 2,4,8,16,32,64 ('' for none)")
+    p.add_argument("--lr", type=float, default=None, help="initial Adam learning rate")
+    p.add_argument("--obs-noise", type=float, default=None,
+                   help="training noise on the network's observation, in normalising stds (0 = off)")
+    p.add_argument("--solver", default=None, help="simulation solver (default: auto)")
+    p.add_argument("--device", default="cpu", help="cpu or cuda:0")
+    p.add_argument("--seed", type=int, default=0, help="seed")
+    p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards (like `wresdyn eval`)")
+
+
+def config_from_args(args: argparse.Namespace):
+    """The default :class:`~wresdyn.learn.gradfit.GradFitConfig` with the flags applied."""
+    from dataclasses import replace
+
+    from ..learn.gradfit import GradFitConfig
+
+    cfg = GradFitConfig()
+    res = {"kind": args.residual, "arch": args.arch}
+    if args.fraction is not None:
+        res["fraction"] = args.fraction
+    kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("horizon", args.horizon),
+                            ("lr", args.lr), ("solver", args.solver), ("obs_noise", args.obs_noise)) if v is not None}
+    if args.curriculum is not None:
+        kw["horizon_curriculum"] = tuple(int(h) for h in args.curriculum.split(",") if h)
+        if kw["horizon_curriculum"] and "horizon" not in kw:
+            kw["horizon"] = kw["horizon_curriculum"][-1]
+    return replace(cfg, residual=replace(cfg.residual, **res), model=args.model, device=args.device, seed=args.seed, **kw)
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+    from dataclasses import asdict
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..data.loading import load_data
+    from ..learn.gradfit import export_run, fit
+    from . import UserError
+
+    cfg = config_from_args(args)
+    if cfg.iterations < 1 or cfg.windows < 1 or cfg.horizon < 1 or any(h < 1 for h in cfg.horizon_curriculum):
+        raise UserError("--iterations, --windows, --horizon and the curriculum must be >= 1")
+    ds, robot = load_data(args.data, args.robot)
+    out = Path(args.out)
+    what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"
+    print(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
+          f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}", flush=True)
+    try:
+        policy, curve = fit(robot, ds, cfg, out=out)
+    except (ValueError, FloatingPointError) as e:
+        raise UserError(str(e).splitlines()[0]) from None
+    export_run(policy, out, cfg, ds, args.data)
+    if cfg.model == "parametric":
+        params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
+        (out / "parameters.json").write_text(json.dumps(params, indent=1))
+    summary = {"iterations": cfg.iterations, "wall_s": curve[-1]["wall"] if curve else 0.0,
+               "sim_steps": curve[-1]["sim_steps"] if curve else 0, "config": asdict(cfg)}
+    (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    print(f"done: {summary['wall_s']:.0f} s, {summary['sim_steps']:.2e} simulated steps; exported {out / 'policy.pt'}")
+    if args.eval:
+        from ..evaluation.runs import evaluate_run
+
+        evaluate_run(str(out), ds, robot, data_label=str(args.data))
+    return 0

@@ -1,0 +1,336 @@
+"""The "real robot": MuJoCo C running a perturbed copy of the robot, recorded under PD like hardware.
+
+The nominal model comes from :func:`wresdyn.robot.mujoco_model.build_mujoco`; a :class:`Mismatch` then changes
+its fields (Coulomb friction, viscous damping, armature, link mass / centre of mass / inertia, PD gains,
+torque limits), adds an actuator delay (a FIFO of commands at the physics step) and degrades the recorded
+joint states (encoder noise and quantisation). It integrates with ``implicitfast`` at its own, finer
+``substep``: a different "physical" robot from the Newton replay, as real hardware is. With every
+mismatch off and ``substep`` equal to the recording step it is exactly :func:`~wresdyn.robot.mujoco_model.mujoco_replay`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tomllib
+
+from ..errors import SimulationDiverged
+from ..paths import REPO
+from ..robot.description import Robot, RobotError
+
+__all__ = ["Mismatch", "MismatchError", "RealRobot", "collect", "replay_gap"]
+
+
+class MismatchError(RobotError):
+    """A mismatch config that cannot be used; the message is one line naming the file."""
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """How the real robot differs from the nominal model. The defaults are all off (the nominal robot)."""
+
+    friction: float = 0.0
+    """Coulomb (dry) joint friction torque as a fraction of each joint's effort limit [-] (MuJoCo frictionloss,
+    added to the model's own)."""
+    damping: float = 0.0
+    """Viscous joint damping as a fraction of each joint's PD kd [-] (added to the model's own damping)."""
+    armature_scale: float = 1.0
+    """Factor on every joint's reflected rotor inertia (armature) [-]."""
+    mass_error: float = 0.0
+    """Relative standard deviation of each link's mass error [-]; the link's inertia scales with it."""
+    com_error: float = 0.0
+    """Standard deviation of each link's centre-of-mass offset, per axis [m]."""
+    inertia_error: float = 0.0
+    """Relative standard deviation of each principal moment of inertia, on top of the mass scaling [-]."""
+    kp_scale: float = 1.0
+    """Factor on every joint's PD stiffness [-]."""
+    kd_scale: float = 1.0
+    """Factor on every joint's PD damping [-]."""
+    gain_error: float = 0.0
+    """Relative standard deviation of a per-joint factor on kp and kd, on top of the scales [-]."""
+    delay: float = 0.0
+    """Actuator delay: a command reaches the motor this much later [s], rounded to whole substeps."""
+    torque_limit_scale: float = 1.0
+    """Factor on every joint's effort limit (torque saturation) [-]; joints without a limit stay unlimited."""
+    position_noise: float = 0.0
+    """Standard deviation of the white noise on measured joint positions [rad]."""
+    velocity_noise: float = 0.0
+    """Standard deviation of the white noise on measured joint velocities [rad/s]."""
+    encoder_resolution: float = 0.0
+    """Measured positions are rounded to multiples of this (encoder quantisation) [rad]; 0 = off."""
+    velocity_resolution: float = 0.0
+    """Measured velocities are rounded to multiples of this (the drive's velocity word) [rad/s]; 0 = off."""
+    torque_resolution: float = 0.0
+    """Recorded (diagnostic) torques are rounded to multiples of this [N*m]; 0 = off."""
+    substep: float = 0.0
+    """Physics step of the real robot [s], must divide the recording step; 0 = the recording step."""
+    seed: int = 0
+    """Seed of the per-link and per-joint errors (one fixed "physical" robot)."""
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Mismatch":
+        """Read a TOML file of ``key = value`` lines (keys: the field names); unknown keys are an error."""
+        path = Path(path)
+        if not path.is_file():
+            raise MismatchError(f"{path}: mismatch config not found")
+        try:
+            data = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            raise MismatchError(f"{path}: malformed TOML: {e}") from None
+        return cls.from_dict(data, where=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "mismatch config") -> "Mismatch":
+        """Build from a dict, checking keys, types and signs."""
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - set(fields))
+        if unknown:
+            raise MismatchError(f"{where}: unknown key(s) {unknown}; allowed: {list(fields)}")
+        values = {}
+        for key, value in data.items():
+            want = int if key == "seed" else float
+            if isinstance(value, bool) or not isinstance(value, int if want is int else (int, float)):
+                raise MismatchError(f"{where}: {key} = {value!r} must be {'an integer' if want is int else 'a number'}")
+            value = want(value)
+            if want is float and not (np.isfinite(value) and value >= 0.0):
+                raise MismatchError(f"{where}: {key} = {value} must be finite and >= 0")
+            values[key] = value
+        for key in ("armature_scale", "kp_scale", "torque_limit_scale"):
+            if key in values and values[key] <= 0.0:
+                raise MismatchError(f"{where}: {key} = {values[key]} must be > 0")
+        return cls(**values)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def is_nominal(self) -> bool:
+        """True when the physics and sensors are those of the nominal model (``substep`` and ``seed`` aside)."""
+        ignore = ("substep", "seed")
+        return all(getattr(self, f.name) == f.default for f in dataclasses.fields(self) if f.name not in ignore)
+
+
+class RealRobot:
+    """The perturbed MuJoCo robot, recording joint states under PD at ``1 / rate_hz``.
+
+    Args:
+        robot: The nominal robot (fixed base).
+        mismatch: How the real robot differs.
+        rate_hz: Recording (and command) rate [Hz].
+    """
+
+    def __init__(self, robot: Robot, mismatch: Mismatch | None = None, rate_hz: float = 500.0):
+        import mujoco
+
+        from ..robot.mujoco_model import build_mujoco
+
+        if robot.base != "fixed":
+            raise RobotError(f"{robot.source}: the real robot records on a stand (fixed base)")
+        self.robot, self.mismatch, self.rate_hz = robot, mismatch or Mismatch(), float(rate_hz)
+        dt = 1.0 / self.rate_hz
+        sub = self.mismatch.substep or dt
+        self.n_sub = int(round(dt / sub))
+        if self.n_sub < 1 or abs(self.n_sub * sub - dt) > 1e-9 * dt:
+            raise MismatchError(f"substep {sub} s does not divide the recording step {dt} s")
+        self.substep = dt / self.n_sub
+        self.n_delay = int(round(self.mismatch.delay / self.substep))
+        self.model = build_mujoco(robot, self.substep, "implicitfast")
+        self._perturb(self.model, np.random.default_rng(self.mismatch.seed))
+        self._mujoco = mujoco
+
+    def _perturb(self, m, rng: np.random.Generator) -> None:
+        """Apply the physical mismatch to the compiled model's fields, in place."""
+        mm, r = self.mismatch, self.robot
+        n = r.n_dof
+        # per-link errors; body 0 of MuJoCo is the world, MuJoCo body i+1 is robot body i
+        nb = m.nbody - 1
+        mass_f = np.clip(1.0 + mm.mass_error * rng.standard_normal(nb), 0.3, None)
+        m.body_mass[1:] *= mass_f
+        m.body_ipos[1:] += mm.com_error * rng.standard_normal((nb, 3))
+        inertia_f = np.clip(1.0 + mm.inertia_error * rng.standard_normal((nb, 3)), 0.3, None)
+        m.body_inertia[1:] *= mass_f[:, None] * inertia_f
+        # joints (fixed base: MuJoCo dof i is robot joint i, actuator i drives it)
+        effort = np.where(np.isfinite(r.effort), r.effort, 0.0)
+        m.dof_armature[:n] *= mm.armature_scale
+        m.dof_damping[:n] += mm.damping * r.kd
+        m.dof_frictionloss[:n] += mm.friction * effort
+        gain_f = np.clip(1.0 + mm.gain_error * rng.standard_normal((2, n)), 0.3, None)
+        kp, kd = r.kp * mm.kp_scale * gain_f[0], r.kd * mm.kd_scale * gain_f[1]
+        m.actuator_gainprm[:n, 0] = kp
+        m.actuator_biasprm[:n, 1] = -kp
+        m.actuator_biasprm[:n, 2] = -kd
+        m.actuator_forcerange[:n] *= mm.torque_limit_scale
+
+    def record(self, q_cmd: np.ndarray, rng: np.random.Generator | None = None, settle: float = 0.5
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Execute joint commands under PD and record what the robot's sensors report.
+
+        The robot starts at rest at ``q_cmd[0]`` and holds it for ``settle`` seconds (it sags under gravity
+        and friction, as a real robot does before a recording starts); then command k is held from t_k to
+        t_k+1, with t_k = k / rate_hz.
+
+        Args:
+            q_cmd: Commanded joint positions [rad], shape (T, n_dof).
+            rng: Generator for the sensor noise (required when a noise is on).
+            settle: Time holding ``q_cmd[0]`` before sample 0 [s].
+
+        Returns:
+            ``(q, qd, tau)``: measured joint positions [rad] and velocities [rad/s] at t_k, shape (T, n_dof);
+            ``tau[k]`` is the actuator torque averaged over [t_k, t_k+1) [N*m] (noise-free, diagnostics only).
+        """
+        mujoco, m, mm = self._mujoco, self.model, self.mismatch
+        q_cmd = np.asarray(q_cmd, dtype=np.float64)
+        t_len, n = q_cmd.shape
+        if n != self.robot.n_dof:
+            raise ValueError(f"q_cmd has {n} joints, the robot {self.robot.n_dof}")
+        d = mujoco.MjData(m)
+        d.qpos[:] = q_cmd[0]
+        d.qvel[:] = 0.0
+        fifo = deque([q_cmd[0]] * self.n_delay)
+
+        def step(cmd):
+            fifo.append(cmd)
+            d.ctrl[:] = fifo.popleft()
+            mujoco.mj_step(m, d)
+
+        for _ in range(int(round(settle / self.substep))):
+            step(q_cmd[0])
+        q, qd, tau = np.empty((t_len, n)), np.empty((t_len, n)), np.zeros((t_len, n))
+        for k in range(t_len):
+            q[k], qd[k] = d.qpos, d.qvel
+            for _ in range(self.n_sub):
+                step(q_cmd[k])
+                tau[k] += d.actuator_force
+        tau /= self.n_sub
+        if not (np.isfinite(q).all() and np.isfinite(qd).all()):
+            raise SimulationDiverged(f"{self.robot.source.name}: the real robot simulation diverged")
+        return self._sense(q, qd, rng) + (_quantise(tau, mm.torque_resolution),)
+
+    def _sense(self, q, qd, rng):
+        mm = self.mismatch
+        if (mm.position_noise > 0 or mm.velocity_noise > 0) and rng is None:
+            raise ValueError("sensor noise is on: pass a numpy Generator")
+        if mm.position_noise > 0:
+            q = q + mm.position_noise * rng.standard_normal(q.shape)
+        if mm.velocity_noise > 0:
+            qd = qd + mm.velocity_noise * rng.standard_normal(qd.shape)
+        return _quantise(q, mm.encoder_resolution), _quantise(qd, mm.velocity_resolution)
+
+
+def _quantise(a: np.ndarray, resolution: float) -> np.ndarray:
+    return np.round(a / resolution) * resolution if resolution > 0 else a
+
+
+COMMAND_RESOLUTION = 2.0 ** -16
+"""Commands are sent as fixed point with this resolution [rad] (1.5e-5 rad, far below any joint's tracking
+error); a power of two, so every command is exact in float32 and compresses well."""
+
+
+def _f32(a: np.ndarray) -> np.ndarray:
+    """Round to float32 precision (kept as float64): what the dataset stores, so storage is exact."""
+    return np.asarray(a, dtype=np.float32).astype(np.float64)
+
+
+def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: float = 4.0, rate_hz: float = 500.0,
+            seed: int = 0, excitation=None, store_tau: bool = True, progress=None):
+    """Draw excitations, execute them on the real robot and return the recorded :class:`~wresdyn.data.dataset.Dataset`.
+
+    Trajectory i of a split draws from ``SeedSequence(seed, spawn_key=(split index, i))``, so it does not depend
+    on how many trajectories the other splits hold. Train and held-out use the ellipsoid excitation (eq. 2);
+    out-of-distribution alternates the other families.
+
+    Args:
+        robot: Nominal robot (fixed base, with sole sites).
+        mismatch: How the real robot differs.
+        counts: Number of trajectories per split, e.g. ``{"train": 16, "heldout": 4, "ood": 4}``.
+        duration: Length of every trajectory [s].
+        rate_hz: Command and recording rate [Hz].
+        seed: Master seed.
+        excitation: :class:`~wresdyn.data.excitation.ExcitationConfig` (default ranges when ``None``).
+        store_tau: Keep the measured (diagnostic) torque in the trajectories.
+        progress: Optional ``callable(str)`` receiving one line per recorded trajectory.
+    """
+    import time
+
+    from . import excitation as ex
+    from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
+    from .ik import FootIK
+
+    cfg = excitation or ex.ExcitationConfig()
+    ik = FootIK(robot)
+    ws = ex.foot_workspace(ik, cfg)
+    real = RealRobot(robot, mismatch, rate_hz)
+    families = {"train": ex.TRAIN_FAMILIES, "heldout": ex.TRAIN_FAMILIES, "ood": ex.OOD_FAMILIES}
+    total, done = sum(counts.values()), 0
+    trajs, params = [], {}
+    for s, split in enumerate(SPLITS):
+        for i in range(counts.get(split, 0)):
+            start = time.perf_counter()
+            seeds = np.random.SeedSequence(seed, spawn_key=(s, i)).spawn(2)
+            rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+            family = families[split][i % len(families[split])]
+            exc = ex.generate(family, robot, ik, ws, duration, rate_hz, rng_exc, cfg)
+            q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
+            q, qd, tau = real.record(q_cmd, rng_noise)
+            q, qd = _f32(q), _f32(qd)
+            name = f"{split}_{i:03d}"
+            t = np.arange(len(q_cmd)) / rate_hz
+            tau = _f32(tau) if store_tau else None
+            trajs.append(Trajectory(name, split, t, q, qd, derive_qdd(qd, rate_hz), q_cmd, tau))
+            params[name] = exc.params
+            done += 1
+            if progress:
+                progress(f"[{done:>{len(str(total))}}/{total}] {name:<12} {family:<9} draws={exc.params['draws']:<2} "
+                         f"IK err {1e3 * exc.params['ik_max_error_m']:.3f} mm  "
+                         f"peak {exc.params['max_speed']:4.1f} rad/s  "
+                         f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")
+    meta = {"generator": "wresdyn collect", "duration_s": duration,
+            "excitation": {k: v for k, v in dataclasses.asdict(cfg).items()},
+            "workspace": {"frames": list(ik.frames), "lo_m": ws.lo.tolist(), "hi_m": ws.hi.tolist()},
+            "real_robot": {"substep_s": real.substep, "delay_substeps": real.n_delay, "integrator": "implicitfast",
+                           "settle_s": 0.5},
+            "trajectory_params": params}
+    return Dataset(list(robot.joint_names), float(rate_hz), trajs, _display_path(robot.source), robot.source_sha256,
+                   mismatch.to_dict(), int(seed), meta)
+
+
+def _display_path(p: Path) -> str:
+    """The robot path relative to the repository root when it lies below it (portable), else absolute."""
+    p, root = Path(p).resolve(), REPO
+    try:
+        return str(p.relative_to(root))
+    except ValueError:
+        return str(p)
+
+
+def replay_gap(robot: Robot, trajectories, rate_hz: float, solver: str = "featherstone") -> dict:
+    """PD-only Newton replay of each trajectory's commands (nominal robot, open loop from the first recorded
+    state over the whole trajectory) against the recorded positions: the sim-to-real gap to close.
+
+    Returns:
+        ``{"mean": mean |Δq| [rad], "std": its standard deviation over all samples and joints [rad],
+        "per_trajectory": {name: mean |Δq|}, "per_joint": {joint: mean |Δq|}, "n_trajectories": int}``.
+    """
+    from ..sim.solvers import replay
+
+    trajectories = list(trajectories)
+    if not trajectories:
+        return {}
+    by_len: dict[int, list] = {}
+    for tr in trajectories:
+        by_len.setdefault(tr.n_samples, []).append(tr)
+    errs, per_traj = [], {}
+    for group in by_len.values():
+        q_cmd = np.stack([tr.q_cmd for tr in group])
+        q_sim, _ = replay(robot, q_cmd, np.stack([tr.q[0] for tr in group]), np.stack([tr.qd[0] for tr in group]),
+                          1.0 / rate_hz, solver)
+        for tr, qs in zip(group, q_sim):
+            e = np.abs(qs[:-1] - tr.q)
+            per_traj[tr.name] = float(e.mean())
+            errs.append(e)
+    e = np.concatenate(errs)
+    return {"mean": float(e.mean()), "std": float(e.std()), "per_trajectory": per_traj,
+            "per_joint": dict(zip(robot.joint_names, e.mean(axis=0).tolist())), "n_trajectories": len(trajectories)}

@@ -1,0 +1,13 @@
+"""Errors a user can cause and fix: each is reported by the command line in one line with exit code 2."""
+
+from __future__ import annotations
+
+__all__ = ["WresdynError", "SimulationDiverged"]
+
+
+class WresdynError(ValueError):
+    """Base of wresdyn's user-facing errors; the message is one line naming the file or setting at fault."""
+
+
+class SimulationDiverged(RuntimeError):
+    """The simulated state became non-finite or left any sensible range."""

@@ -1,0 +1,50 @@
+"""Evaluate a run folder (PPO or gradient fit) and write its report: what ``wresdyn eval RUN`` does."""
+
+from __future__ import annotations
+
+__all__ = ["evaluate_run"]
+
+
+def evaluate_run(run: str, ds, robot, splits=("heldout", "ood"), out: str | None = None, solver: str | None = None,
+                 device: str = "cpu", joints: int = 6, compare=(), data_label: str = "") -> dict:
+    """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
+    per-split summaries."""
+    import json
+    from pathlib import Path
+
+    import torch
+
+    from ..learn.ppo import RunError, config_from_dict, load_policy
+    from .evaluate import evaluate_split, plot_fig3, plot_learning_curves, write_report
+
+    torch.set_num_threads(1)
+    run_dir = Path(run)
+    policy, meta = load_policy(run_dir)
+    cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
+    if list(meta["joint_names"]) != list(robot.joint_names):
+        raise RunError(f"{run_dir}: trained on joints {meta['joint_names'][:3]}..., not this robot's")
+    if abs(meta["rate_hz"] - ds.rate_hz) > 1e-9:
+        raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {ds.rate_hz:g} Hz")
+    solver = solver or cfg.env.solver
+    out_dir = Path(out) if out else run_dir / "eval"
+    results = {}
+    for split in splits:
+        trajs = ds.split(split)
+        if not trajs:
+            print(f"{split}: no trajectories, skipped")
+            continue
+        summary, runs = evaluate_split(robot, trajs, ds.rate_hz, policy, meta["kind"], solver, cfg.env.substeps, device)
+        results[split] = summary
+        plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
+                  title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)")
+        pd, res = summary["pd_only"], summary["pd_residual"]
+        print(f"{split:8s} {len(trajs)} traj  mean |dq| PD only {pd['mean_abs_dq']:.4f} ± {pd['std_abs_dq']:.4f} rad  "
+              f"PD + residual {res['mean_abs_dq']:.4f} ± {res['std_abs_dq']:.4f} rad  ({summary['improvement']:.2f}x)  "
+              f"vel {pd['mean_abs_dqd']:.3f} -> {res['mean_abs_dqd']:.3f} rad/s", flush=True)
+    curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
+    plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
+    write_report(out_dir, robot, results, {"run": str(run_dir), "residual": meta["kind"], "arch": meta["arch"],
+                                           "solver": solver, "dataset": data_label, "robot": str(robot.source)})
+    print(f"wrote {out_dir / 'metrics.json'} and {out_dir / 'report.md'}")
+    return results
+

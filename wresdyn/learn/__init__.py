@@ -1,0 +1,2 @@
+"""Stage 4, the learners: residual models (networks, the parametric baseline), Table I rewards, the PPO replay
+environment and trainer (rsl-rl), and the gradient fit through the differentiable simulation."""

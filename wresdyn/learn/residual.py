@@ -1,0 +1,308 @@
+"""Residual models: what the learner adds to the PD replay so the simulator follows the real robot.
+
+Two kinds, one flag (:attr:`ResidualConfig.kind`):
+
+* ``"torque"`` (the paper, eq. 1): M(q)q̈ + C(q,q̇)q̇ + G(q) + f(q,q̇,q̈) = τ_pd + τ_res, with
+  τ_res = clip(g · a, −1, 1) · fraction · effort_limit per joint for network output a, written to
+  ``control.joint_f``.
+* ``"delta_action"`` (ASAP): the action shifts the PD target, q_target = q_cmd + clip(g · a, −1, 1) · Δ_max.
+  With Δ_max = fraction · effort_limit / kp the two kinds have the same authority: kp · Δ_max = τ_res max.
+
+The action gain g (:attr:`ResidualConfig.action_gain`) < 1 lets the network work in units where rsl-rl's
+Gaussian starts at std 1, the scale its adaptive learning rate is tuned for: KL between two Gaussians
+depends on Δμ/σ, and Adam moves the output by about the same amount per step whatever σ is, so a
+small σ in action units pins the learning rate at its floor and the policy random-walks.
+
+Observations (paper Sec. II-B) are the simulated joint states and the command, [q, q̇, q̈, q_cmd],
+shape (N, 4·n_dof), normalised by fixed per-channel statistics of the training recordings.
+
+The networks are rsl-rl models (MLP with ELU, or GRU + MLP), trained by :mod:`wresdyn.learn.ppo`.
+:class:`ResidualPolicy` is the deterministic, batched, exportable form that every consumer uses
+(evaluation, a gradient learner, deployment): raw observation in, physical residual out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn as nn
+from rsl_rl.models import MLPModel, RNNModel
+
+__all__ = [
+    "KINDS",
+    "ARCHS",
+    "ResidualConfig",
+    "residual_scale",
+    "observation",
+    "obs_stats",
+    "ResidualMLPModel",
+    "ResidualRNNModel",
+    "actor_critic_cfg",
+    "ResidualPolicy",
+    "MLPResidualPolicy",
+    "GRUResidualPolicy",
+    "policy_from_actor",
+    "export_torchscript",
+    "export_onnx",
+    "export_run_files",
+]
+
+KINDS = ("torque", "delta_action")
+"""Residual kinds: joint torque added to τ_pd (paper) or offset added to the PD target (ASAP)."""
+ARCHS = ("mlp", "gru")
+"""Network architectures: MLP with ELU, or GRU followed by the MLP (paper Fig. 4)."""
+
+
+@dataclass(frozen=True)
+class ResidualConfig:
+    """What the residual acts on and the network that produces it."""
+
+    kind: str = "torque"
+    """One of :data:`KINDS`."""
+    fraction: float = 0.5
+    """Residual authority: the largest residual as a fraction of each joint's effort limit (for
+    ``delta_action``, divided by kp). 0.5 rather than 0.25 on the shipped benchmark, where the "real" drives
+    saturate at 20 % of the limit and cancelling PD torque beyond that needs room: gradient fit 2.97x -> 3.09x
+    held-out, PPO 2.39x -> 2.76x after 1800 iterations (``benchmarks/results/h200_ppo_sweep``)."""
+    action_gain: float = 0.2
+    """Normalised residual per unit of network output, g in clip(g · a, −1, 1); 0.2 makes one unit
+    0.05 of the effort limit and the initial exploration noise (``init_std`` 1) that large."""
+    arch: str = "mlp"
+    """One of :data:`ARCHS`."""
+    hidden_dims: tuple[int, ...] = (256, 128, 64)
+    """Actor MLP hidden layer widths (ELU)."""
+    critic_hidden_dims: tuple[int, ...] = (256, 128, 64)
+    """Critic MLP hidden layer widths (ELU); the critic is an MLP for both architectures."""
+    gru_hidden_dim: int = 64
+    """GRU hidden state size (``arch="gru"``)."""
+    gru_layers: int = 1
+    """Number of stacked GRU layers."""
+    init_std: float = 1.0
+    """Initial exploration std of the network output (see ``action_gain``)."""
+    obs_normalization: bool = True
+    """Also normalise observations with running statistics of the simulated rollouts (rsl-rl's
+    ``EmpiricalNormalization``, exported with the policy)."""
+    output_gain: float = 0.01
+    """Scale of the actor's last-layer initial weights: the residual starts near zero, i.e. at PD-only."""
+
+
+def residual_scale(robot, cfg: ResidualConfig) -> np.ndarray:
+    """Largest residual per joint, fraction · effort: [N*m] (torque) or [rad] (delta action), shape (n_dof,)."""
+    if cfg.kind not in KINDS:
+        raise ValueError(f"unknown residual kind {cfg.kind!r}; choose from {KINDS}")
+    effort = np.asarray(robot.effort, dtype=np.float64)
+    if not np.isfinite(effort).all():
+        bad = [n for n, e in zip(robot.joint_names, effort) if not np.isfinite(e)]
+        raise ValueError(f"{robot.source}: residual scale needs an effort limit on every joint; missing on {bad[:4]}")
+    torque = cfg.fraction * effort
+    return torque if cfg.kind == "torque" else torque / np.asarray(robot.kp, dtype=np.float64)
+
+
+def observation(q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor, q_cmd: torch.Tensor) -> torch.Tensor:
+    """Raw observation [q, q̇, q̈, q_cmd] ([rad], [rad/s], [rad/s²], [rad]), (N, n) each -> (N, 4n)."""
+    return torch.cat([q, qd, qdd, q_cmd], dim=-1)
+
+
+OBS_MIN_STD = (0.05, 0.5, 5.0, 0.05)
+"""Floor of the normalising std per observation group q [rad], q̇ [rad/s], q̈ [rad/s²], q_cmd [rad]: a joint
+that barely moves in the recordings moves more in simulation (exploration, the gap itself), and dividing
+by its tiny recorded std would turn that into inputs of ±100."""
+
+
+def obs_stats(trajectories, min_std=OBS_MIN_STD) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel mean and std of :func:`observation` over recorded trajectories, each shape (4n,),
+    the std floored per group by ``min_std`` (see :data:`OBS_MIN_STD`)."""
+    parts = [np.concatenate([t.q, t.qd, t.qdd, t.q_cmd], axis=1) for t in trajectories]
+    x = np.concatenate(parts, axis=0)
+    n = x.shape[1] // 4
+    return x.mean(0), np.maximum(x.std(0), np.repeat(np.asarray(min_std, dtype=np.float64), n))
+
+
+def _shrink_last_layer(mlp: nn.Module, gain: float) -> None:
+    last = [m for m in mlp.modules() if isinstance(m, nn.Linear)][-1]
+    with torch.no_grad():
+        last.weight.mul_(gain)
+        last.bias.zero_()
+
+
+class ResidualMLPModel(MLPModel):
+    """rsl-rl :class:`~rsl_rl.models.MLPModel` whose output starts near zero (``output_gain``)."""
+
+    def __init__(self, *args, output_gain: float = 1.0, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        _shrink_last_layer(self.mlp, output_gain)
+
+
+class ResidualRNNModel(RNNModel):
+    """rsl-rl :class:`~rsl_rl.models.RNNModel` (GRU + MLP) whose output starts near zero (``output_gain``)."""
+
+    def __init__(self, *args, output_gain: float = 1.0, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        _shrink_last_layer(self.mlp, output_gain)
+
+
+def actor_critic_cfg(cfg: ResidualConfig) -> tuple[dict, dict]:
+    """rsl-rl ``actor`` and ``critic`` config dicts for :class:`~rsl_rl.runners.OnPolicyRunner`."""
+    if cfg.arch not in ARCHS:
+        raise ValueError(f"unknown architecture {cfg.arch!r}; choose from {ARCHS}")
+    dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "log"}
+    actor = {
+        "class_name": f"{__name__}:ResidualMLPModel",
+        "hidden_dims": list(cfg.hidden_dims),
+        "activation": "elu",
+        # on top of the environment's fixed data statistics: q̈ and q̇ in simulation, under exploration
+        # noise, spread several times wider than in the recordings
+        "obs_normalization": cfg.obs_normalization,
+        "distribution_cfg": dist,
+        "output_gain": cfg.output_gain,
+    }
+    if cfg.arch == "gru":
+        actor.update(class_name=f"{__name__}:ResidualRNNModel", rnn_type="gru", rnn_hidden_dim=cfg.gru_hidden_dim,
+                     rnn_num_layers=cfg.gru_layers)
+    critic = {"class_name": "MLPModel", "hidden_dims": list(cfg.critic_hidden_dims), "activation": "elu",
+              "obs_normalization": cfg.obs_normalization}
+    return actor, critic
+
+
+class ResidualPolicy(nn.Module):
+    """Deterministic residual: raw observation (N, 4n) -> physical residual (N, n) [N*m or rad].
+
+    residual = scale · clip(gain · net(norm((obs − mean) / std)), −1, 1), ``norm`` an optional second
+    normaliser (identity by default). Differentiable in the parameters.
+    """
+
+    def __init__(self, obs_mean, obs_std, scale, kind: str, gain: float = 1.0, norm: nn.Module | None = None) -> None:
+        super().__init__()
+        self.kind = kind
+        self.gain = float(gain)
+        self.norm = nn.Identity() if norm is None else norm
+        self.register_buffer("obs_mean", torch.as_tensor(obs_mean, dtype=torch.float32))
+        self.register_buffer("obs_std", torch.as_tensor(obs_std, dtype=torch.float32))
+        self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
+
+    def _to_residual(self, a: torch.Tensor) -> torch.Tensor:
+        return (self.gain * a).clamp(-1.0, 1.0) * self.scale
+
+    @torch.jit.export
+    def residual_kind(self) -> str:
+        """``"torque"`` or ``"delta_action"`` (kept in the TorchScript export)."""
+        return self.kind
+
+
+class MLPResidualPolicy(ResidualPolicy):
+    """MLP (ELU) residual; stateless, ``reset`` is a no-op."""
+
+    def __init__(self, mlp: nn.Module, obs_mean, obs_std, scale, kind: str, gain: float = 1.0,
+                 norm: nn.Module | None = None) -> None:
+        super().__init__(obs_mean, obs_std, scale, kind, gain, norm)
+        self.mlp = mlp
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self._to_residual(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)))
+
+    @torch.jit.export
+    def reset(self) -> None:
+        pass
+
+
+class GRUResidualPolicy(ResidualPolicy):
+    """GRU + MLP residual. ``forward`` keeps the hidden state between calls; call ``reset()`` at the start of
+    each rollout (a batch of a new size also starts from zeros). ``step`` is the pure form (ONNX)."""
+
+    def __init__(self, gru: nn.GRU, mlp: nn.Module, obs_mean, obs_std, scale, kind: str, gain: float = 1.0,
+                 norm: nn.Module | None = None) -> None:
+        super().__init__(obs_mean, obs_std, scale, kind, gain, norm)
+        self.gru = gru
+        self.mlp = mlp
+        self.hidden = torch.zeros(gru.num_layers, 0, gru.hidden_size)
+
+    def step(self, obs: torch.Tensor, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """One step: obs (N, 4n), hidden (layers, N, H) -> residual (N, n), new hidden."""
+        y, h = self.gru(self.norm((obs - self.obs_mean) / self.obs_std).unsqueeze(0), h)
+        return self._to_residual(self.mlp(y.squeeze(0))), h
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        h = self.hidden
+        if h.shape[1] != obs.shape[0]:
+            h = torch.zeros(self.gru.num_layers, obs.shape[0], self.gru.hidden_size, dtype=obs.dtype, device=obs.device)
+        out, h = self.step(obs, h)
+        self.hidden = h
+        return out
+
+    @torch.jit.export
+    def reset(self) -> None:
+        self.hidden = torch.zeros(self.gru.num_layers, 0, self.gru.hidden_size, device=self.obs_mean.device)
+
+
+def policy_from_actor(actor: MLPModel, obs_mean, obs_std, scale, kind: str, gain: float = 1.0) -> ResidualPolicy:
+    """Copy a trained rsl-rl actor into a :class:`ResidualPolicy` (CPU, eval mode)."""
+    import copy
+
+    mlp = copy.deepcopy(actor.mlp).cpu()
+    norm = copy.deepcopy(actor.obs_normalizer).cpu()
+    if getattr(actor, "is_recurrent", False):
+        pol = GRUResidualPolicy(copy.deepcopy(actor.rnn.rnn).cpu(), mlp, obs_mean, obs_std, scale, kind, gain, norm)
+    else:
+        pol = MLPResidualPolicy(mlp, obs_mean, obs_std, scale, kind, gain, norm)
+    return pol.eval()
+
+
+def export_torchscript(policy: ResidualPolicy, path: str | Path) -> Path:
+    """Save ``policy`` as TorchScript; ``torch.jit.load`` gives the same ``forward``/``reset``/``residual_kind``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.jit.script(policy).save(str(path))
+    return path
+
+
+class _OnnxGRU(nn.Module):
+    def __init__(self, policy: GRUResidualPolicy) -> None:
+        super().__init__()
+        self.policy = policy
+
+    def forward(self, obs: torch.Tensor, h_in: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.policy.step(obs, h_in)
+
+
+def export_onnx(policy: ResidualPolicy, path: str | Path) -> Path:
+    """Save ``policy`` as ONNX with a dynamic batch axis.
+
+    MLP: ``obs`` (N, 4n) -> ``residual`` (N, n). GRU: (``obs``, ``h_in`` (layers, N, H)) -> (``residual``,
+    ``h_out``); the caller carries the hidden state, starting from zeros.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n_obs = policy.obs_mean.shape[0]
+    obs = torch.zeros(1, n_obs)
+    if isinstance(policy, GRUResidualPolicy):
+        module, args = _OnnxGRU(policy), (obs, torch.zeros(policy.gru.num_layers, 1, policy.gru.hidden_size))
+        names_in, names_out = ["obs", "h_in"], ["residual", "h_out"]
+        axes = {"obs": {0: "batch"}, "h_in": {1: "batch"}, "residual": {0: "batch"}, "h_out": {1: "batch"}}
+    else:
+        module, args = policy, (obs,)
+        names_in, names_out = ["obs"], ["residual"]
+        axes = {"obs": {0: "batch"}, "residual": {0: "batch"}}
+    torch.onnx.export(module.eval(), args, str(path), input_names=names_in, output_names=names_out,
+                      dynamic_axes=axes, opset_version=18, dynamo=False)
+    return path
+
+
+def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, **meta) -> None:
+    """Write what ``wresdyn eval`` and a deployment read from a run folder: ``policy.pt`` (TorchScript),
+    ``policy.onnx`` and ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``)."""
+    import json
+    import warnings
+
+    run_dir = Path(run_dir)
+    export_torchscript(policy, run_dir / "policy.pt")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the GRU batch-size warning does not apply: h_in is an input
+        export_onnx(policy, run_dir / "policy.onnx")
+    info = {"kind": policy.kind, "joint_names": list(dataset.joint_names), "rate_hz": float(dataset.rate_hz),
+            "scale": [float(s) for s in policy.scale], **meta,
+            "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",
+            "output": "N*m added to the PD torque" if policy.kind == "torque" else "rad added to q_cmd"}
+    (run_dir / "residual.json").write_text(json.dumps(info, indent=2))

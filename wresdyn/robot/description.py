@@ -1,0 +1,383 @@
+"""Robot loading: one robot file (USD, URDF or MJCF) -> one :class:`Robot` description.
+
+Newton's importers are the single parser. The robot is loaded once into a single-world
+:class:`newton.ModelBuilder`; :class:`Robot` keeps that builder (to replicate into N worlds) and a
+plain-numpy view of everything the rest of wresdyn needs: the kinematic tree, inertias, actuated
+joints with limits, PD gains, effort limits, armature and friction, and named frames (sites).
+The MuJoCo and Pinocchio models are built from this view (:mod:`wresdyn.robot.mujoco_model`,
+:mod:`wresdyn.robot.pinocchio_model`), never through a lossy file round trip.
+"""
+
+from __future__ import annotations
+
+import copy
+import fnmatch
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import tomllib
+
+from ..errors import WresdynError
+from ..paths import DEFAULT_ROBOT
+
+__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "DEFAULT_ROBOT"]
+
+
+_SUFFIX_KIND = {".usd": "usd", ".usda": "usd", ".usdc": "usd", ".usdz": "usd", ".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
+_UNLIMITED = 1e5
+"""Joint limits at or beyond this magnitude [rad or m] mean "no limit"."""
+_OVERRIDE_FIELDS = ("kp", "kd", "effort", "armature", "friction", "damping", "lower", "upper")
+
+
+class RobotError(WresdynError):
+    """A robot file or gains config that wresdyn cannot use; the message is one line naming the file."""
+
+
+@dataclass
+class Robot:
+    """A fixed- or floating-base articulated robot, as Newton imported it.
+
+    Bodies are in Newton's order (parents before children); body 0 is the base. Every body has one
+    parent joint; joint ``i`` connects body ``parent[i]`` (``-1``: world) to body ``i``. Only 1-DoF
+    revolute and prismatic joints are actuated; fixed joints weld a body to its parent; the root joint is
+    fixed (``base == "fixed"``) or free (``base == "floating"``).
+    """
+
+    def __reduce__(self):
+        """Pickle as the :func:`load_robot` call that made it: the receiving process (a worker of a parallel
+        ablation) loads the file again. The Newton builder itself holds Warp objects that do not pickle."""
+        args = getattr(self, "_load_args", None)
+        if args is None:
+            raise TypeError("only a Robot made by load_robot can be pickled")
+        return (_reload, (args, self.source_sha256))
+
+    source: Path
+    """Robot file the description was loaded from."""
+    source_sha256: str
+    """SHA-256 of the robot file's bytes."""
+    base: str
+    """``"fixed"`` (hung on a stand) or ``"floating"``."""
+    builder: object = field(repr=False)
+    """Single-world :class:`newton.ModelBuilder` holding this robot (gains overrides applied)."""
+
+    body_names: list[str]
+    """Body names (last path element), shape (n_bodies,)."""
+    body_parent: np.ndarray
+    """Parent body index, -1 for the world, shape (n_bodies,)."""
+    joint_type: list[str]
+    """Type of each body's parent joint: "revolute", "prismatic", "fixed" or "free", shape (n_bodies,)."""
+    joint_X_p: np.ndarray
+    """Joint frame in the parent body frame (or world), [x y z qx qy qz qw] [m], shape (n_bodies, 7)."""
+    joint_X_c: np.ndarray
+    """Joint frame in the child body frame, [x y z qx qy qz qw] [m], shape (n_bodies, 7)."""
+    body_mass: np.ndarray
+    """Body mass [kg], shape (n_bodies,)."""
+    body_com: np.ndarray
+    """Centre of mass in the body frame [m], shape (n_bodies, 3)."""
+    body_inertia: np.ndarray
+    """Rotational inertia about the centre of mass, in body-frame axes [kg*m^2], shape (n_bodies, 3, 3)."""
+
+    joint_names: list[str]
+    """Actuated joint names in DoF order, shape (n_dof,)."""
+    dof_body: np.ndarray
+    """Body moved by each actuated joint, shape (n_dof,)."""
+    q_index: np.ndarray
+    """Index of each actuated joint in a Newton world's ``joint_q``, shape (n_dof,)."""
+    qd_index: np.ndarray
+    """Index of each actuated joint in a Newton world's ``joint_qd`` / ``joint_f`` / targets, shape (n_dof,)."""
+    axis: np.ndarray
+    """Joint axis in the joint frame (unit vector), shape (n_dof, 3)."""
+    lower: np.ndarray
+    """Joint position lower limit [rad or m], shape (n_dof,)."""
+    upper: np.ndarray
+    """Joint position upper limit [rad or m], shape (n_dof,)."""
+    kp: np.ndarray
+    """PD stiffness [N*m/rad or N/m], shape (n_dof,)."""
+    kd: np.ndarray
+    """PD damping [N*m*s/rad or N*s/m], shape (n_dof,)."""
+    effort: np.ndarray
+    """Effort limit [N*m or N] (inf when unlimited), shape (n_dof,)."""
+    armature: np.ndarray
+    """Reflected rotor inertia added to the mass-matrix diagonal [kg*m^2 or kg], shape (n_dof,)."""
+    friction: np.ndarray
+    """Coulomb (dry) friction torque [N*m or N], shape (n_dof,)."""
+    damping: np.ndarray
+    """Passive viscous joint damping [N*m*s/rad or N*s/m], shape (n_dof,)."""
+
+    frames: dict[str, tuple[int, np.ndarray]]
+    """Named frames (sites): name -> (body index, [x y z qx qy qz qw] in the body frame)."""
+    gravity: np.ndarray
+    """Gravity vector [m/s^2], shape (3,)."""
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def n_bodies(self) -> int:
+        return len(self.body_names)
+
+    @property
+    def q0(self) -> np.ndarray:
+        """Neutral joint positions [rad or m]: 0 clipped into the limits, shape (n_dof,)."""
+        return np.clip(np.zeros(self.n_dof), self.lower, self.upper)
+
+    def is_prismatic(self) -> np.ndarray:
+        """Boolean mask of prismatic DoF, shape (n_dof,)."""
+        return np.array([self.joint_type[b] == "prismatic" for b in self.dof_body], dtype=bool)
+
+    def check_gains(self) -> None:
+        """Raise :class:`RobotError` if any actuated joint has no PD stiffness (nothing to replay)."""
+        missing = [n for n, k in zip(self.joint_names, self.kp) if not k > 0.0]
+        if missing:
+            raise RobotError(
+                f"{self.source}: {len(missing)} of {self.n_dof} joints have no PD gains ({', '.join(missing[:4])}"
+                f"{', ...' if len(missing) > 4 else ''}); supply them with a gains config (--gains FILE.toml, "
+                "e.g. [[joint]] match = \"*\" kp = 100.0 kd = 5.0)"
+            )
+
+    def build_model(self, n_worlds: int = 1, device: str | None = None, requires_grad: bool = False):
+        """Finalize a Newton :class:`~newton.Model` with ``n_worlds`` copies of the robot.
+
+        Args:
+            n_worlds: Number of independent worlds (one robot each).
+            device: Warp device (``"cpu"``, ``"cuda:0"``); ``None`` takes Warp's default.
+            requires_grad: Allocate gradients for Warp autodiff.
+        """
+        import newton
+
+        scene = newton.ModelBuilder(up_axis=self.builder.up_axis, gravity=tuple(float(g) for g in self.gravity))
+        scene.replicate(self.builder, n_worlds)
+        return scene.finalize(device=device, requires_grad=requires_grad)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _short(label: str) -> str:
+    return label.rstrip("/").split("/")[-1]
+
+
+def _import(builder, path: Path, kind: str, floating: bool) -> None:
+    if kind == "usd":
+        builder.add_usd(str(path), floating=floating, enable_self_collisions=False, load_visual_shapes=False)
+    elif kind == "urdf":
+        builder.add_urdf(str(path), floating=floating, enable_self_collisions=False)
+    else:
+        builder.add_mjcf(str(path), floating=floating, enable_self_collisions=False, parse_visuals=False)
+
+
+def resolve_path(path: str | Path) -> Path:
+    """A robot path; ``newton:NAME`` names an asset bundled with newton (e.g. ``newton:quadruped.urdf``)."""
+    text = str(path)
+    if text.startswith("newton:"):
+        import importlib.util
+
+        spec = importlib.util.find_spec("newton")
+        return Path(spec.origin).parent / "examples" / "assets" / text.removeprefix("newton:")
+    return Path(path)
+
+
+def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed") -> Robot:
+    """Load a robot file into a :class:`Robot`.
+
+    Args:
+        path: USD (``.usd/.usda/.usdc``), URDF (``.urdf``) or MJCF (``.xml``) file, or ``newton:NAME`` for an
+            asset bundled with newton.
+        gains: Optional overrides by joint-name pattern, a TOML file or the parsed dict
+            (see :func:`apply_overrides`).
+        base: ``"fixed"`` (the robot hangs on a stand, as in data collection) or ``"floating"``.
+
+    Raises:
+        RobotError: one-line message naming the file and the problem.
+    """
+    import warp as wp
+
+    # before newton initialises warp: no banner and no per-module load messages
+    wp.config.quiet = True
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    import newton
+
+    path = resolve_path(path)
+    if base not in ("fixed", "floating"):
+        raise RobotError(f"{path}: base must be 'fixed' or 'floating', not {base!r}")
+    if not path.is_file():
+        raise RobotError(f"{path}: robot file not found")
+    kind = _SUFFIX_KIND.get(path.suffix.lower())
+    if kind is None:
+        raise RobotError(f"{path}: unknown robot file type {path.suffix!r} (expected .usd/.usda/.usdc, .urdf or .xml)")
+    builder = newton.ModelBuilder()
+    try:
+        _import(builder, path, kind, floating=(base == "floating"))
+    except Exception as e:  # importers raise many types on malformed input; report one line
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise RobotError(f"{path}: cannot parse {kind.upper()} file: {msg}") from None
+    if builder.joint_count == 0 or builder.body_count == 0:
+        raise RobotError(f"{path}: no articulation found (no bodies connected by joints)")
+    if gains is not None:
+        apply_overrides(builder, gains, source=path)
+    robot = _describe(builder, path, base)
+    robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
+    return robot
+
+
+def _reload(args: tuple, sha256: str) -> Robot:
+    """Unpickle a :class:`Robot`: load the file again and check it is still the same file."""
+    robot = load_robot(*args)
+    if robot.source_sha256 != sha256:
+        raise RobotError(f"{robot.source}: the robot file changed since it was loaded in the parent process")
+    return robot
+
+
+def _describe(builder, path: Path, base: str) -> Robot:
+    import newton
+
+    JT = newton.JointType
+    names = {JT.REVOLUTE: "revolute", JT.PRISMATIC: "prismatic", JT.FIXED: "fixed", JT.FREE: "free"}
+    nb = builder.body_count
+    jt = [int(t) for t in builder.joint_type]
+    child = list(builder.joint_child)
+    parent = list(builder.joint_parent)
+    if sorted(child) != list(range(nb)):
+        raise RobotError(f"{path}: not a tree: each body needs exactly one parent joint")
+    roots = [j for j in range(len(jt)) if parent[j] == -1]
+    if len(roots) != 1:
+        raise RobotError(f"{path}: expected one articulation, found {len(roots)} root bodies")
+    for j, t in enumerate(jt):
+        if t not in names:
+            raise RobotError(
+                f"{path}: unsupported joint type {JT(t).name} at {builder.joint_label[j]!r} "
+                "(wresdyn supports revolute, prismatic and fixed joints on a fixed or free base)"
+            )
+        if t == JT.FREE and parent[j] != -1:
+            raise RobotError(f"{path}: free joint {builder.joint_label[j]!r} is not the root joint")
+    by_child = {c: j for j, c in enumerate(child)}
+    order = [by_child[b] for b in range(nb)]
+    for b in range(nb):
+        p = parent[by_child[b]]
+        if p >= b:
+            raise RobotError(f"{path}: bodies are not ordered parents-first")
+
+    qd_start = list(builder.joint_qd_start)
+    q_start = list(builder.joint_q_start)
+    dof_joint = [(j, qd_start[j]) for j in order if jt[j] in (JT.REVOLUTE, JT.PRISMATIC)]
+    if not dof_joint:
+        raise RobotError(f"{path}: no actuated revolute or prismatic joint")
+    dofs = [d for _, d in dof_joint]
+
+    def arr(name, idx=dofs):
+        return np.asarray(getattr(builder, name), dtype=np.float64)[idx]
+
+    frames = {}
+    for s, label in enumerate(builder.shape_label):
+        flags = int(builder.shape_flags[s])
+        if flags & int(newton.ShapeFlags.SITE) and builder.shape_body[s] >= 0:
+            frames[_short(label)] = (int(builder.shape_body[s]), np.asarray(builder.shape_transform[s], dtype=np.float64))
+
+    lower, upper = arr("joint_limit_lower"), arr("joint_limit_upper")
+    # importers write +-1e6 (Newton's default) for an unlimited joint
+    lower[lower <= -_UNLIMITED], upper[upper >= _UNLIMITED] = -np.inf, np.inf
+    effort = arr("joint_effort_limit")
+    effort[~(effort > 0)] = np.inf  # importers write 0 or inf for "no limit"
+    return Robot(
+        source=path,
+        source_sha256=_sha256(path),
+        base=base,
+        builder=builder,
+        body_names=[_short(builder.body_label[b]) for b in range(nb)],
+        body_parent=np.array([parent[by_child[b]] for b in range(nb)], dtype=np.int64),
+        joint_type=[names[JT(jt[by_child[b]])] for b in range(nb)],
+        joint_X_p=np.array([builder.joint_X_p[by_child[b]] for b in range(nb)], dtype=np.float64),
+        joint_X_c=np.array([builder.joint_X_c[by_child[b]] for b in range(nb)], dtype=np.float64),
+        body_mass=np.asarray(builder.body_mass, dtype=np.float64),
+        body_com=np.asarray(builder.body_com, dtype=np.float64).reshape(nb, 3),
+        body_inertia=np.asarray(builder.body_inertia, dtype=np.float64).reshape(nb, 3, 3),
+        joint_names=[_short(builder.joint_label[j]) for j, _ in dof_joint],
+        dof_body=np.array([child[j] for j, _ in dof_joint], dtype=np.int64),
+        q_index=np.array([q_start[j] for j, _ in dof_joint], dtype=np.int64),
+        qd_index=np.array(dofs, dtype=np.int64),
+        axis=np.asarray(builder.joint_axis, dtype=np.float64)[dofs].reshape(-1, 3),
+        lower=lower,
+        upper=upper,
+        kp=arr("joint_target_ke"),
+        kd=arr("joint_target_kd"),
+        effort=effort,
+        armature=arr("joint_armature"),
+        friction=arr("joint_friction"),
+        damping=arr("joint_damping") if hasattr(builder, "joint_damping") else np.zeros(len(dofs)),
+        frames=frames,
+        gravity=np.array([0.0, 0.0, -9.81]) if builder.up_axis == newton.Axis.Z else np.array([0.0, -9.81, 0.0]),
+    )
+
+
+def apply_overrides(builder, gains: str | Path | dict, source: Path | None = None) -> None:
+    """Override per-joint drive and joint parameters by joint-name pattern, in place.
+
+    The config (TOML) holds ``[[joint]]`` tables applied in order, later ones winning::
+
+        [[joint]]
+        match = "*"            # fnmatch pattern on the joint name (last path element)
+        kp = 100.0             # PD stiffness [N*m/rad]
+        kd = 5.0               # PD damping [N*m*s/rad]
+        [[joint]]
+        match = "*_ankle_*"
+        kp = 40.0
+        effort = 50.0          # effort limit [N*m]
+        armature = 0.01        # reflected rotor inertia [kg*m^2]
+
+    Keys: ``kp kd effort armature friction damping lower upper``. A pattern that matches no joint is an
+    error, so typos do not pass silently.
+    """
+    where = str(gains) if not isinstance(gains, dict) else "gains config"
+    if not isinstance(gains, dict):
+        gp = Path(gains)
+        if not gp.is_file():
+            raise RobotError(f"{gp}: gains config not found")
+        try:
+            gains = tomllib.loads(gp.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            raise RobotError(f"{gp}: malformed TOML: {e}") from None
+    gains = copy.deepcopy(gains)
+    entries = gains.get("joint", [])
+    if not isinstance(entries, list) or not entries:
+        raise RobotError(f"{where}: expected one or more [[joint]] tables")
+    attr = {"kp": "joint_target_ke", "kd": "joint_target_kd", "effort": "joint_effort_limit", "armature": "joint_armature",
+            "friction": "joint_friction", "damping": "joint_damping", "lower": "joint_limit_lower", "upper": "joint_limit_upper"}
+    labels = [_short(label) for label in builder.joint_label]
+    qd_start = list(builder.joint_qd_start)
+    dof_dim = [int(a) + int(b) for a, b in builder.joint_dof_dim]
+    for e in entries:
+        pattern = e.pop("match", None)
+        if not isinstance(pattern, str):
+            raise RobotError(f"{where}: every [[joint]] needs a match = \"pattern\" string")
+        unknown = set(e) - set(_OVERRIDE_FIELDS)
+        if unknown:
+            raise RobotError(f"{where}: unknown key(s) {sorted(unknown)} for match {pattern!r}; allowed: {list(_OVERRIDE_FIELDS)}")
+        hits = [j for j, n in enumerate(labels) if fnmatch.fnmatchcase(n, pattern) and dof_dim[j] == 1]
+        if not hits:
+            raise RobotError(f"{where}: pattern {pattern!r} matches no 1-DoF joint of {source or 'the robot'}")
+        for key, value in e.items():
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise RobotError(f"{where}: {key} = {value!r} for {pattern!r} is not a number") from None
+            if key in ("kp", "kd", "effort", "armature", "friction", "damping") and not value >= 0.0:
+                raise RobotError(f"{where}: {key} = {value} for {pattern!r} must be >= 0")
+            lst = getattr(builder, attr[key])
+            for j in hits:
+                lst[qd_start[j]] = value
+    # a joint given gains but still in "no drive" mode would ignore them
+    import newton
+
+    for j in range(len(labels)):
+        if dof_dim[j] == 1:
+            d = qd_start[j]
+            if builder.joint_target_ke[d] > 0.0 or builder.joint_target_kd[d] > 0.0:
+                builder.joint_target_mode[d] = int(newton.JointTargetMode.POSITION)

@@ -1,0 +1,139 @@
+"""The same robot as a MuJoCo model, built with ``mujoco.MjSpec`` from a :class:`~wresdyn.robot.description.Robot`.
+
+Bodies, inertias, joint axes, limits, armature, damping and dry friction are copied field by field;
+PD drives become MuJoCo position actuators (``kp``, ``kv``) with the effort limit as force range.
+Contacts are disabled: the robot hangs on a stand and the Newton replay has no contacts either.
+The integrator is ``implicitfast``, MuJoCo's recommended default, which treats the actuator's
+velocity gain implicitly (stable with high drive damping).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .description import Robot
+
+__all__ = ["build_mujoco", "quat_xyzw_to_wxyz"]
+
+
+def quat_xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
+    """Newton/Warp quaternion [x y z w] -> MuJoCo quaternion [w x y z]."""
+    q = np.asarray(q, dtype=np.float64)
+    return np.concatenate([q[..., 3:4], q[..., :3]], axis=-1)
+
+
+def _tf_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Compose transforms [p, q_xyzw]: a * b."""
+    from scipy.spatial.transform import Rotation as R
+
+    ra, rb = R.from_quat(a[3:]), R.from_quat(b[3:])
+    return np.concatenate([a[:3] + ra.apply(b[:3]), (ra * rb).as_quat()])
+
+
+def _tf_inv(a: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation as R
+
+    r = R.from_quat(a[3:]).inv()
+    return np.concatenate([-r.apply(a[:3]), r.as_quat()])
+
+
+def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast"):
+    """Build a :class:`mujoco.MjModel` of ``robot``.
+
+    Args:
+        robot: The robot description.
+        dt: Time step [s].
+        integrator: MuJoCo integrator name (``"implicitfast"``, ``"Euler"``, ``"RK4"``, ``"implicit"``).
+
+    Returns:
+        ``mujoco.MjModel`` whose ``nu`` actuators and dof order are ``robot.joint_names`` (plus the free
+        joint's 6 DoF first for a floating base).
+    """
+    import mujoco
+    from scipy.spatial.transform import Rotation as R
+
+    spec = mujoco.MjSpec()
+    spec.modelname = robot.source.stem
+    spec.option.timestep = dt
+    spec.option.gravity = robot.gravity
+    spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{integrator.upper()}")
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    spec.compiler.autolimits = True
+    spec.compiler.degree = False
+
+    dof_of_body = {int(b): i for i, b in enumerate(robot.dof_body)}
+    sbodies = []
+    for b in range(robot.n_bodies):
+        parent = spec.worldbody if robot.body_parent[b] < 0 else sbodies[robot.body_parent[b]]
+        # body frame in the parent frame at q = 0: X_p * inv(X_c)
+        x = _tf_mul(robot.joint_X_p[b], _tf_inv(robot.joint_X_c[b]))
+        body = parent.add_body(name=robot.body_names[b], pos=x[:3], quat=quat_xyzw_to_wxyz(x[3:]))
+        sbodies.append(body)
+        m = float(robot.body_mass[b])
+        if m > 0.0:
+            body.mass = m
+            body.ipos = robot.body_com[b]
+            # diagonalise the inertia so MuJoCo keeps it exactly (principal frame in iquat)
+            inertia = 0.5 * (robot.body_inertia[b] + robot.body_inertia[b].T)
+            w, v = np.linalg.eigh(inertia)
+            if np.linalg.det(v) < 0:
+                v[:, 0] = -v[:, 0]
+            body.inertia = np.maximum(w, 1e-12)
+            body.iquat = quat_xyzw_to_wxyz(R.from_matrix(v).as_quat())
+            body.explicitinertial = True
+        jt = robot.joint_type[b]
+        xc = robot.joint_X_c[b]
+        if jt == "free":
+            body.add_freejoint(name=robot.body_names[b] + "_free")
+        elif jt in ("revolute", "prismatic"):
+            i = dof_of_body[b]
+            axis = R.from_quat(xc[3:]).apply(robot.axis[i])
+            j = body.add_joint(
+                name=robot.joint_names[i],
+                type=mujoco.mjtJoint.mjJNT_HINGE if jt == "revolute" else mujoco.mjtJoint.mjJNT_SLIDE,
+                pos=xc[:3],
+                axis=axis,
+                armature=float(robot.armature[i]),
+                damping=float(robot.damping[i]),
+                frictionloss=float(robot.friction[i]),
+            )
+            if np.isfinite(robot.lower[i]) and np.isfinite(robot.upper[i]) and robot.lower[i] < robot.upper[i]:
+                j.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+                j.range = [robot.lower[i], robot.upper[i]]
+        for name, (fb, tf) in robot.frames.items():
+            if fb == b:
+                body.add_site(name=name, pos=tf[:3], quat=quat_xyzw_to_wxyz(tf[3:]))
+    for i, name in enumerate(robot.joint_names):
+        act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=float(robot.kp[i]), kv=float(robot.kd[i]))
+        if np.isfinite(robot.effort[i]):
+            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.forcerange = [-robot.effort[i], robot.effort[i]]
+    return spec.compile()
+
+
+def mujoco_replay(mj_model, q_cmd: np.ndarray, q0: np.ndarray, qd0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop PD replay in MuJoCo C (fixed base), command k held during step k.
+
+    Args:
+        mj_model: Model from :func:`build_mujoco`.
+        q_cmd: Commanded joint positions [rad], shape (T, n_dof).
+        q0, qd0: Initial joint positions [rad] and velocities [rad/s], shape (n_dof,).
+
+    Returns:
+        ``(q, qd)`` of shape (T + 1, n_dof).
+    """
+    import mujoco
+
+    d = mujoco.MjData(mj_model)
+    d.qpos[:] = q0
+    d.qvel[:] = 0.0 if qd0 is None else qd0
+    t_len = len(q_cmd)
+    q = np.empty((t_len + 1, mj_model.nq))
+    qd = np.empty((t_len + 1, mj_model.nv))
+    q[0], qd[0] = d.qpos, d.qvel
+    for k in range(t_len):
+        d.ctrl[:] = q_cmd[k]
+        mujoco.mj_step(mj_model, d)
+        q[k + 1], qd[k + 1] = d.qpos, d.qvel
+    return q, qd
