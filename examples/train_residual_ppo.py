@@ -12,7 +12,8 @@ import argparse
 import dataclasses
 
 from wresdyn import load_robot
-from wresdyn.evaluation.evaluate import evaluate_split, plot_fig3, write_report
+from wresdyn.evaluation.evaluate import evaluate_split, write_report
+from wresdyn.evaluation.plots import plot_fig3
 from wresdyn.learn.ppo import default_config, load_policy, train
 from wresdyn.robot.description import DEFAULT_ROBOT
 

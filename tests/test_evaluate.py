@@ -7,7 +7,9 @@ import pytest
 import torch
 from _tiny_data import DEFAULT_MISMATCH, make_dataset
 
-from wresdyn.evaluation.evaluate import evaluate_split, plot_fig3, rollout, write_report
+from wresdyn.evaluation.evaluate import evaluate_split, write_report
+from wresdyn.evaluation.plots import plot_fig3
+from wresdyn.sim.rollout import replay_trajectories
 
 
 @pytest.fixture(scope="module")
@@ -33,14 +35,14 @@ class Oracle(torch.nn.Module):
 
 
 def test_pd_only_rollout_is_the_plain_newton_replay(robot, data):
-    from wresdyn.sim.solvers import replay
+    from wresdyn.sim.rollout import replay
 
     traj = data.split("heldout")[0]
     for solver in ("replay", "featherstone"):
-        out = rollout(robot, [traj], data.rate_hz, solver=solver)
+        out = replay_trajectories(robot, [traj], data.rate_hz, solver=solver)["pd"]
         q, qd = replay(robot, traj.q_cmd[:-1], traj.q[0], traj.qd[0], dt=1.0 / data.rate_hz, solver=solver)
-        np.testing.assert_allclose(out["pd"][0][0], q, atol=1e-5)
-        np.testing.assert_allclose(out["pd"][0][1], qd, atol=1e-4)
+        np.testing.assert_allclose(out.q[0], q, atol=1e-5)
+        np.testing.assert_allclose(out.qd[0], qd, atol=1e-4)
 
 
 @pytest.mark.parametrize("kind", ["torque", "delta_action"])
@@ -49,12 +51,12 @@ def test_oracle_residual_closes_most_of_the_gap(robot, data, kind):
     assert s["pd_residual"]["diverged"] == 0
     # the oracle ignores stiction and the real robot's implicit integration: a 3x cut is the bar
     assert s["improvement"] > 3.0, s
-    assert len(runs["residual"]) == 2 and runs["residual"][0][0].shape == data.split("heldout")[0].q.shape
+    assert len(runs["residual"].q) == 2 and runs["residual"].q[0].shape == data.split("heldout")[0].q.shape
 
 
 def test_zero_residual_equals_pd_only(robot, data):
     zero = lambda obs: torch.zeros(obs.shape[0], robot.n_dof)  # noqa: E731
-    s, _ = evaluate_split(robot, data.split("ood"), data.rate_hz, zero)
+    s, _ = evaluate_split(robot, data.split("ood"), data.rate_hz, zero, kind="torque")
     assert s["pd_residual"]["mean_abs_dq"] == pytest.approx(s["pd_only"]["mean_abs_dq"], abs=1e-9)
     assert s["improvement"] == pytest.approx(1.0)
 
@@ -62,7 +64,7 @@ def test_zero_residual_equals_pd_only(robot, data):
 def test_report_files(robot, data, tmp_path):
     results, figs = {}, []
     for split in ("heldout", "ood"):
-        s, runs = evaluate_split(robot, data.split(split), data.rate_hz, Oracle(robot, "torque"))
+        s, runs = evaluate_split(robot, data.split(split), data.rate_hz, Oracle(robot, "torque"), kind="torque")
         results[split] = s
         figs.append(plot_fig3(robot, data.split(split)[0], runs, tmp_path / f"fig3_{split}.png", data.rate_hz))
     write_report(tmp_path, robot, results, {"run": "oracle"})

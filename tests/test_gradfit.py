@@ -8,7 +8,8 @@ import pytest
 import torch
 from _tiny_data import make_dataset
 
-from wresdyn.learn.gradfit import DiffReplay, GradFitConfig, SimStep, _Windows, build_policy, fit, rollout, window_loss
+from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit, window_loss
+from wresdyn.sim import Simulator, TrajectoryBank, rollout
 from wresdyn.learn.residual import ResidualConfig, obs_stats
 from wresdyn.robot.description import load_robot
 
@@ -25,7 +26,7 @@ def cartpole():
 
 def test_gradient_wrt_residual_torque_matches_finite_differences(cartpole):
     b, h = 2, 6
-    sim = DiffReplay(cartpole, b, h, DT, "featherstone")
+    sim = Simulator(cartpole, b, DT, solver="featherstone", requires_grad=True)
     rng = np.random.default_rng(0)
     f = lambda *s, lo=-0.3, hi=0.3: torch.tensor(rng.uniform(lo, hi, s), dtype=torch.float32)  # noqa: E731
     q0, qd0, cmd, q_ref = f(b, 3), f(b, 3, lo=-1, hi=1), f(b, h, 3), f(b, h, 3)
@@ -33,7 +34,7 @@ def test_gradient_wrt_residual_torque_matches_finite_differences(cartpole):
     def loss(tau):
         q, qd, total = q0, qd0, 0.0
         for k in range(h):
-            q, qd = SimStep.apply(q, qd, cmd[:, k], tau[:, k], sim, k)
+            q, qd = sim.step_diff(k, q, qd, cmd[:, k], tau[:, k])
             total = total + ((q - q_ref[:, k]) ** 2).sum() + 0.01 * (qd**2).sum()
         return total
 
@@ -59,12 +60,13 @@ def test_gradient_wrt_network_parameters_matches_finite_differences(cartpole, ki
                         horizon=6, horizon_curriculum=(), windows=2)
     train = data.split("train")
     policy = build_policy(cartpole, cfg.residual, *obs_stats(train))
-    sim = DiffReplay(cartpole, cfg.windows, cfg.horizon, DT, "featherstone")
-    batch = _Windows(train, "cpu").sample(np.random.default_rng(1), cfg.windows, cfg.horizon)
+    sim = Simulator(cartpole, cfg.windows, DT, solver="featherstone", requires_grad=True)
+    w = TrajectoryBank(train, sim.device).sample(np.random.default_rng(1), cfg.windows, cfg.horizon)
 
     def loss():
-        q, qd, a = rollout(sim, policy, *batch[:4])
-        return window_loss(cfg, q, qd, a, batch[4], batch[5], policy.scale if kind == "torque" else None)[0]
+        out = rollout(sim, w, policy, grad=True)
+        return window_loss(cfg, out.q[:, 1:], out.qd[:, 1:], out.actions, w.q[:, 1:], w.qd[:, 1:],
+                           policy.scale if kind == "torque" else None)[0]
 
     params = list(policy.parameters())
     policy.zero_grad()
@@ -98,13 +100,12 @@ def test_fit_reduces_replay_error_and_resumes(tmp_path, quadruped):
     cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(64, 64)), horizon=8, horizon_curriculum=(), windows=8, iterations=40, lr=3e-3,
                         solver="featherstone")
     train = data.split("train")
-    eval_batch = _Windows(train, "cpu").sample(np.random.default_rng(123), 8, 8)
-    eval_sim = DiffReplay(quadruped, 8, 8, DT, "featherstone")
+    eval_sim = Simulator(quadruped, 8, DT, solver="featherstone")
+    w = TrajectoryBank(train, eval_sim.device).sample(np.random.default_rng(123), 8, 8)
 
     def error(policy):
         with torch.no_grad():
-            q, _, _ = rollout(eval_sim, policy, *eval_batch[:4])
-            return float((q - eval_batch[4]).abs().mean())
+            return float((rollout(eval_sim, w, policy).q[:, 1:] - w.q[:, 1:]).abs().mean())
 
     untrained = build_policy(quadruped, cfg.residual, *obs_stats(train))
     policy, curve = fit(quadruped, data, cfg, out=tmp_path, log=lambda *_: None)
@@ -138,12 +139,12 @@ def test_parametric_baseline_fits_friction_and_gains(quadruped):
     cfg = GradFitConfig(model="parametric", horizon=16, horizon_curriculum=(), windows=8, iterations=40, lr=3e-2,
                         solver="featherstone")
     train = data.split("train")
-    batch = _Windows(train, "cpu").sample(np.random.default_rng(5), 8, 16)
-    sim = DiffReplay(quadruped, 8, 16, DT, "featherstone")
+    sim = Simulator(quadruped, 8, DT, solver="featherstone")
+    w = TrajectoryBank(train, sim.device).sample(np.random.default_rng(5), 8, 16)
 
     def error(policy):
         with torch.no_grad():
-            return float((rollout(sim, policy, *batch[:4])[0] - batch[4]).abs().mean())
+            return float((rollout(sim, w, policy).q[:, 1:] - w.q[:, 1:]).abs().mean())
 
     start = build_policy(quadruped, cfg.residual, *obs_stats(train), model="parametric")
     policy, _ = fit(quadruped, data, cfg, log=lambda *_: None)

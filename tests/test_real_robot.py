@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.data.real_robot import Mismatch, MismatchError, RealRobot, collect, replay_gap
+from wresdyn.data.real_robot import Mismatch, MismatchError, RealRobot, collect
+from wresdyn.evaluation.evaluate import pd_gap
 
 RATE = 500.0
 DEFAULT_TOML = Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml"
@@ -106,7 +107,7 @@ def test_default_mismatch_opens_a_gap_the_nominal_robot_does_not(humanoid):
     real = collect(humanoid, Mismatch.load(DEFAULT_TOML), counts, duration=1.0, seed=1).split("heldout")
     nominal = collect(humanoid, Mismatch(substep=0.001), counts, duration=1.0, seed=1).split("heldout")
     np.testing.assert_array_equal(real[0].q_cmd, nominal[0].q_cmd)  # same excitation, different robot
-    gap = replay_gap(humanoid, real + [_renamed(nominal[0])], RATE)["per_trajectory"]
+    gap = pd_gap(humanoid, real + [_renamed(nominal[0])], RATE)["per_trajectory"]
     assert gap["heldout_000"] > 0.03
     assert gap["nominal"] < 0.01
     assert gap["heldout_000"] > 5 * gap["nominal"]

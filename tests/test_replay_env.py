@@ -29,7 +29,7 @@ def test_worlds_start_in_the_recorded_state(robot, data):
 
 
 def test_zero_residual_is_the_plain_newton_pd_replay(robot, data):
-    from wresdyn.sim.solvers import replay
+    from wresdyn.sim.rollout import replay
 
     env = make_env(robot, data, n=1, horizon=50)
     g0 = int(env.g[0])

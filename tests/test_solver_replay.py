@@ -358,7 +358,8 @@ def test_step_tape_matches_rollout_tape_and_threads_agree(tri):
 
 def test_selectable_in_sim(humanoid):
     """``solver="replay"`` in :mod:`wresdyn.sim.solvers` gives the same replay as the fused rollout."""
-    from wresdyn.sim.solvers import SOLVERS, make_solver, replay
+    from wresdyn.sim import SOLVERS, make_solver
+    from wresdyn.sim.rollout import replay
 
     assert "replay" in SOLVERS
     assert isinstance(make_solver(humanoid.build_model(1, "cpu"), humanoid, DT, "replay"), SolverReplay)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from wresdyn.robot.description import load_robot
+from wresdyn.sim import SimulationDiverged, explicit_pd_margin, resolve_solver
+from wresdyn.sim.rollout import replay
 from wresdyn.sim.parity import multisine_command
-from wresdyn.sim.solvers import SimulationDiverged, explicit_pd_margin, replay, resolve_solver
 
 DT = 0.002
 

@@ -64,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     from ..data.excitation import plot_spectrum
-    from ..data.real_robot import Mismatch, collect, replay_gap
+    from ..data.real_robot import Mismatch, collect
+    from ..evaluation.evaluate import pd_gap
 
     counts = {"train": args.train, "heldout": args.heldout, "ood": args.ood}
     if any(n < 0 for n in counts.values()) or sum(counts.values()) == 0:
@@ -83,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
             trajs = ds.split(split)
             if trajs:
                 _say(f"replaying {len(trajs)} {split} trajectories PD-only in Newton (Featherstone, nominal robot)")
-                g = gaps[split] = replay_gap(robot, trajs, args.rate)
+                g = gaps[split] = pd_gap(robot, trajs, args.rate)
                 _say(f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")
         ds.meta["pd_only_gap"] = gaps
     out.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="run folder written by `wresdyn train`")
     p.add_argument("--data", default=None, help="dataset file (default: the one the run was trained on)")
     p.add_argument("--robot", default=None, help="robot file (default: the dataset's)")
-    p.add_argument("--splits", nargs="+", default=["heldout", "ood"], help="splits to evaluate (default: heldout ood)")
+    p.add_argument("--splits", nargs="+", default=["validation", "heldout", "ood"],
+                   help="splits to evaluate (default: validation heldout ood; absent splits are skipped)")
     p.add_argument("--out", default=None, help="output folder (default: RUN/eval)")
     p.add_argument("--solver", default=None, help="Newton solver (default: the one the run was trained with)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")

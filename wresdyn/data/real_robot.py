@@ -22,7 +22,7 @@ from ..errors import SimulationDiverged
 from ..paths import REPO
 from ..robot.description import Robot, RobotError
 
-__all__ = ["Mismatch", "MismatchError", "RealRobot", "collect", "replay_gap"]
+__all__ = ["Mismatch", "MismatchError", "RealRobot", "collect"]
 
 
 class MismatchError(RobotError):
@@ -304,33 +304,3 @@ def _display_path(p: Path) -> str:
         return str(p.relative_to(root))
     except ValueError:
         return str(p)
-
-
-def replay_gap(robot: Robot, trajectories, rate_hz: float, solver: str = "featherstone") -> dict:
-    """PD-only Newton replay of each trajectory's commands (nominal robot, open loop from the first recorded
-    state over the whole trajectory) against the recorded positions: the sim-to-real gap to close.
-
-    Returns:
-        ``{"mean": mean |Δq| [rad], "std": its standard deviation over all samples and joints [rad],
-        "per_trajectory": {name: mean |Δq|}, "per_joint": {joint: mean |Δq|}, "n_trajectories": int}``.
-    """
-    from ..sim.solvers import replay
-
-    trajectories = list(trajectories)
-    if not trajectories:
-        return {}
-    by_len: dict[int, list] = {}
-    for tr in trajectories:
-        by_len.setdefault(tr.n_samples, []).append(tr)
-    errs, per_traj = [], {}
-    for group in by_len.values():
-        q_cmd = np.stack([tr.q_cmd for tr in group])
-        q_sim, _ = replay(robot, q_cmd, np.stack([tr.q[0] for tr in group]), np.stack([tr.qd[0] for tr in group]),
-                          1.0 / rate_hz, solver)
-        for tr, qs in zip(group, q_sim):
-            e = np.abs(qs[:-1] - tr.q)
-            per_traj[tr.name] = float(e.mean())
-            errs.append(e)
-    e = np.concatenate(errs)
-    return {"mean": float(e.mean()), "std": float(e.std()), "per_trajectory": per_traj,
-            "per_joint": dict(zip(robot.joint_names, e.mean(axis=0).tolist())), "n_trajectories": len(trajectories)}

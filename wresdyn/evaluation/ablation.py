@@ -254,6 +254,6 @@ def plot_curves(results: list[dict], path: str | Path) -> Path:
     axes[0].set_ylabel("held-out mean |Δq| [rad]")
     axes[1].legend(fontsize=7)
     fig.tight_layout()
-    from .evaluate import save_figure
+    from .plots import save_figure
 
     return save_figure(fig, path, dpi=120)

@@ -5,7 +5,7 @@ from __future__ import annotations
 __all__ = ["evaluate_run"]
 
 
-def evaluate_run(run: str, ds, robot, splits=("heldout", "ood"), out: str | None = None, solver: str | None = None,
+def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
                  device: str = "cpu", joints: int = 6, compare=(), data_label: str = "") -> dict:
     """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
     per-split summaries."""
@@ -15,7 +15,8 @@ def evaluate_run(run: str, ds, robot, splits=("heldout", "ood"), out: str | None
     import torch
 
     from ..learn.ppo import RunError, config_from_dict, load_policy
-    from .evaluate import evaluate_split, plot_fig3, plot_learning_curves, write_report
+    from .evaluate import evaluate_split, summary_line, write_report
+    from .plots import plot_fig3, plot_learning_curves
 
     torch.set_num_threads(1)
     run_dir = Path(run)
@@ -37,10 +38,7 @@ def evaluate_run(run: str, ds, robot, splits=("heldout", "ood"), out: str | None
         results[split] = summary
         plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
                   title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)")
-        pd, res = summary["pd_only"], summary["pd_residual"]
-        print(f"{split:8s} {len(trajs)} traj  mean |dq| PD only {pd['mean_abs_dq']:.4f} ± {pd['std_abs_dq']:.4f} rad  "
-              f"PD + residual {res['mean_abs_dq']:.4f} ± {res['std_abs_dq']:.4f} rad  ({summary['improvement']:.2f}x)  "
-              f"vel {pd['mean_abs_dqd']:.3f} -> {res['mean_abs_dqd']:.3f} rad/s", flush=True)
+        print(summary_line(split, summary), flush=True)
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
     plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
     write_report(out_dir, robot, results, {"run": str(run_dir), "residual": meta["kind"], "arch": meta["arch"],

@@ -7,9 +7,15 @@ the loop, and minimises the joint position and velocity mismatch against the rec
     L = mean_k [ w_q |q_k − q_r,k|² + w_qd |q̇_k − q̇_r,k|² ] + w_τ |τ_res|² + w_rate |a_k − a_{k−1}|²,
 
 the regularisers mirroring Table I's torque and action-rate penalties. Gradients come from a ``wp.Tape`` per
-solver step, bridged into torch by :class:`SimStep` (a ``torch.autograd.Function``): torch's autograd walks the
-steps backwards and each step's tape turns the incoming state gradient into gradients of the previous state and
-of the residual, all on the device (``wp.from_torch`` / ``wp.to_torch`` are zero-copy).
+solver step, bridged into torch by :meth:`wresdyn.sim.Simulator.step_diff` (a ``torch.autograd.Function``):
+torch's autograd walks the steps backwards and each step's tape turns the incoming state gradient into gradients
+of the previous state and of the residual, all on the device (``wp.from_torch`` / ``wp.to_torch`` are zero-copy).
+Windows come from the simulation layer's :class:`~wresdyn.sim.TrajectoryBank` and run through its rollout driver
+(:func:`wresdyn.sim.rollout`, ``grad=True``), the same code that evaluation replays with.
+
+Model selection is made on the validation split: every ``select_every`` iterations the current residual replays
+the validation trajectories open loop (whole trajectories, the evaluation's metric), and the fit returns the
+residual with the lowest validation error. Held-out and OOD data are never read here.
 """
 
 from __future__ import annotations
@@ -23,9 +29,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .residual import ResidualConfig, obs_stats, observation, residual_scale
+from ..sim.residual import residual_scale
+from .residual import ResidualConfig, obs_stats
 
-__all__ = ["GradFitConfig", "DiffReplay", "SimStep", "build_policy", "rollout", "window_loss", "fit", "export_run"]
+__all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +84,9 @@ class GradFitConfig:
     """Warp / torch device."""
     seed: int = 0
     """Seed of the window sampler and network initialisation."""
+    select_every: int = 0
+    """Evaluate on the validation split every this many iterations and return the best residual (model
+    selection on validation); 0 = ten times per run."""
 
 
 def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "network"):
@@ -90,10 +100,10 @@ def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "ne
     if model == "parametric":
         from .parametric import ParametricResidual
 
-        return ParametricResidual(robot, residual_scale(robot, dataclasses.replace(cfg, kind="torque")))
+        return ParametricResidual(robot, residual_scale(robot, "torque", cfg.fraction))
     if model != "network":
         raise ValueError(f"unknown residual model {model!r}; choose 'network' or 'parametric'")
-    scale = residual_scale(robot, cfg)
+    scale = residual_scale(robot, cfg.kind, cfg.fraction)
     if cfg.arch == "gru":
         gru = torch.nn.GRU(4 * n, cfg.gru_hidden_dim, cfg.gru_layers)
         mlp = MLP(cfg.gru_hidden_dim, n, list(cfg.hidden_dims), "elu")
@@ -106,127 +116,6 @@ def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "ne
         last.weight.mul_(cfg.output_gain)
         last.bias.zero_()
     return policy
-
-
-class DiffReplay:
-    """B Newton worlds of one fixed-base robot with per-step states kept for the backward pass.
-
-    Step k reads ``states_in[k]`` and writes ``states_out[k]``; separate buffers keep each step's tape valid.
-    """
-
-    def __init__(self, robot, worlds: int, horizon: int, dt: float, solver: str = "auto", device: str = "cpu") -> None:
-        import warp as wp
-
-        from ..sim.solvers import make_solver, resolve_solver
-
-        if robot.base != "fixed":
-            raise ValueError("the gradient fit replays fixed-base recordings")
-        kind = resolve_solver(robot, dt, solver)
-        if kind == "mujoco":
-            raise ValueError(f"{robot.source.name}: SolverMuJoCo is not differentiable; the gradient fit needs "
-                             "a differentiable solver (add armature so Featherstone is stable)")
-        self.robot, self.worlds, self.dt, self.device = robot, worlds, dt, device
-        self.model = robot.build_model(worlds, device, requires_grad=True)
-        self.solver = make_solver(self.model, robot, dt, kind)
-        self.nq = self.model.joint_coord_count // worlds
-        self.nqd = self.model.joint_dof_count // worlds
-        self.q_index = torch.as_tensor(robot.q_index, device=device)
-        self.qd_index = torch.as_tensor(robot.qd_index, device=device)
-        self.states_in, self.states_out, self.controls = [], [], []
-        self.ensure_horizon(horizon)
-        self._wp = wp
-
-    def ensure_horizon(self, horizon: int) -> None:
-        while len(self.states_in) < horizon:
-            self.states_in.append(self.model.state(requires_grad=True))
-            self.states_out.append(self.model.state(requires_grad=True))
-            self.controls.append(self.model.control(requires_grad=True))
-
-    def scatter(self, x: torch.Tensor, index: torch.Tensor, width: int) -> torch.Tensor:
-        """Actuated-joint values (B, n) -> a flat per-world array (B*width,) with zeros elsewhere."""
-        full = torch.zeros(self.worlds, width, dtype=torch.float32, device=x.device)
-        full[:, index] = x.to(torch.float32)
-        return full.reshape(-1)
-
-
-class SimStep(torch.autograd.Function):
-    """One differentiable solver step: (q, q̇, PD target, joint torque) -> (q', q̇'), each (B, n_dof)."""
-
-    @staticmethod
-    def forward(ctx, q, qd, target, tau, sim: DiffReplay, k: int):
-        wp = sim._wp
-        s_in, s_out, ctrl = sim.states_in[k], sim.states_out[k], sim.controls[k]
-        wp.copy(s_in.joint_q, wp.from_torch(sim.scatter(q, sim.q_index, sim.nq)))
-        wp.copy(s_in.joint_qd, wp.from_torch(sim.scatter(qd, sim.qd_index, sim.nqd)))
-        wp.copy(ctrl.joint_target_q, wp.from_torch(sim.scatter(target, sim.qd_index, sim.nqd)))
-        wp.copy(ctrl.joint_f, wp.from_torch(sim.scatter(tau, sim.qd_index, sim.nqd)))
-        tape = wp.Tape()
-        with tape:
-            sim.solver.step(s_in, s_out, ctrl, None, sim.dt)
-        ctx.tape, ctx.sim, ctx.k = tape, sim, k
-        q_out = wp.to_torch(s_out.joint_q).view(sim.worlds, sim.nq)[:, sim.q_index].clone()
-        qd_out = wp.to_torch(s_out.joint_qd).view(sim.worlds, sim.nqd)[:, sim.qd_index].clone()
-        return q_out, qd_out
-
-    @staticmethod
-    def backward(ctx, g_q, g_qd):
-        sim, k, tape = ctx.sim, ctx.k, ctx.tape
-        wp = sim._wp
-        s_in, s_out, ctrl = sim.states_in[k], sim.states_out[k], sim.controls[k]
-        tape.backward(grads={
-            s_out.joint_q: wp.from_torch(sim.scatter(g_q, sim.q_index, sim.nq)),
-            s_out.joint_qd: wp.from_torch(sim.scatter(g_qd, sim.qd_index, sim.nqd)),
-        })
-
-        def grad(a, idx, width):
-            return wp.to_torch(a.grad).view(sim.worlds, width)[:, idx].clone()
-
-        out = (grad(s_in.joint_q, sim.q_index, sim.nq), grad(s_in.joint_qd, sim.qd_index, sim.nqd),
-               grad(ctrl.joint_target_q, sim.qd_index, sim.nqd), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
-        tape.zero()
-        ctx.tape = None
-        return (*out, None, None)
-
-
-def rollout(sim: DiffReplay, policy, q0, qd0, qdd0, q_cmd, truncation: int = 0, obs_noise: float = 0.0,
-            generator: torch.Generator | None = None):
-    """Differentiable open-loop replay of H steps with the residual in the loop.
-
-    Args:
-        q0, qd0, qdd0: Recorded start state [rad, rad/s, rad/s²], (B, n).
-        q_cmd: Commands [rad], (B, H, n).
-        truncation: Detach the simulated state (and a GRU's hidden state) every this many steps; 0 = never.
-        obs_noise: Std of Gaussian noise on the policy's observation, in units of ``policy.obs_std``.
-        generator: Torch generator of that noise.
-
-    Returns:
-        q, qd of the simulated steps 1..H, (B, H, n), and the normalised actions (B, H, n).
-    """
-    if hasattr(policy, "reset"):
-        policy.reset()
-    q, qd, qdd = q0, qd0, qdd0
-    qs, qds, actions = [], [], []
-    scale = policy.scale
-    for k in range(q_cmd.shape[1]):
-        obs = observation(q, qd, qdd, q_cmd[:, k])
-        if obs_noise > 0.0:
-            obs = obs + obs_noise * policy.obs_std * torch.randn(obs.shape, generator=generator, device=obs.device)
-        res = policy(obs)
-        actions.append(res / scale)
-        if policy.kind == "torque":
-            target, tau = q_cmd[:, k], res
-        else:
-            target, tau = q_cmd[:, k] + res, torch.zeros_like(res)
-        q_next, qd_next = SimStep.apply(q, qd, target, tau, sim, k)
-        qdd = (qd_next - qd) / sim.dt
-        q, qd = q_next, qd_next
-        qs.append(q)
-        qds.append(qd)
-        if truncation and (k + 1) % truncation == 0:
-            q, qd, qdd = q.detach(), qd.detach(), qdd.detach()
-            if isinstance(getattr(policy, "hidden", None), torch.Tensor):
-                policy.hidden = policy.hidden.detach()
-    return torch.stack(qs, 1), torch.stack(qds, 1), torch.stack(actions, 1)
 
 
 def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tuple[torch.Tensor, dict]:
@@ -246,50 +135,34 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tup
     return loss, {k: float(v.detach()) for k, v in parts.items()}
 
 
-class _Windows:
-    """Uniform sampler of (trajectory, start) windows over the training split, as device tensors.
-
-    Trajectories may differ in length (imported logs do); the recordings live in the replay environment's
-    :class:`~wresdyn.learn.replay_env.TrajectoryBank`.
-    """
-
-    def __init__(self, trajectories, device: str) -> None:
-        from .replay_env import TrajectoryBank
-
-        self.bank = TrajectoryBank(trajectories, device)
-        self.lengths = np.array([len(t.q) for t in trajectories])
-        self.starts = np.concatenate([[0], np.cumsum(self.lengths)[:-1]])
-
-    def sample(self, rng: np.random.Generator, b: int, h: int):
-        eligible = np.flatnonzero(self.lengths > h)
-        if len(eligible) == 0:
-            raise ValueError(f"every training trajectory is shorter than the {h + 1} samples a window needs")
-        traj = eligible[rng.integers(0, len(eligible), b)]
-        start = rng.integers(0, self.lengths[traj] - h, b)
-        dev = self.bank.q.device
-        rows = torch.as_tensor(self.starts[traj] + start, device=dev)[:, None] + torch.arange(h + 1, device=dev)[None]
-        q, qd, qdd, cmd = self.bank.q[rows], self.bank.qd[rows], self.bank.qdd[rows], self.bank.q_cmd[rows]  # (B, H+1, n)
-        return q[:, 0], qd[:, 0], qdd[:, 0], cmd[:, :h], q[:, 1:], qd[:, 1:]
+RESUME_MAY_CHANGE = ("device",)
+""":class:`GradFitConfig` fields a resumed fit may change: where it runs, not what it learns (``iterations``
+shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
 
-def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, eval_fn=None,
-        eval_every: int = 0, until: int | None = None):
-    """Fit a residual policy to ``dataset``'s training split by gradient descent through the simulation.
+def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None):
+    """Fit a residual to ``dataset``'s training split by gradient descent through the simulation.
 
     Args:
         robot: The nominal robot (the simulator side).
-        dataset: A :class:`wresdyn.data.dataset.Dataset` recorded on the "real" robot.
+        dataset: A :class:`wresdyn.data.dataset.Dataset` (only ``q``, ``qd``, ``qdd``, ``q_cmd`` are read; recorded
+            torques never). Its ``validation`` split, when present, selects the returned residual.
         cfg: Settings.
-        out: Optional run folder: ``checkpoint.pt`` (resumed if present), ``curve.json``.
+        out: Optional run folder: ``checkpoint.pt`` (resumed if present; a changed config is refused),
+            ``curve.json``.
         log: Progress printer.
-        eval_fn: Optional ``eval_fn(policy) -> float`` (held-out error), called every ``eval_every`` iterations.
         until: Stop (and checkpoint) after this many iterations of the ``cfg.iterations`` schedule (horizon
             curriculum and learning rate), to resume later; ``None`` runs the whole schedule.
 
     Returns:
-        ``(policy, curve)``: the trained :class:`~wresdyn.learn.residual.ResidualPolicy` and the learning curve rows
-        (iteration, wall-clock [s], simulated env-steps, loss parts, optional held-out error).
+        ``(policy, curve)``: the trained :class:`~wresdyn.learn.residual.ResidualPolicy` (the one with the lowest
+        validation error when the dataset has a validation split, else the last) and the learning curve rows
+        (iteration, wall-clock [s], simulated env-steps, loss parts, validation error where evaluated).
     """
+    from ..sim import Simulator, TrajectoryBank, rollout
+    from .runs import check_resume, load_checkpoint, save_checkpoint
+    from .selection import ValidationScore
+
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     train = dataset.split("train")
@@ -300,31 +173,43 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     policy = build_policy(robot, cfg.residual, mean, std, cfg.model).to(cfg.device)
     optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr)
     horizons = cfg.horizon_curriculum or (cfg.horizon,)
-    sim = DiffReplay(robot, cfg.windows, max(horizons), dt, cfg.solver, cfg.device)
-    windows = _Windows(train, cfg.device)
+    sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True)
+    bank = TrajectoryBank(train, sim.device)
+    validation = dataset.split("validation")
+    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device) if validation else None
+    select_every = max(1, cfg.select_every or cfg.iterations // 10)
     obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
     noise_gen = torch.Generator(device=cfg.device)
     noise_gen.manual_seed(cfg.seed)
     curve, start_it, sim_steps, wall0 = [], 0, 0, 0.0
+    best = {"validation": float("inf"), "iteration": 0, "state": None}
+    config = dataclasses.asdict(cfg)
     ckpt = Path(out) / "checkpoint.pt" if out else None
     if ckpt and ckpt.exists():
-        state = torch.load(ckpt, map_location=cfg.device, weights_only=False)
+        state = load_checkpoint(ckpt, map_location=cfg.device)
+        meta = state["meta"]
+        check_resume(ckpt.parent, meta["config"], config, RESUME_MAY_CHANGE)
         policy.load_state_dict(state["policy"])
         optim.load_state_dict(state["optim"])
-        rng.bit_generator.state = state["rng"]
-        if "noise_rng" in state:
-            noise_gen.set_state(state["noise_rng"].cpu())
-        curve, start_it, sim_steps, wall0 = state["curve"], state["iteration"], state["sim_steps"], state["wall"]
+        rng.bit_generator.state = meta["rng"]
+        noise_gen.set_state(state["noise_rng"].cpu())
+        curve, start_it, sim_steps, wall0 = meta["curve"], meta["iteration"], meta["sim_steps"], meta["wall"]
+        best = {"validation": meta["best_validation"], "iteration": meta["best_iteration"],
+                "state": state["best"] or None}
         log(f"resumed from {ckpt} at iteration {start_it}")
+    if score is None and start_it == 0:
+        log("no validation split: the fit returns its last iteration (`wresdyn migrate` adds one)")
     t0 = time.perf_counter() - wall0
     stop = cfg.iterations if until is None else min(until, cfg.iterations)
     for it in range(start_it, stop):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
             group["lr"] = cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations))
-        q0, qd0, qdd0, cmd, q_ref, qd_ref = windows.sample(rng, cfg.windows, h)
-        q, qd, actions = rollout(sim, policy, q0, qd0, qdd0, cmd, cfg.grad_truncation, obs_noise, noise_gen)
-        loss, parts = window_loss(cfg, q, qd, actions, q_ref, qd_ref, policy.scale if policy.kind == "torque" else None)
+        window = bank.sample(rng, cfg.windows, h)
+        run = rollout(sim, window, policy, grad=True, truncation=cfg.grad_truncation, obs_noise=obs_noise,
+                      generator=noise_gen)
+        loss, parts = window_loss(cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:], window.qd[:, 1:],
+                                  policy.scale if policy.kind == "torque" else None)
         if not torch.isfinite(loss):
             raise FloatingPointError(f"gradient fit: non-finite loss at iteration {it} (simulation diverged)")
         optim.zero_grad()
@@ -332,28 +217,31 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.grad_clip)
         optim.step()
         sim_steps += cfg.windows * h * 2  # forward + backward through each step
-        row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps, "loss": float(loss.detach()), **parts}
-        if eval_fn is not None and eval_every and ((it + 1) % eval_every == 0 or it + 1 == cfg.iterations):
-            row["heldout"] = float(eval_fn(policy))
+        row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps,
+               "loss": float(loss.detach()), **parts}
+        if score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations):
+            t_eval = time.perf_counter()
+            row["validation"] = score(policy)
+            t0 += time.perf_counter() - t_eval  # wall-clock counts training only
+            if row["validation"] < best["validation"]:
+                best = {"validation": row["validation"], "iteration": it + 1,
+                        "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
         curve.append(row)
         if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == stop:
             msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
-            log(msg + (f"  held-out {row['heldout']:.4f} rad" if "heldout" in row else "") + f"  {row['wall']:.0f}s")
+            log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
             if ckpt:
-                _save_atomic(ckpt, {"policy": policy.state_dict(), "optim": optim.state_dict(),
-                                    "rng": rng.bit_generator.state, "noise_rng": noise_gen.get_state(), "curve": curve,
-                                    "iteration": it + 1, "sim_steps": sim_steps, "wall": row["wall"],
-                                    "config": dataclasses.asdict(cfg)})
+                meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
+                        "sim_steps": sim_steps, "wall": row["wall"], "best_validation": best["validation"],
+                        "best_iteration": best["iteration"]}
+                save_checkpoint(ckpt, {"policy": policy.state_dict(), "optim": optim.state_dict(),
+                                       "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, meta)
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))
+    if best["state"] is not None and stop == cfg.iterations:
+        policy.load_state_dict(best["state"])
+        log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
     return policy.eval(), curve
-
-
-def _save_atomic(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(obj, tmp)
-    tmp.replace(path)
 
 
 def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: str | Path | None = None) -> None:

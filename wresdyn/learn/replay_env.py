@@ -7,14 +7,14 @@ the simulated state is compared with the recording at the same time index (Table
 that diverges (non-finite state, runaway velocity, far past a joint limit, or far from the recording)
 is reset and counted; its state never reaches the learner.
 
-:class:`ReplaySim` is the thin layer over Newton (model, two states, control, torch views of the Warp
-arrays, so per-step work stays on the device); :class:`ReplayEnv` is the rsl-rl ``VecEnv`` on top.
-The solver comes from :func:`wresdyn.sim.solvers.make_solver`, so a faster ``SolverBase`` drops in by name.
+:class:`ReplayEnv` is the rsl-rl ``VecEnv`` on the simulation layer: :class:`wresdyn.sim.Simulator` steps the
+worlds, :class:`wresdyn.sim.TrajectoryBank` holds the recordings (and the command path's delay),
+:func:`wresdyn.sim.residual.apply_residual` applies the residual and :meth:`wresdyn.sim.Simulator.diverged`
+judges divergence, as for every other consumer of the replay.
 """
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import asdict, dataclass
 
@@ -23,10 +23,12 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from .residual import ResidualConfig, obs_stats, observation, residual_scale
+from ..sim import DivergenceLimits, Simulator, TrajectoryBank
+from ..sim.residual import apply_residual, observation, residual_scale
+from .residual import ResidualConfig, obs_stats
 from .rewards import RewardConfig, reward_terms
 
-__all__ = ["ReplayEnvConfig", "ReplaySim", "TrajectoryBank", "ReplayEnv", "runaway"]
+__all__ = ["ReplayEnvConfig", "ReplayEnv"]
 
 
 @dataclass(frozen=True)
@@ -38,7 +40,7 @@ class ReplayEnvConfig:
     substeps: int = 1
     """Simulator steps per recorded sample; the sim step is 1 / (rate_hz · substeps) [s]."""
     solver: str = "auto"
-    """Newton solver kind for :func:`wresdyn.sim.solvers.make_solver`; "auto" takes :class:`wresdyn.sim.replay.SolverReplay`
+    """Newton solver kind (:data:`wresdyn.sim.SOLVERS`); "auto" takes :class:`wresdyn.sim.replay.SolverReplay`
     for a fixed base: 100-200k env-steps/s with 256 worlds on 2 busy CPU cores against ~1k for
     ``SolverFeatherstone``, with the same PD-only gap on the shipped benchmark (0.0801 vs 0.0798 rad held-out)."""
     max_qd: float = 100.0
@@ -57,116 +59,12 @@ class ReplayEnvConfig:
     """Scale of q̇ − q̇_r in the critic's privileged observation [rad/s]."""
 
 
-def _torch_device(device: str | None) -> torch.device:
-    import warp as wp
-
-    return torch.device(str(wp.device_to_torch(wp.get_device(device))))
-
-
-def _index(idx: np.ndarray, device) -> slice | torch.Tensor:
-    idx = np.asarray(idx, dtype=np.int64)
-    if len(idx) and (np.diff(idx) == 1).all():
-        return slice(int(idx[0]), int(idx[-1]) + 1)
-    return torch.as_tensor(idx, device=device)
-
-
-class ReplaySim:
-    """``n_worlds`` copies of a robot in Newton, stepped under PD with a residual, read and written as torch.
-
-    Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
-    shape (n_worlds, n_dof), float32 on the simulation device.
-    """
-
-    def __init__(self, robot, n_worlds: int, dt: float, solver: str = "auto", substeps: int = 1,
-                 device: str | None = "cpu") -> None:
-        import warp as wp
-
-        from ..sim.solvers import make_solver
-
-        self.robot, self.n_worlds, self.substeps = robot, n_worlds, substeps
-        self.dt_sub = dt / substeps
-        self.model = robot.build_model(n_worlds, device)
-        self.solver = make_solver(self.model, robot, self.dt_sub, solver)
-        self.states = [self.model.state(), self.model.state()]
-        self.control = self.model.control()
-        self.device = _torch_device(device)
-        self._cuda = self.device.type == "cuda"
-        nq, nqd = self.model.joint_coord_count // n_worlds, self.model.joint_dof_count // n_worlds
-        self._q = [wp.to_torch(s.joint_q).view(n_worlds, nq) for s in self.states]
-        self._qd = [wp.to_torch(s.joint_qd).view(n_worlds, nqd) for s in self.states]
-        self._target = wp.to_torch(self.control.joint_target_q).view(n_worlds, -1)
-        self._force = wp.to_torch(self.control.joint_f).view(n_worlds, nqd)
-        self._qi, self._qdi = _index(robot.q_index, self.device), _index(robot.qd_index, self.device)
-        self._cur = 0
-
-    @property
-    def q(self) -> torch.Tensor:
-        return self._q[self._cur][:, self._qi].clone()
-
-    @property
-    def qd(self) -> torch.Tensor:
-        return self._qd[self._cur][:, self._qdi].clone()
-
-    def set_state(self, ids: torch.Tensor, q: torch.Tensor, qd: torch.Tensor) -> None:
-        """Overwrite the joint state of worlds ``ids`` (long, (k,)) with q, qd (k, n_dof).
-
-        Body poses are not recomputed: the solvers integrate joint coordinates and derive them each step.
-        """
-        self._q[self._cur][ids, self._qi] = q.to(torch.float32)
-        self._qd[self._cur][ids, self._qdi] = qd.to(torch.float32)
-
-    def step(self, q_target: torch.Tensor, tau: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        """Advance one sample period holding the PD target q_target [rad] and joint torque tau [N*m], (N, n_dof)."""
-        import warp as wp
-
-        self._target[:, self._qdi] = q_target
-        self._force[:, self._qdi] = 0.0 if tau is None else tau
-        # torch wrote the control on its stream; have Warp launch on the same one
-        on_torch_stream = (wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.device)))
-                           if self._cuda else contextlib.nullcontext())
-        with on_torch_stream:
-            for _ in range(self.substeps):
-                self.solver.step(self.states[self._cur], self.states[1 - self._cur], self.control, None, self.dt_sub)
-                self._cur = 1 - self._cur
-        return self.q, self.qd
-
-
-class TrajectoryBank:
-    """Recorded trajectories concatenated along time on the device; row ``start[j] + k`` is sample k of j."""
-
-    def __init__(self, trajectories, device) -> None:
-        if not trajectories:
-            raise ValueError("no trajectories to replay")
-
-        def cat(name):
-            return torch.as_tensor(np.concatenate([getattr(t, name) for t in trajectories]), dtype=torch.float32,
-                                   device=device)
-
-        self.q, self.qd, self.qdd, self.q_cmd = cat("q"), cat("qd"), cat("qdd"), cat("q_cmd")
-        """Recorded q [rad], q̇ [rad/s], q̈ [rad/s²] and commanded q [rad], each (T_total, n_dof)."""
-        lengths = np.array([len(t.q) for t in trajectories])
-        if (lengths < 2).any():
-            raise ValueError("every trajectory needs at least two samples")
-        self.length = torch.as_tensor(lengths, device=device)
-        self.start = torch.as_tensor(np.concatenate([[0], np.cumsum(lengths)[:-1]]), device=device)
-
-
-def runaway(q, qd, q_r, lower, upper, cfg: ReplayEnvConfig) -> torch.Tensor:
-    """Worlds to reset: non-finite, faster than ``max_qd``, past a limit by ``limit_margin``, or more than
-    ``max_error`` from the recording. (N, n) tensors -> bool (N,)."""
-    bad = ~(torch.isfinite(q).all(-1) & torch.isfinite(qd).all(-1))
-    bad |= (qd.abs() > cfg.max_qd).any(-1)
-    bad |= ((q < lower - cfg.limit_margin) | (q > upper + cfg.limit_margin)).any(-1)
-    bad |= ((q - q_r).abs() > cfg.max_error).any(-1)
-    return bad
-
-
 class ReplayEnv(VecEnv):
     """rsl-rl vectorised environment replaying recorded trajectories; see the module docstring.
 
     Observation groups: ``policy`` = normalised [q, q̇, q̈, q_cmd] (N, 4n); ``critic`` adds the privileged
     tracking error (q − q_r, q̇ − q̇_r, scaled) and the fraction of the episode left, (N, 6n + 1).
-    Actions a (N, n) become the residual clip(g · a, −1, 1) · :func:`~wresdyn.learn.residual.residual_scale`, g the
+    Actions a (N, n) become the residual clip(g · a, −1, 1) · :func:`~wresdyn.sim.residual.residual_scale`, g the
     configured ``action_gain``; the action terms of the reward see a clipped to ±1/g.
     """
 
@@ -175,7 +73,8 @@ class ReplayEnv(VecEnv):
                  device: str | None = "cpu", seed: int = 0, obs_mean=None, obs_std=None) -> None:
         self.robot, self.env_cfg, self.residual_cfg, self.reward_cfg = robot, cfg, residual, rewards
         self.dt = 1.0 / rate_hz
-        self.sim = ReplaySim(robot, num_envs, self.dt, cfg.solver, cfg.substeps, device)
+        self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device)
+        self.limits = DivergenceLimits(cfg.max_qd, cfg.limit_margin, cfg.max_error)
         self.device = self.sim.device
         self.num_envs, self.num_actions = num_envs, robot.n_dof
         self.max_episode_length = cfg.horizon
@@ -189,9 +88,8 @@ class ReplayEnv(VecEnv):
             return torch.as_tensor(np.asarray(x), dtype=f32, device=dev)
 
         self.obs_mean, self.obs_std = t(obs_mean), t(obs_std)
-        self.scale = t(residual_scale(robot, residual))
+        self.scale = t(residual_scale(robot, residual.kind, residual.fraction))
         self.kp, self.kd = t(robot.kp), t(robot.kd)
-        self.lower, self.upper = t(robot.lower), t(robot.upper)
         self.gen = torch.Generator(device=dev)
         self.gen.manual_seed(seed)
         n, z = robot.n_dof, torch.zeros
@@ -250,22 +148,20 @@ class ReplayEnv(VecEnv):
         t0 = time.perf_counter()
         limit = 1.0 / self.residual_cfg.action_gain
         a = actions.to(self.device).clamp(-limit, limit)
-        cmd = self.bank.q_cmd[self.g]
         res = a * (self.residual_cfg.action_gain * self.scale)
-        if self.residual_cfg.kind == "torque":
-            target, tau_res = cmd, res
-        else:
-            target, tau_res = cmd + res, torch.zeros_like(res)
+        target, tau_res = apply_residual(self.bank.target(self.g), res, self.residual_cfg.kind)
         q0, qd0 = self.q, self.qd
         # joint torque at the start of the step, PD plus residual (Table I torque term); a solver that
         # clamps the drive or treats kd implicitly applies slightly less
-        tau = self.kp * (target - q0) - self.kd * qd0 + tau_res
+        tau = self.kp * (target - q0) - self.kd * qd0
+        if tau_res is not None:
+            tau = tau + tau_res
         q, qd = self.sim.step(target, tau_res)
         qdd = (qd - qd0) / self.dt
         self.g += 1
         self.episode_length_buf += 1
         q_r, qd_r = self.bank.q[self.g], self.bank.qd[self.g]
-        bad = runaway(q, qd, q_r, self.lower, self.upper, self.env_cfg)
+        bad = self.sim.diverged(q, qd, self.limits, q_r)
         if bad.any():  # keep NaN and runaway values out of the reward and the observation
             q, qd = torch.where(bad[:, None], q_r, q), torch.where(bad[:, None], qd_r, qd)
             qdd = torch.where(bad[:, None], self.bank.qdd[self.g], qdd)

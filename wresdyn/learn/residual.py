@@ -32,11 +32,8 @@ import torch.nn as nn
 from rsl_rl.models import MLPModel, RNNModel
 
 __all__ = [
-    "KINDS",
     "ARCHS",
     "ResidualConfig",
-    "residual_scale",
-    "observation",
     "obs_stats",
     "ResidualMLPModel",
     "ResidualRNNModel",
@@ -50,8 +47,6 @@ __all__ = [
     "export_run_files",
 ]
 
-KINDS = ("torque", "delta_action")
-"""Residual kinds: joint torque added to τ_pd (paper) or offset added to the PD target (ASAP)."""
 ARCHS = ("mlp", "gru")
 """Network architectures: MLP with ELU, or GRU followed by the MLP (paper Fig. 4)."""
 
@@ -87,23 +82,6 @@ class ResidualConfig:
     ``EmpiricalNormalization``, exported with the policy)."""
     output_gain: float = 0.01
     """Scale of the actor's last-layer initial weights: the residual starts near zero, i.e. at PD-only."""
-
-
-def residual_scale(robot, cfg: ResidualConfig) -> np.ndarray:
-    """Largest residual per joint, fraction · effort: [N*m] (torque) or [rad] (delta action), shape (n_dof,)."""
-    if cfg.kind not in KINDS:
-        raise ValueError(f"unknown residual kind {cfg.kind!r}; choose from {KINDS}")
-    effort = np.asarray(robot.effort, dtype=np.float64)
-    if not np.isfinite(effort).all():
-        bad = [n for n, e in zip(robot.joint_names, effort) if not np.isfinite(e)]
-        raise ValueError(f"{robot.source}: residual scale needs an effort limit on every joint; missing on {bad[:4]}")
-    torque = cfg.fraction * effort
-    return torque if cfg.kind == "torque" else torque / np.asarray(robot.kp, dtype=np.float64)
-
-
-def observation(q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor, q_cmd: torch.Tensor) -> torch.Tensor:
-    """Raw observation [q, q̇, q̈, q_cmd] ([rad], [rad/s], [rad/s²], [rad]), (N, n) each -> (N, 4n)."""
-    return torch.cat([q, qd, qdd, q_cmd], dim=-1)
 
 
 OBS_MIN_STD = (0.05, 0.5, 5.0, 0.05)

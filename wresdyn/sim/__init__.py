@@ -1,5 +1,19 @@
-"""Stage 3, the simulation: Newton replay of recorded commands under PD plus a residual.
+"""Stage 3, the simulation: Newton replay of recorded commands under PD plus a residual, one layer for all.
 
-:mod:`.solvers` picks the Newton solver, :mod:`.replay` is SolverReplay (this project's fused, differentiable
-Newton solver for the replay workload), :mod:`.parity` checks Newton against MuJoCo C, :mod:`.bench` times it.
+- :mod:`.simulator`: :class:`Simulator`, N worlds of a robot stepped under PD with a residual (fast and
+  differentiable paths, divergence limits, device stream, CUDA graphs);
+- :mod:`.bank`: recorded trajectories on the device, cut into :class:`Window` s, with the command delay/hold;
+- :mod:`.residual`: the residual kinds, their authority, observation and application;
+- :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`;
+- :mod:`.solvers`: the Newton solver choice; :mod:`.replay`: SolverReplay, this project's fused differentiable
+  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.bench`: the solver benchmark.
 """
+
+from ..errors import SimulationDiverged
+from .bank import TrajectoryBank, Window
+from .rollout import Rollout, rollout
+from .simulator import DivergenceLimits, Simulator
+from .solvers import SOLVERS, explicit_pd_margin, make_solver, resolve_solver
+
+__all__ = ["SOLVERS", "DivergenceLimits", "Rollout", "SimulationDiverged", "Simulator", "TrajectoryBank", "Window",
+           "explicit_pd_margin", "make_solver", "resolve_solver", "rollout"]

@@ -66,7 +66,8 @@ def pd_agreement(robot: Robot, seconds: float = 2.0, dt: float = 0.002, integrat
     (implicit drive damping) for SolverReplay and SolverMuJoCo. Across schemes they differ by O(dt).
     """
     from ..robot.mujoco_model import build_mujoco, mujoco_replay
-    from .solvers import replay, resolve_solver
+    from .rollout import replay
+    from .solvers import resolve_solver
 
     robot.check_gains()
     if integrator is None:

@@ -25,10 +25,9 @@ import warnings
 
 import numpy as np
 
-from ..errors import SimulationDiverged
 from ..robot.description import Robot
 
-__all__ = ["SOLVERS", "explicit_pd_margin", "resolve_solver", "make_solver", "replay", "SimulationDiverged"]
+__all__ = ["SOLVERS", "explicit_pd_margin", "resolve_solver", "make_solver"]
 
 SOLVERS = ("auto", "replay", "featherstone", "mujoco")
 """Replay solvers (see the module docstring)."""
@@ -87,71 +86,3 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto"):
         return newton.solvers.SolverFeatherstone(model)
     cpu = not str(model.device).startswith("cuda")
     return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=cpu, disable_contacts=True, integrator="implicitfast")
-
-
-def replay(
-    robot: Robot,
-    q_cmd: np.ndarray,
-    q0: np.ndarray,
-    qd0: np.ndarray | None = None,
-    dt: float = 0.002,
-    solver: str = "auto",
-    tau_res: np.ndarray | None = None,
-    device: str | None = "cpu",
-) -> tuple[np.ndarray, np.ndarray]:
-    """Open-loop PD replay of joint commands in Newton, one world per trajectory.
-
-    Args:
-        robot: The robot.
-        q_cmd: Commanded joint positions [rad], shape (T, n_dof) or (W, T, n_dof).
-        q0: Initial joint positions [rad], shape (n_dof,) or (W, n_dof).
-        qd0: Initial joint velocities [rad/s], same shape as ``q0`` (default zero).
-        dt: Time step [s]; command k is held during step k.
-        solver: One of :data:`SOLVERS`.
-        tau_res: Optional residual joint torque [N*m] added each step, shape like ``q_cmd``.
-        device: Warp device.
-
-    Returns:
-        ``(q, qd)``, each shape (T + 1, n_dof) or (W, T + 1, n_dof): the initial state, then the state after
-        each step.
-
-    Raises:
-        SimulationDiverged: the state became non-finite.
-    """
-    import warp as wp
-
-    single = q_cmd.ndim == 2
-    q_cmd = np.atleast_3d(q_cmd[None] if single else q_cmd)
-    w, t_len, n = q_cmd.shape
-    q0 = np.broadcast_to(q0, (w, n))
-    qd0 = np.zeros((w, n)) if qd0 is None else np.broadcast_to(qd0, (w, n))
-    model = robot.build_model(w, device)
-    sim = make_solver(model, robot, dt, solver)
-    s0, s1, ctrl = model.state(), model.state(), model.control()
-    nq, nqd = model.joint_coord_count // w, model.joint_dof_count // w
-    jq, jqd = s0.joint_q.numpy().reshape(w, nq), s0.joint_qd.numpy().reshape(w, nqd)
-    jq[:, robot.q_index], jqd[:, robot.qd_index] = q0, qd0
-    s0.joint_q.assign(jq.ravel())
-    s0.joint_qd.assign(jqd.ravel())
-    import newton
-
-    newton.eval_fk(model, s0.joint_q, s0.joint_qd, s0)
-    target = np.zeros((w, nqd), dtype=np.float32)
-    force = np.zeros((w, nqd), dtype=np.float32)
-    out_q = np.empty((w, t_len + 1, n))
-    out_qd = np.empty((w, t_len + 1, n))
-    out_q[:, 0], out_qd[:, 0] = q0, qd0
-    for k in range(t_len):
-        target[:, robot.qd_index] = q_cmd[:, k]
-        ctrl.joint_target_q.assign(target.ravel())
-        if tau_res is not None:
-            force[:, robot.qd_index] = np.asarray(tau_res).reshape(w, t_len, n)[:, k]
-            ctrl.joint_f.assign(force.ravel())
-        sim.step(s0, s1, ctrl, None, dt)
-        s0, s1 = s1, s0
-        out_q[:, k + 1] = s0.joint_q.numpy().reshape(w, nq)[:, robot.q_index]
-        out_qd[:, k + 1] = s0.joint_qd.numpy().reshape(w, nqd)[:, robot.qd_index]
-        if not np.isfinite(out_q[:, k + 1]).all():
-            raise SimulationDiverged(f"{robot.source.name}: Newton replay diverged at step {k + 1} (t = {(k + 1) * dt:.3f} s)")
-    wp.synchronize()
-    return (out_q[0], out_qd[0]) if single else (out_q, out_qd)

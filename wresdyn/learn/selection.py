@@ -1,0 +1,54 @@
+"""Model selection on the validation split: the open-loop replay error every learner is chosen by.
+
+The score is the evaluation's headline metric, mean |q_sim − q_real| over all joints and samples of whole
+validation trajectories replayed open loop from their first recorded state (:mod:`wresdyn.evaluation.evaluate`),
+computed through the same simulation layer. A diverged replay holds its last sane state, so it counts with its
+growing error instead of being left out. Held-out and OOD data never reach a learner.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["ValidationScore"]
+
+
+class ValidationScore:
+    """``score(policy) -> mean |Δq| [rad]`` on fixed validation trajectories; reuses one simulator.
+
+    Args:
+        robot: The robot (simulator side).
+        trajectories: Validation trajectories.
+        rate_hz: Their sample rate [Hz].
+        solver, device: Simulation settings (as the learner's).
+        delay: Command-path delay of the simulator [steps].
+    """
+
+    def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
+                 delay=0.0) -> None:
+        from ..sim import Simulator
+
+        self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay
+        if not self.trajectories:
+            raise ValueError("no validation trajectories")
+        self.sim = Simulator(robot, len(self.trajectories), 1.0 / self.rate_hz, solver=solver, device=device)
+        self.last_diverged = 0
+        """Validation replays that diverged in the last call."""
+
+    def __call__(self, policy=None, kind: str | None = None) -> float:
+        import torch
+
+        from ..sim.rollout import replay_trajectories
+
+        was_training = isinstance(policy, torch.nn.Module) and policy.training
+        if was_training:
+            policy.eval()
+        try:
+            runs = replay_trajectories(self.robot, self.trajectories, self.rate_hz, policy, kind=kind,
+                                       sim=self.sim, delay=self.delay)
+        finally:
+            if was_training:
+                policy.train()
+        rep = runs["residual" if policy is not None else "pd"]
+        self.last_diverged = sum(a >= 0 for a in rep.diverged_at)
+        return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)]).mean())

@@ -1,0 +1,176 @@
+"""Recorded trajectories on the simulation device, cut into windows, with the command path's delay and hold.
+
+Every consumer of the replay takes its data from a :class:`TrajectoryBank`: the PPO environment (rows at the
+worlds' current times), the gradient fit (random windows) and evaluation (whole trajectories from their first
+sample). A :class:`Window` is what one rollout needs: the recorded states (start state and reference), the
+commands as recorded (what a residual observes) and the PD targets the simulated drives get, which are the
+commands after the actuator delay of the command path.
+
+Command timing (zero-order hold): command k is held during step k, [t_k, t_k+1). With a delay of δ = m + α
+steps (m whole steps, 0 ≤ α < 1) the drive sees during step k the command issued δ·dt earlier, which is
+c_{k−m−1} for the first α of the step and c_{k−m} for the rest, so the step's PD target is
+
+    target_k = (1 − α) · c_{k−m} + α · c_{k−m−1},
+
+continuous and piecewise linear in δ (differentiable, as the grey-box identification needs). Before a
+trajectory's first sample the first command is held, as on a robot that holds its start pose before recording.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+__all__ = ["Window", "TrajectoryBank", "delay_commands"]
+
+
+@dataclass
+class Window:
+    """B aligned windows of L steps; sample 0 is the start state. Tensors on the simulation device, float32."""
+
+    q: torch.Tensor
+    """Recorded joint positions [rad], (B, L + 1, n): the start state, then the reference after each step."""
+    qd: torch.Tensor
+    """Recorded joint velocities [rad/s], (B, L + 1, n)."""
+    qdd: torch.Tensor
+    """Recorded joint accelerations [rad/s²], (B, L + 1, n) (only sample 0 is read: the first observation)."""
+    cmd: torch.Tensor
+    """Commands as recorded [rad], (B, L, n): what the residual observes at each step."""
+    target: torch.Tensor
+    """PD targets of the simulated drives [rad], (B, L, n): ``cmd`` after the command path's delay."""
+    length: torch.Tensor
+    """Steps of real data per window, (B,) long; beyond it a window holds its trajectory's last sample."""
+
+    @property
+    def steps(self) -> int:
+        return self.cmd.shape[1]
+
+    def repeat(self, times: int) -> "Window":
+        """The windows stacked ``times`` times along the batch (e.g. PD-only and residual copies)."""
+        return Window(*(x.repeat(times, *([1] * (x.dim() - 1))) for x in (self.q, self.qd, self.qdd, self.cmd,
+                                                                           self.target, self.length)))
+
+    @classmethod
+    def from_arrays(cls, q0, qd0, cmd, device=None, target=None) -> "Window":
+        """Windows without a recording (a plain replay): start state q0, qd0 (B, n), commands (B, L, n)."""
+        f = lambda x: torch.as_tensor(np.array(x, dtype=np.float32), device=device)  # noqa: E731
+        cmd = f(cmd)
+        b, steps, n = cmd.shape
+        q = torch.zeros(b, steps + 1, n, device=cmd.device)
+        qd = torch.zeros_like(q)
+        q[:, 0], qd[:, 0] = f(q0), f(qd0)
+        return cls(q, qd, torch.zeros_like(q), cmd, cmd if target is None else f(target),
+                   torch.full((b,), steps, dtype=torch.long, device=cmd.device))
+
+
+def delay_commands(q_cmd: torch.Tensor, rows: torch.Tensor, first: torch.Tensor, delay) -> torch.Tensor:
+    """PD targets at ``rows`` of a concatenated command table with the delay of the module docstring.
+
+    Args:
+        q_cmd: Commands [rad], (R, n): trajectories concatenated along time.
+        rows: Row indices of the steps, any shape S (long).
+        first: First row of each row's trajectory, same shape as ``rows`` (earlier rows hold the first command).
+        delay: δ in steps: a float, or a tensor (n,) per joint (differentiable).
+
+    Returns:
+        Targets, shape S + (n,).
+    """
+    n = q_cmd.shape[1]
+    if not torch.is_tensor(delay):
+        if delay == 0:
+            return q_cmd[rows]
+        delay = torch.full((n,), float(delay), device=q_cmd.device)
+    if (delay.detach() < 0).any():
+        raise ValueError("the command delay must be >= 0 steps")
+    m = torch.floor(delay.detach()).long()  # (n,)
+    alpha = delay - m.to(delay.dtype)  # carries the gradient
+    r = rows.unsqueeze(-1)
+    lo = first.unsqueeze(-1)
+    r0 = torch.maximum(r - m, lo)
+    r1 = torch.maximum(r - m - 1, lo)
+    col = torch.arange(n, device=q_cmd.device).expand_as(r0)
+    return (1.0 - alpha) * q_cmd[r0, col] + alpha * q_cmd[r1, col]
+
+
+class TrajectoryBank:
+    """Recorded trajectories concatenated along time on the device; row ``start[j] + k`` is sample k of j.
+
+    Args:
+        trajectories: Objects with ``q``, ``qd``, ``qdd``, ``q_cmd`` arrays (T_j, n) (a recorded torque is
+            never read).
+        device: Torch device.
+        delay: Actuator delay of the simulated command path [steps], a float or a tensor (n,); see the module
+            docstring.
+    """
+
+    def __init__(self, trajectories, device, delay=0.0) -> None:
+        trajectories = list(trajectories)
+        if not trajectories:
+            raise ValueError("no trajectories to replay")
+        lengths = np.array([len(t.q) for t in trajectories])
+        if (lengths < 2).any():
+            raise ValueError("every trajectory needs at least two samples")
+
+        def cat(name):
+            return torch.as_tensor(np.concatenate([getattr(t, name) for t in trajectories]), dtype=torch.float32,
+                                   device=device)
+
+        self.names = [getattr(t, "name", str(i)) for i, t in enumerate(trajectories)]
+        self.q, self.qd, self.qdd, self.q_cmd = cat("q"), cat("qd"), cat("qdd"), cat("q_cmd")
+        """Recorded q [rad], q̇ [rad/s], q̈ [rad/s²] and commanded q [rad], each (T_total, n)."""
+        self.length = torch.as_tensor(lengths, device=device)
+        """Samples per trajectory, (J,)."""
+        self.start = torch.as_tensor(np.concatenate([[0], np.cumsum(lengths)[:-1]]), device=device)
+        """First row of each trajectory, (J,)."""
+        self.first = torch.repeat_interleave(self.start, self.length)
+        """First row of each row's trajectory, (T_total,)."""
+        self.device = self.q.device
+        self.set_delay(delay)
+
+    @property
+    def n_trajectories(self) -> int:
+        return len(self.length)
+
+    def set_delay(self, delay) -> None:
+        """Set the command delay [steps]; a constant delay is applied once to the whole table."""
+        self.delay = delay
+        self._fixed = None if torch.is_tensor(delay) and delay.requires_grad else delay_commands(
+            self.q_cmd, torch.arange(len(self.q_cmd), device=self.device), self.first, delay)
+
+    def target(self, rows: torch.Tensor) -> torch.Tensor:
+        """PD targets (delayed commands) at ``rows`` [rad], shape rows.shape + (n,)."""
+        if self._fixed is not None:
+            return self._fixed[rows]
+        return delay_commands(self.q_cmd, rows, self.first[rows], self.delay)
+
+    def rows(self, traj: torch.Tensor, start: torch.Tensor, steps: int) -> torch.Tensor:
+        """Rows of windows of ``steps`` steps from sample ``start`` of trajectory ``traj`` (B,): (B, steps + 1),
+        clamped to each trajectory's last sample (a window past the end holds it)."""
+        k = torch.arange(steps + 1, device=self.device)
+        last = (self.start[traj] + self.length[traj] - 1)[:, None]
+        return torch.minimum(self.start[traj][:, None] + start[:, None] + k[None], last)
+
+    def window(self, traj: torch.Tensor, start: torch.Tensor, steps: int) -> Window:
+        """Windows of ``steps`` steps from sample ``start`` (B,) of trajectories ``traj`` (B,)."""
+        rows = self.rows(traj, start, steps)
+        length = torch.clamp(self.length[traj] - 1 - start, max=steps)
+        return Window(self.q[rows], self.qd[rows], self.qdd[rows], self.q_cmd[rows[:, :-1]],
+                      self.target(rows[:, :-1]), length)
+
+    def whole(self) -> Window:
+        """Every trajectory from its first sample to the end of the longest (shorter ones hold their last)."""
+        traj = torch.arange(self.n_trajectories, device=self.device)
+        return self.window(traj, torch.zeros_like(traj), int(self.length.max()) - 1)
+
+    def sample(self, rng: np.random.Generator, b: int, steps: int) -> Window:
+        """``b`` windows of ``steps`` steps drawn uniformly over all (trajectory, start) pairs that fit."""
+        lengths = self.length.cpu().numpy()
+        eligible = np.flatnonzero(lengths > steps)
+        if len(eligible) == 0:
+            raise ValueError(f"every trajectory is shorter than the {steps + 1} samples a window needs")
+        traj = eligible[rng.integers(0, len(eligible), b)]
+        start = rng.integers(0, lengths[traj] - steps, b)
+        t = lambda x: torch.as_tensor(x, device=self.device)  # noqa: E731
+        return self.window(t(traj), t(start), steps)

@@ -1,0 +1,226 @@
+"""Open-loop rollouts of recorded commands with a residual in the loop: the one driver every replay goes through.
+
+:func:`rollout` advances a :class:`~wresdyn.sim.simulator.Simulator` through a :class:`~wresdyn.sim.bank.Window`:
+at each step the residual policy observes [q, q̇, q̈, q_cmd] of the simulated state and the recorded command,
+its output is applied (:func:`~wresdyn.sim.residual.apply_residual`) to the step's PD target (the command after
+the command path's delay), and the solver advances one sample period. Evaluation runs it without gradients
+(diverged worlds are frozen at their last sane state and reported), the gradient fit with ``grad=True``
+(each step differentiable, truncated backpropagation), and :func:`replay` is the numpy form for PD-only checks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..errors import SimulationDiverged
+from .bank import TrajectoryBank, Window
+from .residual import apply_residual, observation
+from .simulator import DivergenceLimits, Simulator
+
+__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device"]
+
+
+@dataclass
+class Rollout:
+    """Simulated trajectories of a window batch."""
+
+    q: torch.Tensor
+    """Joint positions [rad], (B, L + 1, n): the start state, then the state after each step."""
+    qd: torch.Tensor
+    """Joint velocities [rad/s], (B, L + 1, n)."""
+    actions: torch.Tensor | None
+    """Normalised residual (residual / scale) of the policy's worlds, (B_policy, L, n); ``None`` without one."""
+    diverged_at: torch.Tensor
+    """First step whose state diverged, (B,) long, −1 if never. From there a world holds its last state
+    before divergence with zero velocity (the error to the recording keeps counting)."""
+
+
+def policy_device(policy) -> torch.device | None:
+    """Device of a torch module's parameters or buffers (``None`` for a plain callable or an empty module)."""
+    if isinstance(policy, torch.nn.Module):
+        for t in list(policy.parameters()) + list(policy.buffers()):
+            return t.device
+    return None
+
+
+def _policy_kind(policy, kind: str | None) -> str:
+    if kind is not None:
+        return kind
+    k = getattr(policy, "kind", None)
+    if k is None and hasattr(policy, "residual_kind"):
+        k = policy.residual_kind()  # TorchScript export
+    if k is None:
+        raise ValueError("the residual kind is unknown: pass kind='torque' or 'delta_action'")
+    return k
+
+
+def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = None,
+            policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
+            truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
+            limits: DivergenceLimits = DivergenceLimits(), on_diverge: str = "freeze") -> Rollout:
+    """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
+
+    Args:
+        sim: The simulator, ``sim.n_worlds`` equal to the window batch B.
+        window: Start states, commands and PD targets (:meth:`~wresdyn.sim.bank.TrajectoryBank.window`).
+        policy: Residual ``policy(obs (N, 4n)) -> residual (N, n)`` [N*m or rad] (attributes ``kind`` or a
+            TorchScript ``residual_kind()``, optional ``reset()``, ``scale``, ``obs_std``), or ``None``.
+        kind: Residual kind; default the policy's.
+        policy_worlds: Worlds the policy acts on (default all); the others run PD only in the same batch.
+        residual: Instead of a policy, a precomputed open-loop residual of ``kind`` (B, L, n).
+        grad: Differentiable rollout (``sim.requires_grad``): no divergence handling; a diverged state
+            shows up as a non-finite result.
+        truncation: With ``grad``, detach the state (and a GRU's hidden state) every this many steps; 0 = never.
+        obs_noise: Std of Gaussian noise on the policy's observation, in units of ``policy.obs_std``.
+        generator: Torch generator of that noise.
+        limits: When a world counts as diverged (``max_error`` against the window's recording).
+        on_diverge: ``"freeze"`` (hold the last sane state, report in ``diverged_at``) or ``"raise"``
+            (:class:`~wresdyn.errors.SimulationDiverged`).
+    """
+    b, steps = window.cmd.shape[0], window.steps
+    if b != sim.n_worlds:
+        raise ValueError(f"window batch {b} != simulator worlds {sim.n_worlds}")
+    pw = slice(None) if policy_worlds is None else policy_worlds
+    active = policy is not None or residual is not None
+    kind = _policy_kind(policy, kind) if policy is not None else (kind or "torque")
+    pdev = policy_device(policy)
+    if policy is not None and hasattr(policy, "reset"):
+        policy.reset()
+    scale = getattr(policy, "scale", None)
+    q, qd, qdd = window.q[:, 0], window.qd[:, 0], window.qdd[:, 0]
+    qs, qds, actions = [q], [qd], []
+    dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
+    diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
+    if not grad:
+        sim.set_state(None, q, qd)
+    for k in range(steps):
+        res = None
+        if policy is not None:
+            obs = observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k])
+            if obs_noise > 0.0:
+                obs = obs + obs_noise * policy.obs_std * torch.randn(obs.shape, generator=generator, device=obs.device)
+            with torch.set_grad_enabled(grad and torch.is_grad_enabled()):
+                r = policy(obs if pdev is None else obs.to(pdev)).to(sim.device)
+            if scale is not None:
+                actions.append(r / scale.to(r.device))
+            res = r if policy_worlds is None else torch.zeros_like(q).index_put_(
+                (torch.arange(b, device=sim.device)[pw],), r)
+        elif residual is not None:
+            res = residual[:, k]
+        target, tau = apply_residual(window.target[:, k], res, kind) if active else (window.target[:, k], None)
+        if grad:
+            q_new, qd_new = sim.step_diff(k, q, qd, target, tau)
+        else:
+            q_new, qd_new = sim.step(target, tau)
+            bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
+            if bad.any():
+                if on_diverge == "raise":
+                    w = int(bad.nonzero()[0])
+                    raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step "
+                                             f"{k + 1} (t = {(k + 1) * sim.dt:.3f} s)")
+                dead |= bad
+                diverged_at[bad] = k + 1
+            if dead.any():  # frozen worlds hold their last sane state; keep NaN out of the solver and the policy
+                q_new = torch.where(dead[:, None], q, q_new)
+                qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
+                sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
+        qdd = (qd_new - qd) / sim.dt
+        q, qd = q_new, qd_new
+        qs.append(q)
+        qds.append(qd)
+        if grad and truncation and (k + 1) % truncation == 0:
+            q, qd, qdd = q.detach(), qd.detach(), qdd.detach()
+            if isinstance(getattr(policy, "hidden", None), torch.Tensor):
+                policy.hidden = policy.hidden.detach()
+    return Rollout(torch.stack(qs, 1), torch.stack(qds, 1), torch.stack(actions, 1) if actions else None, diverged_at)
+
+
+def replay(robot, q_cmd: np.ndarray, q0: np.ndarray, qd0: np.ndarray | None = None, dt: float = 0.002,
+           solver: str = "auto", tau_res: np.ndarray | None = None, device: str | None = "cpu",
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Open-loop PD replay of joint commands in Newton, one world per trajectory (numpy in and out).
+
+    Args:
+        robot: The robot.
+        q_cmd: Commanded joint positions [rad], shape (T, n_dof) or (W, T, n_dof); command k is held during step k.
+        q0: Initial joint positions [rad], shape (n_dof,) or (W, n_dof).
+        qd0: Initial joint velocities [rad/s], same shape as ``q0`` (default zero).
+        dt: Time step [s].
+        solver: Solver kind (:data:`wresdyn.sim.solvers.SOLVERS`).
+        tau_res: Optional residual joint torque [N*m] added each step, shape like ``q_cmd``.
+        device: Warp device.
+
+    Returns:
+        ``(q, qd)``, each shape (T + 1, n_dof) or (W, T + 1, n_dof): the initial state, then the state after
+        each step.
+
+    Raises:
+        SimulationDiverged: the state became non-finite.
+    """
+    single = np.ndim(q_cmd) == 2
+    q_cmd = np.asarray(q_cmd)[None] if single else np.asarray(q_cmd)
+    w, _, n = q_cmd.shape
+    q0 = np.broadcast_to(q0, (w, n))
+    qd0 = np.zeros((w, n)) if qd0 is None else np.broadcast_to(qd0, (w, n))
+    sim = Simulator(robot, w, dt, solver=solver, device=device)
+    window = Window.from_arrays(q0, qd0, q_cmd, sim.device)
+    res = None if tau_res is None else torch.as_tensor(np.asarray(tau_res).reshape(q_cmd.shape), dtype=torch.float32,
+                                                         device=sim.device)
+    only_nan = DivergenceLimits(max_qd=math.inf, limit_margin=math.inf)
+    out = rollout(sim, window, residual=res, kind="torque", limits=only_nan, on_diverge="raise")
+    q, qd = out.q.cpu().double().numpy(), out.qd.cpu().double().numpy()
+    q[:, 0], qd[:, 0] = q0, qd0  # exact initial state (float64), as given
+    return (q[0], qd[0]) if single else (q, qd)
+
+
+@dataclass
+class Replays:
+    """Simulated trajectories of one split, one entry per recorded trajectory."""
+
+    q: list[np.ndarray]
+    """Joint positions [rad], each (T_i, n_dof); sample 0 is the recorded start state."""
+    qd: list[np.ndarray]
+    """Joint velocities [rad/s], each (T_i, n_dof)."""
+    diverged_at: list[int]
+    """Sample at which each replay diverged, −1 if it did not."""
+
+
+def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kind: str | None = None,
+                        solver: str = "auto", substeps: int = 1, device: str | None = "cpu", with_baseline: bool = False,
+                        delay=0.0, sim: Simulator | None = None) -> dict[str, Replays]:
+    """Replay every trajectory open loop from its first recorded state, PD only and/or with ``policy``.
+
+    Args:
+        robot: The robot (the simulator side).
+        trajectories: Recorded trajectories (``q``, ``qd``, ``qdd``, ``q_cmd``; ``tau`` is never read).
+        rate_hz: Sample rate of the recordings [Hz]; command k is held for one sample period.
+        policy: Residual ``policy(obs) -> residual`` or ``None`` for PD only.
+        kind: ``"torque"`` or ``"delta_action"``; default the policy's.
+        solver, substeps, device: Simulation settings.
+        with_baseline: Also run PD only, in extra worlds of the same batch.
+        delay: Command-path delay of the simulator [steps] (see :mod:`wresdyn.sim.bank`).
+        sim: A simulator to reuse (its world count must match), e.g. for repeated validation.
+
+    Returns:
+        ``{"pd": Replays, "residual": Replays}`` (``"residual"`` absent without a policy, ``"pd"`` without
+        the baseline).
+    """
+    trajectories = list(trajectories)
+    groups = (["pd"] if with_baseline or policy is None else []) + (["residual"] if policy is not None else [])
+    w = len(trajectories)
+    if sim is None or sim.n_worlds != w * len(groups):
+        sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device)
+    window = TrajectoryBank(trajectories, sim.device, delay).whole().repeat(len(groups))
+    pw = slice(groups.index("residual") * w, (groups.index("residual") + 1) * w) if len(groups) == 2 else None
+    with torch.no_grad():
+        out = rollout(sim, window, policy, kind=kind, policy_worlds=pw)
+    q, qd = out.q.cpu().double().numpy(), out.qd.cpu().double().numpy()
+    at = out.diverged_at.cpu().numpy()
+    lengths = [len(t.q) for t in trajectories]
+    return {g: Replays([q[i * w + j, :lengths[j]] for j in range(w)], [qd[i * w + j, :lengths[j]] for j in range(w)],
+                       [int(a) if 0 <= a < lengths[j] else -1 for j, a in enumerate(at[i * w:(i + 1) * w])])
+            for i, g in enumerate(groups)}

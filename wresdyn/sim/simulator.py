@@ -1,0 +1,252 @@
+"""The one simulation layer: N Newton worlds of one robot under PD drives plus a residual, read and written as torch.
+
+Every consumer steps the robot through :class:`Simulator`: data collection's PD-only replay and evaluation
+(through :func:`wresdyn.sim.rollout.rollout`), the PPO environment (:class:`wresdyn.learn.replay_env.ReplayEnv`)
+and the gradient fit (``rollout(..., grad=True)``). It owns the Newton model, the solver
+(:func:`wresdyn.sim.solvers.make_solver`), the states and the control, the torch views of them, the device
+stream, CUDA graphs of the solver steps and, for gradients, one state per step so each step's ``wp.Tape``
+stays valid.
+
+- Fast path, :meth:`Simulator.step`: writes the PD target and joint torque into ``control``, advances
+  ``substeps`` solver steps in place (on CUDA replayed from a captured graph, on torch's stream).
+- Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function`` whose
+  backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque.
+
+Divergence (:class:`DivergenceLimits`, :meth:`Simulator.diverged`) is judged in one place: a non-finite state,
+a runaway joint speed, a joint far past its limit, or (when a reference is given) far from the recording.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..errors import SimulationDiverged
+from .solvers import make_solver, resolve_solver
+
+__all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
+
+
+@dataclass(frozen=True)
+class DivergenceLimits:
+    """When a simulated world counts as diverged (it is then reset by a learner, frozen by evaluation)."""
+
+    max_qd: float = 100.0
+    """Runaway joint speed [rad/s or m/s]."""
+    limit_margin: float = 0.5
+    """Runaway distance beyond a joint limit [rad or m]."""
+    max_error: float = math.inf
+    """Runaway distance from the recording, max over joints [rad or m]; inf = not checked."""
+
+
+def _torch_device(device: str | None) -> torch.device:
+    import warp as wp
+
+    return torch.device(str(wp.device_to_torch(wp.get_device(device))))
+
+
+def _index(idx: np.ndarray, device) -> slice | torch.Tensor:
+    """A slice where the indices are contiguous (a view, no gather), else an index tensor."""
+    idx = np.asarray(idx, dtype=np.int64)
+    if len(idx) and (np.diff(idx) == 1).all():
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return torch.as_tensor(idx, device=device)
+
+
+class Simulator:
+    """``n_worlds`` copies of a fixed- or floating-base robot in Newton, stepped under PD with a residual.
+
+    Args:
+        robot: The robot (:class:`wresdyn.robot.Robot`).
+        n_worlds: Number of worlds (one robot each).
+        dt: Sample period [s]: one :meth:`step` holds its target and torque for ``dt``.
+        solver: Solver kind (:data:`wresdyn.sim.solvers.SOLVERS`).
+        substeps: Solver steps per sample period.
+        device: Warp device (``"cpu"``, ``"cuda:0"``).
+        requires_grad: Build a differentiable model (for :meth:`step_diff`).
+        graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA).
+
+    Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
+    shape (n_worlds, n_dof), float32 on :attr:`device`.
+    """
+
+    def __init__(self, robot, n_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
+                 device: str | None = "cpu", requires_grad: bool = False, graph: bool | None = None) -> None:
+        import warp as wp
+
+        if n_worlds < 1 or substeps < 1 or not dt > 0:
+            raise ValueError(f"need n_worlds >= 1, substeps >= 1 and dt > 0 (got {n_worlds}, {substeps}, {dt})")
+        self.robot, self.n_worlds, self.dt, self.substeps = robot, int(n_worlds), float(dt), int(substeps)
+        self.dt_sub = self.dt / self.substeps
+        self.solver_kind = resolve_solver(robot, self.dt_sub, solver)
+        if requires_grad and self.solver_kind == "mujoco":
+            raise ValueError(f"{robot.source.name}: SolverMuJoCo is not differentiable; gradients need the replay "
+                             "or featherstone solver (add armature so explicit PD is stable)")
+        self.requires_grad = bool(requires_grad)
+        self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad)
+        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind)
+        self.device = _torch_device(device)
+        self._cuda = self.device.type == "cuda"
+        self.graph = self._cuda if graph is None else bool(graph) and self._cuda
+        self.states = [self.model.state(), self.model.state()]
+        self.control = self.model.control()
+        w = self.n_worlds
+        self.nq, self.nqd = self.model.joint_coord_count // w, self.model.joint_dof_count // w
+        """Joint coordinates and DoFs per world (a floating base adds 7 and 6)."""
+        self._q = [wp.to_torch(s.joint_q).view(w, self.nq) for s in self.states]
+        self._qd = [wp.to_torch(s.joint_qd).view(w, self.nqd) for s in self.states]
+        self._target = wp.to_torch(self.control.joint_target_q).view(w, -1)
+        self._force = wp.to_torch(self.control.joint_f).view(w, self.nqd)
+        self.q_index = _index(robot.q_index, self.device)
+        self.qd_index = _index(robot.qd_index, self.device)
+        f32 = dict(dtype=torch.float32, device=self.device)
+        self.lower = torch.as_tensor(robot.lower, **f32)
+        self.upper = torch.as_tensor(robot.upper, **f32)
+        self._cur = 0
+        self._graphs: dict[int, object] = {}
+        self._tape_buffers: list = []
+        self._needs_fk = self.solver_kind != "replay"  # SolverReplay integrates joint coordinates only
+
+    # ------------------------------------------------------------------------------------------------ state
+    @property
+    def q(self) -> torch.Tensor:
+        return self._q[self._cur][:, self.q_index].clone()
+
+    @property
+    def qd(self) -> torch.Tensor:
+        return self._qd[self._cur][:, self.qd_index].clone()
+
+    def set_state(self, ids, q: torch.Tensor, qd: torch.Tensor) -> None:
+        """Overwrite the joint state of worlds ``ids`` (long (k,), a slice, or ``None`` for all) with q, qd (k, n)."""
+        ids = slice(None) if ids is None else ids
+        self._q[self._cur][ids, self.q_index] = q.to(torch.float32)
+        self._qd[self._cur][ids, self.qd_index] = qd.to(torch.float32)
+        if self._needs_fk:
+            self._eval_fk(self.states[self._cur])
+
+    def _eval_fk(self, state) -> None:
+        import newton
+
+        newton.eval_fk(self.model, state.joint_q, state.joint_qd, state)
+
+    # ------------------------------------------------------------------------------------------------ stepping
+    def _stream(self):
+        """Launch Warp work on torch's current stream: torch wrote the control there."""
+        if not self._cuda:
+            return contextlib.nullcontext()
+        import warp as wp
+
+        return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.device)))
+
+    def _advance(self) -> None:
+        for _ in range(self.substeps):
+            self.solver.step(self.states[self._cur], self.states[1 - self._cur], self.control, None, self.dt_sub)
+            self._cur = 1 - self._cur
+
+    def _advance_graph(self) -> None:
+        """Replay the solver steps from a CUDA graph captured once per starting buffer (the states ping-pong)."""
+        import warp as wp
+
+        start = self._cur
+        graph = self._graphs.get(start)
+        if graph is None:
+            self._advance()  # compiles and allocates outside the capture
+            self._cur = start
+            with wp.ScopedCapture(device=self.model.device) as cap:  # on the current (torch's) stream
+                self._advance()
+            self._cur = start
+            graph = self._graphs[start] = cap.graph
+        wp.capture_launch(graph)
+        self._cur = start ^ (self.substeps & 1)
+
+    def step(self, target: torch.Tensor, tau: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Advance one sample period holding the PD target [rad] and joint torque [N*m] (N, n); returns (q, q̇)."""
+        self._target[:, self.qd_index] = target
+        self._force[:, self.qd_index] = 0.0 if tau is None else tau
+        with self._stream():
+            if self.graph:
+                self._advance_graph()
+            else:
+                self._advance()
+        return self.q, self.qd
+
+    def step_diff(self, k: int, q: torch.Tensor, qd: torch.Tensor, target: torch.Tensor,
+                  tau: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Differentiable step ``k`` of a rollout from (q, q̇) (N, n): returns (q', q̇') with gradients to q, q̇,
+        target and tau. Step ``k`` uses its own state buffers (kept for the backward pass)."""
+        if not self.requires_grad:
+            raise RuntimeError("step_diff needs Simulator(..., requires_grad=True)")
+        if tau is None:
+            tau = torch.zeros_like(target)
+        while len(self._tape_buffers) <= k:
+            self._tape_buffers.append(([self.model.state(requires_grad=True) for _ in range(self.substeps + 1)],
+                                       self.model.control(requires_grad=True)))
+        return _Step.apply(q, qd, target, tau, self, k)
+
+    def diverged(self, q: torch.Tensor, qd: torch.Tensor, limits: DivergenceLimits,
+                 q_ref: torch.Tensor | None = None) -> torch.Tensor:
+        """Worlds past ``limits``: non-finite, runaway speed, far past a joint limit, or far from ``q_ref``.
+        (N, n) tensors -> bool (N,)."""
+        bad = ~(torch.isfinite(q).all(-1) & torch.isfinite(qd).all(-1))
+        bad |= (qd.abs() > limits.max_qd).any(-1)
+        bad |= ((q < self.lower - limits.limit_margin) | (q > self.upper + limits.limit_margin)).any(-1)
+        if q_ref is not None and math.isfinite(limits.max_error):
+            bad |= ((q - q_ref).abs() > limits.max_error).any(-1)
+        return bad
+
+    # ------------------------------------------------------------------------------------------------ scatter
+    def _scatter(self, x: torch.Tensor, index, width: int) -> torch.Tensor:
+        """Actuated-joint values (N, n) -> Newton's flat per-world layout (N * width,), zeros elsewhere."""
+        full = torch.zeros(self.n_worlds, width, dtype=torch.float32, device=x.device)
+        full[:, index] = x.to(torch.float32)
+        return full.reshape(-1)
+
+
+class _Step(torch.autograd.Function):
+    """One differentiable sample period: (q, q̇, PD target, joint torque) -> (q', q̇'), each (N, n)."""
+
+    @staticmethod
+    def forward(ctx, q, qd, target, tau, sim: Simulator, k: int):
+        import warp as wp
+
+        states, ctrl = sim._tape_buffers[k]
+        wp.copy(states[0].joint_q, wp.from_torch(sim._scatter(q, sim.q_index, sim.nq)))
+        wp.copy(states[0].joint_qd, wp.from_torch(sim._scatter(qd, sim.qd_index, sim.nqd)))
+        wp.copy(ctrl.joint_target_q, wp.from_torch(sim._scatter(target, sim.qd_index, sim.nqd)))
+        wp.copy(ctrl.joint_f, wp.from_torch(sim._scatter(tau, sim.qd_index, sim.nqd)))
+        tape = wp.Tape()
+        with sim._stream(), tape:
+            if sim._needs_fk:
+                sim._eval_fk(states[0])
+            for s in range(sim.substeps):
+                sim.solver.step(states[s], states[s + 1], ctrl, None, sim.dt_sub)
+        ctx.tape, ctx.sim, ctx.k = tape, sim, k
+        out = states[-1]
+        q_out = wp.to_torch(out.joint_q).view(sim.n_worlds, sim.nq)[:, sim.q_index].clone()
+        qd_out = wp.to_torch(out.joint_qd).view(sim.n_worlds, sim.nqd)[:, sim.qd_index].clone()
+        return q_out, qd_out
+
+    @staticmethod
+    def backward(ctx, g_q, g_qd):
+        import warp as wp
+
+        sim, tape = ctx.sim, ctx.tape
+        states, ctrl = sim._tape_buffers[ctx.k]
+        with sim._stream():
+            tape.backward(grads={
+                states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
+                states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
+            })
+
+        def grad(a, idx, width):
+            return wp.to_torch(a.grad).view(sim.n_worlds, width)[:, idx].clone()
+
+        out = (grad(states[0].joint_q, sim.q_index, sim.nq), grad(states[0].joint_qd, sim.qd_index, sim.nqd),
+               grad(ctrl.joint_target_q, sim.qd_index, sim.nqd), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
+        tape.zero()
+        ctx.tape = None
+        return (*out, None, None)
