@@ -18,8 +18,10 @@ from wresdyn.learn.ppo import (
     load_policy,
     train,
 )
+from wresdyn.errors import WresdynError
 from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript
+from wresdyn.learn.rewards import RewardConfig
 from wresdyn.learn.runs import load_checkpoint
 
 
@@ -126,6 +128,34 @@ def test_resume_refuses_a_checkpoint_that_is_not_weights_only(robot, data, tmp_p
     torch.save({"actor_state_dict": {}, "critic_state_dict": {}, "optimizer_state_dict": {}, "iter": 7}, evil)
     with pytest.raises(RunError, match="model_7.pt: does not fit this run's networks"):
         train(data, robot, tiny(iterations=9), run)
+
+
+def test_configs_check_their_values_at_construction():
+    with pytest.raises(WresdynError, match=r"^residual\.kind = 'torqu' is not one of: torque, delta_action$"):
+        ResidualConfig(kind="torqu")
+    with pytest.raises(WresdynError, match="residual.arch = 'lstm' is not one of: mlp, gru"):
+        ResidualConfig(arch="lstm")
+    for bad, msg in (({"num_envs": 0}, "ppo.num_envs = 0 must be >= 1"),
+                     ({"gamma": 1.5}, "ppo.gamma = 1.5 must be <= 1"),
+                     ({"num_envs": 2.5}, "ppo.num_envs = 2.5 is not an integer"),
+                     ({"learning_rate": float("nan")}, "ppo.learning_rate = nan is not a number"),
+                     ({"device": "gpu"}, "ppo.device = 'gpu' is not a device")):
+        with pytest.raises(WresdynError, match=msg):
+            PPOConfig(**bad)
+    with pytest.raises(WresdynError, match="residual.fraction = 0 must be > 0"):
+        ResidualConfig(fraction=0)
+    with pytest.raises(WresdynError, match="rewards.sigma_q = 0 must be > 0"):
+        RewardConfig(sigma_q=0)
+    with pytest.raises(WresdynError, match="env.solver = 'featherstne' is not one of: auto, replay"):
+        TrainConfig(env=ReplayEnvConfig(solver="featherstne"))
+    # a GRU is batched by world: 2 worlds cannot make 4 mini-batches, whatever the rollout length
+    with pytest.raises(WresdynError, match="num_mini_batches = 4 is more than the 2 worlds"):
+        TrainConfig(residual=ResidualConfig(arch="gru"), ppo=PPOConfig(num_envs=2))
+    # overrides apply at once, so their order does not matter to checks across fields
+    cfg = apply_overrides(default_config(), ["residual.arch=gru", "ppo.num_envs=2", "ppo.num_mini_batches=2"])
+    assert (cfg.residual.arch, cfg.ppo.num_envs, cfg.ppo.num_mini_batches) == ("gru", 2, 2)
+    with pytest.raises(ValueError, match="residual.kind = 'torqu'"):
+        apply_overrides(default_config(), ["residual.kind=torqu"])
 
 
 def test_gru_trains_and_exported_policy_loads(robot, data, tmp_path):

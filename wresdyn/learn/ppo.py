@@ -21,13 +21,15 @@ import numpy as np
 
 from rsl_rl.runners import OnPolicyRunner
 
+from ..choices import SolverKind, check_choice, check_device, check_number
+from ..errors import WresdynError
 from .replay_env import ReplayEnvConfig
 from .residual import ResidualConfig
 from .rewards import RewardConfig
 from .runs import RunError, check_resume, load_checkpoint, save_checkpoint
 
-__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "apply_overrides", "set_field",
-           "runner_cfg", "Runner", "train", "latest_checkpoint", "load_policy", "RunError",
+__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "parse_overrides", "apply_overrides",
+           "set_fields", "set_field", "runner_cfg", "Runner", "train", "latest_checkpoint", "load_policy", "RunError",
            "RESUME_MAY_CHANGE", "DATASET_IDENTITY"]
 
 
@@ -77,6 +79,20 @@ class PPOConfig:
     """CPU threads for torch (0: torch's default). One is fastest for these small batches: on a busy 2-core
     machine two intra-op threads made a (256, 84) gather-and-normalise 600x slower (20 ms vs 31 us)."""
 
+    def __post_init__(self) -> None:
+        for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
+                     "num_mini_batches"):
+            check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
+        for name in ("learning_rate", "clip_param", "desired_kl", "max_grad_norm"):
+            check_number(getattr(self, name), f"ppo.{name}", gt=0)
+        for name in ("entropy_coef", "value_loss_coef"):
+            check_number(getattr(self, name), f"ppo.{name}", ge=0)
+        check_number(self.gamma, "ppo.gamma", gt=0, le=1)
+        check_number(self.lam, "ppo.lam", ge=0, le=1)
+        check_number(self.seed, "ppo.seed", integer=True, ge=0, le=2**32 - 1)  # numpy's seed range
+        check_number(self.torch_threads, "ppo.torch_threads", integer=True, ge=0)
+        check_device(self.device, "ppo.device")
+
 
 RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads")
 """:class:`PPOConfig` fields a resumed run may change: how long, where and how it runs, not what it learns."""
@@ -98,6 +114,25 @@ class TrainConfig:
     """Table I weights and widths."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """PPO and runner."""
+
+    def __post_init__(self) -> None:
+        for name, cls in (("env", ReplayEnvConfig), ("residual", ResidualConfig), ("rewards", RewardConfig),
+                          ("ppo", PPOConfig)):
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise TypeError(f"TrainConfig.{name} must be a {cls.__name__}, not {type(value).__name__}")
+        # ReplayEnvConfig does not check itself (yet): the fields a typo or a zero breaks deep inside the env
+        check_choice(self.env.solver, SolverKind, "env.solver")
+        check_number(self.env.horizon, "env.horizon", integer=True, ge=1)
+        check_number(self.env.substeps, "env.substeps", integer=True, ge=1)
+        check_number(self.env.obs_noise, "env.obs_noise", ge=0)
+        # rsl-rl splits a rollout into mini-batches by world for a recurrent policy, by sample otherwise, and
+        # an empty mini-batch fails deep inside the update
+        p = self.ppo
+        per_batch = p.num_envs if self.residual.arch == "gru" else p.num_envs * p.num_steps_per_env
+        if p.num_mini_batches > per_batch:
+            unit = "worlds (a GRU is batched by world)" if self.residual.arch == "gru" else "samples per rollout"
+            raise WresdynError(f"ppo.num_mini_batches = {p.num_mini_batches} is more than the {per_batch} {unit}")
 
 
 def default_config() -> TrainConfig:
@@ -125,14 +160,15 @@ def config_from_dict(d: dict) -> TrainConfig:
     return build(TrainConfig, d)
 
 
-def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
-    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set``.
+def parse_overrides(cfg: TrainConfig, items) -> dict:
+    """``SECTION.FIELD=VALUE`` items (as on ``wresdyn train --set``) as ``{"SECTION.FIELD": value}``.
 
-    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type
-    (tuples as comma-separated numbers, booleans as true/false). Raises ``ValueError`` with a one-line
-    message for an unknown key or a value of the wrong type.
+    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type in ``cfg``
+    (tuples as comma-separated numbers, booleans as true/false); a later item for the same field wins. Raises
+    ``ValueError`` with a one-line message for an unknown key or a value of the wrong type.
     """
     sections = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
+    out = {}
     for item in items:
         key, sep, text = str(item).partition("=")
         section, dot, name = key.strip().partition(".")
@@ -143,18 +179,39 @@ def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
         names = [f.name for f in fields(sections[section])]
         if name not in names:
             raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
-        cfg = set_field(cfg, f"{section}.{name}", _parse_like(getattr(sections[section], name), text.strip(), item))
-    return cfg
+        out[f"{section}.{name}"] = _parse_like(getattr(sections[section], name), text.strip(), item)
+    return out
+
+
+def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
+    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set`` (see
+    :func:`parse_overrides`); a value the config refuses (:class:`WresdynError`) is a ``ValueError`` too."""
+    return set_fields(cfg, parse_overrides(cfg, items))
+
+
+def set_fields(cfg, values: dict):
+    """``cfg`` (a frozen dataclass) with the nested fields ``{"ppo.seed": 1, ...}`` set, all at once: each
+    config is rebuilt once, so checks across fields (:class:`TrainConfig`'s mini-batch check) see the final
+    values whatever the order. Unknown fields raise ``TypeError``, refused values :class:`WresdynError`."""
+    from dataclasses import replace
+
+    direct, nested = {}, {}
+    for dotted, value in values.items():
+        head, _, rest = dotted.partition(".")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[head] = value
+    for head, sub in nested.items():
+        if not hasattr(cfg, head) or not is_dataclass(getattr(cfg, head)):
+            raise TypeError(f"{type(cfg).__name__} has no section {head!r}")
+        direct[head] = set_fields(getattr(cfg, head), sub)
+    return replace(cfg, **direct)
 
 
 def set_field(cfg, dotted: str, value):
     """``cfg`` (a frozen dataclass) with the nested field at ``dotted`` (e.g. ``"ppo.seed"``) set to ``value``."""
-    from dataclasses import replace
-
-    head, _, rest = dotted.partition(".")
-    if rest:
-        return replace(cfg, **{head: set_field(getattr(cfg, head), rest, value)})
-    return replace(cfg, **{head: value})
+    return set_fields(cfg, {dotted: value})
 
 
 def _parse_like(current, text: str, item):
