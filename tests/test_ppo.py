@@ -158,6 +158,25 @@ def test_configs_check_their_values_at_construction():
         apply_overrides(default_config(), ["residual.kind=torqu"])
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--residual", "bogus"], ["--residual", "'bogus'", "torque"]),
+    (["--solver", "featherstne"], ["--solver", "featherstone"]),
+    (["--set", "residual.kind=torqu"], ["residual.kind", "torque, delta_action"]),
+    (["--num-envs", "0"], ["ppo.num_envs = 0"]),
+], ids=["residual", "solver", "set-kind", "num-envs"])
+def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
+    import subprocess
+    import sys
+
+    out = tmp_path / "never"
+    res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "train", "data/dataset.npz", "--out", str(out), *argv],
+                         capture_output=True, text=True)
+    assert res.returncode == 2 and res.stdout == "" and not out.exists()
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("wresdyn train: error: "), res.stderr
+    assert all(w in lines[0] for w in words), lines[0]
+
+
 def test_gru_trains_and_exported_policy_loads(robot, data, tmp_path):
     run = tmp_path / "gru"
     train(data, robot, tiny("gru", iterations=1, kind="delta_action"), run)
