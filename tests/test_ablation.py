@@ -72,3 +72,27 @@ def test_parallel_cells_reproduce_the_sequential_run(tmp_path, humanoid, tiny_da
     for a, b in zip(seq, par):
         assert b["heldout"]["mean_abs_dq"] == pytest.approx(a["heldout"]["mean_abs_dq"], rel=1e-6)
     assert (tmp_path / "par" / "table.md").is_file()
+
+
+def test_ablation_config_refuses_bad_cells_at_construction(tmp_path, capsys):
+    from wresdyn.errors import WresdynError
+
+    for kw, msg in (({"learners": ("ppo", "bogus")}, "learners = 'bogus' is not one of: ppo, gradient, parametric"),
+                    ({"kinds": ("torqu",)}, "ablation kinds = 'torqu' is not one of: torque, delta_action"),
+                    ({"solver": "mujuco"}, "ablation solver = 'mujuco' is not one of"),
+                    ({"segments": 4, "ppo_iterations": 3}, "ablation ppo_iterations = 3 must be >= 4"),
+                    ({"seeds": ()}, "at least one seed"),
+                    ({"ppo_overrides": {"ppo.num_env": 4}}, "ablation ppo_overrides: .*num_env"),
+                    ({"ppo_overrides": {"ppo.num_envs": 2}}, "num_mini_batches = 4 is more than the 2 worlds"),
+                    ({"learners": ("gradient",), "gradient_overrides": {"windowz": 2}},
+                     "gradient_overrides: .*windowz")):
+        with pytest.raises(WresdynError, match=msg):
+            AblationConfig(**kw)
+    # the command line refuses the same in one line, before loading anything
+    assert main(["ablate", "--out", str(tmp_path / "never"), "--segments", "5", "--ppo-iterations", "2"]) == 2
+    assert capsys.readouterr().err.splitlines() == ["wresdyn ablate: error: ablation ppo_iterations = 2 must be >= 5"]
+    with pytest.raises(SystemExit) as ex:  # argparse's own refusal, in the same one-line form
+        main(["ablate", "--out", str(tmp_path / "never"), "--kinds", "torque,bogus"])
+    err = capsys.readouterr().err.splitlines()
+    assert ex.value.code == 2 and len(err) == 1 and "--kinds" in err[0] and "torque,delta_action" in err[0]
+    assert not (tmp_path / "never").exists()

@@ -9,9 +9,9 @@ import torch
 from _tiny_data import make_dataset
 
 from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit, window_loss
-from wresdyn.sim import Simulator, TrajectoryBank, rollout
 from wresdyn.learn.residual import ResidualConfig, obs_stats
 from wresdyn.robot.description import load_robot
+from wresdyn.sim import Simulator, TrajectoryBank, rollout
 
 DT = 0.002
 FD_RTOL = 3e-2

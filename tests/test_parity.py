@@ -11,8 +11,8 @@ import pytest
 
 from wresdyn.robot.mujoco_model import build_mujoco, mujoco_replay
 from wresdyn.robot.pinocchio_model import build_pinocchio
-from wresdyn.sim.rollout import replay
 from wresdyn.sim.parity import multisine_command
+from wresdyn.sim.rollout import replay
 
 DT = 0.002
 

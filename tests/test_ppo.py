@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from wresdyn.errors import WresdynError
 from wresdyn.learn.ppo import (
     PPOConfig,
     RunError,
@@ -20,6 +21,8 @@ from wresdyn.learn.ppo import (
 )
 from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript
+from wresdyn.learn.rewards import RewardConfig
+from wresdyn.learn.runs import load_checkpoint
 
 
 def tiny(arch="mlp", iterations=2, kind="torque"):
@@ -65,7 +68,7 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     assert list(run.glob("events.out.tfevents.*"))
     # a kill after iteration 0 leaves only model_0.pt; a longer run resumes from it
     (run / "model_1.pt").unlink()
-    saved = torch.load(run / "model_0.pt", weights_only=False)
+    saved = load_checkpoint(run / "model_0.pt")  # rsl-rl's checkpoint is weights only
     s = train(data, robot, tiny(iterations=3), run)
     assert s["iterations_this_session"] == 2
     assert latest_checkpoint(run).name == "model_2.pt"
@@ -77,15 +80,101 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     moved = dataclasses.replace(tiny(iterations=4), ppo=dataclasses.replace(
         tiny(iterations=4).ppo, save_interval=2, torch_threads=2))
     assert train(data, robot, moved, run)["iterations_this_session"] == 1
-    # a different configuration is refused rather than silently mixed in
-    with pytest.raises(RunError):
+    # a different configuration is refused rather than silently mixed in, naming what changed
+    with pytest.raises(RunError, match=r"rewards\.sigma_q = 0\.1, now 0\.5"):
         train(data, robot, dataclasses.replace(tiny(iterations=3), rewards=dataclasses.replace(
             tiny().rewards, sigma_q=0.5)), run)
     with pytest.raises(RunError):
         train(data, robot, tiny(iterations=3), run, resume=False)
-    with pytest.raises(RunError):
-        other = dataclasses.replace(tiny().ppo, iterations=5, gamma=tiny().ppo.gamma / 2)  # learns differently
+    saved_json = (run / "config.json").read_text()
+    other = dataclasses.replace(tiny().ppo, iterations=5, gamma=0.95)  # learns differently
+    with pytest.raises(RunError) as err:
         train(data, robot, dataclasses.replace(tiny(), ppo=other), run)
+    assert str(err.value) == (f"{run} was trained with ppo.gamma = 0.9, now 0.95; resume with the same configuration "
+                              "or choose another folder")
+    # so is other data: here one training trajectory fewer
+    first = data.split("train")[0].name
+    fewer = dataclasses.replace(data, trajectories=[t for t in data.trajectories if t.name != first])
+    with pytest.raises(RunError, match=r"trained on other data: dataset\.train = .*resume with the same data"):
+        train(fewer, robot, tiny(iterations=5), run)
+    assert (run / "config.json").read_text() == saved_json  # a refused resume leaves the folder as it was
+
+
+class _RunsCodeWhenUnpickled:
+    """What a tampered checkpoint could hold: unpickling it calls ``open(marker, "w")``, creating the file."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def test_resume_refuses_a_checkpoint_that_is_not_weights_only(robot, data, tmp_path):
+    run = tmp_path / "run"
+    train(data, robot, tiny(iterations=1), run)
+    marker = tmp_path / "code_ran"
+    evil = run / "model_7.pt"  # the newest checkpoint, so a resume picks it
+    good = load_checkpoint(run / "model_0.pt")
+    torch.save({**good, "iter": 7, "infos": _RunsCodeWhenUnpickled(marker)}, evil)
+    with pytest.raises(RunError) as err:
+        train(data, robot, tiny(iterations=9), run)
+    msg = str(err.value)
+    assert "\n" not in msg and str(evil) in msg and "not a weights-only checkpoint" in msg and "open" in msg
+    assert not marker.exists()
+    evil.write_bytes(evil.read_bytes()[:100])  # cut short, as by a full disk
+    with pytest.raises(RunError, match="model_7.pt: not a readable checkpoint"):
+        train(data, robot, tiny(iterations=9), run)
+    torch.save({"actor_state_dict": {}, "critic_state_dict": {}, "optimizer_state_dict": {}, "iter": 7}, evil)
+    with pytest.raises(RunError, match="model_7.pt: does not fit this run's networks"):
+        train(data, robot, tiny(iterations=9), run)
+
+
+def test_configs_check_their_values_at_construction():
+    with pytest.raises(WresdynError, match=r"^residual\.kind = 'torqu' is not one of: torque, delta_action$"):
+        ResidualConfig(kind="torqu")
+    with pytest.raises(WresdynError, match="residual.arch = 'lstm' is not one of: mlp, gru"):
+        ResidualConfig(arch="lstm")
+    for bad, msg in (({"num_envs": 0}, "ppo.num_envs = 0 must be >= 1"),
+                     ({"gamma": 1.5}, "ppo.gamma = 1.5 must be <= 1"),
+                     ({"num_envs": 2.5}, "ppo.num_envs = 2.5 is not an integer"),
+                     ({"learning_rate": float("nan")}, "ppo.learning_rate = nan is not a number"),
+                     ({"device": "gpu"}, "ppo.device = 'gpu' is not a device")):
+        with pytest.raises(WresdynError, match=msg):
+            PPOConfig(**bad)
+    with pytest.raises(WresdynError, match="residual.fraction = 0 must be > 0"):
+        ResidualConfig(fraction=0)
+    with pytest.raises(WresdynError, match="rewards.sigma_q = 0 must be > 0"):
+        RewardConfig(sigma_q=0)
+    with pytest.raises(WresdynError, match="env.solver = 'featherstne' is not one of: auto, replay"):
+        TrainConfig(env=ReplayEnvConfig(solver="featherstne"))
+    # a GRU is batched by world: 2 worlds cannot make 4 mini-batches, whatever the rollout length
+    with pytest.raises(WresdynError, match="num_mini_batches = 4 is more than the 2 worlds"):
+        TrainConfig(residual=ResidualConfig(arch="gru"), ppo=PPOConfig(num_envs=2))
+    # overrides apply at once, so their order does not matter to checks across fields
+    cfg = apply_overrides(default_config(), ["residual.arch=gru", "ppo.num_envs=2", "ppo.num_mini_batches=2"])
+    assert (cfg.residual.arch, cfg.ppo.num_envs, cfg.ppo.num_mini_batches) == ("gru", 2, 2)
+    with pytest.raises(ValueError, match="residual.kind = 'torqu'"):
+        apply_overrides(default_config(), ["residual.kind=torqu"])
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--residual", "bogus"], ["--residual", "'bogus'", "torque"]),
+    (["--solver", "featherstne"], ["--solver", "featherstone"]),
+    (["--set", "residual.kind=torqu"], ["residual.kind", "torque, delta_action"]),
+    (["--num-envs", "0"], ["ppo.num_envs = 0"]),
+], ids=["residual", "solver", "set-kind", "num-envs"])
+def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
+    import subprocess
+    import sys
+
+    out = tmp_path / "never"
+    res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "train", "data/dataset.npz", "--out", str(out), *argv],
+                         capture_output=True, text=True)
+    assert res.returncode == 2 and res.stdout == "" and not out.exists()
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("wresdyn train: error: "), res.stderr
+    assert all(w in lines[0] for w in words), lines[0]
 
 
 def test_gru_trains_and_exported_policy_loads(robot, data, tmp_path):

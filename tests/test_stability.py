@@ -7,8 +7,8 @@ import pytest
 
 from wresdyn.robot.description import load_robot
 from wresdyn.sim import SimulationDiverged, explicit_pd_margin, resolve_solver
-from wresdyn.sim.rollout import replay
 from wresdyn.sim.parity import multisine_command
+from wresdyn.sim.rollout import replay
 
 DT = 0.002
 

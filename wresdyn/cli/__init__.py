@@ -28,6 +28,13 @@ class UserError(Exception):
     """An error caused by the user's input: reported in one line, exit code 2."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its errors in the same one line as every other user error (no usage block)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _user_errors():
     from ..errors import SimulationDiverged, WresdynError
 
@@ -35,7 +42,7 @@ def _user_errors():
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="wresdyn", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="wresdyn", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module, help_) in COMMANDS.items():
         p = sub.add_parser(name, help=help_, description=help_)

@@ -12,23 +12,42 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..choices import Arch, Learner, ResidualKind, SolverKind, choices
+
 
 def _tuple(kind):
     return lambda s: tuple(kind(x) for x in s.split(",") if x)
+
+
+def _choice_list(literal):
+    """argparse type: a comma list of ``literal``'s values, refused in one line naming the allowed ones."""
+    allowed = choices(literal)
+
+    def parse(text: str) -> tuple[str, ...]:
+        values = tuple(x.strip() for x in text.split(",") if x.strip())
+        bad = [v for v in values if v not in allowed]
+        if bad or not values:
+            raise argparse.ArgumentTypeError(f"{text!r}: give a comma list from {','.join(allowed)}")
+        return values
+
+    return parse
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", default=None, help="dataset (.npz; default: data/dataset.npz)")
     p.add_argument("--robot", default=None, help="robot file (default: scenes/humanoid.usda)")
     p.add_argument("--out", default="runs/ablation", help="output folder")
-    p.add_argument("--learners", type=_tuple(str), default=("ppo", "gradient", "parametric"), help="comma list")
-    p.add_argument("--archs", type=_tuple(str), default=("mlp", "gru"), help="comma list: mlp,gru")
-    p.add_argument("--kinds", type=_tuple(str), default=("torque", "delta_action"), help="comma list")
+    p.add_argument("--learners", type=_choice_list(Learner), default=choices(Learner),
+                   help=f"comma list from {','.join(choices(Learner))}")
+    p.add_argument("--archs", type=_choice_list(Arch), default=choices(Arch), help="comma list: mlp,gru")
+    p.add_argument("--kinds", type=_choice_list(ResidualKind), default=choices(ResidualKind),
+                   help=f"comma list from {','.join(choices(ResidualKind))}")
     p.add_argument("--seeds", type=_tuple(int), default=(0, 1, 2), help="comma list of seeds")
     p.add_argument("--ppo-iterations", type=int, default=60, help="PPO iterations per cell")
     p.add_argument("--gradient-iterations", type=int, default=2000, help="gradient-fit iterations per cell")
     p.add_argument("--segments", type=int, default=4, help="evaluation points per learning curve")
-    p.add_argument("--solver", default="auto", help="simulation solver for training and evaluation")
+    p.add_argument("--solver", choices=choices(SolverKind), default="auto",
+                   help="simulation solver for training and evaluation")
     p.add_argument("--device", default="cpu", help="device (cpu, cuda:0)")
     p.add_argument("--ppo-envs", type=int, default=None, help="override PPO's number of parallel envs")
     p.add_argument("--windows", type=int, default=None, help="override the gradient fit's parallel windows")
@@ -37,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="cells run in parallel worker processes, one core each (default 1)")
     p.add_argument("--delays", type=_tuple(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
     p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
-    p.add_argument("--delay-learner", default="gradient", help="learner of the delay sweep")
+    p.add_argument("--delay-learner", choices=choices(Learner), default="gradient", help="learner of the delay sweep")
     p.add_argument("--delay-trajectories", type=_tuple(int), default=(16, 4, 4),
                    help="train,heldout,ood trajectories recorded per delay")
 
@@ -50,15 +69,16 @@ def run(args: argparse.Namespace) -> int:
     from ..paths import DEFAULT_DATASET
     from ..robot.description import DEFAULT_ROBOT, load_robot
 
-    robot = load_robot(args.robot or DEFAULT_ROBOT)
-    data_path = Path(args.data) if args.data else DEFAULT_DATASET
-    dataset = load_dataset(data_path, robot=robot)
     grad = {k: v for k, v in {"windows": args.windows, "horizon": args.horizon}.items() if v is not None}
+    # the config checks itself before the robot and data load: a bad flag fails at once
     cfg = AblationConfig(learners=args.learners, archs=args.archs, kinds=args.kinds, seeds=args.seeds,
                          ppo_iterations=args.ppo_iterations, gradient_iterations=args.gradient_iterations,
                          segments=args.segments, solver=args.solver, device=args.device,
-                         ppo_overrides={"ppo.num_envs": args.ppo_envs} if args.ppo_envs else {},
+                         ppo_overrides={"ppo.num_envs": args.ppo_envs} if args.ppo_envs is not None else {},
                          gradient_overrides=grad)
+    robot = load_robot(args.robot or DEFAULT_ROBOT)
+    data_path = Path(args.data) if args.data else DEFAULT_DATASET
+    dataset = load_dataset(data_path, robot=robot)
     out = Path(args.out)
     if not args.delays_only:
         run_ablation(robot, dataset, cfg, out, jobs=args.jobs)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from ..choices import SolverKind, choices
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="run folder written by `wresdyn train`")
@@ -16,7 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--splits", nargs="+", default=["validation", "heldout", "ood"],
                    help="splits to evaluate (default: validation heldout ood; absent splits are skipped)")
     p.add_argument("--out", default=None, help="output folder (default: RUN/eval)")
-    p.add_argument("--solver", default=None, help="Newton solver (default: the one the run was trained with)")
+    p.add_argument("--solver", choices=choices(SolverKind), default=None,
+                   help="Newton solver (default: the one the run was trained with)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--joints", type=int, default=6, help="joints in the Fig. 3 plot (largest PD-only error first)")
     p.add_argument("--compare", nargs="*", default=[], metavar="RUN", help="other runs to overlay in the learning curves")

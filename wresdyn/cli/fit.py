@@ -11,16 +11,18 @@ from __future__ import annotations
 
 import argparse
 
-from .train import ARCHS, KINDS
+from ..choices import Arch, ModelKind, ResidualKind, SolverKind, choices
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
     p.add_argument("--out", default="runs/fit", help="run folder; an existing checkpoint is resumed (default: runs/fit)")
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
-    p.add_argument("--model", choices=("network", "parametric"), default="network", help="residual network or the parametric baseline")
-    p.add_argument("--residual", choices=KINDS, default="torque", help="torque (paper) or delta_action (ASAP)")
-    p.add_argument("--arch", choices=ARCHS, default="mlp", help="network: mlp (ELU) or gru (GRU + MLP)")
+    p.add_argument("--model", choices=choices(ModelKind), default="network",
+                   help="residual network or the parametric baseline")
+    p.add_argument("--residual", choices=choices(ResidualKind), default="torque",
+                   help="torque (paper) or delta_action (ASAP)")
+    p.add_argument("--arch", choices=choices(Arch), default="mlp", help="network: mlp (ELU) or gru (GRU + MLP)")
     p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
     p.add_argument("--iterations", type=int, default=None, help="optimiser steps")
     p.add_argument("--windows", type=int, default=None, help="parallel windows (worlds) per step")
@@ -29,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lr", type=float, default=None, help="initial Adam learning rate")
     p.add_argument("--obs-noise", type=float, default=None,
                    help="training noise on the network's observation, in normalising stds (0 = off)")
-    p.add_argument("--solver", default=None, help="simulation solver (default: auto)")
+    p.add_argument("--solver", choices=choices(SolverKind), default=None, help="simulation solver (default: auto)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--seed", type=int, default=0, help="seed")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards (like `wresdyn eval`)")
@@ -66,8 +68,6 @@ def run(args: argparse.Namespace) -> int:
     from . import UserError
 
     cfg = config_from_args(args)
-    if cfg.iterations < 1 or cfg.windows < 1 or cfg.horizon < 1 or any(h < 1 for h in cfg.horizon_curriculum):
-        raise UserError("--iterations, --windows, --horizon and the curriculum must be >= 1")
     ds, robot = load_data(args.data, args.robot)
     out = Path(args.out)
     what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"

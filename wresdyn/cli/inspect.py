@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from ..choices import SolverKind, choices
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", nargs="?", default=None, help="robot file: .usd/.usda/.usdc, .urdf or .xml (default: scenes/humanoid.usda)")
@@ -11,7 +13,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--floating", action="store_true", help="load with a floating base (default: fixed, on a stand)")
     p.add_argument("--seconds", type=float, default=1.0, help="length of the PD replay check [s]")
     p.add_argument("--dt", type=float, default=0.002, help="time step [s]")
-    p.add_argument("--solver", default="auto", help="Newton solver: auto, featherstone or mujoco")
+    p.add_argument("--solver", choices=choices(SolverKind), default="auto", help="Newton solver (default: auto)")
 
 
 def run(args: argparse.Namespace) -> int:

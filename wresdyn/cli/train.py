@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-KINDS = ("torque", "delta_action")  # wresdyn.learn.residual.KINDS, repeated so --help does not import torch
-ARCHS = ("mlp", "gru")
+from ..choices import Arch, ResidualKind, SolverKind, choices
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
     p.add_argument("--out", default="runs/residual", help="run folder; a folder with checkpoints is resumed (default: runs/residual)")
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
-    p.add_argument("--residual", choices=KINDS, default=None, help="torque (paper) or delta_action (ASAP); default torque")
-    p.add_argument("--arch", choices=ARCHS, default=None, help="policy network: mlp (ELU) or gru (GRU + MLP); default mlp")
+    p.add_argument("--residual", choices=choices(ResidualKind), default=None,
+                   help="torque (paper) or delta_action (ASAP); default torque")
+    p.add_argument("--arch", choices=choices(Arch), default=None,
+                   help="policy network: mlp (ELU) or gru (GRU + MLP); default mlp")
     p.add_argument("--iterations", type=int, default=None, help="total PPO iterations of the run")
     p.add_argument("--num-envs", type=int, default=None, help="parallel replay worlds")
     p.add_argument("--steps-per-env", type=int, default=None, help="rollout steps per world per iteration")
@@ -21,7 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--obs-noise", type=float, default=None,
                    help="noise on the policy's normalised observation during training [stds] (default 0)")
     p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
-    p.add_argument("--solver", default=None, help="Newton solver for wresdyn.sim.solvers.make_solver (default: auto)")
+    p.add_argument("--solver", choices=choices(SolverKind), default=None,
+                   help="Newton solver for wresdyn.sim.solvers.make_solver (default: auto)")
     p.add_argument("--device", default=None, help="cpu or cuda:0 (default: cpu)")
     p.add_argument("--seed", type=int, default=None, help="seed (default 0)")
     p.add_argument("--save-interval", type=int, default=None, help="checkpoint every N iterations")
@@ -33,25 +35,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace):
-    """The default :class:`~wresdyn.learn.ppo.TrainConfig` with the flags given on the command line applied."""
-    from dataclasses import replace
+    """The default :class:`~wresdyn.learn.ppo.TrainConfig` with the flags given on the command line applied.
 
-    from ..learn.ppo import apply_overrides, default_config
+    Flags and ``--set`` items are applied in one step (``--set`` wins for the same field), so the config's own
+    checks, across fields too, see what was asked for as a whole; a refused value is a one-line error."""
+    from ..learn.ppo import default_config, parse_overrides, set_fields
     from . import UserError
 
     cfg = default_config()
-    env = {k: v for k, v in (("horizon", args.horizon), ("solver", args.solver), ("obs_noise", args.obs_noise))
-           if v is not None}
-    res = {k: v for k, v in (("kind", args.residual), ("arch", args.arch), ("fraction", args.fraction)) if v is not None}
-    ppo = {k: v for k, v in (("iterations", args.iterations), ("num_envs", args.num_envs),
-                             ("num_steps_per_env", args.steps_per_env), ("device", args.device), ("seed", args.seed),
-                             ("save_interval", args.save_interval)) if v is not None}
-    cfg = replace(cfg, env=replace(cfg.env, **env), residual=replace(cfg.residual, **res), ppo=replace(cfg.ppo, **ppo))
+    flags = {"env.horizon": args.horizon, "env.solver": args.solver, "env.obs_noise": args.obs_noise,
+             "residual.kind": args.residual, "residual.arch": args.arch, "residual.fraction": args.fraction,
+             "ppo.iterations": args.iterations, "ppo.num_envs": args.num_envs,
+             "ppo.num_steps_per_env": args.steps_per_env, "ppo.device": args.device, "ppo.seed": args.seed,
+             "ppo.save_interval": args.save_interval}
     try:
-        return apply_overrides(cfg, getattr(args, "overrides", []))
-    except ValueError as e:
+        given = {k: v for k, v in flags.items() if v is not None}
+        return set_fields(cfg, given | parse_overrides(cfg, getattr(args, "overrides", [])))
+    except ValueError as e:  # a malformed --set, or a value the config refuses (WresdynError is a ValueError)
         raise UserError(str(e)) from None
-
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,10 +62,6 @@ def run(args: argparse.Namespace) -> int:
     from . import UserError
 
     cfg = config_from_args(args)
-    if cfg.ppo.iterations < 1 or cfg.ppo.num_envs < 1 or cfg.ppo.num_steps_per_env < 1 or cfg.env.horizon < 1:
-        raise UserError("--iterations, --num-envs, --steps-per-env and --horizon must be >= 1")
-    if not 0.0 < cfg.residual.fraction:
-        raise UserError("--fraction must be > 0")
     from ..data.loading import load_data
 
     ds, robot = load_data(args.data, args.robot)

@@ -21,21 +21,24 @@ from pathlib import Path
 
 import numpy as np
 
+from ..choices import Arch, Learner, ResidualKind, SolverKind, check_choice, check_device, check_number, choices
+from ..errors import WresdynError
+
 __all__ = ["AblationConfig", "cells", "run_cell", "run_cells", "run_ablation", "write_summary", "table_markdown",
            "plot_curves"]
 
-LEARNERS = ("ppo", "gradient", "parametric")
+LEARNERS = choices(Learner)
 
 
 @dataclass(frozen=True)
 class AblationConfig:
     """Which cells to run and how long each trains."""
 
-    learners: tuple[str, ...] = LEARNERS
+    learners: tuple[Learner, ...] = LEARNERS
     """Learners to compare."""
-    archs: tuple[str, ...] = ("mlp", "gru")
+    archs: tuple[Arch, ...] = ("mlp", "gru")
     """Networks (ignored by ``parametric``)."""
-    kinds: tuple[str, ...] = ("torque", "delta_action")
+    kinds: tuple[ResidualKind, ...] = ("torque", "delta_action")
     """Residual kinds (``parametric`` is torque only)."""
     seeds: tuple[int, ...] = (0, 1, 2)
     """Seeds per cell."""
@@ -45,7 +48,7 @@ class AblationConfig:
     """Gradient-fit iterations per cell (network and parametric)."""
     segments: int = 4
     """Evaluation points on each learning curve."""
-    solver: str = "auto"
+    solver: SolverKind = "auto"
     """Simulation solver, the same for training and evaluation."""
     device: str = "cpu"
     """Device for simulation and networks."""
@@ -54,13 +57,50 @@ class AblationConfig:
     gradient_overrides: dict = field(default_factory=dict)
     """Overrides of :class:`wresdyn.learn.gradfit.GradFitConfig` fields (e.g. ``{"windows": 32}``)."""
 
+    def __post_init__(self) -> None:
+        for name, literal in (("learners", Learner), ("archs", Arch), ("kinds", ResidualKind)):
+            values = getattr(self, name)
+            if isinstance(values, str) or not values:
+                raise WresdynError(f"ablation {name} = {values!r}: give a non-empty list")
+            for v in values:
+                check_choice(v, literal, f"ablation {name}")
+        if not self.seeds:
+            raise WresdynError("ablation seeds: give at least one seed")
+        for seed in self.seeds:
+            check_number(seed, "ablation seeds", integer=True, ge=0)
+        check_number(self.segments, "ablation segments", integer=True, ge=1)
+        # every segment trains at least one iteration: the first evaluation point is after segment 1
+        if "ppo" in self.learners:
+            check_number(self.ppo_iterations, "ablation ppo_iterations", integer=True, ge=self.segments)
+        if {"gradient", "parametric"} & set(self.learners):
+            check_number(self.gradient_iterations, "ablation gradient_iterations", integer=True, ge=self.segments)
+        check_choice(self.solver, SolverKind, "ablation solver")
+        check_device(self.device, "ablation device")
+        self._check_overrides()
+
+    def _check_overrides(self) -> None:
+        """A typo in an override fails here, not after hours of other cells. Imports the learners (torch)."""
+        if self.ppo_overrides and "ppo" in self.learners:
+            from ..learn.ppo import default_config, set_fields
+
+            for arch in self.archs:  # a GRU batches by world: fewer worlds can be too few for the mini-batches
+                try:
+                    set_fields(default_config(), {**self.ppo_overrides, "residual.arch": arch})
+                except (TypeError, WresdynError) as e:
+                    raise WresdynError(f"ablation ppo_overrides: {e}") from None
+        if self.gradient_overrides and {"gradient", "parametric"} & set(self.learners):
+            from ..learn.gradfit import GradFitConfig
+
+            try:
+                dataclasses.replace(GradFitConfig(), **self.gradient_overrides)
+            except (TypeError, WresdynError) as e:
+                raise WresdynError(f"ablation gradient_overrides: {e}") from None
+
 
 def cells(cfg: AblationConfig) -> list[dict]:
     """The cells to run, each ``{"learner", "arch", "kind", "seed", "name"}``."""
     out = []
     for learner in cfg.learners:
-        if learner not in LEARNERS:
-            raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
         archs = ("-",) if learner == "parametric" else cfg.archs
         kinds = ("torque",) if learner == "parametric" else cfg.kinds
         for arch in archs:
@@ -80,17 +120,12 @@ def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> 
 
 
 def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
-    from ..learn.ppo import default_config, load_policy, set_field, train
+    from ..learn.ppo import default_config, load_policy, set_field, set_fields, train
 
-    tc = default_config()
-    for key, value in cfg.ppo_overrides.items():
-        tc = set_field(tc, key, value)
-    tc = set_field(tc, "residual.arch", cell["arch"])
-    tc = set_field(tc, "residual.kind", cell["kind"])
-    tc = set_field(tc, "ppo.seed", cell["seed"])
-    tc = set_field(tc, "ppo.device", cfg.device)
-    tc = set_field(tc, "env.solver", cfg.solver)
-    tc = set_field(tc, "ppo.save_interval", max(1, cfg.ppo_iterations // cfg.segments))
+    cell_fields = {"residual.arch": cell["arch"], "residual.kind": cell["kind"], "ppo.seed": cell["seed"],
+                   "ppo.device": cfg.device, "env.solver": cfg.solver,
+                   "ppo.save_interval": max(1, cfg.ppo_iterations // cfg.segments)}
+    tc = set_fields(default_config(), {**cfg.ppo_overrides, **cell_fields})
     for s in range(1, cfg.segments + 1):
         its = cfg.ppo_iterations * s // cfg.segments
         summary = train(dataset, robot, set_field(tc, "ppo.iterations", its), out, resume=True)

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..choices import ModelKind, SolverKind, check_choice, check_device, check_number
 from ..sim.residual import residual_scale
 from .residual import ResidualConfig, obs_stats
 
@@ -42,7 +43,7 @@ class GradFitConfig:
     residual: ResidualConfig = ResidualConfig()
     """Residual kind (torque / delta action), network (MLP / GRU) and authority (0.5 of each effort limit, as
     for PPO: held-out 3.09x vs 2.97x at 0.25, both with ``obs_noise`` 0.1)."""
-    model: str = "network"
+    model: ModelKind = "network"
     """``"network"`` (``residual``'s MLP or GRU) or ``"parametric"`` (per-joint gain scales, damping, friction,
     armature: :class:`wresdyn.learn.parametric.ParametricResidual`, a torque residual)."""
     horizon: int = 64
@@ -78,7 +79,7 @@ class GradFitConfig:
     normalising std (the simulation itself is not perturbed). A regulariser: with 16 training recordings the
     network otherwise fits the training windows' states too closely (open-loop error 4x below PD-only on the
     training trajectories against 2.9x held-out); 0 = off. Not applied to the parametric model."""
-    solver: str = "auto"
+    solver: SolverKind = "auto"
     """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
     device: str = "cpu"
     """Warp / torch device."""
@@ -87,6 +88,21 @@ class GradFitConfig:
     select_every: int = 0
     """Evaluate on the validation split every this many iterations and return the best residual (model
     selection on validation); 0 = ten times per run."""
+
+    def __post_init__(self) -> None:
+        check_choice(self.model, ModelKind, "model")
+        check_choice(self.solver, SolverKind, "solver")
+        check_device(self.device, "device")
+        for name in ("iterations", "windows", "horizon"):
+            check_number(getattr(self, name), name, integer=True, ge=1)
+        for i, h in enumerate(self.horizon_curriculum):
+            check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
+        for name in ("grad_truncation", "select_every", "seed"):
+            check_number(getattr(self, name), name, integer=True, ge=0)
+        for name in ("lr", "lr_final", "grad_clip"):
+            check_number(getattr(self, name), name, gt=0)
+        for name in ("w_q", "w_qd", "w_torque", "w_action_rate", "obs_noise"):
+            check_number(getattr(self, name), name, ge=0)
 
 
 def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "network"):
@@ -186,7 +202,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     config = dataclasses.asdict(cfg)
     ckpt = Path(out) / "checkpoint.pt" if out else None
     if ckpt and ckpt.exists():
-        state = load_checkpoint(ckpt, map_location=cfg.device)
+        state = load_checkpoint(ckpt, map_location=cfg.device, keys=("policy", "optim", "noise_rng", "best", "meta"))
         meta = state["meta"]
         check_resume(ckpt.parent, meta["config"], config, RESUME_MAY_CHANGE)
         policy.load_state_dict(state["policy"])
@@ -234,8 +250,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
                 meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
                         "sim_steps": sim_steps, "wall": row["wall"], "best_validation": best["validation"],
                         "best_iteration": best["iteration"]}
-                save_checkpoint(ckpt, {"policy": policy.state_dict(), "optim": optim.state_dict(),
-                                       "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, meta)
+                save_checkpoint({"policy": policy.state_dict(), "optim": optim.state_dict(), "meta": meta,
+                                 "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, ckpt)
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))
     if best["state"] is not None and stop == cfg.iterations:

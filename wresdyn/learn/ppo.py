@@ -4,6 +4,9 @@ A run folder holds everything: ``config.json`` (the :class:`TrainConfig`), rsl-r
 ``model_<it>.pt`` (resumed from automatically after a kill), tensorboard event files, and at the end the
 deterministic residual exported as TorchScript (``policy.pt``) and ONNX (``policy.onnx``) with its
 metadata (``residual.json``), plus ``train_summary.json`` (env-steps/s, s per iteration).
+
+A resume is refused, naming the fields, when the configuration or the training data differ from what the folder
+was started with (:data:`RESUME_MAY_CHANGE` may differ), and checkpoints are read as weights only (:class:`Runner`).
 """
 
 from __future__ import annotations
@@ -15,18 +18,18 @@ from dataclasses import MISSING, asdict, dataclass, field, fields, is_dataclass
 from pathlib import Path
 
 import numpy as np
+from rsl_rl.runners import OnPolicyRunner
 
+from ..choices import check_device, check_number
 from ..errors import WresdynError
 from .replay_env import ReplayEnvConfig
 from .residual import ResidualConfig
 from .rewards import RewardConfig
+from .runs import RunError, check_resume, load_checkpoint, save_checkpoint
 
-__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "apply_overrides", "set_field",
-           "runner_cfg", "train", "latest_checkpoint", "load_policy", "RunError"]
-
-
-class RunError(WresdynError):
-    """A run folder that cannot be used as asked (another config, nothing to load)."""
+__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "parse_overrides", "apply_overrides",
+           "set_fields", "set_field", "runner_cfg", "Runner", "train", "latest_checkpoint", "load_policy", "RunError",
+           "RESUME_MAY_CHANGE", "DATASET_IDENTITY"]
 
 
 @dataclass(frozen=True)
@@ -75,9 +78,27 @@ class PPOConfig:
     """CPU threads for torch (0: torch's default). One is fastest for these small batches: on a busy 2-core
     machine two intra-op threads made a (256, 84) gather-and-normalise 600x slower (20 ms vs 31 us)."""
 
+    def __post_init__(self) -> None:
+        for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
+                     "num_mini_batches"):
+            check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
+        for name in ("learning_rate", "clip_param", "desired_kl", "max_grad_norm"):
+            check_number(getattr(self, name), f"ppo.{name}", gt=0)
+        for name in ("entropy_coef", "value_loss_coef"):
+            check_number(getattr(self, name), f"ppo.{name}", ge=0)
+        check_number(self.gamma, "ppo.gamma", gt=0, le=1)
+        check_number(self.lam, "ppo.lam", ge=0, le=1)
+        check_number(self.seed, "ppo.seed", integer=True, ge=0, le=2**32 - 1)  # numpy's seed range
+        check_number(self.torch_threads, "ppo.torch_threads", integer=True, ge=0)
+        check_device(self.device, "ppo.device")
+
 
 RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads")
 """:class:`PPOConfig` fields a resumed run may change: how long, where and how it runs, not what it learns."""
+
+DATASET_IDENTITY = ("train", "joint_names", "rate_hz")
+"""What of the data in ``config.json`` a resumed run must share: the training trajectories (by name), the joints
+and the sample rate. The dataset's path may change (a run moved to another machine)."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +113,20 @@ class TrainConfig:
     """Table I weights and widths."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """PPO and runner."""
+
+    def __post_init__(self) -> None:
+        for name, cls in (("env", ReplayEnvConfig), ("residual", ResidualConfig), ("rewards", RewardConfig),
+                          ("ppo", PPOConfig)):
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise TypeError(f"TrainConfig.{name} must be a {cls.__name__}, not {type(value).__name__}")
+        # rsl-rl splits a rollout into mini-batches by world for a recurrent policy, by sample otherwise, and
+        # an empty mini-batch fails deep inside the update
+        p = self.ppo
+        per_batch = p.num_envs if self.residual.arch == "gru" else p.num_envs * p.num_steps_per_env
+        if p.num_mini_batches > per_batch:
+            unit = "worlds (a GRU is batched by world)" if self.residual.arch == "gru" else "samples per rollout"
+            raise WresdynError(f"ppo.num_mini_batches = {p.num_mini_batches} is more than the {per_batch} {unit}")
 
 
 def default_config() -> TrainConfig:
@@ -119,14 +154,15 @@ def config_from_dict(d: dict) -> TrainConfig:
     return build(TrainConfig, d)
 
 
-def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
-    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set``.
+def parse_overrides(cfg: TrainConfig, items) -> dict:
+    """``SECTION.FIELD=VALUE`` items (as on ``wresdyn train --set``) as ``{"SECTION.FIELD": value}``.
 
-    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type
-    (tuples as comma-separated numbers, booleans as true/false). Raises ``ValueError`` with a one-line
-    message for an unknown key or a value of the wrong type.
+    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type in ``cfg``
+    (tuples as comma-separated numbers, booleans as true/false); a later item for the same field wins. Raises
+    ``ValueError`` with a one-line message for an unknown key or a value of the wrong type.
     """
     sections = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
+    out = {}
     for item in items:
         key, sep, text = str(item).partition("=")
         section, dot, name = key.strip().partition(".")
@@ -137,18 +173,39 @@ def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
         names = [f.name for f in fields(sections[section])]
         if name not in names:
             raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
-        cfg = set_field(cfg, f"{section}.{name}", _parse_like(getattr(sections[section], name), text.strip(), item))
-    return cfg
+        out[f"{section}.{name}"] = _parse_like(getattr(sections[section], name), text.strip(), item)
+    return out
+
+
+def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
+    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set`` (see
+    :func:`parse_overrides`); a value the config refuses (:class:`WresdynError`) is a ``ValueError`` too."""
+    return set_fields(cfg, parse_overrides(cfg, items))
+
+
+def set_fields(cfg, values: dict):
+    """``cfg`` (a frozen dataclass) with the nested fields ``{"ppo.seed": 1, ...}`` set, all at once: each
+    config is rebuilt once, so checks across fields (:class:`TrainConfig`'s mini-batch check) see the final
+    values whatever the order. Unknown fields raise ``TypeError``, refused values :class:`WresdynError`."""
+    from dataclasses import replace
+
+    direct, nested = {}, {}
+    for dotted, value in values.items():
+        head, _, rest = dotted.partition(".")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[head] = value
+    for head, sub in nested.items():
+        if not hasattr(cfg, head) or not is_dataclass(getattr(cfg, head)):
+            raise TypeError(f"{type(cfg).__name__} has no section {head!r}")
+        direct[head] = set_fields(getattr(cfg, head), sub)
+    return replace(cfg, **direct)
 
 
 def set_field(cfg, dotted: str, value):
     """``cfg`` (a frozen dataclass) with the nested field at ``dotted`` (e.g. ``"ppo.seed"``) set to ``value``."""
-    from dataclasses import replace
-
-    head, _, rest = dotted.partition(".")
-    if rest:
-        return replace(cfg, **{head: set_field(getattr(cfg, head), rest, value)})
-    return replace(cfg, **{head: value})
+    return set_fields(cfg, {dotted: value})
 
 
 def _parse_like(current, text: str, item):
@@ -210,6 +267,63 @@ def _dataset_info(dataset) -> dict:
             "train": [t.name for t in dataset.split("train")]}
 
 
+CHECKPOINT_KEYS = ("actor_state_dict", "critic_state_dict", "optimizer_state_dict", "iter")
+"""What an rsl-rl PPO checkpoint holds (``PPO.save`` plus the runner's iteration)."""
+
+
+class Runner(OnPolicyRunner):
+    """rsl-rl's ``OnPolicyRunner`` that never unpickles: checkpoints are written and read as weights only.
+
+    rsl-rl 5.5 loads with ``torch.load(weights_only=False)``, which runs whatever a checkpoint file asks for.
+    What it saves (state dicts, the optimizer state, the iteration, ``infos=None``) is all tensors and plain
+    containers, so the same files load with ``weights_only=True``; :func:`save_checkpoint` checks that on every
+    save and writes atomically, so a run killed mid-save resumes from the previous checkpoint.
+    """
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        data = self.alg.save()
+        data["iter"] = self.current_learning_iteration
+        data["infos"] = infos
+        save_checkpoint(data, path)
+        self.logger.save_model(path, self.current_learning_iteration)
+
+    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None):
+        """What ``OnPolicyRunner.load`` does, reading the file with :func:`load_checkpoint`; a checkpoint that
+        does not fit these networks is a one-line :class:`RunError` naming the file."""
+        data = load_checkpoint(path, map_location, keys=CHECKPOINT_KEYS)
+        if isinstance(data["iter"], bool) or not isinstance(data["iter"], int):
+            raise RunError(f"{path}: not a checkpoint of this project (iteration {data['iter']!r})")
+        try:
+            load_iteration = self.alg.load(data, load_cfg, strict)
+        except (RuntimeError, KeyError, ValueError, TypeError, AttributeError) as e:
+            # load_state_dict lists every mismatching tensor over many lines; the first one says enough
+            lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+            detail = lines[1] if len(lines) > 1 and lines[0].startswith("Error(s) in loading") else (lines or [""])[0]
+            raise RunError(f"{path}: does not fit this run's networks ({detail[:160]})") from None
+        if load_iteration:
+            self.current_learning_iteration = data["iter"]
+        return data.get("infos")
+
+
+def _check_resume(run_dir: Path, cfg_path: Path, saved: dict) -> None:
+    """Refuse to resume ``run_dir`` with another configuration or other data, naming what changed."""
+    if not cfg_path.is_file():
+        raise RunError(f"{run_dir} holds checkpoints but no config.json, so what they learned is unknown; "
+                       "choose another folder")
+    try:
+        old = json.loads(cfg_path.read_text())
+        old_cfg = old["config"]
+    except (ValueError, KeyError, TypeError):
+        raise RunError(f"{cfg_path}: not a run configuration written by `wresdyn train`") from None
+    # a run may be extended, or moved to another device or machine
+    check_resume(run_dir, old_cfg, saved["config"], may_change=[f"ppo.{k}" for k in RESUME_MAY_CHANGE])
+    # runs written before the data was recorded compare what they have
+    old_data = old.get("dataset") or {}
+    keys = [k for k in DATASET_IDENTITY if k in old_data]
+    check_resume(run_dir, {"dataset": {k: old_data[k] for k in keys}},
+                 {"dataset": {k: saved["dataset"][k] for k in keys}}, what="data")
+
+
 def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = True,
           data_path: str | Path | None = None) -> dict:
     """Train a residual with PPO on the ``train`` split of ``dataset``; resume from the latest checkpoint.
@@ -217,22 +331,24 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     Args:
         dataset: A :class:`wresdyn.data.dataset.Dataset` (only ``q``, ``qd``, ``qdd``, ``q_cmd`` are read).
         robot: The nominal robot the simulator uses.
-        cfg: The run configuration; must equal the saved one when resuming, except ``ppo.iterations``.
+        cfg: The run configuration; must equal the saved one when resuming, except :data:`RESUME_MAY_CHANGE`.
         run_dir: Run folder (created).
         resume: Continue from ``model_<it>.pt`` in ``run_dir``; with ``False`` an existing checkpoint is an error.
         data_path: Where ``dataset`` was read from, recorded in ``config.json`` for ``wresdyn eval``.
 
     Returns:
         The training summary written to ``train_summary.json``.
+
+    Raises:
+        RunError: The run folder holds another configuration, other data (:data:`DATASET_IDENTITY`) or a
+            checkpoint that is not a weights-only rsl-rl checkpoint of these networks.
     """
     import torch
-    from rsl_rl.runners import OnPolicyRunner
 
     from .replay_env import ReplayEnv
     from .residual import obs_stats
 
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     train_trajs = dataset.split("train")
     if not train_trajs:
         raise RunError("the dataset has no 'train' trajectories")
@@ -245,15 +361,8 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     ckpt = latest_checkpoint(run_dir)
     if ckpt is not None and not resume:
         raise RunError(f"{run_dir} already holds checkpoints ({ckpt.name}); resume it or choose another folder")
-    if ckpt is not None and cfg_path.is_file():
-        old = json.loads(cfg_path.read_text())["config"]
-        new = json.loads(json.dumps(saved["config"]))
-        for key in RESUME_MAY_CHANGE:  # a run may be extended, or moved to another device or machine
-            old["ppo"].pop(key, None), new["ppo"].pop(key, None)
-        if old != new:
-            raise RunError(f"{run_dir} was trained with another configuration; resume with the same one "
-                           "or choose another folder")
-    cfg_path.write_text(json.dumps(saved, indent=2))
+    if ckpt is not None:
+        _check_resume(run_dir, cfg_path, saved)
 
     if cfg.ppo.torch_threads > 0:
         torch.set_num_threads(cfg.ppo.torch_threads)
@@ -262,13 +371,18 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     mean, std = obs_stats(train_trajs)
     env = ReplayEnv(robot, train_trajs, dataset.rate_hz, cfg.ppo.num_envs, cfg.env, cfg.residual, cfg.rewards,
                     device=cfg.ppo.device, seed=cfg.ppo.seed, obs_mean=mean, obs_std=std)
-    runner = OnPolicyRunner(env, runner_cfg(cfg, run_dir.name), log_dir=str(run_dir), device=str(env.device))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    runner = Runner(env, runner_cfg(cfg, run_dir.name), log_dir=str(run_dir), device=str(env.device))
     start = 0
     if ckpt is not None:
         runner.load(str(ckpt), map_location=str(env.device))
         start = runner.current_learning_iteration + 1
         runner.current_learning_iteration = start
         print(f"resuming {run_dir} from {ckpt.name} at iteration {start}")
+    # written once the checkpoint has loaded: a refused resume leaves the folder as it was
+    tmp = cfg_path.with_name(cfg_path.name + ".tmp")
+    tmp.write_text(json.dumps(saved, indent=2))
+    tmp.replace(cfg_path)
     todo = cfg.ppo.iterations - start
     t0 = time.perf_counter()
     if todo > 0:

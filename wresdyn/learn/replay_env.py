@@ -23,6 +23,8 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from ..choices import SolverKind, check_choice, check_number
+from ..errors import WresdynError
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
 from ..sim.residual import apply_residual, observation, residual_scale
 from .residual import ResidualConfig, obs_stats
@@ -39,7 +41,7 @@ class ReplayEnvConfig:
     """Episode length [steps] (shorter when the trajectory ends first)."""
     substeps: int = 1
     """Simulator steps per recorded sample; the sim step is 1 / (rate_hz · substeps) [s]."""
-    solver: str = "auto"
+    solver: SolverKind = "auto"
     """Newton solver kind (:data:`wresdyn.sim.SOLVERS`); "auto" takes :class:`wresdyn.sim.replay.SolverReplay`
     for a fixed base: 100-200k env-steps/s with 256 worlds on 2 busy CPU cores against ~1k for
     ``SolverFeatherstone``, with the same PD-only gap on the shipped benchmark (0.0801 vs 0.0798 rad held-out)."""
@@ -57,6 +59,16 @@ class ReplayEnvConfig:
     """Scale of q − q_r in the critic's privileged observation [rad]."""
     critic_err_scale_qd: float = 0.5
     """Scale of q̇ − q̇_r in the critic's privileged observation [rad/s]."""
+
+    def __post_init__(self) -> None:
+        check_choice(self.solver, SolverKind, "env.solver")
+        check_number(self.horizon, "env.horizon", integer=True, ge=1)
+        check_number(self.substeps, "env.substeps", integer=True, ge=1)
+        check_number(self.obs_noise, "env.obs_noise", ge=0)
+        for name in ("max_qd", "limit_margin", "critic_err_scale_q", "critic_err_scale_qd"):
+            check_number(getattr(self, name), f"env.{name}", gt=0)
+        if not (isinstance(self.max_error, (int, float)) and self.max_error > 0):  # inf: no check
+            raise WresdynError(f"env.max_error = {self.max_error!r} must be > 0")
 
 
 class ReplayEnv(VecEnv):

@@ -31,6 +31,9 @@ import torch
 import torch.nn as nn
 from rsl_rl.models import MLPModel, RNNModel
 
+from ..choices import Arch, ResidualKind, check_choice, check_number, choices
+from ..errors import WresdynError
+
 __all__ = [
     "ARCHS",
     "ResidualConfig",
@@ -47,7 +50,7 @@ __all__ = [
     "export_run_files",
 ]
 
-ARCHS = ("mlp", "gru")
+ARCHS = choices(Arch)
 """Network architectures: MLP with ELU, or GRU followed by the MLP (paper Fig. 4)."""
 
 
@@ -55,8 +58,8 @@ ARCHS = ("mlp", "gru")
 class ResidualConfig:
     """What the residual acts on and the network that produces it."""
 
-    kind: str = "torque"
-    """One of :data:`KINDS`."""
+    kind: ResidualKind = "torque"
+    """One of :data:`wresdyn.sim.residual.KINDS`."""
     fraction: float = 0.5
     """Residual authority: the largest residual as a fraction of each joint's effort limit (for
     ``delta_action``, divided by kp). 0.5 rather than 0.25 on the shipped benchmark, where the "real" drives
@@ -65,7 +68,7 @@ class ResidualConfig:
     action_gain: float = 0.2
     """Normalised residual per unit of network output, g in clip(g · a, −1, 1); 0.2 makes one unit
     0.05 of the effort limit and the initial exploration noise (``init_std`` 1) that large."""
-    arch: str = "mlp"
+    arch: Arch = "mlp"
     """One of :data:`ARCHS`."""
     hidden_dims: tuple[int, ...] = (256, 128, 64)
     """Actor MLP hidden layer widths (ELU)."""
@@ -82,6 +85,23 @@ class ResidualConfig:
     ``EmpiricalNormalization``, exported with the policy)."""
     output_gain: float = 0.01
     """Scale of the actor's last-layer initial weights: the residual starts near zero, i.e. at PD-only."""
+
+    def __post_init__(self) -> None:
+        check_choice(self.kind, ResidualKind, "residual.kind")
+        check_choice(self.arch, Arch, "residual.arch")
+        for name in ("fraction", "action_gain", "init_std"):
+            check_number(getattr(self, name), f"residual.{name}", gt=0)
+        check_number(self.output_gain, "residual.output_gain", ge=0)  # 0: the residual starts exactly at zero
+        for name in ("gru_hidden_dim", "gru_layers"):
+            check_number(getattr(self, name), f"residual.{name}", integer=True, ge=1)
+        for name in ("hidden_dims", "critic_hidden_dims"):
+            dims = getattr(self, name)
+            if not isinstance(dims, (tuple, list)):
+                raise WresdynError(f"residual.{name} = {dims!r} is not a sequence of layer widths")
+            for i, d in enumerate(dims):
+                check_number(d, f"residual.{name}[{i}]", integer=True, ge=1)
+        if not isinstance(self.obs_normalization, bool):
+            raise WresdynError(f"residual.obs_normalization = {self.obs_normalization!r} is not true or false")
 
 
 OBS_MIN_STD = (0.05, 0.5, 5.0, 0.05)
@@ -124,8 +144,6 @@ class ResidualRNNModel(RNNModel):
 
 def actor_critic_cfg(cfg: ResidualConfig) -> tuple[dict, dict]:
     """rsl-rl ``actor`` and ``critic`` config dicts for :class:`~rsl_rl.runners.OnPolicyRunner`."""
-    if cfg.arch not in ARCHS:
-        raise ValueError(f"unknown architecture {cfg.arch!r}; choose from {ARCHS}")
     dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "log"}
     actor = {
         "class_name": f"{__name__}:ResidualMLPModel",

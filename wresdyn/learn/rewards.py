@@ -20,9 +20,11 @@ Action acceleration        −0.5e-6    |a_t − 2a_{t−1} + a_{t−2}|²
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import torch
+
+from ..choices import check_number
 
 __all__ = [
     "RewardConfig",
@@ -68,6 +70,14 @@ class RewardConfig:
     """Width σ of the velocity mimic kernel [(rad/s)²]: e^{-1} at 0.7 rad/s rms per joint, as ``sigma_q``."""
     bonus_tol: float = 1e-3
     """Joint position bonus tolerance [rad]."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            check_number(getattr(self, f.name), f"rewards.{f.name}")  # weights may have either sign
+        # a zero width divides by zero in the kernel; a negative one turns φ into a growing exponential
+        check_number(self.sigma_q, "rewards.sigma_q", gt=0)
+        check_number(self.sigma_qd, "rewards.sigma_qd", gt=0)
+        check_number(self.bonus_tol, "rewards.bonus_tol", ge=0)
 
 
 TERMS = ("joint_pos_mimic", "joint_vel_mimic", "joint_pos_bonus", "joint_torque", "joint_vel", "joint_acc",

@@ -1,81 +1,181 @@
-"""Run folders: checkpoints that load without unpickling, and resumes that refuse a changed configuration.
+"""Run folders shared by the learners (PPO, gradient fit): resume only what was started, load only weights.
 
-A checkpoint is a ``torch.save`` file of tensors and plain containers only (state dicts, generator states),
-with everything else (iteration, curves, config, random-generator states) as JSON bytes in a uint8 tensor, so
-:func:`load_checkpoint` reads it with ``torch.load(weights_only=True)``: a run folder from elsewhere can hold
-data, never code.
+A resumed run must learn what it started learning, so the configuration saved in the run folder is compared
+with the new one field by field (:func:`config_diff`, :func:`check_resume`), and the refusal names the fields.
+Checkpoints are read with ``torch.load(..., weights_only=True)`` (:func:`load_checkpoint`): tensors and plain
+containers only, so a run folder from elsewhere cannot run code by being resumed.
 """
 
 from __future__ import annotations
 
 import json
+import math
+import re
 from pathlib import Path
-
-import torch
 
 from ..errors import WresdynError
 
-__all__ = ["RunError", "config_diff", "check_resume", "save_checkpoint", "load_checkpoint"]
+__all__ = ["RunError", "config_diff", "describe_diff", "check_resume", "load_checkpoint", "save_checkpoint"]
 
 
 class RunError(WresdynError):
-    """A run folder that cannot be used as asked (another config, a foreign or corrupt file, nothing to load)."""
+    """A run folder that cannot be used as asked (another config, nothing to load, a bad checkpoint)."""
 
 
-def config_diff(old, new, prefix: str = "") -> list[str]:
-    """Dotted paths where two JSON-like configs differ (both compared after a JSON round trip)."""
-    old, new = json.loads(json.dumps(old)), json.loads(json.dumps(new))
+def _plain(value):
+    # what the value reads back as from config.json: tuples become lists, dataclasses are already dicts
+    return json.loads(json.dumps(value))
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, bool) or isinstance(b, bool):
+        return type(a) is type(b) and a == b  # True == 1 in Python, not in a config
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def _diff(old, new, path: str, out: list[str]) -> None:
     if isinstance(old, dict) and isinstance(new, dict):
-        out = []
-        for key in sorted(set(old) | set(new)):
-            path = f"{prefix}.{key}" if prefix else str(key)
+        for key in list(old) + [k for k in new if k not in old]:
+            sub = f"{path}.{key}" if path else str(key)
             if key not in old or key not in new:
-                out.append(path)
+                out.append(sub)
             else:
-                out += config_diff(old[key], new[key], path)
-        return out
-    return [] if old == new else [prefix or "<root>"]
+                _diff(old[key], new[key], sub, out)
+    elif isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        for i, (a, b) in enumerate(zip(old, new)):
+            _diff(a, b, f"{path}[{i}]", out)
+    elif isinstance(old, (dict, list)) or isinstance(new, (dict, list)):
+        if old != new:
+            out.append(path)
+    elif not _same(old, new):
+        out.append(path)
 
 
-def _pick(d, path: str):
-    for part in path.split("."):
-        if not isinstance(d, dict) or part not in d:
-            return "<absent>"
-        d = d[part]
+def config_diff(old: dict, new: dict) -> list[str]:
+    """Dotted paths at which two JSON-like configs differ, in ``old``'s key order.
+
+    Both are compared as they read back from JSON (tuples are lists; floats exactly, after the round trip, so
+    a config equals the one it wrote). Nested dicts give ``a.b.c``; lists of the same length are compared per
+    element, ``a.b[2]``; a key on one side only, or a list whose length changed, gives its own path.
+    """
+    out: list[str] = []
+    _diff(_plain(old), _plain(new), "", out)
+    return out
+
+
+def _lookup(d, path: str):
+    for part in path.replace("[", ".[").split("."):
+        if not isinstance(d, (dict, list)):
+            return "<missing>"
+        if part.startswith("["):
+            d = d[int(part[1:-1])]
+        elif part in d:
+            d = d[part]
+        else:
+            return "<missing>"
     return d
 
 
-def check_resume(run_dir, old: dict, new: dict, may_change=()) -> None:
-    """Raise :class:`RunError` naming the fields where ``new`` differs from the saved ``old`` config, except the
-    top-level or dotted names in ``may_change``."""
-    diff = [p for p in config_diff(old, new) if not any(p == m or p.startswith(m + ".") for m in may_change)]
-    if diff:
-        shown = ", ".join(f"{p} = {_pick(old, p)!r}, now {_pick(new, p)!r}" for p in diff[:3])
-        more = f" (and {len(diff) - 3} more)" if len(diff) > 3 else ""
-        raise RunError(f"{run_dir} was trained with {shown}{more}; resume with the same configuration or choose "
-                       "another folder")
+def _short(value, width: int = 60) -> str:
+    text = value if value == "<missing>" else json.dumps(value)
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
-def save_checkpoint(path: str | Path, tensors: dict, meta: dict) -> None:
-    """Write ``tensors`` (state dicts, tensors, plain containers) and JSON ``meta`` atomically to ``path``."""
+def describe_diff(old: dict, new: dict, paths=None, limit: int = 3) -> str:
+    """Differences in words, ``"ppo.gamma = 0.9, now 0.95; ..."``: those at ``paths`` (default: all of
+    :func:`config_diff`), at most ``limit`` with values, then how many more; ``""`` when there are none."""
+    paths = config_diff(old, new) if paths is None else list(paths)
+    old, new = _plain(old), _plain(new)
+    parts = [f"{p} = {_short(_lookup(old, p))}, now {_short(_lookup(new, p))}" for p in paths[:limit]]
+    if len(paths) > limit:
+        parts.append(f"and {len(paths) - limit} more ({', '.join(paths[limit:])})")
+    return "; ".join(parts)
+
+
+def check_resume(run_dir, old: dict, new: dict, may_change=(), what: str = "configuration") -> None:
+    """Raise :class:`RunError` naming the fields if ``new`` differs from the saved ``old`` outside ``may_change``.
+
+    Args:
+        run_dir: The run folder (named in the message).
+        old, new: JSON-like configs (the saved one and the one asked for).
+        may_change: Dotted paths (as :func:`config_diff` gives them) that a resumed run may change, e.g.
+            ``("ppo.iterations", "ppo.device")``; a path also covers everything under it.
+        what: What the dicts are, for the message (``"configuration"``, ``"data"``).
+    """
+    keep = tuple(may_change)
+
+    def allowed(p: str) -> bool:
+        return any(p == k or p.startswith(k + ".") or p.startswith(k + "[") for k in keep)
+
+    changed = [p for p in config_diff(old, new) if not allowed(p)]
+    if not changed:
+        return
+    # only the refused fields are described: the allowed ones changing is the normal case
+    on = "trained with" if what == "configuration" else f"trained on other {what}:"
+    raise RunError(f"{run_dir} was {on} {describe_diff(old, new, changed)}; resume with the same {what} "
+                   "or choose another folder")
+
+
+def _reason(e: Exception) -> str:
+    # torch's refusal is several paragraphs; the class it would have had to import is the useful part
+    text = str(e)
+    m = re.search(r"GLOBAL (\S+)", text)
+    if m:
+        return f" (it would import {m.group(1)})"
+    m = re.search(r"Unsupported operand \d+", text)
+    return f" ({m.group(0)})" if m else ""
+
+
+def load_checkpoint(path, map_location=None, keys=()) -> dict:
+    """A checkpoint written by :func:`save_checkpoint` or ``torch.save``, read as weights only.
+
+    ``torch.load(..., weights_only=True)`` rebuilds tensors and plain containers (dict, list, tuple, str, numbers,
+    None) and refuses anything else, so a foreign or tampered file cannot run code here. Raises a one-line
+    :class:`RunError` naming the file if it cannot be read that way, is not a dict, or lacks one of ``keys``.
+    """
+    import pickle
+
+    import torch
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    blob = torch.frombuffer(bytearray(json.dumps(meta).encode("utf-8")), dtype=torch.uint8)
-    tmp = path.with_suffix(path.suffix + ".tmp")
     try:
-        torch.save({**tensors, "meta": blob}, tmp)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+        data = torch.load(path, map_location=map_location, weights_only=True)
+    except FileNotFoundError:
+        raise RunError(f"{path}: no such checkpoint") from None
+    except pickle.UnpicklingError as e:
+        raise RunError(f"{path}: not a weights-only checkpoint, refused without loading it{_reason(e)}") from None
+    except EOFError:
+        raise RunError(f"{path}: not a readable checkpoint (empty or cut short)") from None
+    except (RuntimeError, OSError, ValueError, KeyError, IndexError, TypeError, AttributeError) as e:
+        first = (str(e).splitlines() or [type(e).__name__])[0][:120]
+        raise RunError(f"{path}: not a readable checkpoint ({first})") from None
+    if not isinstance(data, dict):
+        raise RunError(f"{path}: not a checkpoint of this project (holds a {type(data).__name__}, not a dict)")
+    missing = [k for k in keys if k not in data]
+    if missing:
+        raise RunError(f"{path}: not a checkpoint of this kind of run (no {', '.join(missing)})")
+    return data
 
 
-def load_checkpoint(path: str | Path, map_location=None) -> dict:
-    """Read a checkpoint written by :func:`save_checkpoint` without unpickling code; ``meta`` decoded from JSON."""
+def save_checkpoint(data: dict, path) -> Path:
+    """Write ``data`` (tensors and plain containers) with ``torch.save``, atomically: a kill mid-write leaves
+    the previous checkpoint, never a truncated file that a resume would pick. Refuses what
+    :func:`load_checkpoint` could not read back, so the failure shows when saving, not hours later."""
+    import io
+
+    import torch
+
     path = Path(path)
+    buf = io.BytesIO()
+    torch.save(data, buf)
+    buf.seek(0)
     try:
-        state = torch.load(path, map_location=map_location, weights_only=True)
-        state["meta"] = json.loads(bytes(state["meta"].cpu().numpy()).decode("utf-8"))
-    except Exception as e:  # torch raises many types for foreign or corrupt files
-        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise RunError(f"{path}: not a wresdyn checkpoint (or corrupt): {msg[:200]}") from None
-    return state
+        torch.load(buf, weights_only=True)
+    except Exception as e:  # noqa: BLE001 - any failure here means the file would not load back
+        raise TypeError(f"checkpoint for {path} holds more than tensors and plain containers{_reason(e)}") from None
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(buf.getvalue())
+    tmp.replace(path)
+    return path

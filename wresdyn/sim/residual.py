@@ -14,16 +14,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..choices import ResidualKind, check_choice, choices
+
 __all__ = ["KINDS", "residual_scale", "observation", "apply_residual"]
 
-KINDS = ("torque", "delta_action")
+KINDS = choices(ResidualKind)
 """Residual kinds: joint torque added to τ_pd (paper) or offset added to the PD target (ASAP)."""
 
 
 def residual_scale(robot, kind: str, fraction: float) -> np.ndarray:
     """Largest residual per joint, fraction · effort: [N*m] (torque) or [rad] (delta action), shape (n_dof,)."""
-    if kind not in KINDS:
-        raise ValueError(f"unknown residual kind {kind!r}; choose from {KINDS}")
+    check_choice(kind, ResidualKind, "kind")
     effort = np.asarray(robot.effort, dtype=np.float64)
     if not np.isfinite(effort).all():
         bad = [n for n, e in zip(robot.joint_names, effort) if not np.isfinite(e)]
@@ -49,6 +50,5 @@ def apply_residual(target, residual, kind: str):
         return target, None
     if kind == "torque":
         return target, residual
-    if kind == "delta_action":
-        return target + residual, None
-    raise ValueError(f"unknown residual kind {kind!r}; choose from {KINDS}")
+    check_choice(kind, ResidualKind, "kind")
+    return target + residual, None

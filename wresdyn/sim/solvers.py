@@ -25,11 +25,12 @@ import warnings
 
 import numpy as np
 
+from ..choices import SolverKind, check_choice, choices
 from ..robot.description import Robot
 
 __all__ = ["SOLVERS", "explicit_pd_margin", "resolve_solver", "make_solver"]
 
-SOLVERS = ("auto", "replay", "featherstone", "mujoco")
+SOLVERS = choices(SolverKind)
 """Replay solvers (see the module docstring)."""
 
 
@@ -55,8 +56,7 @@ def explicit_pd_margin(robot: Robot, dt: float, q: np.ndarray | None = None) -> 
 
 def resolve_solver(robot: Robot, dt: float, kind: str = "auto") -> str:
     """The concrete solver kind for ``kind`` (see the module docstring for "auto")."""
-    if kind not in SOLVERS:
-        raise ValueError(f"unknown solver {kind!r}; choose from {SOLVERS}")
+    check_choice(kind, SolverKind, "solver")
     if kind == "auto" and robot.base == "fixed":
         return "replay"
     if kind not in ("auto", "featherstone"):

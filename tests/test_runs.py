@@ -1,0 +1,63 @@
+"""Run-folder helpers shared by the learners: field-naming config comparison, weights-only checkpoints."""
+
+import pytest
+import torch
+
+from wresdyn.learn.runs import RunError, check_resume, config_diff, describe_diff, load_checkpoint, save_checkpoint
+
+
+def test_config_diff_names_nested_fields_as_json_reads_them():
+    old = {"ppo": {"gamma": 0.9, "seed": 0}, "residual": {"hidden_dims": [64, 32], "kind": "torque"}, "gone": 1}
+    new = {"ppo": {"gamma": 0.95, "seed": 0}, "residual": {"hidden_dims": (64, 16), "kind": "torque"}, "added": 2}
+    assert config_diff(old, new) == ["ppo.gamma", "residual.hidden_dims[1]", "gone", "added"]
+    # equal after the JSON round trip: tuples are lists, 1 == 1.0; but a flag is not a number, and floats are exact
+    assert config_diff({"a": (1, 2), "b": 1, "n": float("nan")}, {"a": [1, 2], "b": 1.0, "n": float("nan")}) == []
+    assert config_diff({"flag": True}, {"flag": 1}) == ["flag"]
+    assert config_diff({"x": 0.1 + 0.2}, {"x": 0.3}) == ["x"]
+    assert config_diff({"l": [1, 2]}, {"l": [1, 2, 3]}) == ["l"]  # another length: the list itself
+    assert describe_diff({"ppo": {"gamma": 0.9}}, {"ppo": {"gamma": 0.95}}) == "ppo.gamma = 0.9, now 0.95"
+    assert describe_diff({"a": 1}, {"b": 1}) == "a = 1, now <missing>; b = <missing>, now 1"
+    many = describe_diff({k: 0 for k in "abcde"}, {k: 1 for k in "abcde"})
+    assert many.endswith("and 2 more (d, e)")
+
+
+def test_check_resume_allows_only_the_listed_fields():
+    old = {"ppo": {"gamma": 0.9, "iterations": 10}}
+    check_resume("runs/x", old, {"ppo": {"gamma": 0.9, "iterations": 20}}, may_change=["ppo.iterations"])
+    with pytest.raises(RunError) as err:
+        check_resume("runs/x", old, {"ppo": {"gamma": 0.95, "iterations": 20}}, may_change=["ppo.iterations"])
+    assert str(err.value) == ("runs/x was trained with ppo.gamma = 0.9, now 0.95; resume with the same configuration "
+                              "or choose another folder")
+
+
+class _Marker:
+    def __init__(self, path):
+        self.path = str(path)
+
+    def __reduce__(self):  # unpickling would create the file
+        return (open, (self.path, "w"))
+
+
+def test_load_checkpoint_reads_weights_only_and_names_the_file(tmp_path):
+    data = {"w": torch.ones(3), "iter": 4, "opt": {"lr": 1e-3, "betas": (0.9, 0.99)}}
+    path = save_checkpoint(data, tmp_path / "c.pt")
+    assert load_checkpoint(path, keys=("w", "iter"))["iter"] == 4
+    assert not list(tmp_path.glob("*.tmp"))  # written atomically, nothing left beside it
+    marker = tmp_path / "ran"
+    torch.save({"w": _Marker(marker)}, tmp_path / "evil.pt")
+    cases = [("evil.pt", "not a weights-only checkpoint, refused without loading it (it would import io.open)"),
+             ("missing.pt", "no such checkpoint"), ("c.pt", "not a checkpoint of this kind of run (no actor)")]
+    (tmp_path / "empty.pt").write_bytes(b"")
+    (tmp_path / "text.pt").write_text("not a checkpoint\n" * 10)
+    torch.save([torch.ones(1)], tmp_path / "list.pt")
+    cases += [("empty.pt", "empty or cut short"), ("text.pt", "not a"), ("list.pt", "holds a list, not a dict")]
+    for name, msg in cases:
+        with pytest.raises(RunError) as err:
+            load_checkpoint(tmp_path / name, keys=("actor",) if name == "c.pt" else ())
+        assert str(err.value).startswith(f"{tmp_path / name}: ") and msg in str(err.value)
+        assert "\n" not in str(err.value)
+    assert not marker.exists()
+    # what could not be read back is refused when saving, not hours later
+    with pytest.raises(TypeError, match="more than tensors and plain containers"):
+        save_checkpoint({"w": _Marker(marker)}, tmp_path / "d.pt")
+    assert not (tmp_path / "d.pt").exists() and not marker.exists()
