@@ -1,10 +1,11 @@
 """The PPO-vs-gradient ablation: learner × network × residual kind × seeds, evaluated identically.
 
 Every cell trains in ``segments`` equal chunks through the learner's own checkpoint/resume path, and after each
-chunk the current residual is evaluated open-loop on the held-out split (:func:`wresdyn.evaluation.evaluate.evaluate_split`,
-the same code for every learner). That gives learning curves of held-out error against training wall-clock
-(evaluation time excluded) and against simulated env-steps, and makes the whole ablation resumable: a finished
-cell keeps its ``result.json`` and is skipped when the command runs again.
+chunk the current residual is evaluated open loop on the validation split
+(:func:`wresdyn.evaluation.evaluate.evaluate_split`, the same code for every learner). That gives learning curves of
+validation error against training wall-clock (evaluation time excluded) and against simulated env-steps; held-out
+and OOD are evaluated once, at the end, for the table. The whole ablation is resumable: a finished cell keeps its
+``result.json`` and is skipped when the command runs again.
 
 Learners: ``ppo`` (rsl-rl, Table I rewards), ``gradient`` (backprop through the simulation, same networks) and
 ``parametric`` (the gradient machinery fitting per-joint gains, damping, friction and armature; torque only, no
@@ -162,12 +163,16 @@ def run_cell(cell: dict, robot, dataset, cfg: AblationConfig, out: str | Path, l
     segments = _ppo_segments if cell["learner"] == "ppo" else _gradient_segments
     curve, wall, steps = [], 0.0, 0
     policy = None
+    # learning curves on validation (what choices are made on); held-out and OOD once, at the end, for reporting
+    curve_split = "validation" if dataset.split("validation") else "heldout"
     for its, seg_wall, seg_steps, policy in segments(cell, robot, dataset, cfg, out):
         wall, steps = wall + seg_wall, steps + seg_steps
-        held = _evaluate(robot, dataset, policy, cell["kind"], cfg, "heldout")
-        curve.append({"iteration": its, "wall_s": wall, "sim_steps": steps,
-                      "heldout": held["pd_residual"]["mean_abs_dq"], "pd_only": held["pd_only"]["mean_abs_dq"]})
-        log(f"  {cell['name']}: iteration {its}, {wall:.0f} s, {steps:.2e} steps, held-out {curve[-1]['heldout']:.4f} rad")
+        val = _evaluate(robot, dataset, policy, cell["kind"], cfg, curve_split)
+        curve.append({"iteration": its, "wall_s": wall, "sim_steps": steps, "split": curve_split,
+                      "error": val["pd_residual"]["mean_abs_dq"], "pd_only": val["pd_only"]["mean_abs_dq"]})
+        log(f"  {cell['name']}: iteration {its}, {wall:.0f} s, {steps:.2e} steps, {curve_split} "
+            f"{curve[-1]['error']:.4f} rad")
+    held = _evaluate(robot, dataset, policy, cell["kind"], cfg, "heldout")
     ood = _evaluate(robot, dataset, policy, cell["kind"], cfg, "ood")
     result = {**cell, "curve": curve, "wall_s": wall, "sim_steps": steps,
               "heldout": held["pd_residual"], "heldout_pd_only": held["pd_only"],
@@ -262,7 +267,7 @@ def table_markdown(results: list[dict], cfg: AblationConfig) -> str:
 
 
 def plot_curves(results: list[dict], path: str | Path) -> Path:
-    """Held-out error against wall-clock and against simulated steps, one line per (learner, network, kind)."""
+    """Validation error against wall-clock and against simulated steps, one line per (learner, network, kind)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -274,19 +279,20 @@ def plot_curves(results: list[dict], path: str | Path) -> Path:
         groups.setdefault(f"{r['learner']} {r['arch']} {r['kind']}".replace(" - ", " "), []).append(r)
     for label, rs in groups.items():
         n = min(len(r["curve"]) for r in rs)
-        err = np.mean([[p["heldout"] for p in r["curve"][:n]] for r in rs], axis=0)
+        err = np.mean([[p["error"] for p in r["curve"][:n]] for r in rs], axis=0)
         wall = np.mean([[p["wall_s"] for p in r["curve"][:n]] for r in rs], axis=0)
         steps = np.mean([[p["sim_steps"] for p in r["curve"][:n]] for r in rs], axis=0)
         style = "-" if rs[0]["learner"] == "ppo" else ("--" if rs[0]["learner"] == "gradient" else ":")
         axes[0].plot(wall, err, style, marker="o", label=label)
         axes[1].plot(steps, err, style, marker="o", label=label)
-    if results:
+    split = results[0]["curve"][0]["split"] if results and results[0]["curve"] else "validation"
+    if results and results[0]["curve"]:
         for ax in axes:
-            ax.axhline(results[0]["heldout_pd_only"]["mean_abs_dq"], color="gray", lw=1, label="PD only")
+            ax.axhline(results[0]["curve"][0]["pd_only"], color="gray", lw=1, label="PD only")
     axes[0].set_xlabel("training wall-clock [s]")
     axes[1].set_xlabel("simulated env-steps")
     axes[1].set_xscale("log")
-    axes[0].set_ylabel("held-out mean |Δq| [rad]")
+    axes[0].set_ylabel(f"{split} mean |Δq| [rad]")
     axes[1].legend(fontsize=7)
     fig.tight_layout()
     from .plots import save_figure

@@ -1,9 +1,14 @@
 """PPO for the residual (paper Sec. II-B) through rsl-rl's ``OnPolicyRunner``.
 
 A run folder holds everything: ``config.json`` (the :class:`TrainConfig`), rsl-rl checkpoints
-``model_<it>.pt`` (resumed from automatically after a kill), tensorboard event files, and at the end the
-deterministic residual exported as TorchScript (``policy.pt``) and ONNX (``policy.onnx``) with its
-metadata (``residual.json``), plus ``train_summary.json`` (env-steps/s, s per iteration).
+``model_<it>.pt`` (resumed from automatically after a kill), tensorboard event files, ``best.pt`` (the actor
+with the lowest validation error so far and the validation curve), and at the end the deterministic residual
+exported as TorchScript (``policy.pt``) and ONNX (``policy.onnx``) with its metadata (``residual.json``), plus
+``train_summary.json`` (env-steps/s, s per iteration, the selected iteration).
+
+Model selection is made on the dataset's validation split: every ``ppo.select_every`` iterations the current
+residual replays the validation trajectories open loop (:class:`wresdyn.learn.selection.ValidationScore`), and
+the residual with the lowest error is the one exported. Held-out and OOD data are never read in training.
 
 A resume is refused, naming the fields, when the configuration or the training data differ from what the folder
 was started with (:data:`RESUME_MAY_CHANGE` may differ), and checkpoints are read as weights only (:class:`Runner`).
@@ -11,6 +16,7 @@ was started with (:data:`RESUME_MAY_CHANGE` may differ), and checkpoints are rea
 
 from __future__ import annotations
 
+import copy
 import json
 import re
 import time
@@ -77,6 +83,9 @@ class PPOConfig:
     torch_threads: int = 1
     """CPU threads for torch (0: torch's default). One is fastest for these small batches: on a busy 2-core
     machine two intra-op threads made a (256, 84) gather-and-normalise 600x slower (20 ms vs 31 us)."""
+    select_every: int = 0
+    """Replay the validation split open loop every this many iterations and export the residual with the lowest
+    validation error (model selection on validation); 0 = ten times per run."""
 
     def __post_init__(self) -> None:
         for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
@@ -90,6 +99,7 @@ class PPOConfig:
         check_number(self.lam, "ppo.lam", ge=0, le=1)
         check_number(self.seed, "ppo.seed", integer=True, ge=0, le=2**32 - 1)  # numpy's seed range
         check_number(self.torch_threads, "ppo.torch_threads", integer=True, ge=0)
+        check_number(self.select_every, "ppo.select_every", integer=True, ge=0)
         check_device(self.device, "ppo.device")
 
 
@@ -346,7 +356,8 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     import torch
 
     from .replay_env import ReplayEnv
-    from .residual import obs_stats
+    from .residual import obs_stats, policy_from_actor
+    from .selection import ValidationScore
 
     run_dir = Path(run_dir)
     train_trajs = dataset.split("train")
@@ -383,12 +394,33 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     tmp = cfg_path.with_name(cfg_path.name + ".tmp")
     tmp.write_text(json.dumps(saved, indent=2))
     tmp.replace(cfg_path)
-    todo = cfg.ppo.iterations - start
-    t0 = time.perf_counter()
-    if todo > 0:
-        runner.learn(todo)
-    wall = time.perf_counter() - t0
-    todo = max(todo, 0)
+    todo = max(cfg.ppo.iterations - start, 0)
+    validation = dataset.split("validation")
+    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, cfg.ppo.device) if validation else None
+    best_path = run_dir / "best.pt"
+    best = load_checkpoint(best_path, keys=("actor", "meta")) if start and best_path.is_file() else None
+    curve = best["meta"]["validation_curve"] if best else []
+    every = cfg.ppo.select_every or max(1, cfg.ppo.iterations // 10)
+    t0, eval_s, done = time.perf_counter(), 0.0, start
+    while done < cfg.ppo.iterations:
+        # learn up to the next selection point (rsl-rl continues from current_learning_iteration)
+        n = min(every - done % every, cfg.ppo.iterations - done)
+        runner.current_learning_iteration = done
+        runner.learn(n)
+        done += n
+        if score is not None:
+            t_eval = time.perf_counter()
+            value = score(policy_from_actor(runner.alg.get_policy(), mean, std, env.scale.cpu().numpy(),
+                                            cfg.residual.kind, cfg.residual.action_gain))
+            curve.append({"iteration": done, "validation": value, "diverged": score.last_diverged})
+            print(f"validation after {done} iterations: {value:.4f} rad", flush=True)
+            if best is None or value < best["meta"]["validation"]:
+                actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
+                best = {"actor": actor, "meta": {"iteration": done, "validation": value}}
+            best["meta"]["validation_curve"] = curve
+            save_checkpoint(best, best_path)
+            eval_s += time.perf_counter() - t_eval
+    wall = time.perf_counter() - t0 - eval_s
     it_time = runner.logger.tot_time  # collection + update, without start-up
     summary = {
         "iterations": cfg.ppo.iterations,
@@ -401,8 +433,15 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         "diverged_this_session": env.diverged_total,
         "device": str(env.device),
         "solver": type(env.sim.solver).__name__,
+        "selected_iteration": best["meta"]["iteration"] if best else cfg.ppo.iterations,
+        "selected_validation": best["meta"]["validation"] if best else None,
+        "validation_curve": curve,
     }
-    export(runner.alg.get_policy(), run_dir, cfg, mean, std, env.scale.cpu().numpy(), dataset)
+    actor = runner.alg.get_policy()
+    if best is not None:  # export the residual chosen on validation, not merely the last
+        actor = copy.deepcopy(actor)
+        actor.load_state_dict(best["actor"])
+    export(actor, run_dir, cfg, mean, std, env.scale.cpu().numpy(), dataset)
     (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
