@@ -1,4 +1,5 @@
-"""Dataset format: exact save/load round trip, every validation error, atomic writes, reproducible collection."""
+"""Dataset format: exact save/load round trip, every validation error, atomic writes, reproducible collection,
+schema-1 files."""
 
 import json
 from pathlib import Path
@@ -6,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.data.dataset import SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd, load_dataset
+from wresdyn.data.dataset import (SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd, load_dataset,
+                                  read_header)
 
 RATE = 500.0
 NAMES = ["j_a", "j_b", "j_c"]
@@ -24,7 +26,7 @@ def _traj(name, split, n=40, seed=0, tau=True, derived=False):
 
 def _dataset(**kw):
     trajs = [_traj("a", "train", seed=1), _traj("b", "heldout", seed=2, tau=False),
-             _traj("c", "ood", n=55, seed=3, derived=True)]
+             _traj("c", "ood", n=55, seed=3, derived=True), _traj("v", "validation", seed=4)]
     args = dict(joint_names=list(NAMES), rate_hz=RATE, trajectories=trajs, robot_file="robot.usda",
                 robot_sha256="0" * 64, mismatch={"friction": 0.1, "seed": 7}, seed=42,
                 meta={"nested": {"x": [1.5, 2.0]}, "np": np.float64(0.25)})
@@ -53,12 +55,13 @@ def test_round_trip_is_exact(tmp_path):
     back = load_dataset(path)
     _assert_same(ds, back)
     assert back.meta == {"nested": {"x": [1.5, 2.0]}, "np": 0.25}
-    assert [len(back.split(s)) for s in SPLITS] == [1, 1, 1]
+    assert SPLITS == ("train", "validation", "heldout", "ood")
+    assert [len(back.split(s)) for s in SPLITS] == [1, 1, 1, 1] and back.split("validation")[0].name == "v"
     with np.load(path) as z:  # float32 where exact, float64 otherwise; derived q̈ is not stored
         assert z["traj/0000/qd"].dtype == np.float32 and z["traj/0000/q"].dtype == np.float64
         assert "traj/0002/qdd" not in z.files and "traj/0000/qdd" in z.files
         header = json.loads(z["header"].tobytes())
-    assert header["schema_version"] == SCHEMA_VERSION and header["units"]["qd"] == "rad/s"
+    assert header["schema_version"] == SCHEMA_VERSION == 2 and header["units"]["qd"] == "rad/s"
 
 
 def test_derive_qdd_matches_the_analytic_derivative():
@@ -137,7 +140,10 @@ def test_shape_and_header_errors(tmp_path):
         (header, {**arrays, "traj/0000/q_cmd": arrays["traj/0000/q_cmd"][:-1]}, "q_cmd must have shape"),
         (header, {**arrays, "traj/0000/t": arrays["traj/0000/t"][:, None]}, "t must have shape"),
         (header, {k: v for k, v in arrays.items() if k != "traj/0001/qd"}, "has no qd array"),
-        ({**header, "schema_version": 99}, arrays, "schema version 99"),
+        ({**header, "schema_version": 99}, arrays, "schema version 99 is not supported"),
+        ({**header, "schema_version": 3}, arrays, "schema version 3 is not supported"),
+        ({**header, "schema_version": True}, arrays, "schema version True is not supported"),
+        ({k: v for k, v in header.items() if k != "schema_version"}, arrays, "schema version None"),
         ({**header, "joint_names": ["j_a", "j_a", "j_c"]}, arrays, "duplicated joint name"),
         ({**header, "rate_hz": -5}, arrays, "rate_hz must be a positive"),
         ({**header, "trajectories": [dict(header["trajectories"][0], split="test")]}, arrays, "unknown split 'test'"),
@@ -195,8 +201,8 @@ def test_save_is_atomic(tmp_path):
 
 
 def test_unknown_split_query():
-    with pytest.raises(DatasetError, match="unknown split"):
-        _dataset().split("validation")
+    with pytest.raises(DatasetError, match="unknown split 'test'"):
+        _dataset().split("test")
 
 
 def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
@@ -219,3 +225,32 @@ def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
     tr = back.trajectories[0]
     np.testing.assert_array_equal(tr.t, np.arange(250) / RATE)
     assert tr.tau is not None and np.abs(tr.q - tr.q_cmd).max() < 0.5
+
+
+def _save_v1(ds: Dataset, path: Path) -> None:
+    """Write ``ds`` as a schema-1 file: the same layout with version 1 (which has no validation split)."""
+    header, arrays = _raw(ds, path.with_name(path.name + ".v2.npz"))
+    path.with_name(path.name + ".v2.npz").unlink()
+    _write_raw(path, {**header, "schema_version": 1}, arrays)
+
+
+def _without_validation(ds: Dataset) -> Dataset:
+    from dataclasses import replace
+
+    return replace(ds, trajectories=[tr for tr in ds.trajectories if tr.split != "validation"])
+
+
+def test_schema_1_files_load(tmp_path):
+    v1 = _without_validation(_dataset())
+    _save_v1(v1, tmp_path / "v1.npz")
+    assert read_header(tmp_path / "v1.npz")["schema_version"] == 1
+    back = load_dataset(tmp_path / "v1.npz")
+    _assert_same(v1, back)
+    assert back.split("validation") == []
+    back.save(tmp_path / "v2.npz")  # saving always writes the current schema
+    assert read_header(tmp_path / "v2.npz")["schema_version"] == 2
+    # schema 1 has no validation split: a version-1 file that claims one is refused
+    header, arrays = _raw(_dataset(), tmp_path / "tmp.npz")
+    _write_raw(tmp_path / "bad.npz", {**header, "schema_version": 1}, arrays)
+    _expect(tmp_path / "bad.npz", r"trajectory 'v' has split 'validation', which schema version 1 does not have")
+
