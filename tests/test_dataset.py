@@ -1,5 +1,5 @@
 """Dataset format: exact save/load round trip, every validation error, atomic writes, reproducible collection,
-schema-1 files."""
+schema-1 files and their migration to schema 2."""
 
 import json
 from pathlib import Path
@@ -254,3 +254,82 @@ def test_schema_1_files_load(tmp_path):
     _write_raw(tmp_path / "bad.npz", {**header, "schema_version": 1}, arrays)
     _expect(tmp_path / "bad.npz", r"trajectory 'v' has split 'validation', which schema version 1 does not have")
 
+
+def test_migrate_log_dataset_moves_train_to_validation(tmp_path, capsys):
+    """Real logs (no mismatch, no seed) cannot record more: the last K training trajectories become validation."""
+    from wresdyn.cli import main
+    from wresdyn.data.migrate import migrate
+
+    trajs = [_traj(f"run{i}", "train", seed=i) for i in range(4)] + [_traj("h", "heldout", seed=9)]
+    logs = Dataset(list(NAMES), RATE, trajs, "robot.usda", "0" * 64, {}, None, {"source_logs": []})
+    old = tmp_path / "logs_v1.npz"
+    _save_v1(logs, old)
+    m = migrate(old, 2)
+    assert (m.from_version, m.how, m.names, m.robot) == (1, "moved from train", ["run2", "run3"], None)
+    assert [(tr.name, tr.split) for tr in m.dataset.trajectories] == [
+        ("run0", "train"), ("run1", "train"), ("run2", "validation"), ("run3", "validation"), ("h", "heldout")]
+    assert m.dataset.meta["migration"]["validation"] == "moved from train"
+    new = tmp_path / "logs_v2.npz"
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "2"]) == 0
+    assert "moved the last 2 training trajectories to validation (run2, run3)" in capsys.readouterr().out
+    back = load_dataset(new)
+    assert read_header(new)["schema_version"] == 2 and [tr.name for tr in back.split("validation")] == ["run2", "run3"]
+    by_name = {tr.name: tr for tr in back.trajectories}
+    for tr in logs.trajectories:
+        np.testing.assert_array_equal(tr.q, by_name[tr.name].q)  # only the split changed
+    # an existing output is refused without --force and left as it was; with --force it is replaced
+    before = new.read_bytes()
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("wresdyn migrate: error:") and "--force" in err and "\n" not in err
+    assert new.read_bytes() == before
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "1", "--force"]) == 0
+    assert [tr.name for tr in load_dataset(new).split("validation")] == ["run3"]
+    # errors leave nothing behind: all of train asked for, an input already at schema 2
+    for args, match in [([str(old), "--validation", "4"], "at least one must stay in train"),
+                        ([str(new)], "already schema version 2")]:
+        assert main(["migrate", *args, "--out", str(tmp_path / "x.npz")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert match in err and "\n" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["logs_v1.npz", "logs_v2.npz"]
+
+
+@pytest.fixture(scope="module")
+def collected(humanoid):
+    """A tiny collect with a validation split (0.1 s per trajectory, the real pipeline)."""
+    from wresdyn.data.real_robot import Mismatch, collect
+
+    mm = Mismatch.load(Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml")
+    return collect(humanoid, mm, {"train": 1, "validation": 2, "heldout": 1}, duration=0.1, seed=5)
+
+
+def test_migrate_simulated_dataset_records_validation(tmp_path, humanoid, collected, capsys):
+    """A schema-1 collect file (same data less validation) migrated with --validation 2 is the schema-2 collect:
+    the recorded validation trajectories are bit for bit those ``collect`` records."""
+    from wresdyn.cli import main
+    from wresdyn.data.migrate import migrate
+
+    old = tmp_path / "sim_v1.npz"
+    _save_v1(_without_validation(collected), old)
+    m = migrate(old, 2, humanoid)
+    assert (m.how, m.names, m.robot) == ("recorded", ["validation_000", "validation_001"], humanoid)
+    _assert_same(collected, m.dataset)
+    assert m.dataset.meta["trajectory_params"] == collected.meta["trajectory_params"]
+    assert m.dataset.meta["migration"] == {"from_schema_version": 1, "to_schema_version": 2, "validation": "recorded",
+                                           "trajectories": ["validation_000", "validation_001"]}
+    # through the command line: the robot comes from the header, the file is exact
+    new = tmp_path / "sim_v2.npz"
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "1", "--no-gap"]) == 0
+    assert "recorded 1 validation trajectories (validation_000)" in capsys.readouterr().out
+    back = load_dataset(new)
+    np.testing.assert_array_equal(back.split("validation")[0].q, collected.split("validation")[0].q)
+    # another robot than the recording's (here: the mismatch draws another set of link and gain errors) is
+    # caught by the re-recorded trajectory, and nothing is written
+    header, arrays = _raw(_without_validation(collected), tmp_path / "tmp.npz")
+    (tmp_path / "tmp.npz").unlink()
+    _write_raw(tmp_path / "other.npz", {**header, "schema_version": 1,
+                                        "mismatch": {**header["mismatch"], "seed": 8}}, arrays)
+    assert main(["migrate", str(tmp_path / "other.npz"), "--out", str(tmp_path / "x.npz"), "--validation", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "re-recording train_000 does not reproduce it" in err and "\n" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.npz", "sim_v1.npz", "sim_v2.npz"]
