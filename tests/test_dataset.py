@@ -1,4 +1,5 @@
-"""Dataset format: exact save/load round trip, every validation error, atomic writes, reproducible collection."""
+"""Dataset format: exact save/load round trip, every validation error, atomic writes, reproducible collection,
+schema-1 files and their migration to schema 2."""
 
 import json
 from pathlib import Path
@@ -6,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.data.dataset import SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd, load_dataset
+from wresdyn.data.dataset import (SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd, load_dataset,
+                                  read_header)
 
 RATE = 500.0
 NAMES = ["j_a", "j_b", "j_c"]
@@ -24,7 +26,7 @@ def _traj(name, split, n=40, seed=0, tau=True, derived=False):
 
 def _dataset(**kw):
     trajs = [_traj("a", "train", seed=1), _traj("b", "heldout", seed=2, tau=False),
-             _traj("c", "ood", n=55, seed=3, derived=True)]
+             _traj("c", "ood", n=55, seed=3, derived=True), _traj("v", "validation", seed=4)]
     args = dict(joint_names=list(NAMES), rate_hz=RATE, trajectories=trajs, robot_file="robot.usda",
                 robot_sha256="0" * 64, mismatch={"friction": 0.1, "seed": 7}, seed=42,
                 meta={"nested": {"x": [1.5, 2.0]}, "np": np.float64(0.25)})
@@ -53,12 +55,13 @@ def test_round_trip_is_exact(tmp_path):
     back = load_dataset(path)
     _assert_same(ds, back)
     assert back.meta == {"nested": {"x": [1.5, 2.0]}, "np": 0.25}
-    assert [len(back.split(s)) for s in SPLITS] == [1, 1, 1]
+    assert SPLITS == ("train", "validation", "heldout", "ood")
+    assert [len(back.split(s)) for s in SPLITS] == [1, 1, 1, 1] and back.split("validation")[0].name == "v"
     with np.load(path) as z:  # float32 where exact, float64 otherwise; derived q̈ is not stored
         assert z["traj/0000/qd"].dtype == np.float32 and z["traj/0000/q"].dtype == np.float64
         assert "traj/0002/qdd" not in z.files and "traj/0000/qdd" in z.files
         header = json.loads(z["header"].tobytes())
-    assert header["schema_version"] == SCHEMA_VERSION and header["units"]["qd"] == "rad/s"
+    assert header["schema_version"] == SCHEMA_VERSION == 2 and header["units"]["qd"] == "rad/s"
 
 
 def test_derive_qdd_matches_the_analytic_derivative():
@@ -137,7 +140,10 @@ def test_shape_and_header_errors(tmp_path):
         (header, {**arrays, "traj/0000/q_cmd": arrays["traj/0000/q_cmd"][:-1]}, "q_cmd must have shape"),
         (header, {**arrays, "traj/0000/t": arrays["traj/0000/t"][:, None]}, "t must have shape"),
         (header, {k: v for k, v in arrays.items() if k != "traj/0001/qd"}, "has no qd array"),
-        ({**header, "schema_version": 99}, arrays, "schema version 99"),
+        ({**header, "schema_version": 99}, arrays, "schema version 99 is not supported"),
+        ({**header, "schema_version": 3}, arrays, "schema version 3 is not supported"),
+        ({**header, "schema_version": True}, arrays, "schema version True is not supported"),
+        ({k: v for k, v in header.items() if k != "schema_version"}, arrays, "schema version None"),
         ({**header, "joint_names": ["j_a", "j_a", "j_c"]}, arrays, "duplicated joint name"),
         ({**header, "rate_hz": -5}, arrays, "rate_hz must be a positive"),
         ({**header, "trajectories": [dict(header["trajectories"][0], split="test")]}, arrays, "unknown split 'test'"),
@@ -195,8 +201,8 @@ def test_save_is_atomic(tmp_path):
 
 
 def test_unknown_split_query():
-    with pytest.raises(DatasetError, match="unknown split"):
-        _dataset().split("validation")
+    with pytest.raises(DatasetError, match="unknown split 'test'"):
+        _dataset().split("test")
 
 
 def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
@@ -219,3 +225,111 @@ def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
     tr = back.trajectories[0]
     np.testing.assert_array_equal(tr.t, np.arange(250) / RATE)
     assert tr.tau is not None and np.abs(tr.q - tr.q_cmd).max() < 0.5
+
+
+def _save_v1(ds: Dataset, path: Path) -> None:
+    """Write ``ds`` as a schema-1 file: the same layout with version 1 (which has no validation split)."""
+    header, arrays = _raw(ds, path.with_name(path.name + ".v2.npz"))
+    path.with_name(path.name + ".v2.npz").unlink()
+    _write_raw(path, {**header, "schema_version": 1}, arrays)
+
+
+def _without_validation(ds: Dataset) -> Dataset:
+    from dataclasses import replace
+
+    return replace(ds, trajectories=[tr for tr in ds.trajectories if tr.split != "validation"])
+
+
+def test_schema_1_files_load(tmp_path):
+    v1 = _without_validation(_dataset())
+    _save_v1(v1, tmp_path / "v1.npz")
+    assert read_header(tmp_path / "v1.npz")["schema_version"] == 1
+    back = load_dataset(tmp_path / "v1.npz")
+    _assert_same(v1, back)
+    assert back.split("validation") == []
+    back.save(tmp_path / "v2.npz")  # saving always writes the current schema
+    assert read_header(tmp_path / "v2.npz")["schema_version"] == 2
+    # schema 1 has no validation split: a version-1 file that claims one is refused
+    header, arrays = _raw(_dataset(), tmp_path / "tmp.npz")
+    _write_raw(tmp_path / "bad.npz", {**header, "schema_version": 1}, arrays)
+    _expect(tmp_path / "bad.npz", r"trajectory 'v' has split 'validation', which schema version 1 does not have")
+
+
+def test_migrate_log_dataset_moves_train_to_validation(tmp_path, capsys):
+    """Real logs (no mismatch, no seed) cannot record more: the last K training trajectories become validation."""
+    from wresdyn.cli import main
+    from wresdyn.data.migrate import migrate
+
+    trajs = [_traj(f"run{i}", "train", seed=i) for i in range(4)] + [_traj("h", "heldout", seed=9)]
+    logs = Dataset(list(NAMES), RATE, trajs, "robot.usda", "0" * 64, {}, None, {"source_logs": []})
+    old = tmp_path / "logs_v1.npz"
+    _save_v1(logs, old)
+    m = migrate(old, 2)
+    assert (m.from_version, m.how, m.names, m.robot) == (1, "moved from train", ["run2", "run3"], None)
+    assert [(tr.name, tr.split) for tr in m.dataset.trajectories] == [
+        ("run0", "train"), ("run1", "train"), ("run2", "validation"), ("run3", "validation"), ("h", "heldout")]
+    assert m.dataset.meta["migration"]["validation"] == "moved from train"
+    new = tmp_path / "logs_v2.npz"
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "2"]) == 0
+    assert "moved the last 2 training trajectories to validation (run2, run3)" in capsys.readouterr().out
+    back = load_dataset(new)
+    assert read_header(new)["schema_version"] == 2 and [tr.name for tr in back.split("validation")] == ["run2", "run3"]
+    by_name = {tr.name: tr for tr in back.trajectories}
+    for tr in logs.trajectories:
+        np.testing.assert_array_equal(tr.q, by_name[tr.name].q)  # only the split changed
+    # an existing output is refused without --force and left as it was; with --force it is replaced
+    before = new.read_bytes()
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("wresdyn migrate: error:") and "--force" in err and "\n" not in err
+    assert new.read_bytes() == before
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "1", "--force"]) == 0
+    assert [tr.name for tr in load_dataset(new).split("validation")] == ["run3"]
+    # errors leave nothing behind: all of train asked for, an input already at schema 2
+    for args, match in [([str(old), "--validation", "4"], "at least one must stay in train"),
+                        ([str(new)], "already schema version 2")]:
+        assert main(["migrate", *args, "--out", str(tmp_path / "x.npz")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert match in err and "\n" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["logs_v1.npz", "logs_v2.npz"]
+
+
+@pytest.fixture(scope="module")
+def collected(humanoid):
+    """A tiny collect with a validation split (0.1 s per trajectory, the real pipeline)."""
+    from wresdyn.data.real_robot import Mismatch, collect
+
+    mm = Mismatch.load(Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml")
+    return collect(humanoid, mm, {"train": 1, "validation": 2, "heldout": 1}, duration=0.1, seed=5)
+
+
+def test_migrate_simulated_dataset_records_validation(tmp_path, humanoid, collected, capsys):
+    """A schema-1 collect file (same data less validation) migrated with --validation 2 is the schema-2 collect:
+    the recorded validation trajectories are bit for bit those ``collect`` records."""
+    from wresdyn.cli import main
+    from wresdyn.data.migrate import migrate
+
+    old = tmp_path / "sim_v1.npz"
+    _save_v1(_without_validation(collected), old)
+    m = migrate(old, 2, humanoid)
+    assert (m.how, m.names, m.robot) == ("recorded", ["validation_000", "validation_001"], humanoid)
+    _assert_same(collected, m.dataset)
+    assert m.dataset.meta["trajectory_params"] == collected.meta["trajectory_params"]
+    assert m.dataset.meta["migration"] == {"from_schema_version": 1, "to_schema_version": 2, "validation": "recorded",
+                                           "trajectories": ["validation_000", "validation_001"]}
+    # through the command line: the robot comes from the header, the file is exact
+    new = tmp_path / "sim_v2.npz"
+    assert main(["migrate", str(old), "--out", str(new), "--validation", "1", "--no-gap"]) == 0
+    assert "recorded 1 validation trajectories (validation_000)" in capsys.readouterr().out
+    back = load_dataset(new)
+    np.testing.assert_array_equal(back.split("validation")[0].q, collected.split("validation")[0].q)
+    # another robot than the recording's (here: the mismatch draws another set of link and gain errors) is
+    # caught by the re-recorded trajectory, and nothing is written
+    header, arrays = _raw(_without_validation(collected), tmp_path / "tmp.npz")
+    (tmp_path / "tmp.npz").unlink()
+    _write_raw(tmp_path / "other.npz", {**header, "schema_version": 1,
+                                        "mismatch": {**header["mismatch"], "seed": 8}}, arrays)
+    assert main(["migrate", str(tmp_path / "other.npz"), "--out", str(tmp_path / "x.npz"), "--validation", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "re-recording train_000 does not reproduce it" in err and "\n" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.npz", "sim_v1.npz", "sim_v2.npz"]

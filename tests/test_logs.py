@@ -153,5 +153,8 @@ def test_cli_imports_logs(tmp_path, humanoid):
     assert main(args) == 0
     ds = load_dataset(tmp_path / "o" / "dataset.npz", humanoid)
     assert [tr.name for tr in ds.split("heldout")] == ["run1"]
+    args = ["collect", "--logs", str(tmp_path / "run1.csv"), "--split", "validation", "--out", str(tmp_path / "v")]
+    assert main(args) == 0
+    assert [tr.name for tr in load_dataset(tmp_path / "v" / "dataset.npz").split("validation")] == ["run1"]
     (tmp_path / "broken.csv").write_text("time\n0\n")
     assert main(["collect", "--logs", str(tmp_path / "broken.csv"), "--out", str(tmp_path / "o2")]) == 2

@@ -113,6 +113,29 @@ def test_default_mismatch_opens_a_gap_the_nominal_robot_does_not(humanoid):
     assert gap["heldout_000"] > 5 * gap["nominal"]
 
 
+def test_seeding_is_per_split_and_stable(humanoid):
+    """Adding a validation split leaves every train / held-out / OOD array bit-identical (fixed spawn keys per
+    split); validation is ellipsoid excitation (the training family) drawn from seeds of its own."""
+    from wresdyn.data.real_robot import SPAWN_KEYS
+
+    assert SPAWN_KEYS == {"train": 0, "heldout": 1, "ood": 2, "validation": 3}  # schema-1 keys kept
+    mm = Mismatch.load(DEFAULT_TOML)
+    without = collect(humanoid, mm, {"train": 1, "heldout": 1, "ood": 1}, duration=0.06, seed=2)
+    with_val = collect(humanoid, mm, {"train": 1, "validation": 2, "heldout": 1, "ood": 1}, duration=0.06, seed=2)
+    assert [tr.name for tr in with_val.trajectories] == ["train_000", "validation_000", "validation_001",
+                                                         "heldout_000", "ood_000"]
+    for tr in without.trajectories:
+        again = next(x for x in with_val.trajectories if x.name == tr.name)
+        for f in ("t", "q", "qd", "qdd", "q_cmd", "tau"):
+            np.testing.assert_array_equal(getattr(tr, f), getattr(again, f), err_msg=f"{tr.name}.{f}")
+    params = with_val.meta["trajectory_params"]
+    assert params["validation_000"]["family"] == params["validation_001"]["family"] == "ellipsoid"
+    cmds = [tr.q_cmd for tr in with_val.trajectories]  # every trajectory, validation too, has its own draw
+    assert all(np.abs(a - b).max() > 1e-3 for i, a in enumerate(cmds) for b in cmds[i + 1:])
+    with pytest.raises(ValueError, match="unknown split"):
+        collect(humanoid, mm, {"test": 1}, duration=0.06)
+
+
 def _renamed(tr):
     from dataclasses import replace
 
@@ -124,13 +147,13 @@ def test_collect_command(tmp_path, capsys):
     from wresdyn.data.dataset import load_dataset
 
     out = tmp_path / "out"
-    args = ["collect", "--train", "1", "--heldout", "0", "--ood", "1", "--duration", "0.3", "--no-gap",
-            "--out", str(out)]
+    args = ["collect", "--train", "1", "--validation", "1", "--heldout", "0", "--ood", "1", "--duration", "0.3",
+            "--no-gap", "--out", str(out)]
     assert main(args) == 0
     printed = capsys.readouterr().out
-    assert "[1/2] train_000" in printed and "[2/2] ood_000" in printed  # progress, one line per trajectory
+    assert "[1/3] train_000" in printed and "[2/3] validation_000" in printed and "[3/3] ood_000" in printed
     ds = load_dataset(out / "dataset.npz")
-    assert [tr.split for tr in ds.trajectories] == ["train", "ood"]
+    assert [tr.split for tr in ds.trajectories] == ["train", "validation", "ood"]
     assert ds.mismatch == Mismatch.load(DEFAULT_TOML).to_dict()
     assert (out / "spectrum.png").stat().st_size > 0
     bad = tmp_path / "bad.toml"

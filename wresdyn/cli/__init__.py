@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "inspect": ("wresdyn.cli.inspect", "print a robot's joint table and check it in Newton and MuJoCo"),
     "demo": ("wresdyn.cli.demo", "run the main job on the embedded defaults"),
     "collect": ("wresdyn.cli.collect", "record a dataset on the simulated real robot (or import real logs)"),
+    "migrate": ("wresdyn.cli.migrate", "rewrite a schema-1 dataset as schema 2, optionally adding a validation split"),
     "train": ("wresdyn.cli.train", "learn a residual with PPO on a dataset's training split (resumable)"),
     "eval": ("wresdyn.cli.eval", "replay held-out and OOD data open-loop: PD only vs PD + residual, report"),
     "bench": ("wresdyn.cli.bench", "env-steps/s of the replay workload for every solver, same robot and worlds"),

@@ -1,9 +1,10 @@
 """``wresdyn collect``: record a dataset on the simulated real robot, or import real logs into one.
 
-Simulated: draws excitations (train / held-out: the paper's ellipsoid foot paths, eq. 2; out-of-distribution:
-chirps and kicks), executes them under PD on the MuJoCo "real" robot with the mismatch config, and writes
-``OUT/dataset.npz`` and ``OUT/spectrum.png`` (command spectrum per split). It then replays the held-out and OOD
-commands PD-only in Newton and reports the gap (mean |Δq|), also stored in the dataset's meta.
+Simulated: draws excitations (train / validation / held-out: the paper's ellipsoid foot paths, eq. 2;
+out-of-distribution: chirps and kicks), executes them under PD on the MuJoCo "real" robot with the mismatch
+config, and writes ``OUT/dataset.npz`` and ``OUT/spectrum.png`` (command spectrum per split). It then replays
+the validation, held-out and OOD commands PD-only in Newton and reports the gap (mean |Δq|), also stored in the
+dataset's meta.
 Logs: ``--logs A.csv B.npz ...`` imports real logs (docs/dataset.md) onto the ``--rate`` grid instead.
 """
 
@@ -22,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="mismatch config (TOML) of the real robot, or 'none' for the nominal robot "
                         "(default: data/mismatch_default.toml)")
     p.add_argument("--train", type=int, default=16, help="number of training trajectories")
+    p.add_argument("--validation", type=int, default=4,
+                   help="number of validation trajectories (same family as train; for every tuning choice)")
     p.add_argument("--heldout", type=int, default=4, help="number of held-out trajectories (same family as train)")
     p.add_argument("--ood", type=int, default=4, help="number of out-of-distribution trajectories (chirp, kick)")
     p.add_argument("--duration", type=float, default=4.0, help="length of each trajectory [s]")
@@ -67,9 +70,9 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import Mismatch, collect
     from ..evaluation.evaluate import pd_gap
 
-    counts = {"train": args.train, "heldout": args.heldout, "ood": args.ood}
+    counts = {"train": args.train, "validation": args.validation, "heldout": args.heldout, "ood": args.ood}
     if any(n < 0 for n in counts.values()) or sum(counts.values()) == 0:
-        raise UserError("--train/--heldout/--ood must be >= 0 and not all 0")
+        raise UserError("--train/--validation/--heldout/--ood must be >= 0 and not all 0")
     if not args.duration * args.rate >= 2:
         raise UserError(f"--duration {args.duration} s at {args.rate:g} Hz gives fewer than 2 samples")
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
@@ -80,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
                  progress=_say)
     if not args.no_gap:
         gaps = {}
-        for split in ("heldout", "ood"):
+        for split in ("validation", "heldout", "ood"):
             trajs = ds.split(split)
             if trajs:
                 _say(f"replaying {len(trajs)} {split} trajectories PD-only in Newton (Featherstone, nominal robot)")

@@ -26,13 +26,18 @@ import numpy as np
 
 from ..errors import WresdynError
 
-__all__ = ["SCHEMA_VERSION", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset", "load_dataset",
-           "derive_qdd"]
+__all__ = ["SCHEMA_VERSION", "READ_VERSIONS", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset",
+           "load_dataset", "read_header", "derive_qdd"]
 
-SCHEMA_VERSION = 1
-"""Version of the file layout; a file written by another version is refused."""
-SPLITS = ("train", "heldout", "ood")
-"""Trajectory splits: training, held-out (same motion family), out-of-distribution (other families)."""
+SCHEMA_VERSION = 2
+"""Version of the file layout that :meth:`Dataset.save` writes."""
+READ_VERSIONS = {1: ("train", "heldout", "ood"), 2: ("train", "validation", "heldout", "ood")}
+"""Schema versions :meth:`Dataset.load` reads, with the splits each allows; any other version is refused.
+Version 1 is version 2 without the validation split (``wresdyn migrate`` rewrites it as version 2)."""
+SPLITS = READ_VERSIONS[SCHEMA_VERSION]
+"""Trajectory splits: training; validation (same motion family as train: every choice of hyper-parameters,
+early stopping or sweep is made on it); held-out (same family) and out-of-distribution (other families), both
+for reporting only."""
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "q_cmd": "rad", "tau": "N*m"}
 """Units of the array fields (prismatic joints: m, m/s, m/s^2, N)."""
 FORMAT = "wresdyn-dataset"
@@ -255,10 +260,14 @@ class Dataset:
         except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
             raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {_first_line(e)}") from None
         h = _read_header(files, path)
+        splits = READ_VERSIONS[h["schema_version"]]
         trajs = []
         for i, e in enumerate(h["trajectories"]):
             if not isinstance(e, dict) or not {"name", "split", "key"} <= set(e):
                 raise DatasetError(f"{path}: trajectory entry {i} needs name, split and key")
+            if e["split"] in SPLITS and e["split"] not in splits:  # other unknown splits: validate() below
+                raise DatasetError(f"{path}: trajectory {e['name']!r} has split {e['split']!r}, which schema "
+                                   f"version {h['schema_version']} does not have ({splits})")
             arr = {}
             for name in _FIELDS:
                 a = files.get(f"{e['key']}/{name}")
@@ -287,6 +296,19 @@ def load_dataset(path, robot=None) -> Dataset:
     return Dataset.load(path, robot)
 
 
+def read_header(path) -> dict:
+    """The checked JSON header of a dataset file (its ``schema_version`` included), without reading the arrays."""
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"{path}: dataset file not found")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            files = {"header": z["header"]} if "header" in z.files else {}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+        raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {_first_line(e)}") from None
+    return _read_header(files, path)
+
+
 def _read_header(files: dict, path: Path) -> dict:
     if "header" not in files:
         raise DatasetError(f"{path}: no header: not a wresdyn dataset file")
@@ -296,9 +318,10 @@ def _read_header(files: dict, path: Path) -> dict:
         raise DatasetError(f"{path}: malformed header: {e}") from None
     if not isinstance(h, dict) or h.get("format") != FORMAT:
         raise DatasetError(f"{path}: not a wresdyn dataset file (header format is not {FORMAT!r})")
-    if h.get("schema_version") != SCHEMA_VERSION:
-        raise DatasetError(f"{path}: schema version {h.get('schema_version')!r} is not supported (this wresdyn "
-                           f"reads version {SCHEMA_VERSION})")
+    version = h.get("schema_version")
+    if type(version) is not int or version not in READ_VERSIONS:  # JSON true is not version 1
+        raise DatasetError(f"{path}: schema version {version!r} is not supported (this wresdyn reads versions "
+                           f"{', '.join(map(str, READ_VERSIONS))})")
     need = {"joint_names": list, "rate_hz": (int, float), "robot_file": str, "robot_sha256": str, "mismatch": dict,
             "meta": dict, "trajectories": list}
     for key, typ in need.items():

@@ -22,7 +22,7 @@ from ..errors import SimulationDiverged
 from ..paths import REPO
 from ..robot.description import Robot, RobotError
 
-__all__ = ["Mismatch", "MismatchError", "RealRobot", "collect"]
+__all__ = ["Mismatch", "MismatchError", "RealRobot", "SPAWN_KEYS", "collect"]
 
 
 class MismatchError(RobotError):
@@ -234,18 +234,24 @@ def _f32(a: np.ndarray) -> np.ndarray:
     return np.asarray(a, dtype=np.float32).astype(np.float64)
 
 
+SPAWN_KEYS = {"train": 0, "heldout": 1, "ood": 2, "validation": 3}
+"""First spawn key of each split's seeds in :func:`collect`. Fixed per split, not its position in
+:data:`~wresdyn.data.dataset.SPLITS`: train, held-out and OOD keep their schema-1 keys, so a dataset recorded
+with a validation split has the same train, held-out and OOD arrays as one recorded without."""
+
+
 def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: float = 4.0, rate_hz: float = 500.0,
             seed: int = 0, excitation=None, store_tau: bool = True, progress=None):
     """Draw excitations, execute them on the real robot and return the recorded :class:`~wresdyn.data.dataset.Dataset`.
 
-    Trajectory i of a split draws from ``SeedSequence(seed, spawn_key=(split index, i))``, so it does not depend
-    on how many trajectories the other splits hold. Train and held-out use the ellipsoid excitation (eq. 2);
-    out-of-distribution alternates the other families.
+    Trajectory i of a split draws from ``SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i))``, so it does not
+    depend on how many trajectories the other splits hold. Train, validation and held-out use the ellipsoid
+    excitation (eq. 2); out-of-distribution alternates the other families.
 
     Args:
         robot: Nominal robot (fixed base, with sole sites).
         mismatch: How the real robot differs.
-        counts: Number of trajectories per split, e.g. ``{"train": 16, "heldout": 4, "ood": 4}``.
+        counts: Number of trajectories per split, e.g. ``{"train": 16, "validation": 4, "heldout": 4, "ood": 4}``.
         duration: Length of every trajectory [s].
         rate_hz: Command and recording rate [Hz].
         seed: Master seed.
@@ -259,17 +265,21 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
     from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
     from .ik import FootIK
 
+    unknown = sorted(set(counts) - set(SPLITS))
+    if unknown:
+        raise ValueError(f"unknown split(s) {unknown} in counts; choose from {SPLITS}")
     cfg = excitation or ex.ExcitationConfig()
     ik = FootIK(robot)
     ws = ex.foot_workspace(ik, cfg)
     real = RealRobot(robot, mismatch, rate_hz)
-    families = {"train": ex.TRAIN_FAMILIES, "heldout": ex.TRAIN_FAMILIES, "ood": ex.OOD_FAMILIES}
+    families = {"train": ex.TRAIN_FAMILIES, "validation": ex.TRAIN_FAMILIES, "heldout": ex.TRAIN_FAMILIES,
+                "ood": ex.OOD_FAMILIES}
     total, done = sum(counts.values()), 0
     trajs, params = [], {}
-    for s, split in enumerate(SPLITS):
+    for split in SPLITS:
         for i in range(counts.get(split, 0)):
             start = time.perf_counter()
-            seeds = np.random.SeedSequence(seed, spawn_key=(s, i)).spawn(2)
+            seeds = np.random.SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i)).spawn(2)
             rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
             family = families[split][i % len(families[split])]
             exc = ex.generate(family, robot, ik, ws, duration, rate_hz, rng_exc, cfg)
@@ -283,7 +293,7 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
             params[name] = exc.params
             done += 1
             if progress:
-                progress(f"[{done:>{len(str(total))}}/{total}] {name:<12} {family:<9} draws={exc.params['draws']:<2} "
+                progress(f"[{done:>{len(str(total))}}/{total}] {name:<14} {family:<9} draws={exc.params['draws']:<2} "
                          f"IK err {1e3 * exc.params['ik_max_error_m']:.3f} mm  "
                          f"peak {exc.params['max_speed']:4.1f} rad/s  "
                          f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")

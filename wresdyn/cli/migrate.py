@@ -1,0 +1,67 @@
+"""``wresdyn migrate OLD.npz --out NEW.npz [--validation K]``: rewrite a schema-1 dataset file as schema 2.
+
+With ``--validation K``, a dataset recorded by ``wresdyn collect`` on the simulated real robot gets K validation
+trajectories recorded exactly as ``collect`` would have (and their PD-only gap when the file stores the
+others'); a dataset of real logs gets its last K training trajectories moved to validation instead
+(:mod:`wresdyn.data.migrate`). The new file is written atomically; an existing one is kept unless ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("data", help="schema-1 dataset file (.npz)")
+    p.add_argument("--out", required=True, help="the schema-2 file to write")
+    p.add_argument("--validation", type=int, default=0,
+                   help="validation trajectories: recorded on the simulated real robot, or moved from the end of "
+                        "train for real logs (default: 0)")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument("--robot", default=None, help="robot file to record on (default: the dataset's)")
+    p.add_argument("--gains", default=None, help="TOML file of PD gains, if the dataset was collected with one")
+    p.add_argument("--no-gap", action="store_true", help="skip the PD-only Newton replay of the new validation split")
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..data.dataset import SCHEMA_VERSION, SPLITS, read_header
+    from ..data.loading import dataset_robot
+    from ..data.migrate import migrate
+    from . import UserError
+
+    out = Path(args.out)
+    if out.is_dir():
+        raise UserError(f"{out}: --out is a folder; give the file to write")
+    if out.exists() and not args.force:
+        raise UserError(f"{out}: exists; pass --force to overwrite it")
+    if args.validation < 0:
+        raise UserError(f"--validation must be >= 0, not {args.validation}")
+    robot = None
+    if args.validation and (args.robot or args.gains):
+        robot = dataset_robot(read_header(args.data)["robot_file"], args.robot, args.gains)
+    m = migrate(args.data, args.validation, robot, progress=_say)
+    ds = m.dataset
+    if m.how == "recorded":
+        _say(f"recorded {len(m.names)} validation trajectories ({', '.join(m.names)}), seeds and robot as collect's")
+    elif m.how == "moved from train":
+        _say(f"not recorded by `wresdyn collect` on the simulated robot: moved the last {len(m.names)} training "
+             f"trajectories to validation ({', '.join(m.names)}); {len(ds.split('train'))} stay in train")
+    gaps = ds.meta.get("pd_only_gap")
+    if m.names and isinstance(gaps, dict) and not args.no_gap:
+        from ..evaluation.evaluate import pd_gap
+
+        robot = m.robot or dataset_robot(ds.robot_file, args.robot, args.gains)
+        _say(f"replaying {len(m.names)} validation trajectories PD-only in Newton (Featherstone, nominal robot)")
+        g = pd_gap(robot, ds.for_robot(robot, str(args.data)).split("validation"), ds.rate_hz)
+        _say(f"  PD-only vs real on validation: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")
+        ds.meta["pd_only_gap"] = {"validation": g, **{k: v for k, v in gaps.items() if k != "validation"}}
+    ds.save(out)
+    counts = ", ".join(f"{s} {len(ds.split(s))}" for s in SPLITS)
+    _say(f"wrote {out} (schema {m.from_version} -> {SCHEMA_VERSION}: {counts})")
+    return 0
