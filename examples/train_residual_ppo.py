@@ -23,7 +23,7 @@ def tiny_dataset(robot):
     from wresdyn.paths import DEFAULT_MISMATCH
     from wresdyn.data.real_robot import Mismatch, collect
 
-    return collect(robot, Mismatch.load(DEFAULT_MISMATCH), {"train": 2, "heldout": 1, "ood": 1}, duration=0.5)
+    return collect(robot, Mismatch.load(DEFAULT_MISMATCH), {"train": 2, "validation": 1, "heldout": 1, "ood": 1}, duration=0.5)
 
 
 def main() -> None:

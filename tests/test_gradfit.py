@@ -10,6 +10,7 @@ from _tiny_data import make_dataset
 
 from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit, window_loss
 from wresdyn.learn.residual import ResidualConfig, obs_stats
+from wresdyn.learn.runs import RunError
 from wresdyn.robot.description import load_robot
 from wresdyn.sim import Simulator, TrajectoryBank, rollout
 
@@ -111,10 +112,12 @@ def test_fit_reduces_replay_error_and_resumes(tmp_path, quadruped):
     policy, curve = fit(quadruped, data, cfg, out=tmp_path, log=lambda *_: None)
     assert error(policy) < 0.7 * error(untrained)
     assert len(curve) == 40 and curve[-1]["sim_steps"] == 40 * 8 * 8 * 2
-    # resume: a longer run in the same folder continues from the checkpoint
-    more = dataclasses.replace(cfg, iterations=44)
-    _, curve2 = fit(quadruped, data, more, out=tmp_path, log=lambda *_: None)
-    assert len(curve2) == 44 and curve2[:40] == curve
+    # the iteration count shapes the learning-rate and horizon schedule: a resume that changes it is refused
+    with pytest.raises(RunError, match="iterations = 40, now 44"):
+        fit(quadruped, data, dataclasses.replace(cfg, iterations=44), out=tmp_path, log=lambda *_: None)
+    with pytest.raises(RunError, match="residual.fraction"):
+        fit(quadruped, data, dataclasses.replace(cfg, residual=dataclasses.replace(cfg.residual, fraction=0.3)),
+            out=tmp_path, log=lambda *_: None)
 
 
 def test_interrupted_fit_resumes_to_the_same_policy(tmp_path, quadruped):

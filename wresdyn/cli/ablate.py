@@ -57,8 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--delays", type=_tuple(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
     p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
     p.add_argument("--delay-learner", choices=choices(Learner), default="gradient", help="learner of the delay sweep")
-    p.add_argument("--delay-trajectories", type=_tuple(int), default=(16, 4, 4),
-                   help="train,heldout,ood trajectories recorded per delay")
+    p.add_argument("--delay-trajectories", type=_tuple(int), default=(16, 4, 4, 4),
+                   help="train,validation,heldout,ood trajectories recorded per delay")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,9 +97,12 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
     from ..data.dataset import load_dataset
     from ..data.real_robot import Mismatch, collect
     from ..evaluation.ablation import cells, run_cells, write_summary
+    from . import UserError
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()
-    n_train, n_held, n_ood = args.delay_trajectories
+    if len(args.delay_trajectories) != 4:
+        raise UserError("--delay-trajectories takes four counts: train,validation,heldout,ood")
+    n_train, n_val, n_held, n_ood = args.delay_trajectories
     grid = cells(cfg)
     folders, tasks = {}, []
     for delay in args.delays:
@@ -109,7 +112,7 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
         if not path.is_file():
             mismatch = dataclasses.replace(base, delay=delay)
             print(f"recording data with actuator delay {1e3 * delay:g} ms")
-            collect(robot, mismatch, {"train": n_train, "heldout": n_held, "ood": n_ood}, seed=dataset.seed or 0,
+            collect(robot, mismatch, {"train": n_train, "validation": n_val, "heldout": n_held, "ood": n_ood}, seed=dataset.seed or 0,
                     store_tau=False).save(path)
         data = load_dataset(path, robot=robot)
         folders[delay] = (folder, len(tasks))

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         for split in ("validation", "heldout", "ood"):
             trajs = ds.split(split)
             if trajs:
-                _say(f"replaying {len(trajs)} {split} trajectories PD-only in Newton (Featherstone, nominal robot)")
+                _say(f"replaying {len(trajs)} {split} trajectories PD-only in Newton (nominal robot)")
                 g = gaps[split] = pd_gap(robot, trajs, args.rate)
                 _say(f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")
         ds.meta["pd_only_gap"] = gaps

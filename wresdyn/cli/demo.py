@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         data_path = out / "data" / "dataset.npz"
         if not data_path.is_file():
             mismatch = Mismatch.load(DEFAULT_MISMATCH)
-            collect(robot, mismatch, {"train": 4, "heldout": 2, "ood": 2}, store_tau=False,
+            collect(robot, mismatch, {"train": 4, "validation": 2, "heldout": 2, "ood": 2}, store_tau=False,
                     progress=lambda line: print("      " + line, flush=True)).save(data_path)
     data = load_dataset(data_path, robot=robot)
     if args.quick:

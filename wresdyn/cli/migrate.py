@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         from ..evaluation.evaluate import pd_gap
 
         robot = m.robot or dataset_robot(ds.robot_file, args.robot, args.gains)
-        _say(f"replaying {len(m.names)} validation trajectories PD-only in Newton (Featherstone, nominal robot)")
+        _say(f"replaying {len(m.names)} validation trajectories PD-only in Newton (nominal robot)")
         g = pd_gap(robot, ds.for_robot(robot, str(args.data)).split("validation"), ds.rate_hz)
         _say(f"  PD-only vs real on validation: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")
         ds.meta["pd_only_gap"] = {"validation": g, **{k: v for k, v in gaps.items() if k != "validation"}}

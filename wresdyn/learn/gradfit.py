@@ -220,7 +220,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     for it in range(start_it, stop):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
-            group["lr"] = cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations))
+            group["lr"] = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
         window = bank.sample(rng, cfg.windows, h)
         run = rollout(sim, window, policy, grad=True, truncation=cfg.grad_truncation, obs_noise=obs_noise,
                       generator=noise_gen)

@@ -175,6 +175,7 @@ def save_checkpoint(data: dict, path) -> Path:
         torch.load(buf, weights_only=True)
     except Exception as e:  # noqa: BLE001 - any failure here means the file would not load back
         raise TypeError(f"checkpoint for {path} holds more than tensors and plain containers{_reason(e)}") from None
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(buf.getvalue())
     tmp.replace(path)
