@@ -34,7 +34,8 @@ def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str) -
 
     cfg = default_config()
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),
-                              ppo=dataclasses.replace(cfg.ppo, num_envs=envs, device=device, save_interval=10**6))
+                              ppo=dataclasses.replace(cfg.ppo, num_envs=envs, device=device, save_interval=10**6,
+                                                                      select_every=10**6))
     with tempfile.TemporaryDirectory() as tmp:
         train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=2)), Path(tmp) / "warm")
         s = train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=iterations)),
@@ -48,7 +49,7 @@ def _gradient(robot, dataset, device: str, windows: int, horizon: int, iteration
     from wresdyn.learn.gradfit import GradFitConfig, fit
 
     cfg = GradFitConfig(windows=windows, horizon=horizon, horizon_curriculum=(), iterations=iterations + 2,
-                        device=device)
+                        device=device, select_every=10**6)  # validation once, at the end (not timed)
     _, curve = fit(robot, dataset, cfg, log=lambda *_: None)
     a, b = curve[1], curve[-1]  # exclude the first two iterations (compilation, allocation)
     wall, steps = b["wall"] - a["wall"], b["sim_steps"] - a["sim_steps"]
