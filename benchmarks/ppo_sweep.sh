@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # PPO hyper-parameter sweep on a GPU host: one `wresdyn train` per line of a sweep file, spread round-robin
 # over the GPUs, all at once, each under a wall-clock limit. Run it again with more iterations to extend the
-# runs (they resume from their checkpoints); finished runs are evaluated (held-out and OOD) and summarised.
+# runs (they resume from their checkpoints); finished runs are evaluated and summarised, sorted by the
+# validation error (choices are made on validation; held-out and OOD are printed for reporting only).
 #
 #   bash benchmarks/ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]
 #
 # SWEEP_FILE: one run per line, `NAME ARGS...`, ARGS passed to `wresdyn train` (e.g. --set ppo.desired_kl=0.06);
 # blank lines and lines starting with # are skipped. Environment: GPUS (number of GPUs, default 1; 0 runs on
-# the CPU), WRESDYN (the CLI, default `wresdyn`), WRESDYN_DATA (default data/dataset.npz). Prints one line
-# per run: name, iterations reached, held-out and OOD factor when evaluated.
+# the CPU), WRESDYN (the CLI, default `wresdyn`), WRESDYN_DATA (default data/dataset.npz).
 set -uo pipefail
 sweep=${1:?usage: ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]}
 out=${2:?usage: ppo_sweep.sh SWEEP_FILE OUT_DIR ITERATIONS [LIMIT_S]}
@@ -34,10 +34,4 @@ while read -r name args; do
   i=$((i + 1))
 done < "$sweep"
 wait "${pids[@]}"
-while read -r name args; do
-  [[ -z "$name" || "$name" == \#* ]] && continue
-  last=$(ls "$out/$name" 2>/dev/null | sed -n 's/^model_\([0-9]*\)\.pt$/\1/p' | sort -n | tail -1)
-  held=$(grep -h "^heldout" "$out/$name.log" | tail -1 | grep -o "([0-9.]*x)")
-  ood=$(grep -h "^ood" "$out/$name.log" | tail -1 | grep -o "([0-9.]*x)")
-  echo "$name it=${last:-0} heldout=${held:--} ood=${ood:--} :: $args"
-done < "$sweep"
+bash "$(dirname "$0")/sweep_summary.sh" "$sweep" "$out"

@@ -83,6 +83,9 @@ class GradFitConfig:
     """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
     device: str = "cpu"
     """Warp / torch device."""
+    torch_threads: int = 1
+    """CPU threads for torch (0: torch's default). One is fastest for these small networks, and an unpinned fit
+    ran 12x slower on a loaded 2-core machine (threads contending with the simulation and each other)."""
     seed: int = 0
     """Seed of the window sampler and network initialisation."""
     select_every: int = 0
@@ -97,7 +100,7 @@ class GradFitConfig:
             check_number(getattr(self, name), name, integer=True, ge=1)
         for i, h in enumerate(self.horizon_curriculum):
             check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
-        for name in ("grad_truncation", "select_every", "seed"):
+        for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
             check_number(getattr(self, name), name, integer=True, ge=0)
         for name in ("lr", "lr_final", "grad_clip"):
             check_number(getattr(self, name), name, gt=0)
@@ -151,7 +154,7 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tup
     return loss, {k: float(v.detach()) for k, v in parts.items()}
 
 
-RESUME_MAY_CHANGE = ("device",)
+RESUME_MAY_CHANGE = ("device", "torch_threads")
 """:class:`GradFitConfig` fields a resumed fit may change: where it runs, not what it learns (``iterations``
 shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
@@ -179,6 +182,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     from .runs import check_resume, load_checkpoint, save_checkpoint
     from .selection import ValidationScore
 
+    if cfg.torch_threads > 0:
+        torch.set_num_threads(cfg.torch_threads)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     train = dataset.split("train")
