@@ -135,3 +135,18 @@ def test_parametric_baseline_fits_friction_and_gains(quadruped, record):
     assert found["friction"].mean() > 1.5 * initial["friction"].mean()
     assert found["kd_scale"].mean() > 1.0  # and the stiffer damping of the real drives
 
+
+def test_recorded_torques_never_reach_the_fit(quadruped, record):
+    """The same recording with every torque NaN fits to exactly the same residual and curve: the gradient fit reads
+    joint states and commands only. (Dataset.validate refuses NaN; the learners never call it.)"""
+    data = record(quadruped, REAL, {"train": 2, "validation": 1}, seconds=0.2, amplitude=0.4)
+    assert all(t.tau is not None and np.isfinite(t.tau).all() for t in data.trajectories)
+    nan = dataclasses.replace(data, trajectories=[dataclasses.replace(t, tau=np.full_like(t.q, np.nan))
+                                                  for t in data.trajectories])
+    cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(16,)), horizon=4, horizon_curriculum=(), windows=4,
+                        iterations=4, select_every=2)
+    (a, curve_a), (b, curve_b) = (fit(quadruped, d, cfg, log=lambda *_: None) for d in (data, nan))
+    assert a.state_dict().keys() == b.state_dict().keys()
+    assert all(torch.equal(a.state_dict()[k], b.state_dict()[k]) for k in a.state_dict())
+    drop_wall = lambda curve: [{k: v for k, v in row.items() if k != "wall"} for row in curve]  # noqa: E731
+    assert drop_wall(curve_a) == drop_wall(curve_b) and np.isfinite(curve_a[-1]["validation"])

@@ -100,6 +100,26 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     assert (run / "config.json").read_text() == saved_json  # a refused resume leaves the folder as it was
 
 
+def test_recorded_torques_never_reach_training(robot, data, tmp_path):
+    """The same recording with every torque NaN trains to exactly the same actor, critic, selection and export:
+    PPO reads joint states and commands only. (Dataset.validate refuses NaN; the learners never call it.)"""
+    assert all(t.tau is not None and np.isfinite(t.tau).all() for t in data.trajectories)
+    nan = dataclasses.replace(data, trajectories=[dataclasses.replace(t, tau=np.full_like(t.q, np.nan))
+                                                  for t in data.trajectories])
+    runs = {name: tmp_path / name for name in ("finite", "nan")}
+    summaries = {name: train(d, robot, tiny(iterations=2), runs[name]) for name, d in (("finite", data), ("nan", nan))}
+    assert summaries["nan"]["validation_curve"] == summaries["finite"]["validation_curve"]
+    for name in ("model_1.pt", "best.pt"):
+        a, b = (load_checkpoint(r / name) for r in runs.values())
+        for key in ("actor_state_dict", "critic_state_dict") if name == "model_1.pt" else ("actor",):
+            assert a[key].keys() == b[key].keys()
+            assert all(torch.equal(a[key][k], b[key][k]) for k in a[key]), (name, key)
+    v = data.split("validation")[0]
+    obs = torch.as_tensor(np.concatenate([v.q, v.qd, v.qdd, v.q_cmd], axis=1), dtype=torch.float32)
+    (pa, _), (pb, _) = (load_policy(r) for r in runs.values())
+    assert torch.equal(pa(obs), pb(obs)) and torch.isfinite(pa(obs)).all()
+
+
 class _RunsCodeWhenUnpickled:
     """What a tampered checkpoint could hold: unpickling it calls ``open(marker, "w")``, creating the file."""
 
