@@ -104,3 +104,25 @@ def record():
     """:func:`record_multisine`, for tests that record their own data."""
     return record_multisine
 
+
+def ppo_best_actor(run_dir, dataset, robot, cfg):
+    """The rsl-rl actor a PPO run kept in ``best.pt`` (the networks :func:`wresdyn.learn.ppo.train` builds, in eval
+    mode) and a fresh :class:`~wresdyn.learn.replay_env.ReplayEnv` set up as ``train`` sets up its own."""
+    from wresdyn.learn.ppo import Runner, runner_cfg
+    from wresdyn.learn.replay_env import ReplayEnv
+    from wresdyn.learn.residual import obs_stats
+    from wresdyn.learn.runs import load_checkpoint
+
+    trajs = dataset.split("train")
+    mean, std = obs_stats(trajs)
+    env = ReplayEnv(robot, trajs, dataset.rate_hz, cfg.ppo.num_envs, cfg.env, cfg.residual, cfg.rewards,
+                    seed=cfg.ppo.seed, obs_mean=mean, obs_std=std)
+    actor = Runner(env, runner_cfg(cfg), log_dir=None).alg.get_policy()
+    actor.load_state_dict(load_checkpoint(run_dir / "best.pt", keys=("actor", "meta"))["actor"])
+    return actor.eval(), env
+
+
+@pytest.fixture(scope="session")
+def best_actor():
+    """:func:`ppo_best_actor`, for the PPO tests."""
+    return ppo_best_actor

@@ -197,6 +197,43 @@ def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
     assert all(w in lines[0] for w in words), lines[0]
 
 
+@pytest.mark.parametrize("kind", ["torque", "delta_action"])
+def test_exported_policy_is_the_residual_the_env_applies(robot, data, tmp_path, best_actor, kind):
+    """The exported TorchScript on raw [q, q̇, q̈, q_cmd] gives the residual that ReplayEnv.step writes into the
+    simulator's control for the actor's deterministic action on the same state: the env's fixed normalisation,
+    the actor's running normaliser, clip(action_gain · a, −1, 1) · scale, both residual kinds."""
+    import warp as wp
+
+    from wresdyn.sim.residual import observation
+
+    # a full-size initial output and action gain 5, so some residuals sit on the clip and some inside it
+    cfg = tiny(iterations=2, kind=kind)
+    cfg = dataclasses.replace(cfg, residual=dataclasses.replace(cfg.residual, output_gain=1.0, action_gain=5.0))
+    run = tmp_path / kind
+    train(data, robot, cfg, run)
+    policy, meta = load_policy(run)
+    actor, env = best_actor(run, data, robot, cfg)
+    assert actor.obs_normalization and float(actor.obs_normalizer.count) > 0  # trained running statistics
+    scale = torch.tensor(meta["scale"])
+    n_worlds, qd_index = env.num_envs, torch.as_tensor(robot.qd_index)
+    clipped = inside = 0
+    for _ in range(4):
+        g0 = env.g.clone()
+        raw = observation(env.q, env.qd, env.qdd, env.bank.q_cmd[g0])
+        with torch.no_grad():
+            a = actor(env.get_observations())
+            expect = policy(raw)
+        env.step(a)
+        if kind == "torque":
+            applied = wp.to_torch(env.sim.control.joint_f).view(n_worlds, -1)[:, qd_index]
+        else:
+            applied = wp.to_torch(env.sim.control.joint_target_q).view(n_worlds, -1)[:, qd_index] - env.bank.target(g0)
+        torch.testing.assert_close(applied, expect, rtol=1e-5, atol=1e-6 * float(scale.max()))
+        on_clip = (expect.abs() >= scale * (1 - 1e-6))
+        clipped, inside = clipped + int(on_clip.sum()), inside + int((~on_clip).sum())
+    assert clipped > 0 and inside > 0
+
+
 def test_gru_trains_and_exported_policy_loads(robot, data, tmp_path):
     run = tmp_path / "gru"
     train(data, robot, tiny("gru", iterations=1, kind="delta_action"), run)
