@@ -1,9 +1,19 @@
-"""Shared fixtures: robots loaded once per test session."""
+"""Shared fixtures: robots loaded once per test session, and tiny datasets recorded on the real robot.
 
+Every dataset of the tests is recorded by :mod:`wresdyn.data.real_robot`, the package's simulated real robot:
+the humanoid through :func:`~wresdyn.data.real_robot.collect` (the paper's excitation, IK included), robots without
+sole sites (quadruped, cartpole) by :meth:`~wresdyn.data.real_robot.RealRobot.record` driven by the package's
+check command :func:`wresdyn.sim.parity.multisine_command`.
+"""
+
+import numpy as np
 import pytest
 
 QUADRUPED_GAINS = {"joint": [{"match": "*", "kp": 80.0, "kd": 2.0, "armature": 0.02}]}
 """Gains for newton's quadruped.urdf, which has none (same as examples/gains/quadruped.toml, inline)."""
+
+LEARNER_COUNTS = {"train": 2, "validation": 1, "heldout": 1, "ood": 1}
+"""Trajectories per split of the learner tests' recordings: every split a learner or the evaluation reads."""
 
 
 def pytest_addoption(parser):
@@ -33,11 +43,21 @@ def robot(humanoid):
 
 
 @pytest.fixture(scope="session")
-def data(humanoid):
-    """A tiny recording of the humanoid: 2 train, 1 held-out, 1 OOD trajectory of 0.1 s (tests/_tiny_data.py)."""
-    from _tiny_data import make_dataset
+def shipped_mismatch():
+    """The shipped benchmark's real robot (data/mismatch_default.toml): friction, gains, delay, saturation, noise."""
+    from wresdyn.data.real_robot import Mismatch
+    from wresdyn.paths import DEFAULT_MISMATCH
 
-    return make_dataset(humanoid, seconds=0.1, counts=(2, 1, 1))
+    return Mismatch.load(DEFAULT_MISMATCH)
+
+
+@pytest.fixture(scope="session")
+def data(humanoid, shipped_mismatch):
+    """A tiny recording of the humanoid on the shipped real robot by ``wresdyn collect``'s code: 2 train,
+    1 validation, 1 held-out, 1 OOD trajectory of 0.2 s."""
+    from wresdyn.data.real_robot import collect
+
+    return collect(humanoid, shipped_mismatch, LEARNER_COUNTS, duration=0.2)
 
 
 @pytest.fixture(scope="session")
@@ -45,3 +65,64 @@ def quadruped():
     from wresdyn.robot.description import load_robot
 
     return load_robot("newton:quadruped.urdf", gains=QUADRUPED_GAINS)
+
+
+@pytest.fixture(scope="session")
+def cartpole():
+    from wresdyn.robot.description import load_robot
+
+    return load_robot("newton:cartpole.urdf", gains="examples/gains/cartpole.toml")
+
+
+def record_multisine(robot, mismatch, counts: dict, seconds: float, amplitude: float = 0.2, rate_hz: float = 500.0,
+                     seed: int = 0):
+    """A :class:`~wresdyn.data.dataset.Dataset` recorded on ``RealRobot(robot, mismatch)``: per split in ``counts``,
+    that many :func:`~wresdyn.sim.parity.multisine_command` commands of ``seconds`` (``amplitude`` of each joint's
+    half-range; out-of-distribution 1.5x larger), each with its own seed. Stored as ``collect`` stores: float32
+    states, q̈ by :func:`~wresdyn.data.dataset.derive_qdd`, the diagnostic torque kept."""
+    from wresdyn.data.dataset import Dataset, Trajectory, derive_qdd
+    from wresdyn.data.real_robot import RealRobot
+    from wresdyn.sim.parity import multisine_command
+
+    real = RealRobot(robot, mismatch, rate_hz)
+    f32 = lambda a: np.asarray(a, dtype=np.float32).astype(np.float64)  # noqa: E731
+    trajs = []
+    for s, (split, count) in enumerate(counts.items()):
+        amp = 1.5 * amplitude if split == "ood" else amplitude
+        for i in range(count):
+            q_cmd = f32(multisine_command(robot, seconds, 1.0 / rate_hz, amp, seed=1000 * seed + 100 * s + i))
+            q, qd, tau = real.record(q_cmd, np.random.default_rng([seed, s, i]))
+            q, qd = f32(q), f32(qd)
+            trajs.append(Trajectory(f"{split}_{i:03d}", split, np.arange(len(q_cmd)) / rate_hz, q, qd,
+                                    derive_qdd(qd, rate_hz), q_cmd, f32(tau)))
+    return Dataset(list(robot.joint_names), rate_hz, trajs, str(robot.source), robot.source_sha256, mismatch.to_dict(),
+                   seed, {"generator": "RealRobot.record of wresdyn.sim.parity.multisine_command"})
+
+
+@pytest.fixture(scope="session")
+def record():
+    """:func:`record_multisine`, for tests that record their own data."""
+    return record_multisine
+
+
+def ppo_best_actor(run_dir, dataset, robot, cfg):
+    """The rsl-rl actor a PPO run kept in ``best.pt`` (the networks :func:`wresdyn.learn.ppo.train` builds, in eval
+    mode) and a fresh :class:`~wresdyn.learn.replay_env.ReplayEnv` set up as ``train`` sets up its own."""
+    from wresdyn.learn.ppo import Runner, runner_cfg
+    from wresdyn.learn.replay_env import ReplayEnv
+    from wresdyn.learn.residual import obs_stats
+    from wresdyn.learn.runs import load_checkpoint
+
+    trajs = dataset.split("train")
+    mean, std = obs_stats(trajs)
+    env = ReplayEnv(robot, trajs, dataset.rate_hz, cfg.ppo.num_envs, cfg.env, cfg.residual, cfg.rewards,
+                    seed=cfg.ppo.seed, obs_mean=mean, obs_std=std)
+    actor = Runner(env, runner_cfg(cfg), log_dir=None).alg.get_policy()
+    actor.load_state_dict(load_checkpoint(run_dir / "best.pt", keys=("actor", "meta"))["actor"])
+    return actor.eval(), env
+
+
+@pytest.fixture(scope="session")
+def best_actor():
+    """:func:`ppo_best_actor`, for the PPO tests."""
+    return ppo_best_actor

@@ -4,16 +4,18 @@ import json
 
 import numpy as np
 import pytest
-from _tiny_data import make_dataset
 
 from wresdyn.cli import main
 from wresdyn.evaluation.ablation import AblationConfig, cells, run_ablation
 
 
 @pytest.fixture(scope="module")
-def tiny_data(tmp_path_factory, humanoid):
+def tiny_data(tmp_path_factory, humanoid, shipped_mismatch):
+    """What `wresdyn collect` records on the shipped real robot, at 0.3 s: 2 train, 1 of each other split."""
+    from wresdyn.data.real_robot import collect
+
     path = tmp_path_factory.mktemp("data") / "tiny.npz"
-    make_dataset(humanoid, seconds=0.3, counts=(2, 1, 1)).save(path)
+    collect(humanoid, shipped_mismatch, {"train": 2, "validation": 1, "heldout": 1, "ood": 1}, duration=0.3).save(path)
     return path
 
 

@@ -1,61 +1,34 @@
-"""Gradient fit through the differentiable Warp simulation: gradients vs central finite differences, a fit
-that reduces the replay error, and checkpoint/resume."""
+"""Gradient fit through the differentiable Warp simulation: network-parameter gradients vs central finite
+differences, a fit that reduces the replay error, and checkpoint/resume. (The simulator's own gradients w.r.t.
+state, target and torque: tests/test_sim.py.)"""
 
 import dataclasses
 
 import numpy as np
 import pytest
 import torch
-from _tiny_data import make_dataset
 
+from wresdyn.data.real_robot import Mismatch
 from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit, window_loss
 from wresdyn.learn.residual import ResidualConfig, obs_stats
 from wresdyn.learn.runs import RunError
-from wresdyn.robot.description import load_robot
 from wresdyn.sim import Simulator, TrajectoryBank, rollout
 
 DT = 0.002
 FD_RTOL = 3e-2
-"""Relative L2 error allowed between the tape gradient and central differences: the simulation runs in
-float32, so a central difference with eps = 1e-2 carries ~1e-7·|L|/eps round-off, ~1 % of these gradients."""
+"""Error allowed between the tape's directional derivative and a central difference, relative to the gradient's
+norm: the simulation runs in float32, so a central difference with step eps carries ~1e-7·|L|/eps round-off."""
 
-
-@pytest.fixture(scope="module")
-def cartpole():
-    return load_robot("newton:cartpole.urdf", gains="examples/gains/cartpole.toml")
-
-
-def test_gradient_wrt_residual_torque_matches_finite_differences(cartpole):
-    b, h = 2, 6
-    sim = Simulator(cartpole, b, DT, solver="featherstone", requires_grad=True)
-    rng = np.random.default_rng(0)
-    f = lambda *s, lo=-0.3, hi=0.3: torch.tensor(rng.uniform(lo, hi, s), dtype=torch.float32)  # noqa: E731
-    q0, qd0, cmd, q_ref = f(b, 3), f(b, 3, lo=-1, hi=1), f(b, h, 3), f(b, h, 3)
-
-    def loss(tau):
-        q, qd, total = q0, qd0, 0.0
-        for k in range(h):
-            q, qd = sim.step_diff(k, q, qd, cmd[:, k], tau[:, k])
-            total = total + ((q - q_ref[:, k]) ** 2).sum() + 0.01 * (qd**2).sum()
-        return total
-
-    tau = f(b, h, 3, lo=-2, hi=2).requires_grad_()
-    loss(tau).backward()
-    fd = torch.zeros_like(tau)
-    eps = 1e-2
-    with torch.no_grad():
-        for idx in np.ndindex(*tau.shape):
-            e = torch.zeros_like(tau)
-            e[idx] = eps
-            fd[idx] = (loss(tau + e) - loss(tau - e)) / (2 * eps)
-    assert fd.abs().max() > 1e-5  # the residual really moves the loss
-    assert (tau.grad - fd).norm() / fd.norm() < FD_RTOL
+REAL = Mismatch(friction=0.02, damping=0.4, kp_scale=0.9, kd_scale=1.2)
+"""The real robot of these tests: dry friction of 2 % of each effort limit (1.6 N*m on the quadruped), extra
+viscous damping of 0.4 kd, 0.9x kp and 1.2x kd; recorded at the sample rate, no delay, saturation or noise."""
 
 
 @pytest.mark.parametrize("kind", ["torque", "delta_action"])
-def test_gradient_wrt_network_parameters_matches_finite_differences(cartpole, kind):
+def test_gradient_wrt_network_parameters_matches_finite_differences(cartpole, record, kind):
     torch.manual_seed(0)
-    data = make_dataset(cartpole, seconds=0.4, counts=(2, 0, 0))
+    # no dry friction: 2 % of the cartpole URDF's effort limit of 1000 would hold its 20 N*m/rad poles still
+    data = record(cartpole, dataclasses.replace(REAL, friction=0.0), {"train": 2}, seconds=0.4)
     # the cartpole URDF's effort limit is 1000: 0.5 % of it is a residual of the size the PD drives exert
     cfg = GradFitConfig(residual=ResidualConfig(kind=kind, hidden_dims=(16,), output_gain=1.0, fraction=0.005),
                         horizon=6, horizon_curriculum=(), windows=2)
@@ -73,11 +46,10 @@ def test_gradient_wrt_network_parameters_matches_finite_differences(cartpole, ki
     policy.zero_grad()
     loss().backward()
     g = torch.cat([p.grad.flatten() for p in params])
-    direction = torch.randn(g.shape, generator=torch.Generator().manual_seed(0))
-    direction /= direction.norm()
+    assert g.norm() > 1e-4  # the parameters really move the loss
     eps = 1e-3  # small enough not to cross the action clamp's kinks
 
-    def shifted(sign):
+    def shifted(direction, sign):
         with torch.no_grad():
             offset = 0
             for p in params:
@@ -90,14 +62,17 @@ def test_gradient_wrt_network_parameters_matches_finite_differences(cartpole, ki
                 offset += p.numel()
         return value
 
-    fd = (shifted(1.0) - shifted(-1.0)) / (2 * eps)
-    analytic = float(g @ direction)
-    assert abs(fd) > 1e-6
-    assert abs(analytic - fd) <= FD_RTOL * abs(fd) + 1e-6
+    # along the gradient (its size and sign) and along a random direction (the rest of it); the error is relative
+    # to |g|, since a random direction in ~300 parameters may be nearly orthogonal to the gradient
+    random = torch.randn(g.shape, generator=torch.Generator().manual_seed(0))
+    for direction in (g / g.norm(), random / random.norm()):
+        fd = (shifted(direction, 1.0) - shifted(direction, -1.0)) / (2 * eps)
+        analytic = float(g @ direction)
+        assert abs(analytic - fd) <= FD_RTOL * float(g.norm()), (analytic, fd)
 
 
-def test_fit_reduces_replay_error_and_resumes(tmp_path, quadruped):
-    data = make_dataset(quadruped, seconds=0.3, counts=(3, 0, 0), amplitude=0.4)
+def test_fit_reduces_replay_error_and_resumes(tmp_path, quadruped, record):
+    data = record(quadruped, REAL, {"train": 3, "validation": 1}, seconds=0.3, amplitude=0.4)
     cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(64, 64)), horizon=8, horizon_curriculum=(), windows=8, iterations=40, lr=3e-3,
                         solver="featherstone")
     train = data.split("train")
@@ -120,12 +95,12 @@ def test_fit_reduces_replay_error_and_resumes(tmp_path, quadruped):
             out=tmp_path, log=lambda *_: None)
 
 
-def test_interrupted_fit_resumes_to_the_same_policy(tmp_path, quadruped):
+def test_interrupted_fit_resumes_to_the_same_policy(tmp_path, quadruped, record):
     """Stopping at ``until`` and resuming gives the uninterrupted run's parameters exactly: the checkpoint carries
-    the optimiser, the window sampler and the observation-noise generator."""
-    data = make_dataset(quadruped, seconds=0.3, counts=(2, 0, 0), amplitude=0.4)
+    the optimiser, the window sampler, the observation-noise generator and the best residual on validation so far."""
+    data = record(quadruped, REAL, {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.4)
     cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(16,)), horizon=4, horizon_curriculum=(), windows=4,
-                        iterations=6, obs_noise=0.1, solver="featherstone")
+                        iterations=6, obs_noise=0.1, solver="featherstone", select_every=1)
     straight, _ = fit(quadruped, data, cfg, log=lambda *_: None)
     fit(quadruped, data, cfg, out=tmp_path, log=lambda *_: None, until=3)
     resumed, _ = fit(quadruped, data, cfg, out=tmp_path, log=lambda *_: None)
@@ -135,14 +110,15 @@ def test_interrupted_fit_resumes_to_the_same_policy(tmp_path, quadruped):
     assert not torch.equal(next(iter(noiseless.parameters())), next(iter(straight.parameters())))
 
 
-def test_parametric_baseline_fits_friction_and_gains(quadruped):
-    """The "real" quadruped has extra dry friction and damping and 0.9x kp / 1.2x kd (tests/_tiny_data.py)."""
+def test_parametric_baseline_fits_friction_and_gains(quadruped, record):
+    """The real quadruped (:data:`REAL`) has extra dry friction and damping and 0.9x kp / 1.2x kd. Fitted through
+    SolverReplay, the default solver, whose implicit drive damping is the real robot's integration scheme."""
     torch.manual_seed(0)
-    data = make_dataset(quadruped, seconds=0.6, counts=(3, 0, 0), amplitude=0.4)
-    cfg = GradFitConfig(model="parametric", horizon=16, horizon_curriculum=(), windows=8, iterations=40, lr=3e-2,
-                        solver="featherstone")
+    data = record(quadruped, REAL, {"train": 3, "validation": 1}, seconds=0.6, amplitude=0.4)
+    cfg = GradFitConfig(model="parametric", horizon=16, horizon_curriculum=(), windows=8, iterations=80, lr=3e-2,
+                        solver="replay")
     train = data.split("train")
-    sim = Simulator(quadruped, 8, DT, solver="featherstone")
+    sim = Simulator(quadruped, 8, DT, solver="replay")
     w = TrajectoryBank(train, sim.device).sample(np.random.default_rng(5), 8, 16)
 
     def error(policy):
@@ -153,5 +129,24 @@ def test_parametric_baseline_fits_friction_and_gains(quadruped):
     policy, _ = fit(quadruped, data, cfg, log=lambda *_: None)
     assert error(policy) < 0.5 * error(start)
     found, initial = policy.parameters_physical(), start.parameters_physical()
-    assert found["friction"].mean() > 1.5 * initial["friction"].mean()  # it finds dry friction (truth: 8x the start)
+    # it finds dry friction (truth: 8x the start). Measured: 1.7x the start at the iteration selected on validation
+    # (32 of 80); on the same data without friction the same fit ends at 1.06x. (80 Adam steps of 3e-2 move the
+    # softplus parameter by at most 2.4, < 9x the start: this fit is too short to reach the truth.)
+    assert found["friction"].mean() > 1.5 * initial["friction"].mean()
     assert found["kd_scale"].mean() > 1.0  # and the stiffer damping of the real drives
+
+
+def test_recorded_torques_never_reach_the_fit(quadruped, record):
+    """The same recording with every torque NaN fits to exactly the same residual and curve: the gradient fit reads
+    joint states and commands only. (Dataset.validate refuses NaN; the learners never call it.)"""
+    data = record(quadruped, REAL, {"train": 2, "validation": 1}, seconds=0.2, amplitude=0.4)
+    assert all(t.tau is not None and np.isfinite(t.tau).all() for t in data.trajectories)
+    nan = dataclasses.replace(data, trajectories=[dataclasses.replace(t, tau=np.full_like(t.q, np.nan))
+                                                  for t in data.trajectories])
+    cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(16,)), horizon=4, horizon_curriculum=(), windows=4,
+                        iterations=4, select_every=2)
+    (a, curve_a), (b, curve_b) = (fit(quadruped, d, cfg, log=lambda *_: None) for d in (data, nan))
+    assert a.state_dict().keys() == b.state_dict().keys()
+    assert all(torch.equal(a.state_dict()[k], b.state_dict()[k]) for k in a.state_dict())
+    drop_wall = lambda curve: [{k: v for k, v in row.items() if k != "wall"} for row in curve]  # noqa: E731
+    assert drop_wall(curve_a) == drop_wall(curve_b) and np.isfinite(curve_a[-1]["validation"])

@@ -100,6 +100,26 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     assert (run / "config.json").read_text() == saved_json  # a refused resume leaves the folder as it was
 
 
+def test_recorded_torques_never_reach_training(robot, data, tmp_path):
+    """The same recording with every torque NaN trains to exactly the same actor, critic, selection and export:
+    PPO reads joint states and commands only. (Dataset.validate refuses NaN; the learners never call it.)"""
+    assert all(t.tau is not None and np.isfinite(t.tau).all() for t in data.trajectories)
+    nan = dataclasses.replace(data, trajectories=[dataclasses.replace(t, tau=np.full_like(t.q, np.nan))
+                                                  for t in data.trajectories])
+    runs = {name: tmp_path / name for name in ("finite", "nan")}
+    summaries = {name: train(d, robot, tiny(iterations=2), runs[name]) for name, d in (("finite", data), ("nan", nan))}
+    assert summaries["nan"]["validation_curve"] == summaries["finite"]["validation_curve"]
+    for name in ("model_1.pt", "best.pt"):
+        a, b = (load_checkpoint(r / name) for r in runs.values())
+        for key in ("actor_state_dict", "critic_state_dict") if name == "model_1.pt" else ("actor",):
+            assert a[key].keys() == b[key].keys()
+            assert all(torch.equal(a[key][k], b[key][k]) for k in a[key]), (name, key)
+    v = data.split("validation")[0]
+    obs = torch.as_tensor(np.concatenate([v.q, v.qd, v.qdd, v.q_cmd], axis=1), dtype=torch.float32)
+    (pa, _), (pb, _) = (load_policy(r) for r in runs.values())
+    assert torch.equal(pa(obs), pb(obs)) and torch.isfinite(pa(obs)).all()
+
+
 class _RunsCodeWhenUnpickled:
     """What a tampered checkpoint could hold: unpickling it calls ``open(marker, "w")``, creating the file."""
 
@@ -175,6 +195,43 @@ def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
     lines = res.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith("wresdyn train: error: "), res.stderr
     assert all(w in lines[0] for w in words), lines[0]
+
+
+@pytest.mark.parametrize("kind", ["torque", "delta_action"])
+def test_exported_policy_is_the_residual_the_env_applies(robot, data, tmp_path, best_actor, kind):
+    """The exported TorchScript on raw [q, q̇, q̈, q_cmd] gives the residual that ReplayEnv.step writes into the
+    simulator's control for the actor's deterministic action on the same state: the env's fixed normalisation,
+    the actor's running normaliser, clip(action_gain · a, −1, 1) · scale, both residual kinds."""
+    import warp as wp
+
+    from wresdyn.sim.residual import observation
+
+    # a full-size initial output and action gain 5, so some residuals sit on the clip and some inside it
+    cfg = tiny(iterations=2, kind=kind)
+    cfg = dataclasses.replace(cfg, residual=dataclasses.replace(cfg.residual, output_gain=1.0, action_gain=5.0))
+    run = tmp_path / kind
+    train(data, robot, cfg, run)
+    policy, meta = load_policy(run)
+    actor, env = best_actor(run, data, robot, cfg)
+    assert actor.obs_normalization and float(actor.obs_normalizer.count) > 0  # trained running statistics
+    scale = torch.tensor(meta["scale"])
+    n_worlds, qd_index = env.num_envs, torch.as_tensor(robot.qd_index)
+    clipped = inside = 0
+    for _ in range(4):
+        g0 = env.g.clone()
+        raw = observation(env.q, env.qd, env.qdd, env.bank.q_cmd[g0])
+        with torch.no_grad():
+            a = actor(env.get_observations())
+            expect = policy(raw)
+        env.step(a)
+        if kind == "torque":
+            applied = wp.to_torch(env.sim.control.joint_f).view(n_worlds, -1)[:, qd_index]
+        else:
+            applied = wp.to_torch(env.sim.control.joint_target_q).view(n_worlds, -1)[:, qd_index] - env.bank.target(g0)
+        torch.testing.assert_close(applied, expect, rtol=1e-5, atol=1e-6 * float(scale.max()))
+        on_clip = (expect.abs() >= scale * (1 - 1e-6))
+        clipped, inside = clipped + int(on_clip.sum()), inside + int((~on_clip).sum())
+    assert clipped > 0 and inside > 0
 
 
 def test_gru_trains_and_exported_policy_loads(robot, data, tmp_path):

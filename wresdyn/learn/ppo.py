@@ -437,7 +437,9 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         "validation_curve": curve,
     }
     actor = runner.alg.get_policy()
-    if best is not None:  # export the residual chosen on validation (the last one is in model_<it>.pt)
+    if best is not None:  # export the residual chosen on validation, not merely the last
+        # into the actor itself: training is over and its last checkpoint written, and a deepcopy of it fails on
+        # the non-leaf outputs its distribution keeps from the last update
         actor.load_state_dict(best["actor"])
     export(actor, run_dir, cfg, mean, std, env.scale.cpu().numpy(), dataset)
     (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))

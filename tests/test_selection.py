@@ -1,0 +1,70 @@
+"""Model selection on the validation split: both learners hand over the residual of their best validation score,
+not their last iteration, and the score they record is what that residual does on the validation replays."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit
+from wresdyn.learn.ppo import PPOConfig, TrainConfig, latest_checkpoint, load_policy, train
+from wresdyn.learn.replay_env import ReplayEnvConfig
+from wresdyn.learn.residual import ResidualConfig, obs_stats, policy_from_actor
+from wresdyn.learn.runs import load_checkpoint
+from wresdyn.learn.selection import ValidationScore
+
+
+def _raw_observations(trajectories):
+    """Recorded [q, q̇, q̈, q_cmd] of every sample, (T, 4n) float32: inputs to compare residuals on."""
+    x = np.concatenate([np.concatenate([t.q, t.qd, t.qdd, t.q_cmd], axis=1) for t in trajectories])
+    return torch.as_tensor(x, dtype=torch.float32)
+
+
+def test_gradient_fit_returns_the_residual_of_its_best_validation(quadruped, record, shipped_mismatch, tmp_path):
+    data = record(quadruped, shipped_mismatch, {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.4)
+    cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(16,)), horizon=8, horizon_curriculum=(), windows=4,
+                        iterations=6, select_every=1, lr=3e-3)
+    policy, curve = fit(quadruped, data, cfg, out=tmp_path, log=lambda *_: None)
+    val = [row["validation"] for row in curve]
+    best = int(np.argmin(val))
+    assert len(val) == 6 and best != len(val) - 1  # set-up: the last iteration is not the best, so selection shows
+    score = ValidationScore(quadruped, data.split("validation"), data.rate_hz)
+    assert score(policy) == pytest.approx(val[best], rel=1e-6)
+    # the checkpoint keeps the last iteration too: it scores as its own curve entry, worse than the returned one
+    last = build_policy(quadruped, cfg.residual, *obs_stats(data.split("train")))
+    last.load_state_dict(load_checkpoint(tmp_path / "checkpoint.pt", keys=("policy",))["policy"])
+    assert score(last) == pytest.approx(val[-1], rel=1e-6) and score(last) > score(policy)
+
+
+def test_ppo_exports_the_actor_of_its_best_validation(robot, data, tmp_path, best_actor):
+    cfg = TrainConfig(env=ReplayEnvConfig(horizon=8),
+                      residual=ResidualConfig(hidden_dims=(32, 32), critic_hidden_dims=(32, 32)),
+                      ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=4, save_interval=1, num_mini_batches=2,
+                                    num_learning_epochs=2, select_every=1))
+    run = tmp_path / "run"
+    summary = train(data, robot, cfg, run)
+    curve = summary["validation_curve"]
+    assert [row["iteration"] for row in curve] == [1, 2, 3, 4]
+    val = [row["validation"] for row in curve]
+    best = int(np.argmin(val))
+    assert best != len(val) - 1  # set-up: the last iteration is not the best, so selection shows
+    assert summary["selected_iteration"] == curve[best]["iteration"] and summary["selected_validation"] == val[best]
+    assert json.loads((run / "train_summary.json").read_text()) == json.loads(json.dumps(summary))
+    kept = load_checkpoint(run / "best.pt", keys=("actor", "meta"))["meta"]
+    assert kept["iteration"] == curve[best]["iteration"] and kept["validation_curve"] == curve
+
+    # the export is the best actor: same residual on recorded observations as that actor's deterministic policy
+    exported, meta = load_policy(run)
+    actor, env = best_actor(run, data, robot, cfg)
+    mean, std = obs_stats(data.split("train"))
+    expected = policy_from_actor(actor, mean, std, meta["scale"], cfg.residual.kind, cfg.residual.action_gain)
+    obs = _raw_observations(data.trajectories)
+    with torch.no_grad():
+        torch.testing.assert_close(exported(obs), expected(obs), rtol=1e-5, atol=1e-7)
+        # ...and not the last one, which the newest checkpoint holds
+        actor.load_state_dict(load_checkpoint(latest_checkpoint(run), keys=("actor_state_dict",))["actor_state_dict"])
+        last = policy_from_actor(actor, mean, std, meta["scale"], cfg.residual.kind, cfg.residual.action_gain)
+        assert (last(obs) - exported(obs)).abs().max() > 1e-4
+    score = ValidationScore(robot, data.split("validation"), data.rate_hz)
+    assert score(exported, meta["kind"]) == pytest.approx(val[best], rel=1e-5)
