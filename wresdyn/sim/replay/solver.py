@@ -38,61 +38,28 @@ Not supported: floating bases, contacts, mimic joints, ``joint_target_mode`` (dr
 
 from __future__ import annotations
 
-import hashlib
-import importlib.util
-import os
-import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
 import warp as wp
 from newton import ModelFlags
 from newton.solvers import SolverBase
 
+from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree, tree_from_model
 
-__all__ = ["SolverReplay", "kernel_dir"]
-
-_MODULES: dict[str, object] = {}
-
-
-def kernel_dir() -> Path:
-    """Folder for generated kernel sources: ``$WRESDYN_KERNEL_DIR`` or ``~/.cache/wresdyn/kernels``."""
-    d = Path(os.environ.get("WRESDYN_KERNEL_DIR", Path.home() / ".cache" / "wresdyn" / "kernels"))
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        d = Path(tempfile.gettempdir()) / "wresdyn_kernels"
-        d.mkdir(parents=True, exist_ok=True)
-    return d
+__all__ = ["SolverReplay"]
 
 
 def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool):
-    """Generate, write and import the kernel module for ``tree`` (Warp reads kernel source from files).
+    """Generate and load (:func:`~.cache.load_module`) the kernel module for ``tree``.
 
     The step kernel's adjoint is outlined into non-inlined functions for Clang (CPU), where the whole step
     as one function compiled for two minutes (16 s outlined); NVRTC is the other way round (over ten
     minutes outlined at full optimisation, 45 s force-inlined), so CUDA inlines.
     """
-    src = generate_source(tree, scalar, backward, inline=bool(cuda))
-    key = hashlib.sha256(src.encode()).hexdigest()[:20]
-    if key in _MODULES:
-        return _MODULES[key]
-    path = kernel_dir() / f"replay_{key}.py"
-    if not path.is_file():
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(src)
-        os.replace(tmp, path)
-    name = f"wresdyn_replay_{key}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    _MODULES[key] = mod
-    return mod
+    return load_module(generate_source(tree, scalar, backward, inline=bool(cuda)))
 
 
 class SolverReplay(SolverBase):
