@@ -7,7 +7,8 @@ kernels around them, :mod:`.cache` stores and loads the generated modules, :mod:
 """
 
 from .cache import KernelCacheError, kernel_dir
-from .solver import SolverReplay
+from .solver import FRICTION_KAPPA, FRICTION_SWEEPS, SolverReplay
 from .tree import ReplayTree, TreeError
 
-__all__ = ["KernelCacheError", "ReplayTree", "SolverReplay", "TreeError", "kernel_dir"]
+__all__ = ["FRICTION_KAPPA", "FRICTION_SWEEPS", "KernelCacheError", "ReplayTree", "SolverReplay", "TreeError",
+           "kernel_dir"]
