@@ -1,16 +1,18 @@
 """SolverReplay (issue 6): tiered MuJoCo parity, analytic checks, gradients against finite differences.
 
 Tiers, each at a tolerance tied to its cause:
-- tree: the constants the generated kernel bakes in, against the Robot description;
+- tree: the structure the generated kernel bakes in, against the Robot description;
 - M(q) and the bias c(q, qd) against MuJoCo C (float32 round-off on entries of size ~1);
 - one step against MuJoCo ``implicitfast`` (same discretisation: semi-implicit Euler with the drive
   damping implicit), saturated drives included;
 - 2 s trajectories (1000 steps) against MuJoCo ``implicitfast`` on the project humanoid and newton's
   quadruped, with no MuJoCo constraint active, so the only difference is float32 round-off;
-- analytic checks for what MuJoCo models differently (smoothed friction, penalty limits) and for
-  implicit stability where explicit PD diverges;
+- analytic checks for what MuJoCo models differently (penalty limits) and for implicit stability where
+  explicit PD diverges (dry friction: tests/test_friction.py);
 - gradients through a Tape against central finite differences (float64, 3-DoF robot with a prismatic
-  joint and skewed axes), and the per-step Tape against the fused rollout's.
+  joint and skewed axes), and the per-step Tape against the fused rollout's (parameter gradients:
+  tests/test_replay_gradients.py; inertias from the model arrays: tests/test_replay_params.py; the kernel
+  cache: tests/test_replay_cache.py).
 """
 
 import numpy as np
@@ -115,8 +117,8 @@ def test_tree_holds_the_robot(humanoid, tri):
         dof_of_body = {int(b): k for k, b in enumerate(robot.dof_body)}
         expected_parent = [dof_of_body.get(int(robot.body_parent[b]), -1) for b in robot.dof_body]
         assert list(tree.parent) == expected_parent
-        # moving mass: everything but the fixed base (no welded bodies here)
-        assert tree.mass.sum() == pytest.approx(robot.body_mass.sum() - robot.body_mass[0], rel=1e-6)
+        # every body but the fixed base belongs to the group of the DoF that moves it (no welded bodies here)
+        assert tree.body_dof[0] == -1 and list(tree.body_dof[robot.dof_body]) == list(range(robot.n_dof))
     assert list(solver_for(tri).tree.prismatic) == [False, False, True]
 
 
@@ -232,28 +234,6 @@ def test_implicit_stiffness_option_keeps_very_stiff_drives_stable():
 def zero_gravity(solver):
     solver.model.gravity.zero_()
     solver.notify_model_changed(0)  # float64 solvers hold a copy
-
-
-def test_smoothed_friction(tri):
-    """tau_f = -mu tanh(qd / v_s): Coulomb above ~3 v_s, holds a joint below the breakaway torque."""
-    mu, vs = 2.0, 0.01
-    passive = {"match": "*", "kp": 0.0, "kd": 0.0, "armature": 0.01}
-    solver = solver_for(load_robot(tri.source, gains={"joint": [{**passive, "friction": mu}]}), dtype=wp.float64,
-                        friction_vel=vs)
-    frictionless = solver_for(load_robot(tri.source, gains={"joint": [passive]}), dtype=wp.float64)
-    zero_gravity(solver)
-    zero_gravity(frictionless)
-    q0, zeros = np.array([0.2, -0.3, 0.05]), np.zeros((1, 3))
-    # fast joints (|qd| = 100 v_s): friction is the constant torque -mu sign(qd) and adds no implicit term
-    qd0 = np.array([1.0, -1.5, 1.2])
-    _, qd = rollout(solver, q0, qd0, zeros, dtype=np.float64)
-    _, qd_ref = rollout(frictionless, q0, qd0, zeros, joint_f=-mu * np.sign(qd0)[None], dtype=np.float64)
-    assert np.abs(qd[1] - qd_ref[1]).max() < 1e-9
-    # at rest under half the breakaway torque for 0.4 s: creeps at ~v_s atanh(1/2) instead of accelerating
-    tau = np.tile(0.5 * mu * np.array([1.0, -1.0, 1.0]), (200, 1))
-    _, qd = rollout(solver, q0, np.zeros(3), np.zeros((200, 3)), joint_f=tau, dtype=np.float64)
-    _, qd_free = rollout(frictionless, q0, np.zeros(3), np.zeros((200, 3)), joint_f=tau, dtype=np.float64)
-    assert np.abs(qd).max() < vs and np.abs(qd_free[-1]).max() > 100 * vs
 
 
 def test_joint_limit_penalty_balances_the_drive(tri):

@@ -1,11 +1,14 @@
 """Replay solver: a Newton ``SolverBase`` specialised for PD replay of fixed-base robots (issue 6).
 
 :class:`SolverReplay` runs each step as one generated, differentiable Warp kernel (one thread per
-world); :mod:`.tree` reads the robot from a Newton model, :mod:`.codegen` writes the kernels,
-:mod:`.replay` is the solver.
+world). In data-flow order: :mod:`.tree` reads the robot from a Newton model, :mod:`.emit` writes
+straight-line code, :mod:`.dynamics` generates the rigid-body algorithms and :mod:`.codegen` the step
+kernels around them, :mod:`.cache` stores and loads the generated modules, :mod:`.solver` is the solver.
 """
 
-from .solver import SolverReplay
+from .cache import KernelCacheError, kernel_dir
+from .solver import FRICTION_KAPPA, FRICTION_SWEEPS, SolverReplay
 from .tree import ReplayTree, TreeError
 
-__all__ = ["ReplayTree", "SolverReplay", "TreeError"]
+__all__ = ["FRICTION_KAPPA", "FRICTION_SWEEPS", "KernelCacheError", "ReplayTree", "SolverReplay", "TreeError",
+           "kernel_dir"]

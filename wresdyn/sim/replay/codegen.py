@@ -1,384 +1,150 @@
-"""Generate the replay kernels for one robot: straight-line Warp code with the robot's constants folded in.
+"""Generate the replay kernels for one robot: straight-line Warp code with the robot's geometry folded in.
 
-Warp differentiates a kernel by replaying it, which is exact for straight-line code (every value is a
-fresh SSA variable) but not for loops that mutate local arrays. So instead of a generic kernel that walks
-the tree with loops, this module unrolls the recursive algorithms for the robot at hand and writes them
-out as scalar Python/Warp statements, folding every constant that is 0 or +-1 (axis-aligned joints,
-identity joint frames) at generation time. The CPU backend runs one world per thread serially, so fewer
-flops per world is directly more env-steps/s.
+This module unrolls the recursive algorithms for the robot at hand (:mod:`.dynamics`) and writes them
+out as scalar Warp statements (:mod:`.emit`), folding every constant that is 0 or +-1 (axis-aligned
+joints, identity joint frames) at generation time. The CPU backend runs one world per thread serially,
+so fewer flops per world is directly more env-steps/s. Masses, inertias and all per-DoF parameters are
+read from the Newton model arrays of the thread's world, so they are free to differ between worlds and
+to carry gradients.
 
-One world step, all spatial quantities in world axes about the fixed base (``ReplayTree.origin``):
+One world step (see :mod:`wresdyn.sim.replay.solver` for the equation):
 
-1. forward kinematics and motion subspaces ``S_k`` (revolute: ``[a; o x a]``, prismatic: ``[0; a]``);
-2. RNEA for the bias ``c(q, qd) = C qd + g`` (Featherstone, RBDA Table 5.1, base acceleration ``-g``);
-3. CRBA for ``M(q)`` with composite inertias summed in world axes (RBDA Table 6.2), so each
-   off-diagonal entry is one 6-vector dot product;
-4. drive, passive and limit torques, and the implicit diagonal (see :mod:`wresdyn.sim.replay.solver`);
-5. ``H = L^T D L`` factorisation without fill-in for a branched tree (RBDA Table 6.3) and the solve;
-6. semi-implicit Euler: ``qd' = qd + dt qdd``, ``q' = q + dt qd'``.
+1. FK, RNEA bias ``c(q, qd)``, CRBA ``M(q)`` (:func:`~.dynamics.dynamics`);
+2. drive, passive and limit torques, and the implicit diagonal;
+3. the frictionless velocity ``v* = qd + dt H^-1 rhs`` (:func:`~.dynamics.solve_ltdl`);
+4. dry friction: Gauss-Seidel sweeps on ``min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i)``
+   (:func:`_friction`);
+5. semi-implicit Euler: ``qd' = v``, ``q' = q + dt qd'``.
 """
 
 from __future__ import annotations
 
-import re
+import itertools
+from dataclasses import dataclass
 
 import numpy as np
 
+from .dynamics import LiveInertia, dynamics, inertial_params, solve_ltdl
+from .emit import Emitter, indent, outline, unmarked
 from .tree import ReplayTree
 
-__all__ = ["generate_source"]
-
-Sym = float | str
-"""A scalar at generation time: a Python float is a constant, a string names a kernel variable."""
-
-_MARK = "#@ "
+__all__ = ["LiveParams", "generate_source"]
 
 
-class _Emitter:
-    """Writes SSA statements and folds constants (products with 0 vanish, with +-1 are free)."""
+@dataclass(frozen=True)
+class LiveParams:
+    """Model parameters that are not zero in every world; the rest are compiled as constant 0."""
 
-    def __init__(self):
-        self.lines: list[str] = []
-        self._count = 0
-
-    def const(self, x: float) -> str:
-        return f"S({float(x)!r})"
-
-    def sym(self, x: Sym) -> str:
-        if isinstance(x, str):
-            return f"({x})" if x.startswith("-") else x
-        return self.const(x)
-
-    def let(self, expr: str, prefix: str = "t") -> str:
-        self._count += 1
-        name = f"{prefix}{self._count}"
-        self.lines.append(f"{name} = {expr}")
-        return name
-
-    def mark(self, text: str) -> None:
-        """A place where the statement list may be cut into functions (see :func:`_outline`)."""
-        self.lines.append(f"{_MARK}{text}")
-
-    def sp(self, *terms: tuple, const: float = 0.0) -> Sym:
-        """Sum of products; each term is a tuple of factors (floats or variable names)."""
-        parts: list[tuple[float, list[str]]] = []
-        for term in terms:
-            coef, names = 1.0, []
-            for f in term:
-                if isinstance(f, str):
-                    if f.startswith("-"):  # a folded negation: "-t12"
-                        coef, f = -coef, f[1:]
-                    names.append(f)
-                else:
-                    coef *= float(f)
-            if coef == 0.0:
-                continue
-            if not names:
-                const += coef
-            else:
-                parts.append((coef, names))
-        if not parts:
-            return float(const)
-        if len(parts) == 1 and abs(parts[0][0]) == 1.0 and len(parts[0][1]) == 1 and const == 0.0:
-            return ("" if parts[0][0] > 0.0 else "-") + parts[0][1][0]  # no statement for +-x
-        expr = ""
-        for i, (coef, names) in enumerate(parts):
-            neg = coef < 0.0
-            mag = abs(coef)
-            body = "*".join(names) if mag == 1.0 else self.const(mag) + "*" + "*".join(names)
-            expr += ("-" if neg else "") + body if i == 0 else (" - " if neg else " + ") + body
-        if const != 0.0:
-            expr += (" - " if const < 0.0 else " + ") + self.const(abs(const))
-        return self.let(expr)
-
-    # 3-vectors and 3x3 matrices as lists of Sym
-    def add(self, a, b):
-        return [self.sp((a[i],), (b[i],)) for i in range(len(a))]
-
-    def scale(self, a, s):
-        return [self.sp((a[i], s)) for i in range(len(a))]
-
-    def cross(self, a, b):
-        return [
-            self.sp((a[1], b[2]), (-1.0, a[2], b[1])),
-            self.sp((a[2], b[0]), (-1.0, a[0], b[2])),
-            self.sp((a[0], b[1]), (-1.0, a[1], b[0])),
-        ]
-
-    def mv(self, m, v):
-        return [self.sp(*[(m[i][k], v[k]) for k in range(3)]) for i in range(3)]
-
-    def mm(self, a, b):
-        return [[self.sp(*[(a[i][k], b[k][j]) for k in range(3)]) for j in range(3)] for i in range(3)]
-
-
-def _joint_rotation(e: _Emitter, axis: np.ndarray, c: str, s: str, omc: str):
-    """R(a, q) = I + sin q [a]x + (1 - cos q) [a]x^2, entries folded for the constant axis ``a``."""
-    a = [float(x) for x in axis]
-    k = [[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]]
-    k2 = [[a[i] * a[j] - (1.0 if i == j else 0.0) for j in range(3)] for i in range(3)]
-    out = []
-    for i in range(3):
-        row = []
-        for j in range(3):
-            if i == j and k2[i][j] == -1.0:
-                row.append(c)  # 1 - (1 - cos q)
-            else:
-                row.append(e.sp((1.0 if i == j else 0.0,), (k[i][j], s), (k2[i][j], omc)))
-        out.append(row)
-    return out
-
-
-class _Spatial:
-    """Spatial inertia in world axes about the origin: mass ``m``, first moment ``h = m c``, rotational
-    inertia ``J`` about the origin."""
-
-    def __init__(self, m: Sym, h: list, J: list):
-        self.m, self.h, self.J = m, h, J
-
-    def apply(self, e: _Emitter, w: list, v: list):
-        """I [w; v] = [J w + h x v; m v - h x w]."""
-        jw = e.mv(self.J, w)
-        hv = e.cross(self.h, v)
-        hw = e.cross(self.h, w)
-        ang = [e.sp((jw[i],), (hv[i],)) for i in range(3)]
-        return ang, [e.sp((self.m, v[i]), (-1.0, hw[i])) for i in range(3)]
-
-    def plus(self, e: _Emitter, o: "_Spatial") -> "_Spatial":
-        return _Spatial(e.sp((self.m,), (o.m,)), e.add(self.h, o.h), [e.add(self.J[i], o.J[i]) for i in range(3)])
-
-
-def _body_inertia(e: _Emitter, tree: ReplayTree, k: int, R, p) -> _Spatial:
-    """Spatial inertia of DoF ``k``'s body in world axes about the origin."""
-    m = float(tree.mass[k])
-    if m <= 0.0:
-        z = [0.0, 0.0, 0.0]
-        return _Spatial(0.0, z, [z[:], z[:], z[:]])
-    c = e.add(p, e.mv(R, [float(x) for x in tree.com[k]]))
-    ib = [[float(x) for x in row] for row in tree.inertia[k]]
-    if np.allclose(tree.inertia[k], tree.inertia[k][0, 0] * np.eye(3), rtol=0.0, atol=1e-12):
-        iw = ib  # isotropic: R I R^T = I
-    else:
-        t = e.mm(R, ib)
-        iw = [[None] * 3 for _ in range(3)]
-        for i in range(3):
-            for j in range(i, 3):
-                iw[i][j] = e.sp(*[(t[i][n], R[j][n]) for n in range(3)])
-                iw[j][i] = iw[i][j]
-    # parallel axis to the origin: J = I_c + m (|c|^2 1 - c c^T)
-    J = [[None] * 3 for _ in range(3)]
-    for i in range(3):
-        for j in range(i, 3):
-            if i == j:
-                o1, o2 = [n for n in range(3) if n != i]
-                J[i][i] = e.sp((iw[i][i],), (m, c[o1], c[o1]), (m, c[o2], c[o2]))
-            else:
-                J[i][j] = e.sp((iw[i][j],), (-m, c[i], c[j]))
-                J[j][i] = J[i][j]
-    return _Spatial(m, e.scale(c, m), J)
-
-
-def _cross_motion(e, w, v, w2, v2):
-    """[w; v] x [w2; v2] = [w x w2; w x v2 + v x w2]."""
-    a = e.cross(w, w2)
-    b = e.add(e.cross(w, v2), e.cross(v, w2))
-    return a, b
-
-
-def _cross_force(e, w, v, n, f):
-    """[w; v] x* [n; f] = [w x n + v x f; w x f]."""
-    return e.add(e.cross(w, n), e.cross(v, f)), e.cross(w, f)
-
-
-def _dynamics(e: _Emitter, tree: ReplayTree, q: list[str], qd: list[str], g: list[str]):
-    """Emit FK, RNEA and CRBA. Returns (bias, M_diag, M_off) with M_off[(k, j)] for j an ancestor of k."""
-    n = tree.n_dof
-    ident = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-    R, P, Sw, Sv, V, A, I = [None] * n, [None] * n, [None] * n, [None] * n, [None] * n, [None] * n, [None] * n
-    F: list = [None] * n
-    for k in range(n):
-        e.mark(f"dof {k}: kinematics, velocity, bias acceleration, RNEA body force")
-        par = int(tree.parent[k])
-        rp, pp = (ident, [0.0, 0.0, 0.0]) if par < 0 else (R[par], P[par])
-        rot_pj = [[float(x) for x in row] for row in tree.rot_pj[k]]
-        rj = e.mm(rp, rot_pj)
-        o = e.add(pp, e.mv(rp, [float(x) for x in tree.pos_pj[k]]))
-        axis = [float(x) for x in tree.axis[k]]
-        aw = e.mv(rj, axis)
-        rot_jc = [[float(x) for x in row] for row in tree.rot_jc[k]]
-        pos_jc = [float(x) for x in tree.pos_jc[k]]
-        if tree.prismatic[k]:
-            R[k] = e.mm(rj, rot_jc)
-            P[k] = e.add(o, e.mv(rj, [e.sp((axis[i], q[k]), const=pos_jc[i]) for i in range(3)]))
-            Sw[k], Sv[k] = [0.0, 0.0, 0.0], aw
-        else:
-            c = e.let(f"wp.cos({q[k]})")
-            s = e.let(f"wp.sin({q[k]})")
-            omc = e.sp((-1.0, c), const=1.0)
-            rq = e.mm(rj, _joint_rotation(e, tree.axis[k], c, s, omc))
-            R[k] = e.mm(rq, rot_jc)
-            P[k] = e.add(o, e.mv(rq, pos_jc))
-            Sw[k], Sv[k] = aw, e.cross(o, aw)
-        sqw, sqv = e.scale(Sw[k], qd[k]), e.scale(Sv[k], qd[k])
-        if par < 0:
-            V[k] = (sqw, sqv)
-            A[k] = ([0.0, 0.0, 0.0], [e.sp((-1.0, g[i])) for i in range(3)])
-        else:
-            V[k] = (e.add(V[par][0], sqw), e.add(V[par][1], sqv))
-            # dS/dt qd = V_parent x S qd (= V_k x S qd, since S qd x S qd = 0)
-            cw, cv = _cross_motion(e, V[par][0], V[par][1], sqw, sqv)
-            A[k] = (e.add(A[par][0], cw), e.add(A[par][1], cv))
-        I[k] = _body_inertia(e, tree, k, R[k], P[k])
-        ia = I[k].apply(e, *A[k])
-        iv = I[k].apply(e, *V[k])
-        xw, xv = _cross_force(e, V[k][0], V[k][1], iv[0], iv[1])
-        F[k] = (e.add(ia[0], xw), e.add(ia[1], xv))
-    Ic = list(I)
-    bias: list = [None] * n
-    m_diag: list = [None] * n
-    m_off: dict = {}
-    for k in reversed(range(n)):
-        e.mark(f"dof {k}: RNEA and CRBA, leaves to root")
-        par = int(tree.parent[k])
-        bias[k] = e.sp(*[(Sw[k][i], F[k][0][i]) for i in range(3)], *[(Sv[k][i], F[k][1][i]) for i in range(3)])
-        fw, fv = Ic[k].apply(e, Sw[k], Sv[k])
-        m_diag[k] = e.sp(*[(Sw[k][i], fw[i]) for i in range(3)], *[(Sv[k][i], fv[i]) for i in range(3)])
-        for j in tree.ancestors(k):
-            m_off[(k, j)] = e.sp(*[(Sw[j][i], fw[i]) for i in range(3)], *[(Sv[j][i], fv[i]) for i in range(3)])
-        if par >= 0:
-            F[par] = (e.add(F[par][0], F[k][0]), e.add(F[par][1], F[k][1]))
-            Ic[par] = Ic[par].plus(e, Ic[k])
-    return bias, m_diag, m_off
-
-
-def _solve(e: _Emitter, tree: ReplayTree, h_diag: list, h_off: dict, rhs: list) -> list:
-    """Solve H x = rhs with H = L^T D L, no fill-in for a tree (RBDA Table 6.3), fully unrolled."""
-    n = tree.n_dof
-    anc = [tree.ancestors(k) for k in range(n)]
-    pend: dict = {}
-    hd = list(h_diag)
-    ho = dict(h_off)
-    lo: dict = {}
-    inv_d: list = [None] * n
-    for k in reversed(range(n)):
-        e.mark(f"dof {k}: factorise")
-        hd[k] = e.sp((hd[k],), *pend.pop((k, k), []))
-        for j in anc[k]:
-            ho[(k, j)] = e.sp((ho[(k, j)],), *pend.pop((k, j), []))
-        inv_d[k] = e.let(f"S(1.0) / {e.sym(hd[k])}")
-        for i in anc[k]:
-            a = e.sp((ho[(k, i)], inv_d[k]))
-            lo[(k, i)] = a
-            pend.setdefault((i, i), []).append((-1.0, a, ho[(k, i)]))
-            for j in anc[i]:
-                pend.setdefault((i, j), []).append((-1.0, a, ho[(k, j)]))
-    e.mark("solve")
-    x = list(rhs)
-    back: dict = {}
-    for i in reversed(range(n)):
-        x[i] = e.sp((x[i],), *back.pop(i, []))
-        for j in anc[i]:
-            back.setdefault(j, []).append((-1.0, lo[(i, j)], x[i]))
-    x = [e.sp((x[i], inv_d[i])) for i in range(n)]
-    for i in range(n):
-        x[i] = e.sp((x[i],), *[(-1.0, lo[(i, j)], x[j]) for j in anc[i]])
-    return x
-
+    body: LiveInertia
+    """Live body mass / centre-of-mass / inertia entries."""
+    friction: np.ndarray
+    """Live ``joint_friction`` per DoF, shape (n_dof,); none: no friction code at all."""
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
+_SCALARS = ("dt", "fric_beta", "fric_dt_beta", "kp_implicit")
+"""Scalar kernel arguments the step statements read."""
 
 
-def _load_params(e: _Emitter, tree: ReplayTree) -> dict:
+def _load_params(e: Emitter, tree: ReplayTree) -> dict:
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
     return out
 
 
-def _step(e: _Emitter, tree: ReplayTree, p: dict, q, qd, tq, tqd, jf, g) -> tuple[list, list]:
+def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: list, mu: list, sweeps: int,
+              live: np.ndarray) -> list:
+    """Dry friction as the velocity problem of one step, solved by ``sweeps`` Gauss-Seidel sweeps.
+
+    With the frictionless velocity ``v*`` (``H (v* - qd) = dt rhs``), friction torques ``tau_f`` change the
+    step to ``H (v - v*) = dt tau_f``, ``-tau_f in dg(v)``: the optimality condition of
+
+        min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i).
+
+    ``g_i`` is the saturated damper ``tau_i = -clamp(d_i v_i, -mu_i, mu_i)`` with ``d_i = kappa H_ii``
+    (Coulomb ``mu_i |v_i|`` for ``kappa = inf``). Minimising over ``v_i`` alone, the others fixed, is in
+    closed form: with the unconstrained ``u = v*_i - sum_{j != i} (H_ij / H_ii) (v_j - v*_j)``,
+
+        v_i = u - clamp(beta u, -mu_i dt / H_ii, mu_i dt / H_ii),   beta = kappa dt / (1 + kappa dt)
+
+    (``beta = 1``: a soft threshold that returns exactly 0 when the joint sticks; below the threshold
+    ``v_i = u / (1 + kappa dt)``, the implicit damper), written ``u - beta clamp(u, -t / beta, t / beta)``
+    so that the division by ``beta`` is a kernel argument and the stuck case stays exact. ``H`` couples a
+    DoF only with its ancestors and descendants, so a sweep costs one multiply-add per such pair. Each
+    sweep visits the DoFs by depth (root to leaves, then back: symmetric Gauss-Seidel), which is the DoF
+    order up to swaps of DoFs of different branches, which do not couple (the same result). A DoF without
+    friction in any world (not ``live``) still moves, as it answers the friction torques of the DoFs it is
+    coupled to: ``v_i = u``.
+    """
+    n = tree.n_dof
+    depth = [len(tree.ancestors(k)) for k in range(n)]
+    order = sorted(range(n), key=lambda k: (depth[k], k))
+    coupled: list[list[tuple[int, object]]] = [[] for _ in range(n)]
+    inv_h = [e.let(f"S(1.0) / {e.sym(h_diag[k])}") for k in range(n)]
+    for (k, j), h in h_off.items():
+        coupled[k].append((j, e.sp((h, inv_h[k]))))
+        coupled[j].append((k, e.sp((h, inv_h[j]))))
+    # clamp(beta u, -t, t) = beta clamp(u, -t / beta, t / beta), t = mu dt / H_ii; fric_dt_beta = dt / beta
+    bound = [e.let(f"fric_dt_beta * {mu[k]} * {inv_h[k]}") if live[k] else None for k in range(n)]
+    last: dict[int, tuple] = {}  # each moved DoF's latest (u, clamp or None); v is made from it at the end
+    delta: dict[int, object] = {}  # v_j - v*_j of the DoFs that moved
+    stamp: dict[int, int] = {}  # when each delta was made: the newest is summed last, the rest need not wait
+    clock = itertools.count()
+    for s in range(sweeps):
+        e.mark(f"friction sweep {s}")
+        for i in (order if s % 2 == 0 else order[::-1]):
+            terms = sorted((stamp[j], h, delta[j]) for j, h in coupled[i] if j in delta)
+            if bound[i] is None and not terms:
+                continue  # frictionless and nothing moved around it yet: v_i = v*_i
+            coupling = e.sp(*[(h, d) for _, h, d in terms])
+            u = e.sym(e.sp((v_star[i],), (-1.0, coupling)))
+            c = None
+            if bound[i] is not None:
+                # clamp(u, -b, b) as two selects: with wp.clamp (NaN-aware fmin/fmax) one sweep cost 20 % of
+                # the humanoid's fused step, with selects 4 %
+                b = bound[i]
+                c = e.let(f"wp.where({u} > {b}, {b}, wp.where({u} < -{b}, -{b}, {u}))")
+            delta[i] = e.sp((-1.0, coupling)) if c is None else e.sp((-1.0, coupling), (-1.0, "fric_beta", c))
+            last[i] = (u, c)
+            stamp[i] = next(clock)
+    e.mark("friction result")
+    v = list(v_star)
+    for i, (u, c) in last.items():
+        # u - beta c, not v* + delta: exactly 0 when the joint sticks with beta = 1
+        v[i] = u if c is None else e.let(f"{u} - fric_beta * {c}")
+    return v
+
+
+def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, jf, g,
+          sweeps: int, friction: np.ndarray) -> tuple[list, list]:
     """Emit one world step; returns the new (q, qd) symbols."""
     n = tree.n_dof
-    bias, m_diag, m_off = _dynamics(e, tree, q, qd, g)
+    bias, m_diag, m_off = dynamics(e, tree, groups, q, qd, g)
     rhs, h_diag = [], []
     for k in range(n):
         e.mark(f"dof {k}: drive, passive and limit torques; implicit diagonal")
-        ke, kd, arm, fric, damp, eff, lo, hi, lke, lkd = (p[name][k] for name in _PARAMS)
+        ke, kd, arm, _, damp, eff, lo, hi, lke, lkd = (p[name][k] for name in _PARAMS)
         raw = e.let(f"{ke} * ({tq[k]} - {q[k]}) + {kd} * ({tqd[k]} - {qd[k]})")
         eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")  # importers write 0 for "no limit"
         pd = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
         free = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")  # saturated: no velocity derivative
-        th = e.let(f"wp.tanh({qd[k]} / friction_vel)")
         viol = e.let(f"wp.where({q[k]} < {lo}, {lo} - {q[k]}, wp.where({q[k]} > {hi}, {hi} - {q[k]}, S(0.0)))")
         on = e.let(f"wp.where({q[k]} < {lo}, S(1.0), wp.where({q[k]} > {hi}, S(1.0), S(0.0)))")
-        damp_k = e.let(f"{free} * {kd} + {damp} + {fric} * (S(1.0) - {th} * {th}) / friction_vel + {on} * {lkd}")
+        damp_k = e.let(f"{free} * {kd} + {damp} + {on} * {lkd}")
         stiff_k = e.let(f"kp_implicit * {free} * {ke} + {on} * {lke}")
         rhs.append(e.let(
-            f"{pd} + {jf[k]} - {e.sym(bias[k])} - {damp} * {qd[k]} - {fric} * {th} + {lke} * {viol}"
+            f"{pd} + {jf[k]} - {e.sym(bias[k])} - {damp} * {qd[k]} + {lke} * {viol}"
             f" - {on} * {lkd} * {qd[k]} - dt * {stiff_k} * {qd[k]}"
         ))
         h_diag.append(e.let(f"{e.sym(m_diag[k])} + {arm} + dt * {damp_k} + dt * dt * {stiff_k}"))
-    qdd = _solve(e, tree, h_diag, m_off, rhs)
+    qdd = solve_ltdl(e, tree, h_diag, m_off, rhs)
+    e.mark("frictionless velocity")
+    v = [e.let(f"{qd[k]} + dt * {e.sym(qdd[k])}") for k in range(n)]
+    if sweeps > 0 and friction.any():
+        v = _friction(e, tree, h_diag, m_off, v, p["fric"], sweeps, friction)
     e.mark("semi-implicit Euler")
-    qd_new = [e.let(f"{qd[k]} + dt * {e.sym(qdd[k])}") for k in range(n)]
-    q_new = [e.let(f"{q[k]} + dt * {qd_new[k]}") for k in range(n)]
-    return q_new, qd_new
-
-
-_IDENT = re.compile(r"(?<![\w.])[A-Za-z_]\w*")
-_KERNEL_SCALARS = ("dt", "friction_vel", "kp_implicit")
-"""Kernel arguments the step statements read."""
-
-
-def _outline(lines: list[str], prefix: str, inline: bool | None, after: list[str], external: set[str],
-             min_len: int = 500) -> tuple[list[str], list[str]]:
-    """Cut a straight-line statement list into ``@wp.func`` chunks of at least ``min_len`` statements.
-
-    Clang compiles one huge function superlinearly: the humanoid step's adjoint as one function took two
-    minutes at -O1, as seven non-inlined functions 16 s at -O2 (and ran faster than with 20). Each chunk
-    takes the values it reads as arguments and returns the values read later (``after``: the statements
-    that follow, e.g. array stores; ``external``: kernel variables defined before). Returns (function
-    sources, kernel statements).
-    """
-    chunks: list[list[str]] = [[]]
-    for line in lines:
-        if line.startswith(_MARK):
-            if len(chunks[-1]) >= min_len:
-                chunks.append([])
-            continue
-        chunks[-1].append(line)
-    parsed = [[(lhs, _IDENT.findall(rhs)) for lhs, rhs in (line.split(" = ", 1) for line in chunk)] for chunk in chunks]
-    defined = {lhs for stmts in parsed for lhs, _ in stmts}
-    last_use: dict[str, int] = {}
-    for c, stmts in enumerate(parsed):
-        for _, uses in stmts:
-            for u in uses:
-                last_use[u] = c
-    for line in after:
-        for u in _IDENT.findall(line.split(" = ", 1)[1]):
-            last_use[u] = len(parsed)
-    hint = "" if inline is None else f"(inline={inline})"
-    funcs, body = [], []
-    for c, (chunk, stmts) in enumerate(zip(chunks, parsed)):
-        own = {lhs for lhs, _ in stmts}
-        ins: list[str] = []
-        for _, uses in stmts:
-            for u in uses:
-                if u not in own and u not in ins and (u in defined or u in external or u in _KERNEL_SCALARS):
-                    ins.append(u)
-        outs = [lhs for lhs, _ in stmts if last_use.get(lhs, -1) > c]
-        if not outs:
-            continue
-        name = f"{prefix}{c}"
-        args = ", ".join(f"{a}: S" for a in ins)
-        funcs.append(f"@wp.func{hint}\ndef {name}({args}):\n" + _indent(chunk, 1) + f"\n    return {', '.join(outs)}\n")
-        body.append(f"{', '.join(outs)} = {name}({', '.join(ins)})")
-    return funcs, body
-
-
-def _indent(lines: list[str], depth: int) -> str:
-    pad = "    " * depth
-    return "\n".join(pad + line for line in lines)
+    return [e.let(f"{q[k]} + dt * {v[k]}") for k in range(n)], v
 
 
 _HEADER = '''"""Generated by wresdyn.sim.replay.codegen for robot tree {digest} ({n} DoF, {scalar}); do not edit."""
@@ -386,9 +152,11 @@ import warp as wp
 
 S = wp.{scalar}
 V3 = wp.vec3{suffix}
+M33 = wp.mat33{suffix}
 '''
 
-_PARAM_ARGS = ", ".join(f"{name}: wp.array(dtype=S)" for name in _PARAMS)
+_PARAM_ARGS = (", ".join(f"{name}: wp.array(dtype=S)" for name in _PARAMS)
+               + ", body_mass: wp.array(dtype=S), body_com: wp.array(dtype=V3), body_inertia: wp.array(dtype=M33)")
 _GRAVITY = ["g = gravity[w]", "gx = g[0]", "gy = g[1]", "gz = g[2]"]
 
 _FLAT = {"q": "joint_q[bq + {}]", "qd": "joint_qd[bd + {}]", "tq": "target_q[bd + {}]",
@@ -400,51 +168,53 @@ _TIME_MAJOR = {"q": "q[t, w, {}]", "qd": "qd[t, w, {}]", "tq": "target_q[t, w, {
 """Array accesses of the rollout kernel (time, world, coordinate)."""
 
 
-def _step_code(tree: ReplayTree, access: dict) -> tuple[list[str], list[str], list[str], list[str]]:
-    """Statements of one step: (parameter loads, state and control loads, compute, stores)."""
+def _step_code(tree: ReplayTree, access: dict, sweeps: int, live: LiveParams | None
+               ) -> tuple[list[str], list[str], list[str], list[str]]:
+    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores)."""
     n = tree.n_dof
     co = [int(x) for x in tree.q_offset]
     do = [int(x) for x in tree.qd_offset]
-    e = _Emitter()
+    e = Emitter()
     p = _load_params(e, tree)
-    params, e.lines = e.lines + _GRAVITY, []
+    groups = inertial_params(e, tree, None if live is None else live.body)
+    params, e.lines = unmarked(e.lines) + _GRAVITY, []
     q = [e.let(access["q"].format(co[k]), prefix="q_") for k in range(n)]
     qd, tq, tqd, jf = ([e.let(access[kind].format(do[k]), prefix=f"{kind}_") for k in range(n)]
                        for kind in ("qd", "tq", "tqd", "jf"))
     loads, e.lines = e.lines, []
-    qn, qdn = _step(e, tree, p, q, qd, tq, tqd, jf, ["gx", "gy", "gz"])
+    friction = np.ones(n, bool) if live is None else live.friction
+    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, friction)
     stores = [f"{access['q_out'].format(co[k])} = {qn[k]}" for k in range(n)]
     stores += [f"{access['qd_out'].format(do[k])} = {qdn[k]}" for k in range(n)]
     return params, loads, e.lines, stores
 
 
-def _unmarked(lines: list[str]) -> list[str]:
-    return [x for x in lines if not x.startswith(_MARK)]
-
-
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
-                    inline: bool | None = False) -> str:
+                    inline: bool | None = False, friction_sweeps: int = 4, live: LiveParams | None = None) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
     world). ``replay_rollout`` runs ``n_steps`` steps in one launch (forward only) on time-major
     trajectories (time, world, coordinate), whose row ``t`` is laid out like Newton's ``joint_q``, so its
     adjoint is the step kernel's adjoint launched on rows ``t`` and ``t + 1``. ``replay_terms`` writes
-    ``M(q)`` and ``c(q, qd)`` for the parity tests. With ``backward`` the step kernel gets an adjoint; its
-    code is cut into functions with the given ``inline`` hint (see :func:`_outline`).
+    ``M(q)`` and ``c(q, qd)`` of one world for the parity tests. With ``backward`` the step kernel gets an
+    adjoint; its code is cut into functions with the given ``inline`` hint (see :func:`~.emit.outline`).
+    ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`_friction`); 0 leaves the
+    friction code out. ``live`` (default: everything) names the parameters the kernels read; the others
+    are folded as 0.
     """
     n = tree.n_dof
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
 
-    params, loads, compute, stores = _step_code(tree, _FLAT)
+    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, live)
     if backward:
-        external = {x.split(" = ", 1)[0] for x in params + loads}
-        funcs, compute = _outline(compute, "step_part", inline, stores, external)
+        external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
+        funcs, compute = outline(compute, "step_part", inline, stores, external)
         src += funcs
     src.append(f'''
 @wp.kernel(enable_backward={backward}, module="unique")
 def replay_step(
-    world_start: int, dt: S, friction_vel: S, kp_implicit: S, {_PARAM_ARGS}, gravity: wp.array(dtype=V3),
+    world_start: int, dt: S, fric_beta: S, fric_dt_beta: S, kp_implicit: S, {_PARAM_ARGS}, gravity: wp.array(dtype=V3),
     joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
     target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),
     joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),
@@ -452,30 +222,33 @@ def replay_step(
     w = wp.tid() + world_start
     bq = w * {tree.coords_per_world}
     bd = w * {tree.dofs_per_world}
-{_indent(params + loads + _unmarked(compute) + stores, 1)}
+    bb = w * {tree.bodies_per_world}
+{indent(params + loads + unmarked(compute) + stores, 1)}
 ''')
 
-    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR)
+    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, live)
     src.append(f'''
 @wp.kernel(enable_backward=False, module="unique")
 def replay_rollout(
-    world_start: int, n_steps: int, dt: S, friction_vel: S, kp_implicit: S, {_PARAM_ARGS},
+    world_start: int, n_steps: int, dt: S, fric_beta: S, fric_dt_beta: S, kp_implicit: S, {_PARAM_ARGS},
     gravity: wp.array(dtype=V3), target_q: wp.array3d(dtype=S), target_qd: wp.array3d(dtype=S),
     joint_f: wp.array3d(dtype=S),
     q: wp.array3d(dtype=S), qd: wp.array3d(dtype=S),
 ):
     w = wp.tid() + world_start
     bd = w * {tree.dofs_per_world}
-{_indent(params, 1)}
+    bb = w * {tree.bodies_per_world}
+{indent(params, 1)}
     for t in range(n_steps):
-{_indent(loads + _unmarked(compute) + stores, 2)}
+{indent(loads + unmarked(compute) + stores, 2)}
 ''')
 
-    e = _Emitter()
+    e = Emitter()
+    groups = inertial_params(e, tree, None if live is None else live.body)
     e.lines += _GRAVITY
     q = [e.let(f"q[w, {k}]", prefix="q_") for k in range(n)]
     qd = [e.let(f"qd[w, {k}]", prefix="qd_") for k in range(n)]
-    bias, m_diag, m_off = _dynamics(e, tree, q, qd, ["gx", "gy", "gz"])
+    bias, m_diag, m_off = dynamics(e, tree, groups, q, qd, ["gx", "gy", "gz"])
     for k in range(n):
         e.lines.append(f"bias[w, {k}] = {e.sym(bias[k])}")
         e.lines.append(f"mass_matrix[w, {k}, {k}] = {e.sym(m_diag[k])}")
@@ -485,10 +258,12 @@ def replay_rollout(
     src.append(f'''
 @wp.kernel(enable_backward=False, module="unique")
 def replay_terms(
+    world: int, body_mass: wp.array(dtype=S), body_com: wp.array(dtype=V3), body_inertia: wp.array(dtype=M33),
     gravity: wp.array(dtype=V3), q: wp.array2d(dtype=S), qd: wp.array2d(dtype=S),
     mass_matrix: wp.array3d(dtype=S), bias: wp.array2d(dtype=S),
 ):
     w = wp.tid()
-{_indent(_unmarked(e.lines), 1)}
+    bb = world * {tree.bodies_per_world}
+{indent(unmarked(e.lines), 1)}
 ''')
     return "\n".join(src)

@@ -3,10 +3,11 @@
 A replay model holds ``W`` copies of one fixed-base robot, one per world. This module reads world 0's
 articulation out of the :class:`newton.Model` arrays, checks that every world holds the same robot, and
 reduces it to what the generated kernel needs: for each 1-DoF joint (revolute or prismatic) its parent
-DoF, the constant transforms around the joint, the axis and the inertia of the rigid group it moves.
-Bodies welded by fixed joints are merged into the moving body they hang from, so the kernel only sees
-DoFs. Per-DoF drive and limit parameters are not constants: the kernel reads them from the model
-arrays every launch, so they may differ between worlds and change without recompiling.
+DoF, the constant transforms around the joint and the axis, and for each body the DoF whose rigid group
+it belongs to with its constant pose in that DoF's body frame. Bodies welded by fixed joints join the
+group of the moving body they hang from, so the kernel only sees DoFs. Masses, centres of mass and
+inertias are not constants, nor are the per-DoF drive and limit parameters: the kernel reads them from
+the model arrays every launch, so they may differ between worlds and change without recompiling.
 """
 
 from __future__ import annotations
@@ -48,12 +49,13 @@ class ReplayTree:
     """Child body frame origin in the joint frame [m], shape (n_dof, 3)."""
     axis: np.ndarray
     """Joint axis in the joint frame (unit), shape (n_dof, 3)."""
-    mass: np.ndarray
-    """Mass of the rigid group the DoF moves (body plus welded descendants) [kg], shape (n_dof,)."""
-    com: np.ndarray
-    """Centre of mass of that group in the DoF's body frame [m], shape (n_dof, 3)."""
-    inertia: np.ndarray
-    """Rotational inertia of that group about its centre of mass, body axes [kg*m^2], shape (n_dof, 3, 3)."""
+    body_dof: np.ndarray
+    """DoF whose rigid group each body of one world belongs to (the DoF moving it, or the one its welded
+    ancestor hangs from), -1 for bodies fixed to the base, shape (bodies_per_world,)."""
+    rot_db: np.ndarray
+    """Body frame orientation in its DoF's body frame (identity unless welded), shape (bodies_per_world, 3, 3)."""
+    pos_db: np.ndarray
+    """Body frame origin in its DoF's body frame [m], shape (bodies_per_world, 3)."""
     origin: np.ndarray
     """World position of the fixed base [m], shape (3,); kernel positions are relative to it (float32 precision)."""
     q_offset: np.ndarray
@@ -64,6 +66,8 @@ class ReplayTree:
     """Length of one world's slice of ``joint_q``."""
     dofs_per_world: int
     """Length of one world's slice of ``joint_qd``."""
+    bodies_per_world: int
+    """Length of one world's slice of ``body_mass`` / ``body_com`` / ``body_inertia``."""
     world_count: int
     """Number of worlds."""
 
@@ -76,13 +80,18 @@ class ReplayTree:
             j = int(self.parent[j])
         return out
 
+    def group(self, k: int) -> list[int]:
+        """Bodies (index within a world) of DoF ``k``'s rigid group."""
+        return [int(b) for b in np.flatnonzero(self.body_dof == k)]
+
     def digest(self) -> str:
-        """Hash of the constants the kernel bakes in (not the world count)."""
+        """Hash of the constants the kernel bakes in: topology and joint frames, not the inertial parameters
+        (read from the model arrays) nor the world count."""
         h = hashlib.sha256()
         for a in (self.prismatic, self.parent, self.rot_pj, self.pos_pj, self.rot_jc, self.pos_jc, self.axis,
-                  self.mass, self.com, self.inertia, self.q_offset, self.qd_offset):
+                  self.body_dof, self.rot_db, self.pos_db, self.q_offset, self.qd_offset):
             h.update(np.ascontiguousarray(a).tobytes())
-        h.update(f"{self.coords_per_world},{self.dofs_per_world}".encode())
+        h.update(f"{self.coords_per_world},{self.dofs_per_world},{self.bodies_per_world}".encode())
         return h.hexdigest()[:16]
 
 
@@ -144,11 +153,8 @@ def tree_from_model(model) -> ReplayTree:
     xp = model.joint_X_p.numpy().reshape(w_count, jpw, 7)
     xc = model.joint_X_c.numpy().reshape(w_count, jpw, 7)
     axis = model.joint_axis.numpy().reshape(w_count, dpw, 3)
-    mass = model.body_mass.numpy().reshape(w_count, bpw)
-    com = model.body_com.numpy().reshape(w_count, bpw, 3)
-    inertia = model.body_inertia.numpy().reshape(w_count, bpw, 3, 3)
 
-    # every world the same robot: topology, joint frames (the root's position may be shifted), inertias
+    # every world the same robot: topology and joint frames (the root's position may be shifted)
     boff = (np.arange(w_count) * bpw)[:, None]
     same = (
         (jt == jt[0]).all()
@@ -159,12 +165,11 @@ def tree_from_model(model) -> ReplayTree:
         and np.allclose(xp[:, :, 3:], xp[0, :, 3:]) and np.allclose(xc, xc[0])
         and np.allclose(np.where((jpar >= 0)[..., None], xp[..., :3], 0.0),
                         np.where((jpar[0] >= 0)[:, None], xp[0, :, :3], 0.0))
-        and np.allclose(axis, axis[0]) and np.allclose(mass, mass[0]) and np.allclose(com, com[0])
-        and np.allclose(inertia, inertia[0])
+        and np.allclose(axis, axis[0])
     )
     if not same:
-        raise TreeError("SolverReplay needs the same robot in every world (topology, joint frames and inertias); "
-                        "per-world gains, limits, armature and friction may differ")
+        raise TreeError("SolverReplay needs the same robot in every world (topology and joint frames); "
+                        "per-world inertias, gains, limits, armature and friction may differ")
 
     jt, jpar, jch, qs, ds, xp, xc = jt[0], jpar[0], jch[0], qs[0], ds[0], xp[0], xc[0]
     roots = np.flatnonzero(jpar < 0)
@@ -215,37 +220,20 @@ def tree_from_model(model) -> ReplayTree:
         axv = axis[0, ds[j]].astype(np.float64)
         ax[k] = axv / np.linalg.norm(axv)
 
-    # inertia of each DoF's rigid group, about its centre of mass, in its body frame
-    m_sum = np.zeros(n)
-    c_sum = np.zeros((n, 3))
-    parts: list[list[tuple[float, np.ndarray, np.ndarray]]] = [[] for _ in range(n)]
+    body_dof = np.full(bpw, -1, dtype=np.int64)
+    rot_db, pos_db = np.tile(np.eye(3), (bpw, 1, 1)), np.zeros((bpw, 3))
     for b in range(bpw):
-        a, (rab, pab) = anchor[b]
-        mb = float(mass[0, b])
-        if a < 0 or mb <= 0.0:
-            continue
-        cb = rab @ com[0, b] + pab
-        parts[a].append((mb, cb, rab @ inertia[0, b] @ rab.T))
-        m_sum[a] += mb
-        c_sum[a] += mb * cb
-    g_com = np.zeros((n, 3))
-    g_inertia = np.zeros((n, 3, 3))
-    for k in range(n):
-        if m_sum[k] <= 0.0:
-            continue
-        g_com[k] = c_sum[k] / m_sum[k]
-        for mb, cb, ib in parts[k]:
-            d = cb - g_com[k]
-            g_inertia[k] += ib + mb * (d @ d * np.eye(3) - np.outer(d, d))
-    g_inertia = 0.5 * (g_inertia + g_inertia.transpose(0, 2, 1))
+        a, (rab, pab) = anchor.get(b, (-1, (None, None)))  # a body no joint reaches does not move
+        if a >= 0:
+            body_dof[b], rot_db[b], pos_db[b] = a, rab, pab
 
     return ReplayTree(
         n_dof=n,
         prismatic=np.array([jt[j] == JT.PRISMATIC for j in dofs]),
         parent=parent,
         rot_pj=_snap(rot_pj), pos_pj=_snap(pos_pj), rot_jc=_snap(rot_jc), pos_jc=_snap(pos_jc), axis=_snap(ax),
-        mass=m_sum, com=_snap(g_com), inertia=_snap(g_inertia), origin=origin,
+        body_dof=body_dof, rot_db=_snap(rot_db), pos_db=_snap(pos_db), origin=origin,
         q_offset=np.array([qs[j] for j in dofs], dtype=np.int64),
         qd_offset=np.array([ds[j] for j in dofs], dtype=np.int64),
-        coords_per_world=cpw, dofs_per_world=dpw, world_count=w_count,
+        coords_per_world=cpw, dofs_per_world=dpw, bodies_per_world=bpw, world_count=w_count,
     )
