@@ -14,7 +14,7 @@ import warp as wp
 
 from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 from wresdyn.robot.mujoco_model import build_mujoco
-from wresdyn.sim.replay import SolverReplay
+from wresdyn.sim.solver_replay import SolverReplay
 
 DT = 0.002
 

@@ -7,8 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.data.dataset import (SCHEMA_VERSION, SPLITS, Dataset, DatasetError, Trajectory, derive_qdd, load_dataset,
-                                  read_header)
+from wresdyn.data.dataset import (
+    SCHEMA_VERSION,
+    SPLITS,
+    Dataset,
+    DatasetError,
+    Trajectory,
+    derive_qdd,
+    load_dataset,
+    read_header,
+)
 
 RATE = 500.0
 NAMES = ["j_a", "j_b", "j_c"]

@@ -11,7 +11,6 @@ from wresdyn.evaluation.evaluate import evaluate_split, write_report
 from wresdyn.evaluation.plots import plot_fig3
 from wresdyn.sim.rollout import replay_trajectories
 
-
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.5, damping=0.5)
 """A real robot whose difference from the nominal one has a closed form in the simulator's terms: PD gains scaled
 and extra viscous damping, recorded at the sample rate (``substep`` 0), no friction, delay, saturation or noise."""

@@ -1,6 +1,6 @@
 """SolverReplay's dry friction against MuJoCo C ``frictionloss`` and against its own closed forms.
 
-The model (see :mod:`wresdyn.sim.replay.solver`): after the frictionless implicit step, Gauss-Seidel sweeps
+The model (see :mod:`wresdyn.sim.solver_replay.solver`): after the frictionless implicit step, Gauss-Seidel sweeps
 solve ``min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i)``, ``g_i`` the saturated damper
 ``tau = -clamp(kappa H_ii v, -mu, mu)``; ``kappa = inf`` is hard Coulomb friction. MuJoCo's default
 ``frictionloss`` is a soft constraint that creeps under a sub-threshold load; the default ``kappa`` is
@@ -17,7 +17,7 @@ import warp as wp
 from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 from wresdyn.robot.mujoco_model import build_mujoco
 from wresdyn.sim.parity import multisine_command
-from wresdyn.sim.replay import FRICTION_KAPPA, SolverReplay
+from wresdyn.sim.solver_replay import FRICTION_KAPPA, SolverReplay
 
 DT = 0.002
 

@@ -1,6 +1,6 @@
 """SolverReplay's generated-kernel cache: in the user cache folder only, and never runs a file it did not write.
 
-Generated kernel modules are written to :func:`wresdyn.sim.replay.kernel_dir` as ``replay_<hash>.py``, the
+Generated kernel modules are written to :func:`wresdyn.sim.solver_replay.kernel_dir` as ``replay_<hash>.py``, the
 hash being the SHA-256 of the generated source; Warp needs the file to read the kernels' source.
 """
 
@@ -11,8 +11,8 @@ import pytest
 from test_solver_replay import TRI_URDF
 
 from wresdyn.robot.description import load_robot
-from wresdyn.sim.replay import KernelCacheError, SolverReplay, kernel_dir
-from wresdyn.sim.replay import cache as kernel_cache
+from wresdyn.sim.solver_replay import KernelCacheError, SolverReplay, kernel_dir
+from wresdyn.sim.solver_replay import cache as kernel_cache
 
 DT = 0.002
 

@@ -16,7 +16,7 @@ import warp as wp
 from test_solver_replay import TRI_URDF
 
 from wresdyn.robot.description import load_robot
-from wresdyn.sim.replay import SolverReplay
+from wresdyn.sim.solver_replay import SolverReplay
 
 DT = 0.002
 T, W, N = 8, 2, 3

@@ -17,8 +17,8 @@ from test_solver_replay import TRI_URDF
 
 from wresdyn.robot.description import load_robot
 from wresdyn.robot.mujoco_model import build_mujoco
-from wresdyn.sim.replay import SolverReplay
-from wresdyn.sim.replay.tree import tree_from_model
+from wresdyn.sim.solver_replay import SolverReplay
+from wresdyn.sim.solver_replay.tree import tree_from_model
 
 DT = 0.002
 

@@ -20,7 +20,7 @@ import pytest
 import warp as wp
 
 from wresdyn.robot.description import load_robot
-from wresdyn.sim.replay import SolverReplay, TreeError
+from wresdyn.sim.solver_replay import SolverReplay, TreeError
 
 DT = 0.002
 

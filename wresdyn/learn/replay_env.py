@@ -42,7 +42,7 @@ class ReplayEnvConfig:
     substeps: int = 1
     """Simulator steps per recorded sample; the sim step is 1 / (rate_hz · substeps) [s]."""
     solver: SolverKind = "auto"
-    """Newton solver kind (:data:`wresdyn.sim.SOLVERS`); "auto" takes :class:`wresdyn.sim.replay.SolverReplay`
+    """Newton solver kind (:data:`wresdyn.sim.SOLVERS`); "auto" takes :class:`wresdyn.sim.solver_replay.SolverReplay`
     for a fixed base: 100-200k env-steps/s with 256 worlds on 2 busy CPU cores against ~1k for
     ``SolverFeatherstone``, with the same PD-only gap on the shipped benchmark (0.0801 vs 0.0798 rad held-out)."""
     max_qd: float = 100.0

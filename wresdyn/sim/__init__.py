@@ -5,15 +5,15 @@
 - :mod:`.bank`: recorded trajectories on the device, cut into :class:`Window` s, with the command delay/hold;
 - :mod:`.residual`: the residual kinds, their authority, observation and application;
 - :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`;
-- :mod:`.solvers`: the Newton solver choice; :mod:`.replay`: SolverReplay, this project's fused differentiable
+- :mod:`.solvers`: the Newton solver choice; :mod:`.solver_replay`: SolverReplay, this project's fused differentiable
   solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.bench`: the solver benchmark.
 """
 
 from ..errors import SimulationDiverged
 from .bank import TrajectoryBank, Window
-from .rollout import Rollout, rollout
+from .rollout import Replays, Rollout, replay, replay_trajectories, rollout
 from .simulator import DivergenceLimits, Simulator
 from .solvers import SOLVERS, explicit_pd_margin, make_solver, resolve_solver
 
 __all__ = ["SOLVERS", "DivergenceLimits", "Rollout", "SimulationDiverged", "Simulator", "TrajectoryBank", "Window",
-           "explicit_pd_margin", "make_solver", "resolve_solver", "rollout"]
+           "Replays", "explicit_pd_margin", "make_solver", "replay", "replay_trajectories", "resolve_solver", "rollout"]

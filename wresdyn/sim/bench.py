@@ -141,7 +141,7 @@ class _Bench:
 
     # -------------------------------------------------------------- SolverReplay rollout
     def rollout(self, w: int, backward: bool):
-        from .replay import SolverReplay
+        from .solver_replay import SolverReplay
 
         wp, args, n = self.wp, self.args, self.n
         model = self.robot.build_model(w, args.device, requires_grad=backward)
@@ -214,7 +214,7 @@ def run_bench(args) -> int:
     b = _Bench(args, robot)
 
     def replay_solver(model):
-        from .replay import SolverReplay
+        from .solver_replay import SolverReplay
 
         return SolverReplay(model, threads=args.threads)
 

@@ -68,6 +68,8 @@ class Simulator:
         substeps: Solver steps per sample period.
         device: Warp device (``"cpu"``, ``"cuda:0"``).
         requires_grad: Build a differentiable model (for :meth:`step_diff`).
+        param_grads: Gradients also reach the model's physical parameters (identification); off, the replay
+            solver folds parameters that are zero everywhere into its kernels (faster).
         graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA).
 
     Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
@@ -75,7 +77,8 @@ class Simulator:
     """
 
     def __init__(self, robot, n_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
-                 device: str | None = "cpu", requires_grad: bool = False, graph: bool | None = None) -> None:
+                 device: str | None = "cpu", requires_grad: bool = False, param_grads: bool = False,
+                 graph: bool | None = None) -> None:
         import warp as wp
 
         if n_worlds < 1 or substeps < 1 or not dt > 0:
@@ -88,7 +91,7 @@ class Simulator:
                              "or featherstone solver (add armature so explicit PD is stable)")
         self.requires_grad = bool(requires_grad)
         self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad)
-        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind)
+        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, param_grads=param_grads)
         self.device = _torch_device(device)
         self._cuda = self.device.type == "cuda"
         self.graph = self._cuda if graph is None else bool(graph) and self._cuda

@@ -1,4 +1,4 @@
-"""The robot tree that :class:`~wresdyn.sim.replay.SolverReplay` compiles: constants read once from a Newton model.
+"""The robot tree that :class:`~wresdyn.sim.solver_replay.SolverReplay` compiles: constants read once from a Newton model.
 
 A replay model holds ``W`` copies of one fixed-base robot, one per world. This module reads world 0's
 articulation out of the :class:`newton.Model` arrays, checks that every world holds the same robot, and

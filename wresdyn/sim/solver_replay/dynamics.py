@@ -94,7 +94,7 @@ class Group:
 @dataclass(frozen=True)
 class LiveInertia:
     """Which body parameters the kernels read; the others are compiled as constant 0 (``fold_zeros`` of
-    :class:`~wresdyn.sim.replay.SolverReplay`). Shapes per world: (bodies,), (bodies, 3), (bodies, 3, 3)."""
+    :class:`~wresdyn.sim.solver_replay.SolverReplay`). Shapes per world: (bodies,), (bodies, 3), (bodies, 3, 3)."""
 
     mass: np.ndarray
     com: np.ndarray
