@@ -8,9 +8,11 @@ stream, CUDA graphs of the solver steps and, for gradients, one state per step s
 stays valid.
 
 - Fast path, :meth:`Simulator.step`: writes the PD target and joint torque into ``control``, advances
-  ``substeps`` solver steps in place (on CUDA replayed from a captured graph, on torch's stream).
+  ``substeps`` solver steps in place (on CUDA replayed from a captured graph on the simulator's own stream,
+  ordered against torch's current stream).
 - Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function`` whose
-  backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque.
+  backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque (on Warp's
+  device stream, as in wave 1; its CUDA gradients were last checked against the CPU on an H200 there).
 
 Divergence (:class:`DivergenceLimits`, :meth:`Simulator.diverged`) is judged in one place: a non-finite state,
 a runaway joint speed, a joint far past its limit, or (when a reference is given) far from the recording.
@@ -100,10 +102,10 @@ class Simulator:
         w = self.n_worlds
         self.nq, self.nqd = self.model.joint_coord_count // w, self.model.joint_dof_count // w
         """Joint coordinates and DoFs per world (a floating base adds 7 and 6)."""
-        self._q = [wp.to_torch(s.joint_q).view(w, self.nq) for s in self.states]
-        self._qd = [wp.to_torch(s.joint_qd).view(w, self.nqd) for s in self.states]
-        self._target = wp.to_torch(self.control.joint_target_q).view(w, -1)
-        self._force = wp.to_torch(self.control.joint_f).view(w, self.nqd)
+        self._q = [wp.to_torch(s.joint_q, requires_grad=False).view(w, self.nq) for s in self.states]
+        self._qd = [wp.to_torch(s.joint_qd, requires_grad=False).view(w, self.nqd) for s in self.states]
+        self._target = wp.to_torch(self.control.joint_target_q, requires_grad=False).view(w, -1)
+        self._force = wp.to_torch(self.control.joint_f, requires_grad=False).view(w, self.nqd)
         self.q_index = _index(robot.q_index, self.device)
         self.qd_index = _index(robot.qd_index, self.device)
         f32 = dict(dtype=torch.float32, device=self.device)
@@ -111,6 +113,7 @@ class Simulator:
         self.upper = torch.as_tensor(robot.upper, **f32)
         self._cur = 0
         self._graphs: dict[int, object] = {}
+        self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._tape_buffers: list = []
         self._needs_fk = self.solver_kind != "replay"  # SolverReplay integrates joint coordinates only
 
@@ -129,7 +132,8 @@ class Simulator:
         self._q[self._cur][ids, self.q_index] = q.to(torch.float32)
         self._qd[self._cur][ids, self.qd_index] = qd.to(torch.float32)
         if self._needs_fk:
-            self._eval_fk(self.states[self._cur])
+            with self._stream():
+                self._eval_fk(self.states[self._cur])
 
     def _eval_fk(self, state) -> None:
         import newton
@@ -137,13 +141,27 @@ class Simulator:
         newton.eval_fk(self.model, state.joint_q, state.joint_qd, state)
 
     # ------------------------------------------------------------------------------------------------ stepping
+    @contextlib.contextmanager
     def _stream(self):
-        """Launch Warp work on torch's current stream: torch wrote the control there."""
+        """Run Warp work on this simulator's own CUDA stream, ordered after and before torch's current stream.
+
+        Torch wrote the control on its current stream and reads the state there afterwards; the solver runs on
+        a side stream that waits for the first and is waited for by the second. A stream of its own, because
+        CUDA graphs cannot be captured on torch's default (legacy) stream.
+        """
         if not self._cuda:
-            return contextlib.nullcontext()
+            yield
+            return
         import warp as wp
 
-        return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.device)))
+        if self._side is None:
+            self._side = torch.cuda.Stream(self.device)
+            self._wp_side = wp.stream_from_torch(self._side)
+        cur = torch.cuda.current_stream(self.device)
+        self._side.wait_stream(cur)
+        with wp.ScopedStream(self._wp_side):
+            yield
+        cur.wait_stream(self._side)
 
     def _advance(self) -> None:
         for _ in range(self.substeps):
@@ -217,12 +235,14 @@ class _Step(torch.autograd.Function):
         import warp as wp
 
         states, ctrl = sim._tape_buffers[k]
-        wp.copy(states[0].joint_q, wp.from_torch(sim._scatter(q, sim.q_index, sim.nq)))
-        wp.copy(states[0].joint_qd, wp.from_torch(sim._scatter(qd, sim.qd_index, sim.nqd)))
-        wp.copy(ctrl.joint_target_q, wp.from_torch(sim._scatter(target, sim.qd_index, sim.nqd)))
-        wp.copy(ctrl.joint_f, wp.from_torch(sim._scatter(tau, sim.qd_index, sim.nqd)))
+        inputs = [sim._scatter(q, sim.q_index, sim.nq), sim._scatter(qd, sim.qd_index, sim.nqd),
+                  sim._scatter(target, sim.qd_index, sim.nqd), sim._scatter(tau, sim.qd_index, sim.nqd)]
         tape = wp.Tape()
-        with sim._stream(), tape:
+        # On Warp's device stream, not Simulator._stream: backward runs on torch's autograd thread, and the
+        # side stream gave wrong CUDA gradients there (forward right, gradients off; found on an H200)
+        for dst, src in zip((states[0].joint_q, states[0].joint_qd, ctrl.joint_target_q, ctrl.joint_f), inputs):
+            wp.copy(dst, wp.from_torch(src))
+        with tape:
             if sim._needs_fk:
                 sim._eval_fk(states[0])
             for s in range(sim.substeps):
@@ -239,11 +259,10 @@ class _Step(torch.autograd.Function):
 
         sim, tape = ctx.sim, ctx.tape
         states, ctrl = sim._tape_buffers[ctx.k]
-        with sim._stream():
-            tape.backward(grads={
-                states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
-                states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
-            })
+        tape.backward(grads={
+            states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
+            states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
+        })
 
         def grad(a, idx, width):
             return wp.to_torch(a.grad).view(sim.n_worlds, width)[:, idx].clone()
