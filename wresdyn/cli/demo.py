@@ -54,9 +54,10 @@ def run(args: argparse.Namespace) -> int:
                     progress=lambda line: print("      " + line, flush=True)).save(data_path)
     data = load_dataset(data_path, robot=robot)
     if args.quick:
-        data = dataclasses.replace(data, trajectories=data.split("train")[:2] + data.split("heldout")[:1]
-                                   + data.split("ood")[:1])
-    print(f"[2/4] data: {data_path} ({', '.join(f'{s} {len(data.split(s))}' for s in ('train', 'heldout', 'ood'))}"
+        data = dataclasses.replace(data, trajectories=data.split("train")[:2] + data.split("validation")[:1]
+                                   + data.split("heldout")[:1] + data.split("ood")[:1])
+    splits = ", ".join(f"{s} {len(data.split(s))}" for s in ("train", "validation", "heldout", "ood"))
+    print(f"[2/4] data: {data_path} ({splits}"
           f", {data.rate_hz:g} Hz)", flush=True)
 
     gcfg = GradFitConfig(iterations=args.fit_iterations)
