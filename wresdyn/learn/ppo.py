@@ -59,9 +59,9 @@ class PPOConfig:
     """Mini-batches per pass."""
     gamma: float = 0.9
     """Discount per step; 1/(1−γ) = 10 steps = 20 ms at 500 Hz, about the PD time constants: a residual's
-    effect on tracking shows within that window, and a longer one only adds variance. On the shipped benchmark
-    γ = λ = 0.9 gave 2.70x held-out after 1800 iterations against 2.39x at 0.95 and worse at 0.99
-    (``benchmarks/results/h200_ppo_sweep``), and 3.17x against 2.98x after 4000 (with authority 0.5)."""
+    effect on tracking shows within that window, and a longer one only adds variance. Chosen in wave 1 on the
+    held-out split, before the validation split existed (``benchmarks/results/h200_ppo_sweep``); not yet
+    re-checked on validation."""
     lam: float = 0.9
     """GAE λ."""
     clip_param: float = 0.2

@@ -62,9 +62,10 @@ class ResidualConfig:
     """One of :data:`wresdyn.sim.residual.KINDS`."""
     fraction: float = 0.5
     """Residual authority: the largest residual as a fraction of each joint's effort limit (for
-    ``delta_action``, divided by kp). 0.5 rather than 0.25 on the shipped benchmark, where the "real" drives
-    saturate at 20 % of the limit and cancelling PD torque beyond that needs room: gradient fit 2.97x -> 3.09x
-    held-out, PPO 2.39x -> 2.76x after 1800 iterations (``benchmarks/results/h200_ppo_sweep``)."""
+    ``delta_action``, divided by kp). PPO's default 0.5, checked on validation: 0.0315 rad against 0.0352 at
+    0.25 after 1200 iterations (``benchmarks/results/validation_protocol/ppo_sweep_authority_1200_summary.md``);
+    the "real" drives saturate at 20 % of the limit and cancelling PD torque beyond that needs room. The
+    gradient fit's default is 0.25 (:class:`wresdyn.learn.gradfit.GradFitConfig`)."""
     action_gain: float = 0.2
     """Normalised residual per unit of network output, g in clip(g · a, −1, 1); 0.2 makes one unit
     0.05 of the effort limit and the initial exploration noise (``init_std`` 1) that large."""
