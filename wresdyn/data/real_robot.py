@@ -164,6 +164,24 @@ class RealRobot:
         m.actuator_biasprm[:n, 2] = -kd
         m.actuator_forcerange[:n] *= mm.torque_limit_scale
 
+    def physics(self):
+        """The true physical parameters of this robot in the simulator's terms
+        (:class:`~wresdyn.sim.physics.PhysicalParams`), read back from the perturbed MuJoCo model: what an
+        identification should find. Inertias are rotated from MuJoCo's principal frame into the body frame;
+        the delay is the FIFO's length [s]."""
+        from scipy.spatial.transform import Rotation
+
+        from ..sim.physics import PhysicalParams
+
+        m, n, r = self.model, self.robot.n_dof, self.robot
+        rot = Rotation.from_quat(m.body_iquat[1:], scalar_first=True).as_matrix()
+        inertia = rot @ (m.body_inertia[1:, :, None] * np.eye(3)) @ rot.transpose(0, 2, 1)
+        effort = np.where(np.isfinite(r.effort), m.actuator_forcerange[:n, 1], np.inf)
+        return PhysicalParams(list(r.joint_names), list(r.body_names), m.actuator_gainprm[:n, 0].copy(),
+                              -m.actuator_biasprm[:n, 2].copy(), m.dof_armature[:n].copy(), m.dof_damping[:n].copy(),
+                              m.dof_frictionloss[:n].copy(), effort, np.full(n, self.n_delay * self.substep),
+                              m.body_mass[1:].copy(), m.body_ipos[1:].copy(), inertia)
+
     def record(self, q_cmd: np.ndarray, rng: np.random.Generator | None = None, settle: float = 0.5
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Execute joint commands under PD and record what the robot's sensors report.

@@ -164,13 +164,16 @@ class TrajectoryBank:
         traj = torch.arange(self.n_trajectories, device=self.device)
         return self.window(traj, torch.zeros_like(traj), int(self.length.max()) - 1)
 
-    def sample(self, rng: np.random.Generator, b: int, steps: int) -> Window:
-        """``b`` windows of ``steps`` steps drawn uniformly over all (trajectory, start) pairs that fit."""
+    def draw(self, rng: np.random.Generator, b: int, steps: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """``b`` (trajectory, start) pairs of windows of ``steps`` steps, uniform over those that fit: (B,) each."""
         lengths = self.length.cpu().numpy()
         eligible = np.flatnonzero(lengths > steps)
         if len(eligible) == 0:
             raise ValueError(f"every trajectory is shorter than the {steps + 1} samples a window needs")
         traj = eligible[rng.integers(0, len(eligible), b)]
         start = rng.integers(0, lengths[traj] - steps, b)
-        t = lambda x: torch.as_tensor(x, device=self.device)  # noqa: E731
-        return self.window(t(traj), t(start), steps)
+        return torch.as_tensor(traj, device=self.device), torch.as_tensor(start, device=self.device)
+
+    def sample(self, rng: np.random.Generator, b: int, steps: int) -> Window:
+        """``b`` windows of ``steps`` steps drawn uniformly over all (trajectory, start) pairs that fit."""
+        return self.window(*self.draw(rng, b, steps), steps)

@@ -191,7 +191,7 @@ class Replays:
 
 def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kind: str | None = None,
                         solver: str = "auto", substeps: int = 1, device: str | None = "cpu", with_baseline: bool = False,
-                        delay=0.0, sim: Simulator | None = None) -> dict[str, Replays]:
+                        delay=0.0, sim: Simulator | None = None, physics=None) -> dict[str, Replays]:
     """Replay every trajectory open loop from its first recorded state, PD only and/or with ``policy``.
 
     Args:
@@ -204,18 +204,36 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
         with_baseline: Also run PD only, in extra worlds of the same batch.
         delay: Command-path delay of the simulator [steps] (see :mod:`wresdyn.sim.bank`).
         sim: A simulator to reuse (its world count must match), e.g. for repeated validation.
+        physics: Physical parameters of the model (:class:`~wresdyn.sim.physics.PhysicalParams`, e.g. identified
+            by ``wresdyn identify``) for the ``"residual"`` worlds, whose command delay then is ``physics.delay``;
+            the ``"pd"`` baseline keeps the robot file's. With ``physics`` and no policy, ``"residual"`` is the
+            calibrated model under PD alone.
 
     Returns:
-        ``{"pd": Replays, "residual": Replays}`` (``"residual"`` absent without a policy, ``"pd"`` without
-        the baseline).
+        ``{"pd": Replays, "residual": Replays}`` (``"residual"`` absent without a policy or physics, ``"pd"``
+        without the baseline).
     """
     trajectories = list(trajectories)
-    groups = (["pd"] if with_baseline or policy is None else []) + (["residual"] if policy is not None else [])
+    model = policy is not None or physics is not None
+    groups = (["pd"] if with_baseline or not model else []) + (["residual"] if model else [])
     w = len(trajectories)
     if sim is None or sim.n_worlds != w * len(groups):
         sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device)
-    window = TrajectoryBank(trajectories, sim.device, delay).whole().repeat(len(groups))
     pw = slice(groups.index("residual") * w, (groups.index("residual") + 1) * w) if len(groups) == 2 else None
+    if physics is None:
+        window = TrajectoryBank(trajectories, sim.device, delay).whole().repeat(len(groups))
+    else:
+        from .physics import PhysicalParams
+
+        mw = slice(None) if pw is None else pw
+        if pw is not None:
+            sim.set_physics(PhysicalParams.nominal(robot), worlds=slice(0, w))
+        sim.set_physics(physics, worlds=mw)
+        model_delay = torch.as_tensor(np.asarray(physics.delay) * rate_hz, dtype=torch.float32, device=sim.device)
+        parts = ([TrajectoryBank(trajectories, sim.device, delay).whole()] if pw is not None else []) + \
+            [TrajectoryBank(trajectories, sim.device, model_delay).whole()]
+        window = Window(*(torch.cat([getattr(p, f) for p in parts]) for f in ("q", "qd", "qdd", "cmd", "target",
+                                                                               "length")))
     with torch.no_grad():
         out = rollout(sim, window, policy, kind=kind, policy_worlds=pw)
     q, qd = out.q.cpu().double().numpy(), out.qd.cpu().double().numpy()

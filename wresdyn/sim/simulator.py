@@ -116,6 +116,59 @@ class Simulator:
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._tape_buffers: list = []
         self._needs_fk = self.solver_kind != "replay"  # SolverReplay integrates joint coordinates only
+        self.param_grads = bool(param_grads)
+        self._physics: dict[str, torch.Tensor] = {}  # field -> tensor carrying gradients (set_physics)
+
+    # ------------------------------------------------------------------------------------------------ physics
+    def _model_view(self, field: str, grad: bool = False) -> torch.Tensor:
+        """Torch view of a physical field's model array (or its gradient) per world: (W, n) for joint fields
+        (DoFs of the actuated joints selected by the caller), (W, nb[, 3[, 3]]) for body fields."""
+        import warp as wp
+
+        from .physics import MODEL_ARRAYS
+
+        a = getattr(self.model, MODEL_ARRAYS[field])
+        t = wp.to_torch(a.grad if grad else a, requires_grad=False)
+        return t.view(self.n_worlds, -1, *t.shape[1:]) if field.startswith("body_") else t.view(self.n_worlds, -1)
+
+    def set_physics(self, values, worlds: slice | None = None) -> None:
+        """Write physical parameters into every world's model arrays (:mod:`wresdyn.sim.physics`).
+
+        ``values``: a :class:`~wresdyn.sim.physics.PhysicalParams` or a dict of its fields as tensors
+        (joint fields (n,), body fields (nb,), (nb, 3), (nb, 3, 3)); ``delay`` is ignored here (it belongs to
+        the command path). Tensors that require grad, with ``param_grads``, receive gradients through
+        :meth:`step_diff`. An infinite effort is written as 0 (Newton's "unlimited"). ``worlds``: only these
+        worlds (e.g. a nominal baseline next to a calibrated model in one batch; no gradients then).
+        """
+        from .physics import MODEL_ARRAYS, PhysicalParams
+
+        if isinstance(values, PhysicalParams):
+            values.check(self.robot)
+            values = {f: torch.as_tensor(getattr(values, f)) for f in MODEL_ARRAYS}
+        self._physics = {}
+        w = slice(None) if worlds is None else worlds
+        with torch.no_grad():
+            for f, v in values.items():
+                if f not in MODEL_ARRAYS:
+                    continue
+                v32 = v.detach().to(self.device, torch.float32)
+                if f == "effort":
+                    v32 = torch.where(torch.isfinite(v32), v32, torch.zeros_like(v32))
+                view = self._model_view(f)
+                if f.startswith("body_"):
+                    view[w] = v32
+                else:
+                    view[w, self.qd_index] = v32
+                if v.requires_grad and worlds is None:
+                    if not (self.param_grads and self.requires_grad):
+                        raise RuntimeError("gradients to physical parameters need Simulator(requires_grad=True, "
+                                           "param_grads=True)")
+                    self._physics[f] = v
+        from newton import ModelFlags
+
+        # SolverReplay recompiles only when an entry folded as zero became non-zero
+        self.solver.notify_model_changed(ModelFlags.JOINT_DOF_PROPERTIES | ModelFlags.BODY_INERTIAL_PROPERTIES)
+        self._graphs.clear()  # captured launches may hold recompiled kernels' predecessors
 
     # ------------------------------------------------------------------------------------------------ state
     @property
@@ -206,7 +259,8 @@ class Simulator:
         while len(self._tape_buffers) <= k:
             self._tape_buffers.append(([self.model.state(requires_grad=True) for _ in range(self.substeps + 1)],
                                        self.model.control(requires_grad=True)))
-        return _Step.apply(q, qd, target, tau, self, k)
+        names = tuple(self._physics)
+        return _Step.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))
 
     def diverged(self, q: torch.Tensor, qd: torch.Tensor, limits: DivergenceLimits,
                  q_ref: torch.Tensor | None = None) -> torch.Tensor:
@@ -231,7 +285,7 @@ class _Step(torch.autograd.Function):
     """One differentiable sample period: (q, q̇, PD target, joint torque) -> (q', q̇'), each (N, n)."""
 
     @staticmethod
-    def forward(ctx, q, qd, target, tau, sim: Simulator, k: int):
+    def forward(ctx, q, qd, target, tau, sim: Simulator, k: int, names: tuple = (), *physics):
         import warp as wp
 
         states, ctrl = sim._tape_buffers[k]
@@ -247,7 +301,8 @@ class _Step(torch.autograd.Function):
                 sim._eval_fk(states[0])
             for s in range(sim.substeps):
                 sim.solver.step(states[s], states[s + 1], ctrl, None, sim.dt_sub)
-        ctx.tape, ctx.sim, ctx.k = tape, sim, k
+        ctx.tape, ctx.sim, ctx.k, ctx.names = tape, sim, k, names
+        ctx.physics_meta = [(p.dtype, p.device) for p in physics]
         out = states[-1]
         q_out = wp.to_torch(out.joint_q).view(sim.n_worlds, sim.nq)[:, sim.q_index].clone()
         qd_out = wp.to_torch(out.joint_qd).view(sim.n_worlds, sim.nqd)[:, sim.qd_index].clone()
@@ -259,6 +314,8 @@ class _Step(torch.autograd.Function):
 
         sim, tape = ctx.sim, ctx.tape
         states, ctrl = sim._tape_buffers[ctx.k]
+        for f in ctx.names:  # the parameters' gradients accumulate over every step's tape: start this one at 0
+            sim._model_view(f, grad=True).zero_()
         tape.backward(grads={
             states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
             states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
@@ -269,6 +326,11 @@ class _Step(torch.autograd.Function):
 
         out = (grad(states[0].joint_q, sim.q_index, sim.nq), grad(states[0].joint_qd, sim.qd_index, sim.nqd),
                grad(ctrl.joint_target_q, sim.qd_index, sim.nqd), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
+        physics = []
+        for f, (dtype, device) in zip(ctx.names, ctx.physics_meta):  # summed over worlds: one robot
+            g = sim._model_view(f, grad=True)
+            g = g.sum(0) if f.startswith("body_") else g[:, sim.qd_index].sum(0)
+            physics.append(g.to(device, dtype))
         tape.zero()
         ctx.tape = None
-        return (*out, None, None)
+        return (*out, None, None, None, *physics)

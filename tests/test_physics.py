@@ -1,0 +1,128 @@
+"""The simulator's physical parameters as fitted quantities (:mod:`wresdyn.sim.physics`): the log-Cholesky
+parametrisation, the JSON file, the real robot's true values, and gradients to the model's own arrays through
+:meth:`Simulator.step_diff` against central finite differences."""
+
+import numpy as np
+import pytest
+import torch
+
+from wresdyn.data.real_robot import Mismatch, RealRobot
+from wresdyn.sim import Simulator, TrajectoryBank
+from wresdyn.sim.physics import PhysicalParams, PhysicsError, PhysicsModel, pseudo_inertia
+
+DT = 0.002
+
+
+def test_start_values_are_reproduced_exactly(humanoid):
+    """At u = start, the module returns the start values (the Cholesky round trip is exact to float64)."""
+    start = PhysicalParams.nominal(humanoid)
+    v = PhysicsModel(humanoid, start).values()
+    for f in ("kp", "kd", "armature", "damping", "friction", "effort", "body_mass", "body_com", "body_inertia"):
+        np.testing.assert_allclose(getattr(v, f), getattr(start, f), rtol=1e-9, atol=1e-12, err_msg=f)
+
+
+def test_any_coordinates_give_a_physical_body(humanoid):
+    """Random coordinates: positive masses, positive-definite inertias obeying the triangle inequalities."""
+    model = PhysicsModel(humanoid)
+    with torch.no_grad():
+        model.u_body_logdiag.add_(torch.randn_like(model.u_body_logdiag))
+        model.u_body_off.add_(0.3 * torch.randn_like(model.u_body_off))
+    v = model.values()
+    moving = model.moving.numpy()
+    assert (v.body_mass[moving] > 0).all()
+    eig = np.linalg.eigvalsh(v.body_inertia[moving])
+    assert (eig > 0).all()
+    assert (eig[:, 0] + eig[:, 1] >= eig[:, 2] * (1 - 1e-9)).all()  # triangle inequality of principal moments
+    j = pseudo_inertia(v.body_mass[moving], v.body_com[moving], v.body_inertia[moving])
+    ev = np.linalg.eigvalsh(j)  # positive definite up to round-off of the J -> (m, c, I) -> J round trip
+    assert (ev[:, 0] > -1e-9 * ev[:, -1]).all()
+
+
+def test_json_round_trip_and_bad_files(humanoid, tmp_path):
+    p = PhysicsModel(humanoid).values()
+    p.effort[0] = np.inf
+    p.save(tmp_path / "p.json")
+    q = PhysicalParams.load(tmp_path / "p.json", humanoid)
+    assert q.effort[0] == np.inf and np.array_equal(q.body_inertia, p.body_inertia)
+    with pytest.raises(PhysicsError, match="not found"):
+        PhysicalParams.load(tmp_path / "missing.json")
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(PhysicsError, match="malformed"):
+        PhysicalParams.load(tmp_path / "bad.json")
+    d = p.to_json()
+    d["joint_names"] = d["joint_names"][::-1]
+    (tmp_path / "names.json").write_text(__import__("json").dumps(d))
+    with pytest.raises(PhysicsError, match="joint names"):
+        PhysicalParams.load(tmp_path / "names.json", humanoid)
+
+
+def test_real_robot_truth_is_the_mujoco_model(humanoid):
+    """The true parameters read back from the perturbed MuJoCo model: nominal when the mismatch is off, the
+    configured scales when on."""
+    nominal = RealRobot(humanoid, Mismatch()).physics()
+    ref = PhysicalParams.nominal(humanoid)
+    for f in ("kp", "kd", "armature", "friction", "effort", "body_mass", "body_com", "body_inertia"):
+        np.testing.assert_allclose(getattr(nominal, f), getattr(ref, f), rtol=1e-6, atol=1e-9, err_msg=f)
+    mm = Mismatch(kp_scale=0.75, damping=0.5, friction=0.1, torque_limit_scale=0.2, delay=0.006, substep=0.001)
+    t = RealRobot(humanoid, mm).physics()
+    np.testing.assert_allclose(t.kp, 0.75 * humanoid.kp)
+    np.testing.assert_allclose(t.damping, 0.5 * humanoid.kd)
+    np.testing.assert_allclose(t.friction, 0.1 * humanoid.effort)
+    np.testing.assert_allclose(t.effort, 0.2 * humanoid.effort)
+    np.testing.assert_allclose(t.delay, 0.006)
+
+
+EPS = 1e-2
+"""Finite-difference step in the module's coordinates (1 % for the exp fields, 0.01 reference units for the
+linear ones): the loss is O(100) in float32 (ulp 1e-5), so a 1e-3 step left the difference quantised to ~1/6
+of these gradients; at 1e-2 round-off is ~2 % of the smallest and the truncation error O(eps²) below it."""
+
+
+def test_parameter_gradients_match_finite_differences(humanoid):
+    """d loss / d coordinates of every field through 4 SolverReplay steps of the humanoid, with friction,
+    damping, a saturating drive and a fractional delay all active: directional derivatives per field."""
+    start = PhysicalParams.nominal(humanoid)
+    start.friction = 0.02 * humanoid.effort
+    start.damping = 0.3 * humanoid.kd
+    start.effort = 0.3 * humanoid.effort
+    start.delay[:] = 1.4 * DT
+    model = PhysicsModel(humanoid, start, dt=DT)
+    b, h = 2, 4
+    sim = Simulator(humanoid, b, DT, solver="replay", requires_grad=True, param_grads=True)
+    rng = np.random.default_rng(0)
+    t_len = 12
+    traj = []
+    for i in range(b):
+        cmd = humanoid.q0 + 0.4 * np.sin(np.linspace(0, 3, t_len))[:, None] * rng.uniform(-1, 1, humanoid.n_dof)
+        traj.append(type("T", (), {"q": cmd + 0.01, "qd": np.zeros_like(cmd), "qdd": np.zeros_like(cmd),
+                                   "q_cmd": cmd})())
+    q_ref = torch.as_tensor(rng.uniform(-0.2, 0.2, (b, h, humanoid.n_dof)), dtype=torch.float32)
+
+    def loss():
+        bank = TrajectoryBank(traj, sim.device, delay=model.delay_steps().float())
+        w = bank.window(torch.arange(b), torch.full((b,), 6), h)
+        sim.set_physics(model())
+        q, qd, total = w.q[:, 0], w.qd[:, 0] + 0.5, 0.0
+        for k in range(h):
+            q, qd = sim.step_diff(k, q, qd, w.target[:, k])
+            total = total + ((q - q_ref[:, k]) ** 2).sum() + 0.01 * (qd ** 2).sum()
+        return total
+
+    params = dict(model.named_parameters())
+    model.zero_grad()
+    loss().backward()
+    grads = {k: p.grad.clone() for k, p in params.items()}
+    gen = torch.Generator().manual_seed(0)
+    for name, p in params.items():
+        d = torch.randn(p.shape, generator=gen, dtype=p.dtype)
+        d /= d.norm()
+        with torch.no_grad():
+            p.add_(EPS * d)
+            plus = float(loss())
+            p.sub_(2 * EPS * d)
+            minus = float(loss())
+            p.add_(EPS * d)
+        fd = (plus - minus) / (2 * EPS)
+        tape = float((grads[name] * d).sum())
+        assert grads[name].abs().max() > 1e-5, name  # the field really moves the loss
+        assert abs(tape - fd) <= 2e-2 * float(grads[name].norm()) + 1e-6, (name, tape, fd)

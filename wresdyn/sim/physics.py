@@ -1,0 +1,278 @@
+"""The simulator's own physical parameters as fitted quantities: per joint and per link, physically consistent.
+
+What the grey-box identification (:mod:`wresdyn.learn.sysid`) fits and what a calibrated robot carries, in the
+units of the Newton model arrays that :class:`~wresdyn.sim.solver_replay.SolverReplay` reads every launch:
+
+========================  =========================  =====================================================
+field                     shape, unit                model array (per world)
+========================  =========================  =====================================================
+``kp``, ``kd``            (n,) N·m/rad, N·m·s/rad    ``joint_target_ke``, ``joint_target_kd``
+``armature``              (n,) kg·m²                 ``joint_armature``
+``damping``               (n,) N·m·s/rad             ``joint_damping`` (viscous)
+``friction``              (n,) N·m                   ``joint_friction`` (dry friction with stiction)
+``effort``                (n,) N·m                   ``joint_effort_limit`` (the drive saturates there)
+``delay``                 (n,) s                     the command path (:class:`~wresdyn.sim.bank.TrajectoryBank`)
+``body_mass``             (nb,) kg                   ``body_mass``
+``body_com``              (nb, 3) m, body frame      ``body_com``
+``body_inertia``          (nb, 3, 3) kg·m², at com   ``body_inertia``
+========================  =========================  =====================================================
+
+:class:`PhysicalParams` holds the values (numpy, float64) and reads/writes them as JSON (never a pickle);
+:class:`PhysicsModel` is the torch module that produces them from unconstrained coordinates:
+
+- gains, armature, mass: ``nominal · exp(u)`` (positive, scale-free steps);
+- damping, friction, effort and delay: ``reference · u`` with ``u`` projected onto ``u ≥ 0``
+  (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
+- each link's mass, centre of mass and inertia through the log-Cholesky factor of its 4×4 pseudo-inertia
+  ``J = [[Σ, h], [hᵀ, m]] = U Uᵀ`` (Rucker & Wensing 2022), ``Σ = ∫ r rᵀ dm`` about the body origin and
+  ``h = m c``: every ``U`` with a positive diagonal gives a physically realisable body (positive mass, the
+  triangle inequalities of the principal moments), so no fitted value can leave physics.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+
+__all__ = ["JOINT_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsModel", "PhysicsError", "pseudo_inertia",
+           "from_pseudo_inertia"]
+
+JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
+"""Per-joint fields of :class:`PhysicalParams`, each (n_dof,)."""
+BODY_FIELDS = ("body_mass", "body_com", "body_inertia")
+"""Per-body fields, (n_bodies,), (n_bodies, 3), (n_bodies, 3, 3)."""
+MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "joint_armature",
+                "damping": "joint_damping", "friction": "joint_friction", "effort": "joint_effort_limit",
+                "body_mass": "body_mass", "body_com": "body_com", "body_inertia": "body_inertia"}
+"""Newton model array of each field (``delay`` is the command path's, not the model's)."""
+
+
+class PhysicsError(ValueError):
+    """A parameter file that cannot be used; the message is one line naming the file."""
+
+
+@dataclass
+class PhysicalParams:
+    """Physical parameters of one robot, SI units (table in the module docstring). Arrays float64."""
+
+    joint_names: list[str]
+    body_names: list[str]
+    kp: np.ndarray
+    kd: np.ndarray
+    armature: np.ndarray
+    damping: np.ndarray
+    friction: np.ndarray
+    effort: np.ndarray
+    """Effort limit [N·m]; ``inf`` = unlimited."""
+    delay: np.ndarray
+    """Actuator delay [s] of each joint's command."""
+    body_mass: np.ndarray
+    body_com: np.ndarray
+    body_inertia: np.ndarray
+
+    @classmethod
+    def nominal(cls, robot) -> "PhysicalParams":
+        """The robot file's values (no delay)."""
+        n = robot.n_dof
+        return cls(list(robot.joint_names), list(robot.body_names), *(np.array(getattr(robot, f), dtype=np.float64)
+                   for f in ("kp", "kd", "armature", "damping", "friction", "effort")), np.zeros(n),
+                   np.array(robot.body_mass, dtype=np.float64), np.array(robot.body_com, dtype=np.float64),
+                   np.array(robot.body_inertia, dtype=np.float64))
+
+    def copy(self) -> "PhysicalParams":
+        return PhysicalParams(**{f.name: (list(v) if isinstance(v := getattr(self, f.name), list) else v.copy())
+                                 for f in fields(self)})
+
+    def check(self, robot, where: str = "parameters") -> None:
+        """Raise :class:`PhysicsError` unless these parameters describe ``robot`` (names, shapes, signs)."""
+        if list(self.joint_names) != list(robot.joint_names):
+            raise PhysicsError(f"{where}: joint names {self.joint_names[:3]}... do not match the robot's "
+                               f"{list(robot.joint_names)[:3]}... ({len(self.joint_names)} vs {robot.n_dof} joints)")
+        if list(self.body_names) != list(robot.body_names):
+            raise PhysicsError(f"{where}: body names do not match the robot's ({len(self.body_names)} vs "
+                               f"{robot.n_bodies} bodies)")
+        n, nb = robot.n_dof, robot.n_bodies
+        want = {**{f: (n,) for f in JOINT_FIELDS}, "body_mass": (nb,), "body_com": (nb, 3), "body_inertia": (nb, 3, 3)}
+        for f, shape in want.items():
+            a = getattr(self, f)
+            if a.shape != shape:
+                raise PhysicsError(f"{where}: {f} has shape {a.shape}, expected {shape}")
+            if np.isnan(a).any() or (f != "effort" and not np.isfinite(a).all()):
+                raise PhysicsError(f"{where}: {f} is not finite")
+            if f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "body_mass") and (a < 0).any():
+                raise PhysicsError(f"{where}: {f} must be >= 0")
+
+    # ------------------------------------------------------------------------------------------------ JSON
+    def to_json(self) -> dict:
+        d = {"format": "wresdyn.physics/1", "joint_names": self.joint_names, "body_names": self.body_names}
+        for f in (*JOINT_FIELDS, *BODY_FIELDS):
+            a = getattr(self, f)
+            d[f] = np.where(np.isfinite(a), a, -1.0).tolist() if f == "effort" else a.tolist()
+        return d
+
+    def save(self, path: str | Path) -> None:
+        """Write JSON atomically (``effort`` −1 = unlimited)."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_json(), indent=1))
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: str | Path, robot=None) -> "PhysicalParams":
+        """Read a file written by :meth:`save`; with ``robot``, check it describes that robot."""
+        path = Path(path)
+        if not path.is_file():
+            raise PhysicsError(f"{path}: parameter file not found")
+        try:
+            d = json.loads(path.read_text())
+            if d.get("format") != "wresdyn.physics/1":
+                raise PhysicsError(f"{path}: not a wresdyn physics file (format {d.get('format')!r})")
+            arrays = {f: np.asarray(d[f], dtype=np.float64) for f in (*JOINT_FIELDS, *BODY_FIELDS)}
+        except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as e:
+            if isinstance(e, PhysicsError):
+                raise
+            raise PhysicsError(f"{path}: malformed physics file ({type(e).__name__}: {e})") from None
+        arrays["effort"] = np.where(arrays["effort"] < 0, np.inf, arrays["effort"])
+        p = cls(list(d["joint_names"]), list(d["body_names"]), **arrays)
+        if robot is not None:
+            p.check(robot, str(path))
+        return p
+
+
+def pseudo_inertia(mass, com, inertia):
+    """4×4 pseudo-inertia ``J = [[Σ, m c], [m cᵀ, m]]``, ``Σ = ½ tr(I_o) 1 − I_o``, ``I_o`` the inertia about the
+    body origin. Torch or numpy: mass (...,), com (..., 3), inertia about the com (..., 3, 3)."""
+    xp = torch if torch.is_tensor(mass) else np
+    eye = xp.eye(3, dtype=inertia.dtype) if xp is np else torch.eye(3, dtype=inertia.dtype, device=inertia.device)
+    c = com[..., :, None]
+    cc = (c * c.swapaxes(-1, -2)) if xp is np else c @ c.transpose(-1, -2)
+    m = mass[..., None, None]
+    i_o = inertia + m * ((com * com).sum(-1)[..., None, None] * eye - cc)
+    tr = xp.diagonal(i_o, axis1=-2, axis2=-1).sum(-1) if xp is np else torch.diagonal(i_o, dim1=-2, dim2=-1).sum(-1)
+    sigma = 0.5 * tr[..., None, None] * eye - i_o
+    h = mass[..., None] * com
+    top = xp.concatenate([sigma, h[..., :, None]], -1) if xp is np else torch.cat([sigma, h[..., :, None]], -1)
+    bottom = xp.concatenate([h, mass[..., None]], -1)[..., None, :] if xp is np else \
+        torch.cat([h, mass[..., None]], -1)[..., None, :]
+    return xp.concatenate([top, bottom], -2) if xp is np else torch.cat([top, bottom], -2)
+
+
+def from_pseudo_inertia(j: torch.Tensor):
+    """Inverse of :func:`pseudo_inertia` (torch): ``J`` (..., 4, 4) -> (mass, com, inertia about the com)."""
+    m = j[..., 3, 3]
+    c = j[..., :3, 3] / m[..., None]
+    sigma_c = j[..., :3, :3] - m[..., None, None] * (c[..., :, None] @ c[..., None, :])
+    eye = torch.eye(3, dtype=j.dtype, device=j.device)
+    tr = torch.diagonal(sigma_c, dim1=-2, dim2=-1).sum(-1)
+    return m, c, tr[..., None, None] * eye - sigma_c
+
+
+def _upper_cholesky(j: np.ndarray) -> np.ndarray:
+    """Upper-triangular ``U`` with ``U Uᵀ = J`` (positive diagonal), for a batch (..., 4, 4)."""
+    p = np.eye(4)[::-1]
+    return p @ np.linalg.cholesky(p @ j @ p) @ p
+
+
+class PhysicsModel(torch.nn.Module):
+    """Unconstrained coordinates -> :class:`PhysicalParams` values as torch tensors (module docstring).
+
+    Args:
+        robot: The robot (nominal values, names, which bodies move).
+        start: Values to start from (default the robot's nominal ones); the exp-parametrised fields are
+            relative to them, the linear ones measured in the reference units below.
+        fit: Fields to fit (default all of :data:`JOINT_FIELDS` and ``"bodies"``); the others stay at ``start``.
+        dt: Sample period [s]; the delay's unit.
+    """
+
+    def __init__(self, robot, start: PhysicalParams | None = None, fit=None, dt: float = 0.002) -> None:
+        super().__init__()
+        start = start or PhysicalParams.nominal(robot)
+        start.check(robot)
+        self.robot, self.start, self.dt = robot, start, float(dt)
+        self.fit = set(fit or (*JOINT_FIELDS, "bodies"))
+        f64 = dict(dtype=torch.float64)
+        n = robot.n_dof
+        kd, eff = np.asarray(robot.kd, float), np.asarray(robot.effort, float)
+        eff_ref = np.where(np.isfinite(eff), eff, 10.0 * np.maximum(robot.kp, 1.0))
+        # linear fields: value = ref * u, u >= 0; references make u ~ O(0.1-1)
+        self.ref = {"damping": kd, "friction": 0.05 * eff_ref, "effort": eff_ref, "delay": np.full(n, self.dt)}
+        for f, r in self.ref.items():
+            self.register_buffer(f"ref_{f}", torch.as_tensor(r, **f64))
+        for f in ("kp", "kd", "armature"):
+            self.register_buffer(f"start_{f}", torch.as_tensor(getattr(start, f), **f64))
+            self.register_parameter(f"u_{f}", torch.nn.Parameter(torch.zeros(n, **f64), f in self.fit))
+        for f, r in self.ref.items():
+            s = getattr(start, f)
+            u0 = np.where(np.isfinite(s), s, r) / r  # an unlimited effort starts at the reference
+            self.register_parameter(f"u_{f}", torch.nn.Parameter(torch.as_tensor(u0, **f64), f in self.fit))
+        # links that move (mass > 0 and not welded to the world)
+        moving = np.array([m > 0 and _moves(robot, b) for b, m in enumerate(start.body_mass)])
+        self.register_buffer("moving", torch.as_tensor(np.flatnonzero(moving)))
+        j = pseudo_inertia(start.body_mass[moving], start.body_com[moving], start.body_inertia[moving])
+        u = _upper_cholesky(j)
+        diag = np.log(np.diagonal(u, axis1=-2, axis2=-1))
+        self.register_buffer("triu", torch.as_tensor(np.stack(np.triu_indices(4, 1)), dtype=torch.long))
+        off = u[:, self.triu[0].numpy(), self.triu[1].numpy()]
+        bodies = "bodies" in self.fit
+        self.u_body_logdiag = torch.nn.Parameter(torch.as_tensor(diag, **f64), bodies)
+        self.u_body_off = torch.nn.Parameter(torch.as_tensor(off, **f64), bodies)
+        self.register_buffer("u0_body_logdiag", self.u_body_logdiag.detach().clone())
+        self.register_buffer("u0_body_off", self.u_body_off.detach().clone())
+        self.register_buffer("start_mass", torch.as_tensor(start.body_mass, **f64))
+        self.register_buffer("start_com", torch.as_tensor(start.body_com, **f64))
+        self.register_buffer("start_inertia", torch.as_tensor(start.body_inertia, **f64))
+
+    def forward(self) -> dict[str, torch.Tensor]:
+        """Current values, float64 tensors named as :class:`PhysicalParams` fields (delay in seconds)."""
+        out = {f: getattr(self, f"start_{f}") * torch.exp(getattr(self, f"u_{f}")) for f in ("kp", "kd", "armature")}
+        for f in self.ref:
+            out[f] = getattr(self, f"ref_{f}") * getattr(self, f"u_{f}")
+        nm = len(self.moving)
+        u = torch.diag_embed(torch.exp(self.u_body_logdiag))
+        u = u.index_put((torch.arange(nm)[:, None].expand(nm, 6), self.triu[0].expand(nm, 6),
+                         self.triu[1].expand(nm, 6)), self.u_body_off)
+        m, c, inertia = from_pseudo_inertia(u @ u.transpose(-1, -2))
+        out["body_mass"] = self.start_mass.index_put((self.moving,), m)
+        out["body_com"] = self.start_com.index_put((self.moving,), c)
+        out["body_inertia"] = self.start_inertia.index_put((self.moving,), inertia)
+        return out
+
+    @torch.no_grad()
+    def project(self) -> None:
+        """Keep the linear fields' coordinates >= 0 (call after each optimiser step); the effort limit and
+        the delay get small positive floors (a drive with no torque, a negative delay are not physical)."""
+        for f in self.ref:
+            getattr(self, f"u_{f}").clamp_(min=0.05 if f == "effort" else 0.0)
+
+    def delay_steps(self) -> torch.Tensor:
+        """The delay in sample periods, (n,) float64 (what :class:`~wresdyn.sim.bank.TrajectoryBank` takes)."""
+        return self.ref_delay * self.u_delay / self.dt
+
+    def values(self) -> PhysicalParams:
+        """The current values as :class:`PhysicalParams` (numpy)."""
+        with torch.no_grad():
+            v = {k: t.detach().cpu().numpy().copy() for k, t in self().items()}
+        return PhysicalParams(list(self.robot.joint_names), list(self.robot.body_names), **v)
+
+    def prior(self) -> torch.Tensor:
+        """Squared distance of the coordinates from the start, in their own units (a weak prior for what the
+        data cannot tell apart, e.g. the mass of a link against its centre of mass along the joint axis)."""
+        terms = [getattr(self, f"u_{f}") ** 2 for f in ("kp", "kd", "armature") if f in self.fit]
+        if "bodies" in self.fit:
+            terms.append((self.u_body_logdiag - self.u0_body_logdiag) ** 2)
+            scale = torch.exp(self.u0_body_logdiag).amax(-1, keepdim=True)  # off-diagonals relative to the factor
+            terms.append(((self.u_body_off - self.u0_body_off) / scale) ** 2)
+        return sum(t.sum() for t in terms) if terms else torch.zeros((), dtype=torch.float64)
+
+
+def _moves(robot, b: int) -> bool:
+    """Whether body ``b`` moves: some joint on its path to the world is not fixed."""
+    while b >= 0:
+        if robot.joint_type[b] != "fixed":
+            return True
+        b = int(robot.body_parent[b])
+    return False
