@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("wresdyn.cli.train", "learn a residual with PPO on a dataset's training split (resumable)"),
     "eval": ("wresdyn.cli.eval", "replay held-out and OOD data open-loop: PD only vs PD + residual, report"),
     "bench": ("wresdyn.cli.bench", "env-steps/s of the replay workload for every solver, same robot and worlds"),
+    "identify": ("wresdyn.cli.identify", "identify the simulator's own physics (gains, friction, delay, masses...)"),
     "fit": ("wresdyn.cli.fit", "learn a residual by gradient descent through the differentiable simulation"),
     "ablate": ("wresdyn.cli.ablate", "PPO vs gradient vs parametric x MLP/GRU x torque/delta action x seeds"),
 }

@@ -34,6 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--solver", choices=choices(SolverKind), default=None, help="simulation solver (default: auto)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--seed", type=int, default=0, help="seed")
+    p.add_argument("--physics", default=None, metavar="JSON",
+                   help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards (like `wresdyn eval`)")
 
 
@@ -48,7 +50,8 @@ def config_from_args(args: argparse.Namespace):
     if args.fraction is not None:
         res["fraction"] = args.fraction
     kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("horizon", args.horizon),
-                            ("lr", args.lr), ("solver", args.solver), ("obs_noise", args.obs_noise)) if v is not None}
+                            ("lr", args.lr), ("solver", args.solver), ("obs_noise", args.obs_noise),
+                            ("physics", args.physics)) if v is not None}
     if args.curriculum is not None:
         kw["horizon_curriculum"] = tuple(int(h) for h in args.curriculum.split(",") if h)
         if kw["horizon_curriculum"] and "horizon" not in kw:

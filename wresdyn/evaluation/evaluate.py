@@ -74,8 +74,11 @@ def metrics(trajectories, replays) -> Metrics:
 
 
 def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str | None = None, solver: str = "auto",
-                   substeps: int = 1, device: str | None = "cpu", delay: float = 0.0) -> tuple[dict, dict]:
-    """PD-only and PD + residual metrics for one split.
+                   substeps: int = 1, device: str | None = "cpu", delay: float = 0.0, physics=None
+                   ) -> tuple[dict, dict]:
+    """PD-only and PD + residual metrics for one split (``physics``: the model's physical parameters, see
+    :func:`~wresdyn.sim.rollout.replay_trajectories`; "PD + residual" is then the calibrated model with its
+    residual, or alone without a policy).
 
     Returns:
         ``(summary, replays)``: summary ``{"pd_only": Metrics-dict, "pd_residual": Metrics-dict | None,
@@ -86,7 +89,7 @@ def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str |
     if not trajectories:
         raise ValueError("no trajectories to evaluate")
     runs = replay_trajectories(robot, trajectories, rate_hz, policy, kind=kind, solver=solver, substeps=substeps,
-                               device=device, with_baseline=True, delay=delay)
+                               device=device, with_baseline=True, delay=delay, physics=physics)
     pd = metrics(trajectories, runs["pd"])
     res = metrics(trajectories, runs["residual"]) if "residual" in runs else None
     summary = {

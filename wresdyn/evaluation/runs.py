@@ -8,7 +8,9 @@ __all__ = ["evaluate_run"]
 def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
                  device: str = "cpu", joints: int = 6, compare=(), data_label: str = "") -> dict:
     """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
-    per-split summaries."""
+    per-split summaries. A run with ``physics.json`` (``wresdyn identify``, or a residual fitted on top of
+    identified physics) replays its model with those parameters; a run with no residual evaluates the
+    calibrated model under PD alone."""
     import json
     from pathlib import Path
 
@@ -19,14 +21,23 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     from .plots import plot_fig3, plot_learning_curves
 
     torch.set_num_threads(1)
+    from ..sim.physics import PhysicalParams
+
     run_dir = Path(run)
-    policy, meta = load_policy(run_dir)
-    cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
+    physics = PhysicalParams.load(run_dir / "physics.json", robot) if (run_dir / "physics.json").exists() else None
+    if physics is not None and not (run_dir / "policy.pt").exists():  # identified physics alone
+        config = json.loads((run_dir / "config.json").read_text())
+        policy, meta = None, {"kind": None, "arch": "none", "joint_names": physics.joint_names,
+                              "rate_hz": float(config["rate_hz"])}
+        solver, substeps = solver or config["solver"], 1
+    else:
+        policy, meta = load_policy(run_dir)
+        cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
+        solver, substeps = solver or cfg.env.solver, cfg.env.substeps
     if list(meta["joint_names"]) != list(robot.joint_names):
         raise RunError(f"{run_dir}: trained on joints {meta['joint_names'][:3]}..., not this robot's")
     if abs(meta["rate_hz"] - ds.rate_hz) > 1e-9:
         raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {ds.rate_hz:g} Hz")
-    solver = solver or cfg.env.solver
     out_dir = Path(out) if out else run_dir / "eval"
     results = {}
     for split in splits:
@@ -34,7 +45,8 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
         if not trajs:
             print(f"{split}: no trajectories, skipped")
             continue
-        summary, runs = evaluate_split(robot, trajs, ds.rate_hz, policy, meta["kind"], solver, cfg.env.substeps, device)
+        summary, runs = evaluate_split(robot, trajs, ds.rate_hz, policy, meta["kind"], solver, substeps, device,
+                                       physics=physics)
         results[split] = summary
         plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
                   title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)")
@@ -42,6 +54,7 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
     plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
     write_report(out_dir, robot, results, {"run": str(run_dir), "residual": meta["kind"], "arch": meta["arch"],
+                                           "physics": "physics.json" if physics is not None else "robot file",
                                            "solver": solver, "dataset": data_label, "robot": str(robot.source)})
     print(f"wrote {out_dir / 'metrics.json'} and {out_dir / 'report.md'}")
     return results

@@ -93,6 +93,9 @@ class GradFitConfig:
     select_every: int = 0
     """Evaluate on the validation split every this many iterations and return the best residual (model
     selection on validation); 0 = ten times per run."""
+    physics: str = ""
+    """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned
+    on top of the identified model (the hybrid), with its command delay; "" = the robot file's."""
 
     def __post_init__(self) -> None:
         check_choice(self.model, ModelKind, "model")
@@ -197,9 +200,15 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr)
     horizons = cfg.horizon_curriculum or (cfg.horizon,)
     sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True)
-    bank = TrajectoryBank(train, sim.device)
+    physics = load_physics(cfg.physics, robot)
+    delay = 0.0
+    if physics is not None:
+        sim.set_physics(physics)
+        delay = torch.as_tensor(physics.delay / dt, dtype=torch.float32, device=sim.device)
+    bank = TrajectoryBank(train, sim.device, delay)
     validation = dataset.split("validation")
-    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device) if validation else None
+    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics) \
+        if validation else None
     select_every = max(1, cfg.select_every or cfg.iterations // 10)
     obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
     noise_gen = torch.Generator(device=cfg.device)
@@ -267,6 +276,15 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     return policy.eval(), curve
 
 
+def load_physics(path: str, robot):
+    """The :class:`~wresdyn.sim.physics.PhysicalParams` at ``path`` (checked against ``robot``), ``None`` for ""."""
+    if not path:
+        return None
+    from ..sim.physics import PhysicalParams
+
+    return PhysicalParams.load(path, robot)
+
+
 def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: str | Path | None = None) -> None:
     """Write the run files ``wresdyn eval`` reads: ``config.json``, ``policy.pt``, ``policy.onnx``, ``residual.json``.
 
@@ -288,3 +306,7 @@ def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: 
               "gradfit": dataclasses.asdict(cfg), "data_path": str(data_path) if data_path else None}
     (out / "config.json").write_text(json.dumps(config, indent=2))
     export_run_files(policy, out, dataset, arch=arch, learner=config["learner"])
+    if cfg.physics:  # the run carries the model it was fitted on: evaluation replays with it
+        from ..sim.physics import PhysicalParams
+
+        PhysicalParams.load(cfg.physics).save(out / "physics.json")

@@ -22,13 +22,15 @@ class ValidationScore:
         rate_hz: Their sample rate [Hz].
         solver, device: Simulation settings (as the learner's).
         delay: Command-path delay of the simulator [steps].
+        physics: Physical parameters of the model (the hybrid's identified physics, with its delay), or ``None``.
     """
 
     def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
-                 delay=0.0) -> None:
+                 delay=0.0, physics=None) -> None:
         from ..sim import Simulator
 
         self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay
+        self.physics = physics
         if not self.trajectories:
             raise ValueError("no validation trajectories")
         self.sim = Simulator(robot, len(self.trajectories), 1.0 / self.rate_hz, solver=solver, device=device)
@@ -45,10 +47,10 @@ class ValidationScore:
             policy.eval()
         try:
             runs = replay_trajectories(self.robot, self.trajectories, self.rate_hz, policy, kind=kind,
-                                       sim=self.sim, delay=self.delay)
+                                       sim=self.sim, delay=self.delay, physics=self.physics)
         finally:
             if was_training:
                 policy.train()
-        rep = runs["residual" if policy is not None else "pd"]
+        rep = runs["residual"] if "residual" in runs else runs["pd"]
         self.last_diverged = sum(a >= 0 for a in rep.diverged_at)
         return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)]).mean())

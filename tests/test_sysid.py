@@ -1,0 +1,70 @@
+"""Grey-box identification through the differentiable solver (:mod:`wresdyn.learn.sysid`), its CLI and report, and
+the hybrid: a residual fitted and evaluated on top of identified physics."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from wresdyn.cli import main
+from wresdyn.data.real_robot import Mismatch, RealRobot
+from wresdyn.learn.runs import RunError
+from wresdyn.learn.sysid import PhysicsScore, SysIdConfig, identify
+from wresdyn.sim.physics import PhysicalParams
+
+REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, delay=0.004, torque_limit_scale=0.5)
+"""Uneven enough to matter, no noise: gains, friction, damping, a 2-step delay and saturation."""
+SMALL = SysIdConfig(iterations=40, windows=4, horizon_curriculum=(8, 16), select_every=10, effort_grid=(0.3, 1.0))
+
+
+@pytest.fixture(scope="module")
+def recorded(humanoid, record):
+    return record(humanoid, REAL, {"train": 2, "validation": 1, "heldout": 1}, seconds=0.3, amplitude=0.3)
+
+
+def test_identification_reduces_the_validation_error_toward_the_truth(humanoid, recorded, tmp_path):
+    params, curve = identify(humanoid, recorded, SMALL, out=tmp_path, log=lambda *_: None)
+    score = PhysicsScore(humanoid, recorded.split("heldout"), recorded.rate_hz)
+    nominal = score(PhysicalParams.nominal(humanoid))
+    fitted = score(params)
+    assert fitted < 0.7 * nominal, (fitted, nominal)
+    truth = RealRobot(humanoid, REAL).physics()
+    # kp starts at the file's value (1.25x the truth): the mean error of the log-ratio shrinks
+    before = np.abs(np.log(humanoid.kp / truth.kp)).mean()
+    after = np.abs(np.log(params.kp / truth.kp)).mean()
+    assert after < before, (after, before)
+    assert PhysicalParams.load(tmp_path / "physics.json", humanoid).kp.tolist() == params.kp.tolist()
+    assert any("validation" in row for row in curve)
+
+
+def test_identification_resume_refuses_a_changed_config(humanoid, recorded, tmp_path):
+    cfg = dataclasses.replace(SMALL, iterations=4, select_every=2)
+    identify(humanoid, recorded, cfg, out=tmp_path, log=lambda *_: None)
+    with pytest.raises(RunError, match="lr"):
+        identify(humanoid, recorded, dataclasses.replace(cfg, lr=0.5), out=tmp_path, log=lambda *_: None)
+
+
+def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys):
+    """`wresdyn identify --eval` writes the parameters, the report against the truth and an evaluation of the
+    calibrated model; `wresdyn fit --physics` learns a residual on top and its run replays with that physics."""
+    data = tmp_path / "d.npz"
+    recorded.save(data)
+    run = tmp_path / "id"
+    assert main(["identify", str(data), "--out", str(run), "--iterations", "8", "--windows", "2", "--eval"]) == 0
+    report = (run / "identification.md").read_text()
+    assert "left_knee" in report and "Within 10 %" in report
+    metrics = json.loads((run / "eval" / "metrics.json").read_text())
+    assert metrics["splits"]["heldout"]["pd_residual"] is not None  # the calibrated model, PD only
+    fit = tmp_path / "fit"
+    assert main(["fit", str(data), "--out", str(fit), "--iterations", "4", "--windows", "2", "--curriculum", "4",
+                 "--physics", str(run / "physics.json"), "--eval"]) == 0
+    assert (fit / "physics.json").exists()
+    hybrid = json.loads((fit / "eval" / "metrics.json").read_text())
+    # a residual that starts at zero on the calibrated model: the same replay as the calibrated model alone
+    assert abs(hybrid["splits"]["heldout"]["pd_residual"]["mean_abs_dq"] - metrics["splits"]["heldout"]["pd_residual"]["mean_abs_dq"]) \
+        < 0.3 * metrics["splits"]["heldout"]["pd_residual"]["mean_abs_dq"]
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert main(["fit", str(data), "--out", str(tmp_path / "f2"), "--physics", str(bad)]) == 2
+    assert "not a wresdyn physics file" in capsys.readouterr().err
