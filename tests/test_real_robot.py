@@ -162,3 +162,27 @@ def test_collect_command(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("wresdyn collect: error:") and str(bad) in err and "\n" not in err
     assert not (tmp_path / "x").exists()  # nothing written on a config error
+
+
+def test_per_joint_and_per_link_mismatch_by_name_pattern(humanoid, tmp_path):
+    """[[joint]] and [[link]] entries override the global scalars on the names they match, later entries win; the
+    shipped second mismatch loads; bad entries are one-line errors."""
+    mm = Mismatch.from_dict({"friction": 0.1, "kp_scale": 0.8,
+                             "joint": [{"match": "*_knee", "friction": 0.3}, {"match": "left_knee", "kp_scale": 0.5}],
+                             "link": [{"match": "torso", "mass_scale": 1.5, "com_offset": [0.01, 0.0, 0.02]}]})
+    t = RealRobot(humanoid, mm).physics()
+    names = list(humanoid.joint_names)
+    knee, rknee, hip = names.index("left_knee"), names.index("right_knee"), names.index("left_hip_pitch")
+    np.testing.assert_allclose(t.friction[[knee, rknee, hip]], [0.3, 0.3, 0.1] * humanoid.effort[[knee, rknee, hip]])
+    np.testing.assert_allclose(t.kp[[knee, rknee]], [0.5, 0.8] * humanoid.kp[[knee, rknee]])
+    torso = list(humanoid.body_names).index("torso")
+    assert t.body_mass[torso] == pytest.approx(1.5 * humanoid.body_mass[torso])
+    np.testing.assert_allclose(t.body_com[torso], humanoid.body_com[torso] + [0.01, 0.0, 0.02], atol=1e-9)
+    assert Mismatch.from_dict(mm.to_dict()) == mm
+    assert not Mismatch.load(Path(__file__).parents[1] / "data" / "mismatch_uneven.toml").is_nominal()
+    with pytest.raises(MismatchError, match="unknown key 'frction'"):
+        Mismatch.from_dict({"joint": [{"match": "*", "frction": 0.1}]})
+    with pytest.raises(MismatchError, match="com_offset"):
+        Mismatch.from_dict({"link": [{"match": "torso", "com_offset": [0.1]}]})
+    with pytest.raises(MismatchError, match="matches no joint"):
+        RealRobot(humanoid, Mismatch.from_dict({"joint": [{"match": "tail_*", "friction": 0.1}]}))

@@ -11,6 +11,7 @@ mismatch off and ``substep`` equal to the recording step it is exactly :func:`~w
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -70,6 +71,13 @@ class Mismatch:
     """Physics step of the real robot [s], must divide the recording step; 0 = the recording step."""
     seed: int = 0
     """Seed of the per-link and per-joint errors (one fixed "physical" robot)."""
+    joint: tuple = ()
+    """Per-joint entries ``{"match": fnmatch pattern, key: value}`` overriding the global scalars on the joints
+    they match, in order (later entries win); keys: :data:`JOINT_KEYS`. TOML: ``[[joint]]`` tables."""
+    link: tuple = ()
+    """Per-link entries ``{"match": pattern on the body name, ...}`` applied on top of the random link errors;
+    keys :data:`LINK_KEYS`: ``mass_scale`` [-] (inertia scales with it), ``com_offset`` [m] (3 numbers, body
+    frame), ``inertia_scale`` [-]. TOML: ``[[link]]`` tables."""
 
     @classmethod
     def load(cls, path: str | Path) -> "Mismatch":
@@ -91,7 +99,12 @@ class Mismatch:
         if unknown:
             raise MismatchError(f"{where}: unknown key(s) {unknown}; allowed: {list(fields)}")
         values = {}
+        for key, allowed in (("joint", JOINT_KEYS), ("link", LINK_KEYS)):
+            if key in data:
+                values[key] = tuple(_entry(e, allowed, f"{where}: [[{key}]] {i}") for i, e in enumerate(data[key]))
         for key, value in data.items():
+            if key in ("joint", "link"):
+                continue
             want = int if key == "seed" else float
             if isinstance(value, bool) or not isinstance(value, int if want is int else (int, float)):
                 raise MismatchError(f"{where}: {key} = {value!r} must be {'an integer' if want is int else 'a number'}")
@@ -105,11 +118,15 @@ class Mismatch:
         return cls(**values)
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        d["joint"], d["link"] = [dict(e) for e in self.joint], [dict(e) for e in self.link]
+        return d
 
     def is_nominal(self) -> bool:
         """True when the physics and sensors are those of the nominal model (``substep`` and ``seed`` aside)."""
-        ignore = ("substep", "seed")
+        ignore = ("substep", "seed", "joint", "link")
+        if self.joint or self.link:
+            return False
         return all(getattr(self, f.name) == f.default for f in dataclasses.fields(self) if f.name not in ignore)
 
 
@@ -148,21 +165,33 @@ class RealRobot:
         # per-link errors; body 0 of MuJoCo is the world, MuJoCo body i+1 is robot body i
         nb = m.nbody - 1
         mass_f = np.clip(1.0 + mm.mass_error * rng.standard_normal(nb), 0.3, None)
-        m.body_mass[1:] *= mass_f
-        m.body_ipos[1:] += mm.com_error * rng.standard_normal((nb, 3))
+        com_d = mm.com_error * rng.standard_normal((nb, 3))
         inertia_f = np.clip(1.0 + mm.inertia_error * rng.standard_normal((nb, 3)), 0.3, None)
+        for e in mm.link:
+            hits = _matches(r.body_names, e["match"], "link", r.source)
+            mass_f[hits] *= e.get("mass_scale", 1.0)
+            com_d[hits] += np.asarray(e.get("com_offset", (0.0, 0.0, 0.0)))
+            inertia_f[hits] *= e.get("inertia_scale", 1.0)
+        m.body_mass[1:] *= mass_f
+        m.body_ipos[1:] += com_d
         m.body_inertia[1:] *= mass_f[:, None] * inertia_f
-        # joints (fixed base: MuJoCo dof i is robot joint i, actuator i drives it)
+        # joints (fixed base: MuJoCo dof i is robot joint i, actuator i drives it): global, then per joint
+        jv = {k: np.full(n, float(getattr(mm, k))) for k in JOINT_KEYS}
+        for e in mm.joint:
+            hits = _matches(r.joint_names, e["match"], "joint", r.source)
+            for k, v in e.items():
+                if k != "match":
+                    jv[k][hits] = v
         effort = np.where(np.isfinite(r.effort), r.effort, 0.0)
-        m.dof_armature[:n] *= mm.armature_scale
-        m.dof_damping[:n] += mm.damping * r.kd
-        m.dof_frictionloss[:n] += mm.friction * effort
+        m.dof_armature[:n] *= jv["armature_scale"]
+        m.dof_damping[:n] += jv["damping"] * r.kd
+        m.dof_frictionloss[:n] += jv["friction"] * effort
         gain_f = np.clip(1.0 + mm.gain_error * rng.standard_normal((2, n)), 0.3, None)
-        kp, kd = r.kp * mm.kp_scale * gain_f[0], r.kd * mm.kd_scale * gain_f[1]
+        kp, kd = r.kp * jv["kp_scale"] * gain_f[0], r.kd * jv["kd_scale"] * gain_f[1]
         m.actuator_gainprm[:n, 0] = kp
         m.actuator_biasprm[:n, 1] = -kp
         m.actuator_biasprm[:n, 2] = -kd
-        m.actuator_forcerange[:n] *= mm.torque_limit_scale
+        m.actuator_forcerange[:n] *= jv["torque_limit_scale"][:, None]
 
     def physics(self):
         """The true physical parameters of this robot in the simulator's terms
@@ -236,6 +265,43 @@ class RealRobot:
         if mm.velocity_noise > 0:
             qd = qd + mm.velocity_noise * rng.standard_normal(qd.shape)
         return _quantise(q, mm.encoder_resolution), _quantise(qd, mm.velocity_resolution)
+
+
+JOINT_KEYS = ("friction", "damping", "armature_scale", "kp_scale", "kd_scale", "torque_limit_scale")
+"""Keys of a ``[[joint]]`` mismatch entry (besides ``match``): the per-joint forms of the global scalars."""
+LINK_KEYS = ("mass_scale", "com_offset", "inertia_scale")
+"""Keys of a ``[[link]]`` mismatch entry (besides ``match``)."""
+
+
+def _entry(e, allowed, where: str) -> dict:
+    """Check one per-joint / per-link entry: a pattern and known keys with finite, sensible values."""
+    if not isinstance(e, dict) or not isinstance(e.get("match"), str):
+        raise MismatchError(f"{where}: needs match = \"PATTERN\"")
+    out = {"match": e["match"]}
+    for k, v in e.items():
+        if k == "match":
+            continue
+        if k not in allowed:
+            raise MismatchError(f"{where}: unknown key {k!r}; allowed: match, {', '.join(allowed)}")
+        if k == "com_offset":
+            if not (isinstance(v, list | tuple) and len(v) == 3 and all(isinstance(x, int | float) and
+                                                                         np.isfinite(x) for x in v)):
+                raise MismatchError(f"{where}: com_offset must be 3 numbers [m]")
+            out[k] = tuple(float(x) for x in v)
+            continue
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or v < 0:
+            raise MismatchError(f"{where}: {k} = {v!r} must be a finite number >= 0")
+        if k.endswith("_scale") and v <= 0:
+            raise MismatchError(f"{where}: {k} = {v} must be > 0")
+        out[k] = float(v)
+    return out
+
+
+def _matches(names, pattern: str, what: str, source) -> np.ndarray:
+    hits = np.array([fnmatch.fnmatchcase(n, pattern) for n in names], dtype=bool)
+    if not hits.any():
+        raise MismatchError(f"mismatch: [[{what}]] pattern {pattern!r} matches no {what} of {source}")
+    return hits
 
 
 def _quantise(a: np.ndarray, resolution: float) -> np.ndarray:
