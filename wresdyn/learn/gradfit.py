@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..choices import ModelKind, SolverKind, check_choice, check_device, check_number
+from ..choices import ModelKind, SolverKind, check_choice, check_number
 from ..sim.residual import residual_scale
 from .residual import ResidualConfig, obs_stats
 
@@ -98,18 +98,12 @@ class GradFitConfig:
     on top of the identified model (the hybrid), with its command delay; "" = the robot file's."""
 
     def __post_init__(self) -> None:
+        from .runs import check_window_fit_config
+
         check_choice(self.model, ModelKind, "model")
-        check_choice(self.solver, SolverKind, "solver")
-        check_device(self.device, "device")
-        for name in ("iterations", "windows", "horizon"):
-            check_number(getattr(self, name), name, integer=True, ge=1)
-        for i, h in enumerate(self.horizon_curriculum):
-            check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
-        for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
-            check_number(getattr(self, name), name, integer=True, ge=0)
-        for name in ("lr", "lr_final", "grad_clip"):
-            check_number(getattr(self, name), name, gt=0)
-        for name in ("w_q", "w_qd", "w_torque", "w_action_rate", "obs_noise"):
+        check_window_fit_config(self)
+        check_number(self.horizon, "horizon", integer=True, ge=1)
+        for name in ("w_torque", "w_action_rate", "obs_noise"):
             check_number(getattr(self, name), name, ge=0)
 
 
@@ -184,17 +178,10 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         (iteration, wall-clock [s], simulated env-steps, loss parts, validation error where evaluated).
     """
     from ..sim import Simulator, TrajectoryBank, rollout
-    from .runs import check_resume, load_checkpoint, save_checkpoint
+    from .runs import check_resume, load_checkpoint, save_checkpoint, start_window_fit
     from .selection import ValidationScore
 
-    if cfg.torch_threads > 0:
-        torch.set_num_threads(cfg.torch_threads)
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    train = dataset.split("train")
-    if not train:
-        raise ValueError("the dataset has no training trajectories")
-    dt = 1.0 / dataset.rate_hz
+    rng, train, dt = start_window_fit(cfg, dataset)
     mean, std = obs_stats(train)
     policy = build_policy(robot, cfg.residual, mean, std, cfg.model).to(cfg.device)
     optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr)

@@ -180,3 +180,37 @@ def save_checkpoint(data: dict, path) -> Path:
     tmp.write_bytes(buf.getvalue())
     tmp.replace(path)
     return path
+
+
+def check_window_fit_config(cfg) -> None:
+    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
+    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
+    from ..choices import SolverKind, check_choice, check_device, check_number
+
+    check_choice(cfg.solver, SolverKind, "solver")
+    check_device(cfg.device, "device")
+    for name in ("iterations", "windows"):
+        check_number(getattr(cfg, name), name, integer=True, ge=1)
+    for i, h in enumerate(cfg.horizon_curriculum):
+        check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
+    for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
+        check_number(getattr(cfg, name), name, integer=True, ge=0)
+    for name in ("lr", "lr_final", "grad_clip"):
+        check_number(getattr(cfg, name), name, gt=0)
+    for name in ("w_q", "w_qd"):
+        check_number(getattr(cfg, name), name, ge=0)
+
+
+def start_window_fit(cfg, dataset):
+    """Pin torch's threads, seed torch and the window sampler, and take the training split: ``(rng, train, dt)``
+    with ``dt`` the sample period [s]. Shared by the two window fits."""
+    import numpy as np
+    import torch
+
+    if cfg.torch_threads > 0:
+        torch.set_num_threads(cfg.torch_threads)
+    torch.manual_seed(cfg.seed)
+    train = dataset.split("train")
+    if not train:
+        raise ValueError("the dataset has no training trajectories")
+    return np.random.default_rng(cfg.seed), train, 1.0 / dataset.rate_hz

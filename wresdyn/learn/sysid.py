@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..choices import SolverKind, check_choice, check_device, check_number
+from ..choices import SolverKind, check_number
 from ..sim.physics import JOINT_FIELDS, PhysicalParams, PhysicsModel
+from .selection import ValidationScore
 
 __all__ = ["SysIdConfig", "identify", "PhysicsScore", "RESUME_MAY_CHANGE"]
 
@@ -95,21 +96,13 @@ class SysIdConfig:
     """Validate every this many iterations (0: ten times per run)."""
 
     def __post_init__(self) -> None:
-        check_choice(self.solver, SolverKind, "solver")
-        check_device(self.device, "device")
+        from .runs import check_window_fit_config
+
+        check_window_fit_config(self)
         bad = sorted(set(self.fit) - set(FIT_FIELDS))
         if bad:
             raise ValueError(f"fit: unknown field(s) {bad}; choose from {list(FIT_FIELDS)}")
-        for name in ("iterations", "windows"):
-            check_number(getattr(self, name), name, integer=True, ge=1)
-        for i, h in enumerate(self.horizon_curriculum):
-            check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
-        for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
-            check_number(getattr(self, name), name, integer=True, ge=0)
-        for name in ("lr", "lr_final", "grad_clip"):
-            check_number(getattr(self, name), name, gt=0)
-        for name in ("w_q", "w_qd", "w_prior"):
-            check_number(getattr(self, name), name, ge=0)
+        check_number(self.w_prior, "w_prior", ge=0)
         for i, f in enumerate(self.effort_grid):
             check_number(f, f"effort_grid[{i}]", gt=0)
         check_number(self.effort_after, "effort_after", ge=0)
@@ -118,32 +111,19 @@ class SysIdConfig:
 
 
 RESUME_MAY_CHANGE = ("device", "torch_threads")
+""":class:`SysIdConfig` fields a resumed identification may change: where it runs, not what it fits."""
 
 
-class PhysicsScore:
-    """``score(params) -> mean |Δq| [rad]`` of whole trajectories replayed PD-only with ``params`` (the
-    evaluation's metric, through one reused simulator)."""
-
-    def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu") -> None:
-        from ..sim import Simulator
-
-        self.robot, self.trajectories, self.rate_hz = robot, list(trajectories), float(rate_hz)
-        # every parameter read live (as when fitting): no recompilation when a zero entry becomes non-zero
-        self.sim = Simulator(robot, len(self.trajectories), 1.0 / self.rate_hz, solver=solver, device=device,
-                             param_grads=True)
-        self.last_diverged = 0
+class PhysicsScore(ValidationScore):
+    """``score(params) -> mean |Δq| [rad]``: :class:`~wresdyn.learn.selection.ValidationScore` of whole trajectories
+    replayed PD-only with the physical parameters ``params`` (and their delay), through one reused simulator."""
 
     def __call__(self, params: PhysicalParams) -> float:
-        from ..sim.rollout import replay_trajectories
-
-        self.sim.set_physics(params)
-        delay = torch.as_tensor(params.delay * self.rate_hz, dtype=torch.float32, device=self.sim.device)
-        rep = replay_trajectories(self.robot, self.trajectories, self.rate_hz, sim=self.sim, delay=delay)["pd"]
-        self.last_diverged = sum(a >= 0 for a in rep.diverged_at)
-        return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)]).mean())
+        self.physics = params
+        return super().__call__()
 
 
-def _window_loss(cfg, model, sim, bank, window):
+def _window_loss(cfg, model, sim, window):
     from ..sim import rollout
 
     sim.set_physics(model())
@@ -201,16 +181,9 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         ``(params, curve)``: the selected :class:`~wresdyn.sim.physics.PhysicalParams` and the learning curve.
     """
     from ..sim import Simulator, TrajectoryBank
-    from .runs import check_resume, load_checkpoint, save_checkpoint
+    from .runs import check_resume, load_checkpoint, save_checkpoint, start_window_fit
 
-    if cfg.torch_threads > 0:
-        torch.set_num_threads(cfg.torch_threads)
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    train = dataset.split("train")
-    if not train:
-        raise ValueError("the dataset has no training trajectories")
-    dt = 1.0 / dataset.rate_hz
+    rng, train, dt = start_window_fit(cfg, dataset)
     model = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
     groups = [[model.u_kp, model.u_kd, model.u_armature],
               [model.u_damping, model.u_friction, model.u_effort, model.u_delay],
@@ -260,7 +233,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
                          lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log)
         bank.set_delay(model.delay_steps().float().to(sim.device))
         window = bank.sample(rng, cfg.windows, h)
-        loss, parts = _window_loss(cfg, model, sim, bank, window)
+        loss, parts = _window_loss(cfg, model, sim, window)
         loss = loss + cfg.w_prior * model.prior().to(loss.device)
         if not torch.isfinite(loss):
             raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")

@@ -164,6 +164,8 @@ class Simulator:
                         raise RuntimeError("gradients to physical parameters need Simulator(requires_grad=True, "
                                            "param_grads=True)")
                     self._physics[f] = v
+        if self.solver_kind == "replay" and not self.solver.fold_zeros:
+            return  # every parameter is read live from the arrays just written (identification's hot loop)
         from newton import ModelFlags
 
         # SolverReplay recompiles only when an entry folded as zero became non-zero
