@@ -100,3 +100,33 @@ def test_observation_noise_reaches_the_policy_only(robot, data):
     noisy = make_env(robot, data, n=64, horizon=8, obs_noise=0.1).get_observations()
     diff = noisy["policy"] - noisy["critic"][:, :4 * n]
     assert 0.08 < float(diff.std()) < 0.12  # noise of 0.1 normalising std on the policy's view
+
+
+def test_identified_physics_sets_the_model_and_the_command_delay(robot, data, tmp_path):
+    """`env.physics` (the hybrid): the worlds step with the file's gains and friction and its delayed commands,
+    exactly as a simulator given the same physics and a bank with the same delay."""
+    from wresdyn.sim import Simulator, TrajectoryBank
+    from wresdyn.sim.physics import PhysicalParams
+
+    p = PhysicalParams.nominal(robot)
+    p.kp, p.friction = 0.6 * p.kp, p.friction + 0.05 * p.effort
+    p.delay = np.full(robot.n_dof, 1.5 / data.rate_hz)
+    p.save(tmp_path / "physics.json")
+    env = make_env(robot, data, n=1, horizon=50, physics=str(tmp_path / "physics.json"))
+    plain = make_env(robot, data, n=1, horizon=50)
+    g0 = int(env.g[0])
+    plain._reset(torch.tensor([0]))
+    plain.g[0], plain.end[0] = g0, env.end[0]
+    plain.sim.set_state(torch.tensor([0]), env.bank.q[g0:g0 + 1], env.bank.qd[g0:g0 + 1])
+    steps = min(8, int(env.end[0]) - g0)
+    for _ in range(steps):
+        env.step(torch.zeros(1, robot.n_dof))
+        plain.step(torch.zeros(1, robot.n_dof))
+    sim = Simulator(robot, 1, env.dt, solver=env.env_cfg.solver)
+    sim.set_physics(p)
+    bank = TrajectoryBank(data.split("train"), sim.device, torch.full((robot.n_dof,), 1.5))
+    sim.set_state(torch.tensor([0]), bank.q[g0:g0 + 1], bank.qd[g0:g0 + 1])
+    for k in range(steps):
+        q, _ = sim.step(bank.target(torch.tensor([g0 + k])), None)
+    torch.testing.assert_close(env.q, q, atol=1e-6, rtol=0)
+    assert (env.q - plain.q).abs().max() > 1e-4  # the physics file matters

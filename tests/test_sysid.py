@@ -9,7 +9,7 @@ import pytest
 
 from wresdyn.cli import main
 from wresdyn.data.real_robot import Mismatch, RealRobot
-from wresdyn.learn.runs import RunError
+from wresdyn.learn.runs import RunError, load_checkpoint
 from wresdyn.learn.sysid import PhysicsScore, SysIdConfig, identify
 from wresdyn.sim.physics import PhysicalParams
 
@@ -64,7 +64,40 @@ def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys
     # a residual that starts at zero on the calibrated model: the same replay as the calibrated model alone
     assert abs(hybrid["splits"]["heldout"]["pd_residual"]["mean_abs_dq"] - metrics["splits"]["heldout"]["pd_residual"]["mean_abs_dq"]) \
         < 0.3 * metrics["splits"]["heldout"]["pd_residual"]["mean_abs_dq"]
+    # PPO on the hybrid (the paper's method on top of the identified model): the run carries the physics too
+    ppo = tmp_path / "ppo"
+    assert main(["train", str(data), "--out", str(ppo), "--iterations", "2", "--num-envs", "4", "--steps-per-env", "8",
+                 "--horizon", "8", "--set", "ppo.num_mini_batches=2", "--physics", str(run / "physics.json"),
+                 "--eval"]) == 0
+    assert PhysicalParams.load(ppo / "physics.json").kp.tolist() == PhysicalParams.load(run / "physics.json").kp.tolist()
+    assert json.loads((ppo / "eval" / "metrics.json").read_text())["info"]["physics"] == "physics.json"
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     assert main(["fit", str(data), "--out", str(tmp_path / "f2"), "--physics", str(bad)]) == 2
     assert "not a wresdyn physics file" in capsys.readouterr().err
+
+
+def test_fit_default_is_the_hybrid_and_resumes_both_stages(humanoid, recorded, tmp_path, capsys):
+    """`wresdyn fit` without --model identifies the physics (OUT/identify) and fits the residual on top; the run
+    carries that physics; a second call finds both stages done."""
+    data = tmp_path / "d.npz"
+    recorded.save(data)
+    out = tmp_path / "hybrid"
+    args = ["fit", str(data), "--out", str(out), "--identify-iterations", "6", "--iterations", "4", "--windows", "2",
+            "--curriculum", "4"]
+    assert main(args) == 0
+    out_text = capsys.readouterr().out
+    assert "identification" in out_text
+    # the zero-residual start (the identified model alone) is a candidate: the hybrid is never selected worse
+    start = float(out_text.split("validation at the start: ")[1].split()[0])
+    meta = load_checkpoint(out / "checkpoint.pt", keys=("meta",))["meta"]
+    assert meta["best_validation"] <= start + 5e-5  # (printed to 4 decimals)
+    identified = PhysicalParams.load(out / "identify" / "physics.json", humanoid)
+    assert PhysicalParams.load(out / "physics.json", humanoid).kp.tolist() == identified.kp.tolist()
+    assert json.loads((out / "identify" / "config.json").read_text())["learner"] == "identify"
+    summary = json.loads((out / "train_summary.json").read_text())
+    assert summary["identify_wall_s"] > 0 and summary["config"]["physics"].endswith("physics.json")
+    mtime = (out / "identify" / "checkpoint.pt").stat().st_mtime
+    assert main(args) == 0  # resumed: nothing left to do in either stage
+    assert (out / "identify" / "checkpoint.pt").stat().st_mtime == mtime
+    assert "resumed" in capsys.readouterr().out

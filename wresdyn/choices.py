@@ -15,7 +15,7 @@ from typing import Literal, get_args
 
 from .errors import WresdynError
 
-__all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "Learner", "choices", "check_choice",
+__all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "FitModel", "Learner", "choices", "check_choice",
            "check_number", "check_device"]
 
 ResidualKind = Literal["torque", "delta_action"]
@@ -26,6 +26,9 @@ SolverKind = Literal["auto", "replay", "featherstone", "mujoco"]
 """Replay solvers of :func:`wresdyn.sim.solvers.make_solver` (its ``SOLVERS``)."""
 ModelKind = Literal["network", "parametric"]
 """What the gradient fit learns: a residual network or the parametric baseline."""
+FitModel = Literal["hybrid", "network", "parametric"]
+"""What ``wresdyn fit`` builds: identified physics + residual network (the default), a residual network on the
+robot file's physics (or on ``--physics``), or the residual-torque parametric baseline."""
 Learner = Literal["ppo", "gradient", "parametric"]
 """Learners of the ablation."""
 

@@ -3,29 +3,41 @@
 The run folder has the same layout as a ``wresdyn train`` (PPO) run: ``config.json``, ``checkpoint.pt``
 (resumed when present), ``curve.json``, and the exported residual ``policy.pt`` (TorchScript), ``policy.onnx``
 and ``residual.json``, so ``wresdyn eval RUN`` evaluates either kind of run identically.
-``--model parametric`` fits the classical baseline (per-joint gains, damping, friction, armature) instead of a
-network and writes the identified parameters to ``parameters.json``.
+``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
+``OUT/identify/``) and learns the residual network on top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
+the given physics is used instead of identifying. ``--model network`` learns the residual on the robot file's
+physics (wave 1's residual alone). ``--model parametric`` fits the residual-torque baseline (per-joint gains,
+damping, friction, armature as an extra torque) and writes its parameters to ``parameters.json``.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from ..choices import Arch, ModelKind, ResidualKind, SolverKind, choices
+from ..choices import Arch, FitModel, ResidualKind, SolverKind, choices
+
+HYBRID_ITERATIONS = 1000
+"""Residual iterations of the hybrid by default: on the identified model the residual's validation error stops
+improving within a few hundred (``benchmarks/results/grey_box/``)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
     p.add_argument("--out", default="runs/fit", help="run folder; an existing checkpoint is resumed (default: runs/fit)")
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
-    p.add_argument("--model", choices=choices(ModelKind), default="network",
-                   help="residual network or the parametric baseline")
+    p.add_argument("--model", choices=choices(FitModel), default="hybrid",
+                   help="hybrid: identified physics + residual network (default); network: the residual alone; "
+                        "parametric: the residual-torque baseline")
     p.add_argument("--residual", choices=choices(ResidualKind), default="torque",
                    help="torque (paper) or delta_action (ASAP)")
     p.add_argument("--arch", choices=choices(Arch), default="mlp", help="network: mlp (ELU) or gru (GRU + MLP)")
     p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
-    p.add_argument("--iterations", type=int, default=None, help="optimiser steps")
-    p.add_argument("--windows", type=int, default=None, help="parallel windows (worlds) per step")
+    p.add_argument("--iterations", type=int, default=None,
+                   help=f"optimiser steps of the residual (default {HYBRID_ITERATIONS} for hybrid, else 2000)")
+    p.add_argument("--identify-iterations", type=int, default=None,
+                   help="optimiser steps of the hybrid's identification (default 800, as `wresdyn identify`)")
+    p.add_argument("--windows", type=int, default=None,
+                   help="parallel windows (worlds) per step, of both hybrid stages (default 32)")
     p.add_argument("--horizon", type=int, default=None, help="final window length [steps]")
     p.add_argument("--curriculum", default=None, help="window lengths to step through, e.g. 2,4,8,16,32,64 ('' for none)")
     p.add_argument("--lr", type=float, default=None, help="initial Adam learning rate")
@@ -56,12 +68,15 @@ def config_from_args(args: argparse.Namespace):
         kw["horizon_curriculum"] = tuple(int(h) for h in args.curriculum.split(",") if h)
         if kw["horizon_curriculum"] and "horizon" not in kw:
             kw["horizon"] = kw["horizon_curriculum"][-1]
-    return replace(cfg, residual=replace(cfg.residual, **res), model=args.model, device=args.device, seed=args.seed, **kw)
+    if args.model == "hybrid" and args.iterations is None:
+        kw["iterations"] = HYBRID_ITERATIONS
+    model = "parametric" if args.model == "parametric" else "network"
+    return replace(cfg, residual=replace(cfg.residual, **res), model=model, device=args.device, seed=args.seed, **kw)
 
 
 def run(args: argparse.Namespace) -> int:
     import json
-    from dataclasses import asdict
+    from dataclasses import asdict, replace
     from pathlib import Path
 
     import numpy as np
@@ -73,21 +88,39 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     ds, robot = load_data(args.data, args.robot)
     out = Path(args.out)
+    identify_first = args.model == "hybrid" and not cfg.physics
     what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"
+    if identify_first:
+        what = f"hybrid (identified physics + {what})"
+    elif cfg.physics:
+        what += f" on the physics of {cfg.physics}"
     print(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
           f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}", flush=True)
     try:
-        policy, curve = fit(robot, ds, cfg, out=out)
+        if identify_first:
+            from ..learn.hybrid import fit_hybrid
+            from ..learn.sysid import SysIdConfig
+
+            stage1 = {k: v for k, v in (("iterations", args.identify_iterations), ("windows", args.windows))
+                      if v is not None}
+            sysid = replace(SysIdConfig(), device=cfg.device, seed=cfg.seed, solver=cfg.solver, **stage1)
+            _, policy, curve, cfg, id_wall = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data)
+        else:
+            policy, curve = fit(robot, ds, cfg, out=out)
+            id_wall = None
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
     export_run(policy, out, cfg, ds, args.data)
     if cfg.model == "parametric":
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
         (out / "parameters.json").write_text(json.dumps(params, indent=1))
-    summary = {"iterations": cfg.iterations, "wall_s": curve[-1]["wall"] if curve else 0.0,
-               "sim_steps": curve[-1]["sim_steps"] if curve else 0, "config": asdict(cfg)}
+    wall = curve[-1]["wall"] if curve else 0.0
+    summary = {"iterations": cfg.iterations, "wall_s": wall + (id_wall or 0.0), "residual_wall_s": wall,
+               "identify_wall_s": id_wall, "sim_steps": curve[-1]["sim_steps"] if curve else 0, "config": asdict(cfg)}
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"done: {summary['wall_s']:.0f} s, {summary['sim_steps']:.2e} simulated steps; exported {out / 'policy.pt'}")
+    stages = f" (identification {id_wall:.0f} s + residual {wall:.0f} s)" if id_wall is not None else ""
+    print(f"done: {summary['wall_s']:.0f} s of training{stages}, {summary['sim_steps']:.2e} simulated steps "
+          f"(residual); exported {out / 'policy.pt'}")
     if args.eval:
         from ..evaluation.runs import evaluate_run
 

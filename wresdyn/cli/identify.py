@@ -31,11 +31,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    from dataclasses import asdict, replace
+    from dataclasses import replace
     from pathlib import Path
 
     from ..data.loading import load_data
+    from ..learn.hybrid import save_identify_config
     from ..learn.sysid import SysIdConfig, identify
     from . import UserError
 
@@ -56,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
         params, curve = identify(robot, ds, cfg, out=out)
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
-    (out / "config.json").write_text(json.dumps({"learner": "identify", "rate_hz": ds.rate_hz, "solver": cfg.solver,
-                                                 "sysid": asdict(cfg), "data_path": str(args.data)}, indent=2))
+    save_identify_config(out, cfg, ds.rate_hz, args.data)
     print(f"done: {curve[-1]['wall'] if curve else 0.0:.0f} s; wrote {out / 'physics.json'}")
     if args.eval:
         from ..evaluation.identification import write_identification_report

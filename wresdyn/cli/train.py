@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="cpu or cuda:0 (default: cpu)")
     p.add_argument("--seed", type=int, default=None, help="seed (default 0)")
     p.add_argument("--save-interval", type=int, default=None, help="checkpoint every N iterations")
+    p.add_argument("--physics", default=None, metavar="JSON",
+                   help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                    help="override any field of the run configuration (wresdyn.learn.ppo.TrainConfig), e.g. "
                         "--set ppo.desired_kl=0.05 --set residual.hidden_dims=128,64; repeatable, applied last")
@@ -44,6 +46,7 @@ def config_from_args(args: argparse.Namespace):
 
     cfg = default_config()
     flags = {"env.horizon": args.horizon, "env.solver": args.solver, "env.obs_noise": args.obs_noise,
+             "env.physics": getattr(args, "physics", None),
              "residual.kind": args.residual, "residual.arch": args.arch, "residual.fraction": args.fraction,
              "ppo.iterations": args.iterations, "ppo.num_envs": args.num_envs,
              "ppo.num_steps_per_env": args.steps_per_env, "ppo.device": args.device, "ppo.seed": args.seed,

@@ -218,6 +218,13 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         log(f"resumed from {ckpt} at iteration {start_it}")
     if score is None and start_it == 0:
         log("no validation split: the fit returns its last iteration (`wresdyn migrate` adds one)")
+    if score is not None and start_it == 0 and physics is not None:
+        # on identified physics (the hybrid) the zero-residual start is a candidate too: the hybrid is never
+        # selected worse than the identified model alone
+        value = score(policy)
+        best = {"validation": value, "iteration": 0,
+                "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
+        log(f"validation at the start: {value:.4f} rad")
     t0 = time.perf_counter() - wall0
     stop = cfg.iterations if until is None else min(until, cfg.iterations)
     for it in range(start_it, stop):

@@ -395,11 +395,22 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     tmp.replace(cfg_path)
     todo = max(cfg.ppo.iterations - start, 0)
     validation = dataset.split("validation")
-    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, cfg.ppo.device) if validation else None
+    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, cfg.ppo.device,
+                            physics=env.physics) if validation else None
     best_path = run_dir / "best.pt"
     best = load_checkpoint(best_path, keys=("actor", "meta")) if start and best_path.is_file() else None
     curve = best["meta"]["validation_curve"] if best else []
     every = cfg.ppo.select_every or max(1, cfg.ppo.iterations // 10)
+    if score is not None and start == 0 and env.physics is not None:
+        # on identified physics (the hybrid) the near-zero residual at the start is a candidate too: the hybrid is
+        # never selected worse than the identified model alone
+        value = score(policy_from_actor(runner.alg.get_policy(), mean, std, env.scale.cpu().numpy(),
+                                        cfg.residual.kind, cfg.residual.action_gain))
+        curve.append({"iteration": 0, "validation": value, "diverged": score.last_diverged})
+        print(f"validation at the start: {value:.4f} rad", flush=True)
+        actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
+        best = {"actor": actor, "meta": {"iteration": 0, "validation": value, "validation_curve": curve}}
+        save_checkpoint(best, best_path)
     t0, eval_s, done = time.perf_counter(), 0.0, start
     while done < cfg.ppo.iterations:
         # learn up to the next selection point (rsl-rl continues from current_learning_iteration)
@@ -442,6 +453,8 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         # the non-leaf outputs its distribution keeps from the last update
         actor.load_state_dict(best["actor"])
     export(actor, run_dir, cfg, mean, std, env.scale.cpu().numpy(), dataset)
+    if env.physics is not None:  # the run carries the model it was trained on: evaluation replays with it
+        env.physics.save(run_dir / "physics.json")
     (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 

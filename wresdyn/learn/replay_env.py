@@ -55,6 +55,10 @@ class ReplayEnvConfig:
     """Gaussian noise on the policy's (normalised) observation [normalising stds], a regulariser as in the
     gradient fit (:attr:`wresdyn.learn.gradfit.GradFitConfig.obs_noise`); the critic and the simulation see the
     clean state. 0 = off."""
+    physics: str = ""
+    """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned on
+    top of the identified model (the hybrid), whose command delay then is ``physics.delay``. "" = the robot
+    file's values, no delay."""
     critic_err_scale_q: float = 0.05
     """Scale of q − q_r in the critic's privileged observation [rad]."""
     critic_err_scale_qd: float = 0.5
@@ -91,7 +95,15 @@ class ReplayEnv(VecEnv):
         self.num_envs, self.num_actions = num_envs, robot.n_dof
         self.max_episode_length = cfg.horizon
         self.cfg = {"env": asdict(cfg), "residual": asdict(residual), "rewards": asdict(rewards), "rate_hz": rate_hz}
-        self.bank = TrajectoryBank(trajectories, self.device)
+        self.physics = None
+        delay = 0.0
+        if cfg.physics:
+            from ..sim.physics import PhysicalParams
+
+            self.physics = PhysicalParams.load(cfg.physics, robot)
+            self.sim.set_physics(self.physics)
+            delay = torch.as_tensor(self.physics.delay * rate_hz, dtype=torch.float32, device=self.device)
+        self.bank = TrajectoryBank(trajectories, self.device, delay)
         if obs_mean is None or obs_std is None:
             obs_mean, obs_std = obs_stats(trajectories)
         dev, f32 = self.device, torch.float32
@@ -101,7 +113,8 @@ class ReplayEnv(VecEnv):
 
         self.obs_mean, self.obs_std = t(obs_mean), t(obs_std)
         self.scale = t(residual_scale(robot, residual.kind, residual.fraction))
-        self.kp, self.kd = t(robot.kp), t(robot.kd)
+        gains = self.physics if self.physics is not None else robot
+        self.kp, self.kd = t(gains.kp), t(gains.kd)
         self.gen = torch.Generator(device=dev)
         self.gen.manual_seed(seed)
         n, z = robot.n_dof, torch.zeros

@@ -1,0 +1,53 @@
+"""The hybrid model, the default of ``wresdyn fit``: identified physics with a residual network learned on top.
+
+Stage 1 identifies the simulator's own physical parameters (:func:`wresdyn.learn.sysid.identify`, grey box) into
+``OUT/identify/``; stage 2 learns the residual network by the gradient fit (:func:`wresdyn.learn.gradfit.fit`)
+on the calibrated model, into ``OUT/``. Both stages checkpoint and resume, both select on validation, and the
+residual's starting point (zero residual: the identified model alone) is one of its candidates, so the hybrid
+is never selected worse than the model it starts from.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, replace
+from pathlib import Path
+
+__all__ = ["fit_hybrid", "save_identify_config"]
+
+
+def save_identify_config(out: str | Path, cfg, rate_hz: float, data_path=None) -> None:
+    """``config.json`` of an identification run (read by ``wresdyn eval``)."""
+    Path(out, "config.json").write_text(json.dumps({"learner": "identify", "rate_hz": rate_hz, "solver": cfg.solver,
+                                                     "sysid": asdict(cfg), "data_path": str(data_path)}, indent=2))
+
+
+def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=None, log=print):
+    """Identify the physics, then fit the residual on top.
+
+    Args:
+        robot, dataset: As for :func:`~wresdyn.learn.gradfit.fit`.
+        sysid_cfg: :class:`~wresdyn.learn.sysid.SysIdConfig` of stage 1.
+        fit_cfg: :class:`~wresdyn.learn.gradfit.GradFitConfig` of stage 2 (a network; its ``physics`` is set here).
+        out: Run folder; stage 1 lives in ``out/identify``.
+        data_path: Where the dataset was read from (recorded in the run's config).
+
+    Returns:
+        ``(params, policy, curve, fit_cfg, identify_wall)``: the identified
+        :class:`~wresdyn.sim.physics.PhysicalParams`, the selected residual, its learning curve, the stage-2 config
+        actually run and stage 1's training wall-clock [s].
+    """
+    from .gradfit import fit
+    from .sysid import identify
+
+    out = Path(out)
+    id_dir = out / "identify"
+    id_dir.mkdir(parents=True, exist_ok=True)
+    log(f"stage 1/2: identifying {', '.join(sysid_cfg.fit)} ({sysid_cfg.iterations} iterations) -> {id_dir}")
+    params, id_curve = identify(robot, dataset, sysid_cfg, out=id_dir, log=log)
+    save_identify_config(id_dir, sysid_cfg, dataset.rate_hz, data_path)
+    cfg = replace(fit_cfg, model="network", physics=str(id_dir / "physics.json"))
+    log(f"stage 2/2: {cfg.residual.kind} residual ({cfg.residual.arch}) on the identified model "
+        f"({cfg.iterations} iterations)")
+    policy, curve = fit(robot, dataset, cfg, out=out, log=log)
+    return params, policy, curve, cfg, (id_curve[-1]["wall"] if id_curve else 0.0)
