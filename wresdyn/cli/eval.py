@@ -15,6 +15,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="run folder written by `wresdyn train`")
     p.add_argument("--data", default=None, help="dataset file (default: the one the run was trained on)")
     p.add_argument("--robot", default=None, help="robot file (default: the dataset's)")
+    p.add_argument("--gains", default=None,
+                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
     p.add_argument("--splits", nargs="+", default=["validation", "heldout", "ood"],
                    help="splits to evaluate (default: validation heldout ood; absent splits are skipped)")
     p.add_argument("--out", default=None, help="output folder (default: RUN/eval)")
@@ -40,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     data = args.data or json.loads(cfg_path.read_text()).get("data_path")
     if not data:
         raise UserError(f"{args.run}: the run does not record its dataset; pass --data")
-    ds, robot = load_data(data, args.robot)
+    ds, robot = load_data(data, args.robot, args.gains)
     evaluate_run(args.run, ds, robot, args.splits, args.out, args.solver, args.device, args.joints, args.compare,
                  data_label=str(data))
     return 0

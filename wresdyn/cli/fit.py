@@ -25,6 +25,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
     p.add_argument("--out", default="runs/fit", help="run folder; an existing checkpoint is resumed (default: runs/fit)")
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
+    p.add_argument("--gains", default=None,
+                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
     p.add_argument("--model", choices=choices(FitModel), default="hybrid",
                    help="hybrid: identified physics + residual network (default); network: the residual alone; "
                         "parametric: the residual-torque baseline")
@@ -86,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     from . import UserError
 
     cfg = config_from_args(args)
-    ds, robot = load_data(args.data, args.robot)
+    ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
     identify_first = args.model == "hybrid" and not cfg.physics
     what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"

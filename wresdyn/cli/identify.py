@@ -20,6 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
     p.add_argument("--out", default="runs/identify", help="run folder (default: runs/identify)")
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
+    p.add_argument("--gains", default=None,
+                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
     p.add_argument("--iterations", type=int, default=None, help="optimiser steps")
     p.add_argument("--windows", type=int, default=None, help="parallel windows (worlds) per step")
     p.add_argument("--fit", default=None, help="fields to identify, comma separated (default: all of "
@@ -47,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = replace(SysIdConfig(), device=args.device, seed=args.seed, **kw)
     except ValueError as e:
         raise UserError(str(e)) from None
-    ds, robot = load_data(args.data, args.robot)
+    ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"identifying {', '.join(cfg.fit)} on {len(ds.split('train'))} trajectories of {args.data}: "

@@ -19,7 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "train for real logs (default: 0)")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--robot", default=None, help="robot file to record on (default: the dataset's)")
-    p.add_argument("--gains", default=None, help="TOML file of PD gains, if the dataset was collected with one")
+    p.add_argument("--gains", default=None,
+                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
     p.add_argument("--no-gap", action="store_true", help="skip the PD-only Newton replay of the new validation split")
 
 
@@ -44,7 +45,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--validation must be >= 0, not {args.validation}")
     robot = None
     if args.validation and (args.robot or args.gains):
-        robot = dataset_robot(read_header(args.data)["robot_file"], args.robot, args.gains)
+        header = read_header(args.data)
+        gains = args.gains if args.gains is not None else (header["gains"] or {}).get("config")
+        robot = dataset_robot(header["robot_file"], args.robot, gains)
     m = migrate(args.data, args.validation, robot, progress=_say)
     ds = m.dataset
     if m.how == "recorded":
@@ -56,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     if m.names and isinstance(gaps, dict) and not args.no_gap:
         from ..evaluation.evaluate import pd_gap
 
-        robot = m.robot or dataset_robot(ds.robot_file, args.robot, args.gains)
+        robot = m.robot or dataset_robot(ds.robot_file, args.robot,
+                                         args.gains if args.gains is not None else ds.gains_config)
         _say(f"replaying {len(m.names)} validation trajectories PD-only in Newton (nominal robot)")
         g = pd_gap(robot, ds.for_robot(robot, str(args.data)).split("validation"), ds.rate_hz)
         _say(f"  PD-only vs real on validation: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")

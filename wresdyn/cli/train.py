@@ -11,6 +11,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
     p.add_argument("--out", default="runs/residual", help="run folder; a folder with checkpoints is resumed (default: runs/residual)")
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
+    p.add_argument("--gains", default=None,
+                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
     p.add_argument("--residual", choices=choices(ResidualKind), default=None,
                    help="torque (paper) or delta_action (ASAP); default torque")
     p.add_argument("--arch", choices=choices(Arch), default=None,
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     from ..data.loading import load_data
 
-    ds, robot = load_data(args.data, args.robot)
+    ds, robot = load_data(args.data, args.robot, args.gains)
     print(f"training a {cfg.residual.kind} residual ({cfg.residual.arch}) on {len(ds.split('train'))} trajectories of "
           f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.ppo.num_envs} worlds x {cfg.ppo.num_steps_per_env} steps "
           f"-> {args.out}", flush=True)

@@ -1,10 +1,11 @@
 """Recorded joint-state trajectories: the data the residual learners fit, and its file format.
 
 A :class:`Dataset` is a set of :class:`Trajectory` sampled at one rate, with the joint order, the robot file
-(and its SHA-256) they were recorded on, the mismatch config of the "real" robot (empty for real logs),
-the seed and free-form metadata. Sample k holds the state (q[k], q̇[k]) at t[k]; applying q_cmd[k] for one
-step of 1 / rate_hz gives the state at k + 1. Only joint states and commands feed the learners; a measured
-torque may ride along for diagnostics.
+(and its SHA-256) they were recorded on, the gains config applied on top of that file (if any: its content
+travels with the data, so every later command replays on the same robot), the mismatch config of the "real"
+robot (empty for real logs), the seed and free-form metadata. Sample k holds the state (q[k], q̇[k]) at t[k];
+applying q_cmd[k] for one step of 1 / rate_hz gives the state at k + 1. Only joint states and commands feed
+the learners; a measured torque may ride along for diagnostics.
 
 On disk a dataset is one ``.npz`` (zip) file: a UTF-8 JSON ``header`` and per-trajectory arrays
 ``traj/<index>/<field>``; docs/dataset.md describes it. Arrays are stored as float32 where that is exact and
@@ -121,6 +122,11 @@ class Dataset:
     """Seed the data was generated with (``None`` for real logs)."""
     meta: dict = field(default_factory=dict)
     """Free-form JSON-serialisable metadata: generator parameters, gap figures, source logs."""
+    gains: dict | None = None
+    """The gains config the robot was loaded with, ``{"file": path as given or None, "config": parsed TOML}``
+    (:meth:`~wresdyn.robot.description.Robot.gains_record`); ``None`` when the robot file was used as it is.
+    Optional header field ``gains`` (absent in files without it, which stay readable by older wresdyn);
+    :func:`~wresdyn.data.loading.load_data` re-applies it."""
 
     @property
     def n_dof(self) -> int:
@@ -132,8 +138,14 @@ class Dataset:
             raise DatasetError(f"unknown split {name!r}; choose from {SPLITS}")
         return [tr for tr in self.trajectories if tr.split == name]
 
+    @property
+    def gains_config(self) -> dict | None:
+        """The stored gains config (parsed TOML) to load the robot with, ``None`` when there is none."""
+        return None if self.gains is None else self.gains["config"]
+
     def validate(self, where: str = "dataset") -> None:
         """Check names, rate, shapes, finiteness and time stamps; raise :class:`DatasetError` naming ``where``."""
+        _check_gains(self.gains, where)
         names = self.joint_names
         if not names or not all(isinstance(n, str) and n for n in names):
             raise DatasetError(f"{where}: joint_names must be a non-empty list of non-empty strings")
@@ -205,7 +217,7 @@ class Dataset:
         trajs = [Trajectory(tr.name, tr.split, tr.t, tr.q[:, cols], tr.qd[:, cols], tr.qdd[:, cols], tr.q_cmd[:, cols],
                             None if tr.tau is None else tr.tau[:, cols]) for tr in self.trajectories]
         return Dataset(names, self.rate_hz, trajs, self.robot_file, self.robot_sha256, self.mismatch, self.seed,
-                       self.meta)
+                       self.meta, self.gains)
 
     def save(self, path) -> None:
         """Validate, then write atomically: a temporary file in the target folder, renamed over ``path``.
@@ -230,6 +242,8 @@ class Dataset:
                   "rate_hz": float(self.rate_hz), "units": UNITS, "robot_file": str(self.robot_file),
                   "robot_sha256": self.robot_sha256, "mismatch": self.mismatch, "seed": self.seed,
                   "meta": self.meta, "trajectories": entries}
+        if self.gains is not None:  # absent otherwise: a file without gains is byte-identical to older wresdyn's
+            header["gains"] = self.gains
         try:
             text = json.dumps(header, default=_jsonable, indent=1)
         except (TypeError, ValueError) as e:
@@ -286,7 +300,7 @@ class Dataset:
                     arr["qdd"] = derive_qdd(qd, h["rate_hz"])
             trajs.append(Trajectory(e["name"], e["split"], **arr))
         ds = cls(h["joint_names"], h["rate_hz"], trajs, h["robot_file"], h["robot_sha256"], h["mismatch"],
-                 h["seed"], h["meta"])
+                 h["seed"], h["meta"], h["gains"])
         ds.validate(str(path))
         return ds.for_robot(robot, str(path)) if robot is not None else ds
 
@@ -330,7 +344,21 @@ def _read_header(files: dict, path: Path) -> dict:
     if h.get("seed") is not None and not isinstance(h["seed"], int):
         raise DatasetError(f"{path}: header field 'seed' must be an integer or null")
     h.setdefault("seed", None)
+    h.setdefault("gains", None)
+    _check_gains(h["gains"], str(path))
     return h
+
+
+def _check_gains(gains, where: str) -> None:
+    """The optional gains record: ``None`` or ``{"file": str or None, "config": {"joint": [tables]}}``."""
+    if gains is None:
+        return
+    if not isinstance(gains, dict) or set(gains) != {"file", "config"} or not isinstance(gains["config"], dict) \
+            or not (gains["file"] is None or isinstance(gains["file"], str)):
+        raise DatasetError(f"{where}: gains must be null or {{\"file\": path or null, \"config\": {{...}}}}")
+    joints = gains["config"].get("joint")
+    if not isinstance(joints, list) or not all(isinstance(e, dict) for e in joints):
+        raise DatasetError(f"{where}: gains config needs a list of [[joint]] tables")
 
 
 def _umask() -> int:

@@ -10,6 +10,15 @@ several Hz (checked by :func:`band_fraction` and shown by :func:`plot_spectrum`)
 
 Out-of-distribution evaluation uses motion families never seen in training: joint-space ``chirp`` sweeps
 and task-space ``kick`` swings (minimum-jerk point-to-point moves of one sole at a time).
+
+The IK frames are any sites or bodies (:class:`ExcitationConfig` ``frames``, ``wresdyn collect --frames``): a
+robot whose chains cannot follow a full pose gets position-only targets (:mod:`wresdyn.data.ik`). For robots
+where foot targets make no sense (an arm) the joint-space mode (``mode = "joint"``) excites every joint
+directly: ``multisine`` for train, validation and held-out, ``chirp`` and ``steps`` (minimum-jerk moves between
+random joint positions) out of distribution. Each joint stays inside its limits, its command speed under
+``joint_max_velocity``, and the torque the command needs (inverse dynamics of the nominal robot: inertia and
+armature, gravity, damping and friction) under ``effort_fraction`` of its effort limit. :func:`plan` picks the
+mode (``"auto"``: foot IK when the robot has all ``frames``, joint space otherwise) and prepares it.
 Everything is drawn from a seeded :class:`numpy.random.Generator`.
 """
 
@@ -20,16 +29,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..robot.description import Robot, RobotError
-from .ik import FootIK
+from .ik import SOLES, FootIK
 
-__all__ = ["ExcitationConfig", "Excitation", "Workspace", "FAMILIES", "TRAIN_FAMILIES", "OOD_FAMILIES", "foot_workspace",
-           "ellipsoid_path", "generate", "command_spectrum", "band_fraction", "plot_spectrum"]
+__all__ = ["ExcitationConfig", "Excitation", "Workspace", "Plan", "FAMILIES", "TRAIN_FAMILIES", "OOD_FAMILIES",
+           "JOINT_FAMILIES", "JOINT_TRAIN_FAMILIES", "JOINT_OOD_FAMILIES", "MODES", "foot_workspace", "ellipsoid_path",
+           "generate", "generate_joint", "plan", "command_spectrum", "band_fraction", "plot_spectrum"]
 
 TRAIN_FAMILIES = ("ellipsoid",)
 """Families used for train and held-out data (the paper's excitation)."""
 OOD_FAMILIES = ("chirp", "kick")
 """Families used only for out-of-distribution evaluation."""
 FAMILIES = TRAIN_FAMILIES + OOD_FAMILIES
+"""Families of the foot (IK) mode."""
+JOINT_TRAIN_FAMILIES = ("multisine",)
+"""Joint-space mode: families for train, validation and held-out data."""
+JOINT_OOD_FAMILIES = ("chirp", "steps")
+"""Joint-space mode: families for out-of-distribution data."""
+JOINT_FAMILIES = JOINT_TRAIN_FAMILIES + JOINT_OOD_FAMILIES
+MODES = ("auto", "foot", "joint")
+"""Excitation modes: foot IK targets, joint space, or foot when the robot has all the frames."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +87,18 @@ class ExcitationConfig:
     workspace_quantiles: tuple[float, float] = (0.2, 0.8)
     """Per-axis quantiles of the reachable sole positions that bound the workspace box [-]."""
     min_foot_y: float = 0.05
-    """The box of each foot stays this far on its own side of the sagittal plane, so feet never cross [m]."""
+    """The box of each foot stays this far on its own side of the sagittal plane, so feet never cross [m]
+    (with two or more frames, each on a clear side)."""
+    mode: str = "auto"
+    """One of :data:`MODES`; :func:`plan` resolves ``"auto"`` (and records the resolved mode)."""
+    frames: tuple[str, ...] = SOLES
+    """IK frames of the foot mode (sites or bodies), one ellipsoid path each."""
+    joint_max_velocity: float = 5.0
+    """Joint-space mode: command speed bound [rad/s] (about an STS3215 servo's no-load speed, 5.4 rad/s at
+    7.4 V; the foot mode keeps ``max_velocity``)."""
+    effort_fraction: float = 0.5
+    """Joint-space mode: the torque a command needs on the nominal robot (inverse dynamics) stays under this
+    fraction of each joint's effort limit [-]; joints without a limit are not checked."""
 
 
 @dataclass
@@ -110,6 +139,10 @@ def foot_workspace(ik: FootIK, cfg: ExcitationConfig, seed: int = 0) -> Workspac
     for _ in range(cfg.workspace_samples):
         q = q_ref.copy()
         q[ik.dofs] = rng.uniform(ik.lower[ik.dofs], ik.upper[ik.dofs])
+        if ik.position_only:  # no orientation to level: every sampled configuration is reachable as it is
+            pts.append(ik.forward(q)[0])
+            confs.append(q)
+            continue
         qs, err = ik.solve(None, level, q)
         if (err[:, 1] < ik.config.rot_tol).all():
             pts.append(ik.forward(qs)[0])
@@ -119,7 +152,9 @@ def foot_workspace(ik: FootIK, cfg: ExcitationConfig, seed: int = 0) -> Workspac
                          "reachable with a level sole; cannot build the foot workspace")
     pts = np.asarray(pts)
     lo, hi = np.quantile(pts, cfg.workspace_quantiles[0], axis=0), np.quantile(pts, cfg.workspace_quantiles[1], axis=0)
-    for f in range(len(lo)):
+    for f in range(len(lo) if len(lo) > 1 else 0):
+        if abs(np.median(pts[:, f, 1])) <= cfg.min_foot_y:
+            continue  # a frame on no clear side of the sagittal plane keeps its box
         side = np.sign(np.median(pts[:, f, 1]))
         if side > 0:
             lo[f, 1] = max(lo[f, 1], cfg.min_foot_y)
@@ -249,6 +284,10 @@ def _ellipsoid(rng, ik: FootIK, ws: Workspace, t, cfg) -> tuple[np.ndarray, np.n
     for f, name in enumerate(ik.frames):
         p = _draw_ellipsoid(rng, ws.lo[f], ws.hi[f], cfg)
         pos[:, f] = ellipsoid_path(p, t)
+        if ik.position_only:  # the orientation is no target
+            rot[:, f] = ws.level[f]
+            params[name] = {"ellipsoid": p}
+            continue
         tilt, tp = _sole_tilt(rng, t, cfg)
         rot[:, f] = tilt @ ws.level[f]
         params[name] = {"ellipsoid": p, "tilt": tp}
@@ -267,7 +306,7 @@ def _kick(rng, ik: FootIK, ws: Workspace, t, cfg) -> tuple[np.ndarray, np.ndarra
     pos = np.broadcast_to(centre, (len(t), nf, 3)).copy()
     rot = np.empty((len(t), nf, 3, 3))
     for f in range(nf):
-        rot[:, f] = _sole_tilt(rng, t, cfg)[0] @ ws.level[f]
+        rot[:, f] = ws.level[f] if ik.position_only else _sole_tilt(rng, t, cfg)[0] @ ws.level[f]
     moves, t0, cur = [], 0.2, centre.copy()
     while t0 < t[-1]:
         f = int(rng.integers(nf))
@@ -281,9 +320,13 @@ def _kick(rng, ik: FootIK, ws: Workspace, t, cfg) -> tuple[np.ndarray, np.ndarra
     return pos, rot, {"moves": moves}
 
 
-def _chirp(rng, robot: Robot, t, cfg) -> tuple[np.ndarray, dict]:
+def _chirp(rng, robot: Robot, t, cfg, vmax: float | None = None, amax: np.ndarray | None = None
+           ) -> tuple[np.ndarray, dict]:
     """Joint-space logarithmic chirps, every joint, from band[0] to band[1] over the trajectory; the amplitude
-    falls as 1/f above the frequency where it would exceed ``max_velocity / 2``."""
+    falls as 1/f above the frequency where it would exceed ``vmax / 2`` (default ``max_velocity``) [rad/s] and,
+    with ``amax`` (per joint [rad/s^2], shape (n_dof,)), as 1/f^2 above where the acceleration would exceed
+    ``amax / 2``, the caps then blended by a smooth minimum."""
+    vmax = cfg.max_velocity if vmax is None else vmax
     lo, hi = _finite_limits(robot)
     f0, f1 = cfg.band
     f = f0 * (f1 / f0) ** (t / t[-1])
@@ -292,7 +335,11 @@ def _chirp(rng, robot: Robot, t, cfg) -> tuple[np.ndarray, dict]:
     for j in range(robot.n_dof):
         c, amp = _centre_amplitude(rng, lo[j], hi[j], cfg)
         amp *= rng.uniform(0.5, 1.0)
-        a = np.minimum(amp, 0.5 * cfg.max_velocity / (2 * np.pi * f))
+        if amax is None:
+            a = np.minimum(amp, 0.5 * vmax / (2 * np.pi * f))
+        else:  # a smooth minimum: a kink in a(t) would be a step in the speed and a spike in the torque
+            w = 2 * np.pi * f
+            a = (amp ** -2 + (0.5 * vmax / w) ** -2 + (0.5 * amax[j] / w ** 2) ** -2) ** -0.5
         q[:, j] = c + _fade(t, cfg) * a * np.sin(phase)
         params[robot.joint_names[j]] = {"centre": c, "amplitude": amp}
     return q, {"f0": f0, "f1": f1, "joints": params}
@@ -314,7 +361,8 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
     """
     cfg = cfg or ExcitationConfig()
     if family not in FAMILIES:
-        raise ValueError(f"unknown excitation family {family!r}; choose from {FAMILIES}")
+        raise ValueError(f"unknown excitation family {family!r}; choose from {FAMILIES} (joint-space families: "
+                         "generate_joint)")
     t = np.arange(int(round(duration * rate_hz))) / rate_hz
     leg = ik.dofs
     rest = np.setdiff1d(np.arange(robot.n_dof), leg)
@@ -325,7 +373,7 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
         else:
             targets = _ellipsoid if family == "ellipsoid" else _kick
             pos, rot, params = targets(rng, ik, ws, t, cfg)
-            q_leg, err = ik.solve_path(pos, rot, ws.home)
+            q_leg, err = ik.solve_path(pos, None if ik.position_only else rot, ws.home)
             ik_err = float(err[:, :, 0].max())
             q = q_leg.copy()
             q[:, rest], params["upper_body"] = _upper_body(rng, robot, rest, t, cfg)
@@ -340,6 +388,231 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
     raise RobotError(f"{robot.source}: no {family} excitation passed the IK ({cfg.ik_tol} m) and speed "
                      f"({cfg.max_velocity} rad/s) checks in {cfg.max_draws} draws; widen the workspace or "
                      "lower peak_rate")
+
+
+class _Dynamics:
+    """Inverse dynamics of the nominal robot (Pinocchio RNEA, armature included) plus its joint damping and
+    dry friction: the torque a command needs if the robot followed it exactly."""
+
+    def __init__(self, robot: Robot):
+        import pinocchio as pin
+
+        from ..robot.pinocchio_model import build_pinocchio
+
+        self.robot, self._pin = robot, pin
+        self.model = build_pinocchio(robot)
+        self.data = self.model.createData()
+
+    def torque(self, q: np.ndarray, rate_hz: float) -> np.ndarray:
+        """Torque [N*m] to follow ``q`` [rad], shape (T, n_dof): q̇ and q̈ by central differences."""
+        dt = 1.0 / rate_hz
+        qd = np.gradient(q, dt, axis=0)
+        qdd = np.gradient(qd, dt, axis=0)
+        r = self.robot
+        tau = np.array([self._pin.rnea(self.model, self.data, q[k], qd[k], qdd[k]) for k in range(len(q))])
+        return tau + r.damping * qd + r.friction * np.sign(qd)
+
+    def accel_budget(self, q: np.ndarray, limit: np.ndarray) -> np.ndarray:
+        """Acceleration each joint can have alone at ``q`` with ``limit`` torque [N*m] left after gravity
+        [rad/s^2], shape (n_dof,): (limit - |g(q)|) / M_jj(q), at least 0 (inf where the limit is)."""
+        pin = self._pin
+        g = pin.computeGeneralizedGravity(self.model, self.data, q)
+        m = np.diag(pin.crba(self.model, self.data, q))
+        with np.errstate(invalid="ignore"):
+            return np.where(np.isfinite(limit), np.maximum(limit - np.abs(g) - self.robot.friction, 0.0) / m, np.inf)
+
+
+def _effort_limit(robot: Robot, cfg: ExcitationConfig) -> np.ndarray:
+    """Torque a joint-space command may need [N*m], shape (n_dof,): ``effort_fraction`` of the effort limit (inf
+    where there is none)."""
+    return np.where(np.isfinite(robot.effort), cfg.effort_fraction * robot.effort, np.inf)
+
+
+def _joint_multisine(rng, robot: Robot, t, cfg, rate_hz, amax) -> tuple[np.ndarray, dict]:
+    """A multisine per joint about a random centre inside its limits (as the foot mode's upper body, amplitudes
+    ∝ f^-slope summing to the excursion), each sine's amplitude capped to 1/n_sines of the speed
+    (``joint_max_velocity``) and acceleration (``amax`` [rad/s^2]) budgets, then each joint's oscillation scaled
+    down if the fade-in still exceeds them; shape (T, n_dof)."""
+    lo, hi = _finite_limits(robot)
+    q, params = np.empty((len(t), robot.n_dof)), {}
+    n = cfg.n_sines
+    for j in range(robot.n_dof):
+        c, amp = _centre_amplitude(rng, lo[j], hi[j], cfg)
+        f = np.exp(rng.uniform(np.log(cfg.band[0]), np.log(cfg.band[1]), size=n))
+        a = f ** -cfg.slope
+        a *= amp / a.sum()
+        # each sine keeps 1/n of the speed and acceleration budgets: high frequencies get small amplitudes,
+        # low ones keep theirs
+        w = 2 * np.pi * f
+        a = np.minimum(a, np.minimum(cfg.joint_max_velocity / (n * w), amax[j] / (n * w ** 2)))
+        ph = rng.uniform(0.0, 2 * np.pi, size=n)
+        s = _fade(t, cfg) * (a[:, None] * np.sin(w[:, None] * t + ph[:, None])).sum(axis=0)
+        p = {"f": f.tolist(), "a": a.tolist(), "phase": ph.tolist()}
+        speed = np.abs(np.diff(s)).max() * rate_hz
+        acc = np.abs(np.diff(s, 2)).max() * rate_hz ** 2
+        scale = min(1.0, 0.95 * cfg.joint_max_velocity / max(speed, 1e-12), 0.95 * amax[j] / max(acc, 1e-12))
+        q[:, j] = c + scale * s
+        params[robot.joint_names[j]] = {"centre": c, "scale": scale, **p}
+    return q, params
+
+
+def _joint_steps(rng, robot: Robot, t, cfg, amax) -> tuple[np.ndarray, dict]:
+    """Every joint makes minimum-jerk moves between random positions inside its limits, with its own random
+    durations (``kick_time``) and pauses; each move is shortened so that its peak speed (1.875 d / T) stays under
+    ``joint_max_velocity`` and its peak acceleration (5.77 d / T^2) under ``amax``."""
+    lo, hi = _finite_limits(robot)
+    q, moves = np.empty((len(t), robot.n_dof)), {}
+    for j in range(robot.n_dof):
+        a, b = lo[j] + cfg.limit_margin, hi[j] - cfg.limit_margin
+        cur = rng.uniform(a, b) if b > a else 0.5 * (lo[j] + hi[j])
+        q[:, j] = cur
+        t0, js = rng.uniform(0.0, 0.3), []
+        while t0 < t[-1] and b > a:
+            dur = rng.uniform(*cfg.kick_time)
+            goal = rng.uniform(a, b)
+            reach = min(cfg.joint_max_velocity * dur / 1.875, amax[j] * dur ** 2 / 5.77) * 0.95
+            goal = cur + np.clip(goal - cur, -reach, reach)
+            s = np.clip((t - t0) / dur, 0.0, 1.0)
+            q[:, j] = np.where(t >= t0, cur + _min_jerk(s) * (goal - cur), q[:, j])
+            js.append({"t0": t0, "duration": dur, "goal": goal})
+            cur = goal
+            t0 += dur + rng.uniform(0.0, 0.3)
+        moves[robot.joint_names[j]] = js
+    return q, {"moves": moves}
+
+
+def generate_joint(family: str, robot: Robot, duration: float, rate_hz: float, rng: np.random.Generator,
+                   cfg: ExcitationConfig | None = None, dynamics: _Dynamics | None = None) -> Excitation:
+    """Draw one joint-space excitation of ``family`` (one of :data:`JOINT_FAMILIES`); redraws (same generator)
+    until the limit, speed (``joint_max_velocity``) and effort (``effort_fraction``) checks pass.
+
+    Args:
+        family: ``"multisine"``, ``"chirp"`` or ``"steps"``.
+        robot: The robot (fixed base).
+        duration: Trajectory length [s].
+        rate_hz: Command rate [Hz].
+        rng: Random generator (advanced in place).
+        cfg: Parameter ranges.
+        dynamics: Inverse dynamics of ``robot`` (made here when ``None``; pass one to draw many).
+
+    Raises:
+        RobotError: no draw passed the checks in ``max_draws`` tries (one line naming the worst joint).
+    """
+    cfg = cfg or ExcitationConfig()
+    if family not in JOINT_FAMILIES:
+        raise ValueError(f"unknown joint-space excitation family {family!r}; choose from {JOINT_FAMILIES}")
+    dyn = dynamics or _Dynamics(robot)
+    t = np.arange(int(round(duration * rate_hz))) / rate_hz
+    lo, hi = _finite_limits(robot)
+    limit = _effort_limit(robot, cfg)
+    amax = dyn.accel_budget(np.clip(np.zeros(robot.n_dof), lo, hi), limit)
+    amax = np.where(np.isfinite(amax), amax, 1e6)
+    worst = (0.0, "")
+    for draw in range(cfg.max_draws):
+        if family == "multisine":
+            q, params = _joint_multisine(rng, robot, t, cfg, rate_hz, amax)
+        elif family == "chirp":
+            q, params = _chirp(rng, robot, t, cfg, cfg.joint_max_velocity, amax)
+        else:
+            q, params = _joint_steps(rng, robot, t, cfg, amax)
+        speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz)
+        inside = (q >= lo + 0.5 * cfg.limit_margin).all() and (q <= hi - 0.5 * cfg.limit_margin).all()
+        tau = dyn.torque(q, rate_hz)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(np.isfinite(limit), np.abs(tau).max(axis=0) / limit, 0.0)
+        if ratio.max() > worst[0]:
+            worst = (float(ratio.max()), robot.joint_names[int(np.argmax(ratio))])
+        if speed <= cfg.joint_max_velocity and inside and ratio.max() <= 1.0:
+            params.update(family=family, draws=draw + 1, max_speed=speed,
+                          peak_effort_fraction=float(cfg.effort_fraction * ratio.max()))
+            return Excitation(family=family, q_cmd=q, params=params)
+        # the budget at the neutral pose was too generous for this draw's poses: tighten it
+        amax = amax * 0.8
+    raise RobotError(f"{robot.source}: no joint-space {family} excitation passed the limit, speed "
+                     f"({cfg.joint_max_velocity} rad/s) and effort ({cfg.effort_fraction:g} of the limit) checks in "
+                     f"{cfg.max_draws} draws (worst: {worst[1]} needs {worst[0] * cfg.effort_fraction:.2f} of its "
+                     "effort limit); can it hold itself up against gravity?")
+
+
+@dataclass
+class Plan:
+    """A resolved excitation: the mode, and what it needs (foot IK and workspace, or the robot's dynamics)."""
+
+    robot: Robot
+    cfg: ExcitationConfig
+    """The config, its ``mode`` resolved to ``"foot"`` or ``"joint"`` (and ``frames`` to the IK's)."""
+    ik: FootIK | None = None
+    """Foot IK (foot mode)."""
+    ws: Workspace | None = None
+    """Foot workspace (foot mode)."""
+    dynamics: _Dynamics | None = None
+    """Inverse dynamics (joint mode)."""
+
+    @property
+    def mode(self) -> str:
+        return self.cfg.mode
+
+    def families(self, split: str) -> tuple[str, ...]:
+        """The families a split draws from, in turn: training ones for train, validation and held-out."""
+        if self.mode == "foot":
+            return OOD_FAMILIES if split == "ood" else TRAIN_FAMILIES
+        return JOINT_OOD_FAMILIES if split == "ood" else JOINT_TRAIN_FAMILIES
+
+    def generate(self, family: str, duration: float, rate_hz: float, rng: np.random.Generator) -> Excitation:
+        """Draw one excitation (:func:`generate` or :func:`generate_joint`)."""
+        if self.mode == "foot":
+            return generate(family, self.robot, self.ik, self.ws, duration, rate_hz, rng, self.cfg)
+        return generate_joint(family, self.robot, duration, rate_hz, rng, self.cfg, self.dynamics)
+
+    def describe(self, e: Excitation) -> str:
+        """The per-trajectory progress figures of one excitation."""
+        p = e.params
+        if self.mode == "foot":
+            return f"IK err {1e3 * p['ik_max_error_m']:.3f} mm  peak {p['max_speed']:4.1f} rad/s"
+        return f"peak {p['max_speed']:4.1f} rad/s, {100 * p['peak_effort_fraction']:3.0f} % effort"
+
+    def meta(self) -> dict:
+        """What a dataset's meta records of the plan: the foot workspace (foot mode)."""
+        if self.mode != "foot":
+            return {}
+        return {"workspace": {"frames": list(self.ik.frames), "lo_m": self.ws.lo.tolist(), "hi_m": self.ws.hi.tolist()}}
+
+
+def plan(robot: Robot, cfg: ExcitationConfig | None = None, progress=None) -> Plan:
+    """Resolve the excitation mode and prepare it: ``"auto"`` is foot IK when the robot has every frame of
+    ``cfg.frames`` as a site (the humanoid's soles), joint space otherwise. The foot mode builds the IK (checking
+    the frames' chains, :class:`~wresdyn.data.ik.FootIK`) and samples the workspace.
+
+    Args:
+        robot: The robot (fixed base).
+        cfg: Parameter ranges, mode and frames.
+        progress: Optional ``callable(str)`` receiving progress lines.
+
+    Raises:
+        RobotError: one line: an unknown mode, a frame the robot lacks, chains that cannot track the targets.
+    """
+    import dataclasses
+
+    cfg = cfg or ExcitationConfig()
+    if cfg.mode not in MODES:
+        raise RobotError(f"excitation mode must be one of {MODES}, not {cfg.mode!r}")
+    mode = cfg.mode
+    if mode == "auto":
+        mode = "foot" if all(f in robot.frames for f in cfg.frames) else "joint"
+    cfg = dataclasses.replace(cfg, mode=mode, frames=tuple(cfg.frames))
+    if mode == "joint":
+        if progress:
+            limit = _effort_limit(robot, cfg)
+            progress(f"joint-space excitation of {robot.n_dof} joints: speed <= {cfg.joint_max_velocity:g} rad/s, "
+                     f"torque <= {cfg.effort_fraction:g} of the effort limit"
+                     f"{'' if np.isfinite(limit).all() else ' (joints without a limit unchecked)'}")
+        return Plan(robot, cfg, dynamics=_Dynamics(robot))
+    ik = FootIK(robot, cfg.frames)
+    if progress:
+        progress(f"foot IK on {', '.join(ik.frames)} ({'position only' if ik.position_only else 'full pose'}, "
+                 f"{len(ik.dofs)} joints): sampling the workspace ({cfg.workspace_samples} configurations)")
+    ws = foot_workspace(ik, cfg)
+    return Plan(robot, cfg, ik=ik, ws=ws)
 
 
 def command_spectrum(q_cmd: list[np.ndarray] | np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:

@@ -1,11 +1,18 @@
-"""Inverse kinematics of both soles on a fixed base, with Pinocchio.
+"""Inverse kinematics of named frames (by default both soles) on a fixed base, with Pinocchio.
 
-Each sole site (``left_sole``, ``right_sole``) is driven to a full 6-D target (position and orientation), so
-a 6-DoF leg has a locally unique solution and no null-space drift. Both legs are solved together as one
-damped least-squares problem (Levenberg-Marquardt: the damping grows with the squared error, so steps are
-Gauss-Newton near the solution and cautious far from it), every iterate is clamped into the joint limits,
-and a path is solved sample by sample warm-started from the previous solution, which keeps the command
-sequence smooth. Joints outside the legs are not moved.
+Each frame (a site or a body, by name; by default ``left_sole`` and ``right_sole``) is driven to a full 6-D
+target (position and orientation), so a 6-DoF leg has a locally unique solution and no null-space drift. All
+frames are solved together as one damped least-squares problem (Levenberg-Marquardt: the damping grows with
+the squared error, so steps are Gauss-Newton near the solution and cautious far from it), every iterate is
+clamped into the joint limits, and a path is solved sample by sample warm-started from the previous solution,
+which keeps the command sequence smooth. Joints outside the frames' chains are not moved.
+
+What the chains can track is checked up front. A frame whose chain (the joints between the base and it) cannot
+move it along all six pose directions (fewer than 6 joints, or a Jacobian of lower rank) cannot follow a full
+pose: then every frame is driven to a position only (3-D targets, ``position_only``; the orientation is whatever
+the joints give). A chain of fewer than 3 joints, one that moves its frame's position along fewer than 3
+directions, or two frames sharing a joint (their targets would fight) is refused with a one-line
+:class:`RobotError`.
 """
 
 from __future__ import annotations
@@ -16,10 +23,14 @@ import numpy as np
 
 from ..robot.description import Robot, RobotError
 
-__all__ = ["FootIK", "IKConfig", "SOLES"]
+__all__ = ["FootIK", "IKConfig", "SOLES", "POSE_DOF", "MIN_CHAIN_DOF"]
 
 SOLES = ("left_sole", "right_sole")
-"""Sole frames driven by the IK, in the order targets are given."""
+"""Default frames driven by the IK, in the order targets are given."""
+POSE_DOF = 6
+"""A chain needs this many joints to track a full 6-D pose; with fewer the IK is position-only."""
+MIN_CHAIN_DOF = 3
+"""A chain needs at least this many joints to track a 3-D position."""
 
 
 @dataclass(frozen=True)
@@ -43,40 +54,90 @@ class IKConfig:
 
 
 class FootIK:
-    """Sole-frame IK for a fixed-base biped.
+    """Frame IK for a fixed-base robot (by default the two soles of a biped).
 
     Args:
-        robot: The robot; must have the sites named in ``frames``.
-        frames: Sole frame names, one target each.
+        robot: The robot; must have sites or bodies named as in ``frames``.
+        frames: Frame names (sites first, then bodies), one target each.
         config: Solver settings.
+        position_only: Drive positions only (3-D targets); ``None``: only when some chain has fewer than
+            :data:`POSE_DOF` joints.
+
+    Raises:
+        RobotError: one line: a name that is no site or body, a chain too short, or chains sharing a joint.
     """
 
-    def __init__(self, robot: Robot, frames: tuple[str, ...] = SOLES, config: IKConfig | None = None):
+    def __init__(self, robot: Robot, frames: tuple[str, ...] = SOLES, config: IKConfig | None = None,
+                 position_only: bool | None = None):
         import pinocchio as pin
 
         from ..robot.pinocchio_model import build_pinocchio
 
         if robot.base != "fixed":
             raise RobotError(f"{robot.source}: foot IK needs a fixed-base robot (load_robot(..., base='fixed'))")
-        missing = [f for f in frames if f not in robot.frames]
+        frames = tuple(frames)
+        if not frames:
+            raise RobotError(f"{robot.source}: no IK frame given")
+        if len(set(frames)) != len(frames):
+            raise RobotError(f"{robot.source}: IK frames {', '.join(frames)} name a frame twice")
+        missing = [f for f in frames if f not in robot.frames and f not in robot.body_names]
         if missing:
-            raise RobotError(f"{robot.source}: no site named {', '.join(missing)} (needed for foot IK)")
+            have = list(robot.frames) + [b for b in robot.body_names if b not in robot.frames]
+            raise RobotError(f"{robot.source}: no site or body named {', '.join(missing)} for the IK targets "
+                             f"(--frames); it has {', '.join(have[:12])}{', ...' if len(have) > 12 else ''}")
         self.robot = robot
         self.config = config or IKConfig()
         self.model = build_pinocchio(robot)
         self.data = self.model.createData()
-        self.frame_ids = [self.model.getFrameId(f) for f in frames]
+        kind = {f: pin.FrameType.OP_FRAME if f in robot.frames else pin.FrameType.BODY for f in frames}
+        self.frame_ids = [self.model.getFrameId(f, kind[f]) for f in frames]
         self.frames = tuple(frames)
         # the DoFs that move each sole: the joints supporting its parent joint
         self.chains = []
         for fid in self.frame_ids:
             joints = self.model.supports[self.model.frames[fid].parentJoint].tolist()[1:]
             self.chains.append(np.array([self.model.joints[j].idx_q for j in joints], dtype=np.int64))
+        names = robot.joint_names
+        for f, chain in zip(frames, self.chains):
+            if len(chain) < MIN_CHAIN_DOF:
+                raise RobotError(f"{robot.source}: IK frame {f!r} is moved by {len(chain)} joint(s) "
+                                 f"({', '.join(names[i] for i in chain) or 'none'}); it needs at least "
+                                 f"{MIN_CHAIN_DOF} to follow a 3-D target")
+        for a in range(len(frames)):
+            for b in range(a + 1, len(frames)):
+                shared = np.intersect1d(self.chains[a], self.chains[b])
+                if len(shared):
+                    raise RobotError(f"{robot.source}: IK frames {frames[a]!r} and {frames[b]!r} share joint(s) "
+                                     f"{', '.join(names[i] for i in shared)}; give frames on separate chains")
         self.dofs = np.unique(np.concatenate(self.chains))
         m = self.config.limit_margin
         self.lower = np.where(np.isfinite(robot.lower), robot.lower + m, -np.pi)
         self.upper = np.where(np.isfinite(robot.upper), robot.upper - m, np.pi)
         self._pin = pin
+        pose_rank, pos_rank = self._ranks()
+        for f, r in zip(frames, pos_rank):
+            if r < 3:
+                raise RobotError(f"{robot.source}: the joints moving IK frame {f!r} move its position along only {r} "
+                                 "direction(s) (a frame on its last joint's axis?); pick a frame further out")
+        self.position_only = bool(min(pose_rank) < POSE_DOF if position_only is None else position_only)
+        """Targets are positions only (some chain cannot move its frame along all 6 pose directions)."""
+
+    def _ranks(self, samples: int = 8) -> tuple[list[int], list[int]]:
+        """Per frame, the rank of its 6-D and of its position Jacobian (over its chain), the largest over a few
+        configurations drawn inside the limits (a fixed generator: the excitation's draws are untouched)."""
+        pin = self._pin
+        rng = np.random.default_rng(0)
+        pose, pos = [0] * len(self.frame_ids), [0] * len(self.frame_ids)
+        for _ in range(samples):
+            q = np.clip(self.robot.q0, self.lower, self.upper)
+            q[self.dofs] = rng.uniform(self.lower[self.dofs], self.upper[self.dofs])
+            pin.computeJointJacobians(self.model, self.data, q)
+            pin.updateFramePlacements(self.model, self.data)
+            for i, (fid, chain) in enumerate(zip(self.frame_ids, self.chains)):
+                j = pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)[:, chain]
+                pose[i] = max(pose[i], int(np.linalg.matrix_rank(j, tol=1e-6)))
+                pos[i] = max(pos[i], int(np.linalg.matrix_rank(j[:3], tol=1e-6)))
+        return pose, pos
 
     def forward(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sole positions [m], shape (n_frames, 3), and rotation matrices, shape (n_frames, 3, 3), at ``q``."""
@@ -90,6 +151,9 @@ class FootIK:
         p, r = self.forward(q)
         err = np.empty((len(self.frame_ids), 6))
         err[:, :3] = (pos - p) if pos is not None else 0.0
+        if self.position_only:
+            err[:, 3:] = 0.0  # the orientation is not a target
+            return err
         for i in range(len(self.frame_ids)):
             err[i, 3:] = self._pin.log3(rot[i] @ r[i].T)  # world-frame rotation that takes the sole to its target
         return err
@@ -99,8 +163,10 @@ class FootIK:
 
         Args:
             pos: Target sole positions in the base (world) frame [m], shape (n_frames, 3); ``None`` solves for
-                the orientations alone (the nearest configuration with the given sole orientations).
-            rot: Target sole orientations (rotation matrices), shape (n_frames, 3, 3).
+                the orientations alone (the nearest configuration with the given sole orientations; not with
+                ``position_only``).
+            rot: Target sole orientations (rotation matrices), shape (n_frames, 3, 3); ignored with
+                ``position_only`` (``None`` allowed there).
             q_init: Start configuration [rad], shape (n_dof,); non-leg joints are returned unchanged.
 
         Returns:
@@ -108,9 +174,11 @@ class FootIK:
             ``[position error [m], orientation error [rad]]``, shape (n_frames, 2).
         """
         pin, cfg = self._pin, self.config
+        if pos is None and self.position_only:
+            raise ValueError("position-only IK needs target positions")
         q = np.array(q_init, dtype=np.float64)
         q[self.dofs] = np.clip(q[self.dofs], self.lower[self.dofs], self.upper[self.dofs])
-        rows = np.arange(6) if pos is not None else np.arange(3, 6)
+        rows = np.arange(3) if self.position_only else np.arange(6) if pos is not None else np.arange(3, 6)
         w = np.array([1.0, 1.0, 1.0, cfg.rot_weight, cfg.rot_weight, cfg.rot_weight])
         nf = len(self.frame_ids)
         for _ in range(cfg.max_iters):
@@ -137,7 +205,7 @@ class FootIK:
 
         Args:
             pos: Target sole positions [m], shape (T, n_frames, 3).
-            rot: Target sole rotations, shape (T, n_frames, 3, 3).
+            rot: Target sole rotations, shape (T, n_frames, 3, 3); ignored (may be ``None``) with ``position_only``.
             q_init: Configuration to start the first sample from [rad], shape (n_dof,).
 
         Returns:
@@ -149,6 +217,6 @@ class FootIK:
         errs = np.empty((t_len, len(self.frame_ids), 2))
         q = np.asarray(q_init, dtype=np.float64)
         for k in range(t_len):
-            q, errs[k] = self.solve(pos[k], rot[k], q)
+            q, errs[k] = self.solve(pos[k], None if rot is None else rot[k], q)
             out[k] = q
         return out, errs

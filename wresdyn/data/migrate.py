@@ -56,7 +56,7 @@ def migrate(path, validation: int = 0, robot=None, progress=None) -> Migration:
         path: The schema-1 ``.npz`` file; a file already at :data:`~wresdyn.data.dataset.SCHEMA_VERSION` is refused.
         validation: Number of validation trajectories to record (simulated data) or move from train (real logs).
         robot: Robot to record on (default: the file's ``robot_file``, as :func:`~wresdyn.data.loading.load_data`
-            finds it, without gain overrides); only used when recording.
+            finds it, with the gains config stored in the file, if any); only used when recording.
         progress: Optional ``callable(str)`` receiving progress lines.
 
     Raises:
@@ -117,7 +117,7 @@ def _record_validation(ds: Dataset, k: int, robot, path: Path, progress):
     ref = next((tr for s in ("train", "heldout", "ood") for tr in ds.split(s) if tr.name == f"{s}_000"), None)
     if ref is None:
         raise DatasetError(f"{path}: no trajectory train_000, heldout_000 or ood_000 to check the re-recording against")
-    robot = robot if robot is not None else dataset_robot(ds.robot_file)
+    robot = robot if robot is not None else dataset_robot(ds.robot_file, gains=ds.gains_config)
     ds = ds.for_robot(robot, str(path))
     ref = next(tr for tr in ds.trajectories if tr.name == ref.name)
     if progress:

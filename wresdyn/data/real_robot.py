@@ -329,35 +329,35 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
     """Draw excitations, execute them on the real robot and return the recorded :class:`~wresdyn.data.dataset.Dataset`.
 
     Trajectory i of a split draws from ``SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i))``, so it does not
-    depend on how many trajectories the other splits hold. Train, validation and held-out use the ellipsoid
-    excitation (eq. 2); out-of-distribution alternates the other families.
+    depend on how many trajectories the other splits hold. Train, validation and held-out use the training
+    family (foot mode: the ellipsoid excitation, eq. 2; joint mode: multisines); out-of-distribution alternates
+    the other families (:meth:`~wresdyn.data.excitation.Plan.families`). The mode and IK frames come from the
+    excitation config (:func:`~wresdyn.data.excitation.plan`); the dataset stores the robot's gains config.
 
     Args:
-        robot: Nominal robot (fixed base, with sole sites).
+        robot: Nominal robot (fixed base; foot mode: with the IK frames).
         mismatch: How the real robot differs.
         counts: Number of trajectories per split, e.g. ``{"train": 16, "validation": 4, "heldout": 4, "ood": 4}``.
         duration: Length of every trajectory [s].
         rate_hz: Command and recording rate [Hz].
         seed: Master seed.
-        excitation: :class:`~wresdyn.data.excitation.ExcitationConfig` (default ranges when ``None``).
+        excitation: :class:`~wresdyn.data.excitation.ExcitationConfig` (default ranges, ``mode = "auto"``, when
+            ``None``).
         store_tau: Keep the measured (diagnostic) torque in the trajectories.
-        progress: Optional ``callable(str)`` receiving one line per recorded trajectory.
+        progress: Optional ``callable(str)`` receiving the plan's lines and one line per recorded trajectory.
     """
     import time
 
     from . import excitation as ex
     from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
-    from .ik import FootIK
 
     unknown = sorted(set(counts) - set(SPLITS))
     if unknown:
         raise ValueError(f"unknown split(s) {unknown} in counts; choose from {SPLITS}")
-    cfg = excitation or ex.ExcitationConfig()
-    ik = FootIK(robot)
-    ws = ex.foot_workspace(ik, cfg)
+    plan = ex.plan(robot, excitation, progress)
+    cfg = plan.cfg
     real = RealRobot(robot, mismatch, rate_hz)
-    families = {"train": ex.TRAIN_FAMILIES, "validation": ex.TRAIN_FAMILIES, "heldout": ex.TRAIN_FAMILIES,
-                "ood": ex.OOD_FAMILIES}
+    families = {split: plan.families(split) for split in SPLITS}
     total, done = sum(counts.values()), 0
     trajs, params = [], {}
     for split in SPLITS:
@@ -366,7 +366,7 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
             seeds = np.random.SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i)).spawn(2)
             rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
             family = families[split][i % len(families[split])]
-            exc = ex.generate(family, robot, ik, ws, duration, rate_hz, rng_exc, cfg)
+            exc = plan.generate(family, duration, rate_hz, rng_exc)
             q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
             q, qd, tau = real.record(q_cmd, rng_noise)
             q, qd = _f32(q), _f32(qd)
@@ -378,17 +378,16 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
             done += 1
             if progress:
                 progress(f"[{done:>{len(str(total))}}/{total}] {name:<14} {family:<9} draws={exc.params['draws']:<2} "
-                         f"IK err {1e3 * exc.params['ik_max_error_m']:.3f} mm  "
-                         f"peak {exc.params['max_speed']:4.1f} rad/s  "
+                         f"{plan.describe(exc)}  "
                          f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")
     meta = {"generator": "wresdyn collect", "duration_s": duration,
             "excitation": {k: v for k, v in dataclasses.asdict(cfg).items()},
-            "workspace": {"frames": list(ik.frames), "lo_m": ws.lo.tolist(), "hi_m": ws.hi.tolist()},
+            **plan.meta(),
             "real_robot": {"substep_s": real.substep, "delay_substeps": real.n_delay, "integrator": "implicitfast",
                            "settle_s": 0.5},
             "trajectory_params": params}
     return Dataset(list(robot.joint_names), float(rate_hz), trajs, _display_path(robot.source), robot.source_sha256,
-                   mismatch.to_dict(), int(seed), meta)
+                   mismatch.to_dict(), int(seed), meta, robot.gains_record())
 
 
 def _display_path(p: Path) -> str:

@@ -4,6 +4,12 @@ Newton's importers are the single parser. The robot is loaded once into a single
 :class:`newton.ModelBuilder`; :class:`Robot` keeps that builder (to replicate into N worlds) and a
 plain-numpy view of everything the rest of wresdyn needs: the kinematic tree, inertias, actuated
 joints with limits, PD gains, effort limits, armature and friction, and named frames (sites).
+
+What Newton's importers leave out but the file states is read here: the force range of MJCF actuators
+(compiled by MuJoCo itself, defaults classes resolved) and, in a USD converted from MJCF, the ``mjc:``
+attributes (joint ``mjc:actuatorfrcrange``; ``MjcActuator`` prims' ``mjc:forceRange``, ``mjc:gainPrm`` and
+``mjc:biasPrm``). An effort limit that nothing states keeps Newton's placeholder (1e6) and is refused by
+:meth:`Robot.check_effort` before any replay, with the fix in the message (``effort = ...`` in a gains config).
 The MuJoCo and Pinocchio models are built from this view (:mod:`wresdyn.robot.mujoco_model`,
 :mod:`wresdyn.robot.pinocchio_model`), never through a lossy file round trip.
 """
@@ -22,13 +28,18 @@ import tomllib
 from ..errors import WresdynError
 from ..paths import DEFAULT_ROBOT
 
-__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "DEFAULT_ROBOT"]
+__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "read_gains", "DEFAULT_ROBOT",
+           "PLACEHOLDER_EFFORT"]
 
 
 _SUFFIX_KIND = {".usd": "usd", ".usda": "usd", ".usdc": "usd", ".usdz": "usd", ".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
 _UNLIMITED = 1e5
 """Joint limits at or beyond this magnitude [rad or m] mean "no limit"."""
 _OVERRIDE_FIELDS = ("kp", "kd", "effort", "armature", "friction", "damping", "lower", "upper")
+PLACEHOLDER_EFFORT = 1e5
+"""An effort limit at or above this [N*m or N] (Newton's importers write 1e6 when a file states none; 0 and inf
+are read as "none" too) is a placeholder, not a property of the robot: :meth:`Robot.check_effort` refuses it
+unless a gains config sets it explicitly."""
 
 
 class RobotError(WresdynError):
@@ -110,6 +121,12 @@ class Robot:
     """Named frames (sites): name -> (body index, [x y z qx qy qz qw] in the body frame)."""
     gravity: np.ndarray
     """Gravity vector [m/s^2], shape (3,)."""
+    gains: dict | None = None
+    """The gains config applied on top of the file (parsed TOML, ``{"joint": [...]}``), ``None`` when none."""
+    gains_file: str | None = None
+    """Path of the gains TOML as given (``None`` when none, or when given as a dict)."""
+    effort_given: np.ndarray | None = None
+    """True where the gains config sets the joint's effort limit explicitly, shape (n_dof,) (``None``: nowhere)."""
 
     @property
     def n_dof(self) -> int:
@@ -127,6 +144,37 @@ class Robot:
     def is_prismatic(self) -> np.ndarray:
         """Boolean mask of prismatic DoF, shape (n_dof,)."""
         return np.array([self.joint_type[b] == "prismatic" for b in self.dof_body], dtype=bool)
+
+    def placeholder_effort(self) -> list[str]:
+        """Joints whose effort limit is a placeholder (at or above :data:`PLACEHOLDER_EFFORT`, or none at all)
+        that no gains config set explicitly."""
+        given = self.effort_given if self.effort_given is not None else np.zeros(self.n_dof, dtype=bool)
+        return [n for n, e, g in zip(self.joint_names, self.effort, given) if not e < PLACEHOLDER_EFFORT and not g]
+
+    def check_effort(self) -> None:
+        """Raise :class:`RobotError` if any actuated joint has a placeholder effort limit (see
+        :meth:`placeholder_effort`): the real robot's torque saturation and the mismatch's friction (a fraction of
+        the effort limit) would be made up."""
+        bad = self.placeholder_effort()
+        if bad:
+            raise RobotError(
+                f"{self.source}: {len(bad)} of {self.n_dof} joints have no effort limit in the file, only the "
+                f"importer's placeholder ({', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}); set it in a gains "
+                "config and pass it with --gains FILE.toml, e.g. [[joint]] match = \"*\" effort = 3.0 (N*m)"
+            )
+
+    def check_replay(self) -> None:
+        """Everything a replay or a fit needs from the robot: PD gains (:meth:`check_gains`) and stated effort
+        limits (:meth:`check_effort`)."""
+        self.check_gains()
+        self.check_effort()
+
+    def gains_record(self) -> dict | None:
+        """The gains config as a dataset stores it: ``{"file": path or None, "config": parsed TOML}``, or ``None``
+        when the robot file is used as it is."""
+        if self.gains is None:
+            return None
+        return {"file": self.gains_file, "config": copy.deepcopy(self.gains)}
 
     def check_gains(self) -> None:
         """Raise :class:`RobotError` if any actuated joint has no PD stiffness (nothing to replay)."""
@@ -168,10 +216,123 @@ def _short(label: str) -> str:
 def _import(builder, path: Path, kind: str, floating: bool) -> None:
     if kind == "usd":
         builder.add_usd(str(path), floating=floating, enable_self_collisions=False, load_visual_shapes=False)
+        _usd_mjc_attributes(builder, path)
     elif kind == "urdf":
         builder.add_urdf(str(path), floating=floating, enable_self_collisions=False)
     else:
         builder.add_mjcf(str(path), floating=floating, enable_self_collisions=False, parse_visuals=False)
+        _mjcf_actuator_limits(builder, path)
+
+
+def _dof_by_label(builder) -> dict[str, int]:
+    """Joint label (full USD prim path or MJCF path) -> DoF index, for 1-DoF joints."""
+    out = {}
+    for j, label in enumerate(builder.joint_label):
+        lin, ang = builder.joint_dof_dim[j]
+        if int(lin) + int(ang) == 1:
+            out[label] = int(builder.joint_qd_start[j])
+    return out
+
+
+def _tighten_effort(builder, dof: int, limit: float) -> None:
+    """Lower a DoF's effort limit to ``limit`` (the file states both: the tighter one bounds the torque)."""
+    current = float(builder.joint_effort_limit[dof])
+    if limit > 0.0 and np.isfinite(limit) and (not current > 0.0 or limit < current):
+        builder.joint_effort_limit[dof] = limit
+
+
+def _mjcf_actuator_limits(builder, path: Path) -> None:
+    """Effort limits from MJCF actuators, which Newton's MJCF importer leaves out: compiled by MuJoCo (so
+    default classes and ``autolimits`` resolve as MuJoCo does), every force-limited actuator on a joint bounds
+    that joint's effort by ``|gear| * max(|forcerange|)``. Newton already reads the joint's own
+    ``actuatorfrcrange`` and a position actuator's ``kp``/``kv``. A file MuJoCo cannot compile is left as
+    Newton read it."""
+    try:
+        import mujoco
+
+        m = mujoco.MjModel.from_xml_path(str(path))
+    except Exception:  # Newton extensions MuJoCo does not know: keep what Newton read
+        return
+    by_name: dict[str, list[int]] = {}
+    for label, dof in _dof_by_label(builder).items():
+        by_name.setdefault(_short(label), []).append(dof)
+    for a in range(m.nu):
+        if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or not m.actuator_forcelimited[a]:
+            continue
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.actuator_trnid[a, 0]))
+        dofs = by_name.get(name or "", [])
+        if len(dofs) == 1:
+            limit = abs(float(m.actuator_gear[a, 0])) * float(np.abs(m.actuator_forcerange[a]).max())
+            _tighten_effort(builder, dofs[0], limit)
+
+
+def _usd_mjc_attributes(builder, path: Path) -> None:
+    """MuJoCo attributes of a USD converted from MJCF that Newton's default USD import leaves out: a joint's
+    ``mjc:actuatorfrcrange:min/max`` (with ``mjc:actuatorfrclimited``) and, for an ``MjcActuator`` prim whose
+    ``mjc:target`` is a 1-DoF joint, its ``mjc:forceRange:min/max`` (with ``mjc:forceLimited`` and
+    ``mjc:gear``) bound the effort; its ``mjc:gainPrm`` / ``mjc:biasPrm`` give kp and kd when they have the
+    position-actuator shape (gain ``[kp]``, bias ``[0, -kp, -kv]``) and Newton found no drive on the joint."""
+    if not _has_text(path, b"mjc:"):
+        return
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        return
+    dofs = _dof_by_label(builder)
+
+    def value(prim, name, default=None):
+        attr = prim.GetAttribute(name)
+        return attr.Get() if attr and attr.HasAuthoredValue() else default
+
+    def limit(prim, rng: str, limited: str) -> float | None:
+        lo, hi = value(prim, f"{rng}:min"), value(prim, f"{rng}:max")
+        if lo is None and hi is None:
+            return None
+        lo, hi = float(lo or 0.0), float(hi or 0.0)
+        flag = str(value(prim, limited, "auto"))
+        return max(abs(lo), abs(hi)) if flag == "true" or (flag == "auto" and lo < hi) else None
+
+    import newton
+
+    for prim in stage.Traverse():
+        path_str = str(prim.GetPath())
+        if path_str in dofs:
+            e = limit(prim, "mjc:actuatorfrcrange", "mjc:actuatorfrclimited")
+            if e is not None:
+                _tighten_effort(builder, dofs[path_str], e)
+        if prim.GetTypeName() != "MjcActuator":
+            continue
+        rel = prim.GetRelationship("mjc:target")
+        targets = [str(t) for t in rel.GetTargets()] if rel else []
+        if len(targets) != 1 or targets[0] not in dofs:
+            continue
+        dof = dofs[targets[0]]
+        gear = list(value(prim, "mjc:gear", None) or [1.0])
+        e = limit(prim, "mjc:forceRange", "mjc:forceLimited")
+        if e is not None:
+            _tighten_effort(builder, dof, abs(float(gear[0])) * e)
+        gain, bias = value(prim, "mjc:gainPrm"), value(prim, "mjc:biasPrm")
+        if gain is None or bias is None or len(gain) < 1 or len(bias) < 3:
+            continue
+        kp, kv = float(gain[0]), -float(bias[2])
+        position_shaped = kp > 0 and abs(float(bias[0])) < 1e-12 and abs(float(bias[1]) + kp) <= 1e-9 * kp and kv >= 0
+        if position_shaped and float(gear[0]) == 1.0 and not builder.joint_target_ke[dof] > 0 \
+                and not builder.joint_target_kd[dof] > 0:
+            builder.joint_target_ke[dof], builder.joint_target_kd[dof] = kp, kv
+            builder.joint_target_mode[dof] = int(newton.JointTargetMode.POSITION)
+
+
+def _has_text(path: Path, needle: bytes) -> bool:
+    """Whether a (text or binary) USD file mentions ``needle`` at all: skips opening the stage twice for files
+    without MuJoCo attributes."""
+    with open(path, "rb") as f:
+        tail = b""
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            if needle in tail + chunk:
+                return True
+            tail = chunk[-len(needle):]
+    return False
 
 
 def resolve_path(path: str | Path) -> Path:
@@ -192,7 +353,7 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         path: USD (``.usd/.usda/.usdc``), URDF (``.urdf``) or MJCF (``.xml``) file, or ``newton:NAME`` for an
             asset bundled with newton.
         gains: Optional overrides by joint-name pattern, a TOML file or the parsed dict
-            (see :func:`apply_overrides`).
+            (see :func:`apply_overrides`); kept on the robot (:attr:`Robot.gains`) so a dataset can store it.
         base: ``"fixed"`` (the robot hangs on a stand, as in data collection) or ``"floating"``.
 
     Raises:
@@ -221,9 +382,13 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         raise RobotError(f"{path}: cannot parse {kind.upper()} file: {msg}") from None
     if builder.joint_count == 0 or builder.body_count == 0:
         raise RobotError(f"{path}: no articulation found (no bodies connected by joints)")
+    config, gains_file, effort_dofs = None, None, set()
     if gains is not None:
-        apply_overrides(builder, gains, source=path)
+        config, gains_file = read_gains(gains)
+        effort_dofs = apply_overrides(builder, config, source=path, where=gains_file or "gains config")
     robot = _describe(builder, path, base)
+    robot.gains, robot.gains_file = config, gains_file
+    robot.effort_given = np.array([int(d) in effort_dofs for d in robot.qd_index], dtype=bool)
     robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
     return robot
 
@@ -317,7 +482,25 @@ def _describe(builder, path: Path, base: str) -> Robot:
     )
 
 
-def apply_overrides(builder, gains: str | Path | dict, source: Path | None = None) -> None:
+def read_gains(gains: str | Path | dict) -> tuple[dict, str | None]:
+    """A gains config as ``(parsed dict, file path or None)``: a TOML file is read, a dict is copied.
+
+    Raises:
+        RobotError: the file is missing or not TOML.
+    """
+    if isinstance(gains, dict):
+        return copy.deepcopy(gains), None
+    gp = Path(gains)
+    if not gp.is_file():
+        raise RobotError(f"{gp}: gains config not found")
+    try:
+        return tomllib.loads(gp.read_text()), str(gains)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise RobotError(f"{gp}: malformed TOML: {e}") from None
+
+
+def apply_overrides(builder, gains: str | Path | dict, source: Path | None = None,
+                    where: str | None = None) -> set[int]:
     """Override per-joint drive and joint parameters by joint-name pattern, in place.
 
     The config (TOML) holds ``[[joint]]`` tables applied in order, later ones winning::
@@ -333,18 +516,12 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
         armature = 0.01        # reflected rotor inertia [kg*m^2]
 
     Keys: ``kp kd effort armature friction damping lower upper``. A pattern that matches no joint is an
-    error, so typos do not pass silently.
+    error, so typos do not pass silently. An effort limit set here is taken as stated, even a huge one (see
+    :meth:`Robot.check_effort`). Returns the DoF indices whose effort limit the config set.
     """
-    where = str(gains) if not isinstance(gains, dict) else "gains config"
-    if not isinstance(gains, dict):
-        gp = Path(gains)
-        if not gp.is_file():
-            raise RobotError(f"{gp}: gains config not found")
-        try:
-            gains = tomllib.loads(gp.read_text())
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise RobotError(f"{gp}: malformed TOML: {e}") from None
-    gains = copy.deepcopy(gains)
+    if where is None:
+        where = str(gains) if not isinstance(gains, dict) else "gains config"
+    gains, _ = read_gains(gains)
     entries = gains.get("joint", [])
     if not isinstance(entries, list) or not entries:
         raise RobotError(f"{where}: expected one or more [[joint]] tables")
@@ -353,7 +530,10 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
     labels = [_short(label) for label in builder.joint_label]
     qd_start = list(builder.joint_qd_start)
     dof_dim = [int(a) + int(b) for a, b in builder.joint_dof_dim]
+    effort_dofs: set[int] = set()
     for e in entries:
+        if not isinstance(e, dict):
+            raise RobotError(f"{where}: every [[joint]] entry must be a table")
         pattern = e.pop("match", None)
         if not isinstance(pattern, str):
             raise RobotError(f"{where}: every [[joint]] needs a match = \"pattern\" string")
@@ -373,6 +553,8 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
             lst = getattr(builder, attr[key])
             for j in hits:
                 lst[qd_start[j]] = value
+                if key == "effort":
+                    effort_dofs.add(int(qd_start[j]))
     # a joint given gains but still in "no drive" mode would ignore them
     import newton
 
@@ -381,3 +563,4 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
             d = qd_start[j]
             if builder.joint_target_ke[d] > 0.0 or builder.joint_target_kd[d] > 0.0:
                 builder.joint_target_mode[d] = int(newton.JointTargetMode.POSITION)
+    return effort_dofs

@@ -1,0 +1,185 @@
+"""Robot files as they come: effort limits the importers leave out (MJCF actuator force range, USD mjc:
+attributes), placeholder effort limits refused in one line, and the gains config travelling with a dataset."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from wresdyn.cli import main
+from wresdyn.data.dataset import Dataset, DatasetError, load_dataset, read_header
+from wresdyn.data.loading import load_data
+from wresdyn.robot.description import PLACEHOLDER_EFFORT, RobotError, load_robot
+
+KP_ONLY = {"joint": [{"match": "*", "kp": 20.0, "kd": 0.5}]}
+"""Gains for newton's nv_ant.xml: its motors state no force range, so the effort limits stay placeholders."""
+
+
+def _raw_header(path) -> dict:
+    """The header JSON exactly as stored (no defaults filled in)."""
+    with np.load(path, allow_pickle=False) as z:
+        return json.loads(z["header"].tobytes().decode("utf-8"))
+
+
+def _one_line(capsys) -> str:
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_placeholder_effort_is_refused_in_one_line():
+    ant = load_robot("newton:nv_ant.xml", gains=KP_ONLY)
+    assert ant.placeholder_effort() == ant.joint_names and np.all(ant.effort >= PLACEHOLDER_EFFORT)
+    ant.check_gains()  # the gains are there: only the effort is missing
+    with pytest.raises(RobotError) as e:
+        ant.check_replay()
+    msg = str(e.value)
+    assert "\n" not in msg and "effort" in msg and "--gains" in msg and "hip_1" in msg
+    # an effort the gains config states is taken as stated, even a huge one
+    stated = load_robot("newton:nv_ant.xml", gains={"joint": [{**KP_ONLY["joint"][0], "effort": 1e6}]})
+    assert stated.placeholder_effort() == []
+    stated.check_replay()
+    # files that state their limits pass as before
+    quadruped = load_robot("newton:quadruped.urdf", gains="examples/gains/quadruped.toml")
+    assert quadruped.placeholder_effort() == [] and np.all(quadruped.effort == 80.0)
+
+
+def test_inspect_flags_placeholder_effort_and_collect_refuses_it(tmp_path, capsys):
+    gains = tmp_path / "ant.toml"
+    gains.write_text('[[joint]]\nmatch = "*"\nkp = 20.0\nkd = 0.5\n')
+    assert main(["inspect", "newton:nv_ant.xml", "--gains", str(gains), "--seconds", "0.04"]) == 0
+    out = capsys.readouterr().out
+    assert "note" in out.splitlines()[1] and out.count("effort: placeholder") == 8
+    assert "warning: 8 of 8 joints have no effort limit" in out and "PD replay" in out
+    assert main(["collect", "--robot", "newton:nv_ant.xml", "--gains", str(gains), "--out", str(tmp_path / "o")]) == 2
+    line = _one_line(capsys)
+    assert line.startswith("wresdyn collect: error:") and "effort" in line and "--gains" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_mjcf_actuator_force_range_is_read(tmp_path):
+    """Newton's MJCF importer reads a position actuator's kp and kv but not its force range (nor a motor's):
+    wresdyn takes |gear| * max|forcerange| from MuJoCo's compiled model, the tighter of it and the joint's own
+    actuatorfrcrange."""
+    xml = tmp_path / "arm.xml"
+    xml.write_text("""<mujoco><default><position kp="40" kv="2"/></default><worldbody><body name="base">
+      <geom type="box" size="0.05 0.05 0.05" mass="1"/>
+      <body name="a"><joint name="j1" type="hinge" axis="0 1 0" range="-1 1"/>
+        <geom type="capsule" size="0.02" fromto="0 0 0 0.2 0 0" mass="0.5"/>
+        <body name="b" pos="0.2 0 0"><joint name="j2" type="hinge" axis="0 1 0" range="-1 1" actuatorfrcrange="-4 4"/>
+          <geom type="capsule" size="0.02" fromto="0 0 0 0.2 0 0" mass="0.3"/>
+          <body name="c" pos="0.2 0 0"><joint name="j3" type="hinge" axis="0 1 0" range="-1 1"/>
+            <geom type="capsule" size="0.02" fromto="0 0 0 0.1 0 0" mass="0.1"/></body></body></body>
+      </body></worldbody><actuator><position joint="j1" forcerange="-3 3"/>
+      <motor joint="j2" gear="2" forcerange="-5 5"/><position joint="j3"/></actuator></mujoco>""")
+    r = load_robot(xml)
+    assert r.joint_names == ["j1", "j2", "j3"]
+    np.testing.assert_allclose(r.kp, [40.0, 0.0, 40.0])
+    np.testing.assert_allclose(r.effort[:2], [3.0, 4.0])  # j2: min(joint's 4, motor's 2 * 5)
+    assert r.placeholder_effort() == ["j3"]
+
+
+def _mjc_usd(path):
+    """A three-link arm as a USD converted from MJCF keeps it: joint a1 has only mjc:actuatorfrcrange, joint a2
+    only an MjcActuator prim (force range, position-shaped gain and bias), joint a3 nothing."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdPhysics.Scene.Define(stage, "/physicsScene")
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/arm").GetPrim())
+    for i, name in enumerate(("base", "l1", "l2", "l3")):
+        body = UsdGeom.Xform.Define(stage, f"/arm/{name}")
+        body.AddTranslateOp().Set(Gf.Vec3d(0.2 * i, 0.0, 1.0))
+        UsdPhysics.RigidBodyAPI.Apply(body.GetPrim())
+        mass = UsdPhysics.MassAPI.Apply(body.GetPrim())
+        mass.CreateMassAttr(1.0)
+        mass.CreateDiagonalInertiaAttr(Gf.Vec3f(0.01, 0.01, 0.01))
+        if i == 0:
+            UsdPhysics.ArticulationRootAPI.Apply(body.GetPrim())
+            fixed = UsdPhysics.FixedJoint.Define(stage, "/arm/joints/root")
+            fixed.CreateBody1Rel().SetTargets(["/arm/base"])
+            fixed.CreateLocalPos0Attr(Gf.Vec3f(0.0, 0.0, 1.0))
+            continue
+        joint = UsdPhysics.RevoluteJoint.Define(stage, f"/arm/joints/a{i}")
+        joint.CreateBody0Rel().SetTargets([f"/arm/{('base', 'l1', 'l2')[i - 1]}"])
+        joint.CreateBody1Rel().SetTargets([f"/arm/{name}"])
+        joint.CreateLocalPos0Attr(Gf.Vec3f(0.2, 0.0, 0.0))
+        joint.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
+        joint.CreateAxisAttr("Y")
+        joint.CreateLowerLimitAttr(-60.0)
+        joint.CreateUpperLimitAttr(60.0)
+    jp = stage.GetPrimAtPath("/arm/joints/a1")
+    jp.CreateAttribute("mjc:actuatorfrcrange:min", Sdf.ValueTypeNames.Double).Set(-7.0)
+    jp.CreateAttribute("mjc:actuatorfrcrange:max", Sdf.ValueTypeNames.Double).Set(7.0)
+    act = stage.DefinePrim("/arm/actuators/a2", "MjcActuator")
+    act.CreateRelationship("mjc:target").SetTargets(["/arm/joints/a2"])
+    act.CreateAttribute("mjc:forceRange:min", Sdf.ValueTypeNames.Double).Set(-2.5)
+    act.CreateAttribute("mjc:forceRange:max", Sdf.ValueTypeNames.Double).Set(2.5)
+    act.CreateAttribute("mjc:gainPrm", Sdf.ValueTypeNames.DoubleArray).Set([30.0] + [0.0] * 9)
+    act.CreateAttribute("mjc:biasPrm", Sdf.ValueTypeNames.DoubleArray).Set([0.0, -30.0, -1.5] + [0.0] * 7)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_usd_mjc_attributes_are_read(tmp_path):
+    r = load_robot(_mjc_usd(tmp_path / "arm.usda"))
+    assert r.joint_names == ["a1", "a2", "a3"]
+    np.testing.assert_allclose(r.effort[:2], [7.0, 2.5])
+    np.testing.assert_allclose([r.kp[1], r.kd[1]], [30.0, 1.5])
+    assert r.kp[0] == 0.0 and r.placeholder_effort() == ["a3"]
+    fixed = load_robot(tmp_path / "arm.usda", gains={"joint": [{"match": "*", "kp": 10.0, "kd": 1.0},
+                                                               {"match": "a3", "effort": 1.0}]})
+    fixed.check_replay()
+    np.testing.assert_allclose(fixed.effort, [7.0, 2.5, 1.0])
+
+
+def test_gains_travel_with_the_dataset(tmp_path, capsys):
+    """collect --gains stores the parsed config in the header; load_data re-applies it; an explicit gains
+    argument replaces it (with a warning); a dataset without gains has no header field and loads as before."""
+    gains = tmp_path / "quad.toml"
+    gains.write_text('[[joint]]\nmatch = "*"\nkp = 60.0\nkd = 2.5\narmature = 0.02\n'
+                     '[[joint]]\nmatch = "*_KFE"\nkp = 90.0\n')
+    out = tmp_path / "q"
+    assert main(["collect", "--robot", "newton:quadruped.urdf", "--gains", str(gains), "--train", "1",
+                 "--validation", "0", "--heldout", "1", "--ood", "1", "--duration", "0.2", "--no-gap",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "joint-space excitation" in text and "[3/3]" in text
+    header = read_header(out / "dataset.npz")
+    assert header["gains"] == {"file": str(gains), "config": {"joint": [
+        {"match": "*", "kp": 60.0, "kd": 2.5, "armature": 0.02}, {"match": "*_KFE", "kp": 90.0}]}}
+    assert header["meta"]["excitation"]["mode"] == "joint"
+    ds, robot = load_data(str(out / "dataset.npz"))
+    knee = [i for i, n in enumerate(robot.joint_names) if n.endswith("_KFE")]
+    assert np.all(robot.kp[knee] == 90.0) and np.all(np.delete(robot.kp, knee) == 60.0) and np.all(robot.kd == 2.5)
+    assert ds.gains == header["gains"]
+    with pytest.warns(UserWarning, match="instead of the one stored"):
+        _, other = load_data(str(out / "dataset.npz"), gains="examples/gains/quadruped.toml")
+    assert np.all(other.kp[knee] == 100.0)
+    # round trip keeps the field; a dataset without gains writes none and reads None
+    ds.save(tmp_path / "again.npz")
+    assert load_dataset(tmp_path / "again.npz").gains == ds.gains
+    plain = Dataset(ds.joint_names, ds.rate_hz, ds.trajectories, ds.robot_file, ds.robot_sha256, {}, None, {})
+    assert plain.gains is None and plain.gains_config is None
+    plain.save(tmp_path / "plain.npz")
+    assert "gains" not in _raw_header(tmp_path / "plain.npz") and read_header(tmp_path / "plain.npz")["gains"] is None
+    assert load_dataset(tmp_path / "plain.npz").gains is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(RobotError, match="no PD gains"):  # the quadruped file has none
+            load_data(str(tmp_path / "plain.npz"))
+    # a malformed gains record is refused in one line
+    bad = Dataset(ds.joint_names, ds.rate_hz, ds.trajectories, ds.robot_file, ds.robot_sha256, gains={"config": 1})
+    with pytest.raises(DatasetError, match="gains must be null"):
+        bad.save(tmp_path / "bad.npz")
+
+
+def test_shipped_dataset_has_no_gains_and_loads():
+    from wresdyn.paths import DEFAULT_DATASET
+
+    assert "gains" not in _raw_header(DEFAULT_DATASET) and read_header(DEFAULT_DATASET)["gains"] is None
+    assert load_dataset(DEFAULT_DATASET).gains is None

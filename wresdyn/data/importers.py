@@ -1,0 +1,439 @@
+"""Real-log formats beyond CSV / NPZ, and datasets of many runs with split assignment.
+
+* **SAGE** (isaac-sim2real/sage real-robot logs): a run folder with ``control.csv`` (``CONTROL,<t_us>,"[n]"``
+  commanded positions), ``state_motor.csv`` (``STATE_MOTOR,<t_us>,"[n]","[n]","[n]"`` measured positions,
+  velocities, torque estimate), ``joint_list.txt`` (the n column names) and optionally ``event.csv``
+  (``MOTION_START`` / ``DISABLE`` bound the motion). Commands and states keep their own stamps.
+* **LeRobot** datasets, codebase v2.x (``data/chunk-*/episode_*.parquet``) and v3.0
+  (``data/chunk-*/file-*.parquet`` with an ``episode_index`` column), read with ``pyarrow`` only:
+  ``observation.state`` = measured positions, ``action`` = commands, ``timestamp`` [s]; one trajectory per
+  episode, named ``<dataset>_ep<k>``.
+
+:func:`import_runs` reads any mix of these and of CSV / NPZ logs (:mod:`wresdyn.data.logs`) into one
+:class:`~wresdyn.data.dataset.Dataset`, assigning each run a split by name pattern or by a deterministic fraction
+(:class:`SplitRule`). Everything is read and checked before anything is returned, so a caller that saves only
+the returned dataset never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import csv
+import fnmatch
+import hashlib
+import itertools
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import tomllib
+
+from .dataset import SPLITS, Dataset, DatasetError
+from .logs import IDENTITY, LogMap, check_finite, check_stamps, log_stats, map_joints, read_log, to_trajectory
+
+__all__ = ["Run", "SplitRule", "sage_run", "lerobot_root", "read_sage", "read_lerobot", "read_runs", "import_runs",
+           "parse_assign", "load_split_map"]
+
+SAGE_FILES = ("control.csv", "state_motor.csv")
+SAGE_STAMP_UNIT = 1e-6
+"""SAGE time stamps are microseconds."""
+LEROBOT_SUFFIXES = (".pos", ".vel", ".effort")
+"""LeRobot names motor features ``<motor>.pos`` (``.vel``, ``.effort``); the suffix is dropped to get the joint."""
+
+
+@dataclass
+class Run:
+    """One log read into robot order, before resampling."""
+
+    name: str
+    """Trajectory name: the file stem, the SAGE run folder, or ``<dataset>_ep<k>``."""
+    format: str
+    """``"csv"``, ``"npz"``, ``"sage"`` or ``"lerobot"``."""
+    file: str
+    """File or folder it was read from."""
+    log: dict
+    """:func:`~wresdyn.data.logs.read_log` arrays (``t``, ``q``, ``qd``, ``q_cmd``, ``tau``, optional ``t_cmd``)."""
+    info: dict = field(default_factory=dict)
+    """Format-specific facts for the dataset's meta (trimmed seconds, LeRobot fps and version, ...)."""
+
+
+# ---------------------------------------------------------------------------------------------------------- SAGE
+
+def sage_run(path) -> Path | None:
+    """The SAGE run folder that ``path`` names (the folder, or its ``control.csv`` / ``state_motor.csv`` when both
+    are there), else ``None``."""
+    p = Path(path)
+    if p.is_dir():
+        return p if any((p / f).is_file() for f in SAGE_FILES) else None
+    if p.name in SAGE_FILES and all((p.parent / f).is_file() for f in SAGE_FILES):
+        return p.parent
+    return None
+
+
+def read_sage(path, joint_names: list[str], log_map: LogMap | None = None) -> dict:
+    """Read a SAGE run (its folder, ``control.csv`` or ``state_motor.csv``) into :func:`~wresdyn.data.logs.read_log`
+    arrays in ``joint_names`` order: ``t`` (N,) [s] and ``q``, ``qd``, ``tau`` (N, n) at the state stamps,
+    ``t_cmd`` (M,) [s] and ``q_cmd`` (M, n) at the command stamps. States before ``MOTION_START`` and after
+    ``DISABLE`` (event.csv) are dropped; the command in force at the first kept state is kept."""
+    return _read_sage(Path(path), joint_names, log_map or IDENTITY)[0]
+
+
+def _read_sage(path: Path, joint_names: list[str], log_map: LogMap) -> tuple[dict, dict]:
+    run = sage_run(path) or (path.parent if path.is_file() else path)
+    for f in SAGE_FILES:
+        if not (run / f).is_file():
+            raise DatasetError(f"{run}: SAGE run has no {f}")
+    jl = run / "joint_list.txt"
+    if not jl.is_file():
+        raise DatasetError(f"{run}: SAGE run has no joint_list.txt (the names of the columns)")
+    try:
+        names = [line.strip() for line in jl.read_text(encoding="utf-8").splitlines() if line.strip()]
+    except (OSError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{jl}: cannot read: {e}") from None
+    if not names or len(set(names)) != len(names):
+        raise DatasetError(f"{jl}: needs one distinct joint name per line, got {names}")
+    t_cmd, cmd = _sage_csv(run / "control.csv", names, ("positions",), ())
+    t, st = _sage_csv(run / "state_motor.csv", names, ("positions",), ("velocities", "torques"))
+    start, end = _sage_events(run / "event.csv")
+    keep = (t >= (start if start is not None else -np.inf)) & (t <= (end if end is not None else np.inf))
+    if keep.sum() < 2:
+        raise DatasetError(f"{run / 'event.csv'}: fewer than two states between MOTION_START and DISABLE")
+    info = {"format": "sage", "trimmed_s": [float(t[keep][0] - t[0]), float(t[-1] - t[keep][-1])]}
+    if not t_cmd[0] <= t[keep][-1]:
+        raise DatasetError(f"{run / 'control.csv'}: the first command (t = {t_cmd[0]:.6g} s) comes after the last "
+                           "state")
+    where = f"{jl}"
+    states = map_joints(names, {"q": st["positions"][keep],
+                                "qd": st["velocities"][keep] if "velocities" in st else None,
+                                "tau": st["torques"][keep] if "torques" in st else None}, joint_names, log_map, where)
+    cmds = map_joints(names, {"q_cmd": cmd["positions"]}, joint_names, log_map, where)
+    log = {"t": t[keep], "q": states["q"], "qd": None if log_map.velocity == "derived" else states["qd"],
+           "q_cmd": cmds["q_cmd"], "tau": states["tau"], "t_cmd": t_cmd}
+    return log, info
+
+
+def _sage_csv(path: Path, names: list[str], required: tuple, optional: tuple) -> tuple[np.ndarray, dict]:
+    """Time stamps [s] (N,) and the vector columns (N, n) of a SAGE CSV file, checked."""
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = [r for r in csv.reader(f) if r]
+    except (OSError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: cannot read CSV: {e}") from None
+    header = [h.strip() for h in rows[0]] if rows else []
+    for c in ("timestamp",) + required:
+        if c not in header:
+            raise DatasetError(f"{path}: no {c!r} column (header: {','.join(header) or 'none'})")
+    cols = [c for c in required + optional if c in header]
+    data = rows[1:]
+    if len(data) < 2:
+        raise DatasetError(f"{path}: needs at least two data rows, has {len(data)}")
+    n = len(names)
+    t = np.empty(len(data))
+    out = {c: np.empty((len(data), n)) for c in cols}
+    it, ic = header.index("timestamp"), {c: header.index(c) for c in cols}
+    for i, r in enumerate(data):
+        if len(r) != len(header):
+            raise DatasetError(f"{path}: data row {i + 1} has {len(r)} fields, the header {len(header)}")
+        t[i] = _number(r[it], path, i, "'timestamp'")
+        for c in cols:
+            text = r[ic[c]].strip()
+            if not (text.startswith("[") and text.endswith("]")):
+                raise DatasetError(f"{path}: data row {i + 1}, column {c!r}: {text[:40]!r} is not a [list] of numbers")
+            parts = text[1:-1].split(",")
+            if len(parts) != n:
+                raise DatasetError(f"{path}: data row {i + 1}, column {c!r} has {len(parts)} values, joint_list.txt "
+                                   f"names {n} joints")
+            out[c][i] = [_number(x, path, i, f"{c!r}[{j}] ({names[j]})") for j, x in enumerate(parts)]
+    t *= SAGE_STAMP_UNIT
+    check_finite(str(path), "timestamp", t, ["'timestamp'"])
+    for c in cols:
+        check_finite(str(path), c, out[c], [f"{c!r}[{j}] ({names[j]})" for j in range(n)])
+    check_stamps(str(path), t)
+    return t, out
+
+
+def _number(text: str, path: Path, i: int, column: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise DatasetError(f"{path}: data row {i + 1}, column {column}: {text.strip()!r} is not a number") from None
+
+
+def _sage_events(path: Path) -> tuple[float | None, float | None]:
+    """MOTION_START and DISABLE stamps [s] of event.csv (``None`` where absent, or without the file)."""
+    if not path.is_file():
+        return None, None
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = [r for r in csv.reader(f) if r]
+    except (OSError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: cannot read CSV: {e}") from None
+    header = [h.strip() for h in rows[0]] if rows else []
+    if "timestamp" not in header or "event" not in header:
+        raise DatasetError(f"{path}: needs 'timestamp' and 'event' columns (header: {','.join(header) or 'none'})")
+    it, ie = header.index("timestamp"), header.index("event")
+    stamps: dict[str, list[float]] = {}
+    for i, r in enumerate(rows[1:]):
+        if len(r) != len(header):
+            raise DatasetError(f"{path}: data row {i + 1} has {len(r)} fields, the header {len(header)}")
+        stamps.setdefault(r[ie].strip(), []).append(_number(r[it], path, i, "'timestamp'") * SAGE_STAMP_UNIT)
+    start, end = stamps.get("MOTION_START"), stamps.get("DISABLE")
+    return (min(start) if start else None), (max(end) if end else None)
+
+
+# ------------------------------------------------------------------------------------------------------- LeRobot
+
+def lerobot_root(path) -> Path | None:
+    """``path`` if it is a LeRobot dataset folder (it has ``meta/info.json``), else ``None``."""
+    p = Path(path)
+    return p if (p / "meta" / "info.json").is_file() else None
+
+
+def read_lerobot(path, joint_names: list[str], log_map: LogMap | None = None) -> list[tuple[str, dict]]:
+    """Every episode of a LeRobot dataset (v2.x or v3.0) as ``(name, read_log arrays)``, in episode order:
+    ``t`` (N,) [s] from the ``timestamp`` column, ``q`` (N, n) from ``observation.state``, ``q_cmd`` (N, n) from
+    ``action`` (both in the map's units, e.g. degrees), ``qd`` from ``observation.velocity`` and ``tau`` from
+    ``observation.effort`` where the dataset has them, else ``None``."""
+    return [(r.name, r.log) for r in _read_lerobot(Path(path), joint_names, log_map or IDENTITY)]
+
+
+def _feature_names(features: dict, key: str, info_path: Path) -> list[str] | None:
+    feat = features.get(key)
+    if feat is None:
+        return None
+    names = feat.get("names") if isinstance(feat, dict) else None
+    if isinstance(names, dict) and len(names) == 1:  # v2.0 style {"motors": [...]}
+        names = next(iter(names.values()))
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise DatasetError(f"{info_path}: features[{key!r}] has no list of joint names (names: {names!r})")
+    shape = feat.get("shape")
+    if isinstance(shape, list) and shape and shape[0] != len(names):
+        raise DatasetError(f"{info_path}: features[{key!r}] has shape {shape} but {len(names)} names")
+    out = []
+    for n in names:
+        for suffix in LEROBOT_SUFFIXES:
+            if n.endswith(suffix):
+                n = n[: -len(suffix)]
+                break
+        out.append(n)
+    return out
+
+
+_FEATURES = {"q": "observation.state", "q_cmd": "action", "qd": "observation.velocity", "tau": "observation.effort"}
+
+
+def _read_lerobot(root: Path, joint_names: list[str], log_map: LogMap) -> list[Run]:
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    info_path = root / "meta" / "info.json"
+    try:
+        info = json.loads(info_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise DatasetError(f"{info_path}: not a readable JSON file: {e}") from None
+    features = info.get("features") if isinstance(info, dict) else None
+    if not isinstance(features, dict):
+        raise DatasetError(f"{info_path}: no 'features' table")
+    names = {k: _feature_names(features, f, info_path) for k, f in _FEATURES.items()}
+    for k in ("q", "q_cmd"):
+        if names[k] is None:
+            raise DatasetError(f"{info_path}: features has no {_FEATURES[k]!r} (it has: {', '.join(features)})")
+    files = sorted((root / "data").rglob("*.parquet"))
+    if not files:
+        raise DatasetError(f"{root}: LeRobot dataset has no data/**/*.parquet file")
+    parts: dict[int, list[dict]] = {}
+    for file in files:
+        try:
+            schema = pq.read_schema(file).names
+        except Exception as e:  # pyarrow raises several types on a corrupt file; report one line
+            raise DatasetError(f"{file}: not a readable parquet file: {type(e).__name__}: {e}") from None
+        for col in ("timestamp", _FEATURES["q"], _FEATURES["q_cmd"]):
+            if col not in schema:
+                raise DatasetError(f"{file}: no column {col!r} (columns: {', '.join(schema)})")
+        keys = [k for k in _FEATURES if names[k] is not None and _FEATURES[k] in schema]
+        table = pq.read_table(file, columns=["timestamp"] + [_FEATURES[k] for k in keys]
+                              + (["episode_index"] if "episode_index" in schema else []))
+        n_rows = table.num_rows
+        t = table.column("timestamp").to_numpy().astype(np.float64)
+        check_finite(str(file), "timestamp", t, ["'timestamp'"], np.arange(n_rows), "row")
+        if "episode_index" in schema:
+            ep = table.column("episode_index").to_numpy()
+        else:
+            m = re.search(r"episode_(\d+)", file.stem)
+            if m is None:
+                raise DatasetError(f"{file}: no 'episode_index' column and no episode number in the file name")
+            ep = np.full(n_rows, int(m.group(1)))
+        arrays = {}
+        for k in keys:
+            col, n = table.column(_FEATURES[k]).combine_chunks(), len(names[k])
+            if col.null_count:
+                r = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
+                raise DatasetError(f"{file}: row {r}, column {_FEATURES[k]!r} is null")
+            lengths = pc.list_value_length(col).to_numpy(zero_copy_only=False)
+            if (lengths != n).any():
+                r = int(np.flatnonzero(lengths != n)[0])
+                raise DatasetError(f"{file}: row {r}, column {_FEATURES[k]!r} has {lengths[r]} values, info.json "
+                                   f"names {n}")
+            a = col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(n_rows, n)
+            check_finite(str(file), _FEATURES[k], a, [f"{_FEATURES[k]!r}[{j}] ({names[k][j]})" for j in range(n)],
+                         np.arange(n_rows), "row")
+            arrays[k] = a
+        order = np.argsort(ep, kind="stable")  # rows of each episode, in file order
+        for rows in np.split(order, np.flatnonzero(np.diff(ep[order])) + 1):
+            e = ep[rows[0]]
+            check_stamps(f"{file}: episode {int(e)}", t[rows], rows, "row")
+            parts.setdefault(int(e), []).append({"file": file, "rows": rows, "t": t[rows],
+                                                 **{k: a[rows] for k, a in arrays.items()}})
+    dataset = root.resolve().name
+    runs = []
+    for e in sorted(parts):
+        ps = parts[e]
+        for a, b in itertools.pairwise(ps):
+            if not b["t"][0] > a["t"][-1]:
+                raise DatasetError(f"{b['file']}: episode {e}: time stamp at row {b['rows'][0]} is not after the "
+                                   f"episode's previous row in {a['file'].name}")
+        cat = {k: np.concatenate([p[k] for p in ps]) if all(k in p for p in ps) else None
+               for k in ("t", "q", "q_cmd", "qd", "tau")}
+        mapped = {}
+        for k in ("q", "q_cmd", "qd", "tau"):
+            if cat[k] is not None:
+                mapped.update(map_joints(names[k], {k: cat[k]}, joint_names, log_map, f"{info_path}: {_FEATURES[k]}"))
+            else:
+                mapped[k] = None
+        if log_map.velocity == "derived":
+            mapped["qd"] = None
+        log = {"t": cat["t"], **mapped}
+        runs.append(Run(f"{dataset}_ep{e}", "lerobot", str(root), log,
+                        {"format": "lerobot", "codebase_version": info.get("codebase_version"), "fps": info.get("fps"),
+                         "episode_index": e}))
+    return runs
+
+
+# ------------------------------------------------------------------------------------------------ many runs, splits
+
+def read_runs(path, joint_names: list[str], log_map: LogMap | None = None) -> list[Run]:
+    """The runs at ``path``, format detected: a SAGE run (folder with control.csv and state_motor.csv, or one of
+    those files), a LeRobot dataset folder (meta/info.json: one run per episode), a ``.csv`` / ``.npz`` log, or a
+    folder whose sub-folders are SAGE runs or LeRobot datasets (each of them, in name order)."""
+    log_map = log_map or IDENTITY
+    p = Path(path)
+    run = sage_run(p)
+    if run is not None:
+        log, info = _read_sage(run, joint_names, log_map)
+        name = run.resolve().name
+        if re.fullmatch(r"run_\d+", name):  # SAGE's output/real/<robot>/<set>/<motion>/run_<N>/ layout
+            name = f"{run.resolve().parent.name}_{name}"
+        return [Run(name, "sage", str(run), log, info)]
+    if lerobot_root(p) is not None:
+        return _read_lerobot(p, joint_names, log_map)
+    if p.is_dir():
+        subs = sorted(c for c in p.iterdir() if c.is_dir() and (sage_run(c) or lerobot_root(c)))
+        if not subs:
+            raise DatasetError(f"{p}: neither a SAGE run (control.csv, state_motor.csv), a LeRobot dataset "
+                               "(meta/info.json) nor a folder of them")
+        return [r for s in subs for r in read_runs(s, joint_names, log_map)]
+    log = read_log(p, joint_names, log_map)
+    return [Run(p.stem, p.suffix.lower().lstrip("."), str(p), log, {"format": p.suffix.lower().lstrip(".")})]
+
+
+def parse_assign(text: str) -> tuple[str, str]:
+    """``"PATTERN=SPLIT"`` -> (pattern, split); the pattern is an fnmatch pattern on the run name."""
+    pattern, sep, split = text.rpartition("=")
+    if not sep or not pattern or split not in SPLITS:
+        raise DatasetError(f"--assign {text!r}: expected PATTERN=SPLIT with SPLIT one of {', '.join(SPLITS)}")
+    return pattern, split
+
+
+def load_split_map(path) -> list[tuple[str, str]]:
+    """A split map file (TOML): ``"PATTERN" = "SPLIT"`` lines, fnmatch patterns on run names, first match wins."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            raw = tomllib.load(f)
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: split map not found") from None
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: not a readable TOML split map: {e}") from None
+    for k, v in raw.items():
+        if v not in SPLITS:
+            raise DatasetError(f"{path}: {k!r} = {v!r}: the split must be one of {', '.join(SPLITS)}")
+    return list(raw.items())
+
+
+def _count(fraction: float, n: int) -> int:
+    """Runs a fraction takes out of n: rounded half up, at least one when the fraction is positive."""
+    return 0 if fraction <= 0 or n == 0 else max(1, int(fraction * n + 0.5))
+
+
+@dataclass(frozen=True)
+class SplitRule:
+    """How runs get their split: the first matching pattern, else the fractions, else ``default``."""
+
+    default: str = "heldout"
+    """Split of every run no pattern or fraction assigns."""
+    patterns: tuple[tuple[str, str], ...] = ()
+    """(fnmatch pattern on the run name, split) pairs; the first that matches decides."""
+    validation_fraction: float = 0.0
+    """Fraction of the runs no pattern matched that go to validation (whole runs)."""
+    heldout_fraction: float = 0.0
+    """Fraction of the runs no pattern matched that go to heldout (whole runs)."""
+
+    def __post_init__(self):
+        bad = [s for s in [self.default] + [s for _, s in self.patterns] if s not in SPLITS]
+        if bad:
+            raise DatasetError(f"unknown split {bad[0]!r}; choose from {SPLITS}")
+        fv, fh = self.validation_fraction, self.heldout_fraction
+        if not (0 <= fv <= 1 and 0 <= fh <= 1 and fv + fh <= 1):
+            raise DatasetError(f"validation and heldout fractions must be in [0, 1] and sum to at most 1, "
+                               f"not {fv:g} and {fh:g}")
+
+    def assign(self, names: list[str]) -> list[str]:
+        """The split of each run. The runs no pattern matches are ranked by the SHA-256 of their name (a fixed,
+        order-independent shuffle): the first ``validation_fraction`` of them go to validation, the next
+        ``heldout_fraction`` to heldout, the rest to ``default``."""
+        out: list[str | None] = [next((s for p, s in self.patterns if fnmatch.fnmatchcase(n, p)), None) for n in names]
+        rest = sorted((i for i, s in enumerate(out) if s is None),
+                      key=lambda i: hashlib.sha256(names[i].encode("utf-8")).hexdigest())
+        n_val, n_held = _count(self.validation_fraction, len(rest)), _count(self.heldout_fraction, len(rest))
+        if n_val + n_held > len(rest):
+            raise DatasetError(f"the validation and heldout fractions ask for {n_val} + {n_held} runs out of "
+                               f"{len(rest)}")
+        for r, i in enumerate(rest):
+            out[i] = "validation" if r < n_val else "heldout" if r < n_val + n_held else self.default
+        return out
+
+    def unused(self, names: list[str]) -> list[str]:
+        """Patterns that match no run (most likely a typo)."""
+        return [p for p, _ in self.patterns if not any(fnmatch.fnmatchcase(n, p) for n in names)]
+
+
+def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = None, splits: SplitRule | None = None,
+                store_tau: bool = True) -> Dataset:
+    """A :class:`~wresdyn.data.dataset.Dataset` of real logs (no mismatch, no seed): every run of every path
+    (:func:`read_runs`), resampled onto ``rate_hz``, its split from ``splits``. Names are made unique with the
+    run's index when two runs share one. ``meta`` gets ``source_logs`` (per run: name, split, file, format,
+    samples, duration, median rate, jitter, max gap), ``excluded_joints`` and ``log_map``."""
+    joint_names = list(robot.joint_names)
+    log_map = log_map or IDENTITY
+    log_map.check(joint_names, Path(robot.source).name)
+    splits = splits or SplitRule()
+    runs = [r for p in paths for r in read_runs(p, joint_names, log_map)]
+    if not runs:
+        raise DatasetError("no logs given")
+    names = [r.name for r in runs]
+    names = [f"{n}_{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+    trajs, sources = [], []
+    for run, name, split in zip(runs, names, splits.assign(names)):
+        where = f"{run.file}: episode {run.info['episode_index']}" if run.format == "lerobot" else run.file
+        trajs.append(to_trajectory(run.log, rate_hz, name, split, where, store_tau))
+        sources.append({"name": name, "split": split, "file": run.file, **log_stats(run.log["t"]), **run.info})
+    meta = {"generator": "wresdyn collect --logs", "source_logs": sources,
+            "excluded_joints": log_map.excluded_joints(joint_names), "log_map": log_map.to_dict(),
+            "split_rule": {"default": splits.default, "patterns": [list(p) for p in splits.patterns],
+                           "validation_fraction": splits.validation_fraction,
+                           "heldout_fraction": splits.heldout_fraction}}
+    ds = Dataset(joint_names, float(rate_hz), trajs, str(robot.source), robot.source_sha256, {}, None, meta,
+                 robot.gains_record())
+    ds.validate("imported logs")
+    return ds
