@@ -101,3 +101,9 @@ def test_fit_default_is_the_hybrid_and_resumes_both_stages(humanoid, recorded, t
     assert main(args) == 0  # resumed: nothing left to do in either stage
     assert (out / "identify" / "checkpoint.pt").stat().st_mtime == mtime
     assert "resumed" in capsys.readouterr().out
+
+
+def test_identify_refuses_a_malformed_delay_grid(tmp_path, capsys):
+    assert main(["identify", str(tmp_path / "none.npz"), "--delay-grid", "0,ten"]) == 2
+    err = capsys.readouterr().err
+    assert "--delay-grid" in err and len(err.strip().splitlines()) == 1

@@ -26,6 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--windows", type=int, default=None, help="parallel windows (worlds) per step")
     p.add_argument("--fit", default=None, help="fields to identify, comma separated (default: all of "
                    "kp,kd,armature,damping,friction,effort,delay,bodies)")
+    p.add_argument("--delay-grid", default=None, metavar="STEPS",
+                   help="command delays [simulation steps] to search, one for every joint, before the gradient fit "
+                        "refines them, e.g. 0,10,25,50 (for drives that lag far more than a window sees; default off)")
     p.add_argument("--solver", choices=choices(SolverKind), default=None, help="simulation solver (default: auto)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--seed", type=int, default=0, help="seed")
@@ -43,6 +46,11 @@ def run(args: argparse.Namespace) -> int:
 
     kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("solver", args.solver))
           if v is not None}
+    if args.delay_grid is not None:
+        try:
+            kw["delay_grid"] = tuple(float(g) for g in args.delay_grid.split(",") if g.strip())
+        except ValueError:
+            raise UserError(f"--delay-grid {args.delay_grid!r}: give comma-separated numbers of steps") from None
     if args.fit is not None:
         kw["fit"] = tuple(f.strip() for f in args.fit.split(",") if f.strip())
     try:
