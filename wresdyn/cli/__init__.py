@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("wresdyn.cli.bench", "env-steps/s of the replay workload for every solver, same robot and worlds"),
     "identify": ("wresdyn.cli.identify", "identify the simulator's own physics (gains, friction, delay, masses...)"),
     "fit": ("wresdyn.cli.fit", "learn a residual by gradient descent through the differentiable simulation"),
+    "export": ("wresdyn.cli.export", "write the calibrated robot: USD layers, Newton actuators and the residual"),
     "ablate": ("wresdyn.cli.ablate", "PPO vs gradient vs parametric x MLP/GRU x torque/delta action x seeds"),
 }
 

@@ -1,0 +1,8 @@
+"""The calibrated robot leaves the project: USD layers Newton's importer reads, Newton actuators, the residual.
+
+- :mod:`wresdyn.export.usd`: ``wresdyn export RUN`` writes ``robot.usda`` (a layer over the robot file with the
+  identified physical parameters as the attributes Newton's USD importer reads) and ``actuated.usda`` (the drive
+  path as ``newton.actuators`` prims: ``DrivePD``, ``Delay``, ``ClampingMaxEffort``; and the residual network).
+- :mod:`wresdyn.export.residual_torque`: the small component a plain Newton script imports to run the exported
+  residual every step (torch and warp only; it does not import the rest of wresdyn).
+"""

@@ -1,0 +1,268 @@
+"""``wresdyn export RUN``: the calibrated robot as USD layers over the robot file, Newton actuators and the residual.
+
+What an export folder holds (written to a temporary folder and renamed into place, so a failed export leaves
+nothing behind):
+
+=====================  ========================================================================================
+``robot.usda``         a layer whose sublayer is the original robot file (untouched, referenced by a relative
+                       path): the identified physical parameters as the attributes Newton's USD importer reads:
+                       per joint ``drive:angular:physics:stiffness/damping`` (per degree, the USD convention) and
+                       ``maxForce`` (effort limit), ``newton:armature`` [kg m²], ``newton:damping`` [N m s/rad],
+                       ``newton:friction`` [N m] (angular gains and damping per degree, as the importer reads them); per link ``physics:mass`` [kg], ``physics:centerOfMass`` [m],
+                       ``physics:diagonalInertia`` [kg m²] and ``physics:principalAxes`` (the inertia tensor's
+                       eigenbasis). Loaded as it is, Newton's solvers run the identified physics under their own
+                       joint drives, without the command delay and the residual.
+``actuated.usda``      a layer over ``robot.usda`` that moves the drive path into ``newton.actuators``: one
+                       ``NewtonActuator`` prim per joint with ``NewtonPDControlAPI`` (kp, kd),
+                       ``NewtonActuatorDelayAPI`` (the identified delay in steps of the scope's ``wresdyn:actuatorRateHz``, the
+                       recording rate: step the actuators at that rate)
+                       and ``NewtonMaxEffortClampingAPI`` (the effort limit), the joints' own drives set to zero
+                       so the PD is applied once; and a ``wresdyn_residual`` prim that references the residual
+                       network (``residual.pt`` TorchScript, ``residual.onnx``) with its joints, kind and rate.
+``residual.pt/.onnx``  the residual network; observation [q, q̇, q̈, q_cmd] (rad, rad/s, rad/s², rad), (N, 4n);
+                       output a joint torque [N m] added next to the actuators' (not clamped with them), as in
+                       :class:`~wresdyn.sim.simulator.Simulator`.
+``physics.json``       the identified parameters (:class:`~wresdyn.sim.physics.PhysicalParams`), ``export.json``
+                       where they came from (run, dataset, robot file and its sha256).
+=====================  ========================================================================================
+
+:mod:`wresdyn.export.residual_torque` runs the residual in a plain Newton loop.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import WresdynError
+
+__all__ = ["ExportError", "export_run", "write_layers", "inertia_principal"]
+
+ACTUATOR_SCOPE = "wresdyn_actuators"
+"""Child of the robot's default prim that holds the actuator prims."""
+RESIDUAL_PRIM = "wresdyn_residual"
+"""Child of the robot's default prim that references the residual network."""
+
+
+class ExportError(WresdynError):
+    """A run that cannot be exported; the message is one line."""
+
+
+def inertia_principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Principal moments (3,) and the rotation quaternion (w, x, y, z) of their axes, for a symmetric 3×3
+    inertia [kg m²]: ``inertia = R diag(moments) Rᵀ`` with R the quaternion's rotation (``physics:principalAxes``)."""
+    w, v = np.linalg.eigh(0.5 * (inertia + inertia.T))
+    if np.linalg.det(v) < 0:
+        v[:, 0] = -v[:, 0]
+    return w, _quat_from_matrix(v)
+
+
+def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (columns: the rotated axes)."""
+    t = np.trace(r)
+    if t > 0:
+        s = 2.0 * math.sqrt(1.0 + t)
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
+        q = [0.0] * 4
+        q[0] = (r[k, j] - r[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (r[j, i] + r[i, j]) / s
+        q[1 + k] = (r[k, i] + r[i, k]) / s
+    q = np.array(q)
+    return q / np.linalg.norm(q) * (1.0 if q[0] >= 0 else -1.0)
+
+
+def _joint_paths(robot) -> list[str]:
+    """USD prim path of each actuated joint, in ``robot.joint_names`` order."""
+    by_dof = {}
+    b = robot.builder
+    for j, label in enumerate(b.joint_label):
+        lin, ang = b.joint_dof_dim[j]
+        if int(lin) + int(ang) == 1:
+            by_dof[int(b.joint_qd_start[j])] = label
+    return [by_dof[int(d)] for d in robot.qd_index]
+
+
+def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | None = None) -> None:
+    """Write ``robot.usda`` and ``actuated.usda`` into the folder ``out`` (module docstring).
+
+    Args:
+        robot: The robot (loaded from a USD file; its builder's labels are the prim paths).
+        physics: :class:`~wresdyn.sim.physics.PhysicalParams` to author.
+        out: Existing folder.
+        rate_hz: Actuator step rate [Hz] the delay is counted in (``newton:timeStepsPerSecond``).
+        residual: ``residual.json`` of the run (kind, joint names, rate), or ``None`` for no residual prim.
+    """
+    from pxr import Gf, Sdf, Usd, UsdPhysics
+
+    physics.check(robot, "physics")
+    src = Path(robot.source).resolve()
+    root_path = out / "robot.usda"
+    stage = Usd.Stage.CreateNew(str(root_path))
+    stage.GetRootLayer().subLayerPaths.append(os.path.relpath(src, out.resolve()))
+    base = Usd.Stage.Open(str(src))
+    default = base.GetDefaultPrim()
+    if not default:
+        raise ExportError(f"{src}: the robot file has no default prim (USD defaultPrim); cannot layer over it")
+    stage.SetDefaultPrim(stage.GetPrimAtPath(default.GetPath()))
+    stage.GetRootLayer().documentation = (
+        f"wresdyn calibrated robot: identified physical parameters over {src.name} (written by wresdyn export)")
+    for k, rel in ((stage, "upAxis"), (stage, "metersPerUnit"), (stage, "kilogramsPerUnit")):
+        if base.HasMetadata(rel):
+            k.SetMetadata(rel, base.GetMetadata(rel))
+
+    deg = math.pi / 180.0
+    for i, path in enumerate(_joint_paths(robot)):
+        prim = stage.OverridePrim(path)
+        prismatic = bool(robot.is_prismatic()[i])
+        axis = "linear" if prismatic else "angular"
+        per = 1.0 if prismatic else deg  # USD angular drive gains are per degree
+        _set(prim, f"drive:{axis}:physics:stiffness", Sdf.ValueTypeNames.Float, physics.kp[i] * per)
+        _set(prim, f"drive:{axis}:physics:damping", Sdf.ValueTypeNames.Float, physics.kd[i] * per)
+        if np.isfinite(physics.effort[i]):
+            _set(prim, f"drive:{axis}:physics:maxForce", Sdf.ValueTypeNames.Float, physics.effort[i])
+        if "NewtonJointAPI" not in prim.GetAppliedSchemas():
+            prim.AddAppliedSchema("NewtonJointAPI")
+        _set(prim, "newton:armature", Sdf.ValueTypeNames.Float, physics.armature[i])
+        _set(prim, "newton:damping", Sdf.ValueTypeNames.Float, physics.damping[i] * per)  # per degree too
+        _set(prim, "newton:friction", Sdf.ValueTypeNames.Float, physics.friction[i])
+        _set(prim, "wresdyn:delay", Sdf.ValueTypeNames.Double, physics.delay[i])  # [s], the identified delay
+    for b, path in enumerate(robot.builder.body_label):
+        if not (physics.body_mass[b] > 0):
+            continue
+        prim = stage.OverridePrim(path)
+        if not prim.HasAPI(UsdPhysics.MassAPI):
+            UsdPhysics.MassAPI.Apply(prim)
+        moments, quat = inertia_principal(physics.body_inertia[b])
+        _set(prim, "physics:mass", Sdf.ValueTypeNames.Float, physics.body_mass[b])
+        _set(prim, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*map(float, physics.body_com[b])))
+        _set(prim, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*map(float, moments)))
+        _set(prim, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(*map(float, quat)))
+    stage.GetRootLayer().Save()
+
+    act = Usd.Stage.CreateNew(str(out / "actuated.usda"))
+    act.GetRootLayer().subLayerPaths.append("robot.usda")
+    act.SetDefaultPrim(act.GetPrimAtPath(default.GetPath()))
+    act.GetRootLayer().documentation = ("wresdyn calibrated robot with its drive path as Newton actuators "
+                                        "(PD, delay, effort clamping) and the residual network")
+    for k in ("upAxis", "metersPerUnit", "kilogramsPerUnit"):
+        if base.HasMetadata(k):
+            act.SetMetadata(k, base.GetMetadata(k))
+    scope = f"{default.GetPath()}/{ACTUATOR_SCOPE}"
+    _set(act.DefinePrim(scope, "Scope"), "wresdyn:actuatorRateHz", Sdf.ValueTypeNames.Double, float(rate_hz))
+    dt = 1.0 / rate_hz
+    for i, (name, path) in enumerate(zip(robot.joint_names, _joint_paths(robot))):
+        joint = act.OverridePrim(path)
+        axis = "linear" if robot.is_prismatic()[i] else "angular"
+        _set(joint, f"drive:{axis}:physics:stiffness", Sdf.ValueTypeNames.Float, 0.0)  # the actuator drives it
+        _set(joint, f"drive:{axis}:physics:damping", Sdf.ValueTypeNames.Float, 0.0)
+        prim = act.DefinePrim(f"{scope}/{name}", "NewtonActuator")
+        schemas = ["NewtonPDControlAPI"]
+        prim.CreateRelationship("newton:targets").SetTargets([path])
+        _set(prim, "newton:kp", Sdf.ValueTypeNames.Float, physics.kp[i])
+        _set(prim, "newton:kd", Sdf.ValueTypeNames.Float, physics.kd[i])
+        steps = int(round(physics.delay[i] / dt))
+        if steps > 0:
+            schemas.append("NewtonActuatorDelayAPI")
+            _set(prim, "newton:delaySteps", Sdf.ValueTypeNames.Int, steps)
+        if np.isfinite(physics.effort[i]):
+            schemas.append("NewtonMaxEffortClampingAPI")
+            _set(prim, "newton:maxEffort", Sdf.ValueTypeNames.Float, physics.effort[i])
+        for s in schemas:
+            prim.AddAppliedSchema(s)
+    if residual is not None:
+        prim = act.DefinePrim(f"{default.GetPath()}/{RESIDUAL_PRIM}", "Scope")
+        prim.SetDocumentation("wresdyn residual: observation [q, qd, qdd, q_cmd] of wresdyn:joints (rad, rad/s, "
+                              "rad/s^2, rad); output joint torque [N m] added to joint_f after the actuators "
+                              "(wresdyn.export.residual_torque runs it)")
+        _set(prim, "wresdyn:torchscript", Sdf.ValueTypeNames.Asset, Sdf.AssetPath("residual.pt"))
+        _set(prim, "wresdyn:onnx", Sdf.ValueTypeNames.Asset, Sdf.AssetPath("residual.onnx"))
+        _set(prim, "wresdyn:kind", Sdf.ValueTypeNames.Token, residual["kind"])
+        _set(prim, "wresdyn:rateHz", Sdf.ValueTypeNames.Double, float(residual["rate_hz"]))
+        by_name = dict(zip(robot.joint_names, _joint_paths(robot)))
+        prim.CreateRelationship("wresdyn:joints").SetTargets([by_name[n] for n in residual["joint_names"]])
+    act.GetRootLayer().Save()
+
+
+def _set(prim, name: str, type_name, value) -> None:
+    attr = prim.GetAttribute(name)
+    if not attr:
+        attr = prim.CreateAttribute(name, type_name)
+    if isinstance(value, (np.floating, float)):
+        value = float(value)
+    attr.Set(value)
+
+
+def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = False, physics_only: bool = False,
+               data: str | None = None, gains=None) -> Path:
+    """Export run folder ``run`` (``wresdyn fit``/``train``/``identify``) to ``out`` (default ``RUN/export``).
+
+    Raises:
+        ExportError: not a run, no residual (unless ``physics_only``), a delta-action residual, the robot file
+            changed since the run's data were recorded, not a USD robot, ``out`` exists without ``force``.
+    """
+    from ..data.dataset import load_dataset
+    from ..data.loading import dataset_robot
+    from ..sim.physics import PhysicalParams
+
+    run = Path(run)
+    out = Path(out) if out is not None else run / "export"
+    cfg_path = run / "config.json"
+    if not cfg_path.is_file():
+        raise ExportError(f"{run}: not a run folder (no config.json)")
+    if out.exists() and not force:
+        raise ExportError(f"{out}: already exists; pass --force to replace it")
+    has_residual = (run / "policy.pt").is_file() and (run / "residual.json").is_file()
+    if not has_residual and not physics_only:
+        raise ExportError(f"{run}: the run has no residual (policy.pt, residual.json); export a `wresdyn fit` run, "
+                          "or pass --physics-only for the identified physics alone")
+    residual = json.loads((run / "residual.json").read_text()) if has_residual and not physics_only else None
+    if residual is not None and residual.get("kind") != "torque":
+        raise ExportError(f"{run}: a {residual.get('kind')} residual cannot be exported yet (only torque residuals "
+                          "act outside the delayed command path)")
+    data = data or json.loads(cfg_path.read_text()).get("data_path")
+    if not data:
+        raise ExportError(f"{run}: the run does not record its dataset; pass --data")
+    ds = load_dataset(data)
+    robot = dataset_robot(ds.robot_file, None, gains if gains is not None else ds.gains_config)
+    if robot.source_sha256 != ds.robot_sha256:
+        raise ExportError(f"{robot.source}: the robot file changed since the run's data were recorded (sha256 "
+                          f"{robot.source_sha256[:12]} != {ds.robot_sha256[:12]}); the export would describe another robot")
+    if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
+        raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
+                          f"{Path(robot.source).suffix} first (e.g. mujoco-usd-converter for MJCF)")
+    if residual is not None and list(residual["joint_names"]) != list(robot.joint_names):
+        raise ExportError(f"{run}: the residual's joints do not match {robot.source.name}'s")
+    physics = (PhysicalParams.load(run / "physics.json", robot) if (run / "physics.json").is_file()
+               else PhysicalParams.nominal(robot))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        write_layers(robot, physics, tmp, ds.rate_hz, residual)
+        physics.save(tmp / "physics.json")
+        if residual is not None:
+            shutil.copyfile(run / "policy.pt", tmp / "residual.pt")
+            if (run / "policy.onnx").is_file():
+                shutil.copyfile(run / "policy.onnx", tmp / "residual.onnx")
+            (tmp / "residual.json").write_text(json.dumps(residual, indent=2))
+        (tmp / "export.json").write_text(json.dumps({
+            "format": "wresdyn.export/1", "run": str(run), "dataset": str(data), "robot_file": str(robot.source),
+            "robot_sha256": robot.source_sha256, "rate_hz": ds.rate_hz, "residual": residual is not None,
+            "gains": ds.gains_config}, indent=2))
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.replace(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
