@@ -185,3 +185,24 @@ def test_export_refuses_bad_runs_and_writes_nothing(tmp_path, humanoid, data, ca
     err = capsys.readouterr().err
     assert "changed since the run's data were recorded" in err and len(err.strip().splitlines()) == 1
     assert not out2.exists() and not any(p.name.startswith(".out2") for p in tmp_path.iterdir())
+
+
+def test_the_exported_robot_stands_on_the_floor_and_writes_an_animation(exported, tmp_path):
+    """examples/corrected_robot_standing.py at a tiny size: free base, ground plane, SolverMuJoCo with contacts,
+    the actuators and the residual every step; the USD animation opens with pxr and has time samples."""
+    from pxr import Usd, UsdGeom
+
+    spec = importlib.util.spec_from_file_location("corrected_robot_standing",
+                                                  REPO / "examples" / "corrected_robot_standing.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    _, out = exported
+    anim = tmp_path / "standing.usda"
+    r = mod.run(str(out / "actuated.usda"), 0.3, str(anim))
+    assert not r["fell"] and r["min_height"] > 0.9 * r["start_height"]  # on its feet, not through the floor
+    assert abs(r["heights"][-1] - r["heights"][1]) < 0.02
+    stage = Usd.Stage.Open(str(anim))
+    assert stage.GetEndTimeCode() > stage.GetStartTimeCode()
+    xforms = [p for p in stage.Traverse() if p.IsA(UsdGeom.Xformable)]
+    assert xforms and any(UsdGeom.Xformable(p).GetTimeSamples() or
+                          any(a.GetNumTimeSamples() > 1 for a in p.GetAttributes()) for p in stage.Traverse())

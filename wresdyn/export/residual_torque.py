@@ -90,7 +90,11 @@ class ResidualTorque:
         self._qd_prev = None
 
     def torque(self, state, q_cmd):
-        """The residual torque (worlds, n) [N m] at ``state`` under command ``q_cmd`` (worlds, n) [rad] (torch)."""
+        """The residual torque (worlds, n) [N m] at ``state`` under command ``q_cmd`` (worlds, n) [rad] (torch).
+
+        CUDA-graph safe for an MLP residual once called outside the capture (the q̇ memory is updated in place):
+        pass ``q_cmd`` as a device tensor (e.g. a gather from ``control.joint_target_q``), not host data. A GRU
+        keeps its hidden state by rebinding it, so capture only MLP residuals."""
         import torch
         import warp as wp
 
@@ -98,10 +102,11 @@ class ResidualTorque:
         q, qd = q_all[self.q_index], qd_all[self.qd_index]
         if self._qd_prev is None:
             qdd = torch.zeros_like(qd) if getattr(self, "_qdd0", None) is None else \
-                torch.as_tensor(self._qdd0, dtype=qd.dtype, device=self.device)
+                torch.as_tensor(self._qdd0, dtype=qd.dtype, device=self.device).reshape(qd.shape)
+            self._qd_prev = qd.clone()
         else:
             qdd = (qd - self._qd_prev) / self.dt
-        self._qd_prev = qd.clone()
+            self._qd_prev.copy_(qd)
         cmd = torch.as_tensor(q_cmd, dtype=q.dtype, device=self.device).reshape(q.shape)
         with torch.no_grad():
             return self.network(torch.cat([q, qd, qdd, cmd], dim=-1))
