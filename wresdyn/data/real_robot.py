@@ -6,6 +6,12 @@ torque limits), adds an actuator delay (a FIFO of commands at the physics step) 
 joint states (encoder noise and quantisation). It integrates with ``implicitfast`` at its own, finer
 ``substep``: a different "physical" robot from the Newton replay, as real hardware is. With every
 mismatch off and ``substep`` equal to the recording step it is exactly :func:`~wresdyn.robot.mujoco_model.mujoco_replay`.
+
+A fixed-base robot records on a stand (:meth:`RealRobot.record`, :func:`collect`). A floating-base robot stands on
+a floor (:func:`~wresdyn.robot.mujoco_model.build_mujoco` with ``ground=True``, the contact of
+:class:`~wresdyn.robot.ground.ContactSettings`) and is driven step by step, as a deployed skill drives hardware:
+:meth:`RealRobot.reset` to a :class:`~wresdyn.robot.ground.FloatingState`, :meth:`RealRobot.step` under PD
+commands, with the same mismatch (physics, delay, saturation, sensors) as a recording.
 """
 
 from __future__ import annotations
@@ -134,19 +140,29 @@ class RealRobot:
     """The perturbed MuJoCo robot, recording joint states under PD at ``1 / rate_hz``.
 
     Args:
-        robot: The nominal robot (fixed base).
+        robot: The nominal robot: fixed base (on a stand, :meth:`record`) or floating base (standing on a floor,
+            :meth:`reset` / :meth:`step`).
         mismatch: How the real robot differs.
         rate_hz: Recording (and command) rate [Hz].
+        contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (floating base only; default
+            ``ContactSettings()``).
     """
 
-    def __init__(self, robot: Robot, mismatch: Mismatch | None = None, rate_hz: float = 500.0):
+    def __init__(self, robot: Robot, mismatch: Mismatch | None = None, rate_hz: float = 500.0, contact=None):
         import mujoco
 
         from ..robot.mujoco_model import build_mujoco
 
-        if robot.base != "fixed":
-            raise RobotError(f"{robot.source}: the real robot records on a stand (fixed base)")
+        floating = robot.base == "floating"
+        if floating:
+            from ..robot.ground import check_floating
+
+            check_floating(robot)
+        elif contact is not None:
+            raise RobotError(f"{robot.source}: contact settings need a floating base: the fixed base hangs on a stand")
         self.robot, self.mismatch, self.rate_hz = robot, mismatch or Mismatch(), float(rate_hz)
+        self.floating = floating
+        self._v0 = 6 if floating else 0  # MuJoCo dof v0 + i is joint i (qpos 7 + i: after the free joint)
         dt = 1.0 / self.rate_hz
         sub = self.mismatch.substep or dt
         self.n_sub = int(round(dt / sub))
@@ -154,9 +170,10 @@ class RealRobot:
             raise MismatchError(f"substep {sub} s does not divide the recording step {dt} s")
         self.substep = dt / self.n_sub
         self.n_delay = int(round(self.mismatch.delay / self.substep))
-        self.model = build_mujoco(robot, self.substep, "implicitfast")
+        self.model = build_mujoco(robot, self.substep, "implicitfast", ground=floating, contact=contact)
         self._perturb(self.model, np.random.default_rng(self.mismatch.seed))
         self._mujoco = mujoco
+        self._data = self._fifo = self._rng = None  # reset / step
 
     def _perturb(self, m, rng: np.random.Generator) -> None:
         """Apply the physical mismatch to the compiled model's fields, in place."""
@@ -175,7 +192,7 @@ class RealRobot:
         m.body_mass[1:] *= mass_f
         m.body_ipos[1:] += com_d
         m.body_inertia[1:] *= mass_f[:, None] * inertia_f
-        # joints (fixed base: MuJoCo dof i is robot joint i, actuator i drives it): global, then per joint
+        # joints (MuJoCo dof v0 + i is robot joint i, actuator i drives it): global, then per joint
         jv = {k: np.full(n, float(getattr(mm, k))) for k in JOINT_KEYS}
         for e in mm.joint:
             hits = _matches(r.joint_names, e["match"], "joint", r.source)
@@ -183,9 +200,10 @@ class RealRobot:
                 if k != "match":
                     jv[k][hits] = v
         effort = np.where(np.isfinite(r.effort), r.effort, 0.0)
-        m.dof_armature[:n] *= jv["armature_scale"]
-        m.dof_damping[:n] += jv["damping"] * r.kd
-        m.dof_frictionloss[:n] += jv["friction"] * effort
+        dof = slice(self._v0, self._v0 + n)
+        m.dof_armature[dof] *= jv["armature_scale"]
+        m.dof_damping[dof] += jv["damping"] * r.kd
+        m.dof_frictionloss[dof] += jv["friction"] * effort
         gain_f = np.clip(1.0 + mm.gain_error * rng.standard_normal((2, n)), 0.3, None)
         kp, kd = r.kp * jv["kp_scale"] * gain_f[0], r.kd * jv["kd_scale"] * gain_f[1]
         m.actuator_gainprm[:n, 0] = kp
@@ -203,12 +221,13 @@ class RealRobot:
         from ..sim.physics import PhysicalParams
 
         m, n, r = self.model, self.robot.n_dof, self.robot
+        dof = slice(self._v0, self._v0 + n)
         rot = Rotation.from_quat(m.body_iquat[1:], scalar_first=True).as_matrix()
         inertia = rot @ (m.body_inertia[1:, :, None] * np.eye(3)) @ rot.transpose(0, 2, 1)
         effort = np.where(np.isfinite(r.effort), m.actuator_forcerange[:n, 1], np.inf)
         return PhysicalParams(list(r.joint_names), list(r.body_names), m.actuator_gainprm[:n, 0].copy(),
-                              -m.actuator_biasprm[:n, 2].copy(), m.dof_armature[:n].copy(), m.dof_damping[:n].copy(),
-                              m.dof_frictionloss[:n].copy(), effort, np.full(n, self.n_delay * self.substep),
+                              -m.actuator_biasprm[:n, 2].copy(), m.dof_armature[dof].copy(), m.dof_damping[dof].copy(),
+                              m.dof_frictionloss[dof].copy(), effort, np.full(n, self.n_delay * self.substep),
                               m.body_mass[1:].copy(), m.body_ipos[1:].copy(), inertia)
 
     def record(self, q_cmd: np.ndarray, rng: np.random.Generator | None = None, settle: float = 0.5
@@ -228,6 +247,9 @@ class RealRobot:
             ``(q, qd, tau)``: measured joint positions [rad] and velocities [rad/s] at t_k, shape (T, n_dof);
             ``tau[k]`` is the actuator torque averaged over [t_k, t_k+1) [N*m] (noise-free, diagnostics only).
         """
+        if self.floating:
+            raise ValueError(f"{self.robot.source.name}: record runs on a stand (fixed base); drive a floating-base "
+                             "robot with reset and step")
         mujoco, m, mm = self._mujoco, self.model, self.mismatch
         q_cmd = np.asarray(q_cmd, dtype=np.float64)
         t_len, n = q_cmd.shape
@@ -255,6 +277,71 @@ class RealRobot:
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):
             raise SimulationDiverged(f"{self.robot.source.name}: the real robot simulation diverged")
         return self._sense(q, qd, rng) + (_quantise(tau, mm.torque_resolution),)
+
+    def reset(self, state, rng: np.random.Generator | None = None) -> None:
+        """Place the floating-base robot at ``state`` (a :class:`~wresdyn.robot.ground.FloatingState`, e.g.
+        :func:`~wresdyn.robot.ground.standing_state`) for :meth:`step`.
+
+        The delay line is filled with ``state.q`` (the motors held the start pose before it); ``rng`` draws the
+        sensor noise of every following :meth:`step` (required when a noise is on).
+        """
+        from ..robot.mujoco_model import free_to_mujoco
+
+        if not self.floating:
+            raise ValueError(f"{self.robot.source.name}: reset and step drive a floating-base robot; a fixed base "
+                             "records with record")
+        mm, n = self.mismatch, self.robot.n_dof
+        if (mm.position_noise > 0 or mm.velocity_noise > 0) and rng is None:
+            raise ValueError("sensor noise is on: pass a numpy Generator")
+        q, qd = np.asarray(state.q, dtype=np.float64), np.asarray(state.qd, dtype=np.float64)
+        if q.shape != (n,) or qd.shape != (n,):
+            raise ValueError(f"state has {q.shape} joint positions and {qd.shape} velocities, the robot {n} joints")
+        d = self._mujoco.MjData(self.model)
+        d.qpos[:7], d.qvel[:6] = free_to_mujoco(self.robot, state.base_pose, state.base_twist)
+        d.qpos[7:], d.qvel[6:] = q, qd
+        self._mujoco.mj_forward(self.model, d)
+        self._data, self._rng = d, rng
+        self._fifo = deque([q.copy()] * self.n_delay)
+
+    @property
+    def state(self):
+        """The true (noise-free) :class:`~wresdyn.robot.ground.FloatingState` after the last :meth:`reset` or
+        :meth:`step`."""
+        from ..robot.ground import FloatingState
+        from ..robot.mujoco_model import free_from_mujoco
+
+        d = self._data
+        if d is None:
+            raise RuntimeError("call reset(state) first")
+        pose, twist = free_from_mujoco(self.robot, d.qpos[:7], d.qvel[:6])
+        return FloatingState(pose, twist, d.qpos[7:].copy(), d.qvel[6:].copy())
+
+    def step(self, q_cmd: np.ndarray):
+        """Hold the joint command ``q_cmd`` [rad], shape (n_dof,), for one period ``1 / rate_hz`` and return what
+        the robot reports at its end: a :class:`~wresdyn.robot.ground.FloatingState` whose joint positions and
+        velocities carry the mismatch's sensor noise and quantisation (as :meth:`record`'s); the base pose and
+        twist are exact. The command reaches the motors after the mismatch's delay, through its torque limits.
+
+        Raises:
+            SimulationDiverged: the simulation produced a non-finite state.
+        """
+        from ..robot.ground import FloatingState
+
+        if self._data is None:
+            raise RuntimeError("call reset(state) first")
+        q_cmd = np.array(q_cmd, dtype=np.float64)  # a copy: the delay line keeps it
+        if q_cmd.shape != (self.robot.n_dof,):
+            raise ValueError(f"q_cmd has shape {q_cmd.shape}, the robot {self.robot.n_dof} joints")
+        d, fifo = self._data, self._fifo
+        for _ in range(self.n_sub):
+            fifo.append(q_cmd)
+            d.ctrl[:] = fifo.popleft()
+            self._mujoco.mj_step(self.model, d)
+        if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
+            raise SimulationDiverged(f"{self.robot.source.name}: the real robot simulation diverged")
+        true = self.state
+        q, qd = self._sense(true.q[None], true.qd[None], self._rng)
+        return FloatingState(true.base_pose, true.base_twist, q[0], qd[0])
 
     def _sense(self, q, qd, rng):
         mm = self.mismatch

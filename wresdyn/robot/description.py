@@ -186,18 +186,43 @@ class Robot:
                 "e.g. [[joint]] match = \"*\" kp = 100.0 kd = 5.0)"
             )
 
-    def build_model(self, n_worlds: int = 1, device: str | None = None, requires_grad: bool = False):
+    def build_model(self, n_worlds: int = 1, device: str | None = None, requires_grad: bool = False,
+                    ground: bool = False, contact=None):
         """Finalize a Newton :class:`~newton.Model` with ``n_worlds`` copies of the robot.
 
         Args:
             n_worlds: Number of independent worlds (one robot each).
             device: Warp device (``"cpu"``, ``"cuda:0"``); ``None`` takes Warp's default.
             requires_grad: Allocate gradients for Warp autodiff.
+            ground: Add a floor through the origin, normal to the up axis: one plane shared by every world (Newton's
+                global world -1; the worlds' robots never touch each other), and give every collision shape of
+                the robot the material of ``contact``.
+            contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor and the robot's shapes (default
+                ``ContactSettings()``); only with ``ground``.
         """
         import newton
 
         scene = newton.ModelBuilder(up_axis=self.builder.up_axis, gravity=tuple(float(g) for g in self.gravity))
         scene.replicate(self.builder, n_worlds)
+        if ground:
+            from .ground import ContactSettings
+
+            c = contact or ContactSettings()
+            material = {"shape_material_mu": c.friction, "shape_material_mu_torsional": c.torsional_friction,
+                        "shape_material_mu_rolling": c.rolling_friction, "shape_material_ke": c.ke,
+                        "shape_material_kd": c.kd, "shape_margin": c.margin, "shape_gap": c.gap}
+            collide = int(newton.ShapeFlags.COLLIDE_SHAPES)
+            for name, value in material.items():
+                values = getattr(scene, name)  # read after replicate: it may replace the lists
+                for s in range(scene.shape_count):
+                    if int(scene.shape_flags[s]) & collide:
+                        values[s] = value
+            cfg = newton.ModelBuilder.ShapeConfig(mu=c.friction, mu_torsional=c.torsional_friction,
+                                                  mu_rolling=c.rolling_friction, ke=c.ke, kd=c.kd, margin=c.margin,
+                                                  gap=c.gap)
+            scene.add_ground_plane(cfg=cfg)
+        elif contact is not None:
+            raise ValueError("contact settings without a ground: pass ground=True")
         return scene.finalize(device=device, requires_grad=requires_grad)
 
 

@@ -2,7 +2,11 @@
 
 Bodies, inertias, joint axes, limits, armature, damping and dry friction are copied field by field;
 PD drives become MuJoCo position actuators (``kp``, ``kv``) with the effort limit as force range.
-Contacts are disabled: the robot hangs on a stand and the Newton replay has no contacts either.
+By default contacts are disabled: the robot hangs on a stand and the Newton replay has no contacts either.
+With ``ground=True`` the robot gets a floor and its collision geometry, written as Newton's ``SolverMuJoCo``
+writes them (:mod:`wresdyn.robot.ground`): the same geoms, materials and solver options, so the MuJoCo C robot
+and Newton's stand on the same contact. :func:`free_to_mujoco` / :func:`free_from_mujoco` convert the free
+joint between Newton's convention and MuJoCo's.
 The integrator is ``implicitfast``, MuJoCo's recommended default, which treats the actuator's
 velocity gain implicitly (stable with high drive damping).
 """
@@ -13,7 +17,7 @@ import numpy as np
 
 from .description import Robot
 
-__all__ = ["build_mujoco", "quat_xyzw_to_wxyz"]
+__all__ = ["build_mujoco", "free_from_mujoco", "free_to_mujoco", "quat_xyzw_to_wxyz"]
 
 
 def quat_xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
@@ -37,17 +41,23 @@ def _tf_inv(a: np.ndarray) -> np.ndarray:
     return np.concatenate([-r.apply(a[:3]), r.as_quat()])
 
 
-def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast"):
+def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast", ground: bool = False,
+                 contact=None):
     """Build a :class:`mujoco.MjModel` of ``robot``.
 
     Args:
         robot: The robot description.
         dt: Time step [s].
         integrator: MuJoCo integrator name (``"implicitfast"``, ``"Euler"``, ``"RK4"``, ``"implicit"``).
+        ground: Add a floor (a plane through the origin, normal to the up axis) and the robot's collision shapes
+            (:func:`~wresdyn.robot.ground.collision_shapes`), contacts on: each shape collides with the floor
+            only, as Newton's importers leave self-collisions off.
+        contact: :class:`~wresdyn.robot.ground.ContactSettings` (default ``ContactSettings()``); only with
+            ``ground``.
 
     Returns:
         ``mujoco.MjModel`` whose ``nu`` actuators and dof order are ``robot.joint_names`` (plus the free
-        joint's 6 DoF first for a floating base).
+        joint's 6 DoF first for a floating base: MuJoCo dof ``6 + i`` and qpos ``7 + i`` are joint ``i``).
     """
     import mujoco
     from scipy.spatial.transform import Rotation as R
@@ -57,9 +67,15 @@ def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfas
     spec.option.timestep = dt
     spec.option.gravity = robot.gravity
     spec.option.integrator = getattr(mujoco.mjtIntegrator, f"mjINT_{integrator.upper()}")
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     spec.compiler.autolimits = True
     spec.compiler.degree = False
+    shapes: dict[int, list] = {}
+    if ground:
+        shapes = _add_ground(spec, robot, contact)
+    elif contact is not None:
+        raise ValueError("contact settings without a ground: pass ground=True")
+    else:
+        spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
 
     dof_of_body = {int(b): i for i, b in enumerate(robot.dof_body)}
     sbodies = []
@@ -103,6 +119,8 @@ def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfas
         for name, (fb, tf) in robot.frames.items():
             if fb == b:
                 body.add_site(name=name, pos=tf[:3], quat=quat_xyzw_to_wxyz(tf[3:]))
+        for geom in shapes.get(b, []):
+            body.add_geom(**geom)
     for i, name in enumerate(robot.joint_names):
         act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.set_to_position(kp=float(robot.kp[i]), kv=float(robot.kd[i]))
@@ -110,6 +128,80 @@ def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfas
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange = [-robot.effort[i], robot.effort[i]]
     return spec.compile()
+
+
+_GEOM = {"box": "mjGEOM_BOX", "sphere": "mjGEOM_SPHERE", "capsule": "mjGEOM_CAPSULE", "cylinder": "mjGEOM_CYLINDER",
+         "ellipsoid": "mjGEOM_ELLIPSOID"}
+
+
+def _add_ground(spec, robot: Robot, contact) -> dict[int, list]:
+    """The floor and the solver options on ``spec``, and the robot's collision geoms per body (keyword arguments
+    of ``add_geom``), each field as Newton's ``SolverMuJoCo`` writes it (its geom names included)."""
+    import mujoco
+
+    from .ground import ContactSettings, collision_shapes
+
+    c = contact or ContactSettings()
+    spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{c.cone.upper()}")
+    spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{c.solver.upper()}")
+    spec.option.iterations, spec.option.ls_iterations, spec.option.impratio = c.iterations, c.ls_iterations, c.impratio
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_MULTICCD  # SolverMuJoCo's enable_multiccd=False
+    # the geoms carry no mass: inertias are copied from the robot (bodies without one stay massless, as before)
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    material = {"friction": [c.friction, c.torsional_friction, c.rolling_friction], "solref": list(c.solref),
+                "solimp": list(c.solimp), "condim": c.condim, "margin": c.margin, "gap": c.gap}
+    # MuJoCo collides two geoms when contype of one meets conaffinity of the other: the floor meets every robot
+    # geom, robot geoms never meet each other (SolverMuJoCo's masks for a robot without self-collisions)
+    up = -np.asarray(robot.gravity, dtype=np.float64) / np.linalg.norm(robot.gravity)
+    floor_quat = quat_xyzw_to_wxyz(_quat_between(np.array([0.0, 0.0, 1.0]), up))
+    spec.worldbody.add_geom(name=f"ground_plane_{robot.builder.shape_count}", type=mujoco.mjtGeom.mjGEOM_PLANE,
+                            size=[5.0, 5.0, 5.0], quat=floor_quat, contype=1, conaffinity=0, **material)
+    geoms: dict[int, list] = {}
+    for sh in collision_shapes(robot):
+        size = sh.size.copy()
+        size[size == 0.0] = size[size > 0.0][0]  # MuJoCo reads only the sizes a type uses; SolverMuJoCo fills the rest
+        geoms.setdefault(sh.body, []).append({
+            "name": f"{sh.label}_{sh.index}", "type": getattr(mujoco.mjtGeom, _GEOM[sh.kind]), "size": size,
+            "pos": sh.transform[:3], "quat": quat_xyzw_to_wxyz(sh.transform[3:]), "contype": 0, "conaffinity": 1,
+            **material})
+    return geoms
+
+
+def _quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Shortest rotation [x y z w] taking unit vector ``a`` to ``b``."""
+    from scipy.spatial.transform import Rotation as R
+
+    if np.allclose(a, b):
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    return R.align_vectors(b[None], a[None])[0].as_quat()
+
+
+def free_to_mujoco(robot: Robot, base_pose: np.ndarray, base_twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Newton's free joint -> MuJoCo's: ``(qpos[:7], qvel[:6])``.
+
+    Newton (:mod:`wresdyn.robot.ground`): pose [x y z qx qy qz qw], twist [centre-of-mass velocity, angular
+    velocity], world axes. MuJoCo: qpos [x y z qw qx qy qz] of the body frame; qvel [velocity of the body
+    frame's origin in world axes, angular velocity in body axes].
+    """
+    from scipy.spatial.transform import Rotation as R
+
+    pose, twist = np.asarray(base_pose, dtype=np.float64), np.asarray(base_twist, dtype=np.float64)
+    rot = R.from_quat(pose[3:])
+    w = twist[3:]
+    v_origin = twist[:3] - np.cross(w, rot.apply(robot.body_com[0]))
+    return np.concatenate([pose[:3], quat_xyzw_to_wxyz(rot.as_quat())]), np.concatenate([v_origin, rot.inv().apply(w)])
+
+
+def free_from_mujoco(robot: Robot, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo's free joint ``(qpos[:7], qvel[:6])`` -> Newton's ``(base_pose, base_twist)`` (the inverse of
+    :func:`free_to_mujoco`)."""
+    from scipy.spatial.transform import Rotation as R
+
+    qpos, qvel = np.asarray(qpos, dtype=np.float64), np.asarray(qvel, dtype=np.float64)
+    rot = R.from_quat(qpos[3:7], scalar_first=True)
+    w = rot.apply(qvel[3:6])
+    v_com = qvel[:3] + np.cross(w, rot.apply(robot.body_com[0]))
+    return np.concatenate([qpos[:3], rot.as_quat()]), np.concatenate([v_com, w])
 
 
 def mujoco_replay(mj_model, q_cmd: np.ndarray, q0: np.ndarray, qd0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

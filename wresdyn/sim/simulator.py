@@ -73,27 +73,35 @@ class Simulator:
         param_grads: Gradients also reach the model's physical parameters (identification); off, the replay
             solver folds parameters that are zero everywhere into its kernels (faster).
         graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA).
+        ground: Stand the robots on a floor (:meth:`wresdyn.robot.Robot.build_model`); needs the ``mujoco``
+            solver (``auto`` picks it), so no gradients.
+        contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (default ``ContactSettings()``).
 
     Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
-    shape (n_worlds, n_dof), float32 on :attr:`device`.
+    shape (n_worlds, n_dof), float32 on :attr:`device`. A floating base adds ``base_pose`` and ``base_twist``
+    (Newton's free-joint convention, :mod:`wresdyn.robot.ground`) and :meth:`set_full_state`.
     """
 
     def __init__(self, robot, n_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
                  device: str | None = "cpu", requires_grad: bool = False, param_grads: bool = False,
-                 graph: bool | None = None) -> None:
+                 graph: bool | None = None, ground: bool = False, contact=None) -> None:
         import warp as wp
 
         if n_worlds < 1 or substeps < 1 or not dt > 0:
             raise ValueError(f"need n_worlds >= 1, substeps >= 1 and dt > 0 (got {n_worlds}, {substeps}, {dt})")
         self.robot, self.n_worlds, self.dt, self.substeps = robot, int(n_worlds), float(dt), int(substeps)
         self.dt_sub = self.dt / self.substeps
-        self.solver_kind = resolve_solver(robot, self.dt_sub, solver)
+        self.ground = bool(ground)
+        self.solver_kind = resolve_solver(robot, self.dt_sub, solver, self.ground)
         if requires_grad and self.solver_kind == "mujoco":
             raise ValueError(f"{robot.source.name}: SolverMuJoCo is not differentiable; gradients need the replay "
-                             "or featherstone solver (add armature so explicit PD is stable)")
+                             "or featherstone solver (add armature so explicit PD is stable)"
+                             + ("; a ground needs SolverMuJoCo" if self.ground else ""))
         self.requires_grad = bool(requires_grad)
-        self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad)
-        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, param_grads=param_grads)
+        self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
+                                       contact=contact)
+        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, param_grads=param_grads,
+                                  ground=self.ground, contact=contact)
         self.device = _torch_device(device)
         self._cuda = self.device.type == "cuda"
         self.graph = self._cuda if graph is None else bool(graph) and self._cuda
@@ -189,6 +197,41 @@ class Simulator:
         if self._needs_fk:
             with self._stream():
                 self._eval_fk(self.states[self._cur])
+
+    def _base_slices(self) -> tuple[slice, slice]:
+        """The free joint's 7 coordinates and 6 DoFs in a world's joint_q / joint_qd."""
+        if self.robot.base != "floating":
+            raise ValueError(f"{self.robot.source.name}: the base is fixed; load_robot(..., base='floating') for a "
+                             "base pose")
+        from ..robot.ground import base_index
+
+        q0, qd0 = base_index(self.robot)
+        return slice(q0, q0 + 7), slice(qd0, qd0 + 6)
+
+    @property
+    def base_pose(self) -> torch.Tensor:
+        """Base pose per world, [x y z qx qy qz qw] (position [m], unit quaternion, world frame), shape
+        (n_worlds, 7); a floating base only."""
+        return self._q[self._cur][:, self._base_slices()[0]].clone()
+
+    @property
+    def base_twist(self) -> torch.Tensor:
+        """Base centre-of-mass velocity [m/s] and angular velocity [rad/s] per world, world axes, shape
+        (n_worlds, 6); a floating base only."""
+        return self._qd[self._cur][:, self._base_slices()[1]].clone()
+
+    def set_full_state(self, ids, base_pose: torch.Tensor, base_twist: torch.Tensor, q: torch.Tensor,
+                       qd: torch.Tensor) -> None:
+        """Overwrite the whole state of worlds ``ids`` (long (k,), a slice, or ``None`` for all): base pose (k, 7)
+        and twist (k, 6) as :attr:`base_pose` / :attr:`base_twist` (the quaternion is normalised), joints q, q̇
+        (k, n). A floating base only."""
+        pose_index, twist_index = self._base_slices()
+        ids = slice(None) if ids is None else ids
+        pose = base_pose.to(self.device, torch.float32).clone()
+        pose[..., 3:] = pose[..., 3:] / pose[..., 3:].norm(dim=-1, keepdim=True)
+        self._q[self._cur][ids, pose_index] = pose
+        self._qd[self._cur][ids, twist_index] = base_twist.to(self.device, torch.float32)
+        self.set_state(ids, q, qd)
 
     def _eval_fk(self, state) -> None:
         import newton

@@ -12,11 +12,17 @@ Solvers (``solver=`` everywhere in wresdyn):
   semi-implicit Euler on m ẍ = −kp x − kd ẋ, with ``m_eff = 1 / (M⁻¹)_ii`` (armature included).
   :func:`explicit_pd_margin` computes the criterion; reflected rotor inertia keeps real humanoids inside it
   at 500 Hz, a robot file without armature and with high damping is not.
-- ``"mujoco"``: Newton's ``SolverMuJoCo`` (implicit PD; mujoco_warp on CUDA, MuJoCo C on CPU), not
-  differentiable.
+- ``"mujoco"``: Newton's ``SolverMuJoCo`` (implicit PD; mujoco_warp on CUDA; on the CPU MuJoCo C for one world
+  and mujoco_warp on Warp's CPU device for several, since Newton's MuJoCo C backend simulates one world only),
+  not differentiable. The only one of the three that feels a ground: MuJoCo's own collision detection and soft
+  contact constraints, with :class:`~wresdyn.robot.ground.ContactSettings`.
 
 ``"auto"`` picks ``replay`` on a fixed base; on a floating base, Featherstone when the explicit-PD criterion
-holds with a 2x margin, else ``mujoco``.
+holds with a 2x margin, else ``mujoco``; with a ground, ``mujoco``. A ground with ``replay`` (no contacts, fixed
+base) or ``featherstone`` is refused: SolverFeatherstone feels contacts only as penalty forces (explicit
+springs from the shapes' ``ke``/``kd``/``kf``/``mu``) computed from a Newton ``Contacts`` buffer passed to its
+``step`` (``model.collide`` each step); the simulator passes none, so the robot would fall through the floor, and
+penalty springs would not be MuJoCo's soft-constraint contact of the real robot either.
 """
 
 from __future__ import annotations
@@ -54,9 +60,15 @@ def explicit_pd_margin(robot: Robot, dt: float, q: np.ndarray | None = None) -> 
     return np.maximum(robot.kd * dt / (2.0 * m_eff), robot.kp * dt * dt / (4.0 * m_eff))
 
 
-def resolve_solver(robot: Robot, dt: float, kind: str = "auto") -> str:
-    """The concrete solver kind for ``kind`` (see the module docstring for "auto")."""
+def resolve_solver(robot: Robot, dt: float, kind: str = "auto", ground: bool = False) -> str:
+    """The concrete solver kind for ``kind`` (see the module docstring for "auto"); with a ``ground``, ``mujoco``
+    or a one-line :class:`ValueError`."""
     check_choice(kind, SolverKind, "solver")
+    if ground:
+        if kind not in ("auto", "mujoco"):
+            raise ValueError(f"{robot.source.name}: a ground needs solver 'mujoco' (or 'auto'); the {kind} solver "
+                             "would not feel it")
+        return "mujoco"
     if kind == "auto" and robot.base == "fixed":
         return "replay"
     if kind not in ("auto", "featherstone"):
@@ -73,22 +85,37 @@ def resolve_solver(robot: Robot, dt: float, kind: str = "auto") -> str:
     return "mujoco"
 
 
-def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, param_grads: bool = False):
+def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, param_grads: bool = False,
+                ground: bool = False, contact=None):
     """Create the Newton solver for replay. See the module docstring for the choice.
 
     ``param_grads``: the model's physical parameters (masses, inertias, joint parameters) are fitted, so
     SolverReplay reads every entry of them; otherwise it compiles the entries that are zero in every world as
     constants (``fold_zeros``, 25-35% faster forward and backward) and gradients reach only the state and
     the control (what residual learning needs).
+
+    ``ground``: the model has a floor (``Robot.build_model(ground=True)``): SolverMuJoCo with contacts on and the
+    solver options of ``contact`` (:class:`~wresdyn.robot.ground.ContactSettings`, default ``ContactSettings()``),
+    the same as :func:`wresdyn.robot.mujoco_model.build_mujoco` writes for the MuJoCo C robot.
     """
     import newton
 
-    kind = resolve_solver(robot, dt, kind)
+    kind = resolve_solver(robot, dt, kind, ground)
     if kind == "replay":
         from .solver_replay import SolverReplay
 
         return SolverReplay(model, fold_zeros=not param_grads)
     if kind == "featherstone":
         return newton.solvers.SolverFeatherstone(model)
-    cpu = not str(model.device).startswith("cuda")
-    return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=cpu, disable_contacts=True, integrator="implicitfast")
+    # Newton's MuJoCo C backend holds one world; several run on mujoco_warp, on the CPU too (Warp's CPU device)
+    mujoco_c = not str(model.device).startswith("cuda") and model.world_count == 1
+    if not ground:
+        return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=mujoco_c, disable_contacts=True,
+                                           integrator="implicitfast")
+    from ..robot.ground import ContactSettings
+
+    c = contact or ContactSettings()
+    return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=mujoco_c, disable_contacts=False,
+                                       integrator="implicitfast", solver=c.solver, cone=c.cone,
+                                       iterations=c.iterations, ls_iterations=c.ls_iterations, impratio=c.impratio,
+                                       enable_multiccd=False)
