@@ -26,21 +26,6 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _scene(usd: str, worlds: int, device: str):
-    import newton
-
-    robot = newton.ModelBuilder()
-    robot.add_usd(usd, floating=True, enable_self_collisions=False, load_visual_shapes=False)
-    scene = newton.ModelBuilder()
-    scene.replicate(robot, worlds)
-    scene.add_ground_plane()
-    model = scene.finalize(device=device)
-    cpu = device == "cpu"
-    solver = newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=cpu, integrator="implicitfast",
-                                         njmax=200, nconmax=100)
-    return model, solver
-
-
 def measure(usd: str, worlds: int, device: str, steps: int, graph: bool, residual_on: bool) -> dict:
     import torch
     import warp as wp
@@ -51,7 +36,7 @@ def measure(usd: str, worlds: int, device: str, steps: int, graph: bool, residua
     standing = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(standing)
     dt = 0.002
-    model, solver = _scene(usd, worlds, device)
+    model, solver = standing.build(usd, worlds, device)
     states = [model.state(), model.state()]
     control = model.control()
     standing.stand(model, states[0])

@@ -153,10 +153,11 @@ def run(usd_path: str, seconds: float, out: str | None, nominal: bool = False, d
             viewer.begin_frame(k * dt)
             viewer.log_state(s0)
             viewer.end_frame()
-        heights.append(float(s0.joint_q.numpy()[z_index]))
+        q = s0.joint_q.numpy()
+        heights.append(float(q[z_index]))
         if k == steps:
             break
-        target = stance.targets(k * dt, s0.joint_q.numpy()[z_index + 1:z_index + 5])
+        target = stance.targets(k * dt, q[z_index + 1:z_index + 5])
         control.joint_target_q.assign(target)
         control.joint_f.zero_()
         for a, sa, sb in zip(acts, ast, ast_next):

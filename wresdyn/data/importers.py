@@ -27,10 +27,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import tomllib
 
 from .dataset import SPLITS, Dataset, DatasetError
-from .logs import IDENTITY, LogMap, check_finite, check_stamps, log_stats, map_joints, read_log, to_trajectory
+from .logs import (
+    IDENTITY,
+    LogMap,
+    check_finite,
+    check_stamps,
+    log_stats,
+    map_joints,
+    read_log,
+    read_toml,
+    to_trajectory,
+)
 
 __all__ = ["Run", "SplitRule", "sage_run", "lerobot_root", "read_sage", "read_lerobot", "read_runs", "import_runs",
            "parse_assign", "load_split_map"]
@@ -113,14 +122,19 @@ def _read_sage(path: Path, joint_names: list[str], log_map: LogMap) -> tuple[dic
     return log, info
 
 
-def _sage_csv(path: Path, names: list[str], required: tuple, optional: tuple) -> tuple[np.ndarray, dict]:
-    """Time stamps [s] (N,) and the vector columns (N, n) of a SAGE CSV file, checked."""
+def _csv_rows(path: Path) -> tuple[list[list[str]], list[str]]:
+    """The non-empty rows of a CSV file and its stripped header (``[]`` for an empty file)."""
     try:
         with open(path, newline="", encoding="utf-8") as f:
             rows = [r for r in csv.reader(f) if r]
     except (OSError, UnicodeDecodeError) as e:
         raise DatasetError(f"{path}: cannot read CSV: {e}") from None
-    header = [h.strip() for h in rows[0]] if rows else []
+    return rows, ([h.strip() for h in rows[0]] if rows else [])
+
+
+def _sage_csv(path: Path, names: list[str], required: tuple, optional: tuple) -> tuple[np.ndarray, dict]:
+    """Time stamps [s] (N,) and the vector columns (N, n) of a SAGE CSV file, checked."""
+    rows, header = _csv_rows(path)
     for c in ("timestamp",) + required:
         if c not in header:
             raise DatasetError(f"{path}: no {c!r} column (header: {','.join(header) or 'none'})")
@@ -164,12 +178,7 @@ def _sage_events(path: Path) -> tuple[float | None, float | None]:
     """MOTION_START and DISABLE stamps [s] of event.csv (``None`` where absent, or without the file)."""
     if not path.is_file():
         return None, None
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = [r for r in csv.reader(f) if r]
-    except (OSError, UnicodeDecodeError) as e:
-        raise DatasetError(f"{path}: cannot read CSV: {e}") from None
-    header = [h.strip() for h in rows[0]] if rows else []
+    rows, header = _csv_rows(path)
     if "timestamp" not in header or "event" not in header:
         raise DatasetError(f"{path}: needs 'timestamp' and 'event' columns (header: {','.join(header) or 'none'})")
     it, ie = header.index("timestamp"), header.index("event")
@@ -348,13 +357,7 @@ def parse_assign(text: str) -> tuple[str, str]:
 def load_split_map(path) -> list[tuple[str, str]]:
     """A split map file (TOML): ``"PATTERN" = "SPLIT"`` lines, fnmatch patterns on run names, first match wins."""
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            raw = tomllib.load(f)
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: split map not found") from None
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise DatasetError(f"{path}: not a readable TOML split map: {e}") from None
+    raw = read_toml(path, "split map")
     for k, v in raw.items():
         if v not in SPLITS:
             raise DatasetError(f"{path}: {k!r} = {v!r}: the split must be one of {', '.join(SPLITS)}")

@@ -33,6 +33,17 @@ UNIT_SCALES = {"rad": 1.0, "deg": math.pi / 180.0}
 """Named position units of the mapping file: value [rad] = scale * logged value."""
 
 
+def read_toml(path: Path, what: str) -> dict:
+    """A TOML file's contents; a missing or unreadable file is a one-line :class:`DatasetError` naming ``what``."""
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: {what} not found") from None
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path}: not a readable TOML {what}: {e}") from None
+
+
 @dataclass(frozen=True)
 class LogMap:
     """How a log's joints become the robot's: the mapping file (TOML) of docs/dataset.md, "Mapping file".
@@ -60,13 +71,7 @@ class LogMap:
     def load(cls, path) -> LogMap:
         """Read and check a mapping file; every error is one line naming the file and the key."""
         path = Path(path)
-        try:
-            with open(path, "rb") as f:
-                raw = tomllib.load(f)
-        except FileNotFoundError:
-            raise DatasetError(f"{path}: mapping file not found") from None
-        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise DatasetError(f"{path}: not a readable TOML mapping file: {e}") from None
+        raw = read_toml(path, "mapping file")
         unknown = sorted(set(raw) - {"joints", "units", "exclude", "velocity"})
         if unknown:
             raise DatasetError(f"{path}: unknown key(s) {unknown} (expected [joints], [units], [exclude], velocity)")

@@ -65,7 +65,8 @@ class ResidualTorque:
         self.q_index = torch.as_tensor(np.array(qi).T, device=self.device)  # (worlds, n)
         self.qd_index = torch.as_tensor(np.array(qdi).T, device=self.device)
         self.network.to(self.device)
-        self._qd_prev = None
+        self._qd_prev = None  # q̇ of the previous call, (worlds, n), updated in place
+        self._qdd0 = None  # q̈ at a start (reset), (worlds, n) [rad/s²]
 
     @classmethod
     def from_usd(cls, usd_path: str | Path, model, dt: float | None = None) -> "ResidualTorque":
@@ -101,7 +102,7 @@ class ResidualTorque:
         q_all, qd_all = wp.to_torch(state.joint_q), wp.to_torch(state.joint_qd)
         q, qd = q_all[self.q_index], qd_all[self.qd_index]
         if self._qd_prev is None:
-            qdd = torch.zeros_like(qd) if getattr(self, "_qdd0", None) is None else \
+            qdd = torch.zeros_like(qd) if self._qdd0 is None else \
                 torch.as_tensor(self._qdd0, dtype=qd.dtype, device=self.device).reshape(qd.shape)
             self._qd_prev = qd.clone()
         else:

@@ -84,13 +84,17 @@ def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
 
 def _joint_paths(robot) -> list[str]:
     """USD prim path of each actuated joint, in ``robot.joint_names`` order."""
-    by_dof = {}
-    b = robot.builder
-    for j, label in enumerate(b.joint_label):
-        lin, ang = b.joint_dof_dim[j]
-        if int(lin) + int(ang) == 1:
-            by_dof[int(b.joint_qd_start[j])] = label
+    from ..robot.description import _dof_by_label
+
+    by_dof = {dof: label for label, dof in _dof_by_label(robot.builder).items()}
     return [by_dof[int(d)] for d in robot.qd_index]
+
+
+def _copy_stage_metadata(src, dst) -> None:
+    """Up axis and units of the robot file onto a layer over it."""
+    for key in ("upAxis", "metersPerUnit", "kilogramsPerUnit"):
+        if src.HasMetadata(key):
+            dst.SetMetadata(key, src.GetMetadata(key))
 
 
 def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | None = None) -> None:
@@ -117,12 +121,11 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
     stage.SetDefaultPrim(stage.GetPrimAtPath(default.GetPath()))
     stage.GetRootLayer().documentation = (
         f"wresdyn calibrated robot: identified physical parameters over {src.name} (written by wresdyn export)")
-    for k, rel in ((stage, "upAxis"), (stage, "metersPerUnit"), (stage, "kilogramsPerUnit")):
-        if base.HasMetadata(rel):
-            k.SetMetadata(rel, base.GetMetadata(rel))
+    _copy_stage_metadata(base, stage)
+    joint_paths = _joint_paths(robot)
 
     deg = math.pi / 180.0
-    for i, path in enumerate(_joint_paths(robot)):
+    for i, path in enumerate(joint_paths):
         prim = stage.OverridePrim(path)
         prismatic = bool(robot.is_prismatic()[i])
         axis = "linear" if prismatic else "angular"
@@ -155,13 +158,11 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
     act.SetDefaultPrim(act.GetPrimAtPath(default.GetPath()))
     act.GetRootLayer().documentation = ("wresdyn calibrated robot with its drive path as Newton actuators "
                                         "(PD, delay, effort clamping) and the residual network")
-    for k in ("upAxis", "metersPerUnit", "kilogramsPerUnit"):
-        if base.HasMetadata(k):
-            act.SetMetadata(k, base.GetMetadata(k))
+    _copy_stage_metadata(base, act)
     scope = f"{default.GetPath()}/{ACTUATOR_SCOPE}"
     _set(act.DefinePrim(scope, "Scope"), "wresdyn:actuatorRateHz", Sdf.ValueTypeNames.Double, float(rate_hz))
     dt = 1.0 / rate_hz
-    for i, (name, path) in enumerate(zip(robot.joint_names, _joint_paths(robot))):
+    for i, (name, path) in enumerate(zip(robot.joint_names, joint_paths)):
         joint = act.OverridePrim(path)
         axis = "linear" if robot.is_prismatic()[i] else "angular"
         _set(joint, f"drive:{axis}:physics:stiffness", Sdf.ValueTypeNames.Float, 0.0)  # the actuator drives it
@@ -189,7 +190,7 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         _set(prim, "wresdyn:onnx", Sdf.ValueTypeNames.Asset, Sdf.AssetPath("residual.onnx"))
         _set(prim, "wresdyn:kind", Sdf.ValueTypeNames.Token, residual["kind"])
         _set(prim, "wresdyn:rateHz", Sdf.ValueTypeNames.Double, float(residual["rate_hz"]))
-        by_name = dict(zip(robot.joint_names, _joint_paths(robot)))
+        by_name = dict(zip(robot.joint_names, joint_paths))
         prim.CreateRelationship("wresdyn:joints").SetTargets([by_name[n] for n in residual["joint_names"]])
     act.GetRootLayer().Save()
 
