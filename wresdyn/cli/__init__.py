@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "identify": ("wresdyn.cli.identify", "identify the simulator's own physics (gains, friction, delay, masses...)"),
     "fit": ("wresdyn.cli.fit", "learn a residual by gradient descent through the differentiable simulation"),
     "export": ("wresdyn.cli.export", "write the calibrated robot: USD layers, Newton actuators and the residual"),
+    "deploy": ("wresdyn.cli.deploy", "train tracking skills in nominal and corrected simulators, deploy them on the real robot"),
     "ablate": ("wresdyn.cli.ablate", "PPO vs gradient vs parametric x MLP/GRU x torque/delta action x seeds"),
 }
 

@@ -1,0 +1,201 @@
+"""Skills deployed zero-shot: motions, plants (Newton and the real robot), the tracking environment, PPO, ``wresdyn deploy``.
+
+Everything runs the real code paths at tiny sizes: the real robot is :class:`RealRobot` (MuJoCo C with the shipped
+mismatch), the simulators are :class:`wresdyn.sim.Simulator`, PPO is rsl-rl's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from wresdyn.cli import main
+from wresdyn.skills.env import SkillConfig, TrackingEnv
+from wresdyn.skills.motions import HELD_OUT_FAMILIES, TRAIN_FAMILIES, make_motions, stance
+from wresdyn.skills.plants import RealPlant, SimPlant, sim_plant
+
+RATE = 500.0
+
+
+@pytest.fixture(scope="module")
+def motions(humanoid):
+    return make_motions(humanoid, {"train": 1, "validation": 1, "heldout": 1}, duration=0.4, rate_hz=RATE, seed=3)
+
+
+@pytest.fixture(scope="module")
+def quiet_real(humanoid, shipped_mismatch):
+    """The shipped real robot without sensor noise (exact comparisons)."""
+    from wresdyn.data.real_robot import RealRobot
+
+    mm = dataclasses.replace(shipped_mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
+                             velocity_resolution=0.0)
+    return RealRobot(humanoid, mm, RATE)
+
+
+def test_motions_start_and_end_in_the_stance_inside_the_limits(humanoid, motions):
+    assert [m.family for m in motions.split("train")] == list(TRAIN_FAMILIES)
+    assert {m.family for m in motions.split("heldout")} == set(TRAIN_FAMILIES + HELD_OUT_FAMILIES)
+    home = stance(humanoid)
+    for m in sum(motions.splits.values(), []):
+        assert m.q.shape == (int(0.4 * RATE) + 1, humanoid.n_dof) and m.feet.shape == (len(m.q), 2, 3)
+        np.testing.assert_allclose(m.q[0], home, atol=1e-3)
+        np.testing.assert_allclose(m.q[-1], home, atol=1e-3)
+        assert (m.q >= humanoid.lower - 1e-9).all() and (m.q <= humanoid.upper + 1e-9).all()
+        assert np.ptp(m.q, axis=0).max() > 0.1  # it moves
+    again = make_motions(humanoid, {"train": 1}, duration=0.4, rate_hz=RATE, seed=3)
+    np.testing.assert_array_equal(again.split("train")[0].q, motions.split("train")[0].q)
+
+
+def test_real_plant_steps_exactly_as_the_real_robot_records(humanoid, motions, quiet_real):
+    """The batched C rollouts (delay line, torque limits) against RealRobot.record on the same held commands."""
+    dec, steps = 5, 12
+    cmd = motions.split("train")[0].q[::dec][:steps]
+    q_rec, _, _ = quiet_real.record(np.repeat(cmd, dec, axis=0), settle=0.0)
+    plant = RealPlant(quiet_real, 2, dec)
+    plant.reset(torch.arange(2), torch.as_tensor(np.repeat(cmd[:1], 2, 0)), torch.zeros(2, humanoid.n_dof))
+    for k in range(steps):
+        np.testing.assert_allclose(plant.q_true[1], q_rec[k * dec], atol=1e-12, err_msg=f"step {k}")
+        _, _, bad = plant.step(torch.as_tensor(np.repeat(cmd[k:k + 1], 2, 0)))
+        assert not bad.any()
+    assert np.abs(plant.tau).max() > 0.1
+    limit = quiet_real.model.actuator_forcerange[:humanoid.n_dof, 1]
+    assert (np.abs(plant.tau) <= limit + 1e-9).all()  # saturated like the real drives
+
+
+def test_sim_plant_delay_matches_the_replay_command_path(humanoid):
+    """The online delay line gives the replay's targets: (1 − α) c_{k−m} + α c_{k−m−1} (wresdyn.sim.bank)."""
+    from wresdyn.sim import Simulator, Window, rollout
+    from wresdyn.sim.bank import delay_commands
+    from wresdyn.sim.physics import PhysicalParams
+
+    phys = PhysicalParams.nominal(humanoid)
+    phys.delay = np.where(np.arange(humanoid.n_dof) % 2 == 0, 0.005, 0.0012)  # 2.5 and 0.6 samples
+    dec, steps = 4, 10
+    rng = np.random.default_rng(0)
+    q0 = stance(humanoid)
+    cmd = q0 + 0.2 * rng.standard_normal((steps, humanoid.n_dof))
+    plant = SimPlant(humanoid, 1, RATE, dec, physics=phys)
+    plant.reset(torch.arange(1), torch.as_tensor(q0[None], dtype=torch.float32), torch.zeros(1, humanoid.n_dof))
+    got = [plant.step(torch.as_tensor(c[None], dtype=torch.float32))[0][0].numpy() for c in cmd]
+    held = np.repeat(cmd, dec, axis=0)
+    table = torch.as_tensor(np.concatenate([np.repeat(q0[None], 4, 0), held]), dtype=torch.float32)
+    rows = 4 + torch.arange(len(held))  # the start pose held before the first command, as the plant's delay line
+    target = delay_commands(table, rows, torch.zeros_like(rows), torch.as_tensor(phys.delay * RATE,
+                                                                                 dtype=torch.float32)).numpy()
+    sim = Simulator(humanoid, 1, 1.0 / RATE)
+    sim.set_physics(phys)
+    win = Window.from_arrays(q0[None], np.zeros((1, humanoid.n_dof)), held[None], sim.device, target=target[None])
+    want = rollout(sim, win).q[0, dec::dec].numpy()
+    np.testing.assert_allclose(np.array(got), want, atol=1e-5)
+    assert np.abs(np.array(got) - SimPlant_no_delay(humanoid, q0, cmd, dec)).max() > 1e-3  # the delay mattered
+
+
+def SimPlant_no_delay(robot, q0, cmd, dec):  # noqa: N802
+    plant = SimPlant(robot, 1, RATE, dec)
+    plant.reset(torch.arange(1), torch.as_tensor(q0[None], dtype=torch.float32), torch.zeros(1, robot.n_dof))
+    return np.array([plant.step(torch.as_tensor(c[None], dtype=torch.float32))[0][0].numpy() for c in cmd])
+
+
+def test_tracking_env_zero_action_plays_the_reference_and_fails_far_from_it(humanoid, motions):
+    cfg = SkillConfig(decimation=5)
+    env = TrackingEnv(SimPlant(humanoid, 3, RATE, 5), motions.split("train"), cfg, random_start=False)
+    obs = env.get_observations()["policy"]
+    assert obs.shape == (3, 6 * humanoid.n_dof) and torch.isfinite(obs).all()
+    a, cmd = env.command(torch.zeros(3, humanoid.n_dof))
+    torch.testing.assert_close(cmd, env.ref(1))
+    _, rew, done, _ = env.step(torch.zeros(3, humanoid.n_dof))
+    assert torch.isfinite(rew).all() and not done.any()
+    strict = TrackingEnv(SimPlant(humanoid, 3, RATE, 5), motions.split("train"),
+                         dataclasses.replace(cfg, fail_error=1e-6), random_start=False)
+    _, _, done, extras = strict.step(torch.zeros(3, humanoid.n_dof))
+    assert done.all() and not extras["time_outs"].any() and strict.failed_total == 3
+
+
+def test_deploy_metrics_count_a_failure(humanoid, motions, quiet_real):
+    from wresdyn.skills.evaluate import deploy_skill, metrics
+
+    mot = motions.split("heldout")
+    cfg = SkillConfig(decimation=5, fail_error=2.0)  # the 0.4 s test motions are fast: a loose bound tracks them
+    ok = metrics(deploy_skill(None, RealPlant(quiet_real, len(mot), 5), mot, cfg), humanoid)
+    assert ok["mean"]["success"] == 1.0 and 0 < ok["mean"]["mpjpe"] < 0.2 and ok["mean"]["torque_rate"] > 0
+    bad = metrics(deploy_skill(None, RealPlant(quiet_real, len(mot), 5), mot, dataclasses.replace(cfg, fail_error=0.01)),
+                  humanoid)
+    assert bad["mean"]["failures"] >= 1 and bad["mean"]["success"] < 1.0
+    assert all(np.isfinite(p["mpjpe"]) for p in bad["motions"] if p["failed_at"] != 1)
+
+
+def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
+    """A `wresdyn fit` run folder from the real writers: a (tiny, untrained) residual, identified physics or not."""
+    from wresdyn.learn.gradfit import build_policy
+    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
+    from wresdyn.sim.physics import PhysicalParams
+
+    run = tmp_path / kind
+    run.mkdir()
+    if physics:
+        p = PhysicalParams.nominal(robot)
+        p.kp *= 0.8
+        p.delay = np.full(robot.n_dof, 0.004)
+        p.save(run / "physics.json")
+    mean, std = obs_stats(data.split("train"))
+    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
+                     learner="gradient")
+    return run
+
+
+def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
+    from wresdyn.errors import WresdynError
+
+    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    assert sim_plant("calibrated", humanoid, 2, RATE, 5, str(cal)).residual is not None
+    assert sim_plant("delta_action", humanoid, 2, RATE, 5, str(delta)).kind == "delta_action"
+    with pytest.raises(WresdynError, match="delta_action residual"):
+        sim_plant("delta_action", humanoid, 2, RATE, 5, str(cal))
+    with pytest.raises(WresdynError, match="physics.json"):
+        sim_plant("calibrated", humanoid, 2, RATE, 5, str(delta))
+
+
+def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
+    data_path = tmp_path / "dataset.npz"
+    data.save(data_path)
+    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    out = tmp_path / "deploy"
+    args = ["deploy", str(data_path), "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
+            "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--heldout", "1"]
+    assert main(args) == 0
+    res = json.loads((out / "results.json").read_text())
+    for split in ("validation", "heldout"):
+        assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
+    assert set(res["gap_closed"]) == {"b_calibrated", "c_delta_action"}
+    assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
+    assert "Gap closed" in (out / "report.md").read_text()
+    for name in ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle"):
+        assert (out / "skills" / name / "policy.pt").is_file()
+    # a changed configuration on resume is refused in one line, and nothing is overwritten
+    before = (out / "skills" / "a_nominal" / "config.json").read_text()
+    capsys.readouterr()
+    assert main(args[:-2] + ["--heldout", "1", "--seed", "5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "a_nominal" in err
+    assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
+
+
+def test_skill_zero_shot_example_runs(tmp_path, humanoid, data):
+    import subprocess
+    import sys
+
+    from wresdyn.paths import REPO
+
+    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    res = subprocess.run([sys.executable, "examples/skill_zero_shot.py", str(cal), "--out", str(tmp_path / "skills"),
+                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1"],
+                         capture_output=True, text=True, cwd=REPO, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    rows = [ln.split() for ln in res.stdout.splitlines() if ln.split()[:1] in (["a_nominal"], ["b_calibrated"])]
+    assert len(rows) == 2 and all(0 < float(r[1]) < 500 for r in rows)

@@ -1,0 +1,55 @@
+"""``wresdyn deploy [DATA]``: train tracking skills in the nominal and the corrected simulators and deploy each
+zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.skills.benchmark`.
+
+Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tracking_heldout.png`` and
+``OUT/deployed_heldout.usda``; the corrections (``OUT/calibrated``, ``OUT/delta_action``) are fitted on DATA unless
+given, and the four policies live in ``OUT/skills/``. Rerunning the same command resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from ..paths import DEFAULT_DATASET
+
+    p.add_argument("data", nargs="?", default=str(DEFAULT_DATASET),
+                   help="dataset the corrections are fitted on; its mismatch is the real robot (default: the shipped one)")
+    p.add_argument("--out", default="runs/deploy", help="output folder; rerun to resume (default: runs/deploy)")
+    p.add_argument("--calibrated", default=None, metavar="RUN",
+                   help="the calibrated robot: a hybrid `wresdyn fit` run (default: fitted into OUT/calibrated)")
+    p.add_argument("--delta", default=None, metavar="RUN",
+                   help="a delta-action `wresdyn fit --model network --residual delta_action` run "
+                        "(default: fitted into OUT/delta_action)")
+    p.add_argument("--mismatch", default=None, help="real robot's mismatch (TOML; default: the dataset's)")
+    p.add_argument("--iterations", type=int, default=None, help="PPO iterations of (a), nominal (default 300)")
+    p.add_argument("--finetune", type=int, default=None, help="PPO iterations of each fine-tuning (default 300)")
+    p.add_argument("--envs", type=int, default=None, help="parallel worlds of PPO (default 64)")
+    p.add_argument("--motions", type=int, default=None, help="training motions per family (default 4)")
+    p.add_argument("--heldout", type=int, default=None, help="held-out motions per family (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the motions and of PPO")
+    p.add_argument("--device", default="cpu", help="cpu or cuda:0 (the real robot always steps on the CPU)")
+    p.add_argument("--no-animation", action="store_true", help="skip the USD animation")
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from ..data.loading import load_data
+    from ..data.real_robot import Mismatch
+    from ..skills.benchmark import DeployConfig, run_benchmark
+
+    cfg = DeployConfig()
+    kw = {k: v for k, v in (("iterations", args.iterations), ("finetune", args.finetune), ("envs", args.envs),
+                            ("train_per_family", args.motions), ("heldout_per_family", args.heldout)) if v is not None}
+    cfg = replace(cfg, seed=args.seed, device=args.device, **kw)
+    ds, robot = load_data(args.data)
+    mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
+    print(f"wresdyn deploy: skills on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
+          f"real robot {'from ' + args.mismatch if args.mismatch else 'as recorded in the dataset'} -> {args.out}",
+          flush=True)
+    run_benchmark(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
+                  mismatch=mismatch, animation=not args.no_animation,
+                  log=lambda s: print(s, flush=True))
+    return 0

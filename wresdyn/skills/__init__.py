@@ -1,0 +1,10 @@
+"""Stage 5, using the corrected simulator: skills trained in it and deployed zero-shot on the real robot.
+
+- :mod:`.motions`: reference motions from keyframes (sole IK and arm joints): kick, squat, wave; march held out;
+- :mod:`.plants`: what a skill acts on: the simulators (nominal, calibrated, delta action; :class:`~.plants.SimPlant`
+  on :class:`wresdyn.sim.Simulator`) and the "real" robot (:class:`~.plants.RealPlant`, MuJoCo C);
+- :mod:`.env`: the tracking environment (rsl-rl ``VecEnv``) on any plant;
+- :mod:`.train`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
+- :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness);
+- :mod:`.benchmark`: the zero-shot benchmark of ``wresdyn deploy``; :mod:`.report`, :mod:`.animation`: its report.
+"""

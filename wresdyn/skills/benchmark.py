@@ -1,0 +1,203 @@
+"""The zero-shot deployment benchmark (``wresdyn deploy``): four skill policies, each deployed on the "real" robot.
+
+1. Motions (:mod:`.motions`): training, validation and held-out draws of the training families, plus a held-out family.
+2. The corrected simulators: the calibrated robot (a hybrid ``wresdyn fit`` run: identified physics + torque residual)
+   and the ASAP-style delta-action residual alone (``wresdyn fit --model network --residual delta_action``); both
+   fitted here on the dataset when not given.
+3. Policies (PPO, rsl-rl, :mod:`.train`): (a) trained in the nominal simulator; (b) (a) fine-tuned in the calibrated
+   one; (c) (a) fine-tuned with the delta-action residual; (d) the oracle, (a) fine-tuned on the "real" robot itself
+   (:class:`~.plants.RealPlant`). (b), (c) and (d) get the same number of fine-tuning iterations.
+4. Deployment (:mod:`.evaluate`): every policy, and the reference played open loop, on the "real" robot (the
+   dataset's mismatch) over the validation and held-out motions; each policy also in the simulator it was trained in.
+   Gap closed = (a − b) / (a − d) on held-out MPJPE. ``report.md``, ``results.json``, tracking plots and a USD
+   animation of the held-out rollouts side by side.
+
+No choice here looks at held-out motions: the task and PPO settings were set on validation motions, and every policy
+is its last iterate (no checkpoint selection on the real robot, which a user could not do before deploying).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..choices import check_number
+
+__all__ = ["DeployConfig", "POLICIES", "run_benchmark", "gap_closed"]
+
+POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real"}
+"""Policy run folders and the plant each trains on."""
+
+
+@dataclass(frozen=True)
+class DeployConfig:
+    """Sizes of the benchmark (the defaults: the CPU configuration, minutes on 2 cores)."""
+
+    train_per_family: int = 4
+    """Training motions per training family."""
+    validation_per_family: int = 1
+    heldout_per_family: int = 2
+    """Held-out motions per family (training families and the held-out one)."""
+    duration: float = 2.0
+    """Length of a motion [s]."""
+    envs: int = 64
+    """Parallel worlds of PPO."""
+    iterations: int = 300
+    """PPO iterations of (a) in the nominal simulator."""
+    finetune: int = 300
+    """PPO iterations of each fine-tuning: (b), (c), (d)."""
+    seed: int = 0
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
+            check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
+        check_number(self.duration, "deploy.duration", gt=0)
+
+
+def gap_closed(a: float, b: float, d: float) -> float:
+    """(a − b) / (a − d): the fraction of the nominal-to-oracle tracking gap that ``b`` closes (NaN if a = d)."""
+    return float((a - b) / (a - d)) if a != d else float("nan")
+
+
+def _fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, device, log, need_delta=True):
+    """Run folders of the calibrated robot and the delta-action residual, fitted into ``out`` when not given."""
+    from ..learn.gradfit import GradFitConfig, export_run, fit
+
+    if calibrated is None:
+        calibrated = out / "calibrated"
+        if not (calibrated / "policy.pt").is_file():
+            from ..cli.fit import HYBRID_ITERATIONS
+            from ..learn.hybrid import fit_hybrid
+            from ..learn.sysid import SysIdConfig
+
+            log(f"fitting the calibrated robot (hybrid, `wresdyn fit`) -> {calibrated}")
+            cfg = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS, device=device)
+            _, policy, _, cfg, _ = fit_hybrid(robot, dataset, replace(SysIdConfig(), device=device), cfg, calibrated,
+                                              data_path=data_path, log=lambda s: None)
+            export_run(policy, calibrated, cfg, dataset, data_path)
+    if delta is None and need_delta:
+        delta = out / "delta_action"
+        if not (delta / "policy.pt").is_file():
+            log(f"fitting the delta-action residual alone (`wresdyn fit --model network --residual delta_action`) "
+                f"-> {delta}")
+            cfg = GradFitConfig()
+            cfg = replace(cfg, model="network", device=device, residual=replace(cfg.residual, kind="delta_action"))
+            policy, _ = fit(robot, dataset, cfg, out=delta, log=lambda s: None)
+            export_run(policy, delta, cfg, dataset, data_path)
+    return Path(calibrated), None if delta is None else Path(delta)
+
+
+def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, data_path=None, calibrated=None,
+                  delta=None, mismatch=None, task=None, ppo=None, animation: bool = True, policies=tuple(POLICIES),
+                  log=print) -> dict:
+    """Run the benchmark into ``out`` (resumable: finished fits and policies are reused, PPO resumes).
+
+    Args:
+        robot: The nominal robot (fixed base).
+        dataset: The recordings the corrections are fitted on (:class:`~wresdyn.data.dataset.Dataset`).
+        out: Output folder.
+        cfg: Sizes.
+        data_path: Where ``dataset`` was read from (recorded in the fitted runs).
+        calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
+        mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
+        task: :class:`~.env.SkillConfig`; ppo: :class:`~.train.SkillPPOConfig` (its size fields are set from ``cfg``).
+        policies: Which of :data:`POLICIES` to train and deploy (``a_nominal`` always; without ``c_delta_action`` no
+            delta-action residual is fitted; the gap closed needs ``d_oracle``).
+
+    Returns:
+        The results written to ``results.json``.
+    """
+    import torch
+
+    from ..data.real_robot import Mismatch, RealRobot
+    from .env import SkillConfig, TrackingEnv
+    from .evaluate import deploy_skill, metrics
+    from .motions import make_motions
+    from .plants import RealPlant, sim_plant
+    from .train import SkillPPOConfig, load_skill, train_skill
+
+    t_start = time.perf_counter()
+    policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    task = task or SkillConfig()
+    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
+    torch.set_num_threads(max(ppo.torch_threads, 1))
+    mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
+    rate = float(dataset.rate_hz)
+    counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
+              "heldout": cfg.heldout_per_family}
+    motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
+    log("[1/4] motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
+        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
+    t0 = time.perf_counter()
+    calibrated, delta = _fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
+                                         need_delta="c_delta_action" in policies)
+    fit_s = time.perf_counter() - t0
+    log(f"[2/4] corrections: calibrated {calibrated}, delta action {delta} ({fit_s:.0f} s)")
+    real = RealRobot(robot, mismatch, rate)
+    runs = {"calibrated": calibrated, "delta_action": delta}
+    meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration}}
+    wall = {}
+    for i, name in enumerate(policies):
+        setting = POLICIES[name]
+        t0 = time.perf_counter()
+        if setting == "real":
+            plant = RealPlant(real, cfg.envs, task.decimation, seed=cfg.seed + 1)
+        else:
+            plant = sim_plant(setting, robot, cfg.envs, rate, task.decimation, runs.get(setting), cfg.device)
+        env = TrackingEnv(plant, motions.split("train"), task, seed=cfg.seed + i)
+        run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
+        it = cfg.iterations if i == 0 else cfg.finetune
+        train_skill(env, replace(ppo, iterations=it), out / "skills" / name, log=log,
+                    init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
+        wall[name] = time.perf_counter() - t0
+        log(f"[3/4] policy {name}: {it} PPO iterations in the {setting} "
+            f"{'robot' if setting == 'real' else 'simulator'} ({wall[name]:.0f} s)")
+    results = {"config": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo), "mismatch": mismatch.to_dict(),
+               "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None}, "train_wall_s": wall, "fit_wall_s": fit_s,
+               "real": {}, "sim": {}}
+    rollouts = {}
+    for split in ("validation", "heldout"):
+        mot = motions.split(split)
+        results["real"][split], results["sim"][split] = {}, {}
+        for name in ("reference", *policies):
+            policy = None if name == "reference" else load_skill(out / "skills" / name)
+            dep = deploy_skill(policy, RealPlant(real, len(mot), task.decimation, seed=cfg.seed + 100), mot, task)
+            results["real"][split][name] = metrics(dep, robot)
+            if split == "heldout":
+                rollouts[name] = dep
+            setting = POLICIES.get(name, "nominal")
+            if setting != "real":
+                plant = sim_plant(setting, robot, len(mot), rate, task.decimation, runs.get(setting), cfg.device)
+                results["sim"][split][name] = metrics(deploy_skill(policy, plant, mot, task), robot)["mean"]
+    for split, key in (("heldout", "gap_closed"), ("validation", "gap_closed_validation")):
+        mean = {n: r["mean"]["mpjpe"] for n, r in results["real"][split].items()}
+        results[key] = {k: gap_closed(mean["a_nominal"], mean[k], mean["d_oracle"])
+                        for k in ("b_calibrated", "c_delta_action") if k in mean and "d_oracle" in mean}
+    mean = {n: r["mean"]["mpjpe"] for n, r in results["real"]["heldout"].items()}
+    log(f"[4/4] deployed on the real robot ({len(motions.split('heldout'))} held-out motions), MPJPE: " + ", ".join(
+        f"{n} {1e3 * v:.1f} mrad" for n, v in mean.items()) + "".join(
+        f"; gap closed by {k[0]} {100 * v:.0f} %" for k, v in results["gap_closed"].items()))
+    from .report import write_report
+
+    results["wall_s"] = time.perf_counter() - t_start
+    write_report(out, robot, results, rollouts, motions.split("heldout"), rate / task.decimation, animation=animation)
+    tmp = out / "results.json.tmp"
+    tmp.write_text(json.dumps(results, indent=1, default=_json))
+    tmp.replace(out / "results.json")
+    log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
+    return results
+
+
+def _json(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(type(x))

@@ -1,0 +1,225 @@
+"""The robots a skill policy acts on: N batched copies of one robot, held for one policy period per step.
+
+Every plant has the same interface, so one environment (:mod:`wresdyn.skills.env`) trains and deploys on any of them:
+``reset(ids, q, qd)``, ``step(cmd) -> (q, qd)`` (the command [rad], (N, n), held for ``decimation`` sample periods),
+``n_worlds``, ``device``.
+
+- :class:`SimPlant`: the one simulation layer (:class:`wresdyn.sim.Simulator`), in three settings:
+  *nominal* (the robot file), *calibrated* (``wresdyn fit``'s run: identified physics, its command delay and the torque
+  residual on top, the hybrid) and *delta action* (an ASAP-style residual on the PD target, on the robot file's
+  physics). The residual network runs at the sample rate, observing [q, q̇, q̈, q_cmd] as when it was fitted.
+- :class:`RealPlant`: the "real" robot (:class:`wresdyn.data.real_robot.RealRobot`, MuJoCo C with the mismatch), the
+  worlds stepped by ``mujoco.rollout`` in C threads, the command through the real robot's delay line and torque
+  limits, the joint state read through its sensors (noise, quantisation). It is where policies are deployed, and the
+  oracle's training ground.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from ..errors import WresdynError
+from ..sim import DivergenceLimits, Simulator
+
+__all__ = ["SimPlant", "RealPlant", "SETTINGS", "sim_plant"]
+
+SETTINGS = ("nominal", "calibrated", "delta_action")
+"""The simulated settings a skill is trained in (:func:`sim_plant`)."""
+
+
+class SimPlant:
+    """``n_worlds`` Newton worlds of ``robot`` under PD, optionally with identified physics, a command delay and a
+    residual network (torque or delta action) in the loop at the sample rate.
+
+    Args:
+        robot: The robot (fixed base).
+        n_worlds: Worlds.
+        rate_hz: Sample rate [Hz] of the simulation (and of the residual).
+        decimation: Sample periods per :meth:`step` (the policy period is ``decimation / rate_hz``).
+        physics: :class:`~wresdyn.sim.physics.PhysicalParams` (identified) or ``None`` (the robot file's).
+        residual: The residual ``policy(obs (N, 4n)) -> (N, n)`` (a run's ``policy.pt``) or ``None``.
+        kind: The residual's kind, ``"torque"`` or ``"delta_action"``.
+        device: Warp device.
+    """
+
+    def __init__(self, robot, n_worlds: int, rate_hz: float, decimation: int, *, physics=None, residual=None,
+                 kind: str | None = None, device: str = "cpu", solver: str = "auto") -> None:
+        self.robot, self.n_worlds, self.decimation = robot, int(n_worlds), int(decimation)
+        self.dt = 1.0 / rate_hz
+        self.sim = Simulator(robot, self.n_worlds, self.dt, solver=solver, device=device)
+        self.device = self.sim.device
+        n = robot.n_dof
+        delay = np.zeros(n)
+        if physics is not None:
+            self.sim.set_physics(physics)
+            delay = np.asarray(physics.delay, dtype=np.float64) * rate_hz  # [samples]
+        whole = np.floor(delay).astype(np.int64)
+        self._m = torch.as_tensor(whole, device=self.device)
+        self._alpha = torch.as_tensor(delay - whole, dtype=torch.float32, device=self.device)
+        self._cols = torch.arange(n, device=self.device)
+        self._hist = torch.zeros(self.n_worlds, int(whole.max()) + 2, n, device=self.device)
+        """Commands of the last sample periods [rad], newest first (N, H, n): the delay line."""
+        self.residual = None if residual is None else residual.to(self.device)
+        self.kind = kind
+        if residual is not None and kind not in ("torque", "delta_action"):
+            raise WresdynError(f"residual kind {kind!r}: need 'torque' or 'delta_action'")
+        self.limits = DivergenceLimits()
+        self.q = torch.zeros(self.n_worlds, n, device=self.device)
+        self.qd = torch.zeros_like(self.q)
+        self._qdd = torch.zeros_like(self.q)
+
+    def reset(self, ids: torch.Tensor, q: torch.Tensor, qd: torch.Tensor) -> None:
+        """Place worlds ``ids`` (long (k,)) at rest-held state ``q``, ``qd`` (k, n); the delay line holds ``q``."""
+        if len(ids) == 0:
+            return
+        self.sim.set_state(ids, q, qd)
+        self.q[ids], self.qd[ids], self._qdd[ids] = q, qd, 0.0
+        self._hist[ids] = q[:, None, :]
+
+    def step(self, cmd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Hold ``cmd`` [rad] (N, n) for ``decimation`` sample periods; returns ``(q, qd, diverged)`` at the end
+        ([rad], [rad/s], bool (N,): worlds that ran away, their state left as it was before the step)."""
+        q, qd, qdd = self.q, self.qd, self._qdd
+        bad = torch.zeros(self.n_worlds, dtype=torch.bool, device=self.device)
+        for _ in range(self.decimation):
+            self._hist = torch.roll(self._hist, 1, dims=1)
+            self._hist[:, 0] = cmd
+            a = self._alpha
+            target = (1 - a) * self._hist[:, self._m, self._cols] + a * self._hist[:, self._m + 1, self._cols]
+            tau = None
+            if self.residual is not None:
+                with torch.no_grad():
+                    r = self.residual(torch.cat([q, qd, qdd, cmd], -1)).to(self.device)
+                if self.kind == "torque":
+                    tau = r
+                else:
+                    target = target + r
+            q_new, qd_new = self.sim.step(target, tau)
+            qdd = (qd_new - qd) / self.dt
+            q, qd = q_new, qd_new
+        bad |= self.sim.diverged(q, qd, self.limits)
+        if bad.any():  # keep NaN out of the policy; the environment ends those episodes
+            ids = bad.nonzero().squeeze(-1)
+            q, qd, qdd = (torch.where(bad[:, None], self.q, q), torch.where(bad[:, None], torch.zeros_like(qd), qd),
+                          torch.where(bad[:, None], torch.zeros_like(qdd), qdd))
+            self.sim.set_state(ids, q[ids], qd[ids])
+        self.q, self.qd, self._qdd = q, qd, qdd
+        return q, qd, bad
+
+
+def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: int, run: str | None = None,
+              device: str = "cpu") -> SimPlant:
+    """The simulator of a training ``setting`` (:data:`SETTINGS`): ``nominal``; ``calibrated`` from a ``wresdyn fit``
+    run (``physics.json`` and the torque residual ``policy.pt``; a run of identified physics alone works too);
+    ``delta_action`` from a ``wresdyn fit --model network --residual delta_action`` run."""
+    from pathlib import Path
+
+    from ..learn.ppo import load_policy
+    from ..sim.physics import PhysicalParams
+
+    if setting not in SETTINGS:
+        raise WresdynError(f"unknown training setting {setting!r}; choose from {SETTINGS}")
+    if setting == "nominal":
+        return SimPlant(robot, n_worlds, rate_hz, decimation, device=device)
+    if not run:
+        raise WresdynError(f"the {setting} setting needs a run folder (wresdyn fit)")
+    run = Path(run)
+    physics = PhysicalParams.load(run / "physics.json", robot) if (run / "physics.json").is_file() else None
+    policy, meta = load_policy(run) if (run / "policy.pt").is_file() else (None, {"kind": None})
+    if list(meta.get("joint_names", robot.joint_names)) != list(robot.joint_names):
+        raise WresdynError(f"{run}: fitted on joints {meta['joint_names'][:3]}..., not this robot's")
+    if meta.get("arch", "mlp") != "mlp":
+        raise WresdynError(f"{run}: a {meta['arch']} residual keeps a hidden state per world; skills take an MLP one")
+    if abs(float(meta.get("rate_hz", rate_hz)) - rate_hz) > 1e-9:
+        raise WresdynError(f"{run}: fitted at {meta['rate_hz']:g} Hz, the skills run at {rate_hz:g} Hz")
+    if setting == "calibrated":
+        if physics is None:
+            raise WresdynError(f"{run}: no physics.json: the calibrated setting needs a hybrid `wresdyn fit` run")
+        if policy is not None and meta["kind"] != "torque":
+            raise WresdynError(f"{run}: the calibrated robot carries a torque residual, this run a {meta['kind']} one")
+    elif physics is not None or policy is None or meta["kind"] != "delta_action":
+        raise WresdynError(f"{run}: the delta-action setting needs a delta_action residual on the robot file's physics "
+                           "(wresdyn fit --model network --residual delta_action)")
+    return SimPlant(robot, n_worlds, rate_hz, decimation, physics=physics, residual=policy,
+                    kind=meta["kind"], device=device)
+
+
+class RealPlant:
+    """``n_worlds`` copies of the "real" robot (fixed base), stepped in C threads by ``mujoco.rollout``.
+
+    The command passes the real robot's delay line (its FIFO at the physics substep) and torque limits exactly as in
+    :meth:`~wresdyn.data.real_robot.RealRobot.record`; :meth:`step` returns the sensed joint state (the mismatch's
+    noise and quantisation, drawn from ``seed``), :attr:`q_true`/:attr:`qd_true` the true one and :attr:`tau` the
+    drive torque at every physics substep of the last step [N*m] (N, S, n). Each step's rollout starts with a cold
+    constraint-solver warm start (its friction solution converges within the solver's iterations).
+    """
+
+    def __init__(self, real, n_worlds: int, decimation: int, seed: int = 0, threads: int = 2) -> None:
+        import mujoco
+        from mujoco import rollout
+
+        if real.floating:
+            raise WresdynError(f"{real.robot.source.name}: RealPlant steps the robot on its stand (a fixed base)")
+        self.real, self.n_worlds, self.decimation = real, int(n_worlds), int(decimation)
+        self.robot, self.device = real.robot, torch.device("cpu")
+        self._mj, self._rollout = mujoco, rollout
+        m = real.model
+        self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self._nstate = mujoco.mj_stateSize(m, self._spec)
+        self._datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
+        self.n_sub = real.n_sub * self.decimation
+        n = self.robot.n_dof
+        d = self._datas[0]
+        d.qpos[:] = np.arange(1, n + 1)
+        d.qvel[:] = -np.arange(1, n + 1)
+        s = np.empty(self._nstate)
+        mujoco.mj_getState(m, d, s, self._spec)
+        self._iq = int(np.flatnonzero(s == 1.0)[0])
+        self._iv = int(np.flatnonzero(s == -1.0)[0])
+        self.kp, self.kd = m.actuator_gainprm[:n, 0].copy(), -m.actuator_biasprm[:n, 2].copy()
+        self.lim = m.actuator_forcerange[:n].copy()
+        self.limited = m.actuator_forcelimited[:n].astype(bool)
+        self.state = np.zeros((self.n_worlds, self._nstate))
+        self._fifo = np.zeros((self.n_worlds, real.n_delay, n))
+        self.rng = np.random.default_rng(seed)
+        self.q_true = np.zeros((self.n_worlds, n))
+        self.qd_true = np.zeros((self.n_worlds, n))
+        self.tau = np.zeros((self.n_worlds, self.n_sub, n))
+
+    def reset(self, ids, q, qd) -> None:
+        """Place worlds ``ids`` at ``q``, ``qd`` [rad, rad/s] (k, n); the delay line holds ``q``."""
+        ids = np.asarray(torch.as_tensor(ids).cpu())
+        if len(ids) == 0:
+            return
+        q, qd = np.asarray(torch.as_tensor(q).cpu(), np.float64), np.asarray(torch.as_tensor(qd).cpu(), np.float64)
+        d = self._datas[0]
+        for i, w in enumerate(ids):
+            self._mj.mj_resetData(self.real.model, d)
+            d.qpos[:], d.qvel[:] = q[i], qd[i]
+            self._mj.mj_getState(self.real.model, d, self.state[w], self._spec)
+        self._fifo[ids] = q[:, None, :]
+        self.q_true[ids], self.qd_true[ids] = q, qd
+
+    def step(self, cmd) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Hold ``cmd`` [rad] (N, n) for ``decimation`` recording periods; returns the sensed ``(q, qd)`` and
+        ``diverged`` (bool (N,), a non-finite state: those worlds are left as before the step)."""
+        n, nd = self.robot.n_dof, self.real.n_delay
+        cmd = np.asarray(torch.as_tensor(cmd).detach().cpu(), np.float64)
+        issued = np.repeat(cmd[:, None], self.n_sub, axis=1)
+        line = np.concatenate([self._fifo, issued], axis=1)  # what reaches the motors, oldest first
+        ctrl = line[:, :self.n_sub]
+        self._fifo = line[:, self.n_sub:] if nd else self._fifo
+        states, _ = self._rollout.rollout(self.real.model, self._datas, self.state, ctrl, persistent_pool=True)
+        prev = np.concatenate([self.state[:, None], states[:, :-1]], axis=1)
+        qs, qds = prev[..., self._iq:self._iq + n], prev[..., self._iv:self._iv + n]
+        tau = self.kp * (ctrl - qs) - self.kd * qds
+        self.tau = np.where(self.limited, np.clip(tau, self.lim[:, 0], self.lim[:, 1]), tau)
+        new = states[:, -1]
+        bad = ~np.isfinite(new).all(-1)
+        self.state = np.where(bad[:, None], self.state, new)
+        self.q_true = self.state[:, self._iq:self._iq + n].copy()
+        self.qd_true = self.state[:, self._iv:self._iv + n].copy()
+        q, qd = self.real._sense(self.q_true, self.qd_true, self.rng)
+        f32 = dict(dtype=torch.float32)
+        return torch.as_tensor(q, **f32), torch.as_tensor(qd, **f32), torch.as_tensor(bad)

@@ -1,0 +1,132 @@
+"""``report.md`` of the deployment benchmark: the table, tracking plots and the USD animation of the rollouts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["write_report", "plot_tracking", "table"]
+
+LABELS = {"reference": "reference played open loop (no policy)", "a_nominal": "(a) nominal simulator",
+          "b_calibrated": "(b) (a) fine-tuned, calibrated robot", "c_delta_action": "(c) (a) fine-tuned, delta action",
+          "d_oracle": "(d) oracle: (a) fine-tuned on the real robot"}
+COLOURS = {"a_nominal": "tab:orange", "b_calibrated": "tab:blue", "c_delta_action": "tab:purple",
+           "d_oracle": "tab:green"}
+
+
+def table(split: dict, sim: dict | None = None) -> str:
+    """Markdown table of one split's deployments (``{policy: metrics(...)}``), optionally with each policy's MPJPE in
+    the simulator it trained in."""
+    head = "| policy | MPJPE [mrad] | foot error [mm] | success | action rate [mrad/step] | torque rate [N m/step] |"
+    head += " MPJPE in its training sim [mrad] |" if sim else ""
+    rows = [head, "|" + "---|" * (head.count("|") - 1)]
+    for name, r in split.items():
+        m = r["mean"]
+        row = (f"| {LABELS.get(name, name)} | {1e3 * m['mpjpe']:.2f} | {1e3 * m['foot_error']:.2f} | "
+               f"{100 * m['success']:.0f} % ({m['failures']} failed) | {1e3 * m['action_rate']:.2f} | "
+               f"{m.get('torque_rate', float('nan')):.4f} |")
+        if sim:
+            s = sim.get(name)
+            row += f" {1e3 * s['mpjpe']:.2f} |" if s else " – (trained on the real robot) |"
+        rows.append(row)
+    return "\n".join(rows)
+
+
+def plot_tracking(rollouts: dict, motions, robot, path, rate_hz: float, max_motions: int = 4, joints: int = 3) -> Path:
+    """Reference vs the real robot's joints under each policy, for up to ``max_motions`` held-out motions (one of each
+    family first) and their ``joints`` most moving joints."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    picked, seen = [], set()
+    for i, m in enumerate(motions):
+        if m.family not in seen:
+            picked.append(i)
+            seen.add(m.family)
+    picked = picked[:max_motions]
+    fig, axes = plt.subplots(len(picked), joints, figsize=(4.2 * joints, 2.6 * len(picked)), squeeze=False)
+    ref = next(iter(rollouts.values())).q_ref
+    for r, i in enumerate(picked):
+        order = np.argsort(-np.ptp(ref[i], axis=0))[:joints]
+        t = np.arange(ref.shape[1]) / rate_hz
+        for c, j in enumerate(order):
+            ax = axes[r, c]
+            ax.plot(t, ref[i, :, j], "k--", lw=1.5, label="reference")
+            for name, dep in rollouts.items():
+                if name in COLOURS:
+                    ax.plot(t, dep.q[i, :, j], color=COLOURS[name], lw=1, label=name)
+            ax.set_title(f"{motions[i].name}: {robot.joint_names[j]}", fontsize=9)
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel("q [rad]")
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _gaps(g: dict) -> str:
+    return ", ".join(f"{LABELS[k][:3]} **{100 * v:.0f} %**" for k, v in g.items()) or "– (needs the oracle (d))"
+
+
+def write_report(out, robot, results: dict, rollouts: dict, motions, policy_rate_hz: float, animation: bool = True):
+    """Write ``report.md``, ``tracking_heldout.png`` and (``animation``) ``deployed_heldout.usda`` into ``out``."""
+    out = Path(out)
+    plot_tracking(rollouts, motions, robot, out / "tracking_heldout.png", policy_rate_hz)
+    anim = ""
+    if animation:
+        from .animation import write_animation
+
+        i = next((k for k, m in enumerate(motions) if m.family not in ("kick", "squat", "wave")), 0)
+        traj = {"reference": rollouts["a_nominal"].q_ref[i]}
+        traj.update({n: d.q[i] for n, d in rollouts.items() if n != "reference"})
+        write_animation(robot, traj, policy_rate_hz, out / "deployed_heldout.usda")
+        anim = (f"\n`deployed_heldout.usda`: held-out motion `{motions[i].name}` on the real robot, side by side along "
+                f"+y: {', '.join(traj)}.\n")
+    g, gv = results["gap_closed"], results["gap_closed_validation"]
+    cfg = results["config"]
+    text = f"""# Zero-shot skill deployment on the "real" robot
+
+Robot `{robot.source.name}` on its stand; the "real" robot is the MuJoCo model with the dataset's mismatch. Skills:
+motion-tracking policies (PPO, rsl-rl) at {policy_rate_hz:g} Hz, PD targets out. Motions per family: train
+{cfg['train_per_family']}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (families kick,
+squat, wave; the held-out set adds march, a family no policy trained on), {cfg['duration']:g} s each. (a): {cfg['iterations']}
+PPO iterations × {cfg['envs']} worlds in the nominal simulator; (b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations.
+Every policy is its last iterate; nothing was selected on the real robot or on held-out motions.
+
+## Held-out motions, deployed on the real robot
+
+{table(results['real']['heldout'], results['sim']['heldout'])}
+
+**Gap closed** (a − x) / (a − d) on MPJPE: {_gaps(g)} (validation motions: {_gaps(gv)}).
+
+## Validation motions, deployed on the real robot
+
+{table(results['real']['validation'], results['sim']['validation'])}
+
+## Per held-out motion, MPJPE on the real robot [mrad]
+
+| motion | {' | '.join(results['real']['heldout'])} |
+|---|{'---|' * len(results['real']['heldout'])}
+""" + "\n".join(
+        f"| {m.name} | " + " | ".join(
+            f"{1e3 * r['motions'][k]['mpjpe']:.2f}" + ("" if r['motions'][k]['success'] else " (failed)")
+            for r in results['real']['heldout'].values()) + " |" for k, m in enumerate(motions)) + f"""
+
+![tracking](tracking_heldout.png)
+
+`tracking_heldout.png`: reference (dashed) and the real robot's joints under (a)-(d), one held-out motion per family.
+{anim}
+Metrics: MPJPE = mean |q − q_ref| over joints and policy steps of the true joint state; foot error = mean distance of
+the soles from the reference's (Pinocchio FK); success = no joint more than the task's fail error from its reference
+and no runaway over the whole motion (a failed motion's errors count up to the failure); action rate = mean
+|Δ q_cmd| per policy step; torque rate = mean |Δτ| of the real drives per physics step.
+
+Corrections: {', '.join(f'{k} `{v}`' for k, v in results['corrections'].items())}. Wall clock: {results['wall_s']:.0f} s (fits {results['fit_wall_s']:.0f} s;
+policies {', '.join(f'{k} {v:.0f} s' for k, v in results['train_wall_s'].items())}).
+"""
+    (out / "report.md").write_text(text)

@@ -1,0 +1,151 @@
+"""Train a tracking skill with PPO (rsl-rl) on a plant, or fine-tune one; checkpoints and resume.
+
+A run folder holds ``config.json`` (what it trains: task, PPO, setting, the policy it started from), rsl-rl
+checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.learn.ppo.Runner`), ``policy.pt``
+(TorchScript: observation (N, 6n) -> action (N, n), the deterministic mean), ``train_summary.json`` and rsl-rl's
+per-iteration log ``train.log``. A run
+killed mid-way resumes from its last checkpoint; one asked to resume with another configuration is refused in
+one line, naming what changed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..choices import check_number
+
+__all__ = ["SkillPPOConfig", "train_skill", "load_skill"]
+
+
+@dataclass(frozen=True)
+class SkillPPOConfig:
+    """PPO of the skills (rsl-rl ``OnPolicyRunner``)."""
+
+    num_envs: int = 64
+    iterations: int = 300
+    num_steps_per_env: int = 24
+    hidden_dims: tuple = (256, 128)
+    init_std: float = 0.3
+    """Initial action noise [-] (× action_scale rad)."""
+    output_gain: float = 0.01
+    """The actor's last layer starts scaled by this: the untrained policy plays the reference (zero action)."""
+    learning_rate: float = 1e-3
+    gamma: float = 0.97
+    lam: float = 0.95
+    entropy_coef: float = 0.002
+    num_learning_epochs: int = 5
+    num_mini_batches: int = 4
+    desired_kl: float = 0.01
+    save_interval: int = 50
+    seed: int = 0
+    device: str = "cpu"
+    torch_threads: int = 2
+    """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine); 0 = torch's default."""
+
+    def __post_init__(self) -> None:
+        for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
+                  "save_interval"):
+            check_number(getattr(self, k), f"ppo.{k}", integer=True, ge=1)
+
+
+def _runner_cfg(cfg: SkillPPOConfig) -> dict:
+    dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "log"}
+    return {
+        "num_steps_per_env": cfg.num_steps_per_env, "save_interval": cfg.save_interval,
+        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
+        "algorithm": {"class_name": "PPO", "num_learning_epochs": cfg.num_learning_epochs,
+                      "num_mini_batches": cfg.num_mini_batches, "clip_param": 0.2, "gamma": cfg.gamma,
+                      "lam": cfg.lam, "value_loss_coef": 1.0, "entropy_coef": cfg.entropy_coef,
+                      "learning_rate": cfg.learning_rate, "max_grad_norm": 1.0, "schedule": "adaptive",
+                      "desired_kl": cfg.desired_kl},
+        "actor": {"class_name": "wresdyn.learn.residual:ResidualMLPModel", "hidden_dims": list(cfg.hidden_dims),
+                  "activation": "elu", "obs_normalization": True, "distribution_cfg": dist,
+                  "output_gain": cfg.output_gain},
+        "critic": {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu",
+                   "obs_normalization": True},
+        "logger": "tensorboard", "run_name": "", "check_for_nan": True,
+    }
+
+
+def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = None, meta: dict | None = None,
+                log=print) -> dict:
+    """PPO on ``env`` (a :class:`~wresdyn.skills.env.TrackingEnv`) for ``cfg.iterations``; resumes ``run_dir``.
+
+    Args:
+        env: The environment (its plant is the training ground).
+        cfg: PPO settings.
+        run_dir: Run folder (created).
+        init: A skill run folder to start from (fine-tuning): its last checkpoint's actor, critic and optimiser;
+            the iteration count starts at 0.
+        meta: What else identifies the run (setting, motions), stored in ``config.json`` and checked on resume.
+
+    Returns:
+        The summary written to ``train_summary.json``.
+    """
+    from ..learn.ppo import Runner, latest_checkpoint
+    from ..learn.runs import check_resume
+
+    run_dir = Path(run_dir)
+    saved = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
+             **(meta or {})}
+    saved = json.loads(json.dumps(saved))  # tuples as lists, as read back
+    cfg_path = run_dir / "config.json"
+    ckpt = latest_checkpoint(run_dir)
+    if ckpt is not None:
+        old = json.loads(cfg_path.read_text()) if cfg_path.is_file() else {}
+        check_resume(run_dir, old, saved, may_change=["ppo.iterations", "ppo.device", "ppo.torch_threads"])
+    if cfg.torch_threads > 0:
+        torch.set_num_threads(cfg.torch_threads)
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with open(run_dir / "train.log", "a") as f, contextlib.redirect_stdout(f):  # rsl-rl prints the networks
+        runner = Runner(env, _runner_cfg(cfg), log_dir=str(run_dir), device=str(env.device))
+    start = 0
+    if ckpt is not None:
+        runner.load(str(ckpt), map_location=str(env.device))
+        start = runner.current_learning_iteration + 1
+        log(f"resuming {run_dir} from {ckpt.name} at iteration {start}")
+    elif init is not None:
+        base = latest_checkpoint(init)
+        if base is None:
+            raise FileNotFoundError(f"{init}: no checkpoint to fine-tune from")
+        runner.load(str(base), map_location=str(env.device))
+        runner.current_learning_iteration = 0
+    tmp = cfg_path.with_name(cfg_path.name + ".tmp")
+    tmp.write_text(json.dumps(saved, indent=2))
+    tmp.replace(cfg_path)
+    todo = max(cfg.iterations - start, 0)
+    t0 = time.perf_counter()
+    if todo:
+        runner.current_learning_iteration = start
+        with open(run_dir / "train.log", "a") as f, contextlib.redirect_stdout(f):  # rsl-rl's per-iteration table
+            runner.learn(todo)
+        runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
+    wall = time.perf_counter() - t0
+    actor = runner.alg.get_policy()
+    policy = torch.jit.script(actor.as_jit().cpu().eval())
+    tmp = run_dir / "policy.pt.tmp"
+    policy.save(str(tmp))
+    tmp.replace(run_dir / "policy.pt")
+    summary = {"iterations": cfg.iterations, "iterations_this_session": todo, "wall_s_this_session": wall,
+               "env_steps_this_session": env.steps_total, "failed_episodes": env.failed_total,
+               "diverged": env.diverged_total, "episodes": env.episodes_total,
+               "env_steps_per_s": env.steps_total / env.step_seconds if env.step_seconds else None}
+    (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def load_skill(run_dir) -> torch.jit.ScriptModule:
+    """The trained skill of a run: ``policy(obs (N, 6n)) -> action (N, n)`` (TorchScript, CPU)."""
+    path = Path(run_dir) / "policy.pt"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run_dir}: no policy.pt; train the skill first")
+    return torch.jit.load(str(path), map_location="cpu")
