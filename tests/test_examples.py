@@ -47,4 +47,7 @@ def test_demo_quick(tmp_path):
                          capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
     report = (tmp_path / "report.md").read_text()
-    assert "| gradient |" in report and "| ppo |" in report
+    assert "| calibrated (gradient fit) |" in report and "| residual by PPO |" in report
+    assert "| b_calibrated |" in report and "| d_oracle |" in report and "Gap closed" in report
+    assert (tmp_path / "fit" / "export" / "actuated.usda").is_file()
+    assert (tmp_path / "deploy" / "report.md").is_file()
