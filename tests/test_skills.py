@@ -91,10 +91,10 @@ def test_sim_plant_delay_matches_the_replay_command_path(humanoid):
     win = Window.from_arrays(q0[None], np.zeros((1, humanoid.n_dof)), held[None], sim.device, target=target[None])
     want = rollout(sim, win).q[0, dec::dec].numpy()
     np.testing.assert_allclose(np.array(got), want, atol=1e-5)
-    assert np.abs(np.array(got) - SimPlant_no_delay(humanoid, q0, cmd, dec)).max() > 1e-3  # the delay mattered
+    assert np.abs(np.array(got) - _replay_without_delay(humanoid, q0, cmd, dec)).max() > 1e-3  # the delay mattered
 
 
-def SimPlant_no_delay(robot, q0, cmd, dec):  # noqa: N802
+def _replay_without_delay(robot, q0, cmd, dec):
     plant = SimPlant(robot, 1, RATE, dec)
     plant.reset(torch.arange(1), torch.as_tensor(q0[None], dtype=torch.float32), torch.zeros(1, robot.n_dof))
     return np.array([plant.step(torch.as_tensor(c[None], dtype=torch.float32))[0][0].numpy() for c in cmd])

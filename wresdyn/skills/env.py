@@ -150,6 +150,8 @@ class TrackingEnv(VecEnv):
         t0 = time.perf_counter()
         c = self.cfg
         a, cmd = self.command(actions)
+        self.cmd = cmd
+        """The PD targets of the last step [rad] (N, n)."""
         q, qd, bad = self.plant.step(cmd)
         q, qd, bad = q.to(self.device), qd.to(self.device), bad.to(self.device)
         self.t += 1

@@ -32,6 +32,8 @@ class Deployment:
     """True joint positions [rad] (M, K + 1, n); NaN after a failure."""
     q_ref: np.ndarray
     """Reference [rad] (M, K + 1, n)."""
+    feet_ref: np.ndarray
+    """Reference sole positions [m] (M, K + 1, n_feet, 3) (:attr:`~.motions.Motion.feet` at the policy rate)."""
     cmd: np.ndarray
     """Commanded PD targets [rad] (M, K, n)."""
     failed_at: np.ndarray
@@ -57,31 +59,33 @@ def deploy_skill(policy, plant, motions, cfg) -> Deployment:
     q[:, 0] = env.ref_q[:, 0].cpu().numpy()  # every motion starts in its reference state
     failed_at = np.full(m_n, -1)
     alive = np.ones(m_n, dtype=bool)
+    has_tau = getattr(plant, "tau", None) is not None
     tau_rate, tau_last = np.zeros(m_n), None
     obs = env.get_observations()["policy"]
     with torch.no_grad():
         for k in range(steps):
             act = torch.zeros(m_n, n) if policy is None else policy(obs.cpu()).to(env.device)
-            a, c = env.command(act)
             obs_td, _, dones, extras = env.step(act)
             obs = obs_td["policy"]
             done = dones.cpu().numpy().astype(bool)
             timeout = extras["time_outs"].cpu().numpy().astype(bool)
             live = alive & (k < k_len)
-            cmd[live, k] = c.cpu().numpy()[live]
+            cmd[live, k] = env.cmd.cpu().numpy()[live]
             q[live, k + 1] = env.true_q.cpu().numpy()[live]
             fail = live & done & ~timeout
             failed_at[fail] = k + 1
             q[fail, k + 1] = np.nan
-            tau = getattr(plant, "tau", None)
-            if tau is not None:
+            if has_tau:
+                tau = plant.tau
                 seq = tau if tau_last is None else np.concatenate([tau_last[:, None], tau], axis=1)
                 tau_rate[live] += np.abs(np.diff(seq, axis=1)).mean(axis=(1, 2))[live]
                 tau_last = tau[:, -1]
             alive &= ~(done & live)
-    tau_rate = tau_rate / np.maximum(k_len, 1) if getattr(plant, "tau", None) is not None else np.full(m_n, np.nan)
+    tau_rate = tau_rate / np.maximum(k_len, 1) if has_tau else np.full(m_n, np.nan)
     q_ref = env.ref_q[:, :steps + 1].cpu().numpy()
-    return Deployment(q, q_ref, cmd, failed_at, tau_rate, [m.name for m in motions])
+    feet_ref = np.stack([np.concatenate([f, np.repeat(f[-1:], steps + 1 - len(f), 0)]) for f in
+                         (m.feet[::cfg.decimation][:k + 1] for m, k in zip(motions, k_len))])
+    return Deployment(q, q_ref, feet_ref, cmd, failed_at, tau_rate, [m.name for m in motions])
 
 
 def metrics(dep: Deployment, robot, frames=None) -> dict:
@@ -95,7 +99,7 @@ def metrics(dep: Deployment, robot, frames=None) -> dict:
         ok = np.isfinite(dep.q[i, 1:]).all(-1)
         e = np.abs(dep.q[i, 1:][ok] - dep.q_ref[i, 1:][ok])
         feet = np.array([ik.forward(x)[0] for x in dep.q[i, 1:][ok]]) if ok.any() else np.zeros((0, 2, 3))
-        ref_feet = np.array([ik.forward(x)[0] for x in dep.q_ref[i, 1:][ok]]) if ok.any() else feet
+        ref_feet = dep.feet_ref[i, 1:][ok]
         c = dep.cmd[i][np.isfinite(dep.cmd[i]).all(-1)]
         per.append({"motion": name, "mpjpe": float(e.mean()) if e.size else float("nan"),
                     "foot_error": float(np.linalg.norm(feet - ref_feet, axis=-1).mean()) if feet.size else float("nan"),

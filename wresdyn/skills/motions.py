@@ -153,7 +153,8 @@ def _arm_keys(rng, robot: Robot, family: str, duration: float):
         keys.append(k)
     times += [0.95 * duration, duration]
     keys += [np.zeros(n), np.zeros(n)]
-    keys = [np.clip(k, robot.lower - stance(robot), robot.upper - stance(robot)) for k in keys]
+    home = stance(robot)
+    keys = [np.clip(k, robot.lower - home, robot.upper - home) for k in keys]
     return times, keys, {"arm": side, "raise_rad": raise_, "waves": waves}
 
 
@@ -176,7 +177,7 @@ def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz:
         q = q + _keyframes(t, at, ak)
         q = np.clip(q, robot.lower, robot.upper)
         qd = np.gradient(q, 1.0 / rate_hz, axis=0)
-        feet = np.array([ik.forward(x)[0] for x in q[::1]])
+        feet = np.array([ik.forward(x)[0] for x in q])
         return Motion(name, family, q, qd, feet, {**lp, **ap, "ik_max_error_m": float(err[:, :, 0].max())})
     raise RobotError(f"{robot.source}: no {family} motion reached its sole keyframes within {ik_tol} m in "
                      f"{max_draws} draws")

@@ -81,7 +81,6 @@ class SimPlant:
         """Hold ``cmd`` [rad] (N, n) for ``decimation`` sample periods; returns ``(q, qd, diverged)`` at the end
         ([rad], [rad/s], bool (N,): worlds that ran away, their state left as it was before the step)."""
         q, qd, qdd = self.q, self.qd, self._qdd
-        bad = torch.zeros(self.n_worlds, dtype=torch.bool, device=self.device)
         for _ in range(self.decimation):
             self._hist = torch.roll(self._hist, 1, dims=1)
             self._hist[:, 0] = cmd
@@ -98,7 +97,7 @@ class SimPlant:
             q_new, qd_new = self.sim.step(target, tau)
             qdd = (qd_new - qd) / self.dt
             q, qd = q_new, qd_new
-        bad |= self.sim.diverged(q, qd, self.limits)
+        bad = self.sim.diverged(q, qd, self.limits)
         if bad.any():  # keep NaN out of the policy; the environment ends those episodes
             ids = bad.nonzero().squeeze(-1)
             q, qd, qdd = (torch.where(bad[:, None], self.q, q), torch.where(bad[:, None], torch.zeros_like(qd), qd),
@@ -204,12 +203,12 @@ class RealPlant:
     def step(self, cmd) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Hold ``cmd`` [rad] (N, n) for ``decimation`` recording periods; returns the sensed ``(q, qd)`` and
         ``diverged`` (bool (N,), a non-finite state: those worlds are left as before the step)."""
-        n, nd = self.robot.n_dof, self.real.n_delay
+        n = self.robot.n_dof
         cmd = np.asarray(torch.as_tensor(cmd).detach().cpu(), np.float64)
         issued = np.repeat(cmd[:, None], self.n_sub, axis=1)
         line = np.concatenate([self._fifo, issued], axis=1)  # what reaches the motors, oldest first
         ctrl = line[:, :self.n_sub]
-        self._fifo = line[:, self.n_sub:] if nd else self._fifo
+        self._fifo = line[:, self.n_sub:]  # the last n_delay commands (none without a delay)
         states, _ = self._rollout.rollout(self.real.model, self._datas, self.state, ctrl, persistent_pool=True)
         prev = np.concatenate([self.state[:, None], states[:, :-1]], axis=1)
         qs, qds = prev[..., self._iq:self._iq + n], prev[..., self._iv:self._iv + n]
