@@ -7,13 +7,14 @@ Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 
 
 - PPO: :func:`wresdyn.learn.ppo.train` with the default config (24 steps per env per iteration, MLP 256-128-64,
   5 epochs x 4 mini-batches) and ``--envs`` worlds, ``--ppo-iterations`` iterations after a 2-iteration
-  warm-up run. ``env`` = simulation + rewards + resets per env-step (:class:`ReplayEnv.step`), ``iteration``
-  = rollout collection + PPO update, as rsl-rl times them. Peers: every ``--solvers`` entry in the same run.
+  warm-up run. ``collect`` = the rollout (policy + :class:`ReplayEnv.step`), ``learn`` = the PPO update, as rsl-rl
+  times them; env-steps/s (collection) = env-steps / collection time. Peers: every ``--solvers`` entry and, on
+  CUDA, ``--graphs on,off`` (environment step replayed from a CUDA graph, or eager) in the same run.
 - Gradient fit: :func:`wresdyn.learn.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
   curriculum), ``--grad-iterations`` iterations after 2 warm-up ones. One env-step = one window advanced one
   step, forward and backward counted once each (as in ``curve.json``'s ``sim_steps``).
 
-Prints a table and writes JSON (``--json``). No CUDA graphs: the learners run as they do in training.
+Prints a table and writes JSON (``--json``). The learners run as they do in training (the gradient fit eagerly).
 """
 
 from __future__ import annotations
@@ -29,20 +30,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str) -> dict:
+def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str, graph: bool = True) -> dict:
     from wresdyn.learn.ppo import default_config, train
 
     cfg = default_config()
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),
                               ppo=dataclasses.replace(cfg.ppo, num_envs=envs, device=device, save_interval=10**6,
-                                                                      select_every=10**6))
+                                                      select_every=10**6, cuda_graph=graph))
     with tempfile.TemporaryDirectory() as tmp:
         train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=2)), Path(tmp) / "warm")
         s = train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=iterations)),
                   Path(tmp) / "run")
-    return {"learner": "ppo", "device": device, "solver": s["solver"], "size": envs, "iterations": iterations,
-            "s_per_iteration": s["s_per_iteration"], "env_steps_per_s": s["env_steps_per_s"],
-            "training_steps_per_s": s["training_steps_per_s"]}
+    return {"learner": "ppo" + (" graph" if s["cuda_graph"] else ""), "device": device, "solver": s["solver"],
+            "size": envs, "iterations": iterations, "s_per_iteration": s["s_per_iteration"],
+            "collect_s": s["collect_s_per_iteration"], "learn_s": s["learn_s_per_iteration"],
+            "env_steps_per_s": s["collection_steps_per_s"], "training_steps_per_s": s["training_steps_per_s"]}
 
 
 def _gradient(robot, dataset, device: str, windows: int, horizon: int, iterations: int) -> dict:
@@ -70,6 +72,7 @@ def main() -> None:
     p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
     p.add_argument("--envs", default="256", help="comma list of PPO env counts")
     p.add_argument("--solvers", default="auto", help="comma list of PPO solvers (auto, featherstone, mujoco)")
+    p.add_argument("--graphs", default="on", help="CUDA: PPO environment step from a CUDA graph: on, off or on,off")
     p.add_argument("--ppo-iterations", type=int, default=10)
     p.add_argument("--windows", default="32", help="comma list of gradient-fit window counts")
     p.add_argument("--horizon", type=int, default=64, help="gradient-fit window length [steps]")
@@ -81,20 +84,24 @@ def main() -> None:
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
     rows = []
+    graphs = [g == "on" for g in args.graphs.split(",")] if args.device.startswith("cuda") else [False]
     for solver in args.solvers.split(","):
-        for envs in (int(x) for x in args.envs.split(",") if x):
-            t = time.perf_counter()
-            rows.append(_ppo(robot, dataset, args.device, envs, args.ppo_iterations, solver))
-            print(f"ppo {solver} {envs}: {time.perf_counter() - t:.0f} s", flush=True)
+        for graph in graphs:
+            for envs in (int(x) for x in args.envs.split(",") if x):
+                t = time.perf_counter()
+                rows.append(_ppo(robot, dataset, args.device, envs, args.ppo_iterations, solver, graph))
+                print(f"ppo {solver} graph={graph} {envs}: {time.perf_counter() - t:.0f} s", flush=True)
     for w in (int(x) for x in args.windows.split(",") if x):
         rows.append(_gradient(robot, dataset, args.device, w, args.horizon, args.grad_iterations))
         print(f"gradient {w}: done", flush=True)
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     print(f"\n{name}, {args.device}; humanoid 21 DoF, dt 2 ms")
-    print("| learner | solver | envs / windows | s per iteration | env-steps/s (env only) | env-steps/s (training) |")
-    print("|---|---|---|---|---|---|")
+    print("| learner | solver | envs / windows | s per iteration | collect / learn [s] | env-steps/s (collection) | "
+          "env-steps/s (training) |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['learner']} | {r['solver']} | {r['size']} | {r['s_per_iteration']:.3f} | "
+        split = f"{r['collect_s']:.3f} / {r['learn_s']:.3f}" if "collect_s" in r else "-"
+        print(f"| {r['learner']} | {r['solver']} | {r['size']} | {r['s_per_iteration']:.3f} | {split} | "
               f"{r['env_steps_per_s'] / 1e3:.1f}k | {r['training_steps_per_s'] / 1e3:.1f}k |")
     if args.json:
         Path(args.json).write_text(json.dumps({"device": name, "rows": rows}, indent=1))

@@ -33,7 +33,10 @@ def test_zero_residual_is_the_plain_newton_pd_replay(robot, data):
 
     env = make_env(robot, data, n=1, horizon=50)
     g0 = int(env.g[0])
-    steps = min(5, int(env.end[0]) - g0)
+    traj = int(torch.searchsorted(env.bank.start, env.g, right=True)[0]) - 1
+    env.end[0] = env.bank.start[traj] + env.bank.length[traj] - 1  # no time-out (a reset) inside the steps
+    steps = min(5, int(env.end[0]) - g0 - 1)
+    assert steps >= 3
     for _ in range(steps):
         env.step(torch.zeros(1, robot.n_dof))
     cmd = env.bank.q_cmd[g0:g0 + steps].double().numpy()
@@ -115,10 +118,14 @@ def test_identified_physics_sets_the_model_and_the_command_delay(robot, data, tm
     env = make_env(robot, data, n=1, horizon=50, physics=str(tmp_path / "physics.json"))
     plain = make_env(robot, data, n=1, horizon=50)
     g0 = int(env.g[0])
+    traj = int(torch.searchsorted(env.bank.start, env.g, right=True)[0]) - 1
+    env.end[0] = env.bank.start[traj] + env.bank.length[traj] - 1  # no time-out (a reset) inside the steps
     plain._reset(torch.tensor([0]))
     plain.g[0], plain.end[0] = g0, env.end[0]
+    plain.q[0], plain.qd[0] = env.bank.q[g0], env.bank.qd[g0]
     plain.sim.set_state(torch.tensor([0]), env.bank.q[g0:g0 + 1], env.bank.qd[g0:g0 + 1])
-    steps = min(8, int(env.end[0]) - g0)
+    steps = min(8, int(env.end[0]) - g0 - 1)
+    assert steps >= 3
     for _ in range(steps):
         env.step(torch.zeros(1, robot.n_dof))
         plain.step(torch.zeros(1, robot.n_dof))

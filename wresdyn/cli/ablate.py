@@ -48,12 +48,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--segments", type=int, default=4, help="evaluation points per learning curve")
     p.add_argument("--solver", choices=choices(SolverKind), default="auto",
                    help="simulation solver for training and evaluation")
-    p.add_argument("--device", default="cpu", help="device (cpu, cuda:0)")
+    p.add_argument("--device", default="cpu",
+                   help="device (cpu, cuda:0; cuda spreads the cells over every GPU of the host, --jobs at a time)")
     p.add_argument("--ppo-envs", type=int, default=None, help="override PPO's number of parallel envs")
     p.add_argument("--windows", type=int, default=None, help="override the gradient fit's parallel windows")
     p.add_argument("--horizon", type=int, default=None, help="override the gradient fit's window length [steps]")
     p.add_argument("--jobs", type=int, default=1,
-                   help="cells run in parallel worker processes, one core each (default 1)")
+                   help="cells run in parallel worker processes, one core (or a share of a GPU) each (default 1)")
     p.add_argument("--delays", type=_tuple(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
     p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
     p.add_argument("--delay-learner", choices=choices(Learner), default="gradient", help="learner of the delay sweep")

@@ -1,4 +1,7 @@
-"""``wresdyn train DATA``: learn a residual with PPO on the dataset's training split (resumes a killed run)."""
+"""``wresdyn train DATA``: learn a residual with PPO on the dataset's training split (resumes a killed run).
+
+Several GPUs: ``torchrun --nproc_per_node N -m wresdyn train DATA --device cuda ...`` (one process per GPU,
+``--num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.learn.ppo.train`)."""
 
 from __future__ import annotations
 
@@ -63,7 +66,7 @@ def config_from_args(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from ..learn.ppo import RunError, train
+    from ..learn.ppo import Ranks, RunError, train
     from . import UserError
 
     cfg = config_from_args(args)
@@ -77,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data)
     except RunError as e:
         raise UserError(str(e)) from None
+    if not Ranks.from_env().main:  # torchrun: rank 0 reports and evaluates
+        return 0
     print(json.dumps(summary, indent=2))
     if args.eval:
         from ..evaluation.runs import evaluate_run

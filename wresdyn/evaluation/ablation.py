@@ -194,13 +194,33 @@ def _run_task(task) -> dict:
     return run_cell(cell, robot, dataset, cfg, out, log=lambda msg: print(msg, flush=True))
 
 
+def cell_devices(device: str, n: int, gpus: int | None = None) -> list[str]:
+    """The device of each of ``n`` cells: ``cuda`` (no index) spreads them round-robin over the host's ``gpus``
+    GPUs (default: all torch sees), ``cuda:i`` and ``cpu`` are every cell's."""
+    if device != "cuda":
+        return [device] * n
+    if gpus is None:
+        import torch
+
+        gpus = torch.cuda.device_count()
+    if gpus < 1:
+        raise WresdynError("ablation device 'cuda' spreads cells over the host's GPUs, and torch sees none here")
+    return [f"cuda:{i % gpus}" for i in range(n)]
+
+
 def run_cells(tasks: list[tuple], jobs: int = 1, log=print) -> list[dict]:
     """Run (or resume) cells, each task ``(cell, robot, dataset, cfg, out_dir)``; results in task order.
 
     With ``jobs`` > 1 the cells run in that many worker processes (spawned, one torch thread each; the robot
     and dataset travel by pickle, the robot as its :func:`~wresdyn.robot.description.load_robot` call). Each cell times
     its own training only; cells that share a machine's memory and caches run slower than on an idle core.
+    A ``cfg.device`` of ``cuda`` places the cells round-robin on the host's GPUs (:func:`cell_devices`): with
+    ``jobs`` a multiple of the GPU count, each GPU trains ``jobs / GPUs`` cells at a time.
     """
+    if any(t[3].device == "cuda" for t in tasks):
+        devices = cell_devices("cuda", len(tasks))
+        tasks = [(c, r, d, dataclasses.replace(cfg, device=dev) if cfg.device == "cuda" else cfg, o)
+                 for (c, r, d, cfg, o), dev in zip(tasks, devices)]
     if jobs <= 1:
         out = []
         for i, task in enumerate(tasks, 1):

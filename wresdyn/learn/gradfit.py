@@ -158,7 +158,8 @@ RESUME_MAY_CHANGE = ("device", "torch_threads")
 shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
 
-def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None):
+def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None,
+        stop_below: float | None = None):
     """Fit a residual to ``dataset``'s training split by gradient descent through the simulation.
 
     Args:
@@ -171,6 +172,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         log: Progress printer.
         until: Stop (and checkpoint) after this many iterations of the ``cfg.iterations`` schedule (horizon
             curriculum and learning rate), to resume later; ``None`` runs the whole schedule.
+        stop_below: End the fit at the first validation check whose error is at or below this [rad] (time to
+            fidelity, ``benchmarks/time_to_fidelity.py``), returning the residual selected so far.
 
     Returns:
         ``(policy, curve)``: the trained :class:`~wresdyn.learn.residual.ResidualPolicy` (the one with the lowest
@@ -227,6 +230,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         log(f"validation at the start: {value:.4f} rad")
     t0 = time.perf_counter() - wall0
     stop = cfg.iterations if until is None else min(until, cfg.iterations)
+    reached = False
     for it in range(start_it, stop):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
@@ -252,8 +256,9 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
             if row["validation"] < best["validation"]:
                 best = {"validation": row["validation"], "iteration": it + 1,
                         "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
+            reached = stop_below is not None and row["validation"] <= stop_below
         curve.append(row)
-        if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == stop:
+        if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == stop or reached:
             msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
             log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
             if ckpt:
@@ -262,9 +267,12 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
                         "best_iteration": best["iteration"]}
                 save_checkpoint({"policy": policy.state_dict(), "optim": optim.state_dict(), "meta": meta,
                                  "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, ckpt)
+        if reached:
+            log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
+            break
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))
-    if best["state"] is not None and stop == cfg.iterations:
+    if best["state"] is not None and (stop == cfg.iterations or reached):
         policy.load_state_dict(best["state"])
         log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
     return policy.eval(), curve

@@ -32,7 +32,7 @@ from .residual import ResidualConfig
 from .rewards import RewardConfig
 from .runs import RunError, check_resume, load_checkpoint, save_checkpoint
 
-__all__ = ["PPOConfig", "TrainConfig", "default_config", "config_from_dict", "parse_overrides", "apply_overrides",
+__all__ = ["PPOConfig", "TrainConfig", "Ranks", "default_config", "config_from_dict", "parse_overrides", "apply_overrides",
            "set_fields", "set_field", "runner_cfg", "Runner", "train", "latest_checkpoint", "load_policy", "RunError",
            "RESUME_MAY_CHANGE", "DATASET_IDENTITY"]
 
@@ -85,6 +85,10 @@ class PPOConfig:
     select_every: int = 0
     """Replay the validation split open loop every this many iterations and export the residual with the lowest
     validation error (model selection on validation); 0 = ten times per run."""
+    cuda_graph: bool = True
+    """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.learn.replay_env.ReplayEnv`); the
+    runner's per-step NaN check (a host sync) is then off: the environment keeps non-finite states out of what it
+    returns (diverged worlds are reset and counted)."""
 
     def __post_init__(self) -> None:
         for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
@@ -102,7 +106,7 @@ class PPOConfig:
         check_device(self.device, "ppo.device")
 
 
-RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads")
+RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph")
 """:class:`PPOConfig` fields a resumed run may change: how long, where and how it runs, not what it learns."""
 
 DATASET_IDENTITY = ("train", "joint_names", "rate_hz")
@@ -260,7 +264,7 @@ def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
         "critic": critic,
         "logger": "tensorboard",
         "run_name": run_name,
-        "check_for_nan": True,
+        "check_for_nan": not (p.cuda_graph and p.device.startswith("cuda")),
     }
 
 
@@ -276,6 +280,46 @@ def _dataset_info(dataset) -> dict:
             "train": [t.name for t in dataset.split("train")]}
 
 
+@dataclass(frozen=True)
+class Ranks:
+    """Where this process stands in a ``torchrun`` launch (``WORLD_SIZE``, ``RANK``, ``LOCAL_RANK``); one process
+    of rank 0 without it."""
+
+    world: int = 1
+    rank: int = 0
+    local_rank: int = 0
+
+    @property
+    def main(self) -> bool:
+        """The process that writes the run folder (config, checkpoints, selection, export)."""
+        return self.rank == 0
+
+    @classmethod
+    def from_env(cls) -> "Ranks":
+        import os
+
+        try:
+            r = cls(int(os.environ.get("WORLD_SIZE", "1")), int(os.environ.get("RANK", "0")),
+                    int(os.environ.get("LOCAL_RANK", "0")))
+        except ValueError:
+            raise RunError("WORLD_SIZE, RANK and LOCAL_RANK must be integers (set by torchrun)") from None
+        if not (r.world >= 1 and 0 <= r.rank < r.world and 0 <= r.local_rank < r.world):
+            raise RunError(f"inconsistent torchrun ranks: WORLD_SIZE={r.world} RANK={r.rank} LOCAL_RANK={r.local_rank}")
+        return r
+
+    def device(self, device: str) -> str:
+        """This process's device: ``cuda:<LOCAL_RANK>`` for a CUDA run under torchrun (one GPU per process),
+        else ``device``."""
+        return f"cuda:{self.local_rank}" if self.world > 1 and device.startswith("cuda") else device
+
+    def num_envs(self, total: int) -> int:
+        """This process's share of ``total`` environments."""
+        if total % self.world:
+            raise RunError(f"ppo.num_envs = {total} does not split over {self.world} processes; use a multiple of "
+                           f"{self.world}")
+        return total // self.world
+
+
 CHECKPOINT_KEYS = ("actor_state_dict", "critic_state_dict", "optimizer_state_dict", "iter")
 """What an rsl-rl PPO checkpoint holds (``PPO.save`` plus the runner's iteration)."""
 
@@ -288,6 +332,22 @@ class Runner(OnPolicyRunner):
     containers, so the same files load with ``weights_only=True``; :func:`save_checkpoint` checks that on every
     save and writes atomically, so a run killed mid-save resumes from the previous checkpoint.
     """
+
+    def _configure_multi_gpu(self) -> None:
+        """rsl-rl's multi-GPU set-up (NCCL, one GPU per process); CPU processes under torchrun (tests, CPU nodes)
+        get the same data-parallel PPO over gloo, NCCL being GPU-only."""
+        import os
+
+        import torch
+
+        if str(self.device).startswith("cuda") or int(os.getenv("WORLD_SIZE", "1")) <= 1:
+            return super()._configure_multi_gpu()
+        r = Ranks.from_env()
+        self.gpu_world_size, self.is_distributed = r.world, True
+        self.gpu_local_rank, self.gpu_global_rank = r.local_rank, r.rank
+        self.cfg["multi_gpu"] = {"global_rank": r.rank, "local_rank": r.local_rank, "world_size": r.world}
+        if not torch.distributed.is_initialized():
+            torch.distributed.init_process_group(backend="gloo", rank=r.rank, world_size=r.world)
 
     def save(self, path: str, infos: dict | None = None) -> None:
         data = self.alg.save()
@@ -334,7 +394,7 @@ def _check_resume(run_dir: Path, cfg_path: Path, saved: dict) -> None:
 
 
 def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = True,
-          data_path: str | Path | None = None) -> dict:
+          data_path: str | Path | None = None, stop_below: float | None = None) -> dict:
     """Train a residual with PPO on the ``train`` split of ``dataset``; resume from the latest checkpoint.
 
     Args:
@@ -344,6 +404,13 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         run_dir: Run folder (created).
         resume: Continue from ``model_<it>.pt`` in ``run_dir``; with ``False`` an existing checkpoint is an error.
         data_path: Where ``dataset`` was read from, recorded in ``config.json`` for ``wresdyn eval``.
+        stop_below: Stop at the first validation check whose error is at or below this [rad] (time to fidelity,
+            ``benchmarks/time_to_fidelity.py``); the run is then exported as if it had ended there.
+
+    Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``num_envs / WORLD_SIZE`` worlds on its own device
+    (``cuda:<LOCAL_RANK>``, or the CPU over gloo) with seed ``seed + RANK``, and rsl-rl averages the gradients
+    across processes; rank 0 alone writes the run folder and selects on validation, and every rank resumes from
+    the same checkpoint.
 
     Returns:
         The training summary written to ``train_summary.json``.
@@ -359,6 +426,9 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     from .selection import ValidationScore
 
     run_dir = Path(run_dir)
+    ranks = Ranks.from_env()
+    device = ranks.device(cfg.ppo.device)
+    num_envs = ranks.num_envs(cfg.ppo.num_envs)
     train_trajs = dataset.split("train")
     if not train_trajs:
         raise RunError("the dataset has no 'train' trajectories")
@@ -376,26 +446,30 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
 
     if cfg.ppo.torch_threads > 0:
         torch.set_num_threads(cfg.ppo.torch_threads)
-    torch.manual_seed(cfg.ppo.seed)
-    np.random.seed(cfg.ppo.seed)
+    seed = cfg.ppo.seed + ranks.rank
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2**32)
     mean, std = obs_stats(train_trajs)
-    env = ReplayEnv(robot, train_trajs, dataset.rate_hz, cfg.ppo.num_envs, cfg.env, cfg.residual, cfg.rewards,
-                    device=cfg.ppo.device, seed=cfg.ppo.seed, obs_mean=mean, obs_std=std)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    runner = Runner(env, runner_cfg(cfg, run_dir.name), log_dir=str(run_dir), device=str(env.device))
+    env = ReplayEnv(robot, train_trajs, dataset.rate_hz, num_envs, cfg.env, cfg.residual, cfg.rewards,
+                    device=device, seed=seed, obs_mean=mean, obs_std=std, graph=cfg.ppo.cuda_graph)
+    if ranks.main:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    rcfg = runner_cfg(cfg, run_dir.name)
+    rcfg["check_for_nan"] = not env.graph  # a graph-replayed step is not checked per step (a host sync each)
+    runner = Runner(env, rcfg, log_dir=str(run_dir) if ranks.main else None, device=str(env.device))
     start = 0
     if ckpt is not None:
         runner.load(str(ckpt), map_location=str(env.device))
         start = runner.current_learning_iteration + 1
         runner.current_learning_iteration = start
         print(f"resuming {run_dir} from {ckpt.name} at iteration {start}")
-    # written once the checkpoint has loaded: a refused resume leaves the folder as it was
-    tmp = cfg_path.with_name(cfg_path.name + ".tmp")
-    tmp.write_text(json.dumps(saved, indent=2))
-    tmp.replace(cfg_path)
+    if ranks.main:  # written once the checkpoint has loaded: a refused resume leaves the folder as it was
+        tmp = cfg_path.with_name(cfg_path.name + ".tmp")
+        tmp.write_text(json.dumps(saved, indent=2))
+        tmp.replace(cfg_path)
     todo = max(cfg.ppo.iterations - start, 0)
-    validation = dataset.split("validation")
-    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, cfg.ppo.device,
+    validation = dataset.split("validation") if ranks.main else []
+    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, device,
                             physics=env.physics) if validation else None
     best_path = run_dir / "best.pt"
     best = load_checkpoint(best_path, keys=("actor", "meta")) if start and best_path.is_file() else None
@@ -411,8 +485,18 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
         best = {"actor": actor, "meta": {"iteration": 0, "validation": value, "validation_curve": curve}}
         save_checkpoint(best, best_path)
+    phases = {"collect": 0.0, "learn": 0.0}  # rsl-rl's own split of each iteration [s]
+    log_iteration = runner.logger.log
+
+    def timed_log(*a, **kw):
+        phases["collect"] += kw.get("collect_time", 0.0)
+        phases["learn"] += kw.get("learn_time", 0.0)
+        return log_iteration(*a, **kw)
+
+    runner.logger.log = timed_log
     t0, eval_s, done = time.perf_counter(), 0.0, start
-    while done < cfg.ppo.iterations:
+    reached = None
+    while done < cfg.ppo.iterations and reached is None:
         # learn up to the next selection point (rsl-rl continues from current_learning_iteration)
         n = min(every - done % every, cfg.ppo.iterations - done)
         runner.current_learning_iteration = done
@@ -422,31 +506,48 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
             t_eval = time.perf_counter()
             value = score(policy_from_actor(runner.alg.get_policy(), mean, std, env.scale.cpu().numpy(),
                                             cfg.residual.kind, cfg.residual.action_gain))
-            curve.append({"iteration": done, "validation": value, "diverged": score.last_diverged})
+            curve.append({"iteration": done, "validation": value, "diverged": score.last_diverged,
+                          "wall_s": t_eval - t0 - eval_s})
             print(f"validation after {done} iterations: {value:.4f} rad", flush=True)
+            if stop_below is not None and value <= stop_below:
+                reached = done
             if best is None or value < best["meta"]["validation"]:
                 actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
                 best = {"actor": actor, "meta": {"iteration": done, "validation": value}}
             best["meta"]["validation_curve"] = curve
             save_checkpoint(best, best_path)
             eval_s += time.perf_counter() - t_eval
+        if ranks.world > 1 and stop_below is not None:  # every rank stops where rank 0 reached the target
+            flag = torch.tensor([-1 if reached is None else reached], device=env.device)
+            torch.distributed.broadcast(flag, src=0)
+            reached = None if int(flag) < 0 else int(flag)
     wall = time.perf_counter() - t0 - eval_s
+    todo = done - start
     it_time = runner.logger.tot_time  # collection + update, without start-up
+    steps = env.steps_total * ranks.world  # every rank steps as many worlds
     summary = {
         "iterations": cfg.ppo.iterations,
         "iterations_this_session": todo,
-        "env_steps_this_session": env.steps_total,
+        "env_steps_this_session": steps,
         "wall_s_this_session": wall,
         "s_per_iteration": it_time / todo if todo else None,
-        "env_steps_per_s": env.steps_total / env.step_seconds if env.step_seconds else None,
-        "training_steps_per_s": env.steps_total / it_time if it_time else None,
+        "env_steps_per_s": steps / env.step_seconds if env.step_seconds else None,
+        "training_steps_per_s": steps / it_time if it_time else None,
+        "collect_s_per_iteration": phases["collect"] / todo if todo else None,
+        "learn_s_per_iteration": phases["learn"] / todo if todo else None,
+        "collection_steps_per_s": steps / phases["collect"] if phases["collect"] else None,
         "diverged_this_session": env.diverged_total,
         "device": str(env.device),
+        "processes": ranks.world,
+        "cuda_graph": env.graph,
+        "stopped_at_target": reached,
         "solver": type(env.sim.solver).__name__,
         "selected_iteration": best["meta"]["iteration"] if best else cfg.ppo.iterations,
         "selected_validation": best["meta"]["validation"] if best else None,
         "validation_curve": curve,
     }
+    if not ranks.main:
+        return summary
     actor = runner.alg.get_policy()
     if best is not None:  # export the residual chosen on validation, not merely the last
         # into the actor itself: training is over and its last checkpoint written, and a deepcopy of it fails on

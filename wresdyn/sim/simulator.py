@@ -198,6 +198,18 @@ class Simulator:
             with self._stream():
                 self._eval_fk(self.states[self._cur])
 
+    def set_state_where(self, mask: torch.Tensor, q: torch.Tensor, qd: torch.Tensor) -> None:
+        """Overwrite the joint state of the worlds where ``mask`` (n_worlds,) bool with q, qd (n_worlds, n); the
+        others keep theirs. Fixed shapes and no host sync: safe inside a CUDA graph."""
+        m = mask[:, None]
+        cq = self._q[self._cur][:, self.q_index]
+        cqd = self._qd[self._cur][:, self.qd_index]
+        self._q[self._cur][:, self.q_index] = torch.where(m, q.to(torch.float32), cq)
+        self._qd[self._cur][:, self.qd_index] = torch.where(m, qd.to(torch.float32), cqd)
+        if self._needs_fk:
+            with self._stream():
+                self._eval_fk(self.states[self._cur])
+
     def _base_slices(self) -> tuple[slice, slice]:
         """The free joint's 7 coordinates and 6 DoFs in a world's joint_q / joint_qd."""
         if self.robot.base != "floating":
@@ -252,14 +264,25 @@ class Simulator:
             return
         import warp as wp
 
-        if self._side is None:
-            self._side = torch.cuda.Stream(self.device)
-            self._wp_side = wp.stream_from_torch(self._side)
+        side = self.side_stream()
         cur = torch.cuda.current_stream(self.device)
-        self._side.wait_stream(cur)
+        if cur == side:  # already on it (a caller capturing a graph of its own on this stream)
+            with wp.ScopedStream(self._wp_side):
+                yield
+            return
+        side.wait_stream(cur)
         with wp.ScopedStream(self._wp_side):
             yield
-        cur.wait_stream(self._side)
+        cur.wait_stream(side)
+
+    def side_stream(self):
+        """The simulator's own CUDA stream (torch), created on first use; CUDA only."""
+        if self._side is None:
+            import warp as wp
+
+            self._side = torch.cuda.Stream(self.device)
+            self._wp_side = wp.stream_from_torch(self._side)
+        return self._side
 
     def _advance(self) -> None:
         for _ in range(self.substeps):

@@ -1,0 +1,103 @@
+"""The learners' speed paths at tiny sizes: PPO across processes (torchrun, rsl-rl's multi-GPU PPO, here over gloo on
+the CPU), stopping at a validation target (time to fidelity), ablation cells spread over GPUs, and (CUDA only) the
+graph-replayed environment step against the eager one."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from wresdyn.evaluation.ablation import cell_devices
+from wresdyn.learn.gradfit import GradFitConfig, fit
+from wresdyn.learn.ppo import default_config, set_fields, train
+from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
+
+TORCHRUN = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m", "wresdyn.cli",
+            "train", "data/dataset.npz", "--num-envs", "16", "--steps-per-env", "8", "--device", "cpu",
+            "--save-interval", "1", "--set", "ppo.select_every=1"]
+
+
+def _torchrun(*argv):
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    return subprocess.run([*TORCHRUN, *argv], capture_output=True, text=True, env=env, timeout=600)
+
+
+def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(tmp_path):
+    run = tmp_path / "run"
+    res = _torchrun("--out", str(run), "--iterations", "2")
+    assert res.returncode == 0, res.stderr[-2000:]
+    # rsl-rl's multi-GPU PPO ran: rank 1 took rank 0's parameters, gradients are averaged across the two
+    assert "Synchronizing parameters for rank 1" in res.stdout
+    s = json.loads((run / "train_summary.json").read_text())
+    assert s["processes"] == 2 and s["iterations_this_session"] == 2
+    assert s["env_steps_this_session"] == 2 * 16 * 8  # 8 worlds per process, both counted
+    assert sorted(p.name for p in run.glob("model_*.pt")) == ["model_0.pt", "model_1.pt"]
+    assert (run / "policy.pt").is_file() and (run / "best.pt").is_file()
+    # a killed run resumes from its checkpoint on every rank
+    (run / "model_1.pt").unlink()
+    res = _torchrun("--out", str(run), "--iterations", "3")
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert json.loads((run / "train_summary.json").read_text())["iterations_this_session"] == 2
+    assert (run / "model_2.pt").is_file()
+    # a changed configuration is refused in one line per process, nothing written
+    saved = (run / "config.json").read_text()
+    res = _torchrun("--out", str(run), "--iterations", "4", "--set", "ppo.gamma=0.95")
+    assert res.returncode != 0
+    refusals = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn") and "ppo.gamma" in ln]
+    assert refusals and (run / "config.json").read_text() == saved and not (run / "model_3.pt").exists()
+
+
+def test_torchrun_refuses_worlds_that_do_not_split(tmp_path):
+    res = _torchrun("--out", str(tmp_path / "odd"), "--iterations", "1", "--num-envs", "15")
+    assert res.returncode != 0
+    assert any("does not split over 2 processes" in ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn"))
+    assert not (tmp_path / "odd").exists()
+
+
+def test_learners_stop_at_the_validation_target(robot, data, tmp_path):
+    # a target every residual meets: each learner stops at its first validation check
+    cfg = set_fields(default_config(), {"ppo.num_envs": 4, "ppo.num_steps_per_env": 8, "ppo.iterations": 10,
+                                        "ppo.select_every": 2, "ppo.save_interval": 2})
+    s = train(data, robot, cfg, tmp_path / "ppo", stop_below=10.0)
+    assert s["stopped_at_target"] == 2 and s["iterations_this_session"] == 2
+    assert [r["iteration"] for r in s["validation_curve"]] == [2] and s["validation_curve"][0]["wall_s"] > 0
+    assert (tmp_path / "ppo" / "policy.pt").is_file()
+    # an unreachable one runs the whole schedule
+    s = train(data, robot, set_fields(cfg, {"ppo.iterations": 4}), tmp_path / "ppo_all", stop_below=0.0)
+    assert s["stopped_at_target"] is None and s["iterations_this_session"] == 4
+    gc = GradFitConfig(windows=2, horizon=4, horizon_curriculum=(), iterations=10, select_every=3)
+    _, curve = fit(robot, data, gc, log=lambda *_: None, stop_below=10.0)
+    assert curve[-1]["iteration"] == 3 and "validation" in curve[-1]
+
+
+def test_ablation_cells_spread_round_robin_over_gpus():
+    assert cell_devices("cuda", 5, gpus=2) == ["cuda:0", "cuda:1", "cuda:0", "cuda:1", "cuda:0"]
+    assert cell_devices("cuda:1", 2) == ["cuda:1", "cuda:1"] and cell_devices("cpu", 1) == ["cpu"]
+    with pytest.raises(ValueError, match="torch sees none"):
+        cell_devices("cuda", 2, gpus=0)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")
+def test_graph_replayed_step_equals_the_eager_step(robot, data):
+    envs = {g: ReplayEnv(robot, data.split("train"), data.rate_hz, 64, ReplayEnvConfig(horizon=400), device="cuda:0",
+                         seed=1, graph=g) for g in (True, False)}
+    a, b = envs[True], envs[False]
+    # the same episodes in both (no episode ends within the steps below)
+    for name in ("g", "q", "qd", "qdd"):
+        getattr(a, name).copy_(getattr(b, name))
+    a.end.fill_(10**9)
+    b.end.fill_(10**9)
+    a.sim.set_state(None, b.q, b.qd)
+    gen = torch.Generator(device="cuda:0").manual_seed(0)
+    for _ in range(6):  # two eager warm-ups, two captures, replays of both
+        act = 0.5 * torch.randn(64, robot.n_dof, device="cuda:0", generator=gen)
+        oa, ra, da, ea = a.step(act)
+        ob, rb, db, eb = b.step(act)
+        torch.testing.assert_close(a.q, b.q, atol=1e-5, rtol=0)
+        torch.testing.assert_close(oa["critic"], ob["critic"], atol=1e-3, rtol=1e-4)
+        torch.testing.assert_close(ra, rb, atol=1e-4, rtol=1e-4)
+        assert torch.equal(da, db) and not da.any()
+    assert len(a._graphs) == 2 and not b._graphs
