@@ -89,7 +89,11 @@ def main() -> None:
         for graph in graphs:
             for envs in (int(x) for x in args.envs.split(",") if x):
                 t = time.perf_counter()
-                rows.append(_ppo(robot, dataset, args.device, envs, args.ppo_iterations, solver, graph))
+                try:
+                    rows.append(_ppo(robot, dataset, args.device, envs, args.ppo_iterations, solver, graph))
+                except Exception as e:  # a failing configuration is reported, the others still run
+                    print(f"ppo {solver} graph={graph} {envs}: FAILED {type(e).__name__}: {str(e)[:300]}", flush=True)
+                    continue
                 print(f"ppo {solver} graph={graph} {envs}: {time.perf_counter() - t:.0f} s", flush=True)
     for w in (int(x) for x in args.windows.split(",") if x):
         rows.append(_gradient(robot, dataset, args.device, w, args.horizon, args.grad_iterations))

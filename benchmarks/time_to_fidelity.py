@@ -148,16 +148,25 @@ def main() -> None:
     pd_only = ValidationScore(robot, dataset.split("validation"), dataset.rate_hz, device=args.device)()
     target = pd_only / args.ratio
     print(f"PD-only validation error {pd_only:.4f} rad; target {target:.4f} rad ({args.ratio:g}x)", flush=True)
-    rows = []
+    jobs = []
     for learner in args.learners.split(","):
         if learner == "gradient":
-            rows.append(run_gradient(robot, dataset, args, target, out / "gradient"))
+            jobs.append(("gradient", lambda: run_gradient(robot, dataset, args, target, out / "gradient")))
         elif learner == "ppo":
-            rows.append(run_ppo(robot, dataset, args, target, out / "ppo", graph=True))
+            jobs.append(("ppo", lambda: run_ppo(robot, dataset, args, target, out / "ppo", graph=True)))
             if args.no_graph and args.device.startswith("cuda"):
-                rows.append(run_ppo(robot, dataset, args, target, out / "ppo_nograph", graph=False))
+                jobs.append(("ppo (no graph)",
+                             lambda: run_ppo(robot, dataset, args, target, out / "ppo_nograph", graph=False)))
         else:
             raise SystemExit(f"time_to_fidelity: unknown learner {learner!r} (gradient, ppo)")
+    rows, failed = [], []
+    for name, job in jobs:
+        try:
+            rows.append(job())
+        except Exception as e:  # reported, and the other learners still run
+            failed.append({"learner": name, "error": f"{type(e).__name__}: {str(e)[:300]}"})
+            print(f"{name}: FAILED {failed[-1]['error']}", flush=True)
+            continue
         print(json.dumps(rows[-1]), flush=True)
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     print(f"\n{name}, {args.device}; humanoid 21 DoF, dt 2 ms; target {target:.4f} rad = PD-only / {args.ratio:g}")
@@ -170,7 +179,9 @@ def main() -> None:
         print(f"| {r['learner']} | {r['size']} | {reached} | {r['process_s']:.0f} | {r['iterations']} | "
               f"{r['env_steps_per_s'] / 1e3:.0f}k | {util} | {r['best_validation']:.4f} | {r['heldout']:.4f} |")
     (out / "results.json").write_text(json.dumps({"device": name, "pd_only_validation": pd_only, "target": target,
-                                                  "ratio": args.ratio, "rows": rows}, indent=1))
+                                                  "ratio": args.ratio, "rows": rows, "failed": failed}, indent=1))
+    if failed:
+        raise SystemExit(1)
 
 
 if __name__ == "__main__":
