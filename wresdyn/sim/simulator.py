@@ -266,8 +266,8 @@ class Simulator:
 
         side = self.side_stream()
         cur = torch.cuda.current_stream(self.device)
-        if cur == side:  # already on it (a caller capturing a graph of its own on this stream)
-            with wp.ScopedStream(self._wp_side):
+        if cur == side:  # already on it (a caller capturing a graph of its own on this stream): no cross-stream waits
+            with wp.ScopedStream(self._wp_side, sync_enter=False, sync_exit=False):
                 yield
             return
         side.wait_stream(cur)
