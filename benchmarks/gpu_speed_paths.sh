@@ -3,7 +3,7 @@
 #   1. the CUDA-graph test (graph-replayed ReplayEnv step equals the eager one);
 #   2. PPO s per iteration, rsl-rl's collect / learn split and env-steps/s, environment step from a CUDA graph
 #      and eager side by side (256, 4096, 16384 envs), and the gradient fit's throughput (1024 windows);
-#   3, 4. time to fidelity to PD-only / 3 on validation: the gradient fit (1024 windows), PPO (4096 envs).
+#   3, 4. time to fidelity on validation: the gradient fit (1024 windows) to PD-only / 3, PPO (4096 envs) to / 2.5.
 #
 #   bash benchmarks/gpu_speed_paths.sh OUT_DIR [STEPS]      # STEPS: which of 1 2 3 4 to run (default all)
 #
@@ -24,8 +24,9 @@ for s in $steps; do
     3) $py benchmarks/time_to_fidelity.py --device "$dev" --learners gradient --windows 1024 --check 50 \
          --out "$runs/ttf_gradient" 2>&1 | tee "$out/time_to_fidelity_gradient.txt"
        cp "$runs/ttf_gradient/results.json" "$out/time_to_fidelity_gradient.json" ;;
-    4) $py benchmarks/time_to_fidelity.py --device "$dev" --learners ppo --envs 4096 \
+    4) $py benchmarks/time_to_fidelity.py --device "$dev" --learners ppo --envs 4096 --ratio 2.5 \
          --ppo-iterations "${PPO_ITERS:-2000}" --check 25 --out "$runs/ttf_ppo" 2>&1 | tee "$out/time_to_fidelity_ppo.txt"
-       cp "$runs/ttf_ppo/results.json" "$out/time_to_fidelity_ppo.json" ;;
+       cp "$runs/ttf_ppo/results.json" "$out/time_to_fidelity_ppo.json"
+       cp "$runs/ttf_ppo/ppo/train_summary.json" "$out/ttf_ppo_train_summary.json" ;;
   esac
 done
