@@ -70,7 +70,7 @@ class GpuSampler:
         return sum(self.samples) / len(self.samples) if self.samples else None
 
 
-def _heldout(robot, dataset, policy, device: str, physics=None) -> float:
+def _heldout(robot, dataset, policy, device: str) -> float:
     from wresdyn.evaluation.evaluate import evaluate_split
 
     summary, _ = evaluate_split(robot, dataset.split("heldout"), dataset.rate_hz, policy, device=device)

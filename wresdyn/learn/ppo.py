@@ -264,7 +264,7 @@ def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
         "critic": critic,
         "logger": "tensorboard",
         "run_name": run_name,
-        "check_for_nan": not (p.cuda_graph and p.device.startswith("cuda")),
+        "check_for_nan": True,  # train() turns it off where the environment's step is graph-replayed
     }
 
 
@@ -336,13 +336,11 @@ class Runner(OnPolicyRunner):
     def _configure_multi_gpu(self) -> None:
         """rsl-rl's multi-GPU set-up (NCCL, one GPU per process); CPU processes under torchrun (tests, CPU nodes)
         get the same data-parallel PPO over gloo, NCCL being GPU-only."""
-        import os
-
         import torch
 
-        if str(self.device).startswith("cuda") or int(os.getenv("WORLD_SIZE", "1")) <= 1:
-            return super()._configure_multi_gpu()
         r = Ranks.from_env()
+        if str(self.device).startswith("cuda") or r.world <= 1:
+            return super()._configure_multi_gpu()
         self.gpu_world_size, self.is_distributed = r.world, True
         self.gpu_local_rank, self.gpu_global_rank = r.local_rank, r.rank
         self.cfg["multi_gpu"] = {"global_rank": r.rank, "local_rank": r.local_rank, "world_size": r.world}
@@ -467,7 +465,6 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         tmp = cfg_path.with_name(cfg_path.name + ".tmp")
         tmp.write_text(json.dumps(saved, indent=2))
         tmp.replace(cfg_path)
-    todo = max(cfg.ppo.iterations - start, 0)
     validation = dataset.split("validation") if ranks.main else []
     score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, device,
                             physics=env.physics) if validation else None

@@ -194,9 +194,7 @@ class Simulator:
         ids = slice(None) if ids is None else ids
         self._q[self._cur][ids, self.q_index] = q.to(torch.float32)
         self._qd[self._cur][ids, self.qd_index] = qd.to(torch.float32)
-        if self._needs_fk:
-            with self._stream():
-                self._eval_fk(self.states[self._cur])
+        self._refresh_fk()
 
     def set_state_where(self, mask: torch.Tensor, q: torch.Tensor, qd: torch.Tensor) -> None:
         """Overwrite the joint state of the worlds where ``mask`` (n_worlds,) bool with q, qd (n_worlds, n); the
@@ -206,6 +204,10 @@ class Simulator:
         cqd = self._qd[self._cur][:, self.qd_index]
         self._q[self._cur][:, self.q_index] = torch.where(m, q.to(torch.float32), cq)
         self._qd[self._cur][:, self.qd_index] = torch.where(m, qd.to(torch.float32), cqd)
+        self._refresh_fk()
+
+    def _refresh_fk(self) -> None:
+        """Body poses from the joint state just written (solvers that read them; SolverReplay does not)."""
         if self._needs_fk:
             with self._stream():
                 self._eval_fk(self.states[self._cur])
