@@ -11,10 +11,11 @@ Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 
   times them; env-steps/s (collection) = env-steps / collection time. Peers: every ``--solvers`` entry and, on
   CUDA, ``--graphs on,off`` (environment step replayed from a CUDA graph, or eager) in the same run.
 - Gradient fit: :func:`wresdyn.learn.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
-  curriculum), ``--grad-iterations`` iterations after 2 warm-up ones. One env-step = one window advanced one
-  step, forward and backward counted once each (as in ``curve.json``'s ``sim_steps``).
+  curriculum), ``--grad-iterations`` iterations after 2 warm-up ones (the eager one and the capture, on CUDA). One
+  env-step = one window advanced one step, forward and backward counted once each (as in ``curve.json``'s
+  ``sim_steps``). On CUDA ``--graphs`` applies here too (the whole iteration replayed from a CUDA graph, or eager).
 
-Prints a table and writes JSON (``--json``). The learners run as they do in training (the gradient fit eagerly).
+Prints a table and writes JSON (``--json``). The learners run as they do in training.
 """
 
 from __future__ import annotations
@@ -47,15 +48,17 @@ def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str, g
             "env_steps_per_s": s["collection_steps_per_s"], "training_steps_per_s": s["training_steps_per_s"]}
 
 
-def _gradient(robot, dataset, device: str, windows: int, horizon: int, iterations: int) -> dict:
+def _gradient(robot, dataset, device: str, windows: int, horizon: int, iterations: int, graph: bool = True) -> dict:
     from wresdyn.learn.gradfit import GradFitConfig, fit
 
     cfg = GradFitConfig(windows=windows, horizon=horizon, horizon_curriculum=(), iterations=iterations + 2,
-                        device=device, select_every=10**6)  # validation once, at the end (not timed)
-    _, curve = fit(robot, dataset, cfg, log=lambda *_: None)
-    a, b = curve[1], curve[-1]  # exclude the first two iterations (compilation, allocation)
+                        device=device, select_every=10**6, cuda_graph=graph)  # validation once, at the end
+    _, curve = fit(robot, dataset, cfg, log=lambda *_: None)  # rows 1, 2 and the last wait for the device
+    a, b = curve[1], curve[-1]  # exclude the first two iterations (compilation, allocation, the graph's capture)
     wall, steps = b["wall"] - a["wall"], b["sim_steps"] - a["sim_steps"]
-    return {"learner": "gradient", "device": device, "solver": "SolverReplay", "size": windows, "horizon": horizon,
+    graphed = graph and device.startswith("cuda")
+    return {"learner": "gradient" + (" graph" if graphed else ""), "device": device, "solver": "SolverReplay",
+            "size": windows, "horizon": horizon,
             "iterations": iterations, "s_per_iteration": wall / iterations, "env_steps_per_s": steps / wall,
             "training_steps_per_s": steps / wall}
 
@@ -72,7 +75,8 @@ def main() -> None:
     p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
     p.add_argument("--envs", default="256", help="comma list of PPO env counts")
     p.add_argument("--solvers", default="auto", help="comma list of PPO solvers (auto, featherstone, mujoco)")
-    p.add_argument("--graphs", default="on", help="CUDA: PPO environment step from a CUDA graph: on, off or on,off")
+    p.add_argument("--graphs", default="on", help="CUDA: PPO environment step and gradient-fit iteration from CUDA graphs: "
+                   "on, off or on,off")
     p.add_argument("--ppo-iterations", type=int, default=10)
     p.add_argument("--windows", default="32", help="comma list of gradient-fit window counts")
     p.add_argument("--horizon", type=int, default=64, help="gradient-fit window length [steps]")
@@ -95,9 +99,10 @@ def main() -> None:
                     print(f"ppo {solver} graph={graph} {envs}: FAILED {type(e).__name__}: {str(e)[:300]}", flush=True)
                     continue
                 print(f"ppo {solver} graph={graph} {envs}: {time.perf_counter() - t:.0f} s", flush=True)
-    for w in (int(x) for x in args.windows.split(",") if x):
-        rows.append(_gradient(robot, dataset, args.device, w, args.horizon, args.grad_iterations))
-        print(f"gradient {w}: done", flush=True)
+    for graph in graphs:
+        for w in (int(x) for x in args.windows.split(",") if x):
+            rows.append(_gradient(robot, dataset, args.device, w, args.horizon, args.grad_iterations, graph))
+            print(f"gradient graph={graph} {w}: done", flush=True)
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     print(f"\n{name}, {args.device}; humanoid 21 DoF, dt 2 ms")
     print("| learner | solver | envs / windows | s per iteration | collect / learn [s] | env-steps/s (collection) | "

@@ -10,13 +10,14 @@ with its defaults at the given size, checks validation every ``--check`` iterati
 or below the target (``stop_below`` of :func:`wresdyn.learn.ppo.train` and :func:`wresdyn.learn.gradfit.fit`):
 
 - ``gradient``: the gradient fit (network residual, MLP, its default 2000-iteration schedule) with ``--windows``;
+  on CUDA each iteration is replayed from a CUDA graph (``--no-graph``: also eager, the peer);
 - ``ppo``: PPO (rsl-rl, default configuration) with ``--envs`` worlds, at most ``--ppo-iterations``; on CUDA the
-  environment step is replayed from a CUDA graph (``--no-graph``: eager, the peer).
+  environment step is replayed from a CUDA graph (``--no-graph``: also eager, the peer).
 
 Reported per learner: training wall-clock to the target (validation checks excluded), the process wall-clock
-including start-up and checks, iterations, env-steps and env-steps/s, the mean GPU utilisation sampled through NVML
-while it trained (CUDA), and the held-out error of the returned residual, for reference only (nothing is chosen
-on it). A learner that misses the target within its iterations is reported as such, with its best validation error.
+including start-up and checks, the gradient fit's training wall-clock of the whole run (``train_s``), iterations,
+env-steps and env-steps/s, the mean GPU utilisation sampled through NVML while it trained (CUDA), and the held-out
+error of the returned residual, for reference only (nothing is chosen on it). A learner that misses the target within its iterations is reported as such, with its best validation error.
 Prints a table; ``--out`` gets ``results.json`` and the run folders.
 """
 
@@ -77,10 +78,11 @@ def _heldout(robot, dataset, policy, device: str) -> float:
     return summary["pd_residual"]["mean_abs_dq"]
 
 
-def run_gradient(robot, dataset, args, target: float, out: Path) -> dict:
+def run_gradient(robot, dataset, args, target: float, out: Path, graph: bool) -> dict:
     from wresdyn.learn.gradfit import GradFitConfig, fit
 
-    cfg = GradFitConfig(windows=args.windows, device=args.device, select_every=args.check, seed=args.seed)
+    cfg = GradFitConfig(windows=args.windows, device=args.device, select_every=args.check, seed=args.seed,
+                        cuda_graph=graph)
     t = time.perf_counter()
     with GpuSampler(args.device) as gpu:
         policy, curve = fit(robot, dataset, cfg, out=out, stop_below=target)
@@ -88,8 +90,9 @@ def run_gradient(robot, dataset, args, target: float, out: Path) -> dict:
     checks = [r for r in curve if "validation" in r]
     hit = next((r for r in checks if r["validation"] <= target), None)
     steps = curve[-1]["sim_steps"]
-    return {"learner": "gradient", "size": args.windows, "reached": hit is not None,
-            "wall_s": hit["wall"] if hit else None, "process_s": process,
+    return {"learner": "gradient" + ("" if graph or not args.device.startswith("cuda") else " (no graph)"),
+            "size": args.windows, "reached": hit is not None,
+            "wall_s": hit["wall"] if hit else None, "process_s": process, "train_s": curve[-1]["wall"],
             "iterations": hit["iteration"] if hit else curve[-1]["iteration"], "env_steps": steps,
             "env_steps_per_s": steps / curve[-1]["wall"], "best_validation": min(r["validation"] for r in checks),
             "gpu_util": gpu.mean, "heldout": _heldout(robot, dataset, policy, args.device)}
@@ -136,7 +139,7 @@ def main() -> None:
     p.add_argument("--ppo-iterations", type=int, default=4000, help="PPO iterations at most")
     p.add_argument("--check", type=int, default=25, help="validation check every this many iterations")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-graph", action="store_true", help="CUDA: also run PPO with eager environment steps")
+    p.add_argument("--no-graph", action="store_true", help="CUDA: also run each learner eagerly (no CUDA graphs)")
     p.add_argument("--out", required=True, help="folder for results.json and the runs (resumed where present)")
     args = p.parse_args()
     wp.config.quiet = True
@@ -151,7 +154,10 @@ def main() -> None:
     jobs = []
     for learner in args.learners.split(","):
         if learner == "gradient":
-            jobs.append(("gradient", lambda: run_gradient(robot, dataset, args, target, out / "gradient")))
+            jobs.append(("gradient", lambda: run_gradient(robot, dataset, args, target, out / "gradient", graph=True)))
+            if args.no_graph and args.device.startswith("cuda"):
+                jobs.append(("gradient (no graph)", lambda: run_gradient(robot, dataset, args, target,
+                                                                         out / "gradient_nograph", graph=False)))
         elif learner == "ppo":
             jobs.append(("ppo", lambda: run_ppo(robot, dataset, args, target, out / "ppo", graph=True)))
             if args.no_graph and args.device.startswith("cuda"):
@@ -170,13 +176,14 @@ def main() -> None:
         print(json.dumps(rows[-1]), flush=True)
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     print(f"\n{name}, {args.device}; humanoid 21 DoF, dt 2 ms; target {target:.4f} rad = PD-only / {args.ratio:g}")
-    print("| learner | envs / windows | to target [s] | process [s] | iterations | env-steps/s | GPU util | "
-          "best validation [rad] | held-out [rad] |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| learner | envs / windows | to target [s] | training [s] | process [s] | iterations | env-steps/s | "
+          "GPU util | best validation [rad] | held-out [rad] |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         reached = f"{r['wall_s']:.1f}" if r["reached"] else "not reached"
         util = f"{r['gpu_util']:.0f} %" if r["gpu_util"] is not None else "-"
-        print(f"| {r['learner']} | {r['size']} | {reached} | {r['process_s']:.0f} | {r['iterations']} | "
+        train = f"{r['train_s']:.1f}" if "train_s" in r else "-"
+        print(f"| {r['learner']} | {r['size']} | {reached} | {train} | {r['process_s']:.0f} | {r['iterations']} | "
               f"{r['env_steps_per_s'] / 1e3:.0f}k | {util} | {r['best_validation']:.4f} | {r['heldout']:.4f} |")
     (out / "results.json").write_text(json.dumps({"device": name, "pd_only_validation": pd_only, "target": target,
                                                   "ratio": args.ratio, "rows": rows, "failed": failed}, indent=1))

@@ -47,6 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="training noise on the network's observation, in normalising stds (0 = off)")
     p.add_argument("--solver", choices=choices(SolverKind), default=None, help="simulation solver (default: auto)")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
+    p.add_argument("--no-cuda-graph", action="store_true",
+                   help="CUDA: run each iteration eagerly instead of replaying it from a CUDA graph")
     p.add_argument("--seed", type=int, default=0, help="seed")
     p.add_argument("--physics", default=None, metavar="JSON",
                    help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
@@ -73,7 +75,8 @@ def config_from_args(args: argparse.Namespace):
     if args.model == "hybrid" and args.iterations is None:
         kw["iterations"] = HYBRID_ITERATIONS
     model = "parametric" if args.model == "parametric" else "network"
-    return replace(cfg, residual=replace(cfg.residual, **res), model=model, device=args.device, seed=args.seed, **kw)
+    return replace(cfg, residual=replace(cfg.residual, **res), model=model, device=args.device, seed=args.seed,
+                   cuda_graph=not args.no_cuda_graph, **kw)
 
 
 def run(args: argparse.Namespace) -> int:

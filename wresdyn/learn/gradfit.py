@@ -93,6 +93,11 @@ class GradFitConfig:
     select_every: int = 0
     """Evaluate on the validation split every this many iterations and return the best residual (model
     selection on validation); 0 = ten times per run."""
+    cuda_graph: bool = True
+    """On CUDA, replay each iteration (the rollout with the residual in the loop, the loss, the backward pass
+    through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
+    length, with no host synchronisation inside (:class:`_Iteration`). The CPU runs the same code eagerly; off,
+    CUDA does too. May change on resume."""
     physics: str = ""
     """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned
     on top of the identified model (the hybrid), with its command delay; "" = the robot file's."""
@@ -137,7 +142,8 @@ def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "ne
 
 
 def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tuple[torch.Tensor, dict]:
-    """Multiple-shooting loss of one batch of windows (see module docstring); returns (loss, parts).
+    """Multiple-shooting loss of one batch of windows (see module docstring); returns (loss, parts), the parts
+    (``pos``, ``vel``, ``torque``, ``rate``) as detached scalar tensors (read them when needed: no host sync here).
 
     ``actions`` are normalised (B, H, n); ``scale`` turns them into residual torque [N·m] for the torque
     penalty (``None`` for a delta action, which applies no residual torque).
@@ -150,10 +156,10 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tup
     rate = ((actions[:, 1:] - actions[:, :-1]) ** 2).sum(-1).mean() if actions.shape[1] > 1 else tau * 0.0
     loss = cfg.w_q * pos + cfg.w_qd * vel + cfg.w_torque * tau + cfg.w_action_rate * rate
     parts = {"pos": pos, "vel": vel, "torque": tau, "rate": rate}
-    return loss, {k: float(v.detach()) for k, v in parts.items()}
+    return loss, {k: v.detach() for k, v in parts.items()}
 
 
-RESUME_MAY_CHANGE = ("device", "torch_threads")
+RESUME_MAY_CHANGE = ("device", "torch_threads", "cuda_graph")
 """:class:`GradFitConfig` fields a resumed fit may change: where it runs, not what it learns (``iterations``
 shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
@@ -180,16 +186,17 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         validation error when the dataset has a validation split, else the last) and the learning curve rows
         (iteration, wall-clock [s], simulated env-steps, loss parts, validation error where evaluated).
     """
-    from ..sim import Simulator, TrajectoryBank, rollout
+    from ..sim import Simulator, TrajectoryBank
     from .runs import check_resume, load_checkpoint, save_checkpoint, start_window_fit
     from .selection import ValidationScore
 
     rng, train, dt = start_window_fit(cfg, dataset)
     mean, std = obs_stats(train)
     policy = build_policy(robot, cfg.residual, mean, std, cfg.model).to(cfg.device)
-    optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr)
     horizons = cfg.horizon_curriculum or (cfg.horizon,)
     sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True)
+    graph = cfg.cuda_graph and sim.device.type == "cuda"
+    optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr, capturable=graph)
     physics = load_physics(cfg.physics, robot)
     delay = 0.0
     if physics is not None:
@@ -200,6 +207,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics) \
         if validation else None
     select_every = max(1, cfg.select_every or cfg.iterations // 10)
+    log_every = max(1, cfg.iterations // 20)
     obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
     noise_gen = torch.Generator(device=cfg.device)
     noise_gen.manual_seed(cfg.seed)
@@ -219,6 +227,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         best = {"validation": meta["best_validation"], "iteration": meta["best_iteration"],
                 "state": state["best"] or None}
         log(f"resumed from {ckpt} at iteration {start_it}")
+    step = _Iteration(cfg, sim, bank, policy, optim, obs_noise, graph)
     if score is None and start_it == 0:
         log("no validation split: the fit returns its last iteration (`wresdyn migrate` adds one)")
     if score is not None and start_it == 0 and physics is not None:
@@ -231,25 +240,41 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     t0 = time.perf_counter() - wall0
     stop = cfg.iterations if until is None else min(until, cfg.iterations)
     reached = False
+    pending: list[tuple[dict, torch.Tensor]] = []  # rows whose loss parts are still on the device
+
+    def settle() -> None:
+        """Read the pending rows' loss parts from the device (one sync) and fail at the first non-finite loss."""
+        if not pending:
+            return
+        values = torch.stack([p for _, p in pending]).tolist()
+        for (row, _), v in zip(pending, values):
+            row.update(zip(_PARTS, v))
+            if not np.isfinite(row["loss"]):
+                raise FloatingPointError(f"gradient fit: non-finite loss at iteration {row['iteration']} "
+                                         "(simulation diverged)")
+        pending.clear()
+
     for it in range(start_it, stop):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
-        for group in optim.param_groups:
-            group["lr"] = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
-        window = bank.sample(rng, cfg.windows, h)
-        run = rollout(sim, window, policy, grad=True, truncation=cfg.grad_truncation, obs_noise=obs_noise,
-                      generator=noise_gen)
-        loss, parts = window_loss(cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:], window.qd[:, 1:],
-                                  policy.scale if policy.kind == "torque" else None)
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"gradient fit: non-finite loss at iteration {it} (simulation diverged)")
-        optim.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.grad_clip)
-        optim.step()
+        lr = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
+        traj, start = bank.draw(rng, cfg.windows, h)
+        noise = torch.stack([torch.randn((cfg.windows, 4 * robot.n_dof), generator=noise_gen, device=sim.device)
+                             for _ in range(h)]) if obs_noise > 0.0 else None
+        parts = step(traj, start, h, noise, lr)
         sim_steps += cfg.windows * h * 2  # forward + backward through each step
-        row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps,
-               "loss": float(loss.detach()), **parts}
-        if score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations):
+        row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps}
+        pending.append((row, parts))
+        if not graph or it < start_it + 2:
+            # eager: each iteration is checked before the next; with graphs, the first two of a session (warm-up and
+            # capture) wait for the device, so their rows' wall-clock is exact (a reference for throughput)
+            settle()
+            row["wall"] = time.perf_counter() - t0
+        validate = score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations)
+        report = (it + 1) % log_every == 0 or it + 1 == stop
+        if validate or report:
+            settle()
+            row["wall"] = time.perf_counter() - t0  # the device has caught up: the row's true wall-clock
+        if validate:
             t_eval = time.perf_counter()
             row["validation"] = score(policy)
             t0 += time.perf_counter() - t_eval  # wall-clock counts training only
@@ -258,8 +283,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
                         "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
             reached = stop_below is not None and row["validation"] <= stop_below
         curve.append(row)
-        if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == stop or reached:
-            msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
+        if report or reached:
+            msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
             log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
             if ckpt:
                 meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
@@ -270,12 +295,99 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         if reached:
             log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
             break
+    settle()
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))
     if best["state"] is not None and (stop == cfg.iterations or reached):
         policy.load_state_dict(best["state"])
         log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
     return policy.eval(), curve
+
+
+_PARTS = ("loss", "pos", "vel", "torque", "rate")
+"""The loss and its parts, in the order :class:`_Iteration` returns them."""
+
+
+class _Iteration:
+    """One optimiser step of the fit: windows of ``h`` steps at (trajectory, start) (B,) each, the rollout with the
+    residual in the loop, the loss, the backward pass (torch's autograd through each step's Warp tape), gradient
+    clipping and Adam. A call returns :data:`_PARTS` as one tensor (5,) on the device, without waiting for it.
+
+    With ``graph`` (CUDA) every call runs on the simulator's own stream and, from the second call at a window
+    length on, is replayed from a CUDA graph captured for that length: torch's capture, which the Warp launches
+    of the solver steps and of their tapes join as an external capture (forward and backward on the same stream,
+    :meth:`~wresdyn.sim.Simulator._tape_stream`), Adam ``capturable`` with the learning rate a device tensor. The
+    first call at each length runs eagerly on that stream (it loads kernels and creates Adam's state and
+    torch's workspaces, which a capture must not). The window indices and the observation noise enter through
+    fixed buffers; the gradients live in each graph's memory pool. Without ``graph`` the same code runs eagerly.
+    """
+
+    def __init__(self, cfg: GradFitConfig, sim, bank, policy, optim, obs_noise: float, graph: bool) -> None:
+        self.cfg, self.sim, self.bank, self.policy, self.optim = cfg, sim, bank, policy, optim
+        self.obs_noise, self.graph = obs_noise, graph
+        self.torque_scale = policy.scale if policy.kind == "torque" else None
+        self._warm: set[int] = set()
+        self._graphs: dict[int, tuple] = {}  # window length -> (graph, (traj, start, noise) buffers, output)
+        for group in optim.param_groups:  # a resumed optimiser takes its flag from the checkpoint: set it here
+            group["capturable"] = graph
+            lr = float(group["lr"])
+            group["lr"] = torch.tensor(lr, device=sim.device) if graph else lr
+        for state in optim.state.values():  # Adam's step count lives where capturable wants it
+            if "step" in state:
+                state["step"] = state["step"].to(sim.device if graph else "cpu", torch.float32)
+
+    def _run(self, traj, start, h: int, noise) -> torch.Tensor:
+        from ..sim import rollout
+
+        window = self.bank.window(traj, start, h)
+        run = rollout(self.sim, window, self.policy, grad=True, truncation=self.cfg.grad_truncation,
+                      obs_noise=self.obs_noise, noise=noise)
+        loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],
+                                  window.qd[:, 1:], self.torque_scale)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.cfg.grad_clip)
+        self.optim.step()
+        return torch.stack([loss.detach(), *(parts[k] for k in _PARTS[1:])])
+
+    def __call__(self, traj, start, h: int, noise, lr: float) -> torch.Tensor:
+        if not self.graph:
+            for group in self.optim.param_groups:
+                group["lr"] = lr
+            self.optim.zero_grad()
+            return self._run(traj, start, h, noise)
+        import warp as wp
+
+        for group in self.optim.param_groups:
+            group["lr"].fill_(lr)
+        sim, cur = self.sim, torch.cuda.current_stream(self.sim.device)
+        side = sim.side_stream()
+        side.wait_stream(cur)
+        if h not in self._warm:
+            self._warm.add(h)
+            with torch.cuda.stream(side):
+                self.optim.zero_grad()
+                out = self._run(traj, start, h, noise)
+            cur.wait_stream(side)
+            return out
+        entry = self._graphs.get(h)
+        if entry is None:
+            inputs = (traj.clone(), start.clone(), None if noise is None else noise.clone())
+            self.optim.zero_grad(set_to_none=True)  # backward allocates the gradients in the graph's pool
+            graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"):
+                wp.capture_begin(stream=sim._wp_side, external=True, capture_mode=wp.CaptureMode.THREAD_LOCAL)
+                try:
+                    out = self._run(inputs[0], inputs[1], h, inputs[2])
+                finally:
+                    wp.capture_end(stream=sim._wp_side)
+            entry = self._graphs[h] = (graph, inputs, out)
+        graph, inputs, out = entry
+        inputs[0].copy_(traj)
+        inputs[1].copy_(start)
+        if noise is not None:
+            inputs[2].copy_(noise)
+        graph.replay()
+        return out.clone()
 
 
 def load_physics(path: str, robot):

@@ -120,6 +120,7 @@ class TrajectoryBank:
         self.names = [getattr(t, "name", str(i)) for i, t in enumerate(trajectories)]
         self.q, self.qd, self.qdd, self.q_cmd = cat("q"), cat("qd"), cat("qdd"), cat("q_cmd")
         """Recorded q [rad], q̇ [rad/s], q̈ [rad/s²] and commanded q [rad], each (T_total, n)."""
+        self._lengths = lengths  # on the host: drawing windows reads them without a device sync
         self.length = torch.as_tensor(lengths, device=device)
         """Samples per trajectory, (J,)."""
         self.start = torch.as_tensor(np.concatenate([[0], np.cumsum(lengths)[:-1]]), device=device)
@@ -166,14 +167,23 @@ class TrajectoryBank:
 
     def draw(self, rng: np.random.Generator, b: int, steps: int) -> tuple[torch.Tensor, torch.Tensor]:
         """``b`` (trajectory, start) pairs of windows of ``steps`` steps, uniform over those that fit: (B,) each."""
-        lengths = self.length.cpu().numpy()
+        lengths = self._lengths
         eligible = np.flatnonzero(lengths > steps)
         if len(eligible) == 0:
             raise ValueError(f"every trajectory is shorter than the {steps + 1} samples a window needs")
         traj = eligible[rng.integers(0, len(eligible), b)]
         start = rng.integers(0, lengths[traj] - steps, b)
-        return torch.as_tensor(traj, device=self.device), torch.as_tensor(start, device=self.device)
+        return _to_device(traj, self.device), _to_device(start, self.device)
 
     def sample(self, rng: np.random.Generator, b: int, steps: int) -> Window:
         """``b`` windows of ``steps`` steps drawn uniformly over all (trajectory, start) pairs that fit."""
         return self.window(*self.draw(rng, b, steps), steps)
+
+
+def _to_device(x: np.ndarray, device: torch.device) -> torch.Tensor:
+    """A host array on ``device``; to CUDA through pinned memory, so the copy does not wait for the work already
+    queued on the stream (a pageable copy would)."""
+    t = torch.as_tensor(x)
+    if device.type != "cuda":
+        return t.to(device)
+    return t.pin_memory().to(device, non_blocking=True)

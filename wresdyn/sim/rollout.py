@@ -61,7 +61,8 @@ def _policy_kind(policy, kind: str | None) -> str:
 def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = None,
             policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
             truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
-            limits: DivergenceLimits = DivergenceLimits(), on_diverge: str = "freeze") -> Rollout:
+            noise: torch.Tensor | None = None, limits: DivergenceLimits = DivergenceLimits(),
+            on_diverge: str = "freeze") -> Rollout:
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
@@ -77,6 +78,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         truncation: With ``grad``, detach the state (and a GRU's hidden state) every this many steps; 0 = never.
         obs_noise: Std of Gaussian noise on the policy's observation, in units of ``policy.obs_std``.
         generator: Torch generator of that noise.
+        noise: The standard normal draws of that noise given up front, (L, B_policy, 4n), instead of drawing from
+            ``generator`` at each step (a captured CUDA graph reads them from a fixed buffer).
         limits: When a world counts as diverged (``max_error`` against the window's recording).
         on_diverge: ``"freeze"`` (hold the last sane state, report in ``diverged_at``) or ``"raise"``
             (:class:`~wresdyn.errors.SimulationDiverged`).
@@ -91,6 +94,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
     if policy is not None and hasattr(policy, "reset"):
         policy.reset()
     scale = getattr(policy, "scale", None)
+    if noise is not None and obs_noise > 0.0:
+        noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
     q, qd, qdd = window.q[:, 0], window.qd[:, 0], window.qdd[:, 0]
     qs, qds, actions = [q], [qd], []
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
@@ -102,7 +107,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         if policy is not None:
             obs = observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k])
             if obs_noise > 0.0:
-                obs = obs + obs_noise * policy.obs_std * torch.randn(obs.shape, generator=generator, device=obs.device)
+                obs = obs + (noise[k] if noise is not None else obs_noise * policy.obs_std * torch.randn(
+                    obs.shape, generator=generator, device=obs.device))
             with torch.set_grad_enabled(grad and torch.is_grad_enabled()):
                 r = policy(obs if pdev is None else obs.to(pdev)).to(sim.device)
             if scale is not None:

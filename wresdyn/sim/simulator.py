@@ -11,8 +11,9 @@ stays valid.
   ``substeps`` solver steps in place (on CUDA replayed from a captured graph on the simulator's own stream,
   ordered against torch's current stream).
 - Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function`` whose
-  backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque (on Warp's
-  device stream, as in wave 1; its CUDA gradients were last checked against the CPU on an H200 there).
+  backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque. On CUDA its
+  Warp work runs on torch's current stream when that is a stream of its own (the gradient fit's CUDA graph,
+  :meth:`Simulator._tape_stream`), else on Warp's device stream as in wave 1.
 
 Divergence (:class:`DivergenceLimits`, :meth:`Simulator.diverged`) is judged in one place: a non-finite state,
 a runaway joint speed, a joint far past its limit, or (when a reference is given) far from the recording.
@@ -122,6 +123,7 @@ class Simulator:
         self._cur = 0
         self._graphs: dict[int, object] = {}
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
+        self._wp_streams: dict[int, tuple] = {}  # torch stream handle -> (torch stream, Warp stream): _tape_stream
         self._tape_buffers: list = []
         self._needs_fk = self.solver_kind != "replay"  # SolverReplay integrates joint coordinates only
         self.param_grads = bool(param_grads)
@@ -277,6 +279,24 @@ class Simulator:
             yield
         cur.wait_stream(side)
 
+    def _tape_stream(self):
+        """Where :meth:`step_diff`'s Warp work (forward and the tape's backward) runs: on torch's current stream when
+        that is a stream of its own (a CUDA graph being captured or warmed up on it: the gradient fit's captured
+        iteration), so torch's and Warp's launches are ordered by the stream itself; else on Warp's device stream
+        as in wave 1 (its CUDA gradients checked against the CPU there; under torch's legacy default stream, which
+        synchronises with it)."""
+        if not self._cuda:
+            return contextlib.nullcontext()
+        import warp as wp
+
+        cur = torch.cuda.current_stream(self.device)
+        if cur == torch.cuda.default_stream(self.device):
+            return contextlib.nullcontext()
+        ws = self._wp_streams.get(cur.cuda_stream)
+        if ws is None:
+            ws = self._wp_streams[cur.cuda_stream] = (cur, wp.stream_from_torch(cur))
+        return wp.ScopedStream(ws[1], sync_enter=False, sync_exit=False)
+
     def side_stream(self):
         """The simulator's own CUDA stream (torch), created on first use; CUDA only."""
         if self._side is None:
@@ -284,6 +304,7 @@ class Simulator:
 
             self._side = torch.cuda.Stream(self.device)
             self._wp_side = wp.stream_from_torch(self._side)
+            self._wp_streams[self._side.cuda_stream] = (self._side, self._wp_side)  # one Warp stream object for it
         return self._side
 
     def _advance(self) -> None:
@@ -346,6 +367,8 @@ class Simulator:
     # ------------------------------------------------------------------------------------------------ scatter
     def _scatter(self, x: torch.Tensor, index, width: int) -> torch.Tensor:
         """Actuated-joint values (N, n) -> Newton's flat per-world layout (N * width,), zeros elsewhere."""
+        if isinstance(index, slice) and index.start == 0 and index.stop == width == x.shape[-1]:
+            return x.to(torch.float32).reshape(-1)  # every coordinate actuated (a fixed base): the layout already
         full = torch.zeros(self.n_worlds, width, dtype=torch.float32, device=x.device)
         full[:, index] = x.to(torch.float32)
         return full.reshape(-1)
@@ -362,15 +385,14 @@ class _Step(torch.autograd.Function):
         inputs = [sim._scatter(q, sim.q_index, sim.nq), sim._scatter(qd, sim.qd_index, sim.nqd),
                   sim._scatter(target, sim.qd_index, sim.nqd), sim._scatter(tau, sim.qd_index, sim.nqd)]
         tape = wp.Tape()
-        # On Warp's device stream, not Simulator._stream: backward runs on torch's autograd thread, and the
-        # side stream gave wrong CUDA gradients there (forward right, gradients off; found on an H200)
-        for dst, src in zip((states[0].joint_q, states[0].joint_qd, ctrl.joint_target_q, ctrl.joint_f), inputs):
-            wp.copy(dst, wp.from_torch(src))
-        with tape:
-            if sim._needs_fk:
-                sim._eval_fk(states[0])
-            for s in range(sim.substeps):
-                sim.solver.step(states[s], states[s + 1], ctrl, None, sim.dt_sub)
+        with sim._tape_stream():
+            for dst, src in zip((states[0].joint_q, states[0].joint_qd, ctrl.joint_target_q, ctrl.joint_f), inputs):
+                wp.copy(dst, wp.from_torch(src))
+            with tape:
+                if sim._needs_fk:
+                    sim._eval_fk(states[0])
+                for s in range(sim.substeps):
+                    sim.solver.step(states[s], states[s + 1], ctrl, None, sim.dt_sub)
         ctx.tape, ctx.sim, ctx.k, ctx.names = tape, sim, k, names
         ctx.physics_meta = [(p.dtype, p.device) for p in physics]
         out = states[-1]
@@ -386,10 +408,11 @@ class _Step(torch.autograd.Function):
         states, ctrl = sim._tape_buffers[ctx.k]
         for f in ctx.names:  # the parameters' gradients accumulate over every step's tape: start this one at 0
             sim._model_view(f, grad=True).zero_()
-        tape.backward(grads={
-            states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
-            states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
-        })
+        with sim._tape_stream():
+            tape.backward(grads={
+                states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
+                states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
+            })
 
         def grad(a, idx, width):
             return wp.to_torch(a.grad).view(sim.n_worlds, width)[:, idx].clone()
@@ -401,6 +424,15 @@ class _Step(torch.autograd.Function):
             g = sim._model_view(f, grad=True)
             g = g.sum(0) if f.startswith("body_") else g[:, sim.qd_index].sum(0)
             physics.append(g.to(device, dtype))
-        tape.zero()
+        with sim._tape_stream():
+            if ctx.names or sim.solver_kind != "replay" or getattr(sim.solver, "update_body_q", False):
+                tape.zero()
+            else:  # SolverReplay adds into the inputs' gradients only (the outputs' are overwritten next time):
+                # zero those, not the 13 parameter arrays no one reads here (one memset each, every step)
+                for st in states[:-1]:
+                    st.joint_q.grad.zero_()
+                    st.joint_qd.grad.zero_()
+                for a in (ctrl.joint_target_q, ctrl.joint_target_qd, ctrl.joint_f):
+                    a.grad.zero_()
         ctx.tape = None
         return (*out, None, None, None, *physics)
