@@ -97,7 +97,10 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path) -> int:
         _say(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
     if not args.no_gap:
         from ..evaluation.evaluate import pd_gap
+        from ..sim.warmup import compile_kernels
 
+        if any(ds.split(s) for s in ("validation", "heldout", "ood")):
+            compile_kernels(robot, args.rate, ("forward",), say=_say)
         gaps = {}
         for split in ("validation", "heldout", "ood"):
             trajs = ds.split(split)
@@ -164,6 +167,10 @@ def run(args: argparse.Namespace) -> int:
     ds = collect(robot, mismatch, counts, args.duration, args.rate, args.seed, cfg, store_tau=not args.no_tau,
                  progress=_say)
     if not args.no_gap:
+        from ..sim.warmup import compile_kernels
+
+        if any(ds.split(s) for s in ("validation", "heldout", "ood")):
+            compile_kernels(robot, args.rate, ("forward",), say=_say)
         gaps = {}
         for split in ("validation", "heldout", "ood"):
             trajs = ds.split(split)

@@ -39,6 +39,9 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     if abs(meta["rate_hz"] - ds.rate_hz) > 1e-9:
         raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {ds.rate_hz:g} Hz")
     out_dir = Path(out) if out else run_dir / "eval"
+    from ..sim.warmup import compile_kernels
+
+    compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)
