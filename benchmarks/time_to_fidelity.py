@@ -148,7 +148,8 @@ def main() -> None:
     dataset = load_dataset(args.data, robot=robot)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    pd_only = ValidationScore(robot, dataset.split("validation"), dataset.rate_hz, device=args.device)()
+    pd_only = ValidationScore(robot, dataset.split("validation"), dataset.rate_hz, device=args.device,
+                              weights=dataset.fit_weights())()
     target = pd_only / args.ratio
     print(f"PD-only validation error {pd_only:.4f} rad; target {target:.4f} rad ({args.ratio:g}x)", flush=True)
     jobs = []

@@ -462,8 +462,12 @@ def test_shipped_so101_subset(tmp_path, so101, capsys):
     assert main(["collect", "--robot", str(SO101), "--logs", str(short), "--map", str(SHIPPED / "map.toml"),
                  "--out", str(tmp_path / "gap")]) == 0
     gap = load_dataset(tmp_path / "gap" / "dataset.npz").meta["pd_only_gap"]["heldout"]
-    assert 0 < gap["mean_fitted"] < 0.2 and gap["diverged"] == 0
-    assert "(fitted joints only:" in capsys.readouterr().out
+    assert 0 < gap["mean"] < 0.2 and gap["diverged"] == 0 and gap["excluded_joints"] == ["gripper"]
+    # the gap averages over the five fitted joints only
+    fitted = [gap["per_joint"][j] for j in SO101_JOINTS if j != "gripper"]
+    assert gap["per_trajectory"]["step_response"] == pytest.approx(gap["mean"])
+    assert gap["mean"] == pytest.approx(sum(fitted) / 5)
+    assert "over the 5 fitted joints (excluded: gripper " in capsys.readouterr().out
 
 
 def test_shipped_subset_is_small_and_attributed():

@@ -97,18 +97,20 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path) -> int:
         _say(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
     if not args.no_gap:
         from ..evaluation.evaluate import pd_gap
+        from ..sim.warmup import compile_kernels
 
+        if any(ds.split(s) for s in ("validation", "heldout", "ood")):
+            compile_kernels(robot, args.rate, ("forward",), say=_say)
         gaps = {}
-        fitted = [j for j in ds.joint_names if j not in excluded]
         for split in ("validation", "heldout", "ood"):
             trajs = ds.split(split)
             if trajs:
                 _say(f"replaying {len(trajs)} {split} run(s) PD-only in Newton (nominal robot)")
-                g = gaps[split] = pd_gap(robot, trajs, args.rate)
-                g["mean_fitted"] = sum(g["per_joint"][j] for j in fitted) / len(fitted) if fitted else None
+                g = gaps[split] = pd_gap(robot, trajs, args.rate, weights=ds.fit_weights())
                 line = f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad"
-                if excluded and fitted:
-                    line += f" (fitted joints only: {g['mean_fitted']:.4f} rad)"
+                if excluded:
+                    line += (f" over the {len(ds.fitted_joints)} fitted joints (excluded: "
+                             + ", ".join(f"{j} {g['per_joint'][j]:.4f} rad" for j in excluded) + ")")
                 _say(line + (f"; {g['diverged']} replay(s) diverged" if g["diverged"] else ""))
         ds.meta["pd_only_gap"] = gaps
     out.mkdir(parents=True, exist_ok=True)
@@ -165,6 +167,10 @@ def run(args: argparse.Namespace) -> int:
     ds = collect(robot, mismatch, counts, args.duration, args.rate, args.seed, cfg, store_tau=not args.no_tau,
                  progress=_say)
     if not args.no_gap:
+        from ..sim.warmup import compile_kernels
+
+        if any(ds.split(s) for s in ("validation", "heldout", "ood")):
+            compile_kernels(robot, args.rate, ("forward",), say=_say)
         gaps = {}
         for split in ("validation", "heldout", "ood"):
             trajs = ds.split(split)

@@ -62,6 +62,9 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     print(f"identifying {', '.join(cfg.fit)} on {len(ds.split('train'))} trajectories of {args.data}: "
           f"{cfg.iterations} iterations x {cfg.windows} windows -> {out}", flush=True)
+    from ..sim.warmup import compile_kernels
+
+    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device)
     try:
         params, curve = identify(robot, ds, cfg, out=out)
     except (ValueError, FloatingPointError) as e:

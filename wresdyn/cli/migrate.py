@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
         robot = m.robot or dataset_robot(ds.robot_file, args.robot,
                                          args.gains if args.gains is not None else ds.gains_config)
         _say(f"replaying {len(m.names)} validation trajectories PD-only in Newton (nominal robot)")
-        g = pd_gap(robot, ds.for_robot(robot, str(args.data)).split("validation"), ds.rate_hz)
+        mapped = ds.for_robot(robot, str(args.data))
+        g = pd_gap(robot, mapped.split("validation"), ds.rate_hz, weights=mapped.fit_weights())
         _say(f"  PD-only vs real on validation: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")
         ds.meta["pd_only_gap"] = {"validation": g, **{k: v for k, v in gaps.items() if k != "validation"}}
     ds.save(out)

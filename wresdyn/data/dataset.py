@@ -139,6 +139,26 @@ class Dataset:
         return [tr for tr in self.trajectories if tr.split == name]
 
     @property
+    def excluded_joints(self) -> list[str]:
+        """Joints kept out of the fit and out of every error metric, in :attr:`joint_names` order: the mapping
+        file's ``[exclude]`` (``meta["excluded_joints"]``, e.g. the SO-101 gripper); ``[]`` when there is none.
+        They are still replayed with their recorded commands."""
+        excluded = self.meta.get("excluded_joints") or []
+        return [j for j in self.joint_names if j in excluded]
+
+    @property
+    def fitted_joints(self) -> list[str]:
+        """The joints every learner fits and every metric averages over: all but :attr:`excluded_joints`."""
+        excluded = self.excluded_joints
+        return [j for j in self.joint_names if j not in excluded]
+
+    def fit_weights(self) -> np.ndarray:
+        """Per-joint weight of the fit losses and error metrics, shape (n_dof,) in :attr:`joint_names` order:
+        1.0 for a fitted joint, 0.0 for an excluded one (:attr:`excluded_joints`)."""
+        excluded = set(self.excluded_joints)
+        return np.array([0.0 if j in excluded else 1.0 for j in self.joint_names])
+
+    @property
     def gains_config(self) -> dict | None:
         """The stored gains config (parsed TOML) to load the robot with, ``None`` when there is none."""
         return None if self.gains is None else self.gains["config"]
@@ -155,6 +175,16 @@ class Dataset:
         if isinstance(self.rate_hz, bool) or not isinstance(self.rate_hz, (int, float)) or not (
                 np.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise DatasetError(f"{where}: rate_hz must be a positive number, not {self.rate_hz!r}")
+        excluded = self.meta.get("excluded_joints") if isinstance(self.meta, dict) else None
+        if excluded is not None:
+            if not isinstance(excluded, list) or not all(isinstance(j, str) for j in excluded):
+                raise DatasetError(f"{where}: meta excluded_joints must be a list of joint names, not {excluded!r}")
+            unknown = [j for j in excluded if j not in names]
+            if unknown:
+                raise DatasetError(f"{where}: meta excluded_joints names {unknown}, which are not among the joints "
+                                   f"{names}")
+            if set(names) <= set(excluded):
+                raise DatasetError(f"{where}: meta excluded_joints excludes every joint; nothing is left to fit")
         if not isinstance(self.trajectories, list) or not self.trajectories:
             raise DatasetError(f"{where}: no trajectories")
         seen = set()

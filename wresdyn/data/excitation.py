@@ -128,10 +128,18 @@ class Workspace:
     """Sole orientation in the neutral pose (the 'level' orientation), shape (n_feet, 3, 3)."""
 
 
-def foot_workspace(ik: FootIK, cfg: ExcitationConfig, seed: int = 0) -> Workspace:
+PROGRESS_EVERY = 2.0
+"""Seconds between progress lines of the workspace fitting loop (a round faster than that prints nothing)."""
+
+
+def foot_workspace(ik: FootIK, cfg: ExcitationConfig, seed: int = 0, progress=None) -> Workspace:
     """Sample the reachable workspace of each sole with the sole level: random leg configurations inside the
     limits are moved to the nearest configuration with level soles (orientation-only IK) and their sole
-    positions (FK) collected; the box spans the given per-axis quantiles of those positions."""
+    positions (FK) collected; the box spans the given per-axis quantiles of those positions. ``progress``: optional
+    ``callable(str)`` receiving a line after the sampling and after each round of fitting the box into reach."""
+    import time
+
+    start = time.perf_counter()
     rng = np.random.default_rng(seed)
     robot = ik.robot
     q_ref = np.clip(robot.q0, ik.lower, ik.upper)
@@ -163,20 +171,31 @@ def foot_workspace(ik: FootIK, cfg: ExcitationConfig, seed: int = 0) -> Workspac
             hi[f, 1] = min(hi[f, 1], -cfg.min_foot_y)
     centre = 0.5 * (lo + hi)
     home = confs[int(np.argmin(np.linalg.norm(pts - centre, axis=2).sum(axis=1)))]
-    lo, hi = _shrink_to_reachable(ik, lo, hi, home, level, cfg)
+    if progress:
+        progress(f"  {len(pts)} of {cfg.workspace_samples} sampled configurations usable "
+                 f"({time.perf_counter() - start:.1f} s); checking the box is reachable (IK on a 5x5x5 grid per frame)")
+    lo, hi = _shrink_to_reachable(ik, lo, hi, home, level, cfg, progress)
+    if progress:
+        size = ", ".join(f"{f} {100 * (hi[i] - lo[i]).min():.1f}-{100 * (hi[i] - lo[i]).max():.1f} cm"
+                         for i, f in enumerate(ik.frames))
+        progress(f"  workspace ready in {time.perf_counter() - start:.1f} s: box sides {size}")
     return Workspace(lo=lo, hi=hi, home=home, level=level)
 
 
-def _shrink_to_reachable(ik: FootIK, lo, hi, home, level, cfg: ExcitationConfig):
+def _shrink_to_reachable(ik: FootIK, lo, hi, home, level, cfg: ExcitationConfig, progress=None):
     """The reachable set is curved, so corners of the quantile box can be out of reach: each round, pull in by
-    a tenth of the box size every face touched by an unreachable point of a 5x5x5 grid."""
+    a tenth of the box size every face touched by an unreachable point of a 5x5x5 grid (``progress``: a line after
+    a round when the last line is :data:`PROGRESS_EVERY` or more old)."""
     import itertools
+    import time
 
     grid = np.array(list(itertools.product(np.linspace(0.0, 1.0, 5), repeat=3)))
     home_pos, _ = ik.forward(home)
     lo, hi = lo.copy(), hi.copy()
-    for _ in range(20):
+    last = time.perf_counter()
+    for r in range(20):
         bad = False
+        n_bad = 0
         for f in range(len(lo)):
             size = hi[f] - lo[f]
             pull_lo, pull_hi = np.zeros(3, dtype=bool), np.zeros(3, dtype=bool)
@@ -186,12 +205,16 @@ def _shrink_to_reachable(ik: FootIK, lo, hi, home, level, cfg: ExcitationConfig)
                 _, err = ik.solve(pos, level, home)
                 if err[f, 0] > 0.1 * cfg.ik_tol:
                     bad = True
+                    n_bad += 1
                     pull_lo |= u == 0.0
                     pull_hi |= u == 1.0
             lo[f] += np.where(pull_lo, 0.1 * size, 0.0)
             hi[f] -= np.where(pull_hi, 0.1 * size, 0.0)
         if not bad:
             return lo, hi
+        if progress and time.perf_counter() - last >= PROGRESS_EVERY:
+            progress(f"  round {r + 1}/20: {n_bad} of {len(grid) * len(lo)} grid points out of reach; box pulled in")
+            last = time.perf_counter()
     raise RobotError(f"{ik.robot.source}: the sole workspace box did not become reachable; check the robot's limits")
 
 
@@ -347,7 +370,7 @@ def _chirp(rng, robot: Robot, t, cfg, vmax: float | None = None, amax: np.ndarra
 
 
 def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: float, rate_hz: float,
-             rng: np.random.Generator, cfg: ExcitationConfig | None = None) -> Excitation:
+             rng: np.random.Generator, cfg: ExcitationConfig | None = None, progress=None) -> Excitation:
     """Draw one excitation of ``family``; redraws (same generator) until IK and speed checks pass.
 
     Args:
@@ -359,7 +382,10 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
         rate_hz: Command rate [Hz].
         rng: Random generator (advanced in place).
         cfg: Parameter ranges.
+        progress: Optional ``callable(str)`` receiving a line per rejected draw (why, and how long it took).
     """
+    import time
+
     cfg = cfg or ExcitationConfig()
     if family not in FAMILIES:
         raise ValueError(f"unknown excitation family {family!r}; choose from {FAMILIES} (joint-space families: "
@@ -368,6 +394,7 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
     leg = ik.dofs
     rest = np.setdiff1d(np.arange(robot.n_dof), leg)
     for draw in range(cfg.max_draws):
+        start = time.perf_counter()
         if family == "chirp":
             q, params = _chirp(rng, robot, t, cfg)
             ik_err = 0.0
@@ -379,6 +406,9 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
             q = q_leg.copy()
             q[:, rest], params["upper_body"] = _upper_body(rng, robot, rest, t, cfg)
             if ik_err > cfg.ik_tol:
+                if progress:
+                    progress(f"  {family} draw {draw + 1}/{cfg.max_draws} rejected: IK error {1e3 * ik_err:.2f} mm > "
+                             f"{1e3 * cfg.ik_tol:g} mm ({time.perf_counter() - start:.1f} s); drawing again")
                 continue
         speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz)
         lo, hi = _finite_limits(robot)
@@ -386,6 +416,11 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
         if speed <= cfg.max_velocity and inside:
             params.update(family=family, draws=draw + 1, ik_max_error_m=ik_err, max_speed=speed)
             return Excitation(family=family, q_cmd=q, params=params)
+        if progress:
+            why = f"peak {speed:.1f} rad/s > {cfg.max_velocity:g} rad/s" if speed > cfg.max_velocity else \
+                "a joint too close to its limit"
+            progress(f"  {family} draw {draw + 1}/{cfg.max_draws} rejected: {why} ({time.perf_counter() - start:.1f} s); "
+                     "drawing again")
     raise RobotError(f"{robot.source}: no {family} excitation passed the IK ({cfg.ik_tol} m) and speed "
                      f"({cfg.max_velocity} rad/s) checks in {cfg.max_draws} draws; widen the workspace or "
                      "lower peak_rate")
@@ -415,10 +450,12 @@ class Plan:
             return OOD_FAMILIES if split == "ood" else TRAIN_FAMILIES
         return JOINT_OOD_FAMILIES if split == "ood" else JOINT_TRAIN_FAMILIES
 
-    def generate(self, family: str, duration: float, rate_hz: float, rng: np.random.Generator) -> Excitation:
-        """Draw one excitation (:func:`generate` or :func:`~wresdyn.data.joint_excitation.generate_joint`)."""
+    def generate(self, family: str, duration: float, rate_hz: float, rng: np.random.Generator,
+                 progress=None) -> Excitation:
+        """Draw one excitation (:func:`generate` or :func:`~wresdyn.data.joint_excitation.generate_joint`);
+        ``progress``: optional ``callable(str)`` receiving a line per rejected foot-IK draw."""
         if self.mode == "foot":
-            return generate(family, self.robot, self.ik, self.ws, duration, rate_hz, rng, self.cfg)
+            return generate(family, self.robot, self.ik, self.ws, duration, rate_hz, rng, self.cfg, progress)
         from .joint_excitation import generate_joint
 
         return generate_joint(family, self.robot, duration, rate_hz, rng, self.cfg, self.dynamics)
@@ -472,7 +509,7 @@ def plan(robot: Robot, cfg: ExcitationConfig | None = None, progress=None) -> Pl
     if progress:
         progress(f"foot IK on {', '.join(ik.frames)} ({'position only' if ik.position_only else 'full pose'}, "
                  f"{len(ik.dofs)} joints): sampling the workspace ({cfg.workspace_samples} configurations)")
-    ws = foot_workspace(ik, cfg)
+    ws = foot_workspace(ik, cfg, progress=progress)
     return Plan(robot, cfg, ik=ik, ws=ws)
 
 

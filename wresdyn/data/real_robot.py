@@ -431,7 +431,8 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
         excitation: :class:`~wresdyn.data.excitation.ExcitationConfig` (default ranges, ``mode = "auto"``, when
             ``None``).
         store_tau: Keep the measured (diagnostic) torque in the trajectories.
-        progress: Optional ``callable(str)`` receiving the plan's lines and one line per recorded trajectory.
+        progress: Optional ``callable(str)`` receiving the plan's lines (foot IK: the workspace), a line per rejected
+            draw and one line per recorded trajectory.
     """
     import time
 
@@ -453,7 +454,7 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
             seeds = np.random.SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i)).spawn(2)
             rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
             family = families[split][i % len(families[split])]
-            exc = plan.generate(family, duration, rate_hz, rng_exc)
+            exc = plan.generate(family, duration, rate_hz, rng_exc, progress)
             q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
             q, qd, tau = real.record(q_cmd, rng_noise)
             q, qd = _f32(q), _f32(qd)

@@ -116,7 +116,7 @@ def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> 
     from .evaluate import evaluate_split
 
     summary, _ = evaluate_split(robot, dataset.split(split), dataset.rate_hz, policy, kind=kind, solver=cfg.solver,
-                                device=cfg.device)
+                                device=cfg.device, weights=dataset.fit_weights())
     return summary
 
 

@@ -5,6 +5,10 @@ the recorded commands, once with PD alone and once with the residual in the loop
 of worlds through the simulation layer's rollout (:func:`wresdyn.sim.rollout`). The headline number is the
 mean |Δq| = |q_sim − q_real| over all joints and samples [rad], ± its std.
 
+Joints a dataset excludes from fitting (its mapping file's ``[exclude]``, e.g. a gripper:
+:attr:`~wresdyn.data.dataset.Dataset.excluded_joints`) are replayed like the others but left out of every
+average: pass ``weights=dataset.fit_weights()`` (1 fitted, 0 excluded) and the summary and report name them.
+
 Diverged replays are never dropped: a world that diverges holds its last sane state to the end of the
 trajectory (the robot "stops"), so its growing error to the recording counts against the model, and the
 number of diverged trajectories is reported next to every figure. PD-only and PD + residual are averaged over
@@ -23,14 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import WresdynError
 from ..sim.rollout import replay_trajectories
 
-__all__ = ["Metrics", "metrics", "evaluate_split", "pd_gap", "summary_line", "write_report"]
+__all__ = ["Metrics", "fitted_mask", "excluded_names", "metrics", "evaluate_split", "pd_gap", "summary_line",
+           "write_report"]
 
 
 @dataclass(frozen=True)
 class Metrics:
-    """Errors of simulated vs recorded joint states over all joints and samples of a set of trajectories."""
+    """Errors of simulated vs recorded joint states over the fitted joints (all joints unless some are excluded)
+    and all samples of a set of trajectories."""
 
     mean_abs_dq: float
     """mean |q_sim − q_real| [rad]."""
@@ -41,7 +48,7 @@ class Metrics:
     max_abs_dq: float
     """max |q_sim − q_real| [rad]."""
     per_joint_rmse: list[float]
-    """RMSE per joint [rad], shape (n_dof,)."""
+    """RMSE per joint [rad], shape (n_dof,): every joint, excluded ones too (for the report)."""
     mean_abs_dqd: float
     """mean |q̇_sim − q̇_real| [rad/s]."""
     rmse_dqd: float
@@ -52,48 +59,75 @@ class Metrics:
     """Trajectories whose replay diverged; from the divergence on they hold their last sane state."""
     diverged_names: list[str]
     """Names of the diverged trajectories."""
+    n_joints: int = 0
+    """Joints the averages above run over (the fitted ones)."""
 
 
-def metrics(trajectories, replays) -> Metrics:
-    """:class:`Metrics` of ``replays`` against the recorded ``trajectories`` (every trajectory counts)."""
-    dq = np.concatenate([q - t.q for t, q in zip(trajectories, replays.q)])
-    dqd = np.concatenate([qd - t.qd for t, qd in zip(trajectories, replays.qd)])
+def fitted_mask(weights, n_dof: int) -> np.ndarray:
+    """The joints the metrics average over, bool (n_dof,): ``weights > 0`` for per-joint weights (n_dof,) such as
+    :meth:`~wresdyn.data.dataset.Dataset.fit_weights` (1 fitted, 0 excluded), every joint for ``None``."""
+    if weights is None:
+        return np.ones(n_dof, dtype=bool)
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != (n_dof,) or not np.isfinite(w).all() or (w < 0).any():
+        raise WresdynError(f"joint weights must be {n_dof} finite numbers >= 0 (one per joint), got shape {w.shape}")
+    if not (w > 0).any():
+        raise WresdynError("joint weights exclude every joint: no joint left to measure")
+    return w > 0
+
+
+def excluded_names(joint_names, weights) -> list[str]:
+    """Names of the joints ``weights`` excludes (weight 0), in order; ``[]`` for ``None``."""
+    return [j for j, m in zip(joint_names, fitted_mask(weights, len(joint_names))) if not m]
+
+
+def metrics(trajectories, replays, weights=None) -> Metrics:
+    """:class:`Metrics` of ``replays`` against the recorded ``trajectories`` (every trajectory counts), averaged
+    over the joints with ``weights > 0`` (per-joint weights (n_dof,), :func:`fitted_mask`; ``None``: all)."""
+    dq_all = np.concatenate([q - t.q for t, q in zip(trajectories, replays.q)])
+    mask = fitted_mask(weights, dq_all.shape[1])
+    dq = dq_all[:, mask]
+    dqd = np.concatenate([qd - t.qd for t, qd in zip(trajectories, replays.qd)])[:, mask]
     names = [getattr(t, "name", str(i)) for i, (t, a) in enumerate(zip(trajectories, replays.diverged_at)) if a >= 0]
     return Metrics(
         mean_abs_dq=float(np.abs(dq).mean()),
         std_abs_dq=float(np.abs(dq).std()),
         rmse_dq=float(np.sqrt((dq**2).mean())),
         max_abs_dq=float(np.abs(dq).max()),
-        per_joint_rmse=[float(x) for x in np.sqrt((dq**2).mean(0))],
+        per_joint_rmse=[float(x) for x in np.sqrt((dq_all**2).mean(0))],
         mean_abs_dqd=float(np.abs(dqd).mean()),
         rmse_dqd=float(np.sqrt((dqd**2).mean())),
         n_trajectories=len(trajectories),
         diverged=len(names),
         diverged_names=names,
+        n_joints=int(mask.sum()),
     )
 
 
 def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str | None = None, solver: str = "auto",
-                   substeps: int = 1, device: str | None = "cpu", delay: float = 0.0, physics=None
+                   substeps: int = 1, device: str | None = "cpu", delay: float = 0.0, physics=None, weights=None
                    ) -> tuple[dict, dict]:
     """PD-only and PD + residual metrics for one split (``physics``: the model's physical parameters, see
     :func:`~wresdyn.sim.rollout.replay_trajectories`; "PD + residual" is then the calibrated model with its
-    residual, or alone without a policy).
+    residual, or alone without a policy). ``weights`` (n_dof,): per-joint weights, joints with 0 are left out of
+    the metrics (pass :meth:`~wresdyn.data.dataset.Dataset.fit_weights`); ``None``: every joint counts.
 
     Returns:
         ``(summary, replays)``: summary ``{"pd_only": Metrics-dict, "pd_residual": Metrics-dict | None,
-        "improvement": mean |Δq| PD-only / PD + residual, "n_trajectories", "seconds"}`` and the replays of
-        :func:`wresdyn.sim.rollout.replay_trajectories`.
+        "improvement": mean |Δq| PD-only / PD + residual, "n_trajectories", "seconds", "excluded_joints": names
+        left out of the metrics}`` and the replays of :func:`wresdyn.sim.rollout.replay_trajectories`.
     """
     trajectories = list(trajectories)
     if not trajectories:
         raise ValueError("no trajectories to evaluate")
+    excluded = excluded_names(robot.joint_names, weights)  # checks the weights before the replay
     runs = replay_trajectories(robot, trajectories, rate_hz, policy, kind=kind, solver=solver, substeps=substeps,
                                device=device, with_baseline=True, delay=delay, physics=physics)
-    pd = metrics(trajectories, runs["pd"])
-    res = metrics(trajectories, runs["residual"]) if "residual" in runs else None
+    pd = metrics(trajectories, runs["pd"], weights)
+    res = metrics(trajectories, runs["residual"], weights) if "residual" in runs else None
     summary = {
         "n_trajectories": len(trajectories),
+        "excluded_joints": excluded,
         "seconds": float(sum(len(t.q) - 1 for t in trajectories) / rate_hz),
         "pd_only": asdict(pd),
         "pd_residual": asdict(res) if res else None,
@@ -102,24 +136,29 @@ def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str |
     return summary, runs
 
 
-def pd_gap(robot, trajectories, rate_hz: float, solver: str = "auto", device: str | None = "cpu") -> dict:
+def pd_gap(robot, trajectories, rate_hz: float, solver: str = "auto", device: str | None = "cpu",
+           weights=None) -> dict:
     """The sim-to-real gap to close: PD-only Newton replay of each trajectory (nominal robot, open loop from the
-    first recorded state, whole trajectory) against the recording.
+    first recorded state, whole trajectory) against the recording. ``weights`` (n_dof,) as in
+    :func:`evaluate_split`: joints with weight 0 are left out of ``mean``, ``std`` and ``per_trajectory``.
 
     Returns:
-        ``{"mean": mean |Δq| [rad], "std": its std over all samples and joints [rad], "per_trajectory":
-        {name: mean |Δq|}, "per_joint": {joint: mean |Δq|}, "n_trajectories": int, "diverged": int}``.
+        ``{"mean": mean |Δq| [rad], "std": its std over all samples and fitted joints [rad], "per_trajectory":
+        {name: mean |Δq|}, "per_joint": {joint: mean |Δq|} (every joint), "excluded_joints": [names],
+        "n_trajectories": int, "diverged": int}``.
     """
     trajectories = list(trajectories)
     if not trajectories:
         return {}
+    mask = fitted_mask(weights, robot.n_dof)
     runs = replay_trajectories(robot, trajectories, rate_hz, solver=solver, device=device)["pd"]
     errs = [np.abs(q - t.q) for t, q in zip(trajectories, runs.q)]
     e = np.concatenate(errs)
-    return {"mean": float(e.mean()), "std": float(e.std()),
-            "per_trajectory": {t.name: float(x.mean()) for t, x in zip(trajectories, errs)},
-            "per_joint": dict(zip(robot.joint_names, e.mean(axis=0).tolist())), "n_trajectories": len(trajectories),
-            "diverged": sum(a >= 0 for a in runs.diverged_at)}
+    return {"mean": float(e[:, mask].mean()), "std": float(e[:, mask].std()),
+            "per_trajectory": {t.name: float(x[:, mask].mean()) for t, x in zip(trajectories, errs)},
+            "per_joint": dict(zip(robot.joint_names, e.mean(axis=0).tolist())),
+            "excluded_joints": [j for j, m in zip(robot.joint_names, mask) if not m],
+            "n_trajectories": len(trajectories), "diverged": sum(a >= 0 for a in runs.diverged_at)}
 
 
 def summary_line(split: str, s: dict) -> str:
@@ -135,6 +174,8 @@ def summary_line(split: str, s: dict) -> str:
             line += f"  {res['diverged']} residual replay(s) diverged: {', '.join(res['diverged_names'])}"
     if pd["diverged"]:
         line += f"  {pd['diverged']} PD-only replay(s) diverged"
+    if s.get("excluded_joints"):
+        line += f"  (over {pd['n_joints']} fitted joints; excluded: {', '.join(s['excluded_joints'])})"
     return line
 
 
@@ -146,13 +187,18 @@ def write_report(out_dir: str | Path, robot, results: dict, info: dict | None = 
     """Write ``metrics.json`` and ``report.md`` for ``results`` = {split: summary of :func:`evaluate_split`}."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    doc = {"info": info or {}, "joint_names": list(robot.joint_names), "splits": results}
+    excluded = sorted({j for s in results.values() for j in s.get("excluded_joints", [])},
+                      key=list(robot.joint_names).index)
+    doc = {"info": info or {}, "joint_names": list(robot.joint_names), "excluded_joints": excluded,
+           "splits": results}
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     lines = ["# Residual dynamics evaluation", ""]
     for k, v in (info or {}).items():
         lines.append(f"- {k}: `{v}`")
-    lines += ["", "Open-loop replay from the first recorded state, whole trajectories. Mean |Δq| ± std over all "
-              "joints and samples of every trajectory; a replay that diverged holds its last sane state from there "
+    over = (f"the {len(robot.joint_names) - len(excluded)} fitted joints (excluded from fitting and from these "
+            f"figures: {', '.join(excluded)})") if excluded else "all joints"
+    lines += ["", f"Open-loop replay from the first recorded state, whole trajectories. Mean |Δq| ± std over {over} "
+              "and samples of every trajectory; a replay that diverged holds its last sane state from there "
               "on and counts with that error.", "",
               "| split | traj | PD only [rad] | PD + residual [rad] | improvement | diverged PD / +res | "
               "vel. err PD / +res [rad/s] |",
@@ -175,7 +221,7 @@ def write_report(out_dir: str | Path, robot, results: dict, info: dict | None = 
             a = s["pd_only"]["per_joint_rmse"][j]
             b = s["pd_residual"]["per_joint_rmse"][j] if s["pd_residual"] else float("nan")
             cells.append(f"{a:.4f} → {b:.4f}")
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append(f"| {name}{' (excluded)' if name in excluded else ''} | " + " | ".join(cells) + " |")
     figs = sorted(p.name for p in out.glob("*.png"))
     if figs:
         lines += [""] + [f"![{f}]({f})" for f in figs]

@@ -9,9 +9,11 @@ import numpy as np
 __all__ = ["plot_fig3", "save_figure", "learning_curves", "plot_learning_curves"]
 
 
-def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joints: int = 6, title: str = "") -> Path:
+def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joints: int = 6, title: str = "",
+              weights=None) -> Path:
     """Fig. 3-style plot of the first trajectory of ``runs`` (:func:`~wresdyn.evaluation.evaluate.replay_split`):
-    real (red), PD only (green), PD + residual (blue), for the ``n_joints`` joints with the largest PD-only error."""
+    real (red), PD only (green), PD + residual (blue), for the ``n_joints`` joints with the largest PD-only error
+    among those with ``weights > 0`` (per-joint weights (n_dof,), e.g. ``Dataset.fit_weights()``; ``None``: all)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -19,7 +21,12 @@ def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joint
 
     q_pd = runs["pd"].q[0]
     q_res = runs["residual"].q[0] if "residual" in runs else None
-    joints = np.argsort(-np.sqrt(np.nanmean((q_pd - traj.q) ** 2, axis=0)))[:n_joints]
+    from .evaluate import fitted_mask
+
+    err = np.sqrt(np.nanmean((q_pd - traj.q) ** 2, axis=0))
+    fitted = np.flatnonzero(fitted_mask(weights, len(err)))
+    joints = fitted[np.argsort(-err[fitted], kind="stable")][:n_joints]
+    n_joints = len(joints)
     t = np.arange(len(traj.q)) / rate_hz
     cols = 2 if n_joints > 1 else 1
     rows = int(np.ceil(n_joints / cols))

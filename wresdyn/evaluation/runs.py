@@ -39,6 +39,12 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     if abs(meta["rate_hz"] - ds.rate_hz) > 1e-9:
         raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {ds.rate_hz:g} Hz")
     out_dir = Path(out) if out else run_dir / "eval"
+    from ..sim.warmup import compile_kernels
+
+    compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
+    weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
+    if ds.excluded_joints:
+        print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)
     results = {}
     for split in splits:
         trajs = ds.split(split)
@@ -46,10 +52,10 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
             print(f"{split}: no trajectories, skipped")
             continue
         summary, runs = evaluate_split(robot, trajs, ds.rate_hz, policy, meta["kind"], solver, substeps, device,
-                                       physics=physics)
+                                       physics=physics, weights=weights)
         results[split] = summary
         plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
-                  title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)")
+                  title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)
         print(summary_line(split, summary), flush=True)
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
     plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")

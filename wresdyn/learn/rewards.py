@@ -4,6 +4,12 @@ Every term maps batched tensors of shape (N, n_dof) to one value per world, shap
 :func:`reward_terms` multiplies each by its weight from :class:`RewardConfig`, so the table lives in
 one place. Mimic terms use the kernel φ(x) = exp(−|x|²/σ) with |x|² summed over joints.
 
+Joints a dataset excludes from fitting (:meth:`wresdyn.data.dataset.Dataset.fit_weights`: 1 fitted, 0 excluded)
+are left out of the terms that compare with the recording (position and velocity mimic, position bonus) by the
+optional per-joint ``weights`` (n,): |x|² becomes Σ_j w_j x_j² and the bonus a w-weighted mean over joints. The
+regularisers (torque, velocity, acceleration, action rate and acceleration) keep every joint: a residual on an
+excluded joint is still penalised, never rewarded.
+
 Table I (defaults below):
 
 =========================  =========  ==========================================
@@ -85,28 +91,39 @@ TERMS = ("joint_pos_mimic", "joint_vel_mimic", "joint_pos_bonus", "joint_torque"
 """Reward term names, in Table I order; each is a function here and a weight in :class:`RewardConfig`."""
 
 
-def kernel(x: torch.Tensor, sigma: float) -> torch.Tensor:
-    """φ(x) = exp(−|x|²/σ), |x|² summed over the last axis. (N, n) -> (N,)."""
-    return torch.exp(-x.square().sum(-1) / sigma)
+def kernel(x: torch.Tensor, sigma: float, weights: torch.Tensor | None = None) -> torch.Tensor:
+    """φ(x) = exp(−|x|²/σ), |x|² summed over the last axis, each joint's x_j² times ``weights[j]`` when given
+    (n,). (N, n) -> (N,)."""
+    sq = x.square()
+    return torch.exp(-(sq if weights is None else sq * weights).sum(-1) / sigma)
 
 
-def joint_pos_mimic(q: torch.Tensor, q_r: torch.Tensor, sigma: float) -> torch.Tensor:
-    """φ(q − q_r): simulated vs recorded joint positions [rad]. (N, n) -> (N,)."""
-    return kernel(q - q_r, sigma)
+def joint_pos_mimic(q: torch.Tensor, q_r: torch.Tensor, sigma: float,
+                    weights: torch.Tensor | None = None) -> torch.Tensor:
+    """φ(q − q_r): simulated vs recorded joint positions [rad], per-joint ``weights`` (n,) as in :func:`kernel`.
+    (N, n) -> (N,)."""
+    return kernel(q - q_r, sigma, weights)
 
 
-def joint_vel_mimic(qd: torch.Tensor, qd_r: torch.Tensor, sigma: float) -> torch.Tensor:
-    """φ(q̇ − q̇_r): simulated vs recorded joint velocities [rad/s]. (N, n) -> (N,)."""
-    return kernel(qd - qd_r, sigma)
+def joint_vel_mimic(qd: torch.Tensor, qd_r: torch.Tensor, sigma: float,
+                    weights: torch.Tensor | None = None) -> torch.Tensor:
+    """φ(q̇ − q̇_r): simulated vs recorded joint velocities [rad/s], per-joint ``weights`` (n,) as in :func:`kernel`.
+    (N, n) -> (N,)."""
+    return kernel(qd - qd_r, sigma, weights)
 
 
-def joint_pos_bonus(q: torch.Tensor, q_r: torch.Tensor, tol: float) -> torch.Tensor:
-    """1{|q − q_r| < tol}, read per joint and averaged over joints, in [0, 1]. (N, n) -> (N,).
+def joint_pos_bonus(q: torch.Tensor, q_r: torch.Tensor, tol: float,
+                    weights: torch.Tensor | None = None) -> torch.Tensor:
+    """1{|q − q_r| < tol}, read per joint and averaged over joints (a ``weights``-weighted mean when given, (n,)),
+    in [0, 1]. (N, n) -> (N,).
 
     Read on the whole-robot norm, the indicator almost never fires with 21 joints and gives no signal;
     per joint it counts the joints already matched, and equals the table's indicator for one joint.
     """
-    return ((q - q_r).abs() < tol).float().mean(-1)
+    hit = ((q - q_r).abs() < tol).float()
+    if weights is None:
+        return hit.mean(-1)
+    return (hit * weights).sum(-1) / weights.sum()
 
 
 def joint_torque(tau: torch.Tensor) -> torch.Tensor:
@@ -145,6 +162,7 @@ def reward_terms(
     a: torch.Tensor,
     a_prev: torch.Tensor,
     a_prev2: torch.Tensor,
+    weights: torch.Tensor | None = None,
 ) -> dict[str, torch.Tensor]:
     """All weighted terms, name -> (N,); the step reward is their sum.
 
@@ -154,11 +172,13 @@ def reward_terms(
         q_r, qd_r: Recorded joint positions and velocities at the same time, (N, n).
         tau: Total joint torque applied during the step [N*m], (N, n).
         a, a_prev, a_prev2: Normalised actions at t, t−1, t−2, (N, n).
+        weights: Per-joint weights (n,) of the mimic and bonus terms (``Dataset.fit_weights()``: 0 for a joint
+            excluded from fitting); ``None``: every joint counts (Table I as written).
     """
     return {
-        "joint_pos_mimic": cfg.joint_pos_mimic * joint_pos_mimic(q, q_r, cfg.sigma_q),
-        "joint_vel_mimic": cfg.joint_vel_mimic * joint_vel_mimic(qd, qd_r, cfg.sigma_qd),
-        "joint_pos_bonus": cfg.joint_pos_bonus * joint_pos_bonus(q, q_r, cfg.bonus_tol),
+        "joint_pos_mimic": cfg.joint_pos_mimic * joint_pos_mimic(q, q_r, cfg.sigma_q, weights),
+        "joint_vel_mimic": cfg.joint_vel_mimic * joint_vel_mimic(qd, qd_r, cfg.sigma_qd, weights),
+        "joint_pos_bonus": cfg.joint_pos_bonus * joint_pos_bonus(q, q_r, cfg.bonus_tol, weights),
         "joint_torque": cfg.joint_torque * joint_torque(tau),
         "joint_vel": cfg.joint_vel * joint_vel(qd),
         "joint_acc": cfg.joint_acc * joint_acc(qdd),

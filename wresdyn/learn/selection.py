@@ -2,7 +2,8 @@
 
 The score is the evaluation's headline metric, mean |q_sim − q_real| over all joints and samples of whole
 validation trajectories replayed open loop from their first recorded state (:mod:`wresdyn.evaluation.evaluate`),
-computed through the same simulation layer. A diverged replay holds its last sane state, so it counts with its
+computed through the same simulation layer; joints the dataset excludes from fitting (``weights`` 0, from
+:meth:`~wresdyn.data.dataset.Dataset.fit_weights`) are left out of it, as from the evaluation. A diverged replay holds its last sane state, so it counts with its
 growing error instead of being left out. Held-out and OOD data never reach a learner.
 """
 
@@ -23,14 +24,19 @@ class ValidationScore:
         solver, device: Simulation settings (as the learner's).
         delay: Command-path delay of the simulator [steps].
         physics: Physical parameters of the model (the hybrid's identified physics, with its delay), or ``None``.
+        weights: Per-joint weights (n_dof,): joints with 0 (excluded from fitting) are left out of the score;
+            ``None``: every joint counts.
     """
 
     def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
-                 delay=0.0, physics=None) -> None:
+                 delay=0.0, physics=None, weights=None) -> None:
+        from ..evaluation.evaluate import fitted_mask
         from ..sim import Simulator
 
         self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay
         self.physics = physics
+        self.mask = fitted_mask(weights, robot.n_dof)
+        """Joints the score averages over, bool (n_dof,)."""
         if not self.trajectories:
             raise ValueError("no validation trajectories")
         self.sim = Simulator(robot, len(self.trajectories), 1.0 / self.rate_hz, solver=solver, device=device)
@@ -53,4 +59,4 @@ class ValidationScore:
                 policy.train()
         rep = runs["residual"] if "residual" in runs else runs["pd"]
         self.last_diverged = sum(a >= 0 for a in rep.diverged_at)
-        return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)]).mean())
+        return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)])[:, self.mask].mean())

@@ -123,20 +123,25 @@ class PhysicsScore(ValidationScore):
         return super().__call__()
 
 
-def _window_loss(cfg, model, sim, window):
+def _window_loss(cfg, model, sim, window, weights=None):
+    """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
+    per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
     from ..sim import rollout
 
     sim.set_physics(model())
     run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation)
-    pos = ((run.q[:, 1:] - window.q[:, 1:]) ** 2).sum(-1).mean()
-    vel = ((run.qd[:, 1:] - window.qd[:, 1:]) ** 2).sum(-1).mean()
+    pos, vel = (run.q[:, 1:] - window.q[:, 1:]) ** 2, (run.qd[:, 1:] - window.qd[:, 1:]) ** 2
+    if weights is not None:
+        pos, vel = pos * weights, vel * weights
+    pos, vel = pos.sum(-1).mean(), vel.sum(-1).mean()
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
 
 
-def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log) -> None:
+def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, weights=None) -> None:
     """Set ``field`` to the grid point of least training loss on a few windows (forward only).
 
     ``values(g)`` maps a grid point to the field's values (n,) [SI]; every other field keeps its current value.
+    ``weights``: per-joint weights (n,) tensor of the position error (0: excluded from fitting), ``None``: all 1.
     """
     from ..sim import TrajectoryBank, rollout
 
@@ -155,7 +160,8 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log) -> 
         window = bank.window(traj, start, h)
         with torch.no_grad():
             run = rollout(sim, window)
-        losses.append(float(((run.q[:, 1:] - window.q[:, 1:]) ** 2).sum(-1).mean()))
+        err = (run.q[:, 1:] - window.q[:, 1:]) ** 2
+        losses.append(float((err if weights is None else err * weights).sum(-1).mean()))
     best = grid[int(np.argmin(losses))]
     v = torch.as_tensor(values(best))
     with torch.no_grad():
@@ -192,7 +198,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
                               for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
     effort_from = int(round(cfg.effort_after * cfg.iterations)) if "effort" in cfg.fit else cfg.iterations
     validation = dataset.split("validation")
-    score = PhysicsScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device) if validation else None
+    score = PhysicsScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device,
+                         weights=dataset.fit_weights()) if validation else None
     select_every = max(1, cfg.select_every or cfg.iterations // 10)
     config = dataclasses.asdict(cfg)
     ckpt = Path(out) / "checkpoint.pt" if out else None
@@ -217,6 +224,9 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True)
     bank = TrajectoryBank(train, sim.device)
+    # joints excluded from fitting (the dataset's excluded_joints) weigh 0 in the loss; all-ones means none
+    weights = None if not dataset.excluded_joints else \
+        torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=sim.device)
     horizons = cfg.horizon_curriculum or (64,)
     t0 = time.perf_counter() - wall0
     for it in range(start_it, cfg.iterations):
@@ -228,12 +238,12 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
             file_effort = np.asarray(robot.effort, dtype=np.float64)
             if "delay" in cfg.fit:
                 _grid_search(cfg, model, sim, train, rng, "delay", cfg.delay_grid,
-                             lambda g: np.full(robot.n_dof, g * dt), log)
+                             lambda g: np.full(robot.n_dof, g * dt), log, weights)
             _grid_search(cfg, model, sim, train, rng, "effort", cfg.effort_grid,
-                         lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log)
+                         lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log, weights)
         bank.set_delay(model.delay_steps().float().to(sim.device))
         window = bank.sample(rng, cfg.windows, h)
-        loss, parts = _window_loss(cfg, model, sim, window)
+        loss, parts = _window_loss(cfg, model, sim, window, weights)
         loss = loss + cfg.w_prior * model.prior().to(loss.device)
         if not torch.isfinite(loss):
             raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")

@@ -1,0 +1,119 @@
+"""Progress lines where a command could otherwise sit silent: the first Warp compile of a robot's kernels
+(:mod:`wresdyn.sim.warmup`, called by collect, fit, train, identify and eval) and the foot-IK workspace and draws
+of ``collect``."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from wresdyn.cli import main
+from wresdyn.errors import WresdynError
+from wresdyn.paths import REPO
+from wresdyn.robot.description import RobotError, load_robot
+from wresdyn.sim.warmup import compile_kernels
+
+SO101 = REPO / "scenes" / "so101" / "so101.xml"
+SHIPPED = REPO / "data" / "so101"
+DONE = re.compile(r"^\.\.\. done in \d+\.\d s$")
+
+
+def test_compile_kernels_says_what_and_how_long_once_per_robot():
+    robot = load_robot(SO101)
+    lines = []
+    seconds = compile_kernels(robot, 500.0, ("forward", "grad"), say=lines.append)
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("compiling Warp kernels for so101.xml (6 joints; forward, grad): on a robot's first "
+                               "run only") and "1.19" in lines[0] and lines[0].endswith(" ...")
+    assert DONE.match(lines[1]) and seconds > 0
+    # compiled in this process: no second announcement, unless a variant is new
+    assert compile_kernels(robot, 500.0, ("grad", "forward"), say=lines.append) is None and len(lines) == 2
+    assert compile_kernels(robot, 500.0, ("param_grads",), say=lines.append) is not None
+    assert "(6 joints; param_grads)" in lines[2] and DONE.match(lines[3])
+    # another robot object (a new load) is announced again
+    assert compile_kernels(load_robot(SO101), 500.0, say=lines.append) is not None and len(lines) == 6
+    with pytest.raises(WresdynError, match="choose from forward, grad, param_grads"):
+        compile_kernels(robot, 500.0, ("backward",))
+
+
+def test_collect_logs_announces_the_compile_before_the_replay(tmp_path, capsys):
+    run = tmp_path / "logs" / "step_response"
+    run.mkdir(parents=True)
+    for f in ("joint_list.txt", "event.csv"):
+        shutil.copy(SHIPPED / "logs" / "step_response" / f, run / f)
+    for f in ("control.csv", "state_motor.csv"):  # 1 s of the run
+        lines = (SHIPPED / "logs" / "step_response" / f).read_text().splitlines()[:51]
+        (run / f).write_text("\n".join(lines) + "\n")
+    assert main(["collect", "--robot", str(SO101), "--logs", str(run), "--map", str(SHIPPED / "map.toml"),
+                 "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    i = next(k for k, line in enumerate(out) if line.startswith("compiling Warp kernels for so101.xml (6 joints; "
+                                                                 "forward)"))
+    assert DONE.match(out[i + 1]) and out[i + 2].startswith("replaying 1 heldout run(s) PD-only"), out
+
+
+def test_collect_foot_ik_reports_the_workspace(tmp_path, capsys):
+    """The SO-101's gripper frame on its 5-joint chain: position-only IK, the case of a 5-joint leg."""
+    assert main(["collect", "--robot", str(SO101), "--frames", "gripperframe", "--train", "1", "--validation", "0",
+                 "--heldout", "0", "--ood", "0", "--duration", "0.2", "--no-gap", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "foot IK on gripperframe (position only, 5 joints): sampling the workspace" in out
+    assert re.search(r"  400 of 400 sampled configurations usable \(\d+\.\d s\); checking the box is reachable", out)
+    assert re.search(r"  workspace ready in \d+\.\d s: box sides gripperframe \d+\.\d-\d+\.\d cm", out)
+    assert "[1/1] train_000" in out
+
+
+def test_rejected_foot_draws_are_reported():
+    from wresdyn.data import excitation as ex
+
+    robot = load_robot(SO101)
+    plan = ex.plan(robot, ex.ExcitationConfig(mode="foot", frames=("gripperframe",)))
+    strict = dataclasses.replace(plan, cfg=dataclasses.replace(plan.cfg, max_velocity=1e-3, max_draws=2))
+    lines = []
+    with pytest.raises(RobotError, match="in 2 draws"):
+        strict.generate("ellipsoid", 0.2, 500.0, np.random.default_rng(0), progress=lines.append)
+    assert len(lines) == 2 and all("rejected: peak" in ln and "> 0.001 rad/s" in ln for ln in lines), lines
+    assert lines[0].startswith("  ellipsoid draw 1/2") and lines[1].startswith("  ellipsoid draw 2/2")
+    tight = dataclasses.replace(plan, cfg=dataclasses.replace(plan.cfg, ik_tol=1e-12, max_draws=1))
+    lines.clear()
+    with pytest.raises(RobotError):
+        tight.generate("ellipsoid", 0.2, 500.0, np.random.default_rng(0), progress=lines.append)
+    assert len(lines) == 1 and "rejected: IK error" in lines[0], lines
+
+
+def _cut_logs(dest, runs=("multisine", "prbs_excitation", "step_response"), rows=51):
+    """The first ``rows - 1`` data rows (1 s at 50 Hz) of shipped SO-101 runs, SAGE layout, under ``dest``."""
+    for name in runs:
+        run = dest / name
+        run.mkdir(parents=True)
+        for f in ("joint_list.txt", "event.csv"):
+            shutil.copy(SHIPPED / "logs" / name / f, run / f)
+        for f in ("control.csv", "state_motor.csv"):
+            lines = (SHIPPED / "logs" / name / f).read_text().splitlines()[:rows]
+            (run / f).write_text("\n".join(lines) + "\n")
+    return dest
+
+
+def test_fit_and_eval_announce_the_compile_and_the_excluded_gripper(tmp_path, capsys):
+    logs = _cut_logs(tmp_path / "logs")
+    data = tmp_path / "d"
+    assert main(["collect", "--robot", str(SO101), "--logs", str(logs), "--map", str(SHIPPED / "map.toml"),
+                 "--split-map", str(SHIPPED / "splits.toml"), "--no-gap", "--out", str(data)]) == 0
+    capsys.readouterr()
+    run = tmp_path / "fit"
+    assert main(["fit", str(data / "dataset.npz"), "--model", "network", "--iterations", "2", "--windows", "2",
+                 "--curriculum", "2", "--out", str(run)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    i = next(k for k, ln in enumerate(out) if ln.startswith("compiling Warp kernels for so101.xml (6 joints; "
+                                                             "forward, grad)"))
+    assert out[i - 1].startswith("gradient fit of") and DONE.match(out[i + 1]), out
+    assert main(["eval", str(run), "--splits", "heldout", "--joints", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "compiling Warp kernels for so101.xml (6 joints; forward)" in out
+    assert "excluded from fitting and from the metrics: gripper" in out
+    assert "(over 5 fitted joints; excluded: gripper)" in out
+    assert "excluded from fitting and from these figures: gripper" in (run / "eval" / "report.md").read_text()
