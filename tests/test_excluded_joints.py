@@ -189,3 +189,53 @@ def test_rewards_ignore_an_excluded_joint():
     fitted[0] = 0.4
     assert (terms(q + fitted, qd, w)["joint_pos_mimic"] < base["joint_pos_mimic"]).all()
     assert torch.equal(terms(q, qd, torch.ones(n))["joint_pos_mimic"], terms(q, qd, None)["joint_pos_mimic"])
+
+
+def test_gradient_fit_loss_ignores_the_gripper(so101, shipped):
+    from wresdyn.learn.gradfit import GradFitConfig, build_policy, window_loss
+    from wresdyn.learn.residual import obs_stats
+    from wresdyn.sim import Simulator, TrajectoryBank, rollout
+
+    cfg = GradFitConfig()
+    train = shipped.split("train")
+    sim = Simulator(so101, 1, 1.0 / shipped.rate_hz, requires_grad=True)
+    policy = build_policy(so101, cfg.residual, *obs_stats(train))
+    w = torch.as_tensor(shipped.fit_weights(), dtype=torch.float32)
+
+    def loss(trs, weights):
+        window = TrajectoryBank(trs, sim.device).window(torch.tensor([0]), torch.tensor([0]), 16)
+        run = rollout(sim, window, policy, grad=True)
+        value, _ = window_loss(cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:], window.qd[:, 1:],
+                               policy.scale, weights)
+        return float(value.detach())
+
+    base = loss(train, w)
+    assert base > 0
+    assert loss([_shifted(train[0], GRIPPER, 0.3)], w) == pytest.approx(base, rel=1e-6)
+    assert loss([_shifted(train[0], PAN, 0.3)], w) > base + 0.05
+    assert loss([_shifted(train[0], GRIPPER, 0.3)], None) > base + 0.05
+
+
+def test_ppo_environment_ignores_the_gripper(so101, shipped):
+    from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
+
+    train = shipped.split("train")
+
+    def step(joint, weights):
+        """One zero-residual step after the recording's ``joint`` is moved by 0.3 rad (the start states, drawn at
+        construction with the same seed, are the same in every call)."""
+        env = ReplayEnv(so101, train, shipped.rate_hz, 4, ReplayEnvConfig(horizon=50), seed=0, weights=weights)
+        if joint is not None:
+            env.bank.q[:, joint] += 0.3
+        _, reward, _, extras = env.step(torch.zeros(4, so101.n_dof))
+        return reward, float(extras["log"]["Error/mean_abs_dq"])
+
+    w = shipped.fit_weights()
+    r0, e0 = step(None, w)
+    r1, e1 = step(GRIPPER, w)
+    torch.testing.assert_close(r1, r0, rtol=0, atol=0)
+    assert e1 == e0
+    r2, e2 = step(PAN, w)
+    assert (r2 < r0).all() and e2 > e0 + 0.05
+    r3, _ = step(GRIPPER, None)
+    assert (r3 < r0).all()

@@ -141,15 +141,19 @@ def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "ne
     return policy
 
 
-def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale) -> tuple[torch.Tensor, dict]:
+def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
+                weights: torch.Tensor | None = None) -> tuple[torch.Tensor, dict]:
     """Multiple-shooting loss of one batch of windows (see module docstring); returns (loss, parts), the parts
     (``pos``, ``vel``, ``torque``, ``rate``) as detached scalar tensors (read them when needed: no host sync here).
 
     ``actions`` are normalised (B, H, n); ``scale`` turns them into residual torque [N·m] for the torque
-    penalty (``None`` for a delta action, which applies no residual torque).
+    penalty (``None`` for a delta action, which applies no residual torque). ``weights`` (n,) weigh each joint's
+    position and velocity error (0 for a joint the dataset excludes from fitting; ``None``: all 1).
     """
-    pos = ((q - q_ref) ** 2).sum(-1).mean()
-    vel = ((qd - qd_ref) ** 2).sum(-1).mean()
+    pos, vel = (q - q_ref) ** 2, (qd - qd_ref) ** 2
+    if weights is not None:
+        pos, vel = pos * weights, vel * weights
+    pos, vel = pos.sum(-1).mean(), vel.sum(-1).mean()
     tau = torch.zeros((), device=q.device)
     if scale is not None:
         tau = ((actions * scale) ** 2).sum(-1).mean()
@@ -204,8 +208,10 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         delay = torch.as_tensor(physics.delay / dt, dtype=torch.float32, device=sim.device)
     bank = TrajectoryBank(train, sim.device, delay)
     validation = dataset.split("validation")
-    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics) \
-        if validation else None
+    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics,
+                            weights=dataset.fit_weights()) if validation else None
+    weights = None if not dataset.excluded_joints else \
+        torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=sim.device)
     select_every = max(1, cfg.select_every or cfg.iterations // 10)
     log_every = max(1, cfg.iterations // 20)
     obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
@@ -227,7 +233,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         best = {"validation": meta["best_validation"], "iteration": meta["best_iteration"],
                 "state": state["best"] or None}
         log(f"resumed from {ckpt} at iteration {start_it}")
-    step = _Iteration(cfg, sim, bank, policy, optim, obs_noise, graph)
+    step = _Iteration(cfg, sim, bank, policy, optim, obs_noise, graph, weights)
     if score is None and start_it == 0:
         log("no validation split: the fit returns its last iteration (`wresdyn migrate` adds one)")
     if score is not None and start_it == 0 and physics is not None:
@@ -322,9 +328,10 @@ class _Iteration:
     fixed buffers; the gradients live in each graph's memory pool. Without ``graph`` the same code runs eagerly.
     """
 
-    def __init__(self, cfg: GradFitConfig, sim, bank, policy, optim, obs_noise: float, graph: bool) -> None:
+    def __init__(self, cfg: GradFitConfig, sim, bank, policy, optim, obs_noise: float, graph: bool,
+                 weights: torch.Tensor | None = None) -> None:
         self.cfg, self.sim, self.bank, self.policy, self.optim = cfg, sim, bank, policy, optim
-        self.obs_noise, self.graph = obs_noise, graph
+        self.obs_noise, self.graph, self.weights = obs_noise, graph, weights
         self.torque_scale = policy.scale if policy.kind == "torque" else None
         self._warm: set[int] = set()
         self._graphs: dict[int, tuple] = {}  # window length -> (graph, (traj, start, noise) buffers, output)
@@ -343,7 +350,7 @@ class _Iteration:
         run = rollout(self.sim, window, self.policy, grad=True, truncation=self.cfg.grad_truncation,
                       obs_noise=self.obs_noise, noise=noise)
         loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],
-                                  window.qd[:, 1:], self.torque_scale)
+                                  window.qd[:, 1:], self.torque_scale, self.weights)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.cfg.grad_clip)
         self.optim.step()

@@ -449,7 +449,8 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     np.random.seed(seed % 2**32)
     mean, std = obs_stats(train_trajs)
     env = ReplayEnv(robot, train_trajs, dataset.rate_hz, num_envs, cfg.env, cfg.residual, cfg.rewards,
-                    device=device, seed=seed, obs_mean=mean, obs_std=std, graph=cfg.ppo.cuda_graph)
+                    device=device, seed=seed, obs_mean=mean, obs_std=std, graph=cfg.ppo.cuda_graph,
+                    weights=dataset.fit_weights())
     if ranks.main:
         run_dir.mkdir(parents=True, exist_ok=True)
     rcfg = runner_cfg(cfg, run_dir.name)
@@ -467,7 +468,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         tmp.replace(cfg_path)
     validation = dataset.split("validation") if ranks.main else []
     score = ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, device,
-                            physics=env.physics) if validation else None
+                            physics=env.physics, weights=dataset.fit_weights()) if validation else None
     best_path = run_dir / "best.pt"
     best = load_checkpoint(best_path, keys=("actor", "meta")) if start and best_path.is_file() else None
     curve = best["meta"]["validation_curve"] if best else []

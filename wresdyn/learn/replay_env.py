@@ -92,7 +92,8 @@ class ReplayEnv(VecEnv):
 
     def __init__(self, robot, trajectories, rate_hz: float, num_envs: int, cfg: ReplayEnvConfig = ReplayEnvConfig(),
                  residual: ResidualConfig = ResidualConfig(), rewards: RewardConfig = RewardConfig(),
-                 device: str | None = "cpu", seed: int = 0, obs_mean=None, obs_std=None, graph: bool = True) -> None:
+                 device: str | None = "cpu", seed: int = 0, obs_mean=None, obs_std=None, graph: bool = True,
+                 weights=None) -> None:
         self.robot, self.env_cfg, self.residual_cfg, self.reward_cfg = robot, cfg, residual, rewards
         self.dt = 1.0 / rate_hz
         self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device)
@@ -121,6 +122,9 @@ class ReplayEnv(VecEnv):
         self.scale = t(residual_scale(robot, residual.kind, residual.fraction))
         gains = self.physics if self.physics is not None else robot
         self.kp, self.kd = t(gains.kp), t(gains.kd)
+        self.weights = None if weights is None or (np.asarray(weights) > 0).all() else t(weights)
+        """Per-joint weights (n,) of the tracking rewards and errors, 0 for joints the dataset excludes from fitting
+        (:meth:`~wresdyn.data.dataset.Dataset.fit_weights`); ``None`` when every joint is fitted."""
         self.gen = torch.Generator(device=dev)
         self.gen.manual_seed(seed)
         n, z = robot.n_dof, torch.zeros
@@ -232,7 +236,7 @@ class ReplayEnv(VecEnv):
         b = bad[:, None]
         q, qd, qdd = torch.where(b, q_r, q), torch.where(b, qd_r, qd), torch.where(b, self.bank.qdd[self.g], qdd)
         self._diverged += bad.sum()
-        terms = reward_terms(self.reward_cfg, q, qd, qdd, q_r, qd_r, tau, a, self.a1, self.a2)
+        terms = reward_terms(self.reward_cfg, q, qd, qdd, q_r, qd_r, tau, a, self.a1, self.a2, weights=self.weights)
         reward = torch.stack(list(terms.values())).sum(0)
         reward = torch.where(bad, torch.zeros_like(reward), reward)
         time_out = (self.g >= self.end) & ~bad
@@ -243,8 +247,13 @@ class ReplayEnv(VecEnv):
         self.a2.copy_(self.a1)
         self.a1.copy_(a)
         means = torch.stack([v.mean() for v in terms.values()])
-        log = torch.cat([means, (means[0] + means[1])[None], (q - q_r).abs().mean()[None],
-                         (qd - qd_r).abs().mean()[None], bad.float().sum()[None]])
+        w = self.weights  # excluded joints out of the logged errors too (a weighted mean: no host sync)
+        dq, dqd = (q - q_r).abs(), (qd - qd_r).abs()
+        if w is None:
+            err = torch.stack([dq.mean(), dqd.mean()])
+        else:
+            err = torch.stack([(dq * w).sum(-1).mean(), (dqd * w).sum(-1).mean()]) / w.sum()
+        log = torch.cat([means, (means[0] + means[1])[None], err, bad.float().sum()[None]])
         self._reset_masked(dones, False, gen)
         policy, critic = self._observations(gen)
         return policy, critic, reward, dones.long(), time_out, log
