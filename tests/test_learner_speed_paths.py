@@ -84,9 +84,12 @@ def test_ablation_cells_spread_round_robin_over_gpus():
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")
-def test_graph_replayed_step_equals_the_eager_step(robot, data):
+@pytest.mark.parametrize("excluded", [0, 3])
+def test_graph_replayed_step_equals_the_eager_step(robot, data, excluded):
+    weights = np.ones(robot.n_dof)
+    weights[:excluded] = 0.0  # joints excluded from fitting: the weighted rewards and errors in the graph too
     envs = {g: ReplayEnv(robot, data.split("train"), data.rate_hz, 64, ReplayEnvConfig(horizon=400), device="cuda:0",
-                         seed=1, graph=g) for g in (True, False)}
+                         seed=1, graph=g, weights=weights) for g in (True, False)}
     a, b = envs[True], envs[False]
     # the same episodes in both (no episode ends within the steps below)
     for name in ("g", "q", "qd", "qdd"):
@@ -102,6 +105,7 @@ def test_graph_replayed_step_equals_the_eager_step(robot, data):
         torch.testing.assert_close(a.q, b.q, atol=1e-5, rtol=0)
         torch.testing.assert_close(oa["critic"], ob["critic"], atol=1e-3, rtol=1e-4)
         torch.testing.assert_close(ra, rb, atol=1e-4, rtol=1e-4)
+        torch.testing.assert_close(ea["log"]["Error/mean_abs_dq"], eb["log"]["Error/mean_abs_dq"], atol=1e-6, rtol=1e-4)
         assert torch.equal(da, db) and not da.any()
     assert len(a._graphs) == 2 and not b._graphs
 
