@@ -32,6 +32,16 @@ def _shifted(tr: Trajectory, joint: int, by: float) -> Trajectory:
     return dataclasses.replace(tr, q=q)
 
 
+def _assert_window_loss_ignores_the_gripper(loss, train, w) -> None:
+    """``loss(trajectories, weights)`` of a window at the start of ``train[0]``: unchanged when only the gripper's
+    recording moves, changed when a fitted joint's does, or when the gripper moves and nothing is weighted."""
+    base = loss(train, w)
+    assert base > 0
+    assert loss([_shifted(train[0], GRIPPER, 0.3)], w) == pytest.approx(base, rel=1e-6)
+    assert loss([_shifted(train[0], PAN, 0.3)], w) > base + 0.05
+    assert loss([_shifted(train[0], GRIPPER, 0.3)], None) > base + 0.05
+
+
 def _tiny(names, excluded, n=2, T=5, seed=0):
     rng = np.random.default_rng(seed)
     trs = [Trajectory(f"t{i}", "heldout", np.arange(T) / 100.0, *rng.normal(size=(4, T, len(names))))
@@ -153,11 +163,7 @@ def test_identification_loss_ignores_the_gripper(so101, shipped):
         value, _ = _window_loss(cfg, model, sim, window, weights)
         return float(value.detach())
 
-    base = loss(train, w)
-    assert base > 0
-    assert loss([_shifted(train[0], GRIPPER, 0.3)], w) == pytest.approx(base, rel=1e-6)
-    assert loss([_shifted(train[0], PAN, 0.3)], w) > base + 0.05
-    assert loss([_shifted(train[0], GRIPPER, 0.3)], None) > base + 0.05
+    _assert_window_loss_ignores_the_gripper(loss, train, w)
 
 
 def test_rewards_ignore_an_excluded_joint():
@@ -209,11 +215,7 @@ def test_gradient_fit_loss_ignores_the_gripper(so101, shipped):
                                policy.scale, weights)
         return float(value.detach())
 
-    base = loss(train, w)
-    assert base > 0
-    assert loss([_shifted(train[0], GRIPPER, 0.3)], w) == pytest.approx(base, rel=1e-6)
-    assert loss([_shifted(train[0], PAN, 0.3)], w) > base + 0.05
-    assert loss([_shifted(train[0], GRIPPER, 0.3)], None) > base + 0.05
+    _assert_window_loss_ignores_the_gripper(loss, train, w)
 
 
 def test_ppo_environment_ignores_the_gripper(so101, shipped):
