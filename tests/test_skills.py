@@ -169,6 +169,8 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     args = ["deploy", str(data_path), "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--heldout", "1"]
     assert main(args) == 0
+    # the compile is announced, for what this run needs: both corrections given, so no fitting variants
+    assert f"compiling Warp kernels for humanoid.usda ({humanoid.n_dof} joints; forward):" in capsys.readouterr().out
     res = json.loads((out / "results.json").read_text())
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}

@@ -81,6 +81,11 @@ def run(args: argparse.Namespace) -> int:
     data_path = Path(args.data) if args.data else DEFAULT_DATASET
     dataset = load_dataset(data_path, robot=robot)
     out = Path(args.out)
+    from ..sim.warmup import compile_kernels
+
+    # once, before the cells (Warp's disk cache then serves every cell's process); "cuda" spreads cells over GPUs
+    compile_kernels(robot, dataset.rate_hz, ("forward", "grad", "param_grads"),
+                    device="cuda:0" if args.device == "cuda" else args.device)
     if not args.delays_only:
         run_ablation(robot, dataset, cfg, out, jobs=args.jobs)
         print((out / "table.md").read_text())

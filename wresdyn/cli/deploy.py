@@ -49,6 +49,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"wresdyn deploy: skills on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
           f"real robot {'from ' + args.mismatch if args.mismatch else 'as recorded in the dataset'} -> {args.out}",
           flush=True)
+    from ..sim.warmup import compile_kernels
+
+    # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
+    variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
+    compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=args.device)
     run_benchmark(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
                   mismatch=mismatch, animation=not args.no_animation,
                   log=lambda s: print(s, flush=True))
