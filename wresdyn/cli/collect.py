@@ -96,23 +96,7 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path) -> int:
     if excluded:
         _say(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
     if not args.no_gap:
-        from ..evaluation.evaluate import pd_gap
-        from ..sim.warmup import compile_kernels
-
-        if any(ds.split(s) for s in ("validation", "heldout", "ood")):
-            compile_kernels(robot, args.rate, ("forward",), say=_say)
-        gaps = {}
-        for split in ("validation", "heldout", "ood"):
-            trajs = ds.split(split)
-            if trajs:
-                _say(f"replaying {len(trajs)} {split} run(s) PD-only in Newton (nominal robot)")
-                g = gaps[split] = pd_gap(robot, trajs, args.rate, weights=ds.fit_weights())
-                line = f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad"
-                if excluded:
-                    line += (f" over the {len(ds.fitted_joints)} fitted joints (excluded: "
-                             + ", ".join(f"{j} {g['per_joint'][j]:.4f} rad" for j in excluded) + ")")
-                _say(line + (f"; {g['diverged']} replay(s) diverged" if g["diverged"] else ""))
-        ds.meta["pd_only_gap"] = gaps
+        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "run(s)")
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
     counts = ", ".join(f"{len(ds.split(s))} {s}" for s in ("train", "validation", "heldout", "ood") if ds.split(s))
@@ -140,7 +124,6 @@ def run(args: argparse.Namespace) -> int:
 
     from ..data.excitation import ExcitationConfig, plot_spectrum
     from ..data.real_robot import Mismatch, collect
-    from ..evaluation.evaluate import pd_gap
 
     counts = {"train": args.train, "validation": args.validation, "heldout": args.heldout, "ood": args.ood}
     if any(n < 0 for n in counts.values()) or sum(counts.values()) == 0:
@@ -167,18 +150,7 @@ def run(args: argparse.Namespace) -> int:
     ds = collect(robot, mismatch, counts, args.duration, args.rate, args.seed, cfg, store_tau=not args.no_tau,
                  progress=_say)
     if not args.no_gap:
-        from ..sim.warmup import compile_kernels
-
-        if any(ds.split(s) for s in ("validation", "heldout", "ood")):
-            compile_kernels(robot, args.rate, ("forward",), say=_say)
-        gaps = {}
-        for split in ("validation", "heldout", "ood"):
-            trajs = ds.split(split)
-            if trajs:
-                _say(f"replaying {len(trajs)} {split} trajectories PD-only in Newton (nominal robot)")
-                g = gaps[split] = pd_gap(robot, trajs, args.rate)
-                _say(f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad")
-        ds.meta["pd_only_gap"] = gaps
+        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "trajectories")
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
     plot_spectrum({s: [tr.q_cmd for tr in ds.split(s)] for s in SPLITS}, args.rate, out / "spectrum.png",
@@ -186,3 +158,25 @@ def run(args: argparse.Namespace) -> int:
     _say(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {out / 'spectrum.png'}")
     return 0
 
+
+def _pd_gaps(ds, robot, rate: float, what: str) -> dict:
+    """The PD-only gap of every evaluation split of ``ds`` (:func:`~wresdyn.evaluation.evaluate.pd_gap`, over the
+    fitted joints), announced line by line; ``what`` names the trajectories in the lines ("run(s)", ...)."""
+    from ..evaluation.evaluate import pd_gap
+    from ..sim.warmup import compile_kernels
+
+    excluded = ds.excluded_joints
+    if any(ds.split(s) for s in ("validation", "heldout", "ood")):
+        compile_kernels(robot, rate, ("forward",), say=_say)
+    gaps = {}
+    for split in ("validation", "heldout", "ood"):
+        trajs = ds.split(split)
+        if trajs:
+            _say(f"replaying {len(trajs)} {split} {what} PD-only in Newton (nominal robot)")
+            g = gaps[split] = pd_gap(robot, trajs, rate, weights=ds.fit_weights())
+            line = f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad"
+            if excluded:
+                line += (f" over the {len(ds.fitted_joints)} fitted joints (excluded: "
+                         + ", ".join(f"{j} {g['per_joint'][j]:.4f} rad" for j in excluded) + ")")
+            _say(line + (f"; {g['diverged']} replay(s) diverged" if g["diverged"] else ""))
+    return gaps

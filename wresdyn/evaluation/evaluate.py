@@ -157,7 +157,7 @@ def pd_gap(robot, trajectories, rate_hz: float, solver: str = "auto", device: st
     return {"mean": float(e[:, mask].mean()), "std": float(e[:, mask].std()),
             "per_trajectory": {t.name: float(x[:, mask].mean()) for t, x in zip(trajectories, errs)},
             "per_joint": dict(zip(robot.joint_names, e.mean(axis=0).tolist())),
-            "excluded_joints": [j for j, m in zip(robot.joint_names, mask) if not m],
+            "excluded_joints": excluded_names(robot.joint_names, weights),
             "n_trajectories": len(trajectories), "diverged": sum(a >= 0 for a in runs.diverged_at)}
 
 

@@ -150,10 +150,9 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
     penalty (``None`` for a delta action, which applies no residual torque). ``weights`` (n,) weigh each joint's
     position and velocity error (0 for a joint the dataset excludes from fitting; ``None``: all 1).
     """
-    pos, vel = (q - q_ref) ** 2, (qd - qd_ref) ** 2
-    if weights is not None:
-        pos, vel = pos * weights, vel * weights
-    pos, vel = pos.sum(-1).mean(), vel.sum(-1).mean()
+    from .runs import squared_error
+
+    pos, vel = squared_error(q, q_ref, weights), squared_error(qd, qd_ref, weights)
     tau = torch.zeros((), device=q.device)
     if scale is not None:
         tau = ((actions * scale) ** 2).sum(-1).mean()
@@ -191,7 +190,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         (iteration, wall-clock [s], simulated env-steps, loss parts, validation error where evaluated).
     """
     from ..sim import Simulator, TrajectoryBank
-    from .runs import check_resume, load_checkpoint, save_checkpoint, start_window_fit
+    from .runs import check_resume, joint_weights, load_checkpoint, save_checkpoint, start_window_fit
     from .selection import ValidationScore
 
     rng, train, dt = start_window_fit(cfg, dataset)
@@ -210,8 +209,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
     validation = dataset.split("validation")
     score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics,
                             weights=dataset.fit_weights()) if validation else None
-    weights = None if not dataset.excluded_joints else \
-        torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=sim.device)
+    weights = joint_weights(dataset, sim.device)
     select_every = max(1, cfg.select_every or cfg.iterations // 10)
     log_every = max(1, cfg.iterations // 20)
     obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser

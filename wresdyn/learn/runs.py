@@ -214,3 +214,21 @@ def start_window_fit(cfg, dataset):
     if not train:
         raise ValueError("the dataset has no training trajectories")
     return np.random.default_rng(cfg.seed), train, 1.0 / dataset.rate_hz
+
+
+def joint_weights(dataset, device):
+    """The dataset's per-joint fit weights (:meth:`~wresdyn.data.dataset.Dataset.fit_weights`: 0 for a joint
+    excluded from fitting) as a float32 tensor (n,) on ``device``, or ``None`` when every joint is fitted (the losses
+    then run unweighted, as before exclusions existed). Shared by the two window fits."""
+    import torch
+
+    if not dataset.excluded_joints:
+        return None
+    return torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=device)
+
+
+def squared_error(x, ref, weights=None):
+    """Window-fit error term: Σ_j w_j (x_j − ref_j)² over the joints (last axis), mean over everything else.
+    ``x``, ``ref`` (..., n); ``weights`` (n,) or ``None`` (all 1). Shared by the gradient fit and identification."""
+    sq = (x - ref) ** 2
+    return (sq if weights is None else sq * weights).sum(-1).mean()

@@ -127,13 +127,12 @@ def _window_loss(cfg, model, sim, window, weights=None):
     """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
     per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
     from ..sim import rollout
+    from .runs import squared_error
 
     sim.set_physics(model())
     run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation)
-    pos, vel = (run.q[:, 1:] - window.q[:, 1:]) ** 2, (run.qd[:, 1:] - window.qd[:, 1:]) ** 2
-    if weights is not None:
-        pos, vel = pos * weights, vel * weights
-    pos, vel = pos.sum(-1).mean(), vel.sum(-1).mean()
+    pos = squared_error(run.q[:, 1:], window.q[:, 1:], weights)
+    vel = squared_error(run.qd[:, 1:], window.qd[:, 1:], weights)
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
 
 
@@ -144,6 +143,7 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
     ``weights``: per-joint weights (n,) tensor of the position error (0: excluded from fitting), ``None``: all 1.
     """
     from ..sim import TrajectoryBank, rollout
+    from .runs import squared_error
 
     if not len(grid):
         return
@@ -160,8 +160,7 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
         window = bank.window(traj, start, h)
         with torch.no_grad():
             run = rollout(sim, window)
-        err = (run.q[:, 1:] - window.q[:, 1:]) ** 2
-        losses.append(float((err if weights is None else err * weights).sum(-1).mean()))
+        losses.append(float(squared_error(run.q[:, 1:], window.q[:, 1:], weights)))
     best = grid[int(np.argmin(losses))]
     v = torch.as_tensor(values(best))
     with torch.no_grad():
@@ -187,7 +186,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         ``(params, curve)``: the selected :class:`~wresdyn.sim.physics.PhysicalParams` and the learning curve.
     """
     from ..sim import Simulator, TrajectoryBank
-    from .runs import check_resume, load_checkpoint, save_checkpoint, start_window_fit
+    from .runs import check_resume, joint_weights, load_checkpoint, save_checkpoint, start_window_fit
 
     rng, train, dt = start_window_fit(cfg, dataset)
     model = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
@@ -224,9 +223,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True)
     bank = TrajectoryBank(train, sim.device)
-    # joints excluded from fitting (the dataset's excluded_joints) weigh 0 in the loss; all-ones means none
-    weights = None if not dataset.excluded_joints else \
-        torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=sim.device)
+    weights = joint_weights(dataset, sim.device)  # joints excluded from fitting weigh 0 in the loss
     horizons = cfg.horizon_curriculum or (64,)
     t0 = time.perf_counter() - wall0
     for it in range(start_it, cfg.iterations):
