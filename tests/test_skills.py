@@ -50,6 +50,19 @@ def test_motions_start_and_end_in_the_stance_inside_the_limits(humanoid, motions
     np.testing.assert_array_equal(again.split("train")[0].q, motions.split("train")[0].q)
 
 
+def test_the_waves_of_a_split_use_both_arms(humanoid):
+    # seed 1 once drew its 4 training waves all with the left arm and its held-out waves with the right
+    names = list(humanoid.joint_names)
+    for seed in (1, 2):
+        waves = [m for m in make_motions(humanoid, {"train": 4}, duration=0.4, rate_hz=RATE, seed=seed).split("train")
+                 if m.family == "wave"]
+        assert sorted(m.params["arm"] for m in waves) == ["left", "left", "right", "right"]
+        for m in waves:  # the named arm is the one that moves
+            other = "right" if m.params["arm"] == "left" else "left"
+            assert np.ptp(m.q[:, names.index(f"{m.params['arm']}_shoulder_roll")]) > 0.5
+            assert np.ptp(m.q[:, names.index(f"{other}_shoulder_roll")]) < 1e-9
+
+
 def test_real_plant_steps_exactly_as_the_real_robot_records(humanoid, motions, quiet_real):
     """The batched C rollouts (delay line, torque limits) against RealRobot.record on the same held commands."""
     dec, steps = 5, 12

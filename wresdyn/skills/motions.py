@@ -127,12 +127,17 @@ def _leg_keys(rng, family: str, home: np.ndarray, duration: float):
     return [0.0, duration], [home, home], {}
 
 
-def _arm_keys(rng, robot: Robot, family: str, duration: float):
-    """Arm joint offsets from the stance, (T-independent keyframes): times [s], values (K, n_dof) [rad]."""
+def _arm_keys(rng, robot: Robot, family: str, duration: float, side: str | None = None):
+    """Arm joint offsets from the stance, (T-independent keyframes): times [s], values (K, n_dof) [rad].
+
+    ``side``: the waving arm (``"left"``/``"right"``); ``None`` draws it. The draw is made either way, so the other
+    amplitudes do not depend on whether the side was given.
+    """
     n = robot.n_dof
     if family != "wave":
         return [0.0, duration], [np.zeros(n), np.zeros(n)], {}
-    side = ("left", "right")[int(rng.integers(2))]
+    drawn = ("left", "right")[int(rng.integers(2))]
+    side = drawn if side is None else side
     sign = 1.0 if side == "left" else -1.0
     names = list(robot.joint_names)
     roll, elbow = f"{side}_shoulder_roll", f"{side}_elbow"
@@ -159,8 +164,9 @@ def _arm_keys(rng, robot: Robot, family: str, duration: float):
 
 
 def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz: float, rng: np.random.Generator,
-                name: str, ik_tol: float = 0.005, max_draws: int = 20) -> Motion:
-    """Draw one motion of ``family`` (redrawn until the sole IK reaches every keyframe path within ``ik_tol`` [m])."""
+                name: str, ik_tol: float = 0.005, max_draws: int = 20, side: str | None = None) -> Motion:
+    """Draw one motion of ``family`` (redrawn until the sole IK reaches every keyframe path within ``ik_tol`` [m]);
+    ``side`` fixes a wave's arm (default: drawn)."""
     if family not in FAMILIES:
         raise ValueError(f"unknown motion family {family!r}; choose from {FAMILIES}")
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
@@ -169,7 +175,7 @@ def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz:
     rots = np.broadcast_to(rot, (len(t),) + rot.shape)
     for _ in range(max_draws):
         lt, lk, lp = _leg_keys(rng, family, home, duration)
-        at, ak, ap = _arm_keys(rng, robot, family, duration)
+        at, ak, ap = _arm_keys(rng, robot, family, duration, side)
         pos = _keyframes(t, lt, lk)
         q, err = ik.solve_path(pos, None if ik.position_only else rots, q0)
         if float(err[:, :, 0].max()) > ik_tol:
@@ -194,6 +200,9 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float = 2.0, ra
         duration: Length of each motion [s].
         rate_hz: Sample rate [Hz] (the simulation's).
         seed: Seed of the draws; each split draws from its own stream.
+
+    The waves of a split alternate between the arms (the first arm drawn per split), so a split of two or more waves
+    has both: training on one arm's waves alone leaves a policy untaught for the other's.
     """
     if robot.base != "fixed":
         raise RobotError(f"{robot.source}: the skill motions are drawn on the stand (a fixed base)")
@@ -201,7 +210,9 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float = 2.0, ra
     splits = {}
     for s, (split, per) in enumerate(counts.items()):
         rng = np.random.default_rng([seed, s])
+        first = int(np.random.default_rng([seed, s, 1]).integers(2))
         fams = TRAIN_FAMILIES + (HELD_OUT_FAMILIES if split == "heldout" else ())
-        splits[split] = [make_motion(robot, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}")
+        splits[split] = [make_motion(robot, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}",
+                                     side=("left", "right")[(first + i) % 2] if f == "wave" else None)
                          for f in fams for i in range(per)]
     return MotionSet(float(rate_hz), splits)
