@@ -23,6 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a delta-action `wresdyn fit --model network --residual delta_action` run "
                         "(default: fitted into OUT/delta_action)")
     p.add_argument("--mismatch", default=None, help="real robot's mismatch (TOML; default: the dataset's)")
+    p.add_argument("--full", action="store_true",
+                   help="the full size, for a GPU: 4096 worlds, 16 training / 2 validation / 4 held-out motions per "
+                        "family (the options below still apply)")
     p.add_argument("--iterations", type=int, default=None, help="PPO iterations of (a), nominal (default 300)")
     p.add_argument("--finetune", type=int, default=None, help="PPO iterations of each fine-tuning (default 300)")
     p.add_argument("--envs", type=int, default=None, help="parallel worlds of PPO (default 64)")
@@ -40,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import Mismatch
     from ..skills.benchmark import DeployConfig, run_benchmark
 
-    cfg = DeployConfig()
+    cfg = DeployConfig.full() if args.full else DeployConfig()
     kw = {k: v for k, v in (("iterations", args.iterations), ("finetune", args.finetune), ("envs", args.envs),
                             ("train_per_family", args.motions), ("heldout_per_family", args.heldout)) if v is not None}
     cfg = replace(cfg, seed=args.seed, device=args.device, **kw)

@@ -53,6 +53,12 @@ class DeployConfig:
     seed: int = 0
     device: str = "cpu"
 
+    @classmethod
+    def full(cls, **kw) -> "DeployConfig":
+        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family
+        (the same PPO iterations; the real robot steps on every CPU core)."""
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096), **kw})
+
     def __post_init__(self) -> None:
         for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
             check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
@@ -151,7 +157,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
             plant = RealPlant(real, cfg.envs, task.decimation, seed=cfg.seed + 1)
         else:
             plant = sim_plant(setting, robot, cfg.envs, rate, task.decimation, runs.get(setting), cfg.device)
-        env = TrackingEnv(plant, motions.split("train"), task, seed=cfg.seed + i)
+        env = TrackingEnv(plant, motions.split("train"), task, seed=cfg.seed + i, device=cfg.device)
         run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
         it = cfg.iterations if i == 0 else cfg.finetune
         train_skill(env, replace(ppo, iterations=it), out / "skills" / name, log=log,

@@ -90,14 +90,17 @@ class TrackingEnv(VecEnv):
         seed: Seed of the motion and start draws.
         random_start: Start at a random policy step (training); ``False``: every world plays motion
             ``i mod M`` from its start once (evaluation, :mod:`wresdyn.skills.deploy`).
+        device: Torch device of the observations, rewards and the policy (default: the plant's). The real robot
+            steps on CPU threads while its policy may learn on a GPU.
     """
 
-    def __init__(self, plant, motions, cfg: SkillConfig = SkillConfig(), seed: int = 0, random_start: bool = True):
+    def __init__(self, plant, motions, cfg: SkillConfig = SkillConfig(), seed: int = 0, random_start: bool = True,
+                 device=None):
         if plant.decimation != cfg.decimation:
             raise ValueError(f"plant decimation {plant.decimation} != task decimation {cfg.decimation}")
         self.plant, self.cfg, self.motions = plant, cfg, list(motions)
         self.num_envs, self.num_actions = plant.n_worlds, plant.robot.n_dof
-        self.device = plant.device
+        self.device = torch.device(device) if device is not None else plant.device
         self.ref_q, self.ref_qd, self.ref_len = reference_tensors(self.motions, cfg.decimation, cfg.ahead, self.device)
         self.max_episode_length = int(self.ref_len.max())
         self.random_start = random_start
@@ -175,7 +178,8 @@ class TrackingEnv(VecEnv):
         self.diverged_total += int(bad.sum())
         self.episodes_total += int(dones.sum())
         true = getattr(self.plant, "q_true", None)
-        self.true_q = q.clone() if true is None else torch.as_tensor(np.array(true), dtype=torch.float32)
+        self.true_q = q.clone() if true is None else torch.as_tensor(np.array(true), dtype=torch.float32,
+                                                                      device=self.device)
         """The true joint positions after this step, before any reset [rad] (N, n): the real robot's, not its
         sensors' (deployment metrics)."""
         self._reset(dones.nonzero().squeeze(-1))

@@ -16,6 +16,8 @@ Every plant has the same interface, so one environment (:mod:`wresdyn.skills.env
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import torch
 
@@ -154,7 +156,7 @@ class RealPlant:
     constraint-solver warm start (its friction solution converges within the solver's iterations).
     """
 
-    def __init__(self, real, n_worlds: int, decimation: int, seed: int = 0, threads: int = 2) -> None:
+    def __init__(self, real, n_worlds: int, decimation: int, seed: int = 0, threads: int | None = None) -> None:
         import mujoco
         from mujoco import rollout
 
@@ -166,7 +168,9 @@ class RealPlant:
         m = real.model
         self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         self._nstate = mujoco.mj_stateSize(m, self._spec)
-        self._datas = [mujoco.MjData(m) for _ in range(max(1, threads))]
+        if threads is None:  # every core this process may use
+            threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        self._datas = [mujoco.MjData(m) for _ in range(max(1, min(int(threads), self.n_worlds)))]
         self.n_sub = real.n_sub * self.decimation
         n = self.robot.n_dof
         d = self._datas[0]
