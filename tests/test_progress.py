@@ -40,6 +40,38 @@ def test_compile_kernels_says_what_and_how_long_once_per_robot():
         compile_kernels(robot, 500.0, ("backward",))
 
 
+def test_compile_kernels_with_identified_physics_compiles_what_the_command_then_runs():
+    """Identified physics makes friction non-zero, which SolverReplay compiled as a constant for the robot file (the
+    humanoid's has none): another module. Warmed up with the physics, a simulator set to it loads no module of its
+    own."""
+    from wresdyn.robot.description import DEFAULT_ROBOT
+    from wresdyn.sim import Simulator
+    from wresdyn.sim.physics import PhysicalParams
+    from wresdyn.sim.solver_replay import cache
+
+    robot = load_robot(DEFAULT_ROBOT)
+    assert not robot.friction.any()
+    physics = PhysicalParams.nominal(robot)
+    physics.friction[:] = 0.5 + 0.01 * np.arange(robot.n_dof)  # [N*m]
+
+    def modules_loaded_by_a_run():
+        before = len(cache._MODULES)
+        sim = Simulator(robot, 2, 1 / 500.0)
+        sim.set_physics(physics)
+        sim.step(sim.q)
+        return len(cache._MODULES) - before
+
+    lines = []
+    cache._MODULES.clear()  # the modules loaded in this process (not Warp's disk cache)
+    compile_kernels(robot, 500.0, ("forward",), say=lines.append)
+    assert modules_loaded_by_a_run() == 1  # the robot file's kernels were not the ones this run needs
+    compile_kernels(load_robot(DEFAULT_ROBOT), 500.0, ("forward",), physics=physics, say=lines.append)
+    assert "(21 joints; forward; identified physics)" in lines[2] and DONE.match(lines[3])
+    cache._MODULES.clear()
+    compile_kernels(robot, 500.0, ("forward",), physics=physics, say=lines.append)
+    assert modules_loaded_by_a_run() == 0
+
+
 def test_collect_logs_announces_the_compile_before_the_replay(tmp_path, capsys):
     run = tmp_path / "logs" / "step_response"
     run.mkdir(parents=True)

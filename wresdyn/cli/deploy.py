@@ -38,6 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
+    from pathlib import Path
 
     from ..data.loading import load_data
     from ..data.real_robot import Mismatch
@@ -57,6 +58,12 @@ def run(args: argparse.Namespace) -> int:
     # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
     variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=args.device)
+    calibrated = Path(args.calibrated) / "physics.json" if args.calibrated else None
+    if calibrated is not None and calibrated.is_file():  # the calibrated plant's kernels (its friction is live)
+        from ..sim.physics import PhysicalParams
+
+        compile_kernels(robot, ds.rate_hz, ("forward",), device=args.device,
+                        physics=PhysicalParams.load(calibrated, robot))
     run_benchmark(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
                   mismatch=mismatch, animation=not args.no_animation,
                   log=lambda s: print(s, flush=True))

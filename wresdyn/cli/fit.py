@@ -101,10 +101,12 @@ def run(args: argparse.Namespace) -> int:
         what += f" on the physics of {cfg.physics}"
     print(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
           f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}", flush=True)
+    from ..learn.gradfit import load_physics
     from ..sim.warmup import compile_kernels
 
-    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads", "grad") if identify_first else ("forward", "grad"),
-                    solver=cfg.solver, device=cfg.device)
+    # the hybrid's stage 2 runs on the identified physics: fit_hybrid compiles those kernels once stage 1 is done
+    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads") if identify_first else ("forward", "grad"),
+                    solver=cfg.solver, device=cfg.device, physics=load_physics(cfg.physics, robot))
     try:
         if identify_first:
             from ..learn.hybrid import fit_hybrid

@@ -41,7 +41,7 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     out_dir = Path(out) if out else run_dir / "eval"
     from ..sim.warmup import compile_kernels
 
-    compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
+    compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device, physics=physics)
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)

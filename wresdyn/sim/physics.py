@@ -38,6 +38,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..errors import WresdynError
+
 __all__ = ["JOINT_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsModel", "PhysicsError", "pseudo_inertia",
            "from_pseudo_inertia"]
 
@@ -51,7 +53,7 @@ MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "j
 """Newton model array of each field (``delay`` is the command path's, not the model's)."""
 
 
-class PhysicsError(ValueError):
+class PhysicsError(WresdynError):
     """A parameter file that cannot be used; the message is one line naming the file."""
 
 

@@ -23,8 +23,9 @@ VARIANTS = {"forward": (False, False), "grad": (True, False), "param_grads": (Tr
 physical parameters too (identification). Each is its own generated module."""
 
 _DONE: dict[tuple, weakref.ref] = {}
-"""(robot object id, solver, device, variant) -> the robot, for what this process has compiled already: not compiled
-or announced again (the weak reference tells a live robot from a new one that got a freed object's id)."""
+"""(robot object id, solver, device, (variant, id of the physics or None)) -> the robot, for what this process
+has compiled already: not compiled or announced again (the weak reference tells a live robot from a new one that got a
+freed object's id)."""
 
 
 def _done(robot, solver, device, variant) -> bool:
@@ -38,7 +39,7 @@ def _home(path: str) -> str:
 
 
 def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str = "auto", device: str | None = "cpu",
-                    say=None) -> float | None:
+                    physics=None, say=None) -> float | None:
     """Compile (or load from Warp's cache) the kernels ``robot`` needs for ``variants`` (names of :data:`VARIANTS`)
     with ``solver`` on ``device``, printing through ``say`` one line before and one after.
 
@@ -47,6 +48,9 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
         rate_hz: Sample rate of its data [Hz] (the step of the warm-up world).
         variants: Kernel variants the command will use, e.g. ``("forward", "grad")`` for ``wresdyn fit``.
         solver, device: As the command's simulators.
+        physics: Identified physics the command simulates (:class:`~wresdyn.sim.physics.PhysicalParams`), or
+            ``None`` for the robot file's. It matters: ``SolverReplay`` compiles parameters that are zero in the
+            robot file (friction, off-diagonal inertia) as constants, so identified physics is another module.
         say: Progress printer, called with one string per line (default: ``print``, flushed).
 
     Returns:
@@ -61,23 +65,27 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         raise WresdynError(f"kernel variant(s) {bad}: choose from {', '.join(VARIANTS)}")
-    todo = [v for v in dict.fromkeys(variants) if not _done(robot, solver, device, v)]
+    tag = None if physics is None else id(physics)
+    todo = [v for v in dict.fromkeys(variants) if not _done(robot, solver, device, (v, tag))]
     if not todo:
         return None
     say = say or (lambda line: print(line, flush=True))
     wp.init()
     cache = _home(str(wp.config.kernel_cache_dir))
     name = Path(str(robot.source)).name
-    say(f"compiling Warp kernels for {name} ({robot.n_dof} joints; {', '.join(todo)}): on a robot's first run only, "
+    what = ", ".join(todo) + ("" if physics is None else "; identified physics")
+    say(f"compiling Warp kernels for {name} ({robot.n_dof} joints; {what}): on a robot's first run only, "
         f"minutes for a large one, then loaded from {cache} ...")
     t0 = time.perf_counter()
     for v in todo:
         requires_grad, param_grads = VARIANTS[v]
         sim = Simulator(robot, 1, 1.0 / rate_hz, solver=solver, device=device, requires_grad=requires_grad,
                         param_grads=param_grads)
+        if physics is not None:
+            sim.set_physics(physics)
         with torch.no_grad():
             sim.step(sim.q)  # hold the start pose for one step: the first launch loads (or compiles) the module
-        _DONE[(id(robot), solver, str(device), v)] = weakref.ref(robot)
+        _DONE[(id(robot), solver, str(device), (v, tag))] = weakref.ref(robot)
     seconds = time.perf_counter() - t0
     say(f"... done in {seconds:.1f} s")
     return seconds
