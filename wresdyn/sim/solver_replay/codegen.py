@@ -42,7 +42,7 @@ class LiveParams:
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
-_SCALARS = ("dt", "fric_beta", "fric_dt_beta", "kp_implicit")
+_SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
 
@@ -50,11 +50,12 @@ def _load_params(e: Emitter, tree: ReplayTree) -> dict:
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
+    out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") for k in range(tree.n_dof)]  # one per DoF, all worlds
     return out
 
 
-def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: list, mu: list, sweeps: int,
-              live: np.ndarray) -> list:
+def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: list, mu: list, m0: list,
+              sweeps: int, live: np.ndarray, qd: list) -> list:
     """Dry friction as the velocity problem of one step, solved by ``sweeps`` Gauss-Seidel sweeps.
 
     With the frictionless velocity ``v*`` (``H (v* - qd) = dt rhs``), friction torques ``tau_f`` change the
@@ -62,15 +63,19 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
 
         min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i).
 
-    ``g_i`` is the saturated damper ``tau_i = -clamp(d_i v_i, -mu_i, mu_i)`` with ``d_i = kappa H_ii``
-    (Coulomb ``mu_i |v_i|`` for ``kappa = inf``). Minimising over ``v_i`` alone, the others fixed, is in
-    closed form: with the unconstrained ``u = v*_i - sum_{j != i} (H_ij / H_ii) (v_j - v*_j)``,
+    ``g_i`` is a saturated damper on ``w_i = v_i - sigma qd_i`` (``qd`` the velocity before the step),
+    ``tau_i = -clamp(c_i H_ii w_i / dt, -mu_i, mu_i)`` with ``c_i = fric_c m0_i / H_ii + fric_k``
+    (``fric_*`` kernel arguments, ``m0`` the array ``fric_m0``): MuJoCo's soft ``frictionloss`` has
+    ``fric_c = d0 / (1 - d0)``, ``m0_i`` the DoF's effective inertia at the reference pose (MuJoCo's
+    ``1 / dof_invweight0``), ``fric_k = 0``, ``sigma = 1 - b dt`` (:mod:`.solver`); the plain damper on the new
+    velocity has ``fric_c = 0``, ``fric_k = kappa dt``, ``sigma = 0`` (Coulomb ``mu_i |v_i|`` for ``kappa = inf``).
+    Minimising over ``v_i`` alone, the others fixed, is in closed form: with the unconstrained
+    ``u = v*_i - sum_{j != i} (H_ij / H_ii) (v_j - v*_j)``,
 
-        v_i = u - clamp(beta u, -mu_i dt / H_ii, mu_i dt / H_ii),   beta = kappa dt / (1 + kappa dt)
+        v_i = u - clamp(beta_i (u - sigma qd_i), -mu_i dt / H_ii, mu_i dt / H_ii),   beta_i = 1 - 1 / (1 + c_i)
 
-    (``beta = 1``: a soft threshold that returns exactly 0 when the joint sticks; below the threshold
-    ``v_i = u / (1 + kappa dt)``, the implicit damper), written ``u - beta clamp(u, -t / beta, t / beta)``
-    so that the division by ``beta`` is a kernel argument and the stuck case stays exact. ``H`` couples a
+    (``beta = 1``: a soft threshold that returns exactly 0 when the joint sticks; below the threshold the
+    implicit damper), written ``u - beta clamp(w, -t / beta, t / beta)`` so that the stuck case stays exact. ``H`` couples a
     DoF only with its ancestors and descendants, so a sweep costs one multiply-add per such pair. Each
     sweep visits the DoFs by depth (root to leaves, then back: symmetric Gauss-Seidel), which is the DoF
     order up to swaps of DoFs of different branches, which do not couple (the same result). A DoF without
@@ -85,8 +90,13 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
     for (k, j), h in h_off.items():
         coupled[k].append((j, e.sp((h, inv_h[k]))))
         coupled[j].append((k, e.sp((h, inv_h[j]))))
-    # clamp(beta u, -t, t) = beta clamp(u, -t / beta, t / beta), t = mu dt / H_ii; fric_dt_beta = dt / beta
-    bound = [e.let(f"fric_dt_beta * {mu[k]} * {inv_h[k]}") if live[k] else None for k in range(n)]
+    # clamp(beta w, -t, t) = beta clamp(w, -t / beta, t / beta), t = mu dt / H_ii
+    beta: list = [None] * n
+    bound: list = [None] * n
+    for k in range(n):
+        if live[k]:
+            beta[k] = e.let(f"S(1.0) - S(1.0) / (S(1.0) + fric_c * {m0[k]} * {inv_h[k]} + fric_k)")
+            bound[k] = e.let(f"dt / {beta[k]} * {mu[k]} * {inv_h[k]}")
     last: dict[int, tuple] = {}  # each moved DoF's latest (u, clamp or None); v is made from it at the end
     delta: dict[int, object] = {}  # v_j - v*_j of the DoFs that moved
     stamp: dict[int, int] = {}  # when each delta was made: the newest is summed last, the rest need not wait
@@ -101,18 +111,19 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
             u = e.sym(e.sp((v_star[i],), (-1.0, coupling)))
             c = None
             if bound[i] is not None:
-                # clamp(u, -b, b) as two selects: with wp.clamp (NaN-aware fmin/fmax) one sweep cost 20 % of
+                # clamp(w, -b, b) as two selects: with wp.clamp (NaN-aware fmin/fmax) one sweep cost 20 % of
                 # the humanoid's fused step, with selects 4 %
                 b = bound[i]
-                c = e.let(f"wp.where({u} > {b}, {b}, wp.where({u} < -{b}, -{b}, {u}))")
-            delta[i] = e.sp((-1.0, coupling)) if c is None else e.sp((-1.0, coupling), (-1.0, "fric_beta", c))
+                w = e.let(f"{u} - fric_shift * {qd[i]}")
+                c = e.let(f"wp.where({w} > {b}, {b}, wp.where({w} < -{b}, -{b}, {w}))")
+            delta[i] = e.sp((-1.0, coupling)) if c is None else e.sp((-1.0, coupling), (-1.0, beta[i], c))
             last[i] = (u, c)
             stamp[i] = next(clock)
     e.mark("friction result")
     v = list(v_star)
     for i, (u, c) in last.items():
         # u - beta c, not v* + delta: exactly 0 when the joint sticks with beta = 1
-        v[i] = u if c is None else e.let(f"{u} - fric_beta * {c}")
+        v[i] = u if c is None else e.let(f"{u} - {beta[i]} * {c}")
     return v
 
 
@@ -142,7 +153,7 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
     e.mark("frictionless velocity")
     v = [e.let(f"{qd[k]} + dt * {e.sym(qdd[k])}") for k in range(n)]
     if sweeps > 0 and friction.any():
-        v = _friction(e, tree, h_diag, m_off, v, p["fric"], sweeps, friction)
+        v = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, friction, qd)
     e.mark("semi-implicit Euler")
     return [e.let(f"{q[k]} + dt * {v[k]}") for k in range(n)], v
 
@@ -214,7 +225,8 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     src.append(f'''
 @wp.kernel(enable_backward={backward}, module="unique")
 def replay_step(
-    world_start: int, dt: S, fric_beta: S, fric_dt_beta: S, kp_implicit: S, {_PARAM_ARGS}, gravity: wp.array(dtype=V3),
+    world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, fric_m0: wp.array(dtype=S),
+    {_PARAM_ARGS}, gravity: wp.array(dtype=V3),
     joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
     target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),
     joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),
@@ -230,7 +242,8 @@ def replay_step(
     src.append(f'''
 @wp.kernel(enable_backward=False, module="unique")
 def replay_rollout(
-    world_start: int, n_steps: int, dt: S, fric_beta: S, fric_dt_beta: S, kp_implicit: S, {_PARAM_ARGS},
+    world_start: int, n_steps: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S,
+    fric_m0: wp.array(dtype=S), {_PARAM_ARGS},
     gravity: wp.array(dtype=V3), target_q: wp.array3d(dtype=S), target_qd: wp.array3d(dtype=S),
     joint_f: wp.array3d(dtype=S),
     q: wp.array3d(dtype=S), qd: wp.array3d(dtype=S),

@@ -28,29 +28,31 @@ differentiable by Warp's Tape. One step, with ``H`` the matrix the kernel factor
 - ``tau_lim``: penalty ``limit_ke * violation - limit_kd * qd`` outside ``[lower, upper]``
   (``Model.joint_limit_*``); unlike Newton's semi-implicit convention the drive stays on at a limit.
 - ``joint_f``: the residual torque ``tau_res`` of eq. (1), added unclamped.
-- ``g_i``: dry friction of ``mu_i = Model.joint_friction``, a saturated implicit damper, friction torque
-  ``-clamp(d_i v_i, -mu_i, mu_i)`` with ``d_i = kappa H_ii``: a joint under a net torque below ``mu_i``
-  creeps at ``tau / d_i`` (sticks exactly for ``kappa = inf``, Coulomb ``mu_i |v_i|``), above it slides
+- ``g_i``: dry friction of ``mu_i = Model.joint_friction``, by default MuJoCo's soft ``frictionloss``
+  constraint written per DoF: friction torque ``-clamp((a_i + b qd_i) / R_i, -mu_i, mu_i)`` with ``a_i`` the
+  step's acceleration ``(v_i - qd_i) / dt``, ``b = 2 / (dmax timeconst)`` and ``1 / R_i = d0 / (1 - d0) m0_i``,
+  ``m0_i`` the DoF's effective inertia ``1 / (M^-1)_ii`` at the reference pose of the model as built (MuJoCo's
+  ``1 / dof_invweight0``; default ``solref``/``solimp``: ``d0 = 0.9``, ``dmax = 0.95``, ``timeconst = 0.02``).
+  Below ``mu_i`` the joint creeps (a virtual inertia ``1 / R_i`` and damper ``b / R_i``), above it slides
   against ``mu_i``. The problem is solved by ``friction_sweeps`` symmetric Gauss-Seidel sweeps, each
-  coordinate in closed form (:mod:`.codegen`).
+  coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the older law instead, a saturated
+  damper ``-clamp(kappa H_ii v_i, -mu_i, mu_i)`` on the new velocity (``kappa = inf``: hard Coulomb friction,
+  exact sticking).
 
 Dry friction against MuJoCo C (``frictionloss``, default ``solref``/``solimp``, ``implicitfast``,
-dt = 2 ms). MuJoCo's friction row is a soft constraint: unsaturated, the joint accelerates as
-``a = (1 - d0) a0 - d0 b v`` (``a0`` the frictionless acceleration, ``d0 = 0.9``,
-``b = 2 / (dmax timeconst)``, ``dmax = 0.95``, ``timeconst = 0.02``), so a lone joint of inertia
-``m = H_ii`` under a sub-threshold torque creeps at ``v = (1 - d0) tau / (d0 b m)``; the damper creeps at
-``tau / (kappa H_ii)``, hence the default ``kappa = d0 b / (1 - d0) = 947 /s``. Measured (float64 kernels):
+dt = 2 ms). Measured:
 
-- one hinge, constant torque from rest, 1 s: 0.5 and 0.9 mu creep to 0.0176 and 0.0316 rad against
-  MuJoCo's 0.0174 and 0.0314 (0.8 %; hard Coulomb stays at 0); 1.5 mu: 1.2e-3 of 8.35 rad (the damper
-  takes a few steps to saturate where MuJoCo saturates at once); 3 mu: 2.5e-7 rad;
+- one hinge, constant torque from rest, 1 s: 0.5 and 0.9 mu creep as MuJoCo's to 7e-8 and 1.2e-7 rad (the
+  damper law: 0.8 % ahead, it relaxes in ~1 ms where MuJoCo takes ``1 / (d0 b) = 10 ms``); 1.5 and 3 mu slide
+  to 3e-5 and 1e-4 rad of 8 and 33 rad (float32 round-off; the damper law lags 1.2e-3 rad at 1.5 mu);
 - the humanoid replaying a 2 s multisine under PD with ``frictionloss = 0.1 x effort`` on all 21 joints
-  (friction moves MuJoCo's trajectory by up to 0.26 rad, mean 0.056 rad): max |q - q_mujoco| 0.022 rad,
-  mean 0.0028 rad with 8 sweeps (4 sweeps: 0.044 / 0.0046; converged, 12+: 0.020 / 0.0027; hard Coulomb:
-  0.060 / 0.0065; the smoothed ``-mu tanh(qd / 0.01)`` this replaces: 0.055 / 0.0061). The rest is
-  mostly the model: MuJoCo scales its regulariser with a joint's effective inertia at ``qpos0``, lower
-  than ``H_ii(q)`` for coupled joints, so a lower ``kappa`` (500-700 /s: 0.013-0.018 rad) fits the
-  humanoid a little better at the cost of the lone joint's creep (off by 35-90 %).
+  (friction moves MuJoCo's trajectory by up to 0.26 rad, mean 0.056 rad): max |q - q_mujoco| 0.0116 rad,
+  mean 0.0006 rad with 8 sweeps (4 sweeps: 0.040 / 0.0030; 16: 0.0027 / 0.0003; the damper law 0.022 /
+  0.0028, hard Coulomb 0.060 / 0.0065, a smoothed ``-mu tanh(qd / 0.01)`` 0.055 / 0.0061). The rest is the
+  Gauss-Seidel solve (MuJoCo solves the coupled rows with Newton's method) and MuJoCo's 1 kHz vs 500 Hz;
+- the "real" robot of the shipped data (default mismatch, noise off, 1 kHz) replayed with its true
+  parameters on the held-out commands: mean |dq| 0.0003 rad (the damper law: 0.0063 rad, the whole gap
+  between the two simulators; without friction both laws give 0.0003).
 
 Gradients (a ``wp.Tape`` around :meth:`step` or :meth:`rollout`, ``requires_grad``) reach the states,
 targets and ``joint_f`` and, when the model was finalized with ``requires_grad``, every parameter above:
@@ -68,7 +70,6 @@ Not supported: floating bases, contacts, mimic joints, ``joint_target_mode`` (dr
 
 from __future__ import annotations
 
-import math
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -86,11 +87,11 @@ __all__ = ["FRICTION_KAPPA", "FRICTION_SWEEPS", "SolverReplay"]
 _MJ_D0, _MJ_DMAX, _MJ_TIMECONST = 0.9, 0.95, 0.02
 """MuJoCo's default ``solimp[0]``, ``solimp[1]`` and ``solref[0]`` [s]."""
 FRICTION_KAPPA = _MJ_D0 / (1.0 - _MJ_D0) * 2.0 / (_MJ_DMAX * _MJ_TIMECONST)
-"""Default rate of the friction damper ``d_i = kappa H_ii`` [1/s], 947: the creep of MuJoCo's default soft
-``frictionloss`` (module docstring)."""
+"""Rate of the older friction law's damper ``d_i = kappa H_ii`` [1/s], 947 (``SolverReplay(friction_kappa=)``):
+the creep velocity of MuJoCo's default soft ``frictionloss`` on a lone joint (module docstring)."""
 FRICTION_SWEEPS = 8
-"""Default Gauss-Seidel sweeps of the friction solve: on the humanoid the error against MuJoCo is within
-10 % of the converged solve's (0.022 vs 0.020 rad), 4 sweeps double it (module docstring)."""
+"""Default Gauss-Seidel sweeps of the friction solve: on the humanoid 0.0116 rad max against MuJoCo (16 sweeps
+0.0027, 4 sweeps 0.040; module docstring)."""
 
 _JOINT_PARAMS = ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_damping",
                  "joint_effort_limit", "joint_limit_lower", "joint_limit_upper", "joint_limit_ke", "joint_limit_kd")
@@ -130,7 +131,7 @@ class SolverReplay(SolverBase):
         self,
         model,
         *,
-        friction_kappa: float = FRICTION_KAPPA,
+        friction_kappa: float | None = None,
         friction_sweeps: int = FRICTION_SWEEPS,
         implicit_stiffness: bool = False,
         requires_grad: bool | None = None,
@@ -143,9 +144,10 @@ class SolverReplay(SolverBase):
         Args:
             model: Newton model holding one fixed-base robot per world (same topology and joint frames;
                 inertias and joint parameters may differ).
-            friction_kappa: Rate ``kappa`` [1/s] of the saturated friction damper ``d_i = kappa H_ii``
-                (see the module docstring); ``math.inf`` gives hard Coulomb friction with exact sticking,
-                0 no friction. For MuJoCo with other ``solref``/``solimp``: ``d0 b / (1 - d0)``.
+            friction_kappa: ``None`` (default): dry friction as MuJoCo's soft ``frictionloss`` constraint with
+                the default ``solref``/``solimp`` (module docstring). A number: the older law, a saturated damper
+                on the new velocity ``d_i = kappa H_ii`` [1/s] (:data:`FRICTION_KAPPA` matches MuJoCo's creep
+                rate only); ``math.inf`` gives hard Coulomb friction with exact sticking, 0 no friction.
             friction_sweeps: Gauss-Seidel sweeps of the friction solve; 0 leaves friction out of the
                 kernels (``joint_friction`` is then ignored).
             implicit_stiffness: Also treat the drive stiffness implicitly (``dt^2 ke`` on the diagonal);
@@ -169,9 +171,9 @@ class SolverReplay(SolverBase):
         super().__init__(model)
         if dtype not in (wp.float32, wp.float64):
             raise ValueError("dtype must be wp.float32 or wp.float64")
-        if not friction_kappa >= 0.0 or int(friction_sweeps) < 0:
+        if (friction_kappa is not None and not friction_kappa >= 0.0) or int(friction_sweeps) < 0:
             raise ValueError("friction_kappa must be >= 0 (inf: hard Coulomb) and friction_sweeps >= 0")
-        self.friction_kappa = float(friction_kappa)
+        self.friction_kappa = None if friction_kappa is None else float(friction_kappa)
         self.friction_sweeps = int(friction_sweeps)
         self.implicit_stiffness = bool(implicit_stiffness)
         self.requires_grad = bool(model.requires_grad if requires_grad is None else requires_grad)
@@ -196,11 +198,24 @@ class SolverReplay(SolverBase):
     def _build(self) -> None:
         self.tree: ReplayTree = tree_from_model(self.model)
         self._load()
+        self._m0 = self._reference_inertia()
+
+    def _reference_inertia(self) -> wp.array:
+        """``fric_m0``: each DoF's effective inertia at the reference pose (all joints at 0) of world 0 as built,
+        armature included, ``1 / (M^-1)_ii`` [kg m^2 or kg], shape (n_dof,): MuJoCo's ``1 / dof_invweight0``,
+        the scale of its soft friction's regulariser. Fixed at construction (as MuJoCo fixes it when it compiles
+        a model): edits of masses or armature later, identification's included, do not change it."""
+        n = self.tree.n_dof
+        mass, _ = self.dynamics_terms(np.zeros(n), np.zeros(n))
+        arm = self.model.joint_armature.numpy()[np.asarray(self.tree.qd_offset)]
+        inv = np.linalg.inv(mass[0].astype(np.float64) + np.diag(arm.astype(np.float64)))
+        dt = np.float64 if self.dtype == wp.float64 else np.float32
+        return wp.array((1.0 / np.diag(inv)).astype(dt), dtype=self.dtype, device=self.model.device)
 
     def _load(self) -> None:
         scalar = "float64" if self.dtype == wp.float64 else "float32"
         self._live = self._live_params()
-        sweeps = self.friction_sweeps if self.friction_kappa > 0.0 else 0  # kappa = 0: no friction at all
+        sweeps = self.friction_sweeps if self.friction_kappa != 0.0 else 0  # kappa = 0: no friction at all
         self.kernels = _load_kernels(self.tree, scalar, self.requires_grad, self.model.device.is_cuda, sweeps,
                                      self._live)
         self._refresh_params()
@@ -246,11 +261,15 @@ class SolverReplay(SolverBase):
             self._refresh_params()
 
     # ------------------------------------------------------------------ launching
-    def _scalars(self, dt: float) -> list:
-        # beta = kappa dt / (1 + kappa dt): the friction update's damper factor, 1 for hard Coulomb
+    def _leading_args(self, dt: float) -> list:
+        """The kernels' first arguments: ``dt``, the friction law's ``fric_c``, ``fric_k``, ``fric_shift``
+        (:func:`.codegen._friction`), ``kp_implicit`` and the array ``fric_m0``."""
         k = self.friction_kappa
-        beta = 1.0 if math.isinf(k) else k * dt / (1.0 + k * dt)
-        return [float(dt), beta, float(dt) / beta if beta > 0.0 else 0.0, 1.0 if self.implicit_stiffness else 0.0]
+        if k is None:  # MuJoCo's soft frictionloss: c_i = d0 / (1 - d0) m0_i / H_ii, shift = 1 - b dt
+            c, kdt, shift = _MJ_D0 / (1.0 - _MJ_D0), 0.0, 1.0 - 2.0 / (_MJ_DMAX * _MJ_TIMECONST) * dt
+        else:  # a damper kappa H_ii on the new velocity (inf: hard Coulomb)
+            c, kdt, shift = 0.0, k * dt, 0.0
+        return [float(dt), c, kdt, shift, 1.0 if self.implicit_stiffness else 0.0, self._m0]
 
     def _chunks(self) -> list[tuple[int, int]]:
         w = self.tree.world_count
@@ -314,7 +333,7 @@ class SolverReplay(SolverBase):
         arrays = [state_in.joint_q, state_in.joint_qd, control.joint_target_q, control.joint_target_qd,
                   control.joint_f, state_out.joint_q, state_out.joint_qd]
         key = ("step", float(dt), *map(_sig, arrays))
-        args, outputs = [*self._scalars(dt), *self._params, self._gravity, *arrays[:5]], arrays[5:]
+        args, outputs = [*self._leading_args(dt), *self._params, self._gravity, *arrays[:5]], arrays[5:]
         kernel = self.kernels.replay_step
         self._execute(self._plan(key, lambda c: [self._command(kernel, c, args, outputs)]))
         self._record(lambda: self._execute(self._plan(key + ("adjoint",), lambda c: [
@@ -361,7 +380,7 @@ class SolverReplay(SolverBase):
             joint_f = zeros if joint_f is None else joint_f
         arrays = [q, qd, target_q, target_qd, joint_f]
         key = ("rollout", float(dt), *map(_sig, arrays))
-        fixed = [*self._scalars(dt), *self._params, self._gravity]
+        fixed = [*self._leading_args(dt), *self._params, self._gravity]
         kernel = self.kernels.replay_rollout
         self._execute(self._plan(key, lambda c: [self._command(kernel, c, [t_len, *fixed, *arrays[2:]], arrays[:2])]))
         if wp._src.context.runtime.tape is None:
