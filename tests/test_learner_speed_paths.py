@@ -28,10 +28,17 @@ def _torchrun(*argv):
     return subprocess.run([*TORCHRUN, *argv], capture_output=True, text=True, env=env, timeout=600)
 
 
+def _failure(res) -> str:
+    """What a failed torchrun says: the ranks' own lines (errors, tracebacks, aborts), then the launcher's summary."""
+    own = [ln for ln in res.stderr.splitlines() if not ln.lstrip().startswith(("E1", "W1", "I1"))
+           and any(k in ln for k in ("Error", "error", "Traceback", "terminate", "Abort", "abort", "File "))]
+    return "\n".join(own[:60]) + "\n--- launcher:\n" + res.stderr[-1500:]
+
+
 def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(tmp_path):
     run = tmp_path / "run"
     res = _torchrun("--out", str(run), "--iterations", "2")
-    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.returncode == 0, _failure(res)
     # rsl-rl's multi-GPU PPO ran: rank 1 took rank 0's parameters, gradients are averaged across the two
     assert "Synchronizing parameters for rank 1" in res.stdout
     s = json.loads((run / "train_summary.json").read_text())
@@ -42,7 +49,7 @@ def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(t
     # a killed run resumes from its checkpoint on every rank
     (run / "model_1.pt").unlink()
     res = _torchrun("--out", str(run), "--iterations", "3")
-    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.returncode == 0, _failure(res)
     assert json.loads((run / "train_summary.json").read_text())["iterations_this_session"] == 2
     assert (run / "model_2.pt").is_file()
     # a changed configuration is refused in one line per process, nothing written
