@@ -32,14 +32,12 @@ LAWS = {"soft (default)": {}, "damper (kappa 947)": None}  # None: filled with F
 
 
 def hinge_and_humanoid(laws: dict) -> None:
-    from test_friction import DT, HINGE_URDF, MU, mujoco_rollout, newton_rollout
+    from test_friction import DT, MU, make_hinge, mujoco_rollout, newton_rollout
 
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
     from wresdyn.sim.parity import multisine_command
 
-    path = Path(tempfile.mkdtemp()) / "hinge.urdf"
-    path.write_text(HINGE_URDF)
-    hinge = load_robot(path, gains={"joint": [{"match": "*", "kp": 0.0, "kd": 0.0, "friction": MU, "armature": 0.01}]})
+    hinge = make_hinge(tempfile.mkdtemp())
     print("1. one hinge, constant torque from rest, 1 s: max |q - q_mujoco| [rad] (q_mujoco at 1 s)")
     for ratio in (0.5, 0.9, 1.5, 3.0):
         tau, cmd = np.full((500, 1), ratio * MU), np.zeros((500, 1))

@@ -8,6 +8,7 @@ reference acceleration ``-b qd``); ``friction_kappa`` selects the older law, a s
 """
 
 import math
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -40,11 +41,16 @@ MU = 1.0
 """Friction torque of the hinge [N m]."""
 
 
-@pytest.fixture(scope="module")
-def hinge(tmp_path_factory):
-    path = tmp_path_factory.mktemp("hinge") / "hinge.urdf"
+def make_hinge(folder):
+    """The hinge robot (no drive, friction ``MU``, armature 0.01), its URDF written into ``folder``."""
+    path = Path(folder) / "hinge.urdf"
     path.write_text(HINGE_URDF)
     return load_robot(path, gains={"joint": [{"match": "*", "kp": 0.0, "kd": 0.0, "friction": MU, "armature": 0.01}]})
+
+
+@pytest.fixture(scope="module")
+def hinge(tmp_path_factory):
+    return make_hinge(tmp_path_factory.mktemp("hinge"))
 
 
 @pytest.fixture(scope="module")
@@ -56,15 +62,15 @@ def tri_robot(tmp_path_factory):
     return load_robot(path, gains={"joint": [{"match": "*", "kp": 30.0, "kd": 1.0, "armature": 0.01}]})
 
 
-def newton_rollout(robot, q0, cmd, joint_f=None, dtype=wp.float32, **kw):
-    solver = SolverReplay(robot.build_model(1, "cpu"), dtype=dtype, **kw)
+def newton_rollout(robot, q0, cmd, joint_f=None, dtype=wp.float32, device="cpu", **kw):
+    solver = SolverReplay(robot.build_model(1, device), dtype=dtype, **kw)
     t_len, n = cmd.shape
     npt = np.float64 if dtype == wp.float64 else np.float32
     q, qd = np.zeros((t_len + 1, 1, n), npt), np.zeros((t_len + 1, 1, n), npt)
     q[0, 0] = q0
-    qa, qda = wp.array(q, dtype=dtype), wp.array(qd, dtype=dtype)
-    f = None if joint_f is None else wp.array(joint_f[:, None].astype(npt), dtype=dtype)
-    solver.rollout(qa, qda, wp.array(cmd[:, None].astype(npt), dtype=dtype), DT, joint_f=f)
+    qa, qda = wp.array(q, dtype=dtype, device=device), wp.array(qd, dtype=dtype, device=device)
+    f = None if joint_f is None else wp.array(joint_f[:, None].astype(npt), dtype=dtype, device=device)
+    solver.rollout(qa, qda, wp.array(cmd[:, None].astype(npt), dtype=dtype, device=device), DT, joint_f=f)
     return qa.numpy()[:, 0], qda.numpy()[:, 0]
 
 

@@ -46,11 +46,12 @@ _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
 
-def _load_params(e: Emitter, tree: ReplayTree) -> dict:
+def _load_params(e: Emitter, tree: ReplayTree, friction: np.ndarray) -> dict:
+    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) only where ``friction``."""
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
-    out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") for k in range(tree.n_dof)]  # one per DoF, all worlds
+    out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction[k] else None for k in range(tree.n_dof)]
     return out
 
 
@@ -186,14 +187,14 @@ def _step_code(tree: ReplayTree, access: dict, sweeps: int, live: LiveParams | N
     co = [int(x) for x in tree.q_offset]
     do = [int(x) for x in tree.qd_offset]
     e = Emitter()
-    p = _load_params(e, tree)
+    friction = np.ones(n, bool) if live is None else live.friction
+    p = _load_params(e, tree, friction & (sweeps > 0))
     groups = inertial_params(e, tree, None if live is None else live.body)
     params, e.lines = unmarked(e.lines) + _GRAVITY, []
     q = [e.let(access["q"].format(co[k]), prefix="q_") for k in range(n)]
     qd, tq, tqd, jf = ([e.let(access[kind].format(do[k]), prefix=f"{kind}_") for k in range(n)]
                        for kind in ("qd", "tq", "tqd", "jf"))
     loads, e.lines = e.lines, []
-    friction = np.ones(n, bool) if live is None else live.friction
     qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, friction)
     stores = [f"{access['q_out'].format(co[k])} = {qn[k]}" for k in range(n)]
     stores += [f"{access['qd_out'].format(do[k])} = {qdn[k]}" for k in range(n)]
