@@ -173,6 +173,14 @@ def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
         sim_plant("calibrated", humanoid, 2, RATE, 5, str(delta))
 
 
+def load_skill_std(run) -> float:
+    """Mean action noise std of a skill run's last checkpoint."""
+    from wresdyn.learn.ppo import latest_checkpoint
+
+    state = torch.load(latest_checkpoint(run), map_location="cpu", weights_only=True)["actor_state_dict"]
+    return float(state["distribution.log_std_param"].exp().mean())
+
+
 def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     data_path = tmp_path / "dataset.npz"
     data.save(data_path)
@@ -180,7 +188,8 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     out = tmp_path / "deploy"
     args = ["deploy", str(data_path), "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
-            "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--heldout", "1"]
+            "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
+            "--motions", "1", "--heldout", "1"]
     assert main(args) == 0
     # the compile is announced, for what this run needs: both corrections given, so no fitting variants
     assert f"compiling Warp kernels for humanoid.usda ({humanoid.n_dof} joints; forward):" in capsys.readouterr().out
@@ -192,6 +201,12 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     assert "Gap closed" in (out / "report.md").read_text()
     for name in ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle"):
         assert (out / "skills" / name / "policy.pt").is_file()
+        # the oracle trains on its own number of worlds (the real robot is MuJoCo C on the CPU)
+        ppo = json.loads((out / "skills" / name / "config.json").read_text())["ppo"]
+        assert ppo["num_envs"] == (3 if name == "d_oracle" else 4)
+        # the fine-tunings restart their action noise at --finetune-std (one iteration moves it little); (a) keeps 0.3
+        std = load_skill_std(out / "skills" / name)
+        assert abs(std - (0.3 if name == "a_nominal" else 0.6)) < 0.05, (name, std)
     # a changed configuration on resume is refused in one line, and nothing is overwritten
     before = (out / "skills" / "a_nominal" / "config.json").read_text()
     capsys.readouterr()

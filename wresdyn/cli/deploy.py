@@ -29,8 +29,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--iterations", type=int, default=None, help="PPO iterations of (a), nominal (default 300)")
     p.add_argument("--finetune", type=int, default=None, help="PPO iterations of each fine-tuning (default 300)")
     p.add_argument("--envs", type=int, default=None, help="parallel worlds of PPO (default 64)")
+    p.add_argument("--oracle-envs", type=int, default=None,
+                   help="parallel worlds of the oracle on the real robot, MuJoCo C on the CPU (default: --envs; "
+                        "--full: 1024)")
     p.add_argument("--motions", type=int, default=None, help="training motions per family (default 4)")
     p.add_argument("--heldout", type=int, default=None, help="held-out motions per family (default 2)")
+    p.add_argument("--finetune-std", type=float, default=None,
+                   help="action noise the fine-tunings (b)-(d) restart from (default: (a)'s own; --full: 0.3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the motions and of PPO")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0 (the real robot always steps on the CPU)")
     p.add_argument("--no-animation", action="store_true", help="skip the USD animation")
@@ -46,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = DeployConfig.full() if args.full else DeployConfig()
     kw = {k: v for k, v in (("iterations", args.iterations), ("finetune", args.finetune), ("envs", args.envs),
+                            ("oracle_envs", args.oracle_envs), ("finetune_std", args.finetune_std),
                             ("train_per_family", args.motions), ("heldout_per_family", args.heldout)) if v is not None}
     cfg = replace(cfg, seed=args.seed, device=args.device, **kw)
     ds, robot = load_data(args.data)

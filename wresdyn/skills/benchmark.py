@@ -46,6 +46,10 @@ class DeployConfig:
     """Length of a motion [s]."""
     envs: int = 64
     """Parallel worlds of PPO."""
+    oracle_envs: int = 0
+    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (0: ``envs``)."""
+    finetune_std: float = 0.0
+    """Action noise the fine-tunings (b), (c), (d) restart from (0: (a)'s own; see ``SkillPPOConfig.restart_std``)."""
     iterations: int = 300
     """PPO iterations of (a) in the nominal simulator."""
     finetune: int = 300
@@ -56,12 +60,16 @@ class DeployConfig:
     @classmethod
     def full(cls, **kw) -> "DeployConfig":
         """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family
-        (the same PPO iterations; the real robot steps on every CPU core)."""
-        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096), **kw})
+        (the same PPO iterations). The oracle trains on 1024 worlds: its real robot is MuJoCo C on the CPU cores
+        (4-6 s per iteration at 4096 worlds on 16 cores, 10-15x the simulated plants on the GPU)."""
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
+                             oracle_envs=1024, finetune_std=0.3), **kw})
 
     def __post_init__(self) -> None:
         for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
             check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
+        check_number(self.oracle_envs, "deploy.oracle_envs", integer=True, ge=0)
+        check_number(self.finetune_std, "deploy.finetune_std", ge=0)
         check_number(self.duration, "deploy.duration", gt=0)
 
 
@@ -153,17 +161,19 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     for i, name in enumerate(policies):
         setting = POLICIES[name]
         t0 = time.perf_counter()
+        envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
         if setting == "real":
-            plant = RealPlant(real, cfg.envs, task.decimation, seed=cfg.seed + 1)
+            plant = RealPlant(real, envs, task.decimation, seed=cfg.seed + 1)
         else:
-            plant = sim_plant(setting, robot, cfg.envs, rate, task.decimation, runs.get(setting), cfg.device)
+            plant = sim_plant(setting, robot, envs, rate, task.decimation, runs.get(setting), cfg.device)
         env = TrackingEnv(plant, motions.split("train"), task, seed=cfg.seed + i, device=cfg.device)
         run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
         it = cfg.iterations if i == 0 else cfg.finetune
-        train_skill(env, replace(ppo, iterations=it), out / "skills" / name, log=log,
+        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.finetune_std),
+                    out / "skills" / name, log=log,
                     init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
         wall[name] = time.perf_counter() - t0
-        log(f"[3/4] policy {name}: {it} PPO iterations in the {setting} "
+        log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds in the {setting} "
             f"{'robot' if setting == 'real' else 'simulator'} ({wall[name]:.0f} s)")
     results = {"config": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo), "mismatch": mismatch.to_dict(),
                "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None}, "train_wall_s": wall, "fit_wall_s": fit_s,
