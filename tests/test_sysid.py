@@ -45,6 +45,23 @@ def test_identification_resume_refuses_a_changed_config(humanoid, recorded, tmp_
         identify(humanoid, recorded, dataclasses.replace(cfg, lr=0.5), out=tmp_path, log=lambda *_: None)
 
 
+def test_refinement_resumes_adam_and_never_selects_worse(humanoid, recorded, tmp_path):
+    score = PhysicsScore(humanoid, recorded.split("validation"), recorded.rate_hz)
+    adam, _ = identify(humanoid, recorded, SMALL, out=tmp_path, log=lambda *_: None)
+    # a finished run refined later: Adam's checkpoint is resumed (refine may change), then L-BFGS on fixed windows
+    cfg = dataclasses.replace(SMALL, refine=3, refine_windows=4)
+    lines = []
+    refined, curve = identify(humanoid, recorded, cfg, out=tmp_path, log=lines.append)
+    assert any(s.startswith("resumed from") for s in lines), lines
+    rows = [r for r in curve if r.get("stage") == "refine"]
+    assert len(rows) == 3 and all("validation" in r for r in rows)
+    assert rows[-1]["loss"] <= rows[0]["loss"]  # L-BFGS with a line search does not go up on its fixed windows
+    best = min([r["validation"] for r in rows] + [score(adam)])
+    assert score(refined) == pytest.approx(best, rel=1e-6)  # the best on validation, Adam's start included
+    assert score(refined) < 0.9 * score(adam)  # here 40 Adam steps leave plenty: 0.0103 -> 0.0068 rad
+    assert PhysicalParams.load(tmp_path / "physics.json", humanoid).kd.tolist() == refined.kd.tolist()
+
+
 def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys):
     """`wresdyn identify --eval` writes the parameters, the report against the truth and an evaluation of the
     calibrated model; `wresdyn fit --physics` learns a residual on top and its run replays with that physics."""
