@@ -120,6 +120,17 @@ def test_fit_default_is_the_hybrid_and_resumes_both_stages(humanoid, recorded, t
     assert "resumed" in capsys.readouterr().out
 
 
+def test_fit_passes_refine_to_its_identification(humanoid, recorded, tmp_path, capsys):
+    data = tmp_path / "d.npz"
+    recorded.save(data)
+    out = tmp_path / "hybrid"
+    assert main(["fit", str(data), "--out", str(out), "--identify-iterations", "4", "--refine", "1", "--iterations",
+                 "2", "--windows", "2", "--curriculum", "4"]) == 0
+    assert "refine   1/1" in capsys.readouterr().out
+    curve = json.loads((out / "identify" / "curve.json").read_text())
+    assert [r.get("stage") for r in curve][-1] == "refine"
+
+
 def test_identify_refuses_a_malformed_delay_grid(tmp_path, capsys):
     assert main(["identify", str(tmp_path / "none.npz"), "--delay-grid", "0,ten"]) == 2
     err = capsys.readouterr().err

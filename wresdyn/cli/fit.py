@@ -38,6 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"optimiser steps of the residual (default {HYBRID_ITERATIONS} for hybrid, else 2000)")
     p.add_argument("--identify-iterations", type=int, default=None,
                    help="optimiser steps of the hybrid's identification (default 800, as `wresdyn identify`)")
+    p.add_argument("--refine", type=int, default=None, metavar="STEPS",
+                   help="L-BFGS steps after the hybrid's identification, as `wresdyn identify --refine` (default 0)")
     p.add_argument("--windows", type=int, default=None,
                    help="parallel windows (worlds) per step, of both hybrid stages (default 32)")
     p.add_argument("--horizon", type=int, default=None, help="final window length [steps]")
@@ -112,8 +114,8 @@ def run(args: argparse.Namespace) -> int:
             from ..learn.hybrid import fit_hybrid
             from ..learn.sysid import SysIdConfig
 
-            stage1 = {k: v for k, v in (("iterations", args.identify_iterations), ("windows", args.windows))
-                      if v is not None}
+            stage1 = {k: v for k, v in (("iterations", args.identify_iterations), ("windows", args.windows),
+                                        ("refine", args.refine)) if v is not None}
             sysid = replace(SysIdConfig(), device=cfg.device, seed=cfg.seed, solver=cfg.solver, **stage1)
             _, policy, curve, cfg, id_wall = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data)
         else:
