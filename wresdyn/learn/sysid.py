@@ -16,7 +16,8 @@ A saturating drive has no gradient while the simulated drive does not saturate, 
 from a coarse search: the training loss of a few windows at a geometric grid of fractions of the robot file's
 limit (forward only); the gradient refines from the best. Model selection on the validation split, as for
 every learner: every ``select_every`` iterations the current parameters replay the validation trajectories and
-the best are returned. Held-out and OOD data are never read.
+the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
+each step validated the same way. Held-out and OOD data are never read.
 """
 
 from __future__ import annotations
