@@ -179,23 +179,22 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
     log(f"{field} search: " + "  ".join(f"{g:.3g}:{x:.2e}" for g, x in zip(grid, losses)) + f"  -> {best:.3g}")
 
 
-def _refine(cfg, robot, train, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
-    """``cfg.refine`` L-BFGS steps from ``start`` on fixed training windows (:attr:`SysIdConfig.refine`); returns
-    the best parameters on validation (``start`` when no step beats ``start_validation``). Appends to ``curve``.
+def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
+    """``cfg.refine`` L-BFGS steps from ``start`` on fixed windows of ``bank`` (the training trajectories; its delay
+    is set to ``start``'s) (:attr:`SysIdConfig.refine`); returns the best parameters on validation (``start`` when
+    no step beats ``start_validation``). Appends to ``curve``.
 
     Adam's steps through the multiple-shooting loss stop in a long, ill-conditioned valley: on the shipped data the
     loss keeps falling along the straight line to the true parameters (``benchmarks/sysid_valley.py``), and a
     quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
     2 cores, rerun on resume."""
-    from ..sim import Simulator, TrajectoryBank, rollout
-    from .runs import squared_error
+    from ..sim import Simulator
 
     fields = [f for f in cfg.fit if f not in ("effort", "delay")]
     model = PhysicsModel(robot, start, fit=fields, dt=dt)
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True)
-    bank = TrajectoryBank(train, sim.device)
     bank.set_delay(torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device))
     window = bank.sample(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
     params = [p for p in model.parameters() if p.requires_grad]
@@ -203,10 +202,7 @@ def _refine(cfg, robot, train, dt, start: PhysicalParams, score, start_validatio
 
     def closure():
         optim.zero_grad()
-        sim.set_physics(model())
-        run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation)
-        loss = (cfg.w_q * squared_error(run.q[:, 1:], window.q[:, 1:], weights)
-                + cfg.w_qd * squared_error(run.qd[:, 1:], window.qd[:, 1:], weights))
+        loss, _ = _window_loss(cfg, model, sim, window, weights)
         if not torch.isfinite(loss):
             raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
         loss.backward()
@@ -344,7 +340,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
     params = model.values()
     if cfg.refine:
-        params = _refine(cfg, robot, train, dt, params, score, best["validation"], weights, curve, log)
+        params = _refine(cfg, robot, bank, dt, params, score, best["validation"], weights, curve, log)
     if out:
         Path(out).mkdir(parents=True, exist_ok=True)
         params.save(Path(out) / "physics.json")
