@@ -544,17 +544,22 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         "selected_validation": best["meta"]["validation"] if best else None,
         "validation_curve": curve,
     }
-    if not ranks.main:
-        return summary
-    actor = runner.alg.get_policy()
-    if best is not None:  # export the residual chosen on validation, not merely the last
-        # into the actor itself: training is over and its last checkpoint written, and a deepcopy of it fails on
-        # the non-leaf outputs its distribution keeps from the last update
-        actor.load_state_dict(best["actor"])
-    export(actor, run_dir, cfg, mean, std, env.scale.cpu().numpy(), dataset)
-    if env.physics is not None:  # the run carries the model it was trained on: evaluation replays with it
-        env.physics.save(run_dir / "physics.json")
-    (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    if ranks.main:
+        actor = runner.alg.get_policy()
+        if best is not None:  # export the residual chosen on validation, not merely the last
+            # into the actor itself: training is over and its last checkpoint written, and a deepcopy of it fails on
+            # the non-leaf outputs its distribution keeps from the last update
+            actor.load_state_dict(best["actor"])
+        export(actor, run_dir, cfg, mean, std, env.scale.cpu().numpy(), dataset)
+        if env.physics is not None:  # the run carries the model it was trained on: evaluation replays with it
+            env.physics.save(run_dir / "physics.json")
+        (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    if ranks.world > 1 and torch.distributed.is_initialized():
+        # a finished run tears its process group down while the interpreter is alive, every rank once rank 0 has
+        # written the run: a gloo group left to interpreter exit aborts a rank now and then ("terminate called
+        # without an active exception", pytorch#190489). A failed rank skips this; torchrun stops the others.
+        torch.distributed.barrier()
+        torch.distributed.destroy_process_group()
     return summary
 
 
