@@ -135,3 +135,30 @@ def test_identify_refuses_a_malformed_delay_grid(tmp_path, capsys):
     assert main(["identify", str(tmp_path / "none.npz"), "--delay-grid", "0,ten"]) == 2
     err = capsys.readouterr().err
     assert "--delay-grid" in err and len(err.strip().splitlines()) == 1
+
+
+def test_gain_grid_starts_each_joint_at_its_own_kp(humanoid, record):
+    # arms' servos 10x softer than the file says, legs and waist as the file says
+    soft_arms = Mismatch(joint=({"match": "*_shoulder_*", "kp_scale": 0.1}, {"match": "*_elbow", "kp_scale": 0.1}))
+    data = record(humanoid, soft_arms, {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.3)
+    cfg = dataclasses.replace(SMALL, iterations=2, gain_grid=(1.0, 0.1), effort_grid=())
+    lines = []
+    params, _ = identify(humanoid, data, cfg, log=lines.append)
+    (line,) = [s for s in lines if s.startswith("kp search, per joint:")]
+    picks = dict(tok.rsplit(":", 1) for tok in line.split(":", 1)[1].split())
+    arms = [j for j in humanoid.joint_names if "shoulder" in j or "elbow" in j]
+    assert sum(picks[j] == "0.1" for j in arms) >= 0.75 * len(arms), picks
+    legs = [j for j in humanoid.joint_names if j not in arms]
+    assert sum(picks[j] == "1" for j in legs) >= 0.75 * len(legs), picks
+    # the selected model starts from there (two small Adam steps later): far closer to the arms' truth than the file
+    truth = RealRobot(humanoid, soft_arms).physics()
+    arm = np.isin(humanoid.joint_names, arms)
+    assert np.abs(np.log(params.kp / truth.kp))[arm].mean() < 0.5 * np.abs(np.log(humanoid.kp / truth.kp))[arm].mean()
+
+
+def test_identify_refuses_a_malformed_gain_grid(tmp_path, capsys):
+    assert main(["identify", str(tmp_path / "none.npz"), "--gain-grid", "1,soft"]) == 2
+    err = capsys.readouterr().err
+    assert "--gain-grid" in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(ValueError, match="gain_grid"):
+        SysIdConfig(fit=("kd",), gain_grid=(1.0, 0.1))

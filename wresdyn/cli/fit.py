@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 
 from ..choices import Arch, FitModel, ResidualKind, SolverKind, choices
+from .identify import GAIN_GRID_HELP, parse_grid
 
 HYBRID_ITERATIONS = 1000
 """Residual iterations of the hybrid by default: on the identified model the residual's validation error stops
@@ -38,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"optimiser steps of the residual (default {HYBRID_ITERATIONS} for hybrid, else 2000)")
     p.add_argument("--identify-iterations", type=int, default=None,
                    help="optimiser steps of the hybrid's identification (default 800, as `wresdyn identify`)")
+    p.add_argument("--gain-grid", default=None, metavar="FACTORS",
+                   help="the hybrid's identification: " + GAIN_GRID_HELP + "; as `wresdyn identify --gain-grid`")
     p.add_argument("--refine", type=int, default=None, metavar="STEPS",
                    help="L-BFGS steps after the hybrid's identification, as `wresdyn identify --refine` (default 0)")
     p.add_argument("--windows", type=int, default=None,
@@ -93,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
     from . import UserError
 
     cfg = config_from_args(args)
+    gain_grid = None if args.gain_grid is None else parse_grid(args.gain_grid, "--gain-grid", "factors on kp")
     ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
     identify_first = args.model == "hybrid" and not cfg.physics
@@ -116,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
 
             stage1 = {k: v for k, v in (("iterations", args.identify_iterations), ("windows", args.windows),
                                         ("refine", args.refine)) if v is not None}
+            if gain_grid is not None:
+                stage1["gain_grid"] = gain_grid
             sysid = replace(SysIdConfig(), device=cfg.device, seed=cfg.seed, solver=cfg.solver, **stage1)
             _, policy, curve, cfg, id_wall = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data)
         else:

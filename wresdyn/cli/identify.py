@@ -29,6 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--delay-grid", default=None, metavar="STEPS",
                    help="command delays [simulation steps] to search, one for every joint, before the gradient fit "
                         "refines them, e.g. 0,10,25,50 (for drives that lag far more than a window sees; default off)")
+    p.add_argument("--gain-grid", default=None, metavar="FACTORS",
+                   help=GAIN_GRID_HELP)
     p.add_argument("--refine", type=int, default=None, metavar="STEPS",
                    help="L-BFGS steps after the Adam iterations, on fixed training windows, each validated "
                         "(default 0: off; 8 take about a minute on 2 cores)")
@@ -36,6 +38,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--seed", type=int, default=0, help="seed")
     p.add_argument("--eval", action="store_true", help="replay every split with the identified model and report")
+
+
+GAIN_GRID_HELP = ("factors on the robot file's kp to try before the gradient fit, each joint taking its own best, "
+                  "e.g. 1,0.1,0.03,0.01 (for a file's servo far stiffer than the real one; default off)")
+
+
+def parse_grid(text: str, flag: str, what: str) -> tuple[float, ...]:
+    """A comma-separated grid of a command-line flag; a malformed one is a one-line :class:`UserError`."""
+    from . import UserError
+
+    try:
+        return tuple(float(g) for g in text.split(",") if g.strip())
+    except ValueError:
+        raise UserError(f"{flag} {text!r}: give comma-separated {what}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,10 +66,9 @@ def run(args: argparse.Namespace) -> int:
     kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("solver", args.solver),
                             ("refine", args.refine)) if v is not None}
     if args.delay_grid is not None:
-        try:
-            kw["delay_grid"] = tuple(float(g) for g in args.delay_grid.split(",") if g.strip())
-        except ValueError:
-            raise UserError(f"--delay-grid {args.delay_grid!r}: give comma-separated numbers of steps") from None
+        kw["delay_grid"] = parse_grid(args.delay_grid, "--delay-grid", "numbers of steps")
+    if args.gain_grid is not None:
+        kw["gain_grid"] = parse_grid(args.gain_grid, "--gain-grid", "factors on kp")
     if args.fit is not None:
         kw["fit"] = tuple(f.strip() for f in args.fit.split(",") if f.strip())
     try:

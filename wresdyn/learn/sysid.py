@@ -76,6 +76,12 @@ class SysIdConfig:
     default: on the shipped data (true delay 3 steps) the grid 0-8 picked 0 there, the gains, damping and
     friction having already absorbed the delay, and the final error did not change (0.0057 vs 0.0055 rad
     held-out)."""
+    gain_grid: tuple[float, ...] = ()
+    """Factors on the start's position gain kp tried before the first step, each joint taking the factor of its own
+    least training error (forward only, every joint at one factor per rollout); empty = start from the file's kp.
+    Off by default. Where the file's kp is so stiff that the drive saturates on every move (the SO-101's servo
+    model: kp 998 N·m/rad against 3.35 N·m), the loss barely depends on kp and Adam cannot walk down to a soft
+    servo's: ``benchmarks/so101_real.sh`` uses it."""
     effort_after: float = 0.4
     """Fraction of the iterations after which the effort limit joins the fit. Before, the drives keep the
     file's limits: a low limit started from the file's other values mimics the friction and delay not yet
@@ -112,6 +118,10 @@ class SysIdConfig:
         check_number(self.w_prior, "w_prior", ge=0)
         for i, f in enumerate(self.effort_grid):
             check_number(f, f"effort_grid[{i}]", gt=0)
+        for i, f in enumerate(self.gain_grid):
+            check_number(f, f"gain_grid[{i}]", gt=0)
+        if self.gain_grid and "kp" not in self.fit:
+            raise ValueError("gain_grid searches kp, which is not among the fitted fields (fit)")
         check_number(self.effort_after, "effort_after", ge=0)
         for i, f in enumerate(self.lr_scale):
             check_number(f, f"lr_scale[{i}]", gt=0)
@@ -146,11 +156,14 @@ def _window_loss(cfg, model, sim, window, weights=None):
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
 
 
-def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, weights=None) -> None:
+def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, weights=None,
+                 per_joint: bool = False) -> None:
     """Set ``field`` to the grid point of least training loss on a few windows (forward only).
 
     ``values(g)`` maps a grid point to the field's values (n,) [SI]; every other field keeps its current value.
     ``weights``: per-joint weights (n,) tensor of the position error (0: excluded from fitting), ``None``: all 1.
+    ``per_joint``: each joint takes the grid point of its own least position error (the joints are tried together,
+    one rollout per grid point, so their coupling is ignored: a start for the gradient steps, not a fit).
     """
     from ..sim import TrajectoryBank, rollout
     from .runs import squared_error
@@ -170,13 +183,26 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
         window = bank.window(traj, start, h)
         with torch.no_grad():
             run = rollout(sim, window)
-        losses.append(float(squared_error(run.q[:, 1:], window.q[:, 1:], weights)))
-    best = grid[int(np.argmin(losses))]
-    v = torch.as_tensor(values(best))
+        if per_joint:  # (n,) mean squared position error of each joint
+            losses.append(((run.q[:, 1:] - window.q[:, 1:]) ** 2).reshape(-1, run.q.shape[-1]).mean(0).cpu().numpy())
+        else:
+            losses.append(float(squared_error(run.q[:, 1:], window.q[:, 1:], weights)))
+    if per_joint:
+        pick = np.argmin(np.stack(losses), axis=0)  # (n,) grid index of each joint
+        v = torch.as_tensor(np.stack([values(g) for g in grid])[pick, np.arange(len(pick))])
+        log(f"{field} search, per joint: " + "  ".join(f"{j}:{grid[k]:.3g}"
+                                                       for j, k in zip(model.robot.joint_names, pick)))
+    else:
+        best = grid[int(np.argmin(losses))]
+        v = torch.as_tensor(values(best))
+        log(f"{field} search: " + "  ".join(f"{g:.3g}:{x:.2e}" for g, x in zip(grid, losses)) + f"  -> {best:.3g}")
     with torch.no_grad():
         u = getattr(model, f"u_{field}")
-        u.copy_(torch.where(torch.isfinite(v), v / getattr(model, f"ref_{field}"), u))
-    log(f"{field} search: " + "  ".join(f"{g:.3g}:{x:.2e}" for g, x in zip(grid, losses)) + f"  -> {best:.3g}")
+        ref = getattr(model, f"ref_{field}", None)
+        if ref is None:  # exp-parametrised fields (gains, armature): u = log(value / start)
+            u.copy_(torch.where(torch.isfinite(v), torch.log(v / getattr(model, f"start_{field}")), u))
+        else:
+            u.copy_(torch.where(torch.isfinite(v), v / ref, u))
 
 
 def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
@@ -291,6 +317,10 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     weights = joint_weights(dataset, sim.device)  # joints excluded from fitting weigh 0 in the loss
     horizons = cfg.horizon_curriculum or (64,)
     t0 = time.perf_counter() - wall0
+    if start_it == 0 and cfg.gain_grid:
+        start_kp = model.values().kp
+        _grid_search(cfg, model, sim, train, rng, "kp", cfg.gain_grid, lambda g: g * start_kp, log, weights,
+                     per_joint=True)
     for it in range(start_it, cfg.iterations):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
