@@ -150,6 +150,9 @@ def test_gain_grid_starts_each_joint_at_its_own_kp(humanoid, record):
     assert sum(picks[j] == "0.1" for j in arms) >= 0.75 * len(arms), picks
     legs = [j for j in humanoid.joint_names if j not in arms]
     assert sum(picks[j] == "1" for j in legs) >= 0.75 * len(legs), picks
+    # the searched start is a selection candidate: what is returned is never worse on validation
+    (after,) = [float(s.split()[-2]) for s in lines if s.startswith("after the kp search: validation")]
+    assert PhysicsScore(humanoid, data.split("validation"), data.rate_hz)(params) <= after + 5e-5
     # the selected model starts from there (two small Adam steps later): far closer to the arms' truth than the file
     truth = RealRobot(humanoid, soft_arms).physics()
     arm = np.isin(humanoid.joint_names, arms)

@@ -321,6 +321,11 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         start_kp = model.values().kp
         _grid_search(cfg, model, sim, train, rng, "kp", cfg.gain_grid, lambda g: g * start_kp, log, weights,
                      per_joint=True)
+        if score is not None:  # the searched start is a candidate of the selection too, as the file's is
+            v = score(model.values())
+            log(f"after the kp search: validation {v:.4f} rad")
+            if v < best["validation"]:
+                best = {"validation": v, "iteration": 0, "state": {k: x.clone() for k, x in model.state_dict().items()}}
     for it in range(start_it, cfg.iterations):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
