@@ -17,7 +17,6 @@ import sys
 
 import numpy as np
 
-
 MIN_GRAVITY_SPAN = 0.05
 """Least spread of a joint's gravity torque over the training holds [N·m] for its sag to be fitted."""
 

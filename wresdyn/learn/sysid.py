@@ -190,8 +190,11 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
     if per_joint:
         pick = np.argmin(np.stack(losses), axis=0)  # (n,) grid index of each joint
         v = torch.as_tensor(np.stack([values(g) for g in grid])[pick, np.arange(len(pick))])
-        log(f"{field} search, per joint: " + "  ".join(f"{j}:{grid[k]:.3g}"
-                                                       for j, k in zip(model.robot.joint_names, pick)))
+        fitted = np.ones(len(pick), bool) if weights is None else weights.detach().cpu().numpy() > 0
+        # a joint excluded from fitting keeps its value: its error is no one's to fit
+        v = torch.where(torch.as_tensor(fitted), v, model()[field].detach().cpu())
+        log(f"{field} search, per joint: " + "  ".join(f"{j}:{grid[k]:.3g}" if f else f"{j}:excluded"
+                                                       for j, k, f in zip(model.robot.joint_names, pick, fitted)))
     else:
         best = grid[int(np.argmin(losses))]
         v = torch.as_tensor(values(best))
