@@ -131,6 +131,17 @@ def test_fit_passes_refine_to_its_identification(humanoid, recorded, tmp_path, c
     assert [r.get("stage") for r in curve][-1] == "refine"
 
 
+def test_fit_passes_the_gain_grid_to_its_identification(humanoid, recorded, tmp_path, capsys):
+    data = tmp_path / "d.npz"
+    recorded.save(data)
+    out = tmp_path / "hybrid"
+    assert main(["fit", str(data), "--out", str(out), "--identify-iterations", "2", "--gain-grid", "1,0.5",
+                 "--iterations", "2", "--windows", "2", "--curriculum", "4"]) == 0
+    assert "kp search, per joint:" in capsys.readouterr().out
+    assert main(["fit", str(data), "--out", str(tmp_path / "bad"), "--gain-grid", "1,-0.5"]) == 2
+    assert "gain_grid" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
 def test_identify_refuses_a_malformed_delay_grid(tmp_path, capsys):
     assert main(["identify", str(tmp_path / "none.npz"), "--delay-grid", "0,ten"]) == 2
     err = capsys.readouterr().err
