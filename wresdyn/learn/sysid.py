@@ -187,8 +187,9 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
             losses.append(((run.q[:, 1:] - window.q[:, 1:]) ** 2).reshape(-1, run.q.shape[-1]).mean(0).cpu().numpy())
         else:
             losses.append(float(squared_error(run.q[:, 1:], window.q[:, 1:], weights)))
+    losses = np.nan_to_num(np.asarray(losses, dtype=np.float64), nan=np.inf)  # a diverged rollout never wins
     if per_joint:
-        pick = np.argmin(np.stack(losses), axis=0)  # (n,) grid index of each joint
+        pick = np.argmin(losses, axis=0)  # (n,) grid index of each joint
         v = torch.as_tensor(np.stack([values(g) for g in grid])[pick, np.arange(len(pick))])
         fitted = np.ones(len(pick), bool) if weights is None else weights.detach().cpu().numpy() > 0
         # a joint excluded from fitting keeps its value: its error is no one's to fit
@@ -325,7 +326,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         _grid_search(cfg, model, sim, train, rng, "kp", cfg.gain_grid, lambda g: g * start_kp, log, weights,
                      per_joint=True)
         if score is not None:  # the searched start is a candidate of the selection too, as the file's is
-            v = score(model.values())
+            v = score(model.values())  # counted in the wall-clock, as the search itself
             log(f"after the kp search: validation {v:.4f} rad")
             if v < best["validation"]:
                 best = {"validation": v, "iteration": 0, "state": {k: x.clone() for k, x in model.state_dict().items()}}
