@@ -190,23 +190,20 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
     losses = np.nan_to_num(np.asarray(losses, dtype=np.float64), nan=np.inf)  # a diverged rollout never wins
     if per_joint:
         pick = np.argmin(losses, axis=0)  # (n,) grid index of each joint
-        v = torch.as_tensor(np.stack([values(g) for g in grid])[pick, np.arange(len(pick))])
         fitted = np.ones(len(pick), bool) if weights is None else weights.detach().cpu().numpy() > 0
         # a joint excluded from fitting keeps its value: its error is no one's to fit
-        v = torch.where(torch.as_tensor(fitted), v, model()[field].detach().cpu())
+        model.assign(field, np.stack([values(g) for g in grid])[pick, np.arange(len(pick))], keep=~fitted)
         log(f"{field} search, per joint: " + "  ".join(f"{j}:{grid[k]:.3g}" if f else f"{j}:excluded"
                                                        for j, k, f in zip(model.robot.joint_names, pick, fitted)))
     else:
         best = grid[int(np.argmin(losses))]
-        v = torch.as_tensor(values(best))
+        model.assign(field, values(best))
         log(f"{field} search: " + "  ".join(f"{g:.3g}:{x:.2e}" for g, x in zip(grid, losses)) + f"  -> {best:.3g}")
-    with torch.no_grad():
-        u = getattr(model, f"u_{field}")
-        ref = getattr(model, f"ref_{field}", None)
-        if ref is None:  # exp-parametrised fields (gains, armature): u = log(value / start)
-            u.copy_(torch.where(torch.isfinite(v), torch.log(v / getattr(model, f"start_{field}")), u))
-        else:
-            u.copy_(torch.where(torch.isfinite(v), v / ref, u))
+
+
+def _snapshot(model) -> dict:
+    """A copy of ``model``'s state, a selection candidate."""
+    return {k: v.clone() for k, v in model.state_dict().items()}
 
 
 def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
@@ -313,7 +310,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     else:
         if score is not None:
             v0 = score(model.values())
-            best = {"validation": v0, "iteration": 0, "state": {k: v.clone() for k, v in model.state_dict().items()}}
+            best = {"validation": v0, "iteration": 0, "state": _snapshot(model)}
             log(f"start: validation {v0:.4f} rad")
     sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True)
@@ -329,7 +326,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
             v = score(model.values())  # counted in the wall-clock, as the search itself
             log(f"after the kp search: validation {v:.4f} rad")
             if v < best["validation"]:
-                best = {"validation": v, "iteration": 0, "state": {k: x.clone() for k, x in model.state_dict().items()}}
+                best = {"validation": v, "iteration": 0, "state": _snapshot(model)}
     for it in range(start_it, cfg.iterations):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
@@ -361,8 +358,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
             row["validation"] = score(model.values())
             t0 += time.perf_counter() - t_eval
             if row["validation"] < best["validation"]:
-                best = {"validation": row["validation"], "iteration": it + 1,
-                        "state": {k: v.clone() for k, v in model.state_dict().items()}}
+                best = {"validation": row["validation"], "iteration": it + 1, "state": _snapshot(model)}
         curve.append(row)
         if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == cfg.iterations:
             msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"

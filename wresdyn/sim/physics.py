@@ -250,6 +250,21 @@ class PhysicsModel(torch.nn.Module):
         for f in self.ref:
             getattr(self, f"u_{f}").clamp_(min=0.05 if f == "effort" else 0.0)
 
+    @torch.no_grad()
+    def assign(self, field: str, value, keep=None) -> None:
+        """Set a joint field (:data:`JOINT_FIELDS`) to ``value`` (n,) [SI]: the inverse of :meth:`forward` on its
+        coordinates. Joints where ``keep`` (n,) bool is true, or where ``value`` is not finite, keep their value."""
+        u = getattr(self, f"u_{field}")
+        v = torch.as_tensor(np.asarray(value, dtype=np.float64), device=u.device)
+        if field in self.ref:  # linear: value = ref * u
+            new = v / getattr(self, f"ref_{field}")
+        else:  # exp-parametrised (gains, armature): value = start * exp(u)
+            new = torch.log(v / getattr(self, f"start_{field}"))
+        hold = ~torch.isfinite(v)
+        if keep is not None:
+            hold |= torch.as_tensor(np.asarray(keep, dtype=bool), device=u.device)
+        u.copy_(torch.where(hold, u, new))
+
     def delay_steps(self) -> torch.Tensor:
         """The delay in sample periods, (n,) float64 (what :class:`~wresdyn.sim.bank.TrajectoryBank` takes)."""
         return self.ref_delay * self.u_delay / self.dt
