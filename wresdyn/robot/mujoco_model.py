@@ -177,7 +177,8 @@ def _quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def free_to_mujoco(robot: Robot, base_pose: np.ndarray, base_twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Newton's free joint -> MuJoCo's: ``(qpos[:7], qvel[:6])``.
+    """Newton's free joint -> MuJoCo's: ``(qpos[..., :7], qvel[..., :6])``; one state (7,), (6,) or a batch
+    (..., 7), (..., 6).
 
     Newton (:mod:`wresdyn.robot.ground`): pose [x y z qx qy qz qw], twist [centre-of-mass velocity, angular
     velocity], world axes. MuJoCo: qpos [x y z qw qx qy qz] of the body frame; qvel [velocity of the body
@@ -186,22 +187,29 @@ def free_to_mujoco(robot: Robot, base_pose: np.ndarray, base_twist: np.ndarray) 
     from scipy.spatial.transform import Rotation as R
 
     pose, twist = np.asarray(base_pose, dtype=np.float64), np.asarray(base_twist, dtype=np.float64)
-    rot = R.from_quat(pose[3:])
-    w = twist[3:]
-    v_origin = twist[:3] - np.cross(w, rot.apply(robot.body_com[0]))
-    return np.concatenate([pose[:3], quat_xyzw_to_wxyz(rot.as_quat())]), np.concatenate([v_origin, rot.inv().apply(w)])
+    shape = pose.shape[:-1]
+    pose, twist = pose.reshape(-1, 7), twist.reshape(-1, 6)
+    rot = R.from_quat(pose[:, 3:])
+    w = twist[:, 3:]
+    v_origin = twist[:, :3] - np.cross(w, rot.apply(robot.body_com[0]))
+    qpos = np.concatenate([pose[:, :3], quat_xyzw_to_wxyz(rot.as_quat())], axis=-1)
+    qvel = np.concatenate([v_origin, rot.inv().apply(w)], axis=-1)
+    return qpos.reshape(*shape, 7), qvel.reshape(*shape, 6)
 
 
 def free_from_mujoco(robot: Robot, qpos: np.ndarray, qvel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """MuJoCo's free joint ``(qpos[:7], qvel[:6])`` -> Newton's ``(base_pose, base_twist)`` (the inverse of
-    :func:`free_to_mujoco`)."""
+    """MuJoCo's free joint ``(qpos[..., :7], qvel[..., :6])`` -> Newton's ``(base_pose, base_twist)`` (the inverse
+    of :func:`free_to_mujoco`; one state or a batch)."""
     from scipy.spatial.transform import Rotation as R
 
     qpos, qvel = np.asarray(qpos, dtype=np.float64), np.asarray(qvel, dtype=np.float64)
-    rot = R.from_quat(qpos[3:7], scalar_first=True)
-    w = rot.apply(qvel[3:6])
-    v_com = qvel[:3] + np.cross(w, rot.apply(robot.body_com[0]))
-    return np.concatenate([qpos[:3], rot.as_quat()]), np.concatenate([v_com, w])
+    shape = qpos.shape[:-1]
+    qpos, qvel = qpos.reshape(-1, qpos.shape[-1])[:, :7], qvel.reshape(-1, qvel.shape[-1])[:, :6]
+    rot = R.from_quat(qpos[:, 3:7], scalar_first=True)
+    w = rot.apply(qvel[:, 3:6])
+    v_com = qvel[:, :3] + np.cross(w, rot.apply(robot.body_com[0]))
+    pose = np.concatenate([qpos[:, :3], rot.as_quat()], axis=-1)
+    return pose.reshape(*shape, 7), np.concatenate([v_com, w], axis=-1).reshape(*shape, 6)
 
 
 def mujoco_replay(mj_model, q_cmd: np.ndarray, q0: np.ndarray, qd0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

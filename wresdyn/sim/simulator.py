@@ -330,7 +330,7 @@ class Simulator:
 
     def step(self, target: torch.Tensor, tau: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """Advance one sample period holding the PD target [rad] and joint torque [N*m] (N, n); returns (q, q̇)."""
-        self._target[:, self.qd_index] = target
+        self._target[:, self.q_index] = target  # joint_target_q has joint_q's (coordinate) layout
         self._force[:, self.qd_index] = 0.0 if tau is None else tau
         with self._stream():
             if self.graph:
@@ -383,7 +383,7 @@ class _Step(torch.autograd.Function):
 
         states, ctrl = sim._tape_buffers[k]
         inputs = [sim._scatter(q, sim.q_index, sim.nq), sim._scatter(qd, sim.qd_index, sim.nqd),
-                  sim._scatter(target, sim.qd_index, sim.nqd), sim._scatter(tau, sim.qd_index, sim.nqd)]
+                  sim._scatter(target, sim.q_index, sim.nq), sim._scatter(tau, sim.qd_index, sim.nqd)]
         tape = wp.Tape()
         with sim._tape_stream():
             for dst, src in zip((states[0].joint_q, states[0].joint_qd, ctrl.joint_target_q, ctrl.joint_f), inputs):
@@ -418,7 +418,7 @@ class _Step(torch.autograd.Function):
             return wp.to_torch(a.grad).view(sim.n_worlds, width)[:, idx].clone()
 
         out = (grad(states[0].joint_q, sim.q_index, sim.nq), grad(states[0].joint_qd, sim.qd_index, sim.nqd),
-               grad(ctrl.joint_target_q, sim.qd_index, sim.nqd), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
+               grad(ctrl.joint_target_q, sim.q_index, sim.nq), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
         physics = []
         for f, (dtype, device) in zip(ctx.names, ctx.physics_meta):  # summed over worlds: one robot
             g = sim._model_view(f, grad=True)

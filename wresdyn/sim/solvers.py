@@ -13,8 +13,9 @@ Solvers (``solver=`` everywhere in wresdyn):
   :func:`explicit_pd_margin` computes the criterion; reflected rotor inertia keeps real humanoids inside it
   at 500 Hz, a robot file without armature and with high damping is not.
 - ``"mujoco"``: Newton's ``SolverMuJoCo`` (implicit PD; mujoco_warp on CUDA; on the CPU MuJoCo C for one world
-  and mujoco_warp on Warp's CPU device for several, since Newton's MuJoCo C backend simulates one world only),
-  not differentiable. The only one of the three that feels a ground: MuJoCo's own collision detection and soft
+  and, since Newton's MuJoCo C backend simulates one world only, mujoco_warp on Warp's CPU device for several, or
+  with a ground :class:`~wresdyn.sim.solver_threads.SolverMuJoCoThreads`: Newton's MuJoCo C model of the robot
+  stepped for every world in C threads), not differentiable. The only one of the three that feels a ground: MuJoCo's own collision detection and soft
   contact constraints, with :class:`~wresdyn.robot.ground.ContactSettings`.
 
 ``"auto"`` picks ``replay`` on a fixed base; on a floating base, Featherstone when the explicit-PD criterion
@@ -112,6 +113,10 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, param_gra
     if not ground:
         return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=mujoco_c, disable_contacts=True,
                                            integrator="implicitfast")
+    if not str(model.device).startswith("cuda") and model.world_count > 1:
+        from .solver_threads import SolverMuJoCoThreads
+
+        return SolverMuJoCoThreads(model, robot, contact)
     from ..robot.ground import ContactSettings
 
     c = contact or ContactSettings()
