@@ -23,6 +23,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a delta-action `wresdyn fit --model network --residual delta_action` run "
                         "(default: fitted into OUT/delta_action)")
     p.add_argument("--mismatch", default=None, help="real robot's mismatch (TOML; default: the dataset's)")
+    p.add_argument("--floor", action="store_true",
+                   help="skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, "
+                        "kick, wave; stepping held out), corrections still fitted on the stand (see "
+                        "wresdyn.skills.floor_benchmark; defaults: 3 training motions per family, 4 s, 300 + 100 "
+                        "iterations)")
     p.add_argument("--full", action="store_true",
                    help="the full size, for a GPU: 4096 worlds, 16 training / 2 validation / 4 held-out motions per "
                         "family (the options below still apply)")
@@ -33,7 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="parallel worlds of the oracle on the real robot, MuJoCo C on the CPU (default: --envs; "
                         "--full: 1024)")
     p.add_argument("--motions", type=int, default=None, help="training motions per family (default 4)")
-    p.add_argument("--heldout", type=int, default=None, help="held-out motions per family (default 2)")
+    p.add_argument("--heldout", type=int, default=None, help="held-out motions per family (default 2; --floor: 1)")
+    p.add_argument("--duration", type=float, default=None, help="length of a motion [s] (default 2; --floor: 4)")
     p.add_argument("--finetune-std", type=float, default=None,
                    help="action noise the fine-tunings (b)-(d) restart from (default: (a)'s own; --full: 0.3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the motions and of PPO")
@@ -49,14 +55,22 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import Mismatch
     from ..skills.benchmark import DeployConfig, run_benchmark
 
-    cfg = DeployConfig.full() if args.full else DeployConfig()
+    if args.floor:
+        from ..skills.floor_benchmark import FloorDeployConfig, run_floor_benchmark
+
+        cfg = FloorDeployConfig.full() if args.full else FloorDeployConfig()
+        bench = run_floor_benchmark
+    else:
+        cfg = DeployConfig.full() if args.full else DeployConfig()
+        bench = run_benchmark
     kw = {k: v for k, v in (("iterations", args.iterations), ("finetune", args.finetune), ("envs", args.envs),
                             ("oracle_envs", args.oracle_envs), ("finetune_std", args.finetune_std),
-                            ("train_per_family", args.motions), ("heldout_per_family", args.heldout)) if v is not None}
+                            ("train_per_family", args.motions), ("heldout_per_family", args.heldout),
+                            ("duration", args.duration)) if v is not None}
     cfg = replace(cfg, seed=args.seed, device=args.device, **kw)
     ds, robot = load_data(args.data)
     mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
-    print(f"wresdyn deploy: skills on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
+    print(f"wresdyn deploy: skills {'on the floor' if args.floor else 'on the stand'} on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
           f"real robot {'from ' + args.mismatch if args.mismatch else 'as recorded in the dataset'} -> {args.out}",
           flush=True)
     from ..sim.warmup import compile_kernels
@@ -70,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
         compile_kernels(robot, ds.rate_hz, ("forward",), device=args.device,
                         physics=PhysicalParams.load(calibrated, robot))
-    run_benchmark(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
+    bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
                   mismatch=mismatch, animation=not args.no_animation,
                   log=lambda s: print(s, flush=True))
     return 0

@@ -1,4 +1,4 @@
-"""USD animations of fixed-base rollouts, side by side: one robot per rollout, in one file.
+"""USD animations of rollouts (on the stand or on the floor), side by side: one robot per rollout, in one file.
 
 Each rollout is a joint-position trajectory sampled at ``rate_hz``; every one is played on its own copy of the robot
 (one Newton world each), the copies placed ``spacing`` metres apart along the world y axis by the viewer's own world
@@ -28,7 +28,8 @@ _USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
 def write_animation(robot: Robot, trajectories: dict[str, np.ndarray], rate_hz: float, path, fps: float = 50.0,
                     spacing: float = 1.0) -> Path:
-    """Write a USD animation of fixed-base rollouts side by side.
+    """Write a USD animation of rollouts side by side: on the stand (a fixed base), or on a floor (a floating base:
+    each row is the base pose [x y z qx qy qz qw] followed by the joint positions, and the floor is drawn).
 
     One robot per entry of ``trajectories``, in the given order, placed ``spacing`` metres apart along the world y
     axis: rollout ``i`` of ``n`` is offset by ``(i - (n - 1) / 2) * spacing`` [m] (the row is centred on the origin;
@@ -42,8 +43,9 @@ def write_animation(robot: Robot, trajectories: dict[str, np.ndarray], rate_hz: 
     left on error.
 
     Args:
-        robot: A fixed-base robot (``robot.base == "fixed"``).
-        trajectories: Rollout name -> joint positions [rad or m], shape (T, n_dof) in ``robot.joint_names`` order,
+        robot: The robot, fixed or floating base.
+        trajectories: Rollout name -> joint positions [rad or m], shape (T, n_dof) in ``robot.joint_names`` order
+            (a floating base: (T, 7 + n_dof), the base pose first),
             sample ``k`` at time ``k / rate_hz`` [s]; ``T >= 1`` may differ between rollouts.
         rate_hz: Sample rate of the trajectories [Hz].
         path: USD file to write (``.usd``, ``.usda`` or ``.usdc``); its folder is created if missing.
@@ -54,13 +56,11 @@ def write_animation(robot: Robot, trajectories: dict[str, np.ndarray], rate_hz: 
         The path written.
 
     Raises:
-        WresdynError: (a :class:`ValueError`, one line) a floating-base robot, no rollouts, a trajectory of the
-            wrong shape, a non-positive rate or frame rate, or a file name that is not a USD layer.
+        WresdynError: (a :class:`ValueError`, one line) no rollouts, a trajectory of the wrong shape, a non-positive rate or frame rate, or a file name that is not a USD layer.
     """
     path = Path(path)
-    if robot.base != "fixed":
-        raise WresdynError(f"{robot.source}: write_animation plays fixed-base rollouts; the robot's base is "
-                           f"{robot.base!r}")
+    floating = robot.base == "floating"
+    width = robot.n_dof + (7 if floating else 0)
     check_number(rate_hz, "rate_hz", gt=0.0)
     check_number(fps, "fps", gt=0.0)
     check_number(spacing, "spacing")
@@ -72,10 +72,11 @@ def write_animation(robot: Robot, trajectories: dict[str, np.ndarray], rate_hz: 
     held = []
     for name, q in trajectories.items():
         q = np.asarray(q, dtype=np.float64)
-        if q.ndim != 2 or q.shape[1] != robot.n_dof or q.shape[0] < 1:
+        if q.ndim != 2 or q.shape[1] != width or q.shape[0] < 1:
             raise WresdynError(f"trajectory {name!r} has shape {q.shape}; {robot.source.name} needs (T >= 1, "
-                               f"{robot.n_dof}) joint positions")
-        held.append(_hold_finite(q, robot.q0))
+                               f"{width}) {'base poses and ' if floating else ''}joint positions")
+        neutral = np.concatenate([[0, 0, 0, 0, 0, 0, 1.0], robot.q0]) if floating else robot.q0
+        held.append(_hold_finite(q, neutral))
 
     n_samples = max(len(q) for q in held)
     n_frames = int(math.floor((n_samples - 1) / rate_hz * fps + 1e-6)) + 1
@@ -119,7 +120,8 @@ def _write(robot: Robot, poses: np.ndarray, names: list[str], out: Path, fps: fl
     from pxr import Sdf
 
     n_frames, n_worlds, _ = poses.shape
-    model = robot.build_model(n_worlds, device="cpu")
+    floating = robot.base == "floating"
+    model = robot.build_model(n_worlds, device="cpu", ground=floating)
     state = model.state()
     q = model.joint_q.numpy().reshape(n_worlds, -1).copy()  # per-world joint_q: default coordinates of every joint
     viewer = newton.viewer.ViewerUSD(output_path=str(out), fps=fps, num_frames=None)
@@ -134,7 +136,13 @@ def _write(robot: Robot, poses: np.ndarray, names: list[str], out: Path, fps: fl
     root.CreateAttribute("wresdyn:rollouts", Sdf.ValueTypeNames.StringArray, custom=True).Set(names)
     root.CreateAttribute("wresdyn:spacing", Sdf.ValueTypeNames.Double, custom=True).Set(float(spacing))
     for f in range(n_frames):
-        q[:, robot.q_index] = poses[f]
+        if floating:
+            from ..robot.ground import base_index
+
+            b = base_index(robot)[0]
+            q[:, b:b + 7], q[:, robot.q_index] = poses[f][:, :7], poses[f][:, 7:]
+        else:
+            q[:, robot.q_index] = poses[f]
         state.joint_q.assign(q.reshape(-1).astype(np.float32))
         newton.eval_fk(model, state.joint_q, state.joint_qd, state)
         viewer.begin_frame(f / fps)

@@ -43,13 +43,15 @@ class SimPlant:
         residual: The residual ``policy(obs (N, 4n)) -> (N, n)`` (a run's ``policy.pt``) or ``None``.
         kind: The residual's kind, ``"torque"`` or ``"delta_action"``.
         device: Warp device.
+        ground: The robot (a floating base) stands on a floor (:class:`~wresdyn.sim.Simulator` ``ground=True``):
+            :meth:`reset_full` places it, :attr:`base_pose` / :attr:`base_twist` read its base.
     """
 
     def __init__(self, robot, n_worlds: int, rate_hz: float, decimation: int, *, physics=None, residual=None,
-                 kind: str | None = None, device: str = "cpu", solver: str = "auto") -> None:
+                 kind: str | None = None, device: str = "cpu", solver: str = "auto", ground: bool = False) -> None:
         self.robot, self.n_worlds, self.decimation = robot, int(n_worlds), int(decimation)
         self.dt = 1.0 / rate_hz
-        self.sim = Simulator(robot, self.n_worlds, self.dt, solver=solver, device=device)
+        self.sim = Simulator(robot, self.n_worlds, self.dt, solver=solver, device=device, ground=ground)
         self.device = self.sim.device
         n = robot.n_dof
         delay = np.zeros(n)
@@ -78,6 +80,25 @@ class SimPlant:
         self.sim.set_state(ids, q, qd)
         self.q[ids], self.qd[ids], self._qdd[ids] = q, qd, 0.0
         self._hist[ids] = q[:, None, :]
+
+    def reset_full(self, ids: torch.Tensor, base_pose: torch.Tensor, base_twist: torch.Tensor, q: torch.Tensor,
+                   qd: torch.Tensor) -> None:
+        """Place worlds ``ids`` of a robot on the floor: base pose (k, 7) and twist (k, 6) as
+        :attr:`wresdyn.sim.Simulator.base_pose`, joints at ``q``, ``qd`` (k, n); the delay line holds ``q``."""
+        if len(ids) == 0:
+            return
+        self.sim.set_full_state(ids, base_pose, base_twist, q, qd)
+        self.reset(ids, q, qd)
+
+    @property
+    def base_pose(self) -> torch.Tensor:
+        """Base pose per world [x y z qx qy qz qw] (N, 7) (a robot on the floor)."""
+        return self.sim.base_pose
+
+    @property
+    def base_twist(self) -> torch.Tensor:
+        """Base centre-of-mass velocity [m/s] and angular velocity [rad/s], world axes (N, 6)."""
+        return self.sim.base_twist
 
     def step(self, cmd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Hold ``cmd`` [rad] (N, n) for ``decimation`` sample periods; returns ``(q, qd, diverged)`` at the end
@@ -110,10 +131,12 @@ class SimPlant:
 
 
 def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: int, run: str | None = None,
-              device: str = "cpu") -> SimPlant:
+              device: str = "cpu", ground: bool = False) -> SimPlant:
     """The simulator of a training ``setting`` (:data:`SETTINGS`): ``nominal``; ``calibrated`` from a ``wresdyn fit``
     run (``physics.json`` and the torque residual ``policy.pt``; a run of identified physics alone works too);
-    ``delta_action`` from a ``wresdyn fit --model network --residual delta_action`` run."""
+    ``delta_action`` from a ``wresdyn fit --model network --residual delta_action`` run. ``ground``: ``robot`` has
+    a free base and stands on a floor; the corrections fitted on the stand apply unchanged (the same joints and
+    links)."""
     from pathlib import Path
 
     from ..learn.ppo import load_policy
@@ -122,7 +145,7 @@ def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: in
     if setting not in SETTINGS:
         raise WresdynError(f"unknown training setting {setting!r}; choose from {SETTINGS}")
     if setting == "nominal":
-        return SimPlant(robot, n_worlds, rate_hz, decimation, device=device)
+        return SimPlant(robot, n_worlds, rate_hz, decimation, device=device, ground=ground)
     if not run:
         raise WresdynError(f"the {setting} setting needs a run folder (wresdyn fit)")
     run = Path(run)
@@ -143,27 +166,35 @@ def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: in
         raise WresdynError(f"{run}: the delta-action setting needs a delta_action residual on the robot file's physics "
                            "(wresdyn fit --model network --residual delta_action)")
     return SimPlant(robot, n_worlds, rate_hz, decimation, physics=physics, residual=policy,
-                    kind=meta["kind"], device=device)
+                    kind=meta["kind"], device=device, ground=ground)
 
 
 class RealPlant:
-    """``n_worlds`` copies of the "real" robot (fixed base), stepped in C threads by ``mujoco.rollout``.
+    """``n_worlds`` copies of the "real" robot, stepped in C threads by ``mujoco.rollout``: on its stand (a fixed base)
+    or, for a floating-base ``real``, standing on its floor.
 
     The command passes the real robot's delay line (its FIFO at the physics substep) and torque limits exactly as in
     :meth:`~wresdyn.data.real_robot.RealRobot.record`; :meth:`step` returns the sensed joint state (the mismatch's
     noise and quantisation, drawn from ``seed``), :attr:`q_true`/:attr:`qd_true` the true one and :attr:`tau` the
-    drive torque at every physics substep of the last step [N*m] (N, S, n). Each step's rollout starts with a cold
-    constraint-solver warm start (its friction solution converges within the solver's iterations).
+    drive torque at every physics substep of the last step [N*m] (N, S, n). On the floor :attr:`base_pose` /
+    :attr:`base_twist` are the true base state and :meth:`imu` what its IMU reports (with ``imu_noise``). Each
+    step's rollout starts with a cold constraint-solver warm start (its friction solution converges within the
+    solver's iterations).
+
+    Args:
+        imu_noise: Standard deviations of the IMU's white noise: angular velocity [rad/s] and the measured gravity
+            direction [-] (floor only).
     """
 
-    def __init__(self, real, n_worlds: int, decimation: int, seed: int = 0, threads: int | None = None) -> None:
+    def __init__(self, real, n_worlds: int, decimation: int, seed: int = 0, threads: int | None = None,
+                 imu_noise: tuple[float, float] = (0.0, 0.0)) -> None:
         import mujoco
         from mujoco import rollout
 
-        if real.floating:
-            raise WresdynError(f"{real.robot.source.name}: RealPlant steps the robot on its stand (a fixed base)")
         self.real, self.n_worlds, self.decimation = real, int(n_worlds), int(decimation)
         self.robot, self.device = real.robot, torch.device("cpu")
+        self.floating = bool(real.floating)
+        self.imu_noise = tuple(float(x) for x in imu_noise)
         self._mj, self._rollout = mujoco, rollout
         m = real.model
         self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -174,12 +205,14 @@ class RealPlant:
         self.n_sub = real.n_sub * self.decimation
         n = self.robot.n_dof
         d = self._datas[0]
-        d.qpos[:] = np.arange(1, n + 1)
-        d.qvel[:] = -np.arange(1, n + 1)
+        d.qpos[:] = np.arange(1, m.nq + 1)
+        d.qvel[:] = -np.arange(1, m.nv + 1)
         s = np.empty(self._nstate)
         mujoco.mj_getState(m, d, s, self._spec)
-        self._iq = int(np.flatnonzero(s == 1.0)[0])
-        self._iv = int(np.flatnonzero(s == -1.0)[0])
+        self._iq0 = int(np.flatnonzero(s == 1.0)[0])  # qpos in the state vector
+        self._iv0 = int(np.flatnonzero(s == -1.0)[0])  # qvel
+        self._iq = self._iq0 + (7 if self.floating else 0)  # the joints
+        self._iv = self._iv0 + (6 if self.floating else 0)
         self.kp, self.kd = m.actuator_gainprm[:n, 0].copy(), -m.actuator_biasprm[:n, 2].copy()
         self.lim = m.actuator_forcerange[:n].copy()
         self.limited = m.actuator_forcelimited[:n].astype(bool)
@@ -192,17 +225,65 @@ class RealPlant:
 
     def reset(self, ids, q, qd) -> None:
         """Place worlds ``ids`` at ``q``, ``qd`` [rad, rad/s] (k, n); the delay line holds ``q``."""
+        if self.floating:
+            raise ValueError(f"{self.robot.source.name}: a robot on the floor is placed with reset_full")
+        self._reset(ids, q, qd)
+
+    def reset_full(self, ids, base_pose, base_twist, q, qd) -> None:
+        """Place worlds ``ids`` of the robot on the floor: base pose (k, 7), twist (k, 6) in Newton's free-joint
+        convention (:mod:`wresdyn.robot.ground`), joints ``q``, ``qd`` (k, n); the delay line holds ``q``."""
+        from ..robot.mujoco_model import free_to_mujoco
+
+        qpos, qvel = free_to_mujoco(self.robot, np.asarray(torch.as_tensor(base_pose).cpu(), np.float64),
+                                    np.asarray(torch.as_tensor(base_twist).cpu(), np.float64))
+        self._reset(ids, q, qd, qpos, qvel)
+
+    def _reset(self, ids, q, qd, base_qpos=None, base_qvel=None) -> None:
         ids = np.asarray(torch.as_tensor(ids).cpu())
         if len(ids) == 0:
             return
         q, qd = np.asarray(torch.as_tensor(q).cpu(), np.float64), np.asarray(torch.as_tensor(qd).cpu(), np.float64)
-        d = self._datas[0]
+        d, n = self._datas[0], self.robot.n_dof
         for i, w in enumerate(ids):
             self._mj.mj_resetData(self.real.model, d)
-            d.qpos[:], d.qvel[:] = q[i], qd[i]
+            if self.floating:
+                d.qpos[:7], d.qvel[:6] = base_qpos[i], base_qvel[i]
+            d.qpos[-n:], d.qvel[-n:] = q[i], qd[i]
             self._mj.mj_getState(self.real.model, d, self.state[w], self._spec)
         self._fifo[ids] = q[:, None, :]
         self.q_true[ids], self.qd_true[ids] = q, qd
+
+    @property
+    def base_pose(self) -> torch.Tensor:
+        """True base pose per world [x y z qx qy qz qw] (N, 7), float32 (floor only)."""
+        return self._base()[0]
+
+    @property
+    def base_twist(self) -> torch.Tensor:
+        """True base centre-of-mass velocity [m/s] and angular velocity [rad/s], world axes (N, 6) (floor only)."""
+        return self._base()[1]
+
+    def _base(self):
+        from ..robot.mujoco_model import free_from_mujoco
+
+        s = self.state
+        pose, twist = free_from_mujoco(self.robot, s[:, self._iq0:self._iq0 + 7], s[:, self._iv0:self._iv0 + 6])
+        f32 = dict(dtype=torch.float32)
+        return torch.as_tensor(pose, **f32), torch.as_tensor(twist, **f32)
+
+    def imu(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """What the base IMU reports: angular velocity [rad/s] and the unit gravity direction, both in base axes,
+        (N, 3) each, with ``imu_noise``."""
+        from .floor_env import base_frame_imu
+
+        gyro, grav = base_frame_imu(self.base_pose, self.base_twist)
+        sg, sd = self.imu_noise
+        if sg > 0:
+            gyro = gyro + sg * torch.as_tensor(self.rng.standard_normal(gyro.shape), dtype=torch.float32)
+        if sd > 0:
+            grav = grav + sd * torch.as_tensor(self.rng.standard_normal(grav.shape), dtype=torch.float32)
+            grav = grav / grav.norm(dim=-1, keepdim=True)
+        return gyro, grav
 
     def step(self, cmd) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Hold ``cmd`` [rad] (N, n) for ``decimation`` recording periods; returns the sensed ``(q, qd)`` and

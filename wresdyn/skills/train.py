@@ -59,11 +59,13 @@ class SkillPPOConfig:
         check_number(self.restart_std, "ppo.restart_std", ge=0)
 
 
-def _runner_cfg(cfg: SkillPPOConfig) -> dict:
+def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
+    """rsl-rl's runner config; ``critic_groups``: the observation groups the critic sees (the actor sees
+    ``policy``; more groups make an asymmetric actor-critic)."""
     dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "log"}
     return {
         "num_steps_per_env": cfg.num_steps_per_env, "save_interval": cfg.save_interval,
-        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
+        "obs_groups": {"actor": ["policy"], "critic": list(critic_groups)},
         "algorithm": {"class_name": "PPO", "num_learning_epochs": cfg.num_learning_epochs,
                       "num_mini_batches": cfg.num_mini_batches, "clip_param": 0.2, "gamma": cfg.gamma,
                       "lam": cfg.lam, "value_loss_coef": 1.0, "entropy_coef": cfg.entropy_coef,
@@ -121,7 +123,8 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     np.random.seed(cfg.seed)
     run_dir.mkdir(parents=True, exist_ok=True)
     with open(run_dir / "train.log", "a") as f, contextlib.redirect_stdout(f):  # rsl-rl prints the networks
-        runner = Runner(env, _runner_cfg(cfg), log_dir=str(run_dir), device=str(env.device))
+        runner = Runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), log_dir=str(run_dir),
+                        device=str(env.device))
     start = 0
     if ckpt is not None:
         runner.load(str(ckpt), map_location=str(env.device))

@@ -1,0 +1,190 @@
+"""Skills on the floor: the threaded MuJoCo C worlds of the simulator, floor motions, floating plants, the balance task
+and ``wresdyn deploy --floor``, at tiny sizes on the real code paths (Newton's SolverMuJoCo model, MuJoCo C for the
+real robot, rsl-rl's PPO)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from wresdyn.cli import main
+from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv, base_frame_imu
+from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
+from wresdyn.skills.floor_motions import FLOOR_HELD_OUT_FAMILIES, FLOOR_TRAIN_FAMILIES, make_floor_motions
+from wresdyn.skills.plants import RealPlant, SimPlant
+
+RATE = 500.0
+
+
+@pytest.fixture(scope="module")
+def floating(humanoid):
+    from wresdyn.robot.description import load_robot
+
+    return load_robot(humanoid.source, base="floating")
+
+
+@pytest.fixture(scope="module")
+def motions(humanoid, floating):
+    return make_floor_motions(humanoid, floating, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0,
+                              rate_hz=RATE, seed=3)
+
+
+@pytest.fixture(scope="module")
+def quiet_real(floating, shipped_mismatch):
+    from wresdyn.data.real_robot import RealRobot
+
+    mm = dataclasses.replace(shipped_mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
+                             velocity_resolution=0.0)
+    return RealRobot(floating, mm, RATE)
+
+
+def test_threaded_mujoco_worlds_step_as_newtons_one_world_solver(floating):
+    """Several CPU worlds on the floor (SolverMuJoCoThreads) follow Newton's own MuJoCo C world step for step, each
+    joint driven to its own target (a per-joint target mapped to the wrong joint would tip the robot)."""
+    from wresdyn.robot.ground import standing_state
+    from wresdyn.sim import Simulator
+
+    torch.set_num_threads(1)
+    st = standing_state(floating)
+    out = {}
+    for w in (1, 3):
+        sim = Simulator(floating, w, 1.0 / RATE, ground=True)
+        assert type(sim.solver).__name__ == ("SolverMuJoCo" if w == 1 else "SolverMuJoCoThreads")
+        f = lambda a: torch.as_tensor(np.tile(a, (w, 1)), dtype=torch.float32)  # noqa: E731
+        sim.set_full_state(None, f(st.base_pose), f(st.base_twist), f(st.q), f(st.qd))
+        target = 0.2 * np.sin(np.arange(floating.n_dof))  # a different target for every joint
+        rows = []
+        for _ in range(150):
+            q, _ = sim.step(f(target))
+            rows.append(np.concatenate([sim.base_pose[-1].numpy(), q[-1].numpy()]))
+        out[w] = np.array(rows)
+    # float32 state round trips between Newton and MuJoCo each step: measured 4e-7 over 150 steps
+    assert np.abs(out[1] - out[3]).max() < 1e-5
+    # each joint follows its own target, not its neighbour's (measured mean error 0.04 rad against 0.10)
+    err = np.abs(out[3][-1, 7:] - target).mean()
+    assert err < 0.06 and err < 0.6 * np.abs(out[3][-1, 7:] - np.roll(target, 1)).mean()
+
+
+def test_floor_motions_keep_planted_soles_still_and_the_weight_over_them(humanoid, floating, motions):
+    from wresdyn.sim.kinematics import BodyPositions
+
+    assert [m.family for m in motions["train"]] == list(FLOOR_TRAIN_FAMILIES)
+    assert [m.family for m in motions["heldout"]] == list(FLOOR_TRAIN_FAMILIES + FLOOR_HELD_OUT_FAMILIES)
+    fk = BodyPositions(floating, 1)
+    feet = [list(floating.body_names).index(b) for b in ("left_foot", "right_foot")]
+    lifted = 0
+    for m in motions["heldout"]:
+        assert m.planted.any(-1).all(), m.name  # one foot always on the floor
+        pos = np.array([fk(torch.as_tensor(m.base[k:k + 1]), torch.as_tensor(m.q[k:k + 1]))[0, feet].numpy()
+                        for k in range(0, len(m.q), 25)])
+        planted = m.planted[::25]
+        for f in range(2):
+            p = pos[planted[:, f], f]
+            # a planted foot stays where it stood (the IK reaches its keyframes to 10 um; float32 FK)
+            assert np.abs(p - pos[0, f]).max() < 2e-3, (m.name, f)
+        lifted += int((~m.planted).any())
+    assert lifted >= 2  # the kick and the stepping lift a foot
+
+
+def test_real_plant_on_the_floor_steps_as_the_real_robot(floating, motions, quiet_real):
+    """The threaded real plant and RealRobot.step agree exactly (no noise), base included."""
+    from wresdyn.robot.ground import FloatingState
+
+    m = motions["train"][0]
+    plant = RealPlant(quiet_real, 2, 5)
+    q0 = torch.as_tensor(m.q[:1].repeat(2, 0))
+    plant.reset_full(torch.arange(2), torch.as_tensor(m.base[:1].repeat(2, 0)), torch.zeros(2, 6), q0, 0 * q0)
+    quiet_real.reset(FloatingState(m.base[0], np.zeros(6), m.q[0], np.zeros(floating.n_dof)))
+    for k in range(4):
+        cmd = m.q[5 * (k + 1)]
+        q, _, bad = plant.step(torch.as_tensor(np.tile(cmd, (2, 1))))
+        for _ in range(5):
+            obs = quiet_real.step(cmd)
+        assert not bad.any()
+        np.testing.assert_allclose(q[1].numpy(), obs.q, atol=1e-5)
+        np.testing.assert_allclose(plant.base_pose[1].numpy(), obs.base_pose, atol=1e-5)
+
+
+def test_imu_of_a_tilted_base():
+    """A base pitched by 0.3 rad about y sees gravity along +x by sin(0.3) in its own axes; its angular velocity
+    about the world z axis appears rotated likewise."""
+    a = 0.3
+    pose = torch.tensor([[0.0, 0.0, 0.8, 0.0, np.sin(a / 2), 0.0, np.cos(a / 2)]], dtype=torch.float32)
+    twist = torch.tensor([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]])
+    gyro, grav = base_frame_imu(pose, twist)
+    np.testing.assert_allclose(grav[0].numpy(), [np.sin(a), 0.0, -np.cos(a)], atol=1e-6)
+    np.testing.assert_allclose(gyro[0].numpy(), [-np.sin(a), 0.0, np.cos(a)], atol=1e-6)
+
+
+def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions, quiet_real):
+    """The actor's observation is 6n + 6 (joints, reference, action, IMU), the critic's adds 11 privileged values;
+    the reference played open loop on the real robot's floor (ankles weaker than gravity's toppling torque) fails,
+    and the metrics count it and stay finite."""
+    cfg = FloorTaskConfig(decimation=5)
+    mot = motions["validation"]
+    env = FloorTrackingEnv(SimPlant(floating, 2, RATE, 5, ground=True), mot[:2], cfg)
+    obs = env.get_observations()
+    assert obs["policy"].shape == (2, 6 * floating.n_dof + 6) and obs["critic"].shape == (2, 11)
+    _, rew, _, extras = env.step(torch.zeros(2, floating.n_dof))
+    assert torch.isfinite(rew).all() and "Reward/slip" in extras["log"]
+    dep = deploy_floor(None, RealPlant(quiet_real, len(mot), 5), mot, cfg)
+    res = floor_metrics(dep)
+    assert res["mean"]["failures"] >= 1 and res["mean"]["success"] < 1.0
+    failed = [p for p in res["motions"] if not p["success"]]
+    assert all(np.isfinite(p["mpjpe"]) and np.isfinite(p["g_mpjpe"]) for p in failed)
+    # g-MPJPE is in metres of link position: a fallen robot is decimetres off, a standing one millimetres
+    assert 0.0 < res["mean"]["g_mpjpe"] < 1.0
+
+
+def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
+    from wresdyn.learn.gradfit import build_policy
+    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
+    from wresdyn.sim.physics import PhysicalParams
+
+    run = tmp_path / kind
+    run.mkdir()
+    if physics:
+        p = PhysicalParams.nominal(robot)
+        p.kp *= 0.8
+        p.delay = np.full(robot.n_dof, 0.004)
+        p.save(run / "physics.json")
+    mean, std = obs_stats(data.split("train"))
+    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
+                     learner="gradient")
+    return run
+
+
+def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
+    data_path = tmp_path / "dataset.npz"
+    data.save(data_path)
+    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    out = tmp_path / "floor"
+    args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
+            "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--motions", "1",
+            "--heldout", "1", "--duration", "1.0"]
+    assert main(args) == 0
+    res = json.loads((out / "results.json").read_text())
+    for split in ("validation", "heldout"):
+        assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
+        for r in res["real"][split].values():
+            assert {"success", "falls", "failures", "mpjpe", "g_mpjpe", "orientation_error", "action_rate"} \
+                <= set(r["mean"])
+    assert set(res["gap_closed_mpjpe"]) == set(res["gap_closed_g_mpjpe"]) == {"b_calibrated", "c_delta_action"}
+    assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
+    report = (out / "report.md").read_text()
+    assert "g-MPJPE" in report and "step" in report
+    cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
+    assert cfg["motions"]["floor"] is True
+    # the oracle trains on its own number of worlds, the others on --envs
+    assert json.loads((out / "skills" / "d_oracle" / "config.json").read_text())["ppo"]["num_envs"] == 3
+    before = (out / "skills" / "a_nominal" / "config.json").read_text()
+    capsys.readouterr()
+    assert main(args + ["--seed", "5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "a_nominal" in err
+    assert (out / "skills" / "a_nominal" / "config.json").read_text() == before

@@ -1,0 +1,181 @@
+"""The zero-shot benchmark on the floor (``wresdyn deploy --floor``): four skills that must keep the humanoid's
+balance, each deployed on the "real" robot standing on its floor.
+
+1. Motions (:mod:`.floor_motions`): squat, weight shift, kick on one leg, arm waves; stepping in place held out.
+2. Corrections fitted **on the stand** from the dataset (no floor data): the calibrated robot (a hybrid ``wresdyn
+   fit`` run: identified physics + torque residual) and the ASAP-style delta action alone, as
+   :mod:`.benchmark` fits them; on the floor they apply unchanged to the same joints and links.
+3. Policies (PPO, rsl-rl, asymmetric actor-critic, :mod:`.floor_env`): (a) trained in the nominal simulator on the
+   floor; (b) (a) fine-tuned in the calibrated robot on the floor; (c) (a) fine-tuned with the delta action; (d) the
+   oracle, (a) fine-tuned on the real robot itself. (b), (c), (d) get the same fine-tuning iterations.
+4. Deployment (:mod:`.floor_evaluate`) of every policy, and of the reference played open loop, on the real robot
+   (the mismatch's physics, delay, torque limits, joint and IMU noise) over validation and held-out motions. Gap
+   closed = (a − b) / (a − d) on held-out MPJPE and on g-MPJPE.
+
+No choice looks at held-out motions; every policy is its last iterate.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..choices import check_number
+from .benchmark import POLICIES, _fit_corrections, _json, gap_closed
+
+__all__ = ["FloorDeployConfig", "run_floor_benchmark"]
+
+
+@dataclass(frozen=True)
+class FloorDeployConfig:
+    """Sizes of the floor benchmark (the defaults: the CPU configuration, about 20 minutes on 2 cores)."""
+
+    train_per_family: int = 3
+    """Training motions per training family."""
+    validation_per_family: int = 1
+    heldout_per_family: int = 1
+    """Held-out motions per family (training families and the held-out one)."""
+    duration: float = 4.0
+    """Length of a motion [s]."""
+    envs: int = 64
+    """Parallel worlds of PPO."""
+    oracle_envs: int = 0
+    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (0: ``envs``)."""
+    finetune_std: float = 0.0
+    """Action noise the fine-tunings restart from (0: (a)'s own)."""
+    iterations: int = 300
+    """PPO iterations of (a) in the nominal simulator."""
+    finetune: int = 100
+    """PPO iterations of each fine-tuning: (b), (c), (d)."""
+    seed: int = 0
+    device: str = "cpu"
+
+    @classmethod
+    def full(cls, **kw) -> "FloorDeployConfig":
+        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
+        1000 + 300 iterations; the oracle on 256 worlds of MuJoCo C on the host's cores."""
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
+                             oracle_envs=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})
+
+    def __post_init__(self) -> None:
+        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
+            check_number(getattr(self, k), f"floor.{k}", integer=True, ge=1)
+        check_number(self.oracle_envs, "floor.oracle_envs", integer=True, ge=0)
+        check_number(self.finetune_std, "floor.finetune_std", ge=0)
+        check_number(self.duration, "floor.duration", gt=0)
+
+
+def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeployConfig(), *, data_path=None,
+                        calibrated=None, delta=None, mismatch=None, task=None, ppo=None, animation: bool = True,
+                        policies=tuple(POLICIES), log=print) -> dict:
+    """Run the floor benchmark into ``out`` (resumable: finished fits and policies are reused, PPO resumes).
+
+    Args:
+        robot: The nominal robot on its stand (fixed base); its floating twin is loaded from the same file.
+        dataset: The stand recordings the corrections are fitted on.
+        cfg: Sizes. task: :class:`~.floor_env.FloorTaskConfig`; ppo: :class:`~.train.SkillPPOConfig`.
+        calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
+        mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
+        policies: Which of :data:`~.benchmark.POLICIES` to train and deploy (``a_nominal`` always).
+
+    Returns:
+        The results written to ``results.json``.
+    """
+    import torch
+
+    from ..data.real_robot import Mismatch, RealRobot
+    from ..robot import load_robot
+    from .floor_env import FloorTaskConfig, FloorTrackingEnv
+    from .floor_evaluate import deploy_floor, floor_metrics
+    from .floor_motions import make_floor_motions
+    from .plants import RealPlant, sim_plant
+    from .train import SkillPPOConfig, load_skill, train_skill
+
+    t_start = time.perf_counter()
+    policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    task = task or FloorTaskConfig()
+    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
+    torch.set_num_threads(max(ppo.torch_threads, 1))
+    mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
+    floating = load_robot(robot.source, gains=robot.gains, base="floating")
+    rate = float(dataset.rate_hz)
+    counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
+              "heldout": cfg.heldout_per_family}
+    motions = make_floor_motions(robot, floating, counts, cfg.duration, rate, cfg.seed)
+    log("[1/4] floor motions: " + ", ".join(f"{s} {len(motions[s])}" for s in counts)
+        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
+    t0 = time.perf_counter()
+    calibrated, delta = _fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
+                                         need_delta="c_delta_action" in policies)
+    fit_s = time.perf_counter() - t0
+    log(f"[2/4] corrections fitted on the stand: calibrated {calibrated}, delta action {delta} ({fit_s:.0f} s)")
+    real = RealRobot(floating, mismatch, rate)
+    imu = (task.gyro_noise, task.gravity_noise)
+    runs = {"calibrated": calibrated, "delta_action": delta}
+    meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration, "floor": True}}
+    wall = {}
+    for i, name in enumerate(policies):
+        setting = POLICIES[name]
+        t0 = time.perf_counter()
+        envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
+        if setting == "real":
+            plant = RealPlant(real, envs, task.decimation, seed=cfg.seed + 1, imu_noise=imu)
+        else:
+            plant = sim_plant(setting, floating, envs, rate, task.decimation, runs.get(setting), cfg.device,
+                              ground=True)
+        env = FloorTrackingEnv(plant, motions["train"], task, seed=cfg.seed + i, device=cfg.device)
+        run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
+        it = cfg.iterations if i == 0 else cfg.finetune
+        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.finetune_std),
+                    out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal",
+                    meta=run_meta)
+        wall[name] = time.perf_counter() - t0
+        log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds on the floor of the {setting} "
+            f"{'robot' if setting == 'real' else 'simulator'} ({wall[name]:.0f} s)")
+    results = {"config": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo), "mismatch": mismatch.to_dict(),
+               "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None},
+               "train_wall_s": wall, "fit_wall_s": fit_s, "real": {}, "sim": {}}
+    rollouts = {}
+    for split in ("validation", "heldout"):
+        mot = motions[split]
+        results["real"][split], results["sim"][split] = {}, {}
+        for name in ("reference", *policies):
+            policy = None if name == "reference" else load_skill(out / "skills" / name)
+            plant = RealPlant(real, len(mot), task.decimation, seed=cfg.seed + 100, imu_noise=imu)
+            dep = deploy_floor(policy, plant, mot, task)
+            results["real"][split][name] = floor_metrics(dep)
+            if split == "heldout":
+                rollouts[name] = dep
+            setting = POLICIES.get(name, "nominal")
+            if setting != "real":
+                plant = sim_plant(setting, floating, len(mot), rate, task.decimation, runs.get(setting), cfg.device,
+                                  ground=True)
+                results["sim"][split][name] = floor_metrics(deploy_floor(policy, plant, mot, task))["mean"]
+    for split, suffix in (("heldout", ""), ("validation", "_validation")):
+        for metric in ("mpjpe", "g_mpjpe"):
+            mean = {n: r["mean"].get(metric, float("nan")) for n, r in results["real"][split].items()}
+            results[f"gap_closed{suffix}_{metric}"] = {
+                k: gap_closed(mean["a_nominal"], mean[k], mean["d_oracle"])
+                for k in ("b_calibrated", "c_delta_action") if k in mean and "d_oracle" in mean}
+    held = results["real"]["heldout"]
+    log("[4/4] deployed on the real robot's floor (" + f"{len(motions['heldout'])} held-out motions): " + "; ".join(
+        f"{n} success {100 * r['mean']['success']:.0f} % ({r['mean']['falls']} falls), MPJPE "
+        f"{1e3 * r['mean'].get('mpjpe', float('nan')):.1f} mrad, g-MPJPE {1e3 * r['mean'].get('g_mpjpe', float('nan')):.0f} mm"
+        for n, r in held.items()) + "".join(
+        f"; gap closed by {k[0]} {100 * v:.0f} % (MPJPE)" for k, v in results["gap_closed_mpjpe"].items()))
+    from .floor_report import write_floor_report
+
+    results["wall_s"] = time.perf_counter() - t_start
+    write_floor_report(out, floating, results, rollouts, motions["heldout"], rate / task.decimation,
+                       animation=animation)
+    tmp = out / "results.json.tmp"
+    tmp.write_text(json.dumps(results, indent=1, default=_json))
+    tmp.replace(out / "results.json")
+    log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
+    return results
