@@ -188,3 +188,22 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
+
+
+def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
+    import subprocess
+    import sys
+
+    from wresdyn.paths import REPO
+
+    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    res = subprocess.run([sys.executable, "examples/skill_on_the_floor.py", str(cal), "--out", str(tmp_path / "skills"),
+                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--duration", "1.0"],
+                         capture_output=True, text=True, cwd=REPO, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    rows = {ln.split()[0]: ln.split() for ln in res.stdout.splitlines()
+            if ln.split()[:1] in (["reference"], ["a_nominal"], ["b_calibrated"])}
+    assert set(rows) == {"reference", "a_nominal", "b_calibrated"}
+    # success is a percentage of the held-out motions; MPJPE in mrad and g-MPJPE in mm of a standing robot
+    for r in rows.values():
+        assert 0 <= float(r[1].rstrip("%")) <= 100 and 0 < float(r[3]) < 300 and 0 < float(r[4]) < 500
