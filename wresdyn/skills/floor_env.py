@@ -30,12 +30,15 @@ from tensordict import TensorDict
 from ..choices import check_number
 
 __all__ = ["FloorTaskConfig", "FloorTrackingEnv", "ACTOR_TERMS", "CRITIC_TERMS", "base_frame_imu", "quat_rotate_inv",
-           "FOOT_BODIES"]
+           "FOOT_BODIES", "FAILURE_CAUSES"]
 
 ACTOR_TERMS = ("error", "qd", "ref_next", "ref_ahead", "ref", "last_action", "gyro", "gravity")
 """The actor's observation: n values each for the joint terms, 3 each for the IMU's."""
 CRITIC_TERMS = ("base_error", "base_velocity", "true_gyro", "planted")
 """What the critic sees besides the actor's observation: 3, 3, 3 and 2 values."""
+FAILURE_CAUSES = ("fell_low", "tilted", "drifted", "diverged")
+"""Why an episode fails: the base fell below its reference by ``fall_height``, tilted past ``fall_tilt``, drifted
+more than ``max_base_error`` from the reference, or the simulation diverged (the first that holds, in this order)."""
 FOOT_BODIES = ("left_foot", "right_foot")
 """The bodies whose slip is penalised where the reference plants them."""
 
@@ -313,7 +316,15 @@ class FloorTrackingEnv(VecEnv):
         slip2 = (slide * planted).sum(-1) / planted.sum(-1).clamp(min=1)
         fell = ((self.base_pose[:, 2] < base_r[:, 2] - c.fall_height) | (_tilt(self.base_pose[:, 3:]) > c.fall_tilt)
                 | ~torch.isfinite(self.base_pose).all(-1))
-        failed = fell | (dist > c.max_base_error) | bad
+        drifted = dist > c.max_base_error
+        failed = fell | drifted | bad
+        # why a world failed, first cause first: 0 none, then the indices of FAILURE_CAUSES
+        cause = torch.zeros_like(self.t)
+        for code, hit in ((4, bad), (3, drifted), (2, _tilt(self.base_pose[:, 3:]) > c.fall_tilt),
+                          (1, self.base_pose[:, 2] < base_r[:, 2] - c.fall_height)):
+            cause = torch.where(hit, torch.full_like(cause, code), cause)
+        self.failure_cause = cause
+        """Why each world failed this step (N,): 0 it did not, else 1 + the index in :data:`FAILURE_CAUSES`."""
         terms = {"track_q": self._track_q(e2), "track_q_fine": self._track_q_fine(e2), "track_qd": self._track_qd(v2),
                  "orientation": self._orientation(ang), "base": self._base(dist), "slip": self._slip(slip2),
                  "action_rate": self._action_rate(a), "fall": self._fall(failed)}

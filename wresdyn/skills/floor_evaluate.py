@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from .floor_env import FAILURE_CAUSES
+
 __all__ = ["FloorDeployment", "deploy_floor", "floor_metrics", "FLOOR_METRICS"]
 
 FLOOR_METRICS = ("success", "falls", "mpjpe", "g_mpjpe", "orientation_error", "foot_slip", "action_rate")
@@ -53,6 +55,10 @@ class FloorDeployment:
     """Policy step of the failure, −1 if none (M,)."""
     fell: np.ndarray
     """Whether the failure was a fall (M,) bool."""
+    cause: np.ndarray
+    """Why each motion failed (M,): ``""`` if it did not, else one of :data:`~.floor_env.FAILURE_CAUSES`."""
+    base_error_max: np.ndarray
+    """Largest distance of the base from the reference's over the rollout [m] (M,)."""
     policy_dt: float
     names: list
 
@@ -75,6 +81,7 @@ def deploy_floor(policy, plant, motions, cfg) -> FloorDeployment:
     cmd = np.full((m_n, steps, n), np.nan)
     q[:, 0], base[:, 0], bodies[:, 0] = env.true_q.cpu(), env.base_pose.cpu(), env.bodies.cpu()
     failed_at, fell = np.full(m_n, -1), np.zeros(m_n, dtype=bool)
+    cause, base_error_max = np.full(m_n, "", dtype=object), np.zeros(m_n)
     alive = np.ones(m_n, dtype=bool)
     obs = env.get_observations()["policy"]
     with torch.no_grad():
@@ -92,6 +99,9 @@ def deploy_floor(policy, plant, motions, cfg) -> FloorDeployment:
             fail = live & done & ~timeout
             failed_at[fail] = k + 1
             fell[fail] = env.fell.cpu().numpy()[fail]
+            code = env.failure_cause.cpu().numpy()
+            cause[fail] = [FAILURE_CAUSES[c - 1] for c in code[fail]]
+            base_error_max[live] = np.maximum(base_error_max[live], env.base_error.cpu().numpy()[live])
             alive &= ~(done & live)
     r = env.ref_data
     q_ref, base_ref = r["q"][:, :steps + 1].cpu().numpy(), r["base"][:, :steps + 1].cpu().numpy()
@@ -99,7 +109,8 @@ def deploy_floor(policy, plant, motions, cfg) -> FloorDeployment:
     bodies_ref = np.stack([fk(torch.as_tensor(base_ref[:, k]), torch.as_tensor(q_ref[:, k])).numpy()
                            for k in range(steps + 1)], axis=1)
     return FloorDeployment(q, base, bodies, q_ref, base_ref, bodies_ref, r["planted"][:, :steps + 1].cpu().numpy(),
-                           env.feet.cpu().numpy(), cmd, failed_at, fell, env.policy_dt, [m.name for m in motions])
+                           env.feet.cpu().numpy(), cmd, failed_at, fell, cause, base_error_max, env.policy_dt,
+                           [m.name for m in motions])
 
 
 def _angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
@@ -121,7 +132,8 @@ def floor_metrics(dep: FloorDeployment) -> dict:
         c = dep.cmd[i][np.isfinite(dep.cmd[i]).all(-1)]
         nan = float("nan")
         per.append({"motion": name, "success": bool(dep.failed_at[i] < 0), "fell": bool(dep.fell[i]),
-                    "failed_at": int(dep.failed_at[i]),
+                    "failed_at": int(dep.failed_at[i]), "cause": str(dep.cause[i]),
+                    "base_error_max": float(dep.base_error_max[i]),
                     "mpjpe": float(np.abs(q - qr).mean()) if len(q) else nan,
                     "g_mpjpe": float(np.linalg.norm(b - br, axis=-1).mean()) if len(b) else nan,
                     "orientation_error": float(ang.mean()) if len(ang) else nan,
@@ -132,4 +144,5 @@ def floor_metrics(dep: FloorDeployment) -> dict:
     mean["success"] = float(np.mean([p["success"] for p in per]))
     mean["failures"] = int(sum(not p["success"] for p in per))
     mean["falls"] = int(sum(p["fell"] for p in per))
+    mean["causes"] = {c: sum(p["cause"] == c for p in per) for c in FAILURE_CAUSES}
     return {"mean": mean, "motions": per}

@@ -134,7 +134,7 @@ g-MPJPE {_gaps(results['gap_closed_validation_g_mpjpe'])}).
 """ + "\n".join(
         f"| {m.name} | " + " | ".join(
             f"{1e3 * r['motions'][k]['mpjpe']:.1f} / {1e3 * r['motions'][k]['g_mpjpe']:.0f}"
-            + ("" if r['motions'][k]['success'] else (" (fell)" if r['motions'][k]['fell'] else " (failed)"))
+            + ("" if r['motions'][k]['success'] else f" ({r['motions'][k].get('cause') or 'failed'})")
             for r in results['real']['heldout'].values()) + " |" for k, m in enumerate(motions)) + f"""
 
 ![tracking](tracking_heldout.png)
@@ -146,7 +146,9 @@ Metrics: success = the motion ran to its end with no fall (base more than {task[
 reference or tilted past {task['fall_tilt']:g} rad) and the base never more than {task['max_base_error']:g} m from the
 reference; MPJPE = mean |q − q_ref| of the true joints; g-MPJPE = mean distance of every link's world position from
 the reference's; base orientation = mean angle to the reference's; foot slip = mean horizontal speed of the soles
-the reference plants; action rate = mean |Δ q_cmd| per policy step. A failed motion's errors count up to its failure.
+the reference plants; action rate = mean |Δ q_cmd| per policy step. A failed motion's errors count up to its failure;
+its cause in the per-motion table: fell_low (base below its reference by the fall height), tilted, drifted (base
+beyond the success radius) or diverged.
 
 Corrections: {', '.join(f'{k} `{v}`' for k, v in results['corrections'].items())}. Wall clock: {results['wall_s']:.0f} s
 (fits {results['fit_wall_s']:.0f} s; policies {', '.join(f'{k} {v:.0f} s' for k, v in results['train_wall_s'].items())}).

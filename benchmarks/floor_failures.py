@@ -1,0 +1,73 @@
+"""Why floor skills fail on the "real" robot: redeploy a finished ``wresdyn deploy --floor`` run's policies on its
+held-out motions and print, per policy and family, the successes and each failure's cause and step.
+
+    python benchmarks/floor_failures.py RUN [--data DATASET]
+
+RUN is the deploy folder (its ``results.json`` gives the sizes, seed and task; ``skills/*/policy.pt`` the policies).
+The motions are drawn again from the run's seed, and the real robot is the dataset's mismatch with the benchmark's
+deployment seed, so the rollouts are the benchmark's own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("run")
+    p.add_argument("--data", default=None, help="the dataset whose mismatch is the real robot (default: shipped)")
+    args = p.parse_args()
+
+    import torch
+
+    from wresdyn.data.dataset import load_dataset
+    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.paths import DEFAULT_DATASET
+    from wresdyn.robot.description import load_robot
+    from wresdyn.skills.floor_env import FloorTaskConfig
+    from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
+    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.plants import RealPlant
+    from wresdyn.skills.train import load_skill
+
+    torch.set_num_threads(2)
+    run = Path(args.run)
+    res = json.loads((run / "results.json").read_text())
+    cfg, task = res["config"], FloorTaskConfig(**res["task"])
+    ds = load_dataset(args.data or DEFAULT_DATASET)
+    stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
+    # the split streams depend on the split's position only: the same held-out motions without drawing the others
+    counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}
+    motions = make_floor_motions(stand, floating, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"])["heldout"]
+    real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
+    print(f"{run}: {len(motions)} held-out motions of {cfg['duration']:g} s, "
+          f"{int(cfg['duration'] * ds.rate_hz / task.decimation)} policy steps each")
+    for name in ("reference", *res["policies"]):
+        policy = None if name == "reference" else load_skill(run / "skills" / name)
+        plant = RealPlant(real, len(motions), task.decimation, seed=cfg["seed"] + 100,
+                          imu_noise=(task.gyro_noise, task.gravity_noise))
+        per = floor_metrics(deploy_floor(policy, plant, motions, task))["motions"]
+        fam = defaultdict(list)
+        for m, r in zip(motions, per):
+            fam[m.family].append(r)
+        rows = []
+        for f, rs in fam.items():
+            fails = [f"{r['cause']}@{r['failed_at']}" for r in rs if not r["success"]]
+            rows.append(f"{f} {sum(r['success'] for r in rs)}/{len(rs)}"
+                        + (f" [{', '.join(fails)}]" if fails else "")
+                        + f" max base error {max(r['base_error_max'] for r in rs):.2f} m")
+        print(f"{name:15s} " + "; ".join(rows))
+        expected = res["real"]["heldout"][name]["mean"]["success"]
+        got = float(np.mean([r["success"] for r in per]))
+        if abs(got - expected) > 1e-9:
+            print(f"  (success {got:.2f} here against {expected:.2f} in results.json)")
+
+
+if __name__ == "__main__":
+    main()
