@@ -13,7 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot.description import Robot, RobotError
-from .signals import JOINT_FAMILIES, Excitation, ExcitationConfig, centre_amplitude, chirp, fade, finite_limits, min_jerk
+from .signals import (
+    JOINT_FAMILIES,
+    Excitation,
+    ExcitationConfig,
+    centre_amplitude,
+    chirp,
+    fade,
+    finite_limits,
+    min_jerk,
+)
 
 __all__ = ["JointDynamics", "effort_limit", "generate_joint"]
 
