@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.dataset import fitted_mask
+
 __all__ = ["plot_fig3", "save_figure", "learning_curves", "plot_learning_curves"]
 
 
@@ -21,8 +23,6 @@ def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joint
 
     q_pd = runs["pd"].q[0]
     q_res = runs["residual"].q[0] if "residual" in runs else None
-    from .evaluate import fitted_mask
-
     err = np.sqrt(np.nanmean((q_pd - traj.q) ** 2, axis=0))
     fitted = np.flatnonzero(fitted_mask(weights, len(err)))
     joints = fitted[np.argsort(-err[fitted], kind="stable")][:n_joints]

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..data.dataset import fitted_mask
+
 __all__ = ["ValidationScore"]
 
 
@@ -30,7 +32,6 @@ class ValidationScore:
 
     def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
                  delay=0.0, physics=None, weights=None) -> None:
-        from ..evaluation.evaluate import fitted_mask
         from ..sim import Simulator
 
         self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay
