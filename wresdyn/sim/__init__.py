@@ -8,7 +8,7 @@
   quantities, physically consistent, read and written as JSON;
 - :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`;
 - :mod:`.solvers`: the Newton solver choice; :mod:`.solver_replay`: SolverReplay, this project's fused differentiable
-  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.bench`: the solver benchmark.
+  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.solver_benchmark`: the solver benchmark behind ``wresdyn bench``.
 """
 
 from ..errors import SimulationDiverged

@@ -1,5 +1,5 @@
-"""``wresdyn bench`` (:mod:`wresdyn.sim.bench`) on a tiny problem: every row it measures, for every world count,
-in the printed table and the JSON file. Sizes and timing windows are tiny; no figure is compared with a speed."""
+"""``wresdyn bench`` (:mod:`wresdyn.sim.solver_benchmark`) on a tiny problem: every row it measures, for every world
+count, in the printed table and the JSON file. Sizes and timing windows are tiny; no figure is compared with a speed."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 import re
 
 from wresdyn.cli import main
-from wresdyn.sim.bench import _fmt
+from wresdyn.sim.solver_benchmark import _fmt
 
 ROWS = ["replay rollout", "replay step", "featherstone", "mujoco-c"]
 """Rows of a CPU run (mujoco-warp runs on CUDA only)."""
