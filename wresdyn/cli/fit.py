@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"done: {summary['wall_s']:.0f} s of training{stages}, {summary['sim_steps']:.2e} simulated steps "
           f"(residual); exported {out / 'policy.pt'}")
     if args.eval:
-        from ..evaluation.runs import evaluate_run
+        from ..evaluation.evaluate_run import evaluate_run
 
         evaluate_run(str(out), ds, robot, data_label=str(args.data))
     return 0
