@@ -88,5 +88,15 @@ def test_demo_quick(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert "| calibrated (gradient fit) |" in report and "| residual by PPO |" in report
     assert "| b_calibrated |" in report and "| d_oracle |" in report and "Gap closed" in report
-    assert (tmp_path / "fit" / "export" / "actuated.usda").is_file()
-    assert (tmp_path / "deploy" / "report.md").is_file()
+    # the calibrated robot it exports: one Newton actuator per joint of the residual it carries
+    export = tmp_path / "fit" / "export"
+    joints = json.loads((export / "residual.json").read_text())["joint_names"]
+    actuators = re.findall(r'def NewtonActuator "(\w+)"', (export / "actuated.usda").read_text())
+    assert len(joints) == 21 and sorted(actuators) == sorted(joints)
+    # the summary quotes the skills benchmark's results: its gap closed and held-out MPJPE [mrad] on the real robot
+    deploy = json.loads((tmp_path / "deploy" / "results.json").read_text())
+    gap = deploy["gap_closed"]["b_calibrated"]
+    assert f"(a − b) / (a − d): {100 * gap:.0f} %" in report
+    for name in ("b_calibrated", "d_oracle"):
+        mpjpe = 1e3 * deploy["real"]["heldout"][name]["mean"]["mpjpe"]
+        assert f"| {name} | {mpjpe:.2f} |" in report, (name, mpjpe)
