@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from wresdyn.data.real_robot import Mismatch, collect
-from wresdyn.evaluation.evaluate import evaluate_split, write_report
+from wresdyn.evaluation.open_loop import evaluate_split, write_report
 from wresdyn.evaluation.plots import plot_fig3
 from wresdyn.sim.rollout import replay_trajectories
 

@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
              f"trajectories to validation ({', '.join(m.names)}); {len(ds.split('train'))} stay in train")
     gaps = ds.meta.get("pd_only_gap")
     if m.names and isinstance(gaps, dict) and not args.no_gap:
-        from ..evaluation.evaluate import pd_gap
+        from ..evaluation.open_loop import pd_gap
 
         robot = m.robot or dataset_robot(ds.robot_file, args.robot,
                                          args.gains if args.gains is not None else ds.gains_config)
