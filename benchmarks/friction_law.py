@@ -66,7 +66,7 @@ def true_parameters(data: str, laws: dict) -> None:
     from wresdyn.data.dataset import Trajectory, derive_qdd
     from wresdyn.data.loading import load_data
     from wresdyn.data.real_robot import Mismatch, RealRobot
-    from wresdyn.evaluation.evaluate import metrics
+    from wresdyn.evaluation.open_loop import metrics
     from wresdyn.sim import Simulator
     from wresdyn.sim.rollout import replay_trajectories
     from wresdyn.sim.solver_replay import SolverReplay
@@ -96,7 +96,7 @@ def true_parameters(data: str, laws: dict) -> None:
             out = replay_trajectories(robot, rec, ds.rate_hz, physics=truth, sim=sim)["residual"]
             row.append(f"{name} {metrics(rec, out).mean_abs_dq:.4f}")
         print("   " + "; ".join(row))
-    from wresdyn.evaluation.evaluate import evaluate_split
+    from wresdyn.evaluation.open_loop import evaluate_split
 
     truth = RealRobot(robot, Mismatch.from_dict(base, "the dataset's mismatch"), ds.rate_hz).physics()
     print(f"4. {data} replayed with the real robot's true parameters (default law): mean |dq| [rad]")

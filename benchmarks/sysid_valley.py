@@ -45,7 +45,7 @@ def main() -> None:
 
     from wresdyn.data.loading import load_data
     from wresdyn.data.real_robot import Mismatch, RealRobot
-    from wresdyn.evaluation.evaluate import evaluate_split
+    from wresdyn.evaluation.open_loop import evaluate_split
     from wresdyn.learn.runs import joint_weights, squared_error
     from wresdyn.learn.sysid import SysIdConfig
     from wresdyn.paths import DEFAULT_DATASET

@@ -72,7 +72,7 @@ class GpuSampler:
 
 
 def _heldout(robot, dataset, policy, device: str) -> float:
-    from wresdyn.evaluation.evaluate import evaluate_split
+    from wresdyn.evaluation.open_loop import evaluate_split
 
     summary, _ = evaluate_split(robot, dataset.split("heldout"), dataset.rate_hz, policy, device=device)
     return summary["pd_residual"]["mean_abs_dq"]

@@ -5,8 +5,14 @@ import json
 import numpy as np
 import pytest
 
+import torch
+from onnx.reference import ReferenceEvaluator
+from PIL import Image
+
 from wresdyn.cli import main
+from wresdyn.data.dataset import load_dataset
 from wresdyn.evaluation.ablation import AblationConfig, cells, run_ablation
+from wresdyn.learn.ppo import load_policy
 
 
 @pytest.fixture(scope="module")
@@ -25,14 +31,33 @@ def test_fit_command_exports_a_run_that_eval_reads(tmp_path, tiny_data, model):
     args = ["fit", str(tiny_data), "--out", str(run), "--model", model, "--iterations", "3", "--windows", "2",
             "--curriculum", "2,4", "--solver", "featherstone"]
     assert main(args) == 0
-    for name in ("policy.pt", "policy.onnx", "residual.json", "config.json", "checkpoint.pt"):
-        assert (run / name).is_file()
+    # the exported residual, as eval and a deployment load it: the data's joints and rate, a finite torque per joint
+    data = load_dataset(tiny_data)
+    policy, meta = load_policy(run)
+    assert meta["kind"] == "torque" and meta["joint_names"] == data.joint_names and meta["rate_hz"] == data.rate_hz
+    t = data.split("heldout")[0]
+    obs = np.concatenate([t.q, t.qd, t.qdd, t.q_cmd], axis=1).astype(np.float32)
+    with torch.no_grad():
+        tau = policy(torch.as_tensor(obs)).numpy()
+    assert tau.shape == t.q.shape and np.isfinite(tau).all() and np.abs(tau).max() > 0
+    # the ONNX file computes the same residual (ONNX's reference evaluator: no runtime needed)
+    (onnx_tau,) = ReferenceEvaluator(str(run / "policy.onnx")).run(None, {"obs": obs})
+    np.testing.assert_allclose(onnx_tau, tau, rtol=1e-4, atol=1e-5)  # float32, two graphs of the same ops
+    config = json.loads((run / "config.json").read_text())  # what eval replays with
+    assert config["gradfit"]["model"] == model and config["gradfit"]["iterations"] == 3
+    assert config["config"]["env"]["solver"] == "featherstone" and config["data_path"] == str(tiny_data)
     if model == "parametric":
         params = json.loads((run / "parameters.json").read_text())
         assert set(params) == {"kp_scale", "kd_scale", "damping", "friction", "armature"}
+        for per_joint in params.values():  # by joint name, each a physical value (scales and softplus terms > 0)
+            assert list(per_joint) == data.joint_names and all(np.isfinite(x) and x > 0 for x in per_joint.values())
     assert main(["eval", str(run), "--splits", "heldout", "--solver", "featherstone"]) == 0
-    metrics = json.loads((run / "eval" / "metrics.json").read_text())
-    assert "heldout" in json.dumps(metrics) and (run / "eval" / "report.md").is_file()
+    metrics = json.loads((run / "eval" / "metrics.json").read_text())["splits"]["heldout"]
+    pd, res = metrics["pd_only"]["mean_abs_dq"], metrics["pd_residual"]["mean_abs_dq"]
+    assert 0 < pd and 0 < res and metrics["improvement"] == pytest.approx(pd / res)
+    # the report's table states those figures
+    report = (run / "eval" / "report.md").read_text()
+    assert f"| heldout | 1 | {pd:.4f}" in report and f"{metrics['improvement']:.1f}×" in report, report
 
 
 def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
@@ -52,8 +77,13 @@ def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
         assert len(r["curve"]) == 2 and r["curve"][-1]["sim_steps"] > r["curve"][0]["sim_steps"] > 0
         assert np.isfinite(r["heldout"]["mean_abs_dq"]) and np.isfinite(r["ood"]["mean_abs_dq"])
     table = (tmp_path / "table.md").read_text()
-    assert "| ppo | mlp | torque | 1 |" in table and "| parametric |" in table
-    assert (tmp_path / "curves.png").stat().st_size > 0
+    for r in results:  # one row per learner, stating its held-out error (one seed: no ± part)
+        assert f"| {r['learner']} | {r['arch']} | {r['kind']} | 1 | {r['heldout']['mean_abs_dq']:.4f} |" in table, table
+    # the curves: a line per learner in matplotlib's first three colours, on both panels of a wide figure
+    img = np.asarray(Image.open(tmp_path / "curves.png").convert("RGB")).astype(int)
+    assert img.shape[1] > 2 * img.shape[0]
+    for colour in ((0x1F, 0x77, 0xB4), (0xFF, 0x7F, 0x0E), (0x2C, 0xA0, 0x2C)):
+        assert (np.abs(img - colour).sum(axis=-1) < 30).sum() > 50, colour
     # a second run finds every cell done and only rewrites the summary
     mtime = (tmp_path / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime
     run_ablation(humanoid, data, cfg, tmp_path, log=lambda *_: None)
@@ -73,7 +103,10 @@ def test_parallel_cells_reproduce_the_sequential_run(tmp_path, humanoid, tiny_da
     assert [r["name"] for r in par] == [r["name"] for r in seq]
     for a, b in zip(seq, par):
         assert b["heldout"]["mean_abs_dq"] == pytest.approx(a["heldout"]["mean_abs_dq"], rel=1e-6)
-    assert (tmp_path / "par" / "table.md").is_file()
+    # the same table but for the wall-clock column (the 8th)
+    tables = [[row.split("|")[:8] + row.split("|")[9:] for row in (tmp_path / d / "table.md").read_text().splitlines()]
+              for d in ("seq", "par")]
+    assert tables[0] == tables[1]
 
 
 def test_ablation_config_refuses_bad_cells_at_construction(tmp_path, capsys):

@@ -266,7 +266,7 @@ def test_schema_1_files_load(tmp_path):
 def test_migrate_log_dataset_moves_train_to_validation(tmp_path, capsys):
     """Real logs (no mismatch, no seed) cannot record more: the last K training trajectories become validation."""
     from wresdyn.cli import main
-    from wresdyn.data.migrate import migrate
+    from wresdyn.data.schema_migration import migrate
 
     trajs = [_traj(f"run{i}", "train", seed=i) for i in range(4)] + [_traj("h", "heldout", seed=9)]
     logs = Dataset(list(NAMES), RATE, trajs, "robot.usda", "0" * 64, {}, None, {"source_logs": []})
@@ -315,7 +315,7 @@ def test_migrate_simulated_dataset_records_validation(tmp_path, humanoid, collec
     """A schema-1 collect file (same data less validation) migrated with --validation 2 is the schema-2 collect:
     the recorded validation trajectories are bit for bit those ``collect`` records."""
     from wresdyn.cli import main
-    from wresdyn.data.migrate import migrate
+    from wresdyn.data.schema_migration import migrate
 
     old = tmp_path / "sim_v1.npz"
     _save_v1(_without_validation(collected), old)

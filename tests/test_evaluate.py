@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from wresdyn.data.real_robot import Mismatch, collect
-from wresdyn.evaluation.evaluate import evaluate_split, write_report
+from wresdyn.evaluation.open_loop import evaluate_split, write_report
 from wresdyn.evaluation.plots import plot_fig3
 from wresdyn.sim.rollout import replay_trajectories
 
@@ -60,8 +60,11 @@ def test_pd_only_rollout_is_the_plain_newton_replay(robot, data):
 def test_oracle_residual_closes_most_of_the_gap(robot, data, kind):
     s, runs = evaluate_split(robot, data.split("heldout"), data.rate_hz, Oracle(robot, kind, REAL), kind)
     assert s["pd_residual"]["diverged"] == 0
-    # the oracle ignores only the real robot's implicit damping (measured: 66-87x); a 3x cut is the bar
-    assert s["improvement"] > 3.0, s
+    # what is left is the O(dt) difference between the real robot's implicit damping and the oracle's explicit
+    # torque: measured 86.9x (0.0143 -> 0.000165 rad) for both kinds on the CPU; the bound leaves room for float32
+    # differences between devices and Warp versions, and still fails if the residual missed 2 % of the gap
+    assert s["improvement"] > 50.0, s
+    assert s["pd_residual"]["mean_abs_dq"] < 3e-4, s  # measured 1.65e-4 rad
     assert len(runs["residual"].q) == 2 and runs["residual"].q[0].shape == data.split("heldout")[0].q.shape
 
 

@@ -1,16 +1,26 @@
 """Every example runs end to end (small sizes), so examples never rot."""
 
+import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _run(*args):
     return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, cwd=ROOT, timeout=600)
+
+
+def _draws(png, rgb, pixels: int = 50) -> bool:
+    """Whether the picture has at least ``pixels`` pixels of colour ``rgb`` (0-255): a line of it is drawn."""
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    return int((np.abs(img - rgb).sum(axis=-1) < 30).sum()) >= pixels
 
 
 @pytest.mark.parametrize(
@@ -36,10 +46,39 @@ def test_load_custom_robot_without_gains_says_how_to_supply_them():
     assert "no PD gains" in res.stderr and "--gains" in res.stderr and "nan" not in res.stdout.lower()
 
 
-@pytest.mark.parametrize("example", ["examples/ppo_vs_gradient.py", "examples/train_residual_ppo.py"])
-def test_learning_examples_smoke(tmp_path, example):
-    res = _run(example, "--test", "--out", tmp_path / "run")
+def test_ppo_vs_gradient_prints_the_table_of_its_runs(tmp_path):
+    out = tmp_path / "run"
+    res = _run("examples/ppo_vs_gradient.py", "--test", "--out", out)
     assert res.returncode == 0, res.stderr[-2000:]
+    results = json.loads((out / "results.json").read_text())
+    assert [r["learner"] for r in results] == ["ppo", "gradient"]
+    pd = results[0]["heldout_pd_only"]["mean_abs_dq"]
+    assert f"PD-only: held-out {pd:.4f} rad" in res.stdout
+    for r in results:  # the printed row of each learner states its held-out error and its ratio to PD only
+        row = f"| {r['learner']} | mlp | torque | 1 | {r['heldout']['mean_abs_dq']:.4f} | " \
+              f"{pd / r['heldout']['mean_abs_dq']:.1f}x |"
+        assert row in res.stdout, res.stdout[-2000:]
+    # the learning curves it points to: PPO's and the gradient fit's lines (matplotlib's first two colours)
+    assert f"learning curves: {out}/curves.png" in res.stdout
+    assert _draws(out / "curves.png", (0x1F, 0x77, 0xB4)) and _draws(out / "curves.png", (0xFF, 0x7F, 0x0E))
+
+
+def test_train_residual_ppo_prints_what_its_report_states(tmp_path):
+    out = tmp_path / "run"
+    res = _run("examples/train_residual_ppo.py", "--test", "--out", out)
+    assert res.returncode == 0, res.stderr[-2000:]
+    speed = re.search(r"^(\d+) env-steps/s, (\d+\.\d+) s/iteration$", res.stdout, re.M)
+    summary = json.loads((out / "train_summary.json").read_text())
+    assert speed and int(speed[1]) == round(summary["env_steps_per_s"]) > 0, res.stdout[-2000:]
+    metrics = json.loads((out / "eval" / "metrics.json").read_text())["splits"]
+    for split in ("heldout", "ood"):
+        s = metrics[split]
+        assert (f"{split}: mean |dq| PD only {s['pd_only']['mean_abs_dq']:.4f} rad, "
+                f"PD + residual {s['pd_residual']['mean_abs_dq']:.4f} rad") in res.stdout
+        # its Fig. 3: the recording (red), PD only (green), PD + residual (blue)
+        fig = out / "eval" / f"fig3_{split}.png"
+        assert all(_draws(fig, rgb) for rgb in ((255, 0, 0), (0, 128, 0), (0, 0, 255))), split
+    assert f"report: {out}/eval/report.md" in res.stdout
 
 
 def test_demo_quick(tmp_path):
@@ -49,5 +88,15 @@ def test_demo_quick(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert "| calibrated (gradient fit) |" in report and "| residual by PPO |" in report
     assert "| b_calibrated |" in report and "| d_oracle |" in report and "Gap closed" in report
-    assert (tmp_path / "fit" / "export" / "actuated.usda").is_file()
-    assert (tmp_path / "deploy" / "report.md").is_file()
+    # the calibrated robot it exports: one Newton actuator per joint of the residual it carries
+    export = tmp_path / "fit" / "export"
+    joints = json.loads((export / "residual.json").read_text())["joint_names"]
+    actuators = re.findall(r'def NewtonActuator "(\w+)"', (export / "actuated.usda").read_text())
+    assert len(joints) == 21 and sorted(actuators) == sorted(joints)
+    # the summary quotes the skills benchmark's results: its gap closed and held-out MPJPE [mrad] on the real robot
+    deploy = json.loads((tmp_path / "deploy" / "results.json").read_text())
+    gap = deploy["gap_closed"]["b_calibrated"]
+    assert f"(a − b) / (a − d): {100 * gap:.0f} %" in report
+    for name in ("b_calibrated", "d_oracle"):
+        mpjpe = 1e3 * deploy["real"]["heldout"][name]["mean"]["mpjpe"]
+        assert f"| {name} | {mpjpe:.2f} |" in report, (name, mpjpe)

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from wresdyn.data.dataset import Dataset, DatasetError, Trajectory
-from wresdyn.evaluation.evaluate import evaluate_split, metrics, pd_gap, summary_line, write_report
+from wresdyn.evaluation.open_loop import evaluate_split, metrics, pd_gap, summary_line, write_report
 from wresdyn.paths import REPO
 from wresdyn.sim.rollout import Replays
 

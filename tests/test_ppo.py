@@ -207,7 +207,7 @@ def test_exported_policy_is_the_residual_the_env_applies(robot, data, tmp_path, 
     the actor's running normaliser, clip(action_gain · a, −1, 1) · scale, both residual kinds."""
     import warp as wp
 
-    from wresdyn.sim.residual import observation
+    from wresdyn.sim.residual_kinds import observation
 
     # a full-size initial output and action gain 5, so some residuals sit on the clip and some inside it
     cfg = tiny(iterations=2, kind=kind)

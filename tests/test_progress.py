@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,12 +24,17 @@ DONE = re.compile(r"^\.\.\. done in \d+\.\d s$")
 
 
 def test_compile_kernels_says_what_and_how_long_once_per_robot():
+    import warp as wp
+
     robot = load_robot(SO101)
     lines = []
     seconds = compile_kernels(robot, 500.0, ("forward", "grad"), say=lines.append)
     assert len(lines) == 2, lines
     assert lines[0].startswith("compiling Warp kernels for so101.xml (6 joints; forward, grad): on a robot's first "
-                               "run only") and "1.19" in lines[0] and lines[0].endswith(" ...")
+                               "run only")
+    # the folder it names is the one Warp loads from (shown with ~ for the home folder)
+    shown = re.fullmatch(r".*, then loaded from (.+) \.\.\.", lines[0])
+    assert shown and Path(shown[1]).expanduser() == Path(wp.config.kernel_cache_dir), lines[0]
     assert DONE.match(lines[1]) and seconds > 0
     # compiled in this process: no second announcement, unless a variant is new
     assert compile_kernels(robot, 500.0, ("grad", "forward"), say=lines.append) is None and len(lines) == 2

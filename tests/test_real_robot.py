@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from wresdyn.data.real_robot import Mismatch, MismatchError, RealRobot, collect
-from wresdyn.evaluation.evaluate import pd_gap
+from wresdyn.evaluation.open_loop import pd_gap
 
 RATE = 500.0
 DEFAULT_TOML = Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml"

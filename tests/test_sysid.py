@@ -154,19 +154,19 @@ def test_gain_grid_starts_each_joint_at_its_own_kp(humanoid, record):
     data = record(humanoid, soft_arms, {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.3)
     data.meta["excluded_joints"] = ["right_elbow"]  # out of the fit: keeps the file's kp, whatever its error says
     cfg = dataclasses.replace(SMALL, iterations=2, gain_grid=(1.0, 0.1), effort_grid=())
-    lines = []
-    params, _ = identify(humanoid, data, cfg, log=lines.append)
-    (line,) = [s for s in lines if s.startswith("kp search, per joint:")]
-    picks = dict(tok.rsplit(":", 1) for tok in line.split(":", 1)[1].split())
-    assert picks.pop("right_elbow") == "excluded"
+    searches = []
+    params, _ = identify(humanoid, data, cfg, log=lambda *_: None, on_search=searches.append)
+    (kp,) = searches  # effort_grid is off and the delay not searched: the kp search alone
+    assert kp.field == "kp" and kp.losses.shape == (2, humanoid.n_dof)
+    picks = dict(kp.choice)
+    assert picks.pop("right_elbow") is None
     arms = [j for j in humanoid.joint_names if ("shoulder" in j or "elbow" in j) and j != "right_elbow"]
-    assert sum(picks[j] == "0.1" for j in arms) >= 0.75 * len(arms), picks
+    assert sum(picks[j] == 0.1 for j in arms) >= 0.75 * len(arms), picks
     legs = [j for j in humanoid.joint_names if j not in arms and j != "right_elbow"]
-    assert sum(picks[j] == "1" for j in legs) >= 0.75 * len(legs), picks
+    assert sum(picks[j] == 1.0 for j in legs) >= 0.75 * len(legs), picks
     # the searched start is a selection candidate: what is returned is never worse on validation
-    (after,) = [float(s.split()[-2]) for s in lines if s.startswith("after the kp search: validation")]
     score = PhysicsScore(humanoid, data.split("validation"), data.rate_hz, weights=data.fit_weights())
-    assert score(params) <= after + 5e-5
+    assert score(params) <= kp.validation + 5e-5
     # the selected model starts from there (two small Adam steps later): far closer to the arms' truth than the file
     truth = RealRobot(humanoid, soft_arms).physics()
     arm = np.isin(humanoid.joint_names, arms)

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
-__all__ = ["WresdynError", "SimulationDiverged"]
+__all__ = ["WresdynError", "RobotError", "SimulationDiverged"]
 
 
 class WresdynError(ValueError):
     """Base of wresdyn's user-facing errors; the message is one line naming the file or setting at fault."""
+
+
+class RobotError(WresdynError):
+    """A robot file or gains config that wresdyn cannot use; the message is one line naming the file."""
 
 
 class SimulationDiverged(RuntimeError):

@@ -1,13 +1,13 @@
 """``wresdyn bench``: env-steps/s of the replay workload for every solver, same robot, same worlds.
 
-The benchmark itself is :mod:`wresdyn.sim.bench` (its docstring lists the rows and the method).
+The benchmark itself is :mod:`wresdyn.sim.solver_benchmark` (its docstring lists the rows and the method).
 """
 
 from __future__ import annotations
 
 import argparse
 
-_SOLVERS = ("replay", "featherstone", "mujoco-warp", "mujoco-c")  # wresdyn.sim.bench.SOLVERS, without importing warp
+_SOLVERS = ("replay", "featherstone", "mujoco-warp", "mujoco-c")  # solver_benchmark.SOLVERS, without importing warp
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -41,6 +41,6 @@ def _solver_list(text: str) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..sim.bench import run_bench
+    from ..sim.solver_benchmark import run_bench
 
     return run_bench(args)

@@ -160,9 +160,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pd_gaps(ds, robot, rate: float, what: str) -> dict:
-    """The PD-only gap of every evaluation split of ``ds`` (:func:`~wresdyn.evaluation.evaluate.pd_gap`, over the
+    """The PD-only gap of every evaluation split of ``ds`` (:func:`~wresdyn.evaluation.open_loop.pd_gap`, over the
     fitted joints), announced line by line; ``what`` names the trajectories in the lines ("run(s)", ...)."""
-    from ..evaluation.evaluate import pd_gap
+    from ..evaluation.open_loop import pd_gap
     from ..sim.warmup import compile_kernels
 
     excluded = ds.excluded_joints

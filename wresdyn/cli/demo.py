@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..data.dataset import load_dataset
-    from ..evaluation.runs import evaluate_run
+    from ..evaluation.evaluate_run import evaluate_run
     from ..learn.gradfit import GradFitConfig, export_run
     from ..learn.ppo import default_config, train
     from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT

@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..data.loading import load_data
-    from ..evaluation.runs import evaluate_run
+    from ..evaluation.evaluate_run import evaluate_run
     from . import UserError
 
     cfg_path = Path(args.run) / "config.json"

@@ -6,8 +6,8 @@ and ``residual.json``, so ``wresdyn eval RUN`` evaluates either kind of run iden
 ``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
 ``OUT/identify/``) and learns the residual network on top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
 the given physics is used instead of identifying. ``--model network`` learns the residual on the robot file's
-physics (wave 1's residual alone). ``--model parametric`` fits the residual-torque baseline (per-joint gains,
-damping, friction, armature as an extra torque) and writes its parameters to ``parameters.json``.
+physics (the residual alone, nothing identified). ``--model parametric`` fits the residual-torque baseline
+(per-joint gains, damping, friction, armature as an extra torque) and writes its parameters to ``parameters.json``.
 """
 
 from __future__ import annotations
@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"done: {summary['wall_s']:.0f} s of training{stages}, {summary['sim_steps']:.2e} simulated steps "
           f"(residual); exported {out / 'policy.pt'}")
     if args.eval:
-        from ..evaluation.runs import evaluate_run
+        from ..evaluation.evaluate_run import evaluate_run
 
         evaluate_run(str(out), ds, robot, data_label=str(args.data))
     return 0

@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"done: {curve[-1]['wall'] if curve else 0.0:.0f} s; wrote {out / 'physics.json'}")
     if args.eval:
         from ..evaluation.identification import write_identification_report
-        from ..evaluation.runs import evaluate_run
+        from ..evaluation.evaluate_run import evaluate_run
 
         truth = None
         if ds.mismatch:

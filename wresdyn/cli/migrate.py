@@ -3,7 +3,7 @@
 With ``--validation K``, a dataset recorded by ``wresdyn collect`` on the simulated real robot gets K validation
 trajectories recorded exactly as ``collect`` would have (and their PD-only gap when the file stores the
 others'); a dataset of real logs gets its last K training trajectories moved to validation instead
-(:mod:`wresdyn.data.migrate`). The new file is written atomically; an existing one is kept unless ``--force``.
+(:mod:`wresdyn.data.schema_migration`). The new file is written atomically; an existing one is kept unless ``--force``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..data.dataset import SCHEMA_VERSION, SPLITS, read_header
     from ..data.loading import dataset_robot
-    from ..data.migrate import migrate
+    from ..data.schema_migration import migrate
     from . import UserError
 
     out = Path(args.out)
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
              f"trajectories to validation ({', '.join(m.names)}); {len(ds.split('train'))} stay in train")
     gaps = ds.meta.get("pd_only_gap")
     if m.names and isinstance(gaps, dict) and not args.no_gap:
-        from ..evaluation.evaluate import pd_gap
+        from ..evaluation.open_loop import pd_gap
 
         robot = m.robot or dataset_robot(ds.robot_file, args.robot,
                                          args.gains if args.gains is not None else ds.gains_config)

@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(json.dumps(summary, indent=2))
     if args.eval:
-        from ..evaluation.runs import evaluate_run
+        from ..evaluation.evaluate_run import evaluate_run
 
         evaluate_run(args.out, ds, robot, data_label=args.data)
     return 0

@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import WresdynError
 
 __all__ = ["SCHEMA_VERSION", "READ_VERSIONS", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset",
-           "load_dataset", "read_header", "derive_qdd"]
+           "load_dataset", "read_header", "derive_qdd", "fitted_mask"]
 
 SCHEMA_VERSION = 2
 """Version of the file layout that :meth:`Dataset.save` writes."""
@@ -410,3 +410,16 @@ def _jsonable(o):
 def _first_line(e: Exception) -> str:
     s = str(e).strip()
     return s.splitlines()[0] if s else type(e).__name__
+
+
+def fitted_mask(weights, n_dof: int) -> np.ndarray:
+    """The joints the metrics average over, bool (n_dof,): ``weights > 0`` for per-joint weights (n_dof,) such as
+    :meth:`Dataset.fit_weights` (1 fitted, 0 excluded), every joint for ``None``."""
+    if weights is None:
+        return np.ones(n_dof, dtype=bool)
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != (n_dof,) or not np.isfinite(w).all() or (w < 0).any():
+        raise WresdynError(f"joint weights must be {n_dof} finite numbers >= 0 (one per joint), got shape {w.shape}")
+    if not (w > 0).any():
+        raise WresdynError("joint weights exclude every joint: no joint left to measure")
+    return w > 0

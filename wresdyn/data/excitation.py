@@ -25,93 +25,36 @@ Everything is drawn from a seeded :class:`numpy.random.Generator`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import dataclasses
+import itertools
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..robot.description import Robot, RobotError
-from .ik import SOLES, FootIK
+from .ik import FootIK
+from .joint_excitation import JointDynamics, effort_limit, generate_joint
+from .signals import (
+    FAMILIES,
+    JOINT_FAMILIES,
+    JOINT_OOD_FAMILIES,
+    JOINT_TRAIN_FAMILIES,
+    MODES,
+    OOD_FAMILIES,
+    TRAIN_FAMILIES,
+    Excitation,
+    ExcitationConfig,
+    centre_amplitude,
+    chirp,
+    finite_limits,
+    min_jerk,
+    multisine,
+)
 
 __all__ = ["ExcitationConfig", "Excitation", "Workspace", "Plan", "FAMILIES", "TRAIN_FAMILIES", "OOD_FAMILIES",
            "JOINT_FAMILIES", "JOINT_TRAIN_FAMILIES", "JOINT_OOD_FAMILIES", "MODES", "foot_workspace", "ellipsoid_path",
            "generate", "plan", "command_spectrum", "band_fraction", "plot_spectrum"]
-
-TRAIN_FAMILIES = ("ellipsoid",)
-"""Families used for train and held-out data (the paper's excitation)."""
-OOD_FAMILIES = ("chirp", "kick")
-"""Families used only for out-of-distribution evaluation."""
-FAMILIES = TRAIN_FAMILIES + OOD_FAMILIES
-"""Families of the foot (IK) mode."""
-JOINT_TRAIN_FAMILIES = ("multisine",)
-"""Joint-space mode: families for train, validation and held-out data."""
-JOINT_OOD_FAMILIES = ("chirp", "steps")
-"""Joint-space mode: families for out-of-distribution data."""
-JOINT_FAMILIES = JOINT_TRAIN_FAMILIES + JOINT_OOD_FAMILIES
-MODES = ("auto", "foot", "joint")
-"""Excitation modes: foot IK targets, joint space, or foot when the robot has all the frames."""
-
-
-@dataclass(frozen=True)
-class ExcitationConfig:
-    """Ranges the per-trajectory parameters are drawn from (log-uniform for rates, uniform otherwise)."""
-
-    omega: tuple[float, float] = (0.3, 3.0)
-    """eq. 2 angular frequency ω_φ, ω_θ of the angle sweep [rad/s]."""
-    peak_rate: tuple[float, float] = (2.0, 30.0)
-    """eq. 2 amplitude A_φ, A_θ = peak angle rate [rad/s]; A / 2π is the top sweep frequency [Hz]."""
-    radius_frac: tuple[float, float] = (0.35, 1.0)
-    """Ellipsoid radii a, b, c as a fraction of the workspace box half-size on that axis [-]."""
-    tilt: tuple[float, float, float] = (0.3, 0.2, 0.15)
-    """Sole orientation excitation amplitude about z (yaw), y (pitch), x (roll) [rad]; moves hip yaw and ankles."""
-    band: tuple[float, float] = (0.1, 8.0)
-    """Multisine and chirp frequency band [Hz]."""
-    n_sines: int = 6
-    """Sines per joint in a multisine."""
-    slope: float = 0.3
-    """Multisine amplitude ∝ f^-slope: 0 = flat position spectrum, 1 = flat velocity spectrum [-]."""
-    amplitude: float = 0.8
-    """Largest excursion of a multisine or chirp joint from its centre [rad]."""
-    limit_margin: float = 0.05
-    """Commands stay this far inside every joint limit [rad]."""
-    fade: float = 0.3
-    """Multisines and chirps fade in over this time (raised cosine), so every command starts at rest [s]."""
-    max_velocity: float = 12.0
-    """A drawn trajectory whose command speed exceeds this on any joint is redrawn [rad/s]."""
-    ik_tol: float = 1e-3
-    """A drawn trajectory whose IK misses any target by more than this is redrawn [m]."""
-    max_draws: int = 50
-    """Redraws before giving up."""
-    kick_time: tuple[float, float] = (0.25, 0.7)
-    """Duration of one kick move [s]."""
-    workspace_samples: int = 400
-    """Random leg configurations sampled (FK, then IK to a level sole) to find each foot's workspace."""
-    workspace_quantiles: tuple[float, float] = (0.2, 0.8)
-    """Per-axis quantiles of the reachable sole positions that bound the workspace box [-]."""
-    min_foot_y: float = 0.05
-    """The box of each foot stays this far on its own side of the sagittal plane, so feet never cross [m]
-    (with two or more frames, each on a clear side)."""
-    mode: str = "auto"
-    """One of :data:`MODES`; :func:`plan` resolves ``"auto"`` (and records the resolved mode)."""
-    frames: tuple[str, ...] = SOLES
-    """IK frames of the foot mode (sites or bodies), one ellipsoid path each."""
-    joint_max_velocity: float = 5.0
-    """Joint-space mode: command speed bound [rad/s] (about an STS3215 servo's no-load speed, 5.4 rad/s at
-    7.4 V; the foot mode keeps ``max_velocity``)."""
-    effort_fraction: float = 0.5
-    """Joint-space mode: the torque a command needs on the nominal robot (inverse dynamics) stays under this
-    fraction of each joint's effort limit [-]; joints without a limit are not checked."""
-
-
-@dataclass
-class Excitation:
-    """One drawn excitation."""
-
-    family: str
-    """Motion family, one of :data:`FAMILIES`."""
-    q_cmd: np.ndarray
-    """Commanded joint positions [rad], shape (T, n_dof); sample k at t = k / rate_hz."""
-    params: dict = field(default_factory=dict)
-    """Drawn parameters (JSON-serialisable), recorded in the dataset's meta."""
 
 
 @dataclass
@@ -137,8 +80,6 @@ def foot_workspace(ik: FootIK, cfg: ExcitationConfig, seed: int = 0, progress=No
     limits are moved to the nearest configuration with level soles (orientation-only IK) and their sole
     positions (FK) collected; the box spans the given per-axis quantiles of those positions. ``progress``: optional
     ``callable(str)`` receiving a line after the sampling and after each round of fitting the box into reach."""
-    import time
-
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
     robot = ik.robot
@@ -186,9 +127,6 @@ def _shrink_to_reachable(ik: FootIK, lo, hi, home, level, cfg: ExcitationConfig,
     """The reachable set is curved, so corners of the quantile box can be out of reach: each round, pull in by
     a tenth of the box size every face touched by an unreachable point of a 5x5x5 grid (``progress``: a line after
     a round when the last line is :data:`PROGRESS_EVERY` or more old)."""
-    import itertools
-    import time
-
     grid = np.array(list(itertools.product(np.linspace(0.0, 1.0, 5), repeat=3)))
     home_pos, _ = ik.forward(home)
     lo, hi = lo.copy(), hi.copy()
@@ -248,42 +186,13 @@ def _draw_ellipsoid(rng, lo, hi, cfg: ExcitationConfig) -> dict:
             "theta0": rng.uniform(-0.5 * np.pi, 0.5 * np.pi)}
 
 
-def _fade(t: np.ndarray, cfg: ExcitationConfig) -> np.ndarray:
-    """Raised-cosine fade-in, 0 -> 1 over ``cfg.fade`` with zero slope at both ends."""
-    s = np.clip(t / cfg.fade, 0.0, 1.0) if cfg.fade > 0 else np.ones_like(t)
-    return 0.5 - 0.5 * np.cos(np.pi * s)
-
-
-def _multisine(rng, t: np.ndarray, amplitude: float, cfg: ExcitationConfig) -> tuple[np.ndarray, dict]:
-    """Sum of ``n_sines`` sines, frequencies log-uniform in the band, amplitudes ∝ f^-slope summing to
-    ``amplitude`` (a hard bound on the excursion), random phases, faded in."""
-    f = np.exp(rng.uniform(np.log(cfg.band[0]), np.log(cfg.band[1]), size=cfg.n_sines))
-    a = f ** -cfg.slope
-    a *= amplitude / a.sum()
-    ph = rng.uniform(0.0, 2 * np.pi, size=cfg.n_sines)
-    s = (a[:, None] * np.sin(2 * np.pi * f[:, None] * t + ph[:, None])).sum(axis=0)
-    return _fade(t, cfg) * s, {"f": f.tolist(), "a": a.tolist(), "phase": ph.tolist()}
-
-
-def _centre_amplitude(rng, lo: float, hi: float, cfg: ExcitationConfig) -> tuple[float, float]:
-    lo, hi = lo + cfg.limit_margin, hi - cfg.limit_margin
-    span = min(hi - lo, 2 * cfg.amplitude)
-    c = rng.uniform(lo + 0.5 * span, hi - 0.5 * span) if hi - lo > span else 0.5 * (lo + hi)
-    return c, 0.5 * span
-
-
-def _finite_limits(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
-    return lo, np.where(np.isfinite(robot.upper), robot.upper, np.pi)
-
-
 def _upper_body(rng, robot, dofs, t, cfg) -> tuple[np.ndarray, dict]:
     """Multisines for the joints in ``dofs``, shape (T, len(dofs))."""
-    lo, hi = _finite_limits(robot)
+    lo, hi = finite_limits(robot)
     out, params = np.empty((len(t), len(dofs))), {}
     for i, j in enumerate(dofs):
-        c, amp = _centre_amplitude(rng, lo[j], hi[j], cfg)
-        s, p = _multisine(rng, t, amp, cfg)
+        c, amp = centre_amplitude(rng, lo[j], hi[j], cfg)
+        s, p = multisine(rng, t, amp, cfg)
         out[:, i] = c + s
         params[robot.joint_names[j]] = {"centre": c, **p}
     return out, params
@@ -295,7 +204,7 @@ def _sole_tilt(rng, t, cfg) -> tuple[np.ndarray, dict]:
 
     angles, params = [], {}
     for amp, axis in zip(cfg.tilt, "zyx"):
-        s, p = _multisine(rng, t, amp, cfg)
+        s, p = multisine(rng, t, amp, cfg)
         angles.append(s)
         params[axis] = p
     return R.from_euler("ZYX", np.stack(angles, axis=1)).as_matrix(), params
@@ -318,10 +227,6 @@ def _ellipsoid(rng, ik: FootIK, ws: Workspace, t, cfg) -> tuple[np.ndarray, np.n
     return pos, rot, params
 
 
-def _min_jerk(s: np.ndarray) -> np.ndarray:
-    return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
-
-
 def _kick(rng, ik: FootIK, ws: Workspace, t, cfg) -> tuple[np.ndarray, np.ndarray, dict]:
     """One sole at a time makes fast minimum-jerk moves between random workspace points while the other
     holds its place; both soles tilt as in the ellipsoid family."""
@@ -337,36 +242,11 @@ def _kick(rng, ik: FootIK, ws: Workspace, t, cfg) -> tuple[np.ndarray, np.ndarra
         goal = rng.uniform(ws.lo[f], ws.hi[f])
         dur = rng.uniform(*cfg.kick_time)
         s = np.clip((t - t0) / dur, 0.0, 1.0)[:, None]
-        pos[:, f] = np.where((t >= t0)[:, None], cur[f] + _min_jerk(s) * (goal - cur[f]), pos[:, f])
+        pos[:, f] = np.where((t >= t0)[:, None], cur[f] + min_jerk(s) * (goal - cur[f]), pos[:, f])
         moves.append({"foot": ik.frames[f], "t0": t0, "duration": dur, "goal": goal.tolist()})
         cur[f] = goal
         t0 += dur + rng.uniform(0.0, 0.3)
     return pos, rot, {"moves": moves}
-
-
-def _chirp(rng, robot: Robot, t, cfg, vmax: float | None = None, amax: np.ndarray | None = None
-           ) -> tuple[np.ndarray, dict]:
-    """Joint-space logarithmic chirps, every joint, from band[0] to band[1] over the trajectory; the amplitude
-    falls as 1/f above the frequency where it would exceed ``vmax / 2`` (default ``max_velocity``) [rad/s] and,
-    with ``amax`` (per joint [rad/s^2], shape (n_dof,)), as 1/f^2 above where the acceleration would exceed
-    ``amax / 2``, the caps then blended by a smooth minimum."""
-    vmax = cfg.max_velocity if vmax is None else vmax
-    lo, hi = _finite_limits(robot)
-    f0, f1 = cfg.band
-    f = f0 * (f1 / f0) ** (t / t[-1])
-    phase = 2 * np.pi * f0 * t[-1] / np.log(f1 / f0) * ((f1 / f0) ** (t / t[-1]) - 1.0)
-    q, params = np.empty((len(t), robot.n_dof)), {}
-    for j in range(robot.n_dof):
-        c, amp = _centre_amplitude(rng, lo[j], hi[j], cfg)
-        amp *= rng.uniform(0.5, 1.0)
-        if amax is None:
-            a = np.minimum(amp, 0.5 * vmax / (2 * np.pi * f))
-        else:  # a smooth minimum: a kink in a(t) would be a step in the speed and a spike in the torque
-            w = 2 * np.pi * f
-            a = (amp ** -2 + (0.5 * vmax / w) ** -2 + (0.5 * amax[j] / w ** 2) ** -2) ** -0.5
-        q[:, j] = c + _fade(t, cfg) * a * np.sin(phase)
-        params[robot.joint_names[j]] = {"centre": c, "amplitude": amp}
-    return q, {"f0": f0, "f1": f1, "joints": params}
 
 
 def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: float, rate_hz: float,
@@ -384,8 +264,6 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
         cfg: Parameter ranges.
         progress: Optional ``callable(str)`` receiving a line per rejected draw (why, and how long it took).
     """
-    import time
-
     cfg = cfg or ExcitationConfig()
     if family not in FAMILIES:
         raise ValueError(f"unknown excitation family {family!r}; choose from {FAMILIES} (joint-space families: "
@@ -396,7 +274,7 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
     for draw in range(cfg.max_draws):
         start = time.perf_counter()
         if family == "chirp":
-            q, params = _chirp(rng, robot, t, cfg)
+            q, params = chirp(rng, robot, t, cfg)
             ik_err = 0.0
         else:
             targets = _ellipsoid if family == "ellipsoid" else _kick
@@ -411,7 +289,7 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
                              f"{1e3 * cfg.ik_tol:g} mm ({time.perf_counter() - start:.1f} s); drawing again")
                 continue
         speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz)
-        lo, hi = _finite_limits(robot)
+        lo, hi = finite_limits(robot)
         inside = (q >= lo + 0.5 * cfg.limit_margin).all() and (q <= hi - 0.5 * cfg.limit_margin).all()
         if speed <= cfg.max_velocity and inside:
             params.update(family=family, draws=draw + 1, ik_max_error_m=ik_err, max_speed=speed)
@@ -437,8 +315,8 @@ class Plan:
     """Foot IK (foot mode)."""
     ws: Workspace | None = None
     """Foot workspace (foot mode)."""
-    dynamics: object | None = None
-    """Inverse dynamics (joint mode; :mod:`wresdyn.data.joint_excitation`)."""
+    dynamics: JointDynamics | None = None
+    """Inverse dynamics of the nominal robot (joint mode)."""
 
     @property
     def mode(self) -> str:
@@ -456,8 +334,6 @@ class Plan:
         ``progress``: optional ``callable(str)`` receiving a line per rejected foot-IK draw."""
         if self.mode == "foot":
             return generate(family, self.robot, self.ik, self.ws, duration, rate_hz, rng, self.cfg, progress)
-        from .joint_excitation import generate_joint
-
         return generate_joint(family, self.robot, duration, rate_hz, rng, self.cfg, self.dynamics)
 
     def describe(self, e: Excitation) -> str:
@@ -487,8 +363,6 @@ def plan(robot: Robot, cfg: ExcitationConfig | None = None, progress=None) -> Pl
     Raises:
         RobotError: one line: an unknown mode, a frame the robot lacks, chains that cannot track the targets.
     """
-    import dataclasses
-
     cfg = cfg or ExcitationConfig()
     if cfg.mode not in MODES:
         raise RobotError(f"excitation mode must be one of {MODES}, not {cfg.mode!r}")
@@ -497,14 +371,12 @@ def plan(robot: Robot, cfg: ExcitationConfig | None = None, progress=None) -> Pl
         mode = "foot" if all(f in robot.frames for f in cfg.frames) else "joint"
     cfg = dataclasses.replace(cfg, mode=mode, frames=tuple(cfg.frames))
     if mode == "joint":
-        from .joint_excitation import _Dynamics, _effort_limit
-
         if progress:
-            limit = _effort_limit(robot, cfg)
+            limit = effort_limit(robot, cfg)
             progress(f"joint-space excitation of {robot.n_dof} joints: speed <= {cfg.joint_max_velocity:g} rad/s, "
                      f"torque <= {cfg.effort_fraction:g} of the effort limit"
                      f"{'' if np.isfinite(limit).all() else ' (joints without a limit unchecked)'}")
-        return Plan(robot, cfg, dynamics=_Dynamics(robot))
+        return Plan(robot, cfg, dynamics=JointDynamics(robot))
     ik = FootIK(robot, cfg.frames)
     if progress:
         progress(f"foot IK on {', '.join(ik.frames)} ({'position only' if ik.position_only else 'full pose'}, "

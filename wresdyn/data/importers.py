@@ -9,7 +9,7 @@
   ``observation.state`` = measured positions, ``action`` = commands, ``timestamp`` [s]; one trajectory per
   episode, named ``<dataset>_ep<k>``.
 
-:func:`import_runs` reads any mix of these and of CSV / NPZ logs (:mod:`wresdyn.data.logs`) into one
+:func:`import_runs` reads any mix of these and of CSV / NPZ logs (:mod:`wresdyn.data.log_files`) into one
 :class:`~wresdyn.data.dataset.Dataset`, assigning each run a split by name pattern or by a deterministic fraction
 (:class:`SplitRule`). Everything is read and checked before anything is returned, so a caller that saves only
 the returned dataset never leaves a half-written file.
@@ -29,14 +29,14 @@ from pathlib import Path
 import numpy as np
 
 from .dataset import SPLITS, Dataset, DatasetError
-from .logs import (
+from .log_files import (
     IDENTITY,
     LogMap,
     check_finite,
     check_stamps,
     log_stats,
     map_joints,
-    read_log,
+    read_file,
     read_toml,
     to_trajectory,
 )
@@ -342,7 +342,7 @@ def read_runs(path, joint_names: list[str], log_map: LogMap | None = None) -> li
             raise DatasetError(f"{p}: neither a SAGE run (control.csv, state_motor.csv), a LeRobot dataset "
                                "(meta/info.json) nor a folder of them")
         return [r for s in subs for r in read_runs(s, joint_names, log_map)]
-    log = read_log(p, joint_names, log_map)
+    log = read_file(p, joint_names, log_map)
     return [Run(p.stem, p.suffix.lower().lstrip("."), str(p), log, {"format": p.suffix.lower().lstrip(".")})]
 
 

@@ -1,7 +1,7 @@
 """Joint-space excitation: commands drawn per joint for robots where IK targets make no sense (an arm).
 
 ``multisine`` for train, validation and held-out, ``chirp`` and ``steps`` (minimum-jerk moves between random
-joint positions) out of distribution (:data:`~wresdyn.data.excitation.JOINT_FAMILIES`). Each joint stays inside
+joint positions) out of distribution (:data:`~wresdyn.data.signals.JOINT_FAMILIES`). Each joint stays inside
 its limits, its command speed under ``joint_max_velocity``, and the torque the command needs (inverse dynamics
 of the nominal robot: inertia and armature, gravity, damping and friction) under ``effort_fraction`` of its
 effort limit. :func:`wresdyn.data.excitation.plan` selects this mode; the foot-space families live in
@@ -13,21 +13,21 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot.description import Robot, RobotError
-from .excitation import (
+from .signals import (
     JOINT_FAMILIES,
     Excitation,
     ExcitationConfig,
-    _centre_amplitude,
-    _chirp,
-    _fade,
-    _finite_limits,
-    _min_jerk,
+    centre_amplitude,
+    chirp,
+    fade,
+    finite_limits,
+    min_jerk,
 )
 
-__all__ = ["generate_joint"]
+__all__ = ["JointDynamics", "effort_limit", "generate_joint"]
 
 
-class _Dynamics:
+class JointDynamics:
     """Inverse dynamics of the nominal robot (Pinocchio RNEA, armature included) plus its joint damping and
     dry friction: the torque a command needs if the robot followed it exactly."""
 
@@ -59,7 +59,7 @@ class _Dynamics:
             return np.where(np.isfinite(limit), np.maximum(limit - np.abs(g) - self.robot.friction, 0.0) / m, np.inf)
 
 
-def _effort_limit(robot: Robot, cfg: ExcitationConfig) -> np.ndarray:
+def effort_limit(robot: Robot, cfg: ExcitationConfig) -> np.ndarray:
     """Torque a joint-space command may need [N*m], shape (n_dof,): ``effort_fraction`` of the effort limit (inf
     where there is none)."""
     return np.where(np.isfinite(robot.effort), cfg.effort_fraction * robot.effort, np.inf)
@@ -70,11 +70,11 @@ def _joint_multisine(rng, robot: Robot, t, cfg, rate_hz, amax) -> tuple[np.ndarr
     ∝ f^-slope summing to the excursion), each sine's amplitude capped to 1/n_sines of the speed
     (``joint_max_velocity``) and acceleration (``amax`` [rad/s^2]) budgets, then each joint's oscillation scaled
     down if the fade-in still exceeds them; shape (T, n_dof)."""
-    lo, hi = _finite_limits(robot)
+    lo, hi = finite_limits(robot)
     q, params = np.empty((len(t), robot.n_dof)), {}
     n = cfg.n_sines
     for j in range(robot.n_dof):
-        c, amp = _centre_amplitude(rng, lo[j], hi[j], cfg)
+        c, amp = centre_amplitude(rng, lo[j], hi[j], cfg)
         f = np.exp(rng.uniform(np.log(cfg.band[0]), np.log(cfg.band[1]), size=n))
         a = f ** -cfg.slope
         a *= amp / a.sum()
@@ -83,7 +83,7 @@ def _joint_multisine(rng, robot: Robot, t, cfg, rate_hz, amax) -> tuple[np.ndarr
         w = 2 * np.pi * f
         a = np.minimum(a, np.minimum(cfg.joint_max_velocity / (n * w), amax[j] / (n * w ** 2)))
         ph = rng.uniform(0.0, 2 * np.pi, size=n)
-        s = _fade(t, cfg) * (a[:, None] * np.sin(w[:, None] * t + ph[:, None])).sum(axis=0)
+        s = fade(t, cfg) * (a[:, None] * np.sin(w[:, None] * t + ph[:, None])).sum(axis=0)
         p = {"f": f.tolist(), "a": a.tolist(), "phase": ph.tolist()}
         speed = np.abs(np.diff(s)).max() * rate_hz
         acc = np.abs(np.diff(s, 2)).max() * rate_hz ** 2
@@ -97,7 +97,7 @@ def _joint_steps(rng, robot: Robot, t, cfg, amax) -> tuple[np.ndarray, dict]:
     """Every joint makes minimum-jerk moves between random positions inside its limits, with its own random
     durations (``kick_time``) and pauses; each move is shortened so that its peak speed (1.875 d / T) stays under
     ``joint_max_velocity`` and its peak acceleration (5.77 d / T^2) under ``amax``."""
-    lo, hi = _finite_limits(robot)
+    lo, hi = finite_limits(robot)
     q, moves = np.empty((len(t), robot.n_dof)), {}
     for j in range(robot.n_dof):
         a, b = lo[j] + cfg.limit_margin, hi[j] - cfg.limit_margin
@@ -110,7 +110,7 @@ def _joint_steps(rng, robot: Robot, t, cfg, amax) -> tuple[np.ndarray, dict]:
             reach = min(cfg.joint_max_velocity * dur / 1.875, amax[j] * dur ** 2 / 5.77) * 0.95
             goal = cur + np.clip(goal - cur, -reach, reach)
             s = np.clip((t - t0) / dur, 0.0, 1.0)
-            q[:, j] = np.where(t >= t0, cur + _min_jerk(s) * (goal - cur), q[:, j])
+            q[:, j] = np.where(t >= t0, cur + min_jerk(s) * (goal - cur), q[:, j])
             js.append({"t0": t0, "duration": dur, "goal": goal})
             cur = goal
             t0 += dur + rng.uniform(0.0, 0.3)
@@ -119,7 +119,7 @@ def _joint_steps(rng, robot: Robot, t, cfg, amax) -> tuple[np.ndarray, dict]:
 
 
 def generate_joint(family: str, robot: Robot, duration: float, rate_hz: float, rng: np.random.Generator,
-                   cfg: ExcitationConfig | None = None, dynamics: _Dynamics | None = None) -> Excitation:
+                   cfg: ExcitationConfig | None = None, dynamics: JointDynamics | None = None) -> Excitation:
     """Draw one joint-space excitation of ``family`` (one of :data:`JOINT_FAMILIES`); redraws (same generator)
     until the limit, speed (``joint_max_velocity``) and effort (``effort_fraction``) checks pass.
 
@@ -138,10 +138,10 @@ def generate_joint(family: str, robot: Robot, duration: float, rate_hz: float, r
     cfg = cfg or ExcitationConfig()
     if family not in JOINT_FAMILIES:
         raise ValueError(f"unknown joint-space excitation family {family!r}; choose from {JOINT_FAMILIES}")
-    dyn = dynamics or _Dynamics(robot)
+    dyn = dynamics or JointDynamics(robot)
     t = np.arange(int(round(duration * rate_hz))) / rate_hz
-    lo, hi = _finite_limits(robot)
-    limit = _effort_limit(robot, cfg)
+    lo, hi = finite_limits(robot)
+    limit = effort_limit(robot, cfg)
     amax = dyn.accel_budget(np.clip(np.zeros(robot.n_dof), lo, hi), limit)
     amax = np.where(np.isfinite(amax), amax, 1e6)
     worst = (0.0, "")
@@ -149,7 +149,7 @@ def generate_joint(family: str, robot: Robot, duration: float, rate_hz: float, r
         if family == "multisine":
             q, params = _joint_multisine(rng, robot, t, cfg, rate_hz, amax)
         elif family == "chirp":
-            q, params = _chirp(rng, robot, t, cfg, cfg.joint_max_velocity, amax)
+            q, params = chirp(rng, robot, t, cfg, cfg.joint_max_velocity, amax)
         else:
             q, params = _joint_steps(rng, robot, t, cfg, amax)
         speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz)

@@ -28,6 +28,7 @@ import tomllib
 from ..errors import SimulationDiverged
 from ..paths import REPO
 from ..robot.description import Robot, RobotError
+from ..robot.physical import PhysicalParams
 
 __all__ = ["Mismatch", "MismatchError", "RealRobot", "SPAWN_KEYS", "collect"]
 
@@ -213,12 +214,10 @@ class RealRobot:
 
     def physics(self):
         """The true physical parameters of this robot in the simulator's terms
-        (:class:`~wresdyn.sim.physics.PhysicalParams`), read back from the perturbed MuJoCo model: what an
+        (:class:`~wresdyn.robot.physical.PhysicalParams`), read back from the perturbed MuJoCo model: what an
         identification should find. Inertias are rotated from MuJoCo's principal frame into the body frame;
         the delay is the FIFO's length [s]."""
         from scipy.spatial.transform import Rotation
-
-        from ..sim.physics import PhysicalParams
 
         m, n, r = self.model, self.robot.n_dof, self.robot
         dof = slice(self._v0, self._v0 + n)

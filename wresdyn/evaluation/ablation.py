@@ -2,7 +2,7 @@
 
 Every cell trains in ``segments`` equal chunks through the learner's own checkpoint/resume path, and after each
 chunk the current residual is evaluated open loop on the validation split
-(:func:`wresdyn.evaluation.evaluate.evaluate_split`, the same code for every learner). That gives learning curves of
+(:func:`wresdyn.evaluation.open_loop.evaluate_split`, the same code for every learner). That gives learning curves of
 validation error against training wall-clock (evaluation time excluded) and against simulated env-steps; held-out
 and OOD are evaluated once, at the end, for the table. The whole ablation is resumable: a finished cell keeps its
 ``result.json`` and is skipped when the command runs again.
@@ -113,7 +113,7 @@ def cells(cfg: AblationConfig) -> list[dict]:
 
 
 def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> dict:
-    from .evaluate import evaluate_split
+    from .open_loop import evaluate_split
 
     summary, _ = evaluate_split(robot, dataset.split(split), dataset.rate_hz, policy, kind=kind, solver=cfg.solver,
                                 device=cfg.device, weights=dataset.fit_weights())

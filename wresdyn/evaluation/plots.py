@@ -6,12 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.dataset import fitted_mask
+
 __all__ = ["plot_fig3", "save_figure", "learning_curves", "plot_learning_curves"]
 
 
 def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joints: int = 6, title: str = "",
               weights=None) -> Path:
-    """Fig. 3-style plot of the first trajectory of ``runs`` (:func:`~wresdyn.evaluation.evaluate.replay_split`):
+    """Fig. 3-style plot of the first trajectory of ``runs`` (:func:`~wresdyn.evaluation.open_loop.evaluate_split`):
     real (red), PD only (green), PD + residual (blue), for the ``n_joints`` joints with the largest PD-only error
     among those with ``weights > 0`` (per-joint weights (n_dof,), e.g. ``Dataset.fit_weights()``; ``None``: all)."""
     import matplotlib
@@ -21,8 +23,6 @@ def plot_fig3(robot, traj, runs: dict, path: str | Path, rate_hz: float, n_joint
 
     q_pd = runs["pd"].q[0]
     q_res = runs["residual"].q[0] if "residual" in runs else None
-    from .evaluate import fitted_mask
-
     err = np.sqrt(np.nanmean((q_pd - traj.q) ** 2, axis=0))
     fitted = np.flatnonzero(fitted_mask(weights, len(err)))
     joints = fitted[np.argsort(-err[fitted], kind="stable")][:n_joints]

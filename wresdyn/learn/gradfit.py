@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from ..choices import ModelKind, SolverKind, check_choice, check_number
-from ..sim.residual import residual_scale
+from ..sim.residual_kinds import residual_scale
 from .residual import ResidualConfig, obs_stats
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]

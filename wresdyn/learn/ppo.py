@@ -59,9 +59,8 @@ class PPOConfig:
     """Mini-batches per pass."""
     gamma: float = 0.9
     """Discount per step; 1/(1−γ) = 10 steps = 20 ms at 500 Hz, about the PD time constants: a residual's
-    effect on tracking shows within that window, and a longer one only adds variance. Chosen in wave 1 on the
-    held-out split, before the validation split existed (``benchmarks/results/h200_ppo_sweep``); not yet
-    re-checked on validation."""
+    effect on tracking shows within that window, and a longer one only adds variance. Chosen by the sweep in
+    ``benchmarks/results/h200_ppo_sweep``, which scored on the held-out split: not yet checked on validation."""
     lam: float = 0.9
     """GAE λ."""
     clip_param: float = 0.2
@@ -384,7 +383,7 @@ def _check_resume(run_dir: Path, cfg_path: Path, saved: dict) -> None:
         raise RunError(f"{cfg_path}: not a run configuration written by `wresdyn train`") from None
     # a run may be extended, or moved to another device or machine
     check_resume(run_dir, old_cfg, saved["config"], may_change=[f"ppo.{k}" for k in RESUME_MAY_CHANGE])
-    # runs written before the data was recorded compare what they have
+    # a run folder may hold only some of the identity fields (the others unrecorded): compare those it has
     old_data = old.get("dataset") or {}
     keys = [k for k in DATASET_IDENTITY if k in old_data]
     check_resume(run_dir, {"dataset": {k: old_data[k] for k in keys}},

@@ -9,7 +9,7 @@ is reset and counted; its state never reaches the learner.
 
 :class:`ReplayEnv` is the rsl-rl ``VecEnv`` on the simulation layer: :class:`wresdyn.sim.Simulator` steps the
 worlds, :class:`wresdyn.sim.TrajectoryBank` holds the recordings (and the command path's delay),
-:func:`wresdyn.sim.residual.apply_residual` applies the residual and :meth:`wresdyn.sim.Simulator.diverged`
+:func:`wresdyn.sim.residual_kinds.apply_residual` applies the residual and :meth:`wresdyn.sim.Simulator.diverged`
 judges divergence, as for every other consumer of the replay.
 """
 
@@ -26,7 +26,7 @@ from tensordict import TensorDict
 from ..choices import SolverKind, check_choice, check_number
 from ..errors import WresdynError
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
-from ..sim.residual import apply_residual, observation, residual_scale
+from ..sim.residual_kinds import apply_residual, observation, residual_scale
 from .residual import ResidualConfig, obs_stats
 from .rewards import TERMS, RewardConfig, reward_terms
 
@@ -80,7 +80,7 @@ class ReplayEnv(VecEnv):
 
     Observation groups: ``policy`` = normalised [q, q̇, q̈, q_cmd] (N, 4n); ``critic`` adds the privileged
     tracking error (q − q_r, q̇ − q̇_r, scaled) and the fraction of the episode left, (N, 6n + 1).
-    Actions a (N, n) become the residual clip(g · a, −1, 1) · :func:`~wresdyn.sim.residual.residual_scale`, g the
+    Actions a (N, n) become the residual clip(g · a, −1, 1) · :func:`~wresdyn.sim.residual_kinds.residual_scale`, g the
     configured ``action_gain``; the action terms of the reward see a clipped to ±1/g.
 
     A step never waits on the device: diverged worlds are masked, not branched on, and resets draw a start for

@@ -59,7 +59,7 @@ class ResidualConfig:
     """What the residual acts on and the network that produces it."""
 
     kind: ResidualKind = "torque"
-    """One of :data:`wresdyn.sim.residual.KINDS`."""
+    """One of :data:`wresdyn.sim.residual_kinds.KINDS`."""
     fraction: float = 0.5
     """Residual authority: the largest residual as a fraction of each joint's effort limit (for
     ``delta_action``, divided by kp). PPO's default 0.5, checked on validation: 0.0315 rad against 0.0352 at

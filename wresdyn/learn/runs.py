@@ -219,7 +219,7 @@ def start_window_fit(cfg, dataset):
 def joint_weights(dataset, device):
     """The dataset's per-joint fit weights (:meth:`~wresdyn.data.dataset.Dataset.fit_weights`: 0 for a joint
     excluded from fitting) as a float32 tensor (n,) on ``device``, or ``None`` when every joint is fitted (the losses
-    then run unweighted, as before exclusions existed). Shared by the two window fits."""
+    then skip the weighting). Shared by the two window fits."""
     import torch
 
     if not dataset.excluded_joints:

@@ -1,7 +1,7 @@
 """Model selection on the validation split: the open-loop replay error every learner is chosen by.
 
 The score is the evaluation's headline metric, mean |q_sim − q_real| over all joints and samples of whole
-validation trajectories replayed open loop from their first recorded state (:mod:`wresdyn.evaluation.evaluate`),
+validation trajectories replayed open loop from their first recorded state (:mod:`wresdyn.evaluation.open_loop`),
 computed through the same simulation layer; joints the dataset excludes from fitting (``weights`` 0, from
 :meth:`~wresdyn.data.dataset.Dataset.fit_weights`) are left out of it, as from the evaluation. A diverged replay holds its last sane state, so it counts with its
 growing error instead of being left out. Held-out and OOD data never reach a learner.
@@ -10,6 +10,8 @@ growing error instead of being left out. Held-out and OOD data never reach a lea
 from __future__ import annotations
 
 import numpy as np
+
+from ..data.dataset import fitted_mask
 
 __all__ = ["ValidationScore"]
 
@@ -30,7 +32,6 @@ class ValidationScore:
 
     def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
                  delay=0.0, physics=None, weights=None) -> None:
-        from ..evaluation.evaluate import fitted_mask
         from ..sim import Simulator
 
         self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay

@@ -35,7 +35,7 @@ from ..choices import SolverKind, check_number
 from ..sim.physics import JOINT_FIELDS, PhysicalParams, PhysicsModel
 from .selection import ValidationScore
 
-__all__ = ["SysIdConfig", "identify", "PhysicsScore", "RESUME_MAY_CHANGE"]
+__all__ = ["SysIdConfig", "identify", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE"]
 
 FIT_FIELDS = (*JOINT_FIELDS, "bodies")
 """What can be identified: the per-joint fields and ``"bodies"`` (every moving link's mass, com, inertia)."""
@@ -156,9 +156,25 @@ def _window_loss(cfg, model, sim, window, weights=None):
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
 
 
+@dataclass(frozen=True)
+class GridChoice:
+    """What one grid search of :func:`identify` chose (its ``on_search`` receives one per search)."""
+
+    field: str
+    """The field searched: ``"kp"`` (``gain_grid``, per joint), ``"delay"`` or ``"effort"`` (all joints at once)."""
+    choice: dict[str, float | None]
+    """Grid point each joint took, by joint name; ``None`` for a joint excluded from fitting (it keeps its value)."""
+    losses: np.ndarray
+    """Training loss of each grid point, shape (len(grid),), or per joint (len(grid), n_dof) for a per-joint
+    search (mean squared position error [rad²])."""
+    validation: float | None = None
+    """Validation score of the parameters right after the search [rad] (the kp search, with a validation split)."""
+
+
 def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, weights=None,
-                 per_joint: bool = False) -> None:
-    """Set ``field`` to the grid point of least training loss on a few windows (forward only).
+                 per_joint: bool = False) -> GridChoice | None:
+    """Set ``field`` to the grid point of least training loss on a few windows (forward only); return what was
+    chosen (``None`` for an empty grid).
 
     ``values(g)`` maps a grid point to the field's values (n,) [SI]; every other field keeps its current value.
     ``weights``: per-joint weights (n,) tensor of the position error (0: excluded from fitting), ``None``: all 1.
@@ -169,7 +185,7 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
     from .runs import squared_error
 
     if not len(grid):
-        return
+        return None
     h = max(cfg.horizon_curriculum or (64,))
     bank = TrajectoryBank(train, sim.device)
     traj, start = bank.draw(rng, cfg.windows, h)  # the same windows for every grid point
@@ -193,12 +209,15 @@ def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, wei
         fitted = np.ones(len(pick), bool) if weights is None else weights.detach().cpu().numpy() > 0
         # a joint excluded from fitting keeps its value: its error is no one's to fit
         model.assign(field, np.stack([values(g) for g in grid])[pick, np.arange(len(pick))], keep=~fitted)
-        log(f"{field} search, per joint: " + "  ".join(f"{j}:{grid[k]:.3g}" if f else f"{j}:excluded"
-                                                       for j, k, f in zip(model.robot.joint_names, pick, fitted)))
+        choice = {j: float(grid[k]) if f else None for j, k, f in zip(model.robot.joint_names, pick, fitted)}
+        log(f"{field} search, per joint: " + "  ".join(f"{j}:{'excluded' if g is None else f'{g:.3g}'}"
+                                                       for j, g in choice.items()))
     else:
         best = grid[int(np.argmin(losses))]
         model.assign(field, values(best))
+        choice = dict.fromkeys(model.robot.joint_names, float(best))
         log(f"{field} search: " + "  ".join(f"{g:.3g}:{x:.2e}" for g, x in zip(grid, losses)) + f"  -> {best:.3g}")
+    return GridChoice(field, choice, losses)
 
 
 def _snapshot(model) -> dict:
@@ -262,7 +281,7 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
 
 
 def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, log=print,
-             start: PhysicalParams | None = None):
+             start: PhysicalParams | None = None, on_search=None):
     """Identify the simulator's physical parameters from ``dataset``'s training split.
 
     Args:
@@ -273,6 +292,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
             selected parameters), ``curve.json``.
         log: Progress printer.
         start: Values to start from (default the robot file's).
+        on_search: Optional ``callable(GridChoice)``, called after each grid search (kp, delay, effort) with what
+            it chose.
 
     Returns:
         ``(params, curve)``: the selected :class:`~wresdyn.sim.physics.PhysicalParams` and the learning curve.
@@ -320,13 +341,16 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     t0 = time.perf_counter() - wall0
     if start_it == 0 and cfg.gain_grid:
         start_kp = model.values().kp
-        _grid_search(cfg, model, sim, train, rng, "kp", cfg.gain_grid, lambda g: g * start_kp, log, weights,
-                     per_joint=True)
+        searched = _grid_search(cfg, model, sim, train, rng, "kp", cfg.gain_grid, lambda g: g * start_kp, log,
+                                weights, per_joint=True)
         if score is not None:  # the searched start is a candidate of the selection too, as the file's is
             v = score(model.values())  # counted in the wall-clock, as the search itself
             log(f"after the kp search: validation {v:.4f} rad")
+            searched = dataclasses.replace(searched, validation=v)
             if v < best["validation"]:
                 best = {"validation": v, "iteration": 0, "state": _snapshot(model)}
+        if on_search:
+            on_search(searched)
     for it in range(start_it, cfg.iterations):
         h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
         for group in optim.param_groups:
@@ -334,11 +358,15 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
                                                  (1 + np.cos(np.pi * it / cfg.iterations)))
         if it == effort_from:
             file_effort = np.asarray(robot.effort, dtype=np.float64)
-            if "delay" in cfg.fit:
-                _grid_search(cfg, model, sim, train, rng, "delay", cfg.delay_grid,
-                             lambda g: np.full(robot.n_dof, g * dt), log, weights)
-            _grid_search(cfg, model, sim, train, rng, "effort", cfg.effort_grid,
-                         lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log, weights)
+            searched = [_grid_search(cfg, model, sim, train, rng, "delay", cfg.delay_grid,
+                                     lambda g: np.full(robot.n_dof, g * dt), log, weights)
+                        if "delay" in cfg.fit else None,
+                        _grid_search(cfg, model, sim, train, rng, "effort", cfg.effort_grid,
+                                     lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log,
+                                     weights)]
+            for choice in searched:
+                if choice is not None and on_search:
+                    on_search(choice)
         bank.set_delay(model.delay_steps().float().to(sim.device))
         window = bank.sample(rng, cfg.windows, h)
         loss, parts = _window_loss(cfg, model, sim, window, weights)

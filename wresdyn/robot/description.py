@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 import tomllib
 
-from ..errors import WresdynError
+from ..errors import RobotError
 from ..paths import DEFAULT_ROBOT
+from .contact import ContactSettings
 
 __all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "read_gains", "DEFAULT_ROBOT",
            "PLACEHOLDER_EFFORT"]
@@ -40,10 +41,6 @@ PLACEHOLDER_EFFORT = 1e5
 """An effort limit at or above this [N*m or N] (Newton's importers write 1e6 when a file states none; 0 and inf
 are read as "none" too) is a placeholder, not a property of the robot: :meth:`Robot.check_effort` refuses it
 unless a gains config sets it explicitly."""
-
-
-class RobotError(WresdynError):
-    """A robot file or gains config that wresdyn cannot use; the message is one line naming the file."""
 
 
 @dataclass
@@ -197,7 +194,7 @@ class Robot:
             ground: Add a floor through the origin, normal to the up axis: one plane shared by every world (Newton's
                 global world -1; the worlds' robots never touch each other), and give every collision shape of
                 the robot the material of ``contact``.
-            contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor and the robot's shapes (default
+            contact: :class:`~wresdyn.robot.contact.ContactSettings` of the floor and the robot's shapes (default
                 ``ContactSettings()``); only with ``ground``.
         """
         import newton
@@ -205,8 +202,6 @@ class Robot:
         scene = newton.ModelBuilder(up_axis=self.builder.up_axis, gravity=tuple(float(g) for g in self.gravity))
         scene.replicate(self.builder, n_worlds)
         if ground:
-            from .ground import ContactSettings
-
             c = contact or ContactSettings()
             material = {"shape_material_mu": c.friction, "shape_material_mu_torsional": c.torsional_friction,
                         "shape_material_mu_rolling": c.rolling_friction, "shape_material_ke": c.ke,

@@ -146,7 +146,7 @@ def _add_ground(spec, robot: Robot, contact) -> dict[int, list]:
     spec.option.solver = getattr(mujoco.mjtSolver, f"mjSOL_{c.solver.upper()}")
     spec.option.iterations, spec.option.ls_iterations, spec.option.impratio = c.iterations, c.ls_iterations, c.impratio
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_MULTICCD  # SolverMuJoCo's enable_multiccd=False
-    # the geoms carry no mass: inertias are copied from the robot (bodies without one stay massless, as before)
+    # the geoms carry no mass: every body's inertia is the robot's, copied (a body without one stays massless)
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
     material = {"friction": [c.friction, c.torsional_friction, c.rolling_friction], "solref": list(c.solref),
                 "solimp": list(c.solimp), "condim": c.condim, "margin": c.margin, "gap": c.gap}

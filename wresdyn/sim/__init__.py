@@ -3,12 +3,12 @@
 - :mod:`.simulator`: :class:`Simulator`, N worlds of a robot stepped under PD with a residual (fast and
   differentiable paths, divergence limits, device stream, CUDA graphs);
 - :mod:`.bank`: recorded trajectories on the device, cut into :class:`Window` s, with the command delay/hold;
-- :mod:`.residual`: the residual kinds, their authority, observation and application;
+- :mod:`.residual_kinds`: the residual kinds, their authority, observation and application;
 - :mod:`.physics`: the simulator's physical parameters (gains, friction, delay, link inertias) as fitted
   quantities, physically consistent, read and written as JSON;
 - :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`;
 - :mod:`.solvers`: the Newton solver choice; :mod:`.solver_replay`: SolverReplay, this project's fused differentiable
-  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.bench`: the solver benchmark.
+  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.solver_benchmark`: the solver benchmark behind ``wresdyn bench``.
 """
 
 from ..errors import SimulationDiverged

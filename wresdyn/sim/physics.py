@@ -17,8 +17,8 @@ field                     shape, unit                model array (per world)
 ``body_inertia``          (nb, 3, 3) kg·m², at com   ``body_inertia``
 ========================  =========================  =====================================================
 
-:class:`PhysicalParams` holds the values (numpy, float64) and reads/writes them as JSON (never a pickle);
-:class:`PhysicsModel` is the torch module that produces them from unconstrained coordinates:
+:class:`~wresdyn.robot.physical.PhysicalParams` holds the values (numpy, float64) and reads/writes them as JSON
+(never a pickle); :class:`PhysicsModel` is the torch module that produces them from unconstrained coordinates:
 
 - gains, armature, mass: ``nominal · exp(u)`` (positive, scale-free steps);
 - damping, friction, effort and delay: ``reference · u`` with ``u`` projected onto ``u ≥ 0``
@@ -31,118 +31,18 @@ field                     shape, unit                model array (per world)
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass, fields
-from pathlib import Path
-
 import numpy as np
 import torch
 
-from ..errors import WresdynError
+from ..robot.physical import BODY_FIELDS, JOINT_FIELDS, PhysicalParams, PhysicsError
 
 __all__ = ["JOINT_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsModel", "PhysicsError", "pseudo_inertia",
            "from_pseudo_inertia"]
 
-JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
-"""Per-joint fields of :class:`PhysicalParams`, each (n_dof,)."""
-BODY_FIELDS = ("body_mass", "body_com", "body_inertia")
-"""Per-body fields, (n_bodies,), (n_bodies, 3), (n_bodies, 3, 3)."""
 MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "joint_armature",
                 "damping": "joint_damping", "friction": "joint_friction", "effort": "joint_effort_limit",
                 "body_mass": "body_mass", "body_com": "body_com", "body_inertia": "body_inertia"}
 """Newton model array of each field (``delay`` is the command path's, not the model's)."""
-
-
-class PhysicsError(WresdynError):
-    """A parameter file that cannot be used; the message is one line naming the file."""
-
-
-@dataclass
-class PhysicalParams:
-    """Physical parameters of one robot, SI units (table in the module docstring). Arrays float64."""
-
-    joint_names: list[str]
-    body_names: list[str]
-    kp: np.ndarray
-    kd: np.ndarray
-    armature: np.ndarray
-    damping: np.ndarray
-    friction: np.ndarray
-    effort: np.ndarray
-    """Effort limit [N·m]; ``inf`` = unlimited."""
-    delay: np.ndarray
-    """Actuator delay [s] of each joint's command."""
-    body_mass: np.ndarray
-    body_com: np.ndarray
-    body_inertia: np.ndarray
-
-    @classmethod
-    def nominal(cls, robot) -> "PhysicalParams":
-        """The robot file's values (no delay)."""
-        n = robot.n_dof
-        return cls(list(robot.joint_names), list(robot.body_names), *(np.array(getattr(robot, f), dtype=np.float64)
-                   for f in ("kp", "kd", "armature", "damping", "friction", "effort")), np.zeros(n),
-                   np.array(robot.body_mass, dtype=np.float64), np.array(robot.body_com, dtype=np.float64),
-                   np.array(robot.body_inertia, dtype=np.float64))
-
-    def copy(self) -> "PhysicalParams":
-        return PhysicalParams(**{f.name: (list(v) if isinstance(v := getattr(self, f.name), list) else v.copy())
-                                 for f in fields(self)})
-
-    def check(self, robot, where: str = "parameters") -> None:
-        """Raise :class:`PhysicsError` unless these parameters describe ``robot`` (names, shapes, signs)."""
-        if list(self.joint_names) != list(robot.joint_names):
-            raise PhysicsError(f"{where}: joint names {self.joint_names[:3]}... do not match the robot's "
-                               f"{list(robot.joint_names)[:3]}... ({len(self.joint_names)} vs {robot.n_dof} joints)")
-        if list(self.body_names) != list(robot.body_names):
-            raise PhysicsError(f"{where}: body names do not match the robot's ({len(self.body_names)} vs "
-                               f"{robot.n_bodies} bodies)")
-        n, nb = robot.n_dof, robot.n_bodies
-        want = {**{f: (n,) for f in JOINT_FIELDS}, "body_mass": (nb,), "body_com": (nb, 3), "body_inertia": (nb, 3, 3)}
-        for f, shape in want.items():
-            a = getattr(self, f)
-            if a.shape != shape:
-                raise PhysicsError(f"{where}: {f} has shape {a.shape}, expected {shape}")
-            if np.isnan(a).any() or (f != "effort" and not np.isfinite(a).all()):
-                raise PhysicsError(f"{where}: {f} is not finite")
-            if f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "body_mass") and (a < 0).any():
-                raise PhysicsError(f"{where}: {f} must be >= 0")
-
-    # ------------------------------------------------------------------------------------------------ JSON
-    def to_json(self) -> dict:
-        d = {"format": "wresdyn.physics/1", "joint_names": self.joint_names, "body_names": self.body_names}
-        for f in (*JOINT_FIELDS, *BODY_FIELDS):
-            a = getattr(self, f)
-            d[f] = np.where(np.isfinite(a), a, -1.0).tolist() if f == "effort" else a.tolist()
-        return d
-
-    def save(self, path: str | Path) -> None:
-        """Write JSON atomically (``effort`` −1 = unlimited)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_json(), indent=1))
-        tmp.replace(path)
-
-    @classmethod
-    def load(cls, path: str | Path, robot=None) -> "PhysicalParams":
-        """Read a file written by :meth:`save`; with ``robot``, check it describes that robot."""
-        path = Path(path)
-        if not path.is_file():
-            raise PhysicsError(f"{path}: parameter file not found")
-        try:
-            d = json.loads(path.read_text())
-            if d.get("format") != "wresdyn.physics/1":
-                raise PhysicsError(f"{path}: not a wresdyn physics file (format {d.get('format')!r})")
-            arrays = {f: np.asarray(d[f], dtype=np.float64) for f in (*JOINT_FIELDS, *BODY_FIELDS)}
-        except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as e:
-            if isinstance(e, PhysicsError):
-                raise
-            raise PhysicsError(f"{path}: malformed physics file ({type(e).__name__}: {e})") from None
-        arrays["effort"] = np.where(arrays["effort"] < 0, np.inf, arrays["effort"])
-        p = cls(list(d["joint_names"]), list(d["body_names"]), **arrays)
-        if robot is not None:
-            p.check(robot, str(path))
-        return p
 
 
 def pseudo_inertia(mass, com, inertia):

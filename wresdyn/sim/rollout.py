@@ -2,7 +2,7 @@
 
 :func:`rollout` advances a :class:`~wresdyn.sim.simulator.Simulator` through a :class:`~wresdyn.sim.bank.Window`:
 at each step the residual policy observes [q, q̇, q̈, q_cmd] of the simulated state and the recorded command,
-its output is applied (:func:`~wresdyn.sim.residual.apply_residual`) to the step's PD target (the command after
+its output is applied (:func:`~wresdyn.sim.residual_kinds.apply_residual`) to the step's PD target (the command after
 the command path's delay), and the solver advances one sample period. Evaluation runs it without gradients
 (diverged worlds are frozen at their last sane state and reported), the gradient fit with ``grad=True``
 (each step differentiable, truncated backpropagation), and :func:`replay` is the numpy form for PD-only checks.
@@ -18,7 +18,7 @@ import torch
 
 from ..errors import SimulationDiverged
 from .bank import TrajectoryBank, Window
-from .residual import apply_residual, observation
+from .residual_kinds import apply_residual, observation
 from .simulator import DivergenceLimits, Simulator
 
 __all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device"]

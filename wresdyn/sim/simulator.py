@@ -13,7 +13,7 @@ stays valid.
 - Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function`` whose
   backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque. On CUDA its
   Warp work runs on torch's current stream when that is a stream of its own (the gradient fit's CUDA graph,
-  :meth:`Simulator._tape_stream`), else on Warp's device stream as in wave 1.
+  :meth:`Simulator._tape_stream`), else on Warp's device stream.
 
 Divergence (:class:`DivergenceLimits`, :meth:`Simulator.diverged`) is judged in one place: a non-finite state,
 a runaway joint speed, a joint far past its limit, or (when a reference is given) far from the recording.
@@ -282,9 +282,9 @@ class Simulator:
     def _tape_stream(self):
         """Where :meth:`step_diff`'s Warp work (forward and the tape's backward) runs: on torch's current stream when
         that is a stream of its own (a CUDA graph being captured or warmed up on it: the gradient fit's captured
-        iteration), so torch's and Warp's launches are ordered by the stream itself; else on Warp's device stream
-        as in wave 1 (its CUDA gradients checked against the CPU there; under torch's legacy default stream, which
-        synchronises with it)."""
+        iteration), so torch's and Warp's launches are ordered by the stream itself; else on Warp's device stream,
+        which torch's legacy default stream synchronises with (the set-up whose CUDA gradients are checked against
+        the CPU's)."""
         if not self._cuda:
             return contextlib.nullcontext()
         import warp as wp

@@ -1,4 +1,4 @@
-"""Replay solver: a Newton ``SolverBase`` specialised for PD replay of fixed-base robots (issue 6).
+"""Replay solver: a Newton ``SolverBase`` specialised for PD replay of fixed-base robots.
 
 :class:`SolverReplay` runs each step as one generated, differentiable Warp kernel (one thread per
 world). In data-flow order: :mod:`.tree` reads the robot from a Newton model, :mod:`.emit` writes

@@ -1,4 +1,4 @@
-"""``SolverReplay``: a Newton solver specialised for PD replay of fixed-base robots (issue 6).
+"""``SolverReplay``: a Newton solver specialised for PD replay of fixed-base robots.
 
 The replay workload is one articulated robot per world, PD drives plus a residual torque, no contacts.
 Newton's ``SolverFeatherstone`` handles it with ~20 kernel launches per step, a dense ``J^T M J`` mass
@@ -35,24 +35,16 @@ differentiable by Warp's Tape. One step, with ``H`` the matrix the kernel factor
   ``1 / dof_invweight0``; default ``solref``/``solimp``: ``d0 = 0.9``, ``dmax = 0.95``, ``timeconst = 0.02``).
   Below ``mu_i`` the joint creeps (a virtual inertia ``1 / R_i`` and damper ``b / R_i``), above it slides
   against ``mu_i``. The problem is solved by ``friction_sweeps`` symmetric Gauss-Seidel sweeps, each
-  coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the older law instead, a saturated
+  coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the damper law instead, a saturated
   damper ``-clamp(kappa H_ii v_i, -mu_i, mu_i)`` on the new velocity (``kappa = inf``: hard Coulomb friction,
   exact sticking).
 
-Dry friction against MuJoCo C (``frictionloss``, default ``solref``/``solimp``, ``implicitfast``,
-dt = 2 ms). Measured:
-
-- one hinge, constant torque from rest, 1 s: 0.5 and 0.9 mu creep as MuJoCo's to 7e-8 and 1.2e-7 rad (the
-  damper law: 0.8 % ahead, it relaxes in ~1 ms where MuJoCo takes ``1 / (d0 b) = 10 ms``); 1.5 and 3 mu slide
-  to 3e-5 and 1e-4 rad of 8 and 33 rad (float32 round-off; the damper law lags 1.2e-3 rad at 1.5 mu);
-- the humanoid replaying a 2 s multisine under PD with ``frictionloss = 0.1 x effort`` on all 21 joints
-  (friction moves MuJoCo's trajectory by up to 0.26 rad, mean 0.056 rad): max |q - q_mujoco| 0.0116 rad,
-  mean 0.0006 rad with 8 sweeps (4 sweeps: 0.040 / 0.0030; 16: 0.0027 / 0.0003; the damper law 0.022 /
-  0.0028, hard Coulomb 0.060 / 0.0065, a smoothed ``-mu tanh(qd / 0.01)`` 0.055 / 0.0061). The rest is the
-  Gauss-Seidel solve (MuJoCo solves the coupled rows with Newton's method) and MuJoCo's 1 kHz vs 500 Hz;
-- the "real" robot of the shipped data (default mismatch, noise off, 1 kHz) replayed with its true
-  parameters on the held-out commands: mean |dq| 0.0003 rad (the damper law: 0.0063 rad, the whole gap
-  between the two simulators; without friction both laws give 0.0003).
+Why the soft law is the default: against MuJoCo C (``frictionloss``, default ``solref``/``solimp``,
+``implicitfast``, dt = 2 ms) it creeps and slides as MuJoCo does to float32 round-off on one hinge, and the
+"real" robot of the shipped data replayed with its true parameters matches its noise-free recording to 0.0003 rad,
+where the damper law leaves 0.0063 rad, the whole gap between the two simulators. The figures are in
+docs/results/simulation.md ("Dry friction against MuJoCo") and
+``benchmarks/results/grey_box/soft_friction/friction_law.txt``, made by ``benchmarks/friction_law.py``.
 
 Gradients (a ``wp.Tape`` around :meth:`step` or :meth:`rollout`, ``requires_grad``) reach the states,
 targets and ``joint_f`` and, when the model was finalized with ``requires_grad``, every parameter above:
@@ -87,11 +79,11 @@ __all__ = ["FRICTION_KAPPA", "FRICTION_SWEEPS", "SolverReplay"]
 _MJ_D0, _MJ_DMAX, _MJ_TIMECONST = 0.9, 0.95, 0.02
 """MuJoCo's default ``solimp[0]``, ``solimp[1]`` and ``solref[0]`` [s]."""
 FRICTION_KAPPA = _MJ_D0 / (1.0 - _MJ_D0) * 2.0 / (_MJ_DMAX * _MJ_TIMECONST)
-"""Rate of the older friction law's damper ``d_i = kappa H_ii`` [1/s], 947 (``SolverReplay(friction_kappa=)``):
+"""Rate of the damper friction law's ``d_i = kappa H_ii`` [1/s], 947 (``SolverReplay(friction_kappa=)``):
 the creep velocity of MuJoCo's default soft ``frictionloss`` on a lone joint (module docstring)."""
 FRICTION_SWEEPS = 8
 """Default Gauss-Seidel sweeps of the friction solve: on the humanoid 0.0116 rad max against MuJoCo (16 sweeps
-0.0027, 4 sweeps 0.040; module docstring)."""
+0.0027, 4 sweeps 0.040; ``benchmarks/results/grey_box/soft_friction/friction_law.txt``)."""
 
 _JOINT_PARAMS = ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_damping",
                  "joint_effort_limit", "joint_limit_lower", "joint_limit_upper", "joint_limit_ke", "joint_limit_kd")
@@ -145,7 +137,7 @@ class SolverReplay(SolverBase):
             model: Newton model holding one fixed-base robot per world (same topology and joint frames;
                 inertias and joint parameters may differ).
             friction_kappa: ``None`` (default): dry friction as MuJoCo's soft ``frictionloss`` constraint with
-                the default ``solref``/``solimp`` (module docstring). A number: the older law, a saturated damper
+                the default ``solref``/``solimp`` (module docstring). A number: the damper law, a saturated damper
                 on the new velocity ``d_i = kappa H_ii`` [1/s] (:data:`FRICTION_KAPPA` matches MuJoCo's creep
                 rate only); ``math.inf`` gives hard Coulomb friction with exact sticking, 0 no friction.
             friction_sweeps: Gauss-Seidel sweeps of the friction solve; 0 leaves friction out of the

@@ -17,7 +17,7 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     import torch
 
     from ..learn.ppo import RunError, config_from_dict, load_policy
-    from .evaluate import evaluate_split, summary_line, write_report
+    from .open_loop import evaluate_split, summary_line, write_report
     from .plots import plot_fig3, plot_learning_curves
 
     torch.set_num_threads(1)

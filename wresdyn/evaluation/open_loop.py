@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import WresdynError
+from ..data.dataset import fitted_mask
 from ..sim.rollout import replay_trajectories
 
 __all__ = ["Metrics", "fitted_mask", "excluded_names", "metrics", "evaluate_split", "pd_gap", "summary_line",
@@ -61,19 +61,6 @@ class Metrics:
     """Names of the diverged trajectories."""
     n_joints: int = 0
     """Joints the averages above run over (the fitted ones)."""
-
-
-def fitted_mask(weights, n_dof: int) -> np.ndarray:
-    """The joints the metrics average over, bool (n_dof,): ``weights > 0`` for per-joint weights (n_dof,) such as
-    :meth:`~wresdyn.data.dataset.Dataset.fit_weights` (1 fitted, 0 excluded), every joint for ``None``."""
-    if weights is None:
-        return np.ones(n_dof, dtype=bool)
-    w = np.asarray(weights, dtype=np.float64)
-    if w.shape != (n_dof,) or not np.isfinite(w).all() or (w < 0).any():
-        raise WresdynError(f"joint weights must be {n_dof} finite numbers >= 0 (one per joint), got shape {w.shape}")
-    if not (w > 0).any():
-        raise WresdynError("joint weights exclude every joint: no joint left to measure")
-    return w > 0
 
 
 def excluded_names(joint_names, weights) -> list[str]:
