@@ -1,7 +1,7 @@
 """``wresdyn fit DATA``: learn a residual by gradient descent through the differentiable simulation.
 
 The run folder has the same layout as a ``wresdyn train`` (PPO) run: ``config.json``, ``checkpoint.pt``
-(resumed when present), ``curve.json``, and the exported residual ``policy.pt`` (TorchScript), ``policy.onnx``
+(resumed when present), ``curve.json``, and the exported residual ``policy.pt`` (a ``torch.export`` archive), ``policy.onnx``
 and ``residual.json``, so ``wresdyn eval RUN`` evaluates either kind of run identically.
 ``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
 ``OUT/identify/``) and learns the residual network on top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
