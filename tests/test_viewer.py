@@ -68,7 +68,7 @@ def test_animation_scene_reads_back_the_frames_it_was_written_with(tmp_path):
     names, poses = sample_frames(robot, rollouts, 50.0, 25.0)
     assert scene.names == names == ["reference", "nominal"] and scene.fps == 25.0
     np.testing.assert_array_equal(scene.poses, poses)
-    assert scene.poses.shape == (15, 2, robot.n_dof)
+    assert scene.poses.shape == (15, 2, robot.n_dof) and scene.spacing == 1.0  # write_animation's default
     assert scene.robot.joint_names == robot.joint_names and scene.robot.base == "fixed"
 
 

@@ -67,6 +67,9 @@ class Scene:
     """RGB tint in [0, 1] of each rollout's robot."""
     title: str
     """What is shown, one line (the page's heading)."""
+    spacing: float | None = None
+    """Distance between neighbouring robots along +y [m] the rollouts were written with (an animation's
+    ``wresdyn:spacing``); ``None``: :attr:`ViewerConfig.spacing`."""
 
 
 def run_scene(run, split: str = "heldout", index: int = 0, data: str | None = None, fps: float = 50.0,
@@ -123,8 +126,9 @@ def animation_scene(path) -> Scene:
     poses = np.asarray(attr.Get(), dtype=np.float64).reshape(shape)
     names = list(root.GetAttribute("wresdyn:rollouts").Get())
     colours = tuple(PALETTE[i % len(PALETTE)] for i in range(len(names)))
+    spacing = root.GetAttribute("wresdyn:spacing")
     return Scene(robot, names, poses, float(stage.GetTimeCodesPerSecond()), colours,
-                 f"{Path(path).name}: {', '.join(names)}")
+                 f"{Path(path).name}: {', '.join(names)}", float(spacing.Get()) if spacing else None)
 
 
 def load_scene(path, split: str = "heldout", index: int = 0, data: str | None = None, fps: float = 50.0,
@@ -179,15 +183,16 @@ def serve(scene: Scene, cfg: ViewerConfig = ViewerConfig(), say=print) -> None:
     from ..skills.animation import RobotRow
 
     n_frames, n_worlds, width = scene.poses.shape
+    spacing = scene.spacing if scene.spacing is not None else cfg.spacing
     row = RobotRow(scene.robot, n_worlds)
     _tint(row.model, scene.colours)
     viewer = newton.viewer.ViewerViser(host=cfg.host, port=cfg.port, label="wresdyn", verbose=False)
     try:
-        row.attach(viewer, cfg.spacing)
+        row.attach(viewer, spacing)
         viewer.begin_frame(0.0)
         viewer.log_state(row.pose(scene.poses[0]))
         viewer.end_frame()
-        _aim_camera(viewer, row, cfg.spacing)
+        _aim_camera(viewer, row, spacing)
         gui = viewer.server.gui
         duration = (n_frames - 1) / scene.fps
         with gui.add_folder("wresdyn", order=-2):  # above the viewer's own folders
