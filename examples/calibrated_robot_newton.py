@@ -110,15 +110,14 @@ def main() -> None:
 
 
 def _wresdyn_replay(export: str, data: str, traj, n: int) -> np.ndarray:
-    import torch
-
     from wresdyn.data.loading import load_data
+    from wresdyn.export.program import load_residual
     from wresdyn.sim.physics import PhysicalParams
     from wresdyn.sim.rollout import replay_trajectories
 
     ds, robot = load_data(data)
     physics = PhysicalParams.load(f"{export}/physics.json", robot)
-    policy = torch.jit.load(f"{export}/residual.pt")
+    policy = load_residual(f"{export}/residual.pt2")
     out = replay_trajectories(robot, [traj], ds.rate_hz, policy, physics=physics)
     return out["residual"].q[0][:n]
 

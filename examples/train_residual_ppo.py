@@ -60,7 +60,7 @@ def main() -> None:
     summary = train(dataset, robot, cfg, args.out)  # resumes if args.out holds checkpoints of the same config
     print(f"{summary['env_steps_per_s'] or 0:.0f} env-steps/s, {summary['s_per_iteration'] or 0:.2f} s/iteration")
 
-    policy, meta = load_policy(args.out)  # the exported TorchScript residual: raw [q, qd, qdd, q_cmd] -> N*m or rad
+    policy, meta = load_policy(args.out)  # the exported residual (torch.export): raw [q, qd, qdd, q_cmd] -> N*m or rad
     results = {}
     for split in ("heldout", "ood"):
         trajs = dataset.split(split)

@@ -85,7 +85,7 @@ def test_export_writes_the_identified_physics_as_usd_newton_reads(exported, huma
     from wresdyn.sim.physics import PhysicalParams
 
     run, out = exported
-    assert {"robot.usda", "actuated.usda", "residual.pt", "residual.onnx", "physics.json", "export.json"} <= {
+    assert {"robot.usda", "actuated.usda", "residual.pt2", "residual.onnx", "physics.json", "export.json"} <= {
         p.name for p in out.iterdir()}
     want = PhysicalParams.load(run / "physics.json", humanoid)
     cal = load_robot(out / "robot.usda")  # Newton's USD importer, through the layer over the untouched file
@@ -136,12 +136,13 @@ def test_plain_newton_reproduces_the_corrected_replay(exported, humanoid, data):
     wresdyn's interpolated command) and the PD (explicit in the actuator, implicit damping in SolverReplay);
     measured 2.4e-3 rad mean over 2 s of the default benchmark (README). The residual's own effect is asserted
     larger, so dropping it would fail."""
+    from wresdyn.export.program import load_residual
     from wresdyn.sim.physics import PhysicalParams
     from wresdyn.sim.rollout import replay_trajectories
 
     run, out = exported
     physics = PhysicalParams.load(run / "physics.json", humanoid)
-    policy = torch.jit.load(str(run / "policy.pt"))
+    policy = load_residual(run / "policy.pt")
     traj = data.split("heldout")[0]
     q_plain = _example().replay(str(out / "actuated.usda"), traj.q[0], traj.qd[0], traj.qdd[0], traj.q_cmd,
                                 1.0 / data.rate_hz)
@@ -161,7 +162,7 @@ def test_export_refuses_bad_runs_and_writes_nothing(tmp_path, humanoid, data, ca
     assert main(["export", str(no_res), "--out", str(out)]) == 2
     assert "has no residual" in capsys.readouterr().err and not out.exists()
     assert main(["export", str(no_res), "--out", str(out), "--physics-only"]) == 0  # identified physics alone
-    assert (out / "robot.usda").exists() and not (out / "residual.pt").exists()
+    assert (out / "robot.usda").exists() and not (out / "residual.pt2").exists()
     assert main(["export", str(no_res), "--out", str(out), "--physics-only"]) == 2  # exists, no --force
     assert "already exists" in capsys.readouterr().err
     assert main(["export", str(no_res), "--out", str(out), "--physics-only", "--force"]) == 0

@@ -20,7 +20,7 @@ from wresdyn.learn.ppo import (
     train,
 )
 from wresdyn.learn.replay_env import ReplayEnvConfig
-from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_onnx, export_torchscript
+from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
 from wresdyn.learn.rewards import RewardConfig
 from wresdyn.learn.runs import load_checkpoint
 
@@ -202,7 +202,7 @@ def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
 
 @pytest.mark.parametrize("kind", ["torque", "delta_action"])
 def test_exported_policy_is_the_residual_the_env_applies(robot, data, tmp_path, best_actor, kind):
-    """The exported TorchScript on raw [q, q̇, q̈, q_cmd] gives the residual that ReplayEnv.step writes into the
+    """The exported residual on raw [q, q̇, q̈, q_cmd] gives the residual that ReplayEnv.step writes into the
     simulator's control for the actor's deterministic action on the same state: the env's fixed normalisation,
     the actor's running normaliser, clip(action_gain · a, −1, 1) · scale, both residual kinds."""
     import warp as wp
@@ -268,12 +268,18 @@ def test_export_loads_back_with_the_same_outputs(tmp_path, which):
     obs = [torch.randn(5, 12), torch.randn(5, 12)]
     policy.reset()
     expect = [policy(o).detach() for o in obs]  # two steps: the GRU carries its state
-    jit = torch.jit.load(str(export_torchscript(policy, tmp_path / "p.pt")))
-    jit.reset()
-    for o, e in zip(obs, expect):
-        torch.testing.assert_close(jit(o), e, rtol=0, atol=1e-6)
-    assert jit.residual_kind() == policy.kind
-    sess = ort.InferenceSession(str(export_onnx(policy, tmp_path / "p.onnx")))
+    from wresdyn.export.program import load_residual
+
+    export_policy(policy, tmp_path / "p.pt", tmp_path / "p.onnx")
+    loaded = load_residual(tmp_path / "p.pt")
+    for batch in (obs, [o[:1] for o in obs]):  # the batch axis is dynamic, down to one robot
+        loaded.reset()
+        for o, e in zip(batch, expect):
+            torch.testing.assert_close(loaded(o), e[:len(o)], rtol=0, atol=1e-6)
+    assert loaded.residual_kind() == loaded.kind == policy.kind
+    torch.testing.assert_close(loaded.scale, policy.scale)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.onnx", "p.pt"]  # the ONNX holds its weights
+    sess = ort.InferenceSession(str(tmp_path / "p.onnx"))
     h = np.zeros((1, 5, 32), np.float32)
     for o, e in zip(obs, expect):
         feeds = {"obs": o.numpy()}

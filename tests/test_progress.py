@@ -155,3 +155,87 @@ def test_fit_and_eval_announce_the_compile_and_the_excluded_gripper(tmp_path, ca
     assert "excluded from fitting and from the metrics: gripper" in out
     assert "(over 5 fitted joints; excluded: gripper)" in out
     assert "excluded from fitting and from these figures: gripper" in (run / "eval" / "report.md").read_text()
+
+
+# wresdyn.progress: the bar of the long loops, plain lines off a terminal, --quiet, the run folder's log
+
+
+def _loop(log, n: int = 4):
+    from wresdyn.progress import bar
+
+    with bar(log, n, "fit") as b:
+        for i in range(n):
+            if i == 2:
+                log("iter 3: a line of the loop")
+            b.update(1, f"H={i}")
+
+
+def test_plain_lines_off_a_terminal_and_every_line_in_the_file(tmp_path):
+    import io
+
+    from wresdyn.progress import Log
+
+    out = io.StringIO()  # not a terminal: no bar, periodic plain lines (every update at every=0)
+    log = Log(tmp_path / "run" / "fit.log", stream=out, every=0.0)
+    log("before the run folder exists")
+    assert not (tmp_path / "run").exists()  # a run refused before it starts leaves no folder
+    (tmp_path / "run").mkdir()
+    _loop(log)
+    lines = out.getvalue().splitlines()
+    plain = re.compile(r"^fit: (\d)/4 \((\d+) %\), 0:00 elapsed, 0:00 left, H=(\d)$")
+    assert [plain.match(ln).group(1, 3) for ln in lines if plain.match(ln)] == [("1", "0"), ("2", "1"), ("3", "2"),
+                                                                                ("4", "3")]
+    assert "iter 3: a line of the loop" in lines and "\r" not in out.getvalue()
+    # the log's lines, those from before the folder too; not the progress lines
+    assert (tmp_path / "run" / "fit.log").read_text() == "before the run folder exists\niter 3: a line of the loop\n"
+
+
+def test_quiet_prints_nothing_and_the_file_keeps_the_lines(tmp_path):
+    import io
+
+    from wresdyn.progress import Log
+
+    out = io.StringIO()
+    _loop(Log(tmp_path / "fit.log", quiet=True, stream=out, every=0.0))
+    assert out.getvalue() == "" and (tmp_path / "fit.log").read_text() == "iter 3: a line of the loop\n"
+
+
+def test_a_bar_with_elapsed_and_remaining_time_on_a_terminal(tmp_path):
+    """On a real pseudo-terminal: tqdm redraws one bar (carriage returns), the loop's line printed above it."""
+    import fcntl
+    import os
+    import struct
+    import termios
+
+    from wresdyn.progress import Log
+
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # a new pty is 0 columns wide
+    with open(slave, "w", closefd=True) as tty:
+        assert tty.isatty()
+        _loop(Log(tmp_path / "fit.log", stream=tty))
+    text = b""
+    os.set_blocking(master, False)
+    try:
+        while chunk := os.read(master, 65536):
+            text += chunk
+    except OSError:  # drained: EAGAIN, or EIO once the closed terminal's output is all read (Linux)
+        pass
+    os.close(master)
+    screen = text.decode()
+    assert "\r" in screen and "iter 3: a line of the loop" in screen
+    assert re.search(r"fit: 4/4 \|.*\| 00:00 elapsed, 00:00 left, H=3", screen), screen
+
+
+def test_fit_quiet_writes_only_the_log(tmp_path, capsys):
+    data = tmp_path / "d"
+    assert main(["collect", "--robot", str(SO101), "--train", "1", "--validation", "1", "--heldout", "0", "--ood",
+                 "0", "--duration", "0.4", "--no-gap", "--out", str(data)]) == 0
+    capsys.readouterr()
+    run = tmp_path / "fit"
+    assert main(["fit", str(data / "dataset.npz"), "--model", "network", "--iterations", "3", "--windows", "2",
+                 "--curriculum", "2", "--out", str(run), "--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+    log = (run / "fit.log").read_text().splitlines()
+    assert log[0].startswith("gradient fit of a torque residual (mlp) on 1 trajectories")
+    assert sum(ln.startswith("iter ") for ln in log) == 3 and log[-1].startswith("done: ")

@@ -1,7 +1,7 @@
 """``wresdyn export RUN``: the calibrated robot as USD layers over the robot file, Newton actuators and the residual.
 
 Writes ``robot.usda`` (identified physics as the attributes Newton's importer reads), ``actuated.usda`` (the drive
-path as ``newton.actuators`` prims and the residual network), ``residual.pt``/``.onnx``, ``physics.json`` into
+path as ``newton.actuators`` prims and the residual network), ``residual.pt2``/``.onnx``, ``physics.json`` into
 ``RUN/export`` (or ``--out``); see :mod:`wresdyn.export.usd`.
 """
 
@@ -27,5 +27,5 @@ def run(args: argparse.Namespace) -> int:
     out = export_run(args.run, args.out, force=args.force, physics_only=args.physics_only, data=args.data,
                      gains=args.gains)
     print(f"wrote {out}/robot.usda (identified physics) and {out}/actuated.usda (Newton actuators"
-          f"{' + residual' if (out / 'residual.pt').exists() else ''})")
+          f"{' + residual' if (out / 'residual.pt2').exists() else ''})")
     return 0

@@ -1,8 +1,10 @@
 """``wresdyn fit DATA``: learn a residual by gradient descent through the differentiable simulation.
 
 The run folder has the same layout as a ``wresdyn train`` (PPO) run: ``config.json``, ``checkpoint.pt``
-(resumed when present), ``curve.json``, and the exported residual ``policy.pt`` (TorchScript), ``policy.onnx``
-and ``residual.json``, so ``wresdyn eval RUN`` evaluates either kind of run identically.
+(resumed when present), ``curve.json``, and the exported residual ``policy.pt`` (a ``torch.export`` archive),
+``policy.onnx`` and ``residual.json``, so ``wresdyn eval RUN`` evaluates either kind of run identically. Every line
+printed is also in ``fit.log``; on a terminal a progress bar shows the elapsed and remaining time
+(:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
 ``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
 ``OUT/identify/``) and learns the residual network on top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
 the given physics is used instead of identifying. ``--model network`` learns the residual on the robot file's
@@ -58,6 +60,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--physics", default=None, metavar="JSON",
                    help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards (like `wresdyn eval`)")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
 
 
 def config_from_args(args: argparse.Namespace):
@@ -105,14 +109,17 @@ def run(args: argparse.Namespace) -> int:
         what = f"hybrid (identified physics + {what})"
     elif cfg.physics:
         what += f" on the physics of {cfg.physics}"
-    print(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
-          f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}", flush=True)
+    from ..progress import Log
+
+    log = Log(out / "fit.log", quiet=args.quiet)
+    log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
+          f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}")
     from ..learn.gradfit import load_physics
     from ..sim.warmup import compile_kernels
 
     # the hybrid's stage 2 runs on the identified physics: fit_hybrid compiles those kernels once stage 1 is done
     compile_kernels(robot, ds.rate_hz, ("forward", "param_grads") if identify_first else ("forward", "grad"),
-                    solver=cfg.solver, device=cfg.device, physics=load_physics(cfg.physics, robot))
+                    solver=cfg.solver, device=cfg.device, physics=load_physics(cfg.physics, robot), say=log)
     try:
         if identify_first:
             from ..learn.hybrid import fit_hybrid
@@ -123,9 +130,10 @@ def run(args: argparse.Namespace) -> int:
             if gain_grid is not None:
                 stage1["gain_grid"] = gain_grid
             sysid = replace(SysIdConfig(), device=cfg.device, seed=cfg.seed, solver=cfg.solver, **stage1)
-            _, policy, curve, cfg, id_wall = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data)
+            _, policy, curve, cfg, id_wall = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data,
+                                                          log=log)
         else:
-            policy, curve = fit(robot, ds, cfg, out=out)
+            policy, curve = fit(robot, ds, cfg, out=out, log=log)
             id_wall = None
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
@@ -138,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
                "identify_wall_s": id_wall, "sim_steps": curve[-1]["sim_steps"] if curve else 0, "config": asdict(cfg)}
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
     stages = f" (identification {id_wall:.0f} s + residual {wall:.0f} s)" if id_wall is not None else ""
-    print(f"done: {summary['wall_s']:.0f} s of training{stages}, {summary['sim_steps']:.2e} simulated steps "
+    log(f"done: {summary['wall_s']:.0f} s of training{stages}, {summary['sim_steps']:.2e} simulated steps "
           f"(residual); exported {out / 'policy.pt'}")
     if args.eval:
         from ..evaluation.evaluate_run import evaluate_run

@@ -3,9 +3,10 @@
 Grey-box system identification (:mod:`wresdyn.learn.sysid`): per joint PD gains, armature, viscous damping, dry
 friction with stiction, effort limit and command delay; per link mass, centre of mass and inertia. The run
 folder holds ``physics.json`` (the calibrated robot's parameters, JSON), ``config.json``, ``checkpoint.pt``
-(resumed when present; a changed config is refused) and ``curve.json``; with ``--eval`` the calibrated model is
-replayed on every split (``eval/report.md``) and, for data recorded on the simulated real robot, the identified
-values are compared with the truth (``identification.md``). ``wresdyn fit DATA --physics RUN/physics.json``
+(resumed when present; a changed config is refused), ``curve.json`` and ``identify.log`` (every line printed;
+``--quiet`` prints none); with ``--eval`` the calibrated model is replayed on every split (``eval/report.md``)
+and, for data recorded on the simulated real robot, the identified values are compared with the truth
+(``identification.md``). ``wresdyn fit DATA --physics RUN/physics.json``
 then learns a residual on top (the hybrid model).
 """
 
@@ -38,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default="cpu", help="cpu or cuda:0")
     p.add_argument("--seed", type=int, default=0, help="seed")
     p.add_argument("--eval", action="store_true", help="replay every split with the identified model and report")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing while identifying (OUT/identify.log keeps every line; no progress bar)")
 
 
 GAIN_GRID_HELP = ("factors on the robot file's kp to try before the gradient fit, each joint taking its own best, "
@@ -78,17 +81,20 @@ def run(args: argparse.Namespace) -> int:
     ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    print(f"identifying {', '.join(cfg.fit)} on {len(ds.split('train'))} trajectories of {args.data}: "
-          f"{cfg.iterations} iterations x {cfg.windows} windows -> {out}", flush=True)
+    from ..progress import Log
+
+    log = Log(out / "identify.log", quiet=args.quiet)
+    log(f"identifying {', '.join(cfg.fit)} on {len(ds.split('train'))} trajectories of {args.data}: "
+          f"{cfg.iterations} iterations x {cfg.windows} windows -> {out}")
     from ..sim.warmup import compile_kernels
 
-    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device)
+    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device, say=log)
     try:
-        params, curve = identify(robot, ds, cfg, out=out)
+        params, curve = identify(robot, ds, cfg, out=out, log=log)
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
     save_identify_config(out, cfg, ds.rate_hz, args.data)
-    print(f"done: {curve[-1]['wall'] if curve else 0.0:.0f} s; wrote {out / 'physics.json'}")
+    log(f"done: {curve[-1]['wall'] if curve else 0.0:.0f} s; wrote {out / 'physics.json'}")
     if args.eval:
         from ..evaluation.identification import write_identification_report
         from ..evaluation.evaluate_run import evaluate_run

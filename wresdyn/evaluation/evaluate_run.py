@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["evaluate_run"]
+__all__ = ["evaluate_run", "load_run_model"]
 
 
 def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
@@ -16,28 +16,12 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
 
     import torch
 
-    from ..learn.ppo import RunError, config_from_dict, load_policy
     from .open_loop import evaluate_split, summary_line, write_report
     from .plots import plot_fig3, plot_learning_curves
 
     torch.set_num_threads(1)
-    from ..sim.physics import PhysicalParams
-
     run_dir = Path(run)
-    physics = PhysicalParams.load(run_dir / "physics.json", robot) if (run_dir / "physics.json").exists() else None
-    if physics is not None and not (run_dir / "policy.pt").exists():  # identified physics alone
-        config = json.loads((run_dir / "config.json").read_text())
-        policy, meta = None, {"kind": None, "arch": "none", "joint_names": physics.joint_names,
-                              "rate_hz": float(config["rate_hz"])}
-        solver, substeps = solver or config["solver"], 1
-    else:
-        policy, meta = load_policy(run_dir)
-        cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
-        solver, substeps = solver or cfg.env.solver, cfg.env.substeps
-    if list(meta["joint_names"]) != list(robot.joint_names):
-        raise RunError(f"{run_dir}: trained on joints {meta['joint_names'][:3]}..., not this robot's")
-    if abs(meta["rate_hz"] - ds.rate_hz) > 1e-9:
-        raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {ds.rate_hz:g} Hz")
+    policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
     out_dir = Path(out) if out else run_dir / "eval"
     from ..sim.warmup import compile_kernels
 
@@ -65,3 +49,36 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     print(f"wrote {out_dir / 'metrics.json'} and {out_dir / 'report.md'}")
     return results
 
+
+def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
+    """What a run folder replays: ``(policy, meta, physics, solver, substeps)``.
+
+    ``policy`` is the run's residual (``None`` for identified physics alone), ``meta`` its ``residual.json``
+    (kind, arch, joint names, rate), ``physics`` the :class:`~wresdyn.sim.physics.PhysicalParams` of
+    ``physics.json`` (``None``: the robot file's), ``solver`` the one given or the run's, ``substeps`` the run's.
+
+    Raises:
+        RunError: the run was trained on other joints than ``robot``'s or at another rate than ``rate_hz`` [Hz].
+    """
+    import json
+    from pathlib import Path
+
+    from ..learn.ppo import RunError, config_from_dict, load_policy
+    from ..sim.physics import PhysicalParams
+
+    run_dir = Path(run_dir)
+    physics = PhysicalParams.load(run_dir / "physics.json", robot) if (run_dir / "physics.json").exists() else None
+    if physics is not None and not (run_dir / "policy.pt").exists():  # identified physics alone
+        config = json.loads((run_dir / "config.json").read_text())
+        policy, meta = None, {"kind": None, "arch": "none", "joint_names": physics.joint_names,
+                              "rate_hz": float(config["rate_hz"])}
+        solver, substeps = solver or config["solver"], 1
+    else:
+        policy, meta = load_policy(run_dir)
+        cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
+        solver, substeps = solver or cfg.env.solver, cfg.env.substeps
+    if list(meta["joint_names"]) != list(robot.joint_names):
+        raise RunError(f"{run_dir}: trained on joints {meta['joint_names'][:3]}..., not this robot's")
+    if abs(meta["rate_hz"] - rate_hz) > 1e-9:
+        raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {rate_hz:g} Hz")
+    return policy, meta, physics, solver, substeps

@@ -3,7 +3,7 @@
 Newton's actuators compute each joint's effort from that joint's own state and command; the residual is one
 network over every joint's [q, q̇, q̈, q_cmd], so it runs beside them and adds its torque to ``control.joint_f``
 after they have written theirs, the mechanism Newton documents for external joint efforts (the residual is
-not clamped with the drive, as in wresdyn's own simulator). It imports numpy, torch, warp and pxr only::
+not clamped with the drive, as in wresdyn's own simulator). It imports numpy, torch, warp and pxr only (and :mod:`wresdyn.export.program`, the file format)::
 
     import newton
     from wresdyn.export.residual_torque import ResidualTorque
@@ -34,10 +34,11 @@ __all__ = ["ResidualTorque"]
 
 
 class ResidualTorque:
-    """A TorchScript residual ``obs (N, 4n) -> tau (N, n)`` [N m] on ``n`` joints of every world of a Newton model.
+    """An exported residual ``obs (N, 4n) -> tau (N, n)`` [N m] on ``n`` joints of every world of a Newton model.
 
     Args:
-        network: The TorchScript module (``forward``, ``reset``; wresdyn's ``residual.pt``).
+        network: The residual (``forward``, ``reset``): wresdyn's ``residual.pt2`` loaded by
+            :func:`wresdyn.export.program.load_residual`.
         model: The Newton model (one robot per world, ``model.world_count`` worlds).
         joint_paths: USD prim path of each of the network's joints, in its order.
         dt: Period between :meth:`apply` calls [s] (the q̈ estimate's step).
@@ -70,19 +71,21 @@ class ResidualTorque:
 
     @classmethod
     def from_usd(cls, usd_path: str | Path, model, dt: float | None = None) -> "ResidualTorque":
-        """Read the ``wresdyn_residual`` prim of an exported ``actuated.usda`` and load its TorchScript network."""
-        import torch
+        """Read the ``wresdyn_residual`` prim of an exported ``actuated.usda`` and load its network (the
+        ``torch.export`` archive its ``wresdyn:program`` names)."""
         from pxr import Usd
+
+        from .program import load_residual
 
         stage = Usd.Stage.Open(str(usd_path))
         prim = next((p for p in stage.Traverse() if p.GetName() == "wresdyn_residual"), None)
         if prim is None:
             raise ValueError(f"{usd_path}: no wresdyn_residual prim (export a run with a residual)")
-        asset = prim.GetAttribute("wresdyn:torchscript").Get()
+        asset = prim.GetAttribute("wresdyn:program").Get()
         path = asset.resolvedPath or str(Path(usd_path).parent / asset.path)
         joints = [str(t) for t in prim.GetRelationship("wresdyn:joints").GetTargets()]
         rate = float(prim.GetAttribute("wresdyn:rateHz").Get())
-        return cls(torch.jit.load(path, map_location="cpu"), model, joints, dt or 1.0 / rate)
+        return cls(load_residual(path), model, joints, dt or 1.0 / rate)
 
     def reset(self, qdd=None) -> None:
         """Start a new rollout: the network's memory cleared; ``qdd`` (worlds, n) [rad/s²] the start's q̈ (default 0)."""

@@ -18,8 +18,9 @@ nothing behind):
                        recording rate: step the actuators at that rate)
                        and ``NewtonMaxEffortClampingAPI`` (the effort limit), the joints' own drives set to zero
                        so the PD is applied once; and a ``wresdyn_residual`` prim that references the residual
-                       network (``residual.pt`` TorchScript, ``residual.onnx``) with its joints, kind and rate.
-``residual.pt/.onnx``  the residual network; observation [q, q̇, q̈, q_cmd] (rad, rad/s, rad/s², rad), (N, 4n);
+                       network (``residual.pt2``, ``residual.onnx``) with its joints, kind and rate.
+``residual.pt2``       the residual network, a ``torch.export`` archive (:mod:`wresdyn.export.program`), and
+                       ``residual.onnx`` the same program as ONNX; observation [q, q̇, q̈, q_cmd] (rad, rad/s, rad/s², rad), (N, 4n);
                        output a joint torque [N m] added next to the actuators' (not clamped with them), as in
                        :class:`~wresdyn.sim.simulator.Simulator`.
 ``physics.json``       the identified parameters (:class:`~wresdyn.sim.physics.PhysicalParams`), ``export.json``
@@ -186,7 +187,7 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         prim.SetDocumentation("wresdyn residual: observation [q, qd, qdd, q_cmd] of wresdyn:joints (rad, rad/s, "
                               "rad/s^2, rad); output joint torque [N m] added to joint_f after the actuators "
                               "(wresdyn.export.residual_torque runs it)")
-        _set(prim, "wresdyn:torchscript", Sdf.ValueTypeNames.Asset, Sdf.AssetPath("residual.pt"))
+        _set(prim, "wresdyn:program", Sdf.ValueTypeNames.Asset, Sdf.AssetPath("residual.pt2"))
         _set(prim, "wresdyn:onnx", Sdf.ValueTypeNames.Asset, Sdf.AssetPath("residual.onnx"))
         _set(prim, "wresdyn:kind", Sdf.ValueTypeNames.Token, residual["kind"])
         _set(prim, "wresdyn:rateHz", Sdf.ValueTypeNames.Double, float(residual["rate_hz"]))
@@ -252,7 +253,7 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
         write_layers(robot, physics, tmp, ds.rate_hz, residual)
         physics.save(tmp / "physics.json")
         if residual is not None:
-            shutil.copyfile(run / "policy.pt", tmp / "residual.pt")
+            shutil.copyfile(run / "policy.pt", tmp / "residual.pt2")
             if (run / "policy.onnx").is_file():
                 shutil.copyfile(run / "policy.onnx", tmp / "residual.onnx")
             (tmp / "residual.json").write_text(json.dumps(residual, indent=2))

@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from ..choices import ModelKind, SolverKind, check_choice, check_number
+from ..progress import bar
 from ..sim.residual_kinds import residual_scale
 from .residual import ResidualConfig, obs_stats
 
@@ -258,47 +259,50 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
                                          "(simulation diverged)")
         pending.clear()
 
-    for it in range(start_it, stop):
-        h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
-        lr = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
-        traj, start = bank.draw(rng, cfg.windows, h)
-        noise = torch.stack([torch.randn((cfg.windows, 4 * robot.n_dof), generator=noise_gen, device=sim.device)
-                             for _ in range(h)]) if obs_noise > 0.0 else None
-        parts = step(traj, start, h, noise, lr)
-        sim_steps += cfg.windows * h * 2  # forward + backward through each step
-        row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps}
-        pending.append((row, parts))
-        if not graph or it < start_it + 2:
-            # eager: each iteration is checked before the next; with graphs, the first two of a session (warm-up and
-            # capture) wait for the device, so their rows' wall-clock is exact (a reference for throughput)
-            settle()
-            row["wall"] = time.perf_counter() - t0
-        validate = score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations)
-        report = (it + 1) % log_every == 0 or it + 1 == stop
-        if validate or report:
-            settle()
-            row["wall"] = time.perf_counter() - t0  # the device has caught up: the row's true wall-clock
-        if validate:
-            t_eval = time.perf_counter()
-            row["validation"] = score(policy)
-            t0 += time.perf_counter() - t_eval  # wall-clock counts training only
-            if row["validation"] < best["validation"]:
-                best = {"validation": row["validation"], "iteration": it + 1,
-                        "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
-            reached = stop_below is not None and row["validation"] <= stop_below
-        curve.append(row)
-        if report or reached:
-            msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
-            log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
-            if ckpt:
-                meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
-                        "sim_steps": sim_steps, "wall": row["wall"], "best_validation": best["validation"],
-                        "best_iteration": best["iteration"]}
-                save_checkpoint({"policy": policy.state_dict(), "optim": optim.state_dict(), "meta": meta,
-                                 "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, ckpt)
-        if reached:
-            log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
-            break
+    with bar(log, stop, "fit", start_it) as progress:
+        for it in range(start_it, stop):
+            h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
+            lr = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
+            traj, start = bank.draw(rng, cfg.windows, h)
+            noise = torch.stack([torch.randn((cfg.windows, 4 * robot.n_dof), generator=noise_gen, device=sim.device)
+                                 for _ in range(h)]) if obs_noise > 0.0 else None
+            parts = step(traj, start, h, noise, lr)
+            sim_steps += cfg.windows * h * 2  # forward + backward through each step
+            row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps}
+            pending.append((row, parts))
+            if not graph or it < start_it + 2:
+                # eager: each iteration is checked before the next; with graphs, the first two of a session (warm-up and
+                # capture) wait for the device, so their rows' wall-clock is exact (a reference for throughput)
+                settle()
+                row["wall"] = time.perf_counter() - t0
+            validate = score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations)
+            report = (it + 1) % log_every == 0 or it + 1 == stop
+            if validate or report:
+                settle()
+                row["wall"] = time.perf_counter() - t0  # the device has caught up: the row's true wall-clock
+            if validate:
+                t_eval = time.perf_counter()
+                row["validation"] = score(policy)
+                t0 += time.perf_counter() - t_eval  # wall-clock counts training only
+                if row["validation"] < best["validation"]:
+                    best = {"validation": row["validation"], "iteration": it + 1,
+                            "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
+                reached = stop_below is not None and row["validation"] <= stop_below
+            curve.append(row)
+            progress.update(1, f"H={h}" + (f"  loss {row['loss']:.2e}" if "loss" in row else ""))
+            if report or reached:
+                msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
+                log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "")
+                    + f"  {row['wall']:.0f}s")
+                if ckpt:
+                    meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
+                            "sim_steps": sim_steps, "wall": row["wall"], "best_validation": best["validation"],
+                            "best_iteration": best["iteration"]}
+                    save_checkpoint({"policy": policy.state_dict(), "optim": optim.state_dict(), "meta": meta,
+                                     "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, ckpt)
+            if reached:
+                log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
+                break
     settle()
     if out:
         Path(out, "curve.json").write_text(json.dumps(curve, indent=1))

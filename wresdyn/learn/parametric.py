@@ -80,10 +80,8 @@ class ParametricResidual(nn.Module):
         tau = tau - self.armature_unit * f(self.raw_armature) * qdd
         return torch.clamp(tau, -self.scale, self.scale)
 
-    @torch.jit.export
     def reset(self) -> None:
         pass
 
-    @torch.jit.export
     def residual_kind(self) -> str:
         return self.kind

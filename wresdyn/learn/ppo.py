@@ -3,7 +3,7 @@
 A run folder holds everything: ``config.json`` (the :class:`TrainConfig`), rsl-rl checkpoints
 ``model_<it>.pt`` (resumed from automatically after a kill), tensorboard event files, ``best.pt`` (the actor
 with the lowest validation error so far and the validation curve), and at the end the deterministic residual
-exported as TorchScript (``policy.pt``) and ONNX (``policy.onnx``) with its metadata (``residual.json``), plus
+exported through ``torch.export`` (``policy.pt``, :mod:`wresdyn.export.program`) and ONNX (``policy.onnx``) with its metadata (``residual.json``), plus
 ``train_summary.json`` (env-steps/s, s per iteration, the selected iteration).
 
 Model selection is made on the dataset's validation split: every ``ppo.select_every`` iterations the current
@@ -563,7 +563,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
 
 
 def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) -> None:
-    """Write ``policy.pt`` (TorchScript), ``policy.onnx`` and ``residual.json`` for a trained actor."""
+    """Write ``policy.pt`` (a ``torch.export`` archive), ``policy.onnx`` and ``residual.json`` for a trained actor."""
     from .residual import export_run_files, policy_from_actor
 
     policy = policy_from_actor(actor, mean, std, scale, cfg.residual.kind, cfg.residual.action_gain)
@@ -571,11 +571,12 @@ def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) ->
 
 
 def load_policy(run_dir: str | Path):
-    """The exported residual of a run: ``(policy, meta)`` with ``policy(obs) -> residual`` (TorchScript)."""
-    import torch
+    """The exported residual of a run: ``(policy, meta)`` with ``policy(obs) -> residual``
+    (:class:`~wresdyn.export.program.ExportedResidual`, on the CPU) and ``meta`` its ``residual.json``."""
+    from ..export.program import load_residual
 
     run_dir = Path(run_dir)
     path, meta_path = run_dir / "policy.pt", run_dir / "residual.json"
     if not path.is_file() or not meta_path.is_file():
         raise RunError(f"{run_dir}: no exported residual (policy.pt, residual.json); train it first")
-    return torch.jit.load(str(path)), json.loads(meta_path.read_text())
+    return load_residual(path), json.loads(meta_path.read_text())

@@ -45,8 +45,7 @@ __all__ = [
     "MLPResidualPolicy",
     "GRUResidualPolicy",
     "policy_from_actor",
-    "export_torchscript",
-    "export_onnx",
+    "export_policy",
     "export_run_files",
 ]
 
@@ -183,9 +182,8 @@ class ResidualPolicy(nn.Module):
     def _to_residual(self, a: torch.Tensor) -> torch.Tensor:
         return (self.gain * a).clamp(-1.0, 1.0) * self.scale
 
-    @torch.jit.export
     def residual_kind(self) -> str:
-        """``"torque"`` or ``"delta_action"`` (kept in the TorchScript export)."""
+        """``"torque"`` or ``"delta_action"`` (the exported residual has it too)."""
         return self.kind
 
 
@@ -200,14 +198,13 @@ class MLPResidualPolicy(ResidualPolicy):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self._to_residual(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)))
 
-    @torch.jit.export
     def reset(self) -> None:
         pass
 
 
 class GRUResidualPolicy(ResidualPolicy):
     """GRU + MLP residual. ``forward`` keeps the hidden state between calls; call ``reset()`` at the start of
-    each rollout (a batch of a new size also starts from zeros). ``step`` is the pure form (ONNX)."""
+    each rollout (a batch of a new size also starts from zeros). ``step`` is the pure form (what the exports hold)."""
 
     def __init__(self, gru: nn.GRU, mlp: nn.Module, obs_mean, obs_std, scale, kind: str, gain: float = 1.0,
                  norm: nn.Module | None = None) -> None:
@@ -229,7 +226,6 @@ class GRUResidualPolicy(ResidualPolicy):
         self.hidden = h
         return out
 
-    @torch.jit.export
     def reset(self) -> None:
         self.hidden = torch.zeros(self.gru.num_layers, 0, self.gru.hidden_size, device=self.obs_mean.device)
 
@@ -247,15 +243,9 @@ def policy_from_actor(actor: MLPModel, obs_mean, obs_std, scale, kind: str, gain
     return pol.eval()
 
 
-def export_torchscript(policy: ResidualPolicy, path: str | Path) -> Path:
-    """Save ``policy`` as TorchScript; ``torch.jit.load`` gives the same ``forward``/``reset``/``residual_kind``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    torch.jit.script(policy).save(str(path))
-    return path
+class _PureGRU(nn.Module):
+    """The GRU residual's pure step, (obs, h_in) -> (residual, h_out): what its exports hold."""
 
-
-class _OnnxGRU(nn.Module):
     def __init__(self, policy: GRUResidualPolicy) -> None:
         super().__init__()
         self.policy = policy
@@ -264,40 +254,41 @@ class _OnnxGRU(nn.Module):
         return self.policy.step(obs, h_in)
 
 
-def export_onnx(policy: ResidualPolicy, path: str | Path) -> Path:
-    """Save ``policy`` as ONNX with a dynamic batch axis.
+def export_policy(policy: ResidualPolicy, path: str | Path, onnx_path: str | Path | None = None):
+    """Save ``policy`` as a ``torch.export`` archive at ``path`` (:mod:`wresdyn.export.program`; loaded back by
+    :func:`~wresdyn.export.program.load_residual`) and, with ``onnx_path``, as ONNX, both with a dynamic batch axis.
 
     MLP: ``obs`` (N, 4n) -> ``residual`` (N, n). GRU: (``obs``, ``h_in`` (layers, N, H)) -> (``residual``,
-    ``h_out``); the caller carries the hidden state, starting from zeros.
+    ``h_out``); the caller carries the hidden state, starting from zeros (``load_residual`` does).
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    from ..export.program import export_onnx, save_program
+
     n_obs = policy.obs_mean.shape[0]
-    obs = torch.zeros(1, n_obs)
+    batch = torch.export.Dim("batch", min=1)
+    obs = torch.zeros(2, n_obs)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
+    meta = {"kind": policy.kind, "hidden": None}
     if isinstance(policy, GRUResidualPolicy):
-        module, args = _OnnxGRU(policy), (obs, torch.zeros(policy.gru.num_layers, 1, policy.gru.hidden_size))
+        module, args = _PureGRU(policy), (obs, torch.zeros(policy.gru.num_layers, 2, policy.gru.hidden_size))
+        shapes = {"obs": {0: batch}, "h_in": {1: batch}}
         names_in, names_out = ["obs", "h_in"], ["residual", "h_out"]
-        axes = {"obs": {0: "batch"}, "h_in": {1: "batch"}, "residual": {0: "batch"}, "h_out": {1: "batch"}}
+        meta["hidden"] = [policy.gru.num_layers, policy.gru.hidden_size]
     else:
-        module, args = policy, (obs,)
+        module, args, shapes = policy, (obs,), {"obs": {0: batch}}
         names_in, names_out = ["obs"], ["residual"]
-        axes = {"obs": {0: "batch"}, "residual": {0: "batch"}}
-    torch.onnx.export(module.eval(), args, str(path), input_names=names_in, output_names=names_out,
-                      dynamic_axes=axes, opset_version=18, dynamo=False)
-    return path
+    program = save_program(module, args, shapes, path, meta)
+    if onnx_path is not None:
+        export_onnx(program, onnx_path, names_in, names_out)
+    return program
 
 
 def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, **meta) -> None:
-    """Write what ``wresdyn eval`` and a deployment read from a run folder: ``policy.pt`` (TorchScript),
-    ``policy.onnx`` and ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``)."""
+    """Write what ``wresdyn eval`` and a deployment read from a run folder: ``policy.pt`` (the ``torch.export``
+    archive of :func:`export_policy`, under the name tools check for a trained run), ``policy.onnx`` and
+    ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``)."""
     import json
-    import warnings
 
     run_dir = Path(run_dir)
-    export_torchscript(policy, run_dir / "policy.pt")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the GRU batch-size warning does not apply: h_in is an input
-        export_onnx(policy, run_dir / "policy.onnx")
+    export_policy(policy, run_dir / "policy.pt", run_dir / "policy.onnx")
     info = {"kind": policy.kind, "joint_names": list(dataset.joint_names), "rate_hz": float(dataset.rate_hz),
             "scale": [float(s) for s in policy.scale], **meta,
             "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",

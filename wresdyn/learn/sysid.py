@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from ..choices import SolverKind, check_number
+from ..progress import bar
 from ..sim.physics import JOINT_FIELDS, PhysicalParams, PhysicsModel
 from .selection import ValidationScore
 
@@ -351,53 +352,55 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
                 best = {"validation": v, "iteration": 0, "state": _snapshot(model)}
         if on_search:
             on_search(searched)
-    for it in range(start_it, cfg.iterations):
-        h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
-        for group in optim.param_groups:
-            group["lr"] = group["scale"] * float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) *
-                                                 (1 + np.cos(np.pi * it / cfg.iterations)))
-        if it == effort_from:
-            file_effort = np.asarray(robot.effort, dtype=np.float64)
-            searched = [_grid_search(cfg, model, sim, train, rng, "delay", cfg.delay_grid,
-                                     lambda g: np.full(robot.n_dof, g * dt), log, weights)
-                        if "delay" in cfg.fit else None,
-                        _grid_search(cfg, model, sim, train, rng, "effort", cfg.effort_grid,
-                                     lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log,
-                                     weights)]
-            for choice in searched:
-                if choice is not None and on_search:
-                    on_search(choice)
-        bank.set_delay(model.delay_steps().float().to(sim.device))
-        window = bank.sample(rng, cfg.windows, h)
-        loss, parts = _window_loss(cfg, model, sim, window, weights)
-        loss = loss + cfg.w_prior * model.prior().to(loss.device)
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")
-        optim.zero_grad()
-        loss.backward()
-        if it < effort_from and model.u_effort.grad is not None:
-            model.u_effort.grad = None  # not yet part of the fit (Adam skips a parameter without gradient)
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-        optim.step()
-        model.project()
-        row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "loss": float(loss.detach()), **parts}
-        if score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations):
-            t_eval = time.perf_counter()
-            row["validation"] = score(model.values())
-            t0 += time.perf_counter() - t_eval
-            if row["validation"] < best["validation"]:
-                best = {"validation": row["validation"], "iteration": it + 1, "state": _snapshot(model)}
-        curve.append(row)
-        if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == cfg.iterations:
-            msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
-            log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") +
-                f"  {row['wall']:.0f}s")
-            if ckpt:
-                meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
-                        "wall": row["wall"], "best_validation": best["validation"],
-                        "best_iteration": best["iteration"]}
-                save_checkpoint({"model": model.state_dict(), "optim": optim.state_dict(), "meta": meta,
-                                 "best": best["state"] or {}}, ckpt)
+    with bar(log, cfg.iterations, "identify", start_it) as progress:
+        for it in range(start_it, cfg.iterations):
+            h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
+            for group in optim.param_groups:
+                group["lr"] = group["scale"] * float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) *
+                                                     (1 + np.cos(np.pi * it / cfg.iterations)))
+            if it == effort_from:
+                file_effort = np.asarray(robot.effort, dtype=np.float64)
+                searched = [_grid_search(cfg, model, sim, train, rng, "delay", cfg.delay_grid,
+                                         lambda g: np.full(robot.n_dof, g * dt), log, weights)
+                            if "delay" in cfg.fit else None,
+                            _grid_search(cfg, model, sim, train, rng, "effort", cfg.effort_grid,
+                                         lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log,
+                                         weights)]
+                for choice in searched:
+                    if choice is not None and on_search:
+                        on_search(choice)
+            bank.set_delay(model.delay_steps().float().to(sim.device))
+            window = bank.sample(rng, cfg.windows, h)
+            loss, parts = _window_loss(cfg, model, sim, window, weights)
+            loss = loss + cfg.w_prior * model.prior().to(loss.device)
+            if not torch.isfinite(loss):
+                raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")
+            optim.zero_grad()
+            loss.backward()
+            if it < effort_from and model.u_effort.grad is not None:
+                model.u_effort.grad = None  # not yet part of the fit (Adam skips a parameter without gradient)
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            optim.step()
+            model.project()
+            row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "loss": float(loss.detach()), **parts}
+            if score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations):
+                t_eval = time.perf_counter()
+                row["validation"] = score(model.values())
+                t0 += time.perf_counter() - t_eval
+                if row["validation"] < best["validation"]:
+                    best = {"validation": row["validation"], "iteration": it + 1, "state": _snapshot(model)}
+            curve.append(row)
+            progress.update(1, f"H={h}  loss {row['loss']:.2e}")
+            if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == cfg.iterations:
+                msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
+                log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") +
+                    f"  {row['wall']:.0f}s")
+                if ckpt:
+                    meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
+                            "wall": row["wall"], "best_validation": best["validation"],
+                            "best_iteration": best["iteration"]}
+                    save_checkpoint({"model": model.state_dict(), "optim": optim.state_dict(), "meta": meta,
+                                     "best": best["state"] or {}}, ckpt)
     if best["state"] is not None:
         model.load_state_dict(best["state"])
         log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")

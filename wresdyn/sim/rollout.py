@@ -52,7 +52,7 @@ def _policy_kind(policy, kind: str | None) -> str:
         return kind
     k = getattr(policy, "kind", None)
     if k is None and hasattr(policy, "residual_kind"):
-        k = policy.residual_kind()  # TorchScript export
+        k = policy.residual_kind()  # an exported residual (wresdyn.export.program)
     if k is None:
         raise ValueError("the residual kind is unknown: pass kind='torque' or 'delta_action'")
     return k
@@ -69,7 +69,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         sim: The simulator, ``sim.n_worlds`` equal to the window batch B.
         window: Start states, commands and PD targets (:meth:`~wresdyn.sim.bank.TrajectoryBank.window`).
         policy: Residual ``policy(obs (N, 4n)) -> residual (N, n)`` [N*m or rad] (attributes ``kind`` or a
-            TorchScript ``residual_kind()``, optional ``reset()``, ``scale``, ``obs_std``), or ``None``.
+            ``residual_kind()`` of an exported one, optional ``reset()``, ``scale``, ``obs_std``), or ``None``.
         kind: Residual kind; default the policy's.
         policy_worlds: Worlds the policy acts on (default all); the others run PD only in the same batch.
         residual: Instead of a policy, a precomputed open-loop residual of ``kind`` (B, L, n).

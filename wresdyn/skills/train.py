@@ -2,7 +2,8 @@
 
 A run folder holds ``config.json`` (what it trains: task, PPO, setting, the policy it started from), rsl-rl
 checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.learn.ppo.Runner`), ``policy.pt``
-(TorchScript: observation (N, 6n) -> action (N, n), the deterministic mean), ``train_summary.json`` and rsl-rl's
+(a ``torch.export`` archive, :mod:`wresdyn.export.program`: observation (N, 6n) -> action (N, n), the deterministic
+mean), ``train_summary.json`` and rsl-rl's
 per-iteration log ``train.log``. A run
 killed mid-way resumes from its last checkpoint; one asked to resume with another configuration is refused in
 one line, naming what changed.
@@ -150,10 +151,11 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
     wall = time.perf_counter() - t0
     actor = runner.alg.get_policy()
-    policy = torch.jit.script(actor.as_jit().cpu().eval())
-    tmp = run_dir / "policy.pt.tmp"
-    policy.save(str(tmp))
-    tmp.replace(run_dir / "policy.pt")
+    from ..export.program import save_program
+
+    obs = torch.zeros(2, actor.obs_dim)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
+    save_program(actor.as_jit().cpu().eval(), (obs,), ({0: torch.export.Dim("batch", min=1)},),
+                 run_dir / "policy.pt", {"kind": "skill"})
     summary = {"iterations": cfg.iterations, "iterations_this_session": todo, "wall_s_this_session": wall,
                "env_steps_this_session": env.steps_total, "failed_episodes": env.failed_total,
                "diverged": env.diverged_total, "episodes": env.episodes_total,
@@ -162,9 +164,11 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     return summary
 
 
-def load_skill(run_dir) -> torch.jit.ScriptModule:
-    """The trained skill of a run: ``policy(obs (N, 6n)) -> action (N, n)`` (TorchScript, CPU)."""
+def load_skill(run_dir) -> torch.nn.Module:
+    """The trained skill of a run: ``policy(obs (N, 6n)) -> action (N, n)`` (the exported program, CPU)."""
     path = Path(run_dir) / "policy.pt"
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir}: no policy.pt; train the skill first")
-    return torch.jit.load(str(path), map_location="cpu")
+    from ..export.program import load_program
+
+    return load_program(path)[0].module()
