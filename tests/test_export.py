@@ -207,3 +207,22 @@ def test_the_exported_robot_stands_on_the_floor_and_writes_an_animation(exported
     xforms = [p for p in stage.Traverse() if p.IsA(UsdGeom.Xformable)]
     assert xforms and any(UsdGeom.Xformable(p).GetTimeSamples() or
                           any(a.GetNumTimeSamples() > 1 for a in p.GetAttributes()) for p in stage.Traverse())
+
+
+@pytest.mark.filterwarnings("ignore:`torch.jit:DeprecationWarning")  # writing the old format on purpose
+def test_a_torchscript_or_corrupt_model_file_is_refused_in_one_line(tmp_path):
+    """Run folders written before the torch.export format hold TorchScript ``policy.pt`` files: loading one names the
+    file and what to do, as does a file that is no archive at all."""
+    import torch
+
+    from wresdyn.errors import WresdynError
+    from wresdyn.export.program import load_program
+
+    old = tmp_path / "policy.pt"
+    torch.jit.save(torch.jit.script(torch.nn.Linear(2, 2)), str(old))
+    with pytest.raises(WresdynError, match="TorchScript file.*again"):
+        load_program(old)
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(WresdynError, match="not a torch.export archive"):
+        load_program(bad)

@@ -21,9 +21,12 @@ import json
 import logging
 import os
 import warnings
+import zipfile
 from pathlib import Path
 
 import torch
+
+from ..errors import WresdynError
 
 __all__ = ["save_program", "load_program", "export_onnx", "ExportedResidual", "load_residual"]
 
@@ -51,8 +54,16 @@ def save_program(module, args: tuple, dynamic_shapes, path, meta: dict):
 
 def load_program(path):
     """The program of an archive and its metadata: ``(program, meta)``."""
+    data = Path(path).read_bytes()
+    try:
+        names = zipfile.ZipFile(io.BytesIO(data)).namelist()
+    except zipfile.BadZipFile:
+        raise WresdynError(f"{path}: not a torch.export archive (corrupt or not a model file)") from None
+    if not any(n.endswith("archive_format") for n in names):
+        raise WresdynError(f"{path}: a TorchScript file, which this version of wresdyn no longer reads; train or "
+                           "export the run again") from None
     extra = {META: ""}
-    program = torch.export.load(io.BytesIO(Path(path).read_bytes()), extra_files=extra)
+    program = torch.export.load(io.BytesIO(data), extra_files=extra)
     return program, json.loads(extra[META] or "{}")
 
 
