@@ -1,0 +1,67 @@
+"""Drive saturation on the "real" robot while a floor skill stands on one foot: redeploy a ``wresdyn deploy --floor``
+run's policies on its held-out stepping and kick motions and print, per policy, the four joints whose drive torque
+sat at the real robot's torque limit for the largest share of physics substeps (over the motions still running).
+
+    python benchmarks/floor_saturation.py RUN [--data DATASET]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("run")
+    p.add_argument("--data", default=None, help="the dataset whose mismatch is the real robot (default: shipped)")
+    args = p.parse_args()
+
+    import torch
+
+    from wresdyn.data.dataset import load_dataset
+    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.paths import DEFAULT_DATASET
+    from wresdyn.robot.description import load_robot
+    from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
+    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.plants import RealPlant
+    from wresdyn.skills.train import load_skill
+
+    torch.set_num_threads(1)
+    run = Path(args.run)
+    res = json.loads((run / "results.json").read_text())
+    cfg, task = res["config"], FloorTaskConfig(**res["task"])
+    ds = load_dataset(args.data or DEFAULT_DATASET)
+    stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
+    counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}  # the run's own held-out draws
+    motions = make_floor_motions(stand, floating, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"])["heldout"]
+    real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
+    names = list(floating.joint_names)
+    for family in ("step", "kick"):
+        fam = [m for m in motions if m.family == family]
+        for name in res["policies"]:
+            plant = RealPlant(real, len(fam), task.decimation, seed=cfg["seed"] + 100,
+                              imu_noise=(task.gyro_noise, task.gravity_noise))
+            env = FloorTrackingEnv(plant, fam, task, random_start=False)
+            policy = load_skill(run / "skills" / name)
+            obs, alive, share = env.get_observations()["policy"], np.ones(len(fam), bool), []
+            limit = np.abs(plant.lim[:, 1])
+            with torch.no_grad():
+                for _ in range(env.max_episode_length):
+                    td, _, done, _ = env.step(policy(obs))
+                    obs = td["policy"]
+                    if alive.any():  # share of this step's substeps at the limit, per joint
+                        share.append((np.abs(plant.tau) >= 0.999 * limit).mean(1)[alive])
+                    alive &= ~done.numpy().astype(bool)
+            mean = np.concatenate(share).mean(0)
+            top = np.argsort(-mean)[:4]
+            print(f"{family:5s} {name:15s} saturated substeps: "
+                  + ", ".join(f"{names[j]} {100 * mean[j]:.0f} %" for j in top), flush=True)
+
+
+if __name__ == "__main__":
+    main()
