@@ -1,4 +1,5 @@
-"""Progress of long loops (fits, identification) you can read: a bar on a terminal, plain lines elsewhere.
+"""Progress of long loops (fits, identification, PPO, recordings) you can read: a bar on a terminal, plain lines
+elsewhere.
 
 A command makes one :class:`Log` and hands it to the library as its ``log`` printer. Its lines go to the terminal
 (unless ``quiet``) and, always, to a log file in the run folder. A loop asks :func:`bar` for a progress bar over
@@ -10,11 +11,12 @@ and tests see only their lines.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from pathlib import Path
 
-__all__ = ["Log", "bar"]
+__all__ = ["Log", "bar", "into_file"]
 
 
 class Log:
@@ -111,6 +113,18 @@ def bar(log, total: int, desc: str, initial: int = 0) -> _Bar:
     """A progress bar over iterations ``initial..total`` of a loop that prints through ``log`` (a context manager:
     ``with bar(log, n, "fit") as b: ... b.update(1)``); drawn only when ``log`` is a :class:`Log`."""
     return _Bar(log, total, desc, initial)
+
+
+@contextlib.contextmanager
+def into_file(path):
+    """Within the block, what a library prints on stdout (rsl-rl's networks and per-iteration tables) is appended to
+    ``path`` instead of the terminal, where it would bury the bar; ``None`` leaves stdout as it is (torchrun ranks
+    other than 0, which have no run folder)."""
+    if path is None:
+        yield
+        return
+    with open(path, "a") as f, contextlib.redirect_stdout(f):
+        yield
 
 
 def _clock(seconds: float) -> str:

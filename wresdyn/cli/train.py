@@ -1,7 +1,10 @@
 """``wresdyn train DATA``: learn a residual with PPO on the dataset's training split (resumes a killed run).
 
 Several GPUs: ``torchrun --nproc_per_node N -m wresdyn train DATA --device cuda ...`` (one process per GPU,
-``--num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.learn.ppo.train`)."""
+``--num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.learn.ppo.train`).
+
+Every line printed, and rsl-rl's per-iteration tables, are in ``OUT/train.log``; on a terminal a progress bar shows
+the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing."""
 
 from __future__ import annotations
 
@@ -39,6 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "--set ppo.desired_kl=0.05 --set residual.hidden_dims=128,64; repeatable, applied last")
     p.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD trajectories afterwards (like `wresdyn eval`)")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing while training (OUT/train.log keeps every line and rsl-rl's tables; the "
+                        "progress bar is not drawn)")
 
 
 def config_from_args(args: argparse.Namespace):
@@ -73,21 +79,27 @@ def run(args: argparse.Namespace) -> int:
     from ..data.loading import load_data
 
     ds, robot = load_data(args.data, args.robot, args.gains)
-    print(f"training a {cfg.residual.kind} residual ({cfg.residual.arch}) on {len(ds.split('train'))} trajectories of "
+    from pathlib import Path
+
+    from ..progress import Log
+
+    main = Ranks.from_env().main  # torchrun: rank 0 reports and evaluates
+    log = Log(Path(args.out) / "train.log" if main else None, quiet=args.quiet or not main)
+    log(f"training a {cfg.residual.kind} residual ({cfg.residual.arch}) on {len(ds.split('train'))} trajectories of "
           f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.ppo.num_envs} worlds x {cfg.ppo.num_steps_per_env} steps "
-          f"-> {args.out}", flush=True)
+          f"-> {args.out}")
     from ..learn.gradfit import load_physics
     from ..sim.warmup import compile_kernels
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=cfg.env.solver, device=Ranks.from_env().device(cfg.ppo.device),
-                    physics=load_physics(cfg.env.physics or "", robot))
+                    physics=load_physics(cfg.env.physics or "", robot), say=log)
     try:
-        summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data)
+        summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data, log=log)
     except RunError as e:
         raise UserError(str(e)) from None
-    if not Ranks.from_env().main:  # torchrun: rank 0 reports and evaluates
+    if not main:
         return 0
-    print(json.dumps(summary, indent=2))
+    log(json.dumps(summary, indent=2))
     if args.eval:
         from ..evaluation.evaluate_run import evaluate_run
 

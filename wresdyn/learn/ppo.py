@@ -4,7 +4,9 @@ A run folder holds everything: ``config.json`` (the :class:`TrainConfig`), rsl-r
 ``model_<it>.pt`` (resumed from automatically after a kill), tensorboard event files, ``best.pt`` (the actor
 with the lowest validation error so far and the validation curve), and at the end the deterministic residual
 exported through ``torch.export`` (``policy.pt``, :mod:`wresdyn.export.program`) and ONNX (``policy.onnx``) with its metadata (``residual.json``), plus
-``train_summary.json`` (env-steps/s, s per iteration, the selected iteration).
+``train_summary.json`` (env-steps/s, s per iteration, the selected iteration) and ``train.log``: rsl-rl's networks
+and per-iteration tables (kept off the terminal, where a progress bar stands per iteration, :func:`on_iteration`)
+and, from ``wresdyn train``, every line the command printed.
 
 Model selection is made on the dataset's validation split: every ``ppo.select_every`` iterations the current
 residual replays the validation trajectories open loop (:class:`wresdyn.learn.selection.ValidationScore`), and
@@ -33,7 +35,7 @@ from .rewards import RewardConfig
 from .runs import RunError, check_resume, load_checkpoint, save_checkpoint
 
 __all__ = ["PPOConfig", "TrainConfig", "Ranks", "default_config", "config_from_dict", "parse_overrides", "apply_overrides",
-           "set_fields", "set_field", "runner_cfg", "Runner", "train", "latest_checkpoint", "load_policy", "RunError",
+           "set_fields", "set_field", "runner_cfg", "Runner", "on_iteration", "train", "latest_checkpoint", "load_policy", "RunError",
            "RESUME_MAY_CHANGE", "DATASET_IDENTITY"]
 
 
@@ -371,6 +373,25 @@ class Runner(OnPolicyRunner):
         return data.get("infos")
 
 
+def on_iteration(runner, progress, each=None) -> None:
+    """Advance ``progress`` (a :func:`wresdyn.progress.bar`) by one after each PPO iteration of ``runner``, noting
+    the mean episode reward, and call ``each(kw)`` with what rsl-rl logs of it (``collect_time``, ``learn_time``, ...).
+
+    rsl-rl's ``OnPolicyRunner.learn`` reports an iteration only through ``runner.logger.log``, so the hook wraps it.
+    """
+    log_iteration = runner.logger.log
+
+    def logged(*a, **kw):
+        out = log_iteration(*a, **kw)
+        rewards = getattr(runner.logger, "rewbuffer", None)  # the episodes finished in the last 100 resets
+        progress.update(1, f"reward {float(np.mean(rewards)):.3g}" if rewards else None)
+        if each is not None:
+            each(kw)
+        return out
+
+    runner.logger.log = logged
+
+
 def _check_resume(run_dir: Path, cfg_path: Path, saved: dict) -> None:
     """Refuse to resume ``run_dir`` with another configuration or other data, naming what changed."""
     if not cfg_path.is_file():
@@ -391,7 +412,7 @@ def _check_resume(run_dir: Path, cfg_path: Path, saved: dict) -> None:
 
 
 def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = True,
-          data_path: str | Path | None = None, stop_below: float | None = None) -> dict:
+          data_path: str | Path | None = None, stop_below: float | None = None, log=print) -> dict:
     """Train a residual with PPO on the ``train`` split of ``dataset``; resume from the latest checkpoint.
 
     Args:
@@ -403,6 +424,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         data_path: Where ``dataset`` was read from, recorded in ``config.json`` for ``wresdyn eval``.
         stop_below: Stop at the first validation check whose error is at or below this [rad] (time to fidelity,
             ``benchmarks/time_to_fidelity.py``); the run is then exported as if it had ended there.
+        log: Printer of the run's lines; a :class:`wresdyn.progress.Log` also draws a bar over the iterations.
 
     Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``num_envs / WORLD_SIZE`` worlds on its own device
     (``cuda:<LOCAL_RANK>``, or the CPU over gloo) with seed ``seed + RANK``, and rsl-rl averages the gradients
@@ -418,6 +440,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     """
     import torch
 
+    from ..progress import bar, into_file
     from .replay_env import ReplayEnv
     from .residual import obs_stats, policy_from_actor
     from .selection import ValidationScore
@@ -452,15 +475,18 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
                     weights=dataset.fit_weights())
     if ranks.main:
         run_dir.mkdir(parents=True, exist_ok=True)
+    log(f"{num_envs} replay worlds on {env.device}, {type(env.sim.solver).__name__}")  # writes the waiting lines too
     rcfg = runner_cfg(cfg, run_dir.name)
     rcfg["check_for_nan"] = not env.graph  # a graph-replayed step is not checked per step (a host sync each)
-    runner = Runner(env, rcfg, log_dir=str(run_dir) if ranks.main else None, device=str(env.device))
+    rsl_rl_log = run_dir / "train.log" if ranks.main else None
+    with into_file(rsl_rl_log):  # rsl-rl prints the networks
+        runner = Runner(env, rcfg, log_dir=str(run_dir) if ranks.main else None, device=str(env.device))
     start = 0
     if ckpt is not None:
         runner.load(str(ckpt), map_location=str(env.device))
         start = runner.current_learning_iteration + 1
         runner.current_learning_iteration = start
-        print(f"resuming {run_dir} from {ckpt.name} at iteration {start}")
+        log(f"resuming {run_dir} from {ckpt.name} at iteration {start}")
     if ranks.main:  # written once the checkpoint has loaded: a refused resume leaves the folder as it was
         tmp = cfg_path.with_name(cfg_path.name + ".tmp")
         tmp.write_text(json.dumps(saved, indent=2))
@@ -478,46 +504,47 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         value = score(policy_from_actor(runner.alg.get_policy(), mean, std, env.scale.cpu().numpy(),
                                         cfg.residual.kind, cfg.residual.action_gain))
         curve.append({"iteration": 0, "validation": value, "diverged": score.last_diverged})
-        print(f"validation at the start: {value:.4f} rad", flush=True)
+        log(f"validation at the start: {value:.4f} rad")
         actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
         best = {"actor": actor, "meta": {"iteration": 0, "validation": value, "validation_curve": curve}}
         save_checkpoint(best, best_path)
     phases = {"collect": 0.0, "learn": 0.0}  # rsl-rl's own split of each iteration [s]
-    log_iteration = runner.logger.log
 
-    def timed_log(*a, **kw):
+    def timed(kw):
         phases["collect"] += kw.get("collect_time", 0.0)
         phases["learn"] += kw.get("learn_time", 0.0)
-        return log_iteration(*a, **kw)
 
-    runner.logger.log = timed_log
+    progress = bar(log, cfg.ppo.iterations, "train", start)
+    on_iteration(runner, progress, timed)
     t0, eval_s, done = time.perf_counter(), 0.0, start
     reached = None
-    while done < cfg.ppo.iterations and reached is None:
-        # learn up to the next selection point (rsl-rl continues from current_learning_iteration)
-        n = min(every - done % every, cfg.ppo.iterations - done)
-        runner.current_learning_iteration = done
-        runner.learn(n)
-        done += n
-        if score is not None:
-            t_eval = time.perf_counter()
-            value = score(policy_from_actor(runner.alg.get_policy(), mean, std, env.scale.cpu().numpy(),
-                                            cfg.residual.kind, cfg.residual.action_gain))
-            curve.append({"iteration": done, "validation": value, "diverged": score.last_diverged,
-                          "wall_s": t_eval - t0 - eval_s})
-            print(f"validation after {done} iterations: {value:.4f} rad", flush=True)
-            if stop_below is not None and value <= stop_below:
-                reached = done
-            if best is None or value < best["meta"]["validation"]:
-                actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
-                best = {"actor": actor, "meta": {"iteration": done, "validation": value}}
-            best["meta"]["validation_curve"] = curve
-            save_checkpoint(best, best_path)
-            eval_s += time.perf_counter() - t_eval
-        if ranks.world > 1 and stop_below is not None:  # every rank stops where rank 0 reached the target
-            flag = torch.tensor([-1 if reached is None else reached], device=env.device)
-            torch.distributed.broadcast(flag, src=0)
-            reached = None if int(flag) < 0 else int(flag)
+    with progress:
+        while done < cfg.ppo.iterations and reached is None:
+            # learn up to the next selection point (rsl-rl continues from current_learning_iteration)
+            n = min(every - done % every, cfg.ppo.iterations - done)
+            runner.current_learning_iteration = done
+            with into_file(rsl_rl_log):  # rsl-rl's per-iteration table
+                runner.learn(n)
+            done += n
+            if score is not None:
+                t_eval = time.perf_counter()
+                value = score(policy_from_actor(runner.alg.get_policy(), mean, std, env.scale.cpu().numpy(),
+                                                cfg.residual.kind, cfg.residual.action_gain))
+                curve.append({"iteration": done, "validation": value, "diverged": score.last_diverged,
+                              "wall_s": t_eval - t0 - eval_s})
+                log(f"validation after {done} iterations: {value:.4f} rad")
+                if stop_below is not None and value <= stop_below:
+                    reached = done
+                if best is None or value < best["meta"]["validation"]:
+                    actor = {k: v.detach().cpu().clone() for k, v in runner.alg.get_policy().state_dict().items()}
+                    best = {"actor": actor, "meta": {"iteration": done, "validation": value}}
+                best["meta"]["validation_curve"] = curve
+                save_checkpoint(best, best_path)
+                eval_s += time.perf_counter() - t_eval
+            if ranks.world > 1 and stop_below is not None:  # every rank stops where rank 0 reached the target
+                flag = torch.tensor([-1 if reached is None else reached], device=env.device)
+                torch.distributed.broadcast(flag, src=0)
+                reached = None if int(flag) < 0 else int(flag)
     wall = time.perf_counter() - t0 - eval_s
     todo = done - start
     it_time = runner.logger.tot_time  # collection + update, without start-up
