@@ -3,7 +3,9 @@ zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wr
 
 Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tracking_heldout.png`` and
 ``OUT/deployed_heldout.usda``; the corrections (``OUT/calibrated``, ``OUT/delta_action``) are fitted on DATA unless
-given, and the four policies live in ``OUT/skills/``. Rerunning the same command resumes.
+given, and the four policies live in ``OUT/skills/``. Rerunning the same command resumes. Every line printed is also
+in ``OUT/deploy.log`` (rsl-rl's tables in each policy's ``train.log``); on a terminal a progress bar per policy shows
+the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the motions and of PPO")
     p.add_argument("--device", default="cpu", help="cpu or cuda:0 (the real robot always steps on the CPU)")
     p.add_argument("--no-animation", action="store_true", help="skip the USD animation")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing while deploying (OUT/deploy.log keeps every line; no progress bars)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,21 +74,23 @@ def run(args: argparse.Namespace) -> int:
     cfg = replace(cfg, seed=args.seed, device=args.device, **kw)
     ds, robot = load_data(args.data)
     mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
-    print(f"wresdyn deploy: skills {'on the floor' if args.floor else 'on the stand'} on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
-          f"real robot {'from ' + args.mismatch if args.mismatch else 'as recorded in the dataset'} -> {args.out}",
-          flush=True)
+    from ..progress import Log
+
+    log = Log(Path(args.out) / "deploy.log", quiet=args.quiet)
+    log(f"wresdyn deploy: skills {'on the floor' if args.floor else 'on the stand'} on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
+          f"real robot {'from ' + args.mismatch if args.mismatch else 'as recorded in the dataset'} -> {args.out}")
     from ..sim.warmup import compile_kernels
 
     # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
     variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
-    compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=args.device)
+    compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=args.device, say=log)
     calibrated = Path(args.calibrated) / "physics.json" if args.calibrated else None
     if calibrated is not None and calibrated.is_file():  # the calibrated plant's kernels (its friction is live)
         from ..sim.physics import PhysicalParams
 
         compile_kernels(robot, ds.rate_hz, ("forward",), device=args.device,
-                        physics=PhysicalParams.load(calibrated, robot))
+                        physics=PhysicalParams.load(calibrated, robot), say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
                   mismatch=mismatch, animation=not args.no_animation,
-                  log=lambda s: print(s, flush=True))
+                  log=log)
     return 0

@@ -11,7 +11,6 @@ one line, naming what changed.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -102,11 +101,14 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         init: A skill run folder to start from (fine-tuning): its last checkpoint's actor, critic and optimiser;
             the iteration count starts at 0.
         meta: What else identifies the run (setting, motions), stored in ``config.json`` and checked on resume.
+        log: Printer of the run's lines; a :class:`wresdyn.progress.Log` also draws a bar over the iterations,
+            named after the run folder (the policy).
 
     Returns:
         The summary written to ``train_summary.json``.
     """
-    from ..learn.ppo import Runner, latest_checkpoint
+    from ..learn.ppo import Runner, latest_checkpoint, on_iteration
+    from ..progress import bar, into_file
     from ..learn.runs import check_resume
 
     run_dir = Path(run_dir)
@@ -123,7 +125,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     torch.manual_seed(cfg.seed)
     np.random.seed(cfg.seed)
     run_dir.mkdir(parents=True, exist_ok=True)
-    with open(run_dir / "train.log", "a") as f, contextlib.redirect_stdout(f):  # rsl-rl prints the networks
+    with into_file(run_dir / "train.log"):  # rsl-rl prints the networks
         runner = Runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), log_dir=str(run_dir),
                         device=str(env.device))
     start = 0
@@ -146,8 +148,9 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     t0 = time.perf_counter()
     if todo:
         runner.current_learning_iteration = start
-        with open(run_dir / "train.log", "a") as f, contextlib.redirect_stdout(f):  # rsl-rl's per-iteration table
-            runner.learn(todo)
+        with bar(log, cfg.iterations, run_dir.name, start) as progress, into_file(run_dir / "train.log"):
+            on_iteration(runner, progress)
+            runner.learn(todo)  # rsl-rl's per-iteration table goes to train.log
         runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
     wall = time.perf_counter() - t0
     actor = runner.alg.get_policy()
