@@ -11,6 +11,9 @@ also stored in the dataset's meta.
 Logs: ``--logs A.csv B.npz RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, SAGE runs, LeRobot datasets;
 docs/dataset.md) onto the ``--rate`` grid instead, with a ``--map`` file and splits by ``--assign`` / ``--split-map``
 patterns or fractions, and reports the same PD-only gap.
+
+Every line printed is also in ``OUT/collect.log``; on a terminal a progress bar over the trajectories shows the
+elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="data", help="output folder (default: data)")
     p.add_argument("--no-tau", action="store_true", help="do not store the measured (diagnostic) torque")
     p.add_argument("--no-gap", action="store_true", help="skip the PD-only Newton replay that measures the gap")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing while collecting (OUT/collect.log keeps every line; no progress bar)")
     p.add_argument("--excitation", default="auto", choices=("auto", "foot", "joint"),
                    help="foot: IK paths of --frames (the paper's); joint: joint-space multisines, chirps and steps "
                         "within limits, speed and effort; auto (default): foot when --frames is given or the robot "
@@ -67,11 +72,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="logs: this fraction of the unassigned runs goes to heldout (whole runs, deterministic)")
 
 
-def _say(line: str) -> None:
-    print(line, flush=True)
-
-
-def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path) -> int:
+def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path, log) -> int:
     """``--logs``: read every run, assign splits, report the sampling of each log and the PD-only gap, and only
     then write the dataset (an error anywhere leaves nothing behind)."""
     from ..data.importers import SplitRule, import_runs, load_split_map, parse_assign
@@ -86,21 +87,21 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path) -> int:
                      args.heldout_fraction)
     ds = import_runs(args.logs, robot, args.rate, log_map, rule, store_tau=not args.no_tau)
     for p in rule.unused([tr.name for tr in ds.trajectories]):
-        _say(f"note: split pattern {p!r} matches no run")
-    _say(f"imported {len(ds.trajectories)} run(s) onto {args.rate:g} Hz:")
+        log(f"note: split pattern {p!r} matches no run")
+    log(f"imported {len(ds.trajectories)} run(s) onto {args.rate:g} Hz:")
     for s in ds.meta["source_logs"]:
-        _say(f"  {s['name']:28s} {s['split']:10s} {s['format']:7s} {s['samples']:6d} samples {s['duration_s']:8.2f} s  "
+        log(f"  {s['name']:28s} {s['split']:10s} {s['format']:7s} {s['samples']:6d} samples {s['duration_s']:8.2f} s  "
              f"median {s['median_rate_hz']:8.3f} Hz  jitter {100 * s['jitter']:.3f} %  max gap "
              f"{1e3 * s['max_gap_s']:.2f} ms")
     excluded = ds.meta["excluded_joints"]
     if excluded:
-        _say(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
+        log(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
     if not args.no_gap:
-        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "run(s)")
+        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "run(s)", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
     counts = ", ".join(f"{len(ds.split(s))} {s}" for s in ("train", "validation", "heldout", "ood") if ds.split(s))
-    _say(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {counts}")
+    log(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {counts}")
     return 0
 
 
@@ -116,8 +117,11 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--rate must be > 0, not {args.rate}")
     robot = load_robot(args.robot or DEFAULT_ROBOT, gains=args.gains)
     path = out / "dataset.npz"
+    from ..progress import Log
+
+    log = Log(out / "collect.log", quiet=args.quiet)
     if args.logs:
-        return _import_logs(args, robot, out, path)
+        return _import_logs(args, robot, out, path, log)
 
     robot.check_replay()  # simulating needs PD gains and stated effort limits
     import dataclasses
@@ -144,22 +148,22 @@ def run(args: argparse.Namespace) -> int:
         if not args.max_velocity > 0:
             raise UserError(f"--max-velocity must be > 0, not {args.max_velocity}")
         cfg = dataclasses.replace(cfg, max_velocity=args.max_velocity, joint_max_velocity=args.max_velocity)
-    _say(f"collecting {sum(counts.values())} trajectories of {args.duration:g} s at {args.rate:g} Hz on "
+    log(f"collecting {sum(counts.values())} trajectories of {args.duration:g} s at {args.rate:g} Hz on "
          f"{robot.source.name} with mismatch {'none (nominal)' if mismatch.is_nominal() else args.mismatch}, "
          f"seed {args.seed}")
     ds = collect(robot, mismatch, counts, args.duration, args.rate, args.seed, cfg, store_tau=not args.no_tau,
-                 progress=_say)
+                 progress=log)
     if not args.no_gap:
-        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "trajectories")
+        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "trajectories", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
     plot_spectrum({s: [tr.q_cmd for tr in ds.split(s)] for s in SPLITS}, args.rate, out / "spectrum.png",
                   ds.joint_names)
-    _say(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {out / 'spectrum.png'}")
+    log(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {out / 'spectrum.png'}")
     return 0
 
 
-def _pd_gaps(ds, robot, rate: float, what: str) -> dict:
+def _pd_gaps(ds, robot, rate: float, what: str, log) -> dict:
     """The PD-only gap of every evaluation split of ``ds`` (:func:`~wresdyn.evaluation.open_loop.pd_gap`, over the
     fitted joints), announced line by line; ``what`` names the trajectories in the lines ("run(s)", ...)."""
     from ..evaluation.open_loop import pd_gap
@@ -167,16 +171,16 @@ def _pd_gaps(ds, robot, rate: float, what: str) -> dict:
 
     excluded = ds.excluded_joints
     if any(ds.split(s) for s in ("validation", "heldout", "ood")):
-        compile_kernels(robot, rate, ("forward",), say=_say)
+        compile_kernels(robot, rate, ("forward",), say=log)
     gaps = {}
     for split in ("validation", "heldout", "ood"):
         trajs = ds.split(split)
         if trajs:
-            _say(f"replaying {len(trajs)} {split} {what} PD-only in Newton (nominal robot)")
+            log(f"replaying {len(trajs)} {split} {what} PD-only in Newton (nominal robot)")
             g = gaps[split] = pd_gap(robot, trajs, rate, weights=ds.fit_weights())
             line = f"  PD-only vs real on {split}: mean |dq| {g['mean']:.4f} +- {g['std']:.4f} rad"
             if excluded:
                 line += (f" over the {len(ds.fitted_joints)} fitted joints (excluded: "
                          + ", ".join(f"{j} {g['per_joint'][j]:.4f} rad" for j in excluded) + ")")
-            _say(line + (f"; {g['diverged']} replay(s) diverged" if g["diverged"] else ""))
+            log(line + (f"; {g['diverged']} replay(s) diverged" if g["diverged"] else ""))
     return gaps

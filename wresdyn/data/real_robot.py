@@ -431,10 +431,11 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
             ``None``).
         store_tau: Keep the measured (diagnostic) torque in the trajectories.
         progress: Optional ``callable(str)`` receiving the plan's lines (foot IK: the workspace), a line per rejected
-            draw and one line per recorded trajectory.
+            draw and one line per recorded trajectory; a :class:`wresdyn.progress.Log` also draws a bar over them.
     """
     import time
 
+    from ..progress import bar
     from . import excitation as ex
     from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 
@@ -447,26 +448,28 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
     families = {split: plan.families(split) for split in SPLITS}
     total, done = sum(counts.values()), 0
     trajs, params = [], {}
-    for split in SPLITS:
-        for i in range(counts.get(split, 0)):
-            start = time.perf_counter()
-            seeds = np.random.SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i)).spawn(2)
-            rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
-            family = families[split][i % len(families[split])]
-            exc = plan.generate(family, duration, rate_hz, rng_exc, progress)
-            q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
-            q, qd, tau = real.record(q_cmd, rng_noise)
-            q, qd = _f32(q), _f32(qd)
-            name = f"{split}_{i:03d}"
-            t = np.arange(len(q_cmd)) / rate_hz
-            tau = _f32(tau) if store_tau else None
-            trajs.append(Trajectory(name, split, t, q, qd, derive_qdd(qd, rate_hz), q_cmd, tau))
-            params[name] = exc.params
-            done += 1
-            if progress:
-                progress(f"[{done:>{len(str(total))}}/{total}] {name:<14} {family:<9} draws={exc.params['draws']:<2} "
-                         f"{plan.describe(exc)}  "
-                         f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")
+    with bar(progress, total, "collect") as recorded:
+        for split in SPLITS:
+            for i in range(counts.get(split, 0)):
+                start = time.perf_counter()
+                seeds = np.random.SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i)).spawn(2)
+                rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+                family = families[split][i % len(families[split])]
+                exc = plan.generate(family, duration, rate_hz, rng_exc, progress)
+                q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
+                q, qd, tau = real.record(q_cmd, rng_noise)
+                q, qd = _f32(q), _f32(qd)
+                name = f"{split}_{i:03d}"
+                t = np.arange(len(q_cmd)) / rate_hz
+                tau = _f32(tau) if store_tau else None
+                trajs.append(Trajectory(name, split, t, q, qd, derive_qdd(qd, rate_hz), q_cmd, tau))
+                params[name] = exc.params
+                done += 1
+                if progress:
+                    progress(f"[{done:>{len(str(total))}}/{total}] {name:<14} {family:<9} "
+                             f"draws={exc.params['draws']:<2} {plan.describe(exc)}  "
+                             f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")
+                recorded.update(1)
     meta = {"generator": "wresdyn collect", "duration_s": duration,
             "excitation": {k: v for k, v in dataclasses.asdict(cfg).items()},
             **plan.meta(),
