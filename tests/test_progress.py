@@ -239,3 +239,89 @@ def test_fit_quiet_writes_only_the_log(tmp_path, capsys):
     log = (run / "fit.log").read_text().splitlines()
     assert log[0].startswith("gradient fit of a torque residual (mlp) on 1 trajectories")
     assert sum(ln.startswith("iter ") for ln in log) == 3 and log[-1].startswith("done: ")
+
+
+# the other long jobs on the same helper: PPO of the residual (train), the skills' PPO (deploy), recording (collect)
+
+PLAIN_END = r"^{}: {n}/{n} \(100 %\), \d+:\d\d elapsed, 0:00 left"
+
+
+def _plain(desc: str, n: int):
+    """The plain progress line of the last of ``n`` iterations of the loop ``desc``."""
+    return re.compile(PLAIN_END.format(re.escape(desc), n=n), re.M)
+
+
+def test_ppo_draws_a_line_per_iteration_and_keeps_rsl_rls_tables_in_the_run(robot, data, tmp_path):
+    import io
+
+    from test_ppo import tiny
+
+    from wresdyn.learn.ppo import train
+    from wresdyn.progress import Log
+
+    out = io.StringIO()  # not a terminal, every=0: a plain line after every iteration
+    run = tmp_path / "run"
+    train(data, robot, tiny(iterations=2), run, log=Log(run / "train.log", stream=out, every=0.0))
+    text = out.getvalue()
+    assert re.search(r"^train: 1/2 \(50 %\), \d+:\d\d elapsed, \d+:\d\d left, reward -?\d", text, re.M), text
+    assert _plain("train", 2).search(text) and "validation after 2 iterations" in text
+    assert "Learning iteration" not in text  # rsl-rl's block is in the run folder, not on the screen
+    kept = (run / "train.log").read_text()
+    assert kept.count("Learning iteration") == 2 and "validation after 2 iterations" in kept
+
+
+def test_train_quiet_prints_nothing_and_train_log_has_every_line(data, tmp_path, capsys):
+    path = tmp_path / "dataset.npz"
+    data.save(path)
+    run = tmp_path / "run"
+    tiny = ["--iterations", "2", "--num-envs", "4", "--steps-per-env", "8", "--horizon", "8",
+            "--set", "residual.hidden_dims=32,32", "--set", "residual.critic_hidden_dims=32,32",
+            "--set", "ppo.num_mini_batches=2", "--set", "ppo.num_learning_epochs=2"]
+    capsys.readouterr()
+    assert main(["train", str(path), "--out", str(run), "--quiet"] + tiny) == 0
+    assert capsys.readouterr().out == ""
+    log = (run / "train.log").read_text()
+    assert log.startswith("training a torque residual (mlp) on 2 trajectories")
+    assert log.count("Learning iteration") == 2 and '"iterations_this_session": 2' in log
+    # not quiet, off a terminal: the last iteration's plain line, with the elapsed and remaining time
+    assert main(["train", str(path), "--out", str(tmp_path / "loud")] + tiny) == 0
+    out = capsys.readouterr().out
+    assert _plain("train", 2).search(out) and "Learning iteration" not in out, out
+
+
+def test_a_skill_draws_a_line_per_iteration_named_after_its_policy(humanoid, tmp_path):
+    import io
+
+    from wresdyn.progress import Log
+    from wresdyn.skills.env import SkillConfig, TrackingEnv
+    from wresdyn.skills.motions import make_motions
+    from wresdyn.skills.plants import SimPlant
+    from wresdyn.skills.train import SkillPPOConfig, train_skill
+
+    motions = make_motions(humanoid, {"train": 1}, duration=0.4, rate_hz=500.0, seed=3)
+    env = TrackingEnv(SimPlant(humanoid, 3, 500.0, 5), motions.split("train"), SkillConfig(decimation=5))
+    cfg = SkillPPOConfig(num_envs=3, iterations=2, num_steps_per_env=8, hidden_dims=(32, 32), num_mini_batches=1,
+                         num_learning_epochs=1)
+    out = io.StringIO()
+    train_skill(env, cfg, tmp_path / "skills" / "a_nominal", log=Log(tmp_path / "deploy.log", stream=out, every=0.0))
+    text = out.getvalue()
+    assert re.search(r"^a_nominal: 1/2 \(50 %\), \d+:\d\d elapsed, \d+:\d\d left", text, re.M), text
+    assert _plain("a_nominal", 2).search(text) and "Learning iteration" not in text
+    assert (tmp_path / "skills" / "a_nominal" / "train.log").read_text().count("Learning iteration") == 2
+    out = io.StringIO()  # quiet: nothing, not even the bar
+    train_skill(env, dataclasses.replace(cfg, iterations=3), tmp_path / "skills" / "a_nominal",
+                log=Log(tmp_path / "deploy.log", quiet=True, stream=out, every=0.0))
+    assert out.getvalue() == "" and "resuming" in (tmp_path / "deploy.log").read_text()
+
+
+def test_collect_draws_a_line_over_the_trajectories_and_quiet_keeps_them_in_collect_log(tmp_path, capsys):
+    argv = ["collect", "--robot", str(SO101), "--train", "2", "--validation", "0", "--heldout", "0", "--ood", "0",
+            "--duration", "0.2", "--no-gap"]
+    assert main(argv + ["--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert _plain("collect", 2).search(out) and "[2/2] train_001" in out, out
+    assert main(argv + ["--out", str(tmp_path / "b"), "--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+    log = (tmp_path / "b" / "collect.log").read_text()
+    assert log.startswith("collecting 2 trajectories of 0.2 s") and "[2/2] train_001" in log
+    assert log.splitlines()[-1].startswith("wrote ")
