@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -192,7 +193,10 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
             "--motions", "1", "--heldout", "1"]
     assert main(args) == 0
     # the compile is announced, for what this run needs: both corrections given, so no fitting variants
-    assert f"compiling Warp kernels for humanoid.usda ({humanoid.n_dof} joints; forward):" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert f"compiling Warp kernels for humanoid.usda ({humanoid.n_dof} joints; forward):" in printed
+    # off a terminal, each policy's PPO ends on its plain progress line (wresdyn.progress)
+    assert re.search(r"^b_calibrated: 1/1 \(100 %\), \d+:\d\d elapsed, 0:00 left", printed, re.M), printed
     res = json.loads((out / "results.json").read_text())
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
@@ -214,6 +218,10 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
+    # --quiet: nothing printed, OUT/deploy.log keeps the lines of both runs
+    assert main(args + ["--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+    assert (out / "deploy.log").read_text().count("wresdyn deploy: skills on the stand") == 3
 
 
 def test_skill_zero_shot_example_runs(tmp_path, humanoid, data):
