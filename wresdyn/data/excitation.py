@@ -418,15 +418,20 @@ def plot_spectrum(groups: dict[str, list[np.ndarray]], rate_hz: float, path, joi
         if not qs:
             continue
         f, p = command_spectrum(qs, rate_hz)
-        keep = f > 0
+        keep = (f > 0) & (p.mean(axis=1) > 0)  # log axes: a held (constant) command has no power to draw
+        if not keep.any():
+            continue
         f_min = min(f_min, f[keep][0])
         line, = ax.loglog(f[keep], p[keep].mean(axis=1), label=f"{name} (mean of {len(joint_names)} joints)")
         ax.fill_between(f[keep], np.quantile(p[keep], 0.1, axis=1), np.quantile(p[keep], 0.9, axis=1),
                         color=line.get_color(), alpha=0.15, linewidth=0)
+    f_max = min(50.0, rate_hz / 2)
     for x in (0.5, 2.0):  # the bands the frequency-content check compares
+        if not f_min <= x <= f_max:  # a short recording starts above them; a label outside would squash the axes
+            continue
         ax.axvline(x, color="0.6", linestyle=":", linewidth=1)
         ax.text(x, 1.0, f" {x:g} Hz", transform=ax.get_xaxis_transform(), va="top", fontsize=8, color="0.4")
-    ax.set_xlim(f_min, min(50.0, rate_hz / 2))
+    ax.set_xlim(f_min, f_max)
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("command PSD [rad²/Hz]")
     ax.set_title("Excitation command spectrum (shaded: 10-90 % of joints)")
