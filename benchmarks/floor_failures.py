@@ -11,7 +11,6 @@ deployment seed, so the rollouts are the benchmark's own.
 from __future__ import annotations
 
 import argparse
-import json
 from collections import defaultdict
 from pathlib import Path
 
@@ -26,28 +25,17 @@ def main() -> None:
 
     import torch
 
-    from wresdyn.data.dataset import load_dataset
-    from wresdyn.data.real_robot import Mismatch, RealRobot
-    from wresdyn.paths import DEFAULT_DATASET
-    from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_env import FloorTaskConfig
+    from floor_run import held_out
     from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
-    from wresdyn.skills.floor_motions import make_floor_motions
     from wresdyn.skills.plants import RealPlant
     from wresdyn.skills.train import load_skill
 
     torch.set_num_threads(2)
     run = Path(args.run)
-    res = json.loads((run / "results.json").read_text())
-    cfg, task = res["config"], FloorTaskConfig(**res["task"])
-    ds = load_dataset(args.data or DEFAULT_DATASET)
-    stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
-    # the split streams depend on the split's position only: the same held-out motions without drawing the others
-    counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}
-    motions = make_floor_motions(stand, floating, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"])["heldout"]
-    real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
+    res, task, _, motions, real = held_out(run, args.data)
+    cfg = res["config"]
     print(f"{run}: {len(motions)} held-out motions of {cfg['duration']:g} s, "
-          f"{int(cfg['duration'] * ds.rate_hz / task.decimation)} policy steps each")
+          f"{int(cfg['duration'] * real.rate_hz / task.decimation)} policy steps each")
     for name in ("reference", *res["policies"]):
         policy = None if name == "reference" else load_skill(run / "skills" / name)
         plant = RealPlant(real, len(motions), task.decimation, seed=cfg["seed"] + 100,

@@ -8,7 +8,6 @@ sat at the real robot's torque limit for the largest share of physics substeps (
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -22,24 +21,15 @@ def main() -> None:
 
     import torch
 
-    from wresdyn.data.dataset import load_dataset
-    from wresdyn.data.real_robot import Mismatch, RealRobot
-    from wresdyn.paths import DEFAULT_DATASET
-    from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from floor_run import held_out
+    from wresdyn.skills.floor_env import FloorTrackingEnv
     from wresdyn.skills.plants import RealPlant
     from wresdyn.skills.train import load_skill
 
     torch.set_num_threads(1)
     run = Path(args.run)
-    res = json.loads((run / "results.json").read_text())
-    cfg, task = res["config"], FloorTaskConfig(**res["task"])
-    ds = load_dataset(args.data or DEFAULT_DATASET)
-    stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
-    counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}  # the run's own held-out draws
-    motions = make_floor_motions(stand, floating, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"])["heldout"]
-    real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
+    res, task, floating, motions, real = held_out(run, args.data)
+    cfg = res["config"]
     names = list(floating.joint_names)
     for family in ("step", "kick"):
         fam = [m for m in motions if m.family == family]
