@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"[2/5] data: {data_path} ({splits}"
           f", {data.rate_hz:g} Hz)", flush=True)
 
-    from ..cli.fit import HYBRID_ITERATIONS
+    from ..learn.hybrid import HYBRID_ITERATIONS
     from ..export.usd import export_run as export_usd
     from ..learn.hybrid import fit_hybrid
     from ..learn.sysid import SysIdConfig

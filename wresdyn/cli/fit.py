@@ -17,11 +17,9 @@ from __future__ import annotations
 import argparse
 
 from ..choices import Arch, FitModel, ResidualKind, SolverKind, choices
+from ..learn.hybrid import HYBRID_ITERATIONS
 from .identify import GAIN_GRID_HELP, parse_grid
 
-HYBRID_ITERATIONS = 1000
-"""Residual iterations of the hybrid by default: on the identified model the residual's validation error stops
-improving within a few hundred (``benchmarks/results/grey_box/``)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -13,7 +13,11 @@ import json
 from dataclasses import asdict, replace
 from pathlib import Path
 
-__all__ = ["fit_hybrid", "save_identify_config"]
+__all__ = ["fit_hybrid", "save_identify_config", "HYBRID_ITERATIONS"]
+
+HYBRID_ITERATIONS = 1000
+"""Residual iterations of the hybrid by default: on the identified model the residual's validation error stops
+improving within a few hundred (``benchmarks/results/grey_box/``)."""
 
 
 def save_identify_config(out: str | Path, cfg, rate_hz: float, data_path=None) -> None:

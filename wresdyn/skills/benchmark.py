@@ -85,7 +85,7 @@ def _fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, de
     if calibrated is None:
         calibrated = out / "calibrated"
         if not (calibrated / "policy.pt").is_file():
-            from ..cli.fit import HYBRID_ITERATIONS
+            from ..learn.hybrid import HYBRID_ITERATIONS
             from ..learn.hybrid import fit_hybrid
             from ..learn.sysid import SysIdConfig
 
