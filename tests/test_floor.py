@@ -167,13 +167,15 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--motions", "1",
             "--heldout", "1", "--duration", "1.0"]
-    assert main(args) == 0
+    # the oracle in a process of its own beside (b) and (c), as on a GPU
+    assert main(args + ["--oracle-beside"]) == 0
     res = json.loads((out / "results.json").read_text())
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
         for r in res["real"][split].values():
             assert {"success", "falls", "failures", "mpjpe", "g_mpjpe", "orientation_error", "action_rate"} \
                 <= set(r["mean"])
+    assert "d_oracle: 1 PPO iterations x 3 worlds" in (out / "deploy.log").read_text()
     assert set(res["gap_closed_mpjpe"]) == set(res["gap_closed_g_mpjpe"]) == {"b_calibrated", "c_delta_action"}
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
@@ -184,7 +186,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert json.loads((out / "skills" / "d_oracle" / "config.json").read_text())["ppo"]["num_envs"] == 3
     before = (out / "skills" / "a_nominal" / "config.json").read_text()
     capsys.readouterr()
-    assert main(args + ["--seed", "5"]) == 2
+    assert main(args + ["--oracle-beside", "--seed", "5"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before

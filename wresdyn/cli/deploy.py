@@ -39,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--oracle-envs", type=int, default=None,
                    help="parallel worlds of the oracle on the real robot, MuJoCo C on the CPU (default: --envs; "
                         "--full: 1024)")
+    p.add_argument("--oracle-beside", action="store_true", default=None,
+                   help="--floor: train the oracle in a process of its own beside (b) and (c) (default on a GPU)")
     p.add_argument("--motions", type=int, default=None, help="training motions per family (default 4)")
     p.add_argument("--heldout", type=int, default=None, help="held-out motions per family (default 2; --floor: 1)")
     p.add_argument("--duration", type=float, default=None, help="length of a motion [s] (default 2; --floor: 4)")
@@ -59,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import Mismatch
     from ..skills.benchmark import DeployConfig, run_benchmark
 
+    if args.oracle_beside and not args.floor:
+        from . import UserError
+
+        raise UserError("--oracle-beside trains the floor's oracle; it needs --floor")
     if args.floor:
         from ..skills.floor_benchmark import FloorDeployConfig, run_floor_benchmark
 
@@ -68,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         cfg = DeployConfig.full() if args.full else DeployConfig()
         bench = run_benchmark
     kw = {k: v for k, v in (("iterations", args.iterations), ("finetune", args.finetune), ("envs", args.envs),
-                            ("oracle_envs", args.oracle_envs), ("finetune_std", args.finetune_std),
+                            ("oracle_envs", args.oracle_envs), ("oracle_beside", args.oracle_beside),
+                            ("finetune_std", args.finetune_std),
                             ("train_per_family", args.motions), ("heldout_per_family", args.heldout),
                             ("duration", args.duration)) if v is not None}
     cfg = replace(cfg, seed=args.seed, device=args.device, **kw)

@@ -51,6 +51,9 @@ class FloorDeployConfig:
     """PPO iterations of (a) in the nominal simulator."""
     finetune: int = 100
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
+    oracle_beside: bool | None = None
+    """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU, where the
+    oracle's real robot steps on otherwise idle host cores)."""
     seed: int = 0
     device: str = "cpu"
 
@@ -67,6 +70,47 @@ class FloorDeployConfig:
         check_number(self.oracle_envs, "floor.oracle_envs", integer=True, ge=0)
         check_number(self.finetune_std, "floor.finetune_std", ge=0)
         check_number(self.duration, "floor.duration", gt=0)
+
+
+def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: FloorDeployConfig, runs: dict,
+                  meta: dict, out: Path, log) -> float:
+    """Train policy ``name`` (the ``i``-th of the benchmark: ``a_nominal`` from scratch, the others fine-tuned from it)
+    on the floor of its plant; returns the wall-clock time [s]."""
+    from .floor_env import FloorTrackingEnv
+    from .plants import RealPlant, sim_plant
+    from .train import train_skill
+
+    setting = POLICIES[name]
+    t0 = time.perf_counter()
+    envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
+    if setting == "real":
+        plant = RealPlant(real, envs, task.decimation, seed=cfg.seed + 1, imu_noise=(task.gyro_noise, task.gravity_noise))
+    else:
+        plant = sim_plant(setting, floating, envs, real.rate_hz, task.decimation, runs.get(setting), cfg.device,
+                          ground=True)
+    env = FloorTrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
+    run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
+    it = cfg.iterations if i == 0 else cfg.finetune
+    train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.finetune_std),
+                out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
+    wall = time.perf_counter() - t0
+    log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds on the floor of the {setting} "
+        f"{'robot' if setting == 'real' else 'simulator'} ({wall:.0f} s)")
+    return wall
+
+
+def _train_oracle(source: str, gains, mismatch: dict, rate: float, i: int, motions, task, ppo, cfg, runs, meta,
+                  out: Path) -> float:
+    """:func:`_train_policy` of the oracle in a process of its own (its lines go to its ``train.log`` only)."""
+    import torch
+
+    from ..data.real_robot import Mismatch, RealRobot
+    from ..robot import load_robot
+
+    torch.set_num_threads(max(ppo.torch_threads, 1))
+    floating = load_robot(source, gains=gains, base="floating")
+    real = RealRobot(floating, Mismatch.from_dict(mismatch, "the benchmark's mismatch"), rate)
+    return _train_policy(i, "d_oracle", floating, real, motions, task, ppo, cfg, runs, meta, out, lambda s: None)
 
 
 def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeployConfig(), *, data_path=None,
@@ -89,11 +133,11 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
 
     from ..data.real_robot import Mismatch, RealRobot
     from ..robot import load_robot
-    from .floor_env import FloorTaskConfig, FloorTrackingEnv
+    from .floor_env import FloorTaskConfig
     from .floor_evaluate import deploy_floor, floor_metrics
     from .floor_motions import make_floor_motions
     from .plants import RealPlant, sim_plant
-    from .train import SkillPPOConfig, load_skill, train_skill
+    from .train import SkillPPOConfig, load_skill
 
     t_start = time.perf_counter()
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
@@ -120,24 +164,29 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     runs = {"calibrated": calibrated, "delta_action": delta}
     meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration, "floor": True}}
     wall = {}
-    for i, name in enumerate(policies):
-        setting = POLICIES[name]
-        t0 = time.perf_counter()
-        envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
-        if setting == "real":
-            plant = RealPlant(real, envs, task.decimation, seed=cfg.seed + 1, imu_noise=imu)
-        else:
-            plant = sim_plant(setting, floating, envs, rate, task.decimation, runs.get(setting), cfg.device,
-                              ground=True)
-        env = FloorTrackingEnv(plant, motions["train"], task, seed=cfg.seed + i, device=cfg.device)
-        run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
-        it = cfg.iterations if i == 0 else cfg.finetune
-        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.finetune_std),
-                    out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal",
-                    meta=run_meta)
-        wall[name] = time.perf_counter() - t0
-        log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds on the floor of the {setting} "
-            f"{'robot' if setting == 'real' else 'simulator'} ({wall[name]:.0f} s)")
+    # With PPO on a GPU the oracle's real robot (MuJoCo C on the host's cores) trains beside (b) and (c)
+    beside = (cfg.device != "cpu" if cfg.oracle_beside is None else cfg.oracle_beside) and "d_oracle" in policies[2:]
+    pool = None
+    try:
+        for i, name in enumerate(policies):
+            if name == "d_oracle" and beside:
+                import multiprocessing as mp
+
+                pool = mp.get_context("spawn").Pool(1)
+                oracle = pool.apply_async(_train_oracle, (str(robot.source), robot.gains, mismatch.to_dict(), rate, i,
+                                                          motions["train"], task, ppo, cfg, runs, meta, out))
+                log(f"[3/4] policy {name}: training on the real robot beside the others "
+                    f"({out / 'skills' / name / 'train.log'})")
+                continue
+            wall[name] = _train_policy(i, name, floating, real, motions["train"], task, ppo, cfg, runs, meta, out,
+                                       log)
+        if pool is not None:
+            wall["d_oracle"] = oracle.get()
+            log(f"[3/4] policy d_oracle: {cfg.finetune} PPO iterations x {cfg.oracle_envs or cfg.envs} worlds on the "
+                f"floor of the real robot ({wall['d_oracle']:.0f} s, beside the others)")
+    finally:
+        if pool is not None:
+            pool.terminate()
     results = {"config": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo), "mismatch": mismatch.to_dict(),
                "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None},
                "train_wall_s": wall, "fit_wall_s": fit_s, "real": {}, "sim": {}}
