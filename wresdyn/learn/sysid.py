@@ -108,6 +108,13 @@ class SysIdConfig:
     step is validated and the best kept. The fields of ``fit`` except the effort limit and the delay (both kept)."""
     refine_windows: int = 64
     """Fixed training windows of the refinement."""
+    share_effort_ratio: bool = True
+    """After the selection, give the effort limits the training data never reaches the ratio to the file's limit that
+    the saturating joints share, bounded below by the torque the data demands
+    (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
+    when the effort limit is fitted."""
+    saturated_min: float = 0.01
+    """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
 
     def __post_init__(self) -> None:
         from .runs import check_window_fit_config
@@ -128,6 +135,7 @@ class SysIdConfig:
             check_number(f, f"lr_scale[{i}]", gt=0)
         check_number(self.refine, "refine", integer=True, ge=0)
         check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
+        check_number(self.saturated_min, "saturated_min", gt=0, le=1)
 
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows")
@@ -142,6 +150,24 @@ class PhysicsScore(ValidationScore):
     def __call__(self, params: PhysicalParams) -> float:
         self.physics = params
         return super().__call__()
+
+
+def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log):
+    """The selected parameters with the effort limits the training data never reaches set from the saturating
+    joints' ratio (:mod:`.unexcited_limits`), unless that is worse on validation."""
+    from .unexcited_limits import limit_unexcited_efforts
+
+    shared, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=dataset.fit_weights() > 0,
+                                            saturated_min=cfg.saturated_min)
+    log(found.describe())
+    if not found.changed or score is None:
+        return shared
+    v = score(shared)
+    if v > validation:
+        log(f"  not kept: validation {v:.4f} rad against {validation:.4f} rad")
+        return params
+    log(f"  validation {v:.4f} rad (was {validation:.4f} rad)")
+    return shared
 
 
 def _window_loss(cfg, model, sim, window, weights=None):
@@ -405,6 +431,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         model.load_state_dict(best["state"])
         log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
     params = model.values()
+    if cfg.share_effort_ratio and "effort" in cfg.fit:
+        params = _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, best["validation"], log)
     if cfg.refine:
         params = _refine(cfg, robot, bank, dt, params, score, best["validation"], weights, curve, log)
     if out:

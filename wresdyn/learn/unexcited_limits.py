@@ -1,0 +1,112 @@
+"""Effort limits the training data never reaches: a shared derating instead of a number the data cannot tell.
+
+A drive's effort limit shows in the recordings only where the drive saturates. Identification (:mod:`.sysid`)
+starts every limit from one searched fraction of the robot file's and refines it by gradient, which is zero on a
+joint whose drive never saturates in the replay: that joint keeps the searched fraction, a compromise of all
+joints, however far it is from its own. On a robot hung on a stand this is the rule, not the exception: the legs
+swing free, so hip roll, knees and ankles never need the torque that balance on the floor does, and their limits
+come out where the search left them (1.6x the true ones on the shipped data, ``benchmarks/effort_limits.py``).
+
+What the data does say about such a joint:
+
+- a lower bound: the drive delivered the torque the replay demands of it, τ = kp·(q_cmd(t − delay) − q) − kd·q̇
+  on the recorded states, so its limit is at least that (taken at the ``1 − saturated_min`` quantile of |τ|,
+  the level at which the joint would count as saturated);
+- how far below the file the drives of this robot are derated: the ratio identified / file of the joints that do
+  saturate (battery voltage, current limits and firmware derating act on every drive alike).
+
+:func:`limit_unexcited_efforts` gives each joint that saturates on fewer than ``saturated_min`` of the training
+samples the median ratio of those that do, times its own file limit, and never below its lower bound:
+``effort_j = max(r̃ · effort_file_j, quantile_{1 − s}(|τ_j|))``. It changes nothing where no joint saturates
+(no ratio to share), on joints excluded from fitting and on unlimited drives.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..robot.physical import PhysicalParams
+
+__all__ = ["UnexcitedLimits", "demanded_torque", "limit_unexcited_efforts"]
+
+
+@dataclass(frozen=True)
+class UnexcitedLimits:
+    """What :func:`limit_unexcited_efforts` found and set."""
+
+    saturated: np.ndarray
+    """Fraction of training samples on which each joint's demanded torque exceeds its identified limit, (n,)."""
+    bound: np.ndarray
+    """Lower bound of each joint's limit from the data [N·m], (n,)."""
+    ratio: float | None
+    """Median identified / file limit over the saturating joints (``None``: no joint saturates)."""
+    changed: tuple[str, ...]
+    """Joints whose limit was set from the shared ratio."""
+    before: np.ndarray
+    """Identified limits before [N·m], (n,)."""
+    after: np.ndarray
+    """Limits after [N·m], (n,)."""
+
+    def describe(self) -> str:
+        """One line for the run's log."""
+        if self.ratio is None:
+            return "effort limits: no joint saturates in the training data; identified limits kept"
+        if not self.changed:
+            return f"effort limits: every fitted joint saturates in the training data (median {self.ratio:.3f} of file)"
+        return (f"effort limits: {len(self.changed)} joints never saturate in the training data and take the "
+                f"saturating joints' median {self.ratio:.3f} of the file's limit, at least what the data demands "
+                f"({', '.join(self.changed)})")
+
+
+def _delayed(q_cmd: np.ndarray, delay_steps: np.ndarray) -> np.ndarray:
+    """Commands seen through each joint's delay [steps] (fractional: linear interpolation; the first command held
+    before the recording starts), as the replay applies them. ``q_cmd`` (T, n)."""
+    t = np.arange(len(q_cmd), dtype=np.float64)
+    return np.stack([np.interp(t - d, t, q_cmd[:, j]) for j, d in enumerate(delay_steps)], axis=1)
+
+
+def demanded_torque(params: PhysicalParams, trajectories, dt: float) -> np.ndarray:
+    """|τ| the PD drives of ``params`` demand on the recorded states, unsaturated [N·m], shape (Σ T, n):
+    τ = kp·(q_cmd(t − delay) − q) − kd·q̇."""
+    steps = np.asarray(params.delay, dtype=np.float64) / dt
+    tau = [params.kp * (_delayed(np.asarray(tr.q_cmd, np.float64), steps) - tr.q) - params.kd * tr.qd
+           for tr in trajectories]
+    return np.abs(np.concatenate(tau))
+
+
+def limit_unexcited_efforts(params: PhysicalParams, file_effort, trajectories, dt: float, fitted=None,
+                            saturated_min: float = 0.01) -> tuple[PhysicalParams, UnexcitedLimits]:
+    """Set the effort limits that the training data cannot identify (module docstring).
+
+    Args:
+        params: Identified parameters (not modified).
+        file_effort: The robot file's effort limits [N·m], (n,).
+        trajectories: Training recordings (``q``, ``qd``, ``q_cmd``, (T, n) each).
+        dt: Sample period [s].
+        fitted: Per joint, whether it is fitted, (n,) bool (default: all); the others are left alone.
+        saturated_min: Fraction of samples on which a joint must saturate for its limit to count as identified.
+
+    Returns:
+        ``(params, found)``: a copy of ``params`` with the limits set, and :class:`UnexcitedLimits`.
+    """
+    tau = demanded_torque(params, trajectories, dt)
+    before = np.asarray(params.effort, dtype=np.float64)
+    file_effort = np.asarray(file_effort, dtype=np.float64)
+    n = len(before)
+    fitted = np.ones(n, dtype=bool) if fitted is None else np.asarray(fitted, dtype=bool)
+    limited = fitted & np.isfinite(before) & np.isfinite(file_effort) & (file_effort > 0)
+    saturated = (tau > before).mean(0)
+    bound = np.quantile(tau, 1.0 - saturated_min, axis=0)
+    seen = limited & (saturated >= saturated_min)
+    out = params.copy()
+    if not seen.any():
+        return out, UnexcitedLimits(saturated, bound, None, (), before, before.copy())
+    ratio = float(np.median(before[seen] / file_effort[seen]))
+    unseen = limited & ~seen
+    after = before.copy()
+    after[unseen] = np.maximum(ratio * file_effort[unseen], bound[unseen])
+    out.effort = after
+    changed = tuple(name for name, u in zip(params.joint_names, unseen) if u)
+    return out, UnexcitedLimits(saturated, bound, ratio, changed, before, after.copy())
