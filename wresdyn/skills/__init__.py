@@ -4,7 +4,7 @@
 - :mod:`.plants`: what a skill acts on: the simulators (nominal, calibrated, delta action; :class:`~.plants.SimPlant`
   on :class:`wresdyn.sim.Simulator`) and the "real" robot (:class:`~.plants.RealPlant`, MuJoCo C);
 - :mod:`.env`: the tracking environment (rsl-rl ``VecEnv``) on any plant;
-- :mod:`.train`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
+- :mod:`.skill_ppo`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
 - :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness);
 - :mod:`.benchmark`: the zero-shot benchmark of ``wresdyn deploy``; :mod:`.report`, :mod:`.animation`: its report.
 """

@@ -4,7 +4,7 @@
 2. The corrected simulators: the calibrated robot (a hybrid ``wresdyn fit`` run: identified physics + torque residual)
    and the ASAP-style delta-action residual alone (``wresdyn fit --model network --residual delta_action``); both
    fitted here on the dataset when not given.
-3. Policies (PPO, rsl-rl, :mod:`.train`): (a) trained in the nominal simulator; (b) (a) fine-tuned in the calibrated
+3. Policies (PPO, rsl-rl, :mod:`.skill_ppo`): (a) trained in the nominal simulator; (b) (a) fine-tuned in the calibrated
    one; (c) (a) fine-tuned with the delta-action residual; (d) the oracle, (a) fine-tuned on the "real" robot itself
    (:class:`~.plants.RealPlant`). (b), (c) and (d) get the same number of fine-tuning iterations.
 4. Deployment (:mod:`.evaluate`): every policy, and the reference played open loop, on the "real" robot (the
@@ -119,7 +119,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         data_path: Where ``dataset`` was read from (recorded in the fitted runs).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
-        task: :class:`~.env.SkillConfig`; ppo: :class:`~.train.SkillPPOConfig` (its size fields are set from ``cfg``).
+        task: :class:`~.env.SkillConfig`; ppo: :class:`~.skill_ppo.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`POLICIES` to train and deploy (``a_nominal`` always; without ``c_delta_action`` no
             delta-action residual is fitted; the gap closed needs ``d_oracle``).
 
@@ -133,7 +133,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     from .evaluate import deploy_skill, metrics
     from .motions import make_motions
     from .plants import RealPlant, sim_plant
-    from .train import SkillPPOConfig, load_skill, train_skill
+    from .skill_ppo import SkillPPOConfig, load_skill, train_skill
 
     t_start = time.perf_counter()
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]

@@ -78,7 +78,7 @@ def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: Fl
     on the floor of its plant; returns the wall-clock time [s]."""
     from .floor_env import FloorTrackingEnv
     from .plants import RealPlant, sim_plant
-    from .train import train_skill
+    from .skill_ppo import train_skill
 
     setting = POLICIES[name]
     t0 = time.perf_counter()
@@ -121,7 +121,7 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     Args:
         robot: The nominal robot on its stand (fixed base); its floating twin is loaded from the same file.
         dataset: The stand recordings the corrections are fitted on.
-        cfg: Sizes. task: :class:`~.floor_env.FloorTaskConfig`; ppo: :class:`~.train.SkillPPOConfig`.
+        cfg: Sizes. task: :class:`~.floor_env.FloorTaskConfig`; ppo: :class:`~.skill_ppo.SkillPPOConfig`.
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
         policies: Which of :data:`~.benchmark.POLICIES` to train and deploy (``a_nominal`` always).
@@ -137,7 +137,7 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     from .floor_evaluate import deploy_floor, floor_metrics
     from .floor_motions import make_floor_motions
     from .plants import RealPlant, sim_plant
-    from .train import SkillPPOConfig, load_skill
+    from .skill_ppo import SkillPPOConfig, load_skill
 
     t_start = time.perf_counter()
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
