@@ -1,2 +1,2 @@
 """Stage 5, evaluation: open-loop replay of held-out and out-of-distribution recordings, metrics, reports,
-the learner ablation, and the same replays in the browser (:mod:`wresdyn.evaluation.viewer`)."""
+and the same replays in the browser (:mod:`wresdyn.evaluation.viewer`)."""
