@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from ..export.usd import export_run as export_usd
     from ..learn.hybrid import fit_hybrid
     from ..learn.sysid import SysIdConfig
-    from ..skills.benchmark import DeployConfig, run_benchmark
+    from ..experiments.stand_skills import DeployConfig, run_benchmark
 
     log = lambda line: print("      " + line, flush=True)  # noqa: E731
     gcfg = GradFitConfig(iterations=HYBRID_ITERATIONS)

@@ -5,6 +5,7 @@
   on :class:`wresdyn.sim.Simulator`) and the "real" robot (:class:`~.plants.RealPlant`, MuJoCo C);
 - :mod:`.env`: the tracking environment (rsl-rl ``VecEnv``) on any plant;
 - :mod:`.skill_ppo`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
-- :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness);
-- :mod:`.benchmark`: the zero-shot benchmark of ``wresdyn deploy``; :mod:`.report`, :mod:`.animation`: its report.
+- :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness, the gap closed);
+- :mod:`.report`, :mod:`.animation`: the report of a zero-shot benchmark (the benchmarks themselves, which train
+  every policy, are :mod:`wresdyn.experiments.stand_skills` and :mod:`wresdyn.experiments.floor_skills`).
 """
