@@ -7,5 +7,5 @@ the skills (and below the command line, which only parses flags and calls them).
   corrections fitted on the stand, the results file;
 - :mod:`.stand_skills`: the zero-shot skill benchmark on the stand (``wresdyn deploy``);
 - :mod:`.floor_skills`: the same on the floor (``wresdyn deploy --floor``);
-- :mod:`.demo`: the whole story at a small size, record → fit → calibrated robot → skills (``wresdyn demo``).
+- :mod:`.demo_pipeline`: the whole story at a small size, record → fit → calibrated robot → skills (``wresdyn demo``).
 """
