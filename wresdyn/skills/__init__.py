@@ -6,6 +6,7 @@
 - :mod:`.env`: the tracking environment (rsl-rl ``VecEnv``) on any plant;
 - :mod:`.skill_ppo`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
 - :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness, the gap closed);
-- :mod:`.report`, :mod:`.animation`: the report of a zero-shot benchmark (the benchmarks themselves, which train
-  every policy, are :mod:`wresdyn.experiments.stand_skills` and :mod:`wresdyn.experiments.floor_skills`).
+- :mod:`.report`, :mod:`.floor_report`: the report of a zero-shot benchmark, with its USD animation
+  (:mod:`wresdyn.evaluation.animation`). The benchmarks themselves, which train every policy, are
+  :mod:`wresdyn.experiments.stand_skills` and :mod:`wresdyn.experiments.floor_skills`.
 """
