@@ -268,7 +268,7 @@ def test_export_loads_back_with_the_same_outputs(tmp_path, which):
     obs = [torch.randn(5, 12), torch.randn(5, 12)]
     policy.reset()
     expect = [policy(o).detach() for o in obs]  # two steps: the GRU carries its state
-    from wresdyn.export.program import load_residual
+    from wresdyn.learn.network_file import load_residual
 
     export_policy(policy, tmp_path / "p.pt", tmp_path / "p.onnx")
     loaded = load_residual(tmp_path / "p.pt")
