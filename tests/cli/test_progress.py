@@ -254,7 +254,7 @@ def _plain(desc: str, n: int):
 def test_ppo_draws_a_line_per_iteration_and_keeps_rsl_rls_tables_in_the_run(robot, data, tmp_path):
     import io
 
-    from test_ppo import tiny
+    from conftest import tiny_ppo_config as tiny
 
     from wresdyn.learn.ppo import train
     from wresdyn.progress import Log
