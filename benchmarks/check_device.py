@@ -3,7 +3,7 @@
     python benchmarks/check_device.py [--device cuda:0]
 
 Prints the 2 s trajectory error against MuJoCo C ``implicitfast`` on the project humanoid (the CPU
-figure is in tests/test_solver_replay.py), the difference between the device's and the CPU's
+figure is in tests/sim/test_solver_replay.py), the difference between the device's and the CPU's
 trajectories and Tape gradients, and that the step() API matches the fused rollout on the device.
 """
 

@@ -28,7 +28,7 @@ def main() -> None:
     from floor_run import held_out
     from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
     from wresdyn.skills.plants import RealPlant
-    from wresdyn.skills.train import load_skill
+    from wresdyn.skills.skill_ppo import load_skill
 
     torch.set_num_threads(2)
     run = Path(args.run)

@@ -24,7 +24,7 @@ def main() -> None:
     from floor_run import held_out
     from wresdyn.skills.floor_env import FloorTrackingEnv
     from wresdyn.skills.plants import RealPlant
-    from wresdyn.skills.train import load_skill
+    from wresdyn.skills.skill_ppo import load_skill
 
     torch.set_num_threads(1)
     run = Path(args.run)

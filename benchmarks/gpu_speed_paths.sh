@@ -20,7 +20,7 @@ mkdir -p "$out" "$runs"
 export PYTHONUNBUFFERED=1
 for s in $steps; do
   case $s in
-    1) $py -m pytest -q -p no:cacheprovider tests/test_learner_speed_paths.py -k graph 2>&1 | tee "$out/graph_test.txt" ;;
+    1) $py -m pytest -q -p no:cacheprovider tests/learn/test_learner_speed_paths.py -k graph 2>&1 | tee "$out/graph_test.txt" ;;
     2) $py benchmarks/learners.py --device "$dev" --envs 256,4096,16384 --graphs on,off --ppo-iterations 20 \
          --windows 1024 --grad-iterations 20 --json "$out/learners.json" 2>&1 | tee "$out/learners.txt"
        $py benchmarks/profile_gradfit.py --device "$dev" --windows 1024 --horizon 64 --json "$out/profile_gradfit.json" \

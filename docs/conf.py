@@ -1,6 +1,6 @@
 """Sphinx configuration of the wresdyn documentation (MyST Markdown, pydata theme).
 
-Build it strictly, as the test suite does (``tests/test_docs.py``)::
+Build it strictly, as the test suite does (``tests/integration/test_docs.py``)::
 
     .venv/bin/sphinx-build -W --keep-going -b html docs docs/_build/html
 """

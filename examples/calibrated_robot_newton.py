@@ -111,7 +111,7 @@ def main() -> None:
 
 def _wresdyn_replay(export: str, data: str, traj, n: int) -> np.ndarray:
     from wresdyn.data.loading import load_data
-    from wresdyn.export.program import load_residual
+    from wresdyn.learn.network_file import load_residual
     from wresdyn.sim.physics import PhysicalParams
     from wresdyn.sim.rollout import replay_trajectories
 

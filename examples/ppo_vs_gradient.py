@@ -15,7 +15,7 @@ import dataclasses
 
 import wresdyn
 from wresdyn.data.dataset import load_dataset
-from wresdyn.evaluation.ablation import AblationConfig, run_ablation
+from wresdyn.experiments.ablation import AblationConfig, run_ablation
 from wresdyn.paths import DEFAULT_DATASET
 
 

@@ -41,7 +41,7 @@ def main() -> None:
     from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
     from wresdyn.skills.floor_motions import make_floor_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
-    from wresdyn.skills.train import SkillPPOConfig, load_skill, train_skill
+    from wresdyn.skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
 
     ds = load_dataset(args.data or DEFAULT_DATASET)
     stand, floor = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")

@@ -38,7 +38,7 @@ def main() -> None:
     from wresdyn.skills.evaluate import deploy_skill, metrics
     from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
-    from wresdyn.skills.train import SkillPPOConfig, load_skill, train_skill
+    from wresdyn.skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
 
     ds = load_dataset(args.data or DEFAULT_DATASET)
     robot = load_robot(ds.robot_file)

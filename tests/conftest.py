@@ -16,6 +16,21 @@ LEARNER_COUNTS = {"train": 2, "validation": 1, "heldout": 1, "ood": 1}
 """Trajectories per split of the learner tests' recordings: every split a learner or the evaluation reads."""
 
 
+def tiny_ppo_config(arch="mlp", iterations=2, kind="torque"):
+    """A PPO residual configuration at rsl_rl's test sizes (4 envs, 8 steps, 32-unit nets), for the PPO tests."""
+    from wresdyn.learn.ppo import PPOConfig, TrainConfig
+    from wresdyn.learn.replay_env import ReplayEnvConfig
+    from wresdyn.learn.residual import ResidualConfig
+
+    return TrainConfig(
+        env=ReplayEnvConfig(horizon=8),
+        residual=ResidualConfig(kind=kind, arch=arch, hidden_dims=(32, 32), critic_hidden_dims=(32, 32),
+                                gru_hidden_dim=32),
+        ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=iterations, save_interval=1, num_mini_batches=2,
+                      num_learning_epochs=2),
+    )
+
+
 def pytest_addoption(parser):
     parser.addoption("--run-slow", action="store_true", help="also run tests marked slow")
     parser.addoption("--run-browser", action="store_true",

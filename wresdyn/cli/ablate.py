@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from ..data.dataset import load_dataset
-    from ..evaluation.ablation import AblationConfig, run_ablation
+    from ..experiments.ablation import AblationConfig, run_ablation
     from ..paths import DEFAULT_DATASET
     from ..robot.description import DEFAULT_ROBOT, load_robot
 
@@ -102,7 +102,7 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
 
     from ..data.dataset import load_dataset
     from ..data.real_robot import Mismatch, collect
-    from ..evaluation.ablation import cells, run_cells, write_summary
+    from ..experiments.ablation import cells, run_cells, write_summary
     from . import UserError
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()

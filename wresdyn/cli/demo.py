@@ -1,17 +1,5 @@
-"""``wresdyn demo``: the main job on the embedded defaults, end to end on a 2-core CPU in about 10 minutes.
-
-The whole story at a small size: record → fit → calibrated robot → a skill deployed zero-shot with and without it.
-
-1. robot: load ``scenes/humanoid.usda`` and check Newton against MuJoCo C on a PD replay;
-2. data: the shipped dataset ``data/dataset.npz`` (made by ``wresdyn collect``; ``--collect`` records a fresh one);
-3. learn: the calibrated robot by the gradient fit through the simulation (``wresdyn fit``: identified physics + a
-   torque residual) and, for comparison, a torque residual by PPO (``wresdyn train``, the paper's method);
-4. evaluate: open-loop replay of the held-out and out-of-distribution trajectories (``wresdyn eval``), and the
-   calibrated robot written as USD + Newton actuators (``wresdyn export``);
-5. use it: a motion-tracking skill trained by PPO in the nominal simulator, fine-tuned in the calibrated one, and
-   fine-tuned on the "real" robot itself (the oracle), each deployed zero-shot on the real robot (``wresdyn deploy``
-   at a small size, without its delta-action policy). ``OUT/report.md`` sums it up.
-"""
+"""``wresdyn demo``: the main job on the embedded defaults, end to end on a 2-core CPU in about 10 minutes
+(the pipeline: :mod:`wresdyn.experiments.demo_pipeline`)."""
 
 from __future__ import annotations
 
@@ -29,101 +17,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import dataclasses
-    import json
-    import time
-    from pathlib import Path
+    from ..experiments.demo_pipeline import run_demo
 
-    from ..data.dataset import load_dataset
-    from ..evaluation.evaluate_run import evaluate_run
-    from ..learn.gradfit import GradFitConfig, export_run
-    from ..learn.ppo import default_config, train
-    from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
-    from ..robot.description import load_robot
-    from ..sim.parity import pd_agreement
-
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    robot = load_robot(DEFAULT_ROBOT)
-    a = pd_agreement(robot, 1.0, 0.002, integrator="Euler", solver="featherstone")
-    print(f"[1/5] robot: {robot.source.name}, {robot.n_dof} joints, {robot.body_mass.sum():.1f} kg; Newton vs MuJoCo C "
-          f"PD replay max |dq| {a.max_abs:.1e} rad", flush=True)
-
-    data_path = DEFAULT_DATASET
-    if args.collect:
-        from ..data.real_robot import Mismatch, collect
-
-        data_path = out / "data" / "dataset.npz"
-        if not data_path.is_file():
-            mismatch = Mismatch.load(DEFAULT_MISMATCH)
-            collect(robot, mismatch, {"train": 4, "validation": 2, "heldout": 2, "ood": 2}, store_tau=False,
-                    progress=lambda line: print("      " + line, flush=True)).save(data_path)
-    data = load_dataset(data_path, robot=robot)
-    if args.quick:
-        data = dataclasses.replace(data, trajectories=data.split("train")[:2] + data.split("validation")[:1]
-                                   + data.split("heldout")[:1] + data.split("ood")[:1])
-    splits = ", ".join(f"{s} {len(data.split(s))}" for s in ("train", "validation", "heldout", "ood"))
-    print(f"[2/5] data: {data_path} ({splits}"
-          f", {data.rate_hz:g} Hz)", flush=True)
-
-    from ..learn.hybrid import HYBRID_ITERATIONS
-    from ..export.usd import export_run as export_usd
-    from ..learn.hybrid import fit_hybrid
-    from ..learn.sysid import SysIdConfig
-    from ..skills.benchmark import DeployConfig, run_benchmark
-
-    log = lambda line: print("      " + line, flush=True)  # noqa: E731
-    gcfg = GradFitConfig(iterations=HYBRID_ITERATIONS)
-    scfg = SysIdConfig()
-    tcfg = default_config()
-    tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=args.ppo_iterations))
-    dcfg = DeployConfig(train_per_family=3, heldout_per_family=1, iterations=args.skill_iterations,
-                        finetune=args.skill_iterations)
-    if args.quick:
-        gcfg = dataclasses.replace(gcfg, iterations=4, windows=4, horizon_curriculum=(2, 4))
-        scfg = dataclasses.replace(scfg, iterations=4, windows=4)
-        tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=2, num_envs=8, num_steps_per_env=8))
-        dcfg = dataclasses.replace(dcfg, train_per_family=1, iterations=2, finetune=1, envs=8)
-    print(f"[3/5] the calibrated robot: gradient fit through the simulation ({scfg.iterations} identification + "
-          f"{gcfg.iterations} residual iterations, `wresdyn fit`) ...", flush=True)
-    fit_dir = out / "fit"
-    _, policy, curve, gcfg, id_wall = fit_hybrid(robot, data, scfg, gcfg, fit_dir, data_path=data_path, log=log)
-    export_run(policy, fit_dir, gcfg, data, data_path)
-    print(f"      ... and a torque residual by PPO ({tcfg.ppo.iterations} iterations, `wresdyn train`)", flush=True)
-    ppo_dir = out / "ppo"
-    summary = train(data, robot, tcfg, ppo_dir, resume=True)
-    print("[4/5] evaluation (open loop over whole trajectories)", flush=True)
-    results = {}
-    for name, run_dir in (("calibrated (gradient fit)", fit_dir), ("residual by PPO", ppo_dir)):
-        print(f"      {name}:", flush=True)
-        results[name] = evaluate_run(str(run_dir), data, robot, data_label=str(data_path))
-    exported = export_usd(fit_dir, force=True, data=str(data_path))
-    print(f"      the calibrated robot for Newton: {exported}/actuated.usda (`wresdyn export`)", flush=True)
-    print("[5/5] skills deployed zero-shot on the real robot (`wresdyn deploy`, small)", flush=True)
-    deploy = run_benchmark(robot, data, out / "deploy", dcfg, data_path=data_path, calibrated=fit_dir,
-                           policies=("a_nominal", "b_calibrated", "d_oracle"), log=log)
-    rows = ["| learner | training [s] | held-out mean abs dq [rad] | x | OOD mean abs dq [rad] | x |", "|---|---|---|---|---|---|"]
-    walls = {"calibrated (gradient fit)": (curve[-1]["wall"] if curve else 0.0) + id_wall,
-             "residual by PPO": summary["wall_s_this_session"]}
-    for name, res in results.items():
-        h, o = res.get("heldout"), res.get("ood")
-        cells = [f"{r['pd_residual']['mean_abs_dq']:.4f} | {r['improvement']:.2f}x" if r else "- | -" for r in (h, o)]
-        rows.append(f"| {name} | {walls[name]:.0f} | {cells[0]} | {cells[1]} |")
-    pd = next(iter(results.values())).get("heldout", {}).get("pd_only", {}).get("mean_abs_dq", float("nan"))
-    real = deploy["real"]["heldout"]
-    skill = ["| skill policy, deployed on the real robot | MPJPE [mrad] | foot error [mm] | success |", "|---|---|---|---|"]
-    skill += [f"| {n} | {1e3 * r['mean']['mpjpe']:.2f} | {1e3 * r['mean']['foot_error']:.2f} | "
-              f"{100 * r['mean']['success']:.0f} % |" for n, r in real.items()]
-    gap = deploy["gap_closed"].get("b_calibrated", float("nan"))
-    report = ["# wresdyn demo", "", "## Fidelity: open-loop replay", "", f"PD-only held-out mean |Δq|: {pd:.4f} rad.", "",
-              *rows, "", "## Zero-shot skills on the real robot (held-out motions)", "", *skill, "",
-              f"Gap closed by the calibrated robot, (a − b) / (a − d): {100 * gap:.0f} %.", "",
-              "Plots: `fit/eval/fig3_heldout.png`, `ppo/eval/fig3_heldout.png`, `deploy/tracking_heldout.png`; "
-              "the calibrated robot: `fit/export/`; the skills' report: `deploy/report.md`. "
-              f"Total {time.perf_counter() - t0:.0f} s."]
-    (out / "report.md").write_text("\n".join(report) + "\n")
-    (out / "results.json").write_text(json.dumps({"fidelity": results, "skills": deploy["real"],
-                                                  "gap_closed": deploy["gap_closed"]}, indent=1))
-    print("\n".join(report))
+    run_demo(args.out, collect=args.collect, ppo_iterations=args.ppo_iterations,
+             skill_iterations=args.skill_iterations, quick=args.quick)
     return 0

@@ -1,5 +1,5 @@
 """``wresdyn deploy [DATA]``: train tracking skills in the nominal and the corrected simulators and deploy each
-zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.skills.benchmark`.
+zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.experiments.stand_skills`.
 
 Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tracking_heldout.png`` and
 ``OUT/deployed_heldout.usda``; the corrections (``OUT/calibrated``, ``OUT/delta_action``) are fitted on DATA unless
@@ -28,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--floor", action="store_true",
                    help="skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, "
                         "kick, wave; stepping held out), corrections still fitted on the stand (see "
-                        "wresdyn.skills.floor_benchmark; defaults: 3 training motions per family, 4 s, 300 + 100 "
+                        "wresdyn.experiments.floor_skills; defaults: 3 training motions per family, 4 s, 300 + 100 "
                         "iterations)")
     p.add_argument("--full", action="store_true",
                    help="the full size, for a GPU: 4096 worlds, 16 training / 2 validation / 4 held-out motions per "
@@ -59,14 +59,14 @@ def run(args: argparse.Namespace) -> int:
 
     from ..data.loading import load_data
     from ..data.real_robot import Mismatch
-    from ..skills.benchmark import DeployConfig, run_benchmark
+    from ..experiments.stand_skills import DeployConfig, run_benchmark
 
     if args.oracle_beside and not args.floor:
         from . import UserError
 
         raise UserError("--oracle-beside trains the floor's oracle; it needs --floor")
     if args.floor:
-        from ..skills.floor_benchmark import FloorDeployConfig, run_floor_benchmark
+        from ..experiments.floor_skills import FloorDeployConfig, run_floor_benchmark
 
         cfg = FloorDeployConfig.full() if args.full else FloorDeployConfig()
         bench = run_floor_benchmark

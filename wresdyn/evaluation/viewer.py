@@ -4,10 +4,10 @@ A ``wresdyn fit``/``train``/``identify`` run folder shows one recording of a spl
 times, as :func:`~wresdyn.evaluation.open_loop.evaluate_split` replays it for ``wresdyn eval``: the real robot (the
 recording, red), the simulator with PD alone (green) and the calibrated robot (the run's physics and residual,
 blue). A ``wresdyn deploy`` output folder shows its ``deployed_heldout.usda`` (the skills deployed on the real
-robot, :func:`wresdyn.skills.animation.write_animation`), from the joint positions stored in it.
+robot, :func:`wresdyn.evaluation.animation.write_animation`), from the joint positions stored in it.
 
 The page is Newton's :class:`newton.viewer.ViewerViser` (a `viser <https://viser.studio>`_ server): the robots are
-one Newton world each, posed by forward kinematics (:class:`~wresdyn.skills.animation.RobotRow`, shared with the USD
+one Newton world each, posed by forward kinematics (:class:`~wresdyn.evaluation.animation.RobotRow`, shared with the USD
 animation); viser's own GUI adds a time slider, play/pause and a plot per joint of the rollouts' positions.
 """
 
@@ -77,7 +77,7 @@ def run_scene(run, split: str = "heldout", index: int = 0, data: str | None = No
     """The scene of a run folder: trajectory ``index`` of ``split`` as recorded, replayed with PD alone and with
     the run's calibrated model (its ``physics.json`` and residual), open loop from the first recorded state."""
     from ..data.loading import load_data
-    from ..skills.animation import sample_frames
+    from .animation import sample_frames
     from .open_loop import evaluate_split
     from .evaluate_run import load_run_model
 
@@ -107,7 +107,7 @@ def run_scene(run, split: str = "heldout", index: int = 0, data: str | None = No
 
 
 def animation_scene(path) -> Scene:
-    """The scene of a USD animation written by :func:`~wresdyn.skills.animation.write_animation` (e.g. a deploy
+    """The scene of a USD animation written by :func:`~wresdyn.evaluation.animation.write_animation` (e.g. a deploy
     folder's ``deployed_heldout.usda``), from the joint positions and robot file stored on its default prim."""
     from pxr import Usd
 
@@ -180,7 +180,7 @@ def serve(scene: Scene, cfg: ViewerConfig = ViewerConfig(), say=print) -> None:
         raise WresdynError("the viewer needs viser: pip install 'wresdyn[view]' (or pip install viser)") from None
     import newton
 
-    from ..skills.animation import RobotRow
+    from .animation import RobotRow
 
     n_frames, n_worlds, width = scene.poses.shape
     spacing = scene.spacing if scene.spacing is not None else cfg.spacing

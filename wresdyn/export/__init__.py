@@ -3,8 +3,9 @@
 - :mod:`wresdyn.export.usd`: ``wresdyn export RUN`` writes ``robot.usda`` (a layer over the robot file with the
   identified physical parameters as the attributes Newton's USD importer reads) and ``actuated.usda`` (the drive
   path as ``newton.actuators`` prims: ``DrivePD``, ``Delay``, ``ClampingMaxEffort``; and the residual network).
-- :mod:`wresdyn.export.program`: the exported networks' format (residuals and skills): a ``torch.export`` archive
-  and the same program as ONNX through torch's dynamo-based exporter; loaded back with torch alone.
+- the residual network is written in the format every learner saves its networks in
+  (:mod:`wresdyn.learn.network_file`: a ``torch.export`` archive and the same program as ONNX; loaded back with
+  torch alone).
 - :mod:`wresdyn.export.residual_torque`: the small component a plain Newton script imports to run the exported
   residual every step (torch and warp only; it does not import the rest of wresdyn).
 """

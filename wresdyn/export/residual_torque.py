@@ -3,7 +3,7 @@
 Newton's actuators compute each joint's effort from that joint's own state and command; the residual is one
 network over every joint's [q, q̇, q̈, q_cmd], so it runs beside them and adds its torque to ``control.joint_f``
 after they have written theirs, the mechanism Newton documents for external joint efforts (the residual is
-not clamped with the drive, as in wresdyn's own simulator). It imports numpy, torch, warp and pxr only (and :mod:`wresdyn.export.program`, the file format)::
+not clamped with the drive, as in wresdyn's own simulator). It imports numpy, torch, warp and pxr only (and :mod:`wresdyn.learn.network_file`, the file format)::
 
     import newton
     from wresdyn.export.residual_torque import ResidualTorque
@@ -38,7 +38,7 @@ class ResidualTorque:
 
     Args:
         network: The residual (``forward``, ``reset``): wresdyn's ``residual.pt2`` loaded by
-            :func:`wresdyn.export.program.load_residual`.
+            :func:`wresdyn.learn.network_file.load_residual`.
         model: The Newton model (one robot per world, ``model.world_count`` worlds).
         joint_paths: USD prim path of each of the network's joints, in its order.
         dt: Period between :meth:`apply` calls [s] (the q̈ estimate's step).
@@ -75,7 +75,7 @@ class ResidualTorque:
         ``torch.export`` archive its ``wresdyn:program`` names)."""
         from pxr import Usd
 
-        from .program import load_residual
+        from ..learn.network_file import load_residual
 
         stage = Usd.Stage.Open(str(usd_path))
         prim = next((p for p in stage.Traverse() if p.GetName() == "wresdyn_residual"), None)

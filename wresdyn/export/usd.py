@@ -19,7 +19,7 @@ nothing behind):
                        and ``NewtonMaxEffortClampingAPI`` (the effort limit), the joints' own drives set to zero
                        so the PD is applied once; and a ``wresdyn_residual`` prim that references the residual
                        network (``residual.pt2``, ``residual.onnx``) with its joints, kind and rate.
-``residual.pt2``       the residual network, a ``torch.export`` archive (:mod:`wresdyn.export.program`), and
+``residual.pt2``       the residual network, a ``torch.export`` archive (:mod:`wresdyn.learn.network_file`), and
                        ``residual.onnx`` the same program as ONNX; observation [q, q̇, q̈, q_cmd] (rad, rad/s, rad/s², rad), (N, 4n);
                        output a joint torque [N m] added next to the actuators' (not clamped with them), as in
                        :class:`~wresdyn.sim.simulator.Simulator`.

@@ -600,7 +600,7 @@ def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) ->
 def load_policy(run_dir: str | Path):
     """The exported residual of a run: ``(policy, meta)`` with ``policy(obs) -> residual``
     (:class:`~wresdyn.export.program.ExportedResidual`, on the CPU) and ``meta`` its ``residual.json``."""
-    from ..export.program import load_residual
+    from .network_file import load_residual
 
     run_dir = Path(run_dir)
     path, meta_path = run_dir / "policy.pt", run_dir / "residual.json"

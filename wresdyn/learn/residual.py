@@ -255,13 +255,13 @@ class _PureGRU(nn.Module):
 
 
 def export_policy(policy: ResidualPolicy, path: str | Path, onnx_path: str | Path | None = None):
-    """Save ``policy`` as a ``torch.export`` archive at ``path`` (:mod:`wresdyn.export.program`; loaded back by
-    :func:`~wresdyn.export.program.load_residual`) and, with ``onnx_path``, as ONNX, both with a dynamic batch axis.
+    """Save ``policy`` as a ``torch.export`` archive at ``path`` (:mod:`wresdyn.learn.network_file`; loaded back by
+    :func:`~wresdyn.learn.network_file.load_residual`) and, with ``onnx_path``, as ONNX, both with a dynamic batch axis.
 
     MLP: ``obs`` (N, 4n) -> ``residual`` (N, n). GRU: (``obs``, ``h_in`` (layers, N, H)) -> (``residual``,
     ``h_out``); the caller carries the hidden state, starting from zeros (``load_residual`` does).
     """
-    from ..export.program import export_onnx, save_program
+    from .network_file import export_onnx, save_program
 
     n_obs = policy.obs_mean.shape[0]
     batch = torch.export.Dim("batch", min=1)

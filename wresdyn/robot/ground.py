@@ -8,7 +8,7 @@ turns every Newton shape into a MuJoCo geom (friction from ``shape_material_mu``
 ``mu_rolling``, ``solref`` from ``shape_material_ke`` / ``kd``, ``gap`` as it is, ``margin`` zeroed where there
 are boxes, MuJoCo's default ``solimp`` and ``condim``) and takes the solver options from its constructor;
 :class:`~wresdyn.robot.contact.ContactSettings` states those numbers once, both sides are written from it, and
-``tests/test_standing.py`` checks the two compiled MuJoCo models field by field.
+``tests/robot/test_standing.py`` checks the two compiled MuJoCo models field by field.
 
 Conventions (Newton's, for both simulators): the base pose is the free root joint's ``joint_q``,
 ``[x y z qx qy qz qw]`` (position [m], unit quaternion scalar last); the base twist is its ``joint_qd``,

@@ -52,7 +52,7 @@ def _policy_kind(policy, kind: str | None) -> str:
         return kind
     k = getattr(policy, "kind", None)
     if k is None and hasattr(policy, "residual_kind"):
-        k = policy.residual_kind()  # an exported residual (wresdyn.export.program)
+        k = policy.residual_kind()  # an exported residual (wresdyn.learn.network_file)
     if k is None:
         raise ValueError("the residual kind is unknown: pass kind='torque' or 'delta_action'")
     return k

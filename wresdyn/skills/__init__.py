@@ -4,7 +4,9 @@
 - :mod:`.plants`: what a skill acts on: the simulators (nominal, calibrated, delta action; :class:`~.plants.SimPlant`
   on :class:`wresdyn.sim.Simulator`) and the "real" robot (:class:`~.plants.RealPlant`, MuJoCo C);
 - :mod:`.env`: the tracking environment (rsl-rl ``VecEnv``) on any plant;
-- :mod:`.train`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
-- :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness);
-- :mod:`.benchmark`: the zero-shot benchmark of ``wresdyn deploy``; :mod:`.report`, :mod:`.animation`: its report.
+- :mod:`.skill_ppo`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
+- :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error, success, smoothness, the gap closed);
+- :mod:`.report`, :mod:`.floor_report`: the report of a zero-shot benchmark, with its USD animation
+  (:mod:`wresdyn.evaluation.animation`). The benchmarks themselves, which train every policy, are
+  :mod:`wresdyn.experiments.stand_skills` and :mod:`wresdyn.experiments.floor_skills`.
 """

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["Deployment", "deploy_skill", "metrics", "METRICS"]
+__all__ = ["Deployment", "deploy_skill", "metrics", "METRICS", "gap_closed"]
 
 METRICS = ("mpjpe", "foot_error", "success", "action_rate", "torque_rate")
 
@@ -112,3 +112,8 @@ def metrics(dep: Deployment, robot, frames=None) -> dict:
     mean["success"] = float(np.mean([p["success"] for p in per]))
     mean["failures"] = int(sum(not p["success"] for p in per))
     return {"mean": mean, "motions": per}
+
+
+def gap_closed(a: float, b: float, d: float) -> float:
+    """(a − b) / (a − d): the fraction of the nominal-to-oracle tracking gap that ``b`` closes (NaN if a = d)."""
+    return float((a - b) / (a - d)) if a != d else float("nan")

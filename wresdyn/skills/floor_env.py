@@ -166,7 +166,7 @@ class FloorTrackingEnv(VecEnv):
     """
 
     critic_groups = ("policy", "critic")
-    """What the critic sees (:func:`wresdyn.skills.train.train_skill`)."""
+    """What the critic sees (:func:`wresdyn.skills.skill_ppo.train_skill`)."""
 
     def __init__(self, plant, motions, cfg: FloorTaskConfig = FloorTaskConfig(), seed: int = 0,
                  random_start: bool = True, device=None):

@@ -91,7 +91,7 @@ def write_floor_report(out, floating, results: dict, rollouts: dict, motions, po
     plot_floor_tracking(rollouts, motions, floating, out / "tracking_heldout.png", policy_rate_hz)
     anim = ""
     if animation:
-        from .animation import write_animation
+        from ..evaluation.animation import write_animation
 
         i = next((k for k, m in enumerate(motions) if m.family == "step"), 0)
         ref = rollouts["reference"]

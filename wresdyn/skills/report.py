@@ -79,7 +79,7 @@ def write_report(out, robot, results: dict, rollouts: dict, motions, policy_rate
     plot_tracking(rollouts, motions, robot, out / "tracking_heldout.png", policy_rate_hz)
     anim = ""
     if animation:
-        from .animation import write_animation
+        from ..evaluation.animation import write_animation
 
         i = next((k for k, m in enumerate(motions) if m.family not in ("kick", "squat", "wave")), 0)
         traj = {"reference": rollouts["a_nominal"].q_ref[i]}

@@ -72,6 +72,7 @@ from newton.solvers import SolverBase
 from .cache import load_module
 from .codegen import LiveParams, generate_source
 from .dynamics import LiveInertia
+from .launch import cpu_call, grad_of, launch_signature
 from .tree import ReplayTree, tree_from_model
 
 __all__ = ["FRICTION_KAPPA", "FRICTION_SWEEPS", "SolverReplay"]
@@ -288,10 +289,10 @@ class SolverReplay(SolverBase):
         inputs = [chunk[0], *args]
         extra = {}
         if adjoint:
-            extra = {"adj_inputs": [_grad(a) for a in inputs], "adj_outputs": [_grad(a) for a in outputs]}
+            extra = {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
         cmd = wp.launch(kernel, dim=chunk[1], inputs=inputs, outputs=outputs, device=self.model.device,
                         adjoint=adjoint, record_cmd=True, **extra)
-        return _cpu_call(cmd) or cmd.launch
+        return cpu_call(cmd) or cmd.launch
 
     def _execute(self, plan: list) -> None:
         """Run each chunk's launches in order, the chunks concurrently (CPU threads)."""
@@ -324,7 +325,7 @@ class SolverReplay(SolverBase):
             control = self._control0
         arrays = [state_in.joint_q, state_in.joint_qd, control.joint_target_q, control.joint_target_qd,
                   control.joint_f, state_out.joint_q, state_out.joint_qd]
-        key = ("step", float(dt), *map(_sig, arrays))
+        key = ("step", float(dt), *map(launch_signature, arrays))
         args, outputs = [*self._leading_args(dt), *self._params, self._gravity, *arrays[:5]], arrays[5:]
         kernel = self.kernels.replay_step
         self._execute(self._plan(key, lambda c: [self._command(kernel, c, args, outputs)]))
@@ -371,7 +372,7 @@ class SolverReplay(SolverBase):
             target_qd = zeros if target_qd is None else target_qd
             joint_f = zeros if joint_f is None else joint_f
         arrays = [q, qd, target_q, target_qd, joint_f]
-        key = ("rollout", float(dt), *map(_sig, arrays))
+        key = ("rollout", float(dt), *map(launch_signature, arrays))
         fixed = [*self._leading_args(dt), *self._params, self._gravity]
         kernel = self.kernels.replay_rollout
         self._execute(self._plan(key, lambda c: [self._command(kernel, c, [t_len, *fixed, *arrays[2:]], arrays[:2])]))
@@ -412,43 +413,3 @@ def _same_live(a: LiveParams | None, b: LiveParams | None) -> bool:
         return a is b
     return all(np.array_equal(x, y) for x, y in ((a.friction, b.friction), (a.body.mass, b.body.mass),
                                                   (a.body.com, b.body.com), (a.body.inertia, b.body.inertia)))
-
-
-def _cpu_call(cmd):
-    """A CPU launch as a direct call of the compiled entry point with argument structs built once.
-
-    ``Launch.launch`` rebuilds the ctypes argument structs on every call (~20 us for this kernel's ~30
-    arguments, twice that for an adjoint), which dominates a step of one world. Uses Warp internals
-    (pinned to 1.19); returns None where they differ, and the caller falls back to ``Launch.launch``.
-    """
-    import ctypes
-
-    try:
-        if not cmd.device.is_cpu or cmd.block_dim != 1:
-            return None
-        args, adj = wp._src.context._build_cpu_args_structs(cmd.kernel, cmd.hooks, cmd.params, cmd.adjoint)
-        bounds = cmd.params[0]
-        if cmd.adjoint:
-            fn, refs = cmd.hooks.backward, (ctypes.byref(bounds), ctypes.byref(args), ctypes.byref(adj))
-        else:
-            fn, refs = cmd.hooks.forward, (ctypes.byref(bounds), ctypes.byref(args))
-    except (AttributeError, TypeError, ValueError):
-        return None
-
-    def call(fn=fn, refs=refs, _keep=(cmd, args, adj, bounds)):  # the structs and module must outlive the call
-        fn(*refs)
-
-    return call
-
-
-def _grad(a):
-    if isinstance(a, wp.array):
-        return a.grad if a.requires_grad else None
-    return None
-
-
-def _sig(a):
-    """Launch-cache key of an argument: arrays by address, shape, strides and gradient address."""
-    if isinstance(a, wp.array):
-        return (a.ptr, a.shape, a.strides, a.grad.ptr if a.requires_grad and a.grad is not None else None)
-    return a

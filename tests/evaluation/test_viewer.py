@@ -56,7 +56,7 @@ def test_run_scene_is_the_recording_and_the_eval_replays(fit_run):
 def test_animation_scene_reads_back_the_frames_it_was_written_with(tmp_path):
     from wresdyn.evaluation.viewer import load_scene
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.animation import sample_frames, write_animation
+    from wresdyn.evaluation.animation import sample_frames, write_animation
 
     robot = load_robot(SO101)
     ramp = np.zeros((30, robot.n_dof))

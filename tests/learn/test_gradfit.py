@@ -1,6 +1,6 @@
 """Gradient fit through the differentiable Warp simulation: network-parameter gradients vs central finite
 differences, a fit that reduces the replay error, and checkpoint/resume. (The simulator's own gradients w.r.t.
-state, target and torque: tests/test_sim.py.)"""
+state, target and torque: tests/sim/test_sim.py.)"""
 
 import dataclasses
 

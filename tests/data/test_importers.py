@@ -16,7 +16,7 @@ from wresdyn.data.dataset import DatasetError, load_dataset
 from wresdyn.data.importers import SplitRule, import_runs, load_split_map, parse_assign, read_runs, read_sage
 from wresdyn.data.logs import LogMap, import_log, resample
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SO101 = REPO / "scenes" / "so101" / "so101.xml"
 SHIPPED = REPO / "data" / "so101"
 SO101_JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]

@@ -217,7 +217,7 @@ def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
     """The real pipeline, tiny: same seed gives the same data, another seed other data, and the file is exact."""
     from wresdyn.data.real_robot import Mismatch, collect
 
-    mm = Mismatch.load(Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml")
+    mm = Mismatch.load(Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml")
     counts = {"train": 1, "ood": 2}
     a = collect(humanoid, mm, counts, duration=0.5, seed=3)
     b = collect(humanoid, mm, counts, duration=0.5, seed=3)
@@ -307,7 +307,7 @@ def collected(humanoid):
     """A tiny collect with a validation split (0.1 s per trajectory, the real pipeline)."""
     from wresdyn.data.real_robot import Mismatch, collect
 
-    mm = Mismatch.load(Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml")
+    mm = Mismatch.load(Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml")
     return collect(humanoid, mm, {"train": 1, "validation": 2, "heldout": 1}, duration=0.1, seed=5)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.evaluation.ablation import cell_devices
+from wresdyn.experiments.ablation import cell_devices
 from wresdyn.learn.gradfit import GradFitConfig, fit
 from wresdyn.learn.ppo import default_config, set_fields, train
 from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig

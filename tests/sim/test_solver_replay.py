@@ -8,11 +8,11 @@ Tiers, each at a tolerance tied to its cause:
 - 2 s trajectories (1000 steps) against MuJoCo ``implicitfast`` on the project humanoid and newton's
   quadruped, with no MuJoCo constraint active, so the only difference is float32 round-off;
 - analytic checks for what MuJoCo models differently (penalty limits) and for implicit stability where
-  explicit PD diverges (dry friction: tests/test_friction.py);
+  explicit PD diverges (dry friction: tests/sim/test_friction.py);
 - gradients through a Tape against central finite differences (float64, 3-DoF robot with a prismatic
   joint and skewed axes), and the per-step Tape against the fused rollout's (parameter gradients:
-  tests/test_replay_gradients.py; inertias from the model arrays: tests/test_replay_params.py; the kernel
-  cache: tests/test_replay_cache.py).
+  tests/sim/test_replay_gradients.py; inertias from the model arrays: tests/sim/test_replay_params.py; the kernel
+  cache: tests/sim/test_replay_cache.py).
 """
 
 import numpy as np

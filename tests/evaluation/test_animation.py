@@ -1,11 +1,11 @@
-"""The side-by-side USD animation of fixed-base rollouts (:mod:`wresdyn.skills.animation`)."""
+"""The side-by-side USD animation of fixed-base rollouts (:mod:`wresdyn.evaluation.animation`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from wresdyn.skills.animation import write_animation
+from wresdyn.evaluation.animation import write_animation
 
 RATE_HZ = 500.0
 SAMPLES = 20

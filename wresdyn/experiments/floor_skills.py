@@ -1,31 +1,39 @@
 """The zero-shot benchmark on the floor (``wresdyn deploy --floor``): four skills that must keep the humanoid's
 balance, each deployed on the "real" robot standing on its floor.
 
-1. Motions (:mod:`.floor_motions`): squat, weight shift, kick on one leg, arm waves; stepping in place held out.
+1. Motions (:mod:`wresdyn.skills.floor_motions`): squat, weight shift, kick on one leg, arm waves; stepping in place
+   held out.
 2. Corrections fitted **on the stand** from the dataset (no floor data): the calibrated robot (a hybrid ``wresdyn
    fit`` run: identified physics + torque residual) and the ASAP-style delta action alone, as
-   :mod:`.benchmark` fits them; on the floor they apply unchanged to the same joints and links.
-3. Policies (PPO, rsl-rl, asymmetric actor-critic, :mod:`.floor_env`): (a) trained in the nominal simulator on the
-   floor; (b) (a) fine-tuned in the calibrated robot on the floor; (c) (a) fine-tuned with the delta action; (d) the
-   oracle, (a) fine-tuned on the real robot itself. (b), (c), (d) get the same fine-tuning iterations.
-4. Deployment (:mod:`.floor_evaluate`) of every policy, and of the reference played open loop, on the real robot
-   (the mismatch's physics, delay, torque limits, joint and IMU noise) over validation and held-out motions. Gap
-   closed = (a − b) / (a − d) on held-out MPJPE and on g-MPJPE.
+   :mod:`.zero_shot` fits them; on the floor they apply unchanged to the same joints and links.
+3. Policies (PPO, rsl-rl, asymmetric actor-critic, :mod:`wresdyn.skills.floor_env`): (a) trained in the nominal
+   simulator on the floor; (b) (a) fine-tuned in the calibrated robot on the floor; (c) (a) fine-tuned with the delta
+   action; (d) the oracle, (a) fine-tuned on the real robot itself. (b), (c), (d) get the same fine-tuning
+   iterations.
+4. Deployment (:mod:`wresdyn.skills.floor_evaluate`) of every policy, and of the reference played open loop, on the
+   real robot (the mismatch's physics, delay, torque limits, joint and IMU noise) over validation and held-out
+   motions. Gap closed = (a − b) / (a − d) on held-out MPJPE and on g-MPJPE.
 
 No choice looks at held-out motions; every policy is its last iterate.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-import numpy as np
-
 from ..choices import check_number
-from .benchmark import POLICIES, _fit_corrections, _json, gap_closed
+from ..data.real_robot import Mismatch, RealRobot
+from ..robot import load_robot
+from ..skills.evaluate import gap_closed
+from ..skills.floor_env import FloorTaskConfig, FloorTrackingEnv
+from ..skills.floor_evaluate import deploy_floor, floor_metrics
+from ..skills.floor_motions import make_floor_motions
+from ..skills.floor_report import write_floor_report
+from ..skills.plants import RealPlant, sim_plant
+from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from .zero_shot import POLICIES, fit_corrections, write_results
 
 __all__ = ["FloorDeployConfig", "run_floor_benchmark"]
 
@@ -76,10 +84,6 @@ def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: Fl
                   meta: dict, out: Path, log) -> float:
     """Train policy ``name`` (the ``i``-th of the benchmark: ``a_nominal`` from scratch, the others fine-tuned from it)
     on the floor of its plant; returns the wall-clock time [s]."""
-    from .floor_env import FloorTrackingEnv
-    from .plants import RealPlant, sim_plant
-    from .train import train_skill
-
     setting = POLICIES[name]
     t0 = time.perf_counter()
     envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
@@ -104,9 +108,6 @@ def _train_oracle(source: str, gains, mismatch: dict, rate: float, i: int, motio
     """:func:`_train_policy` of the oracle in a process of its own (its lines go to its ``train.log`` only)."""
     import torch
 
-    from ..data.real_robot import Mismatch, RealRobot
-    from ..robot import load_robot
-
     torch.set_num_threads(max(ppo.torch_threads, 1))
     floating = load_robot(source, gains=gains, base="floating")
     real = RealRobot(floating, Mismatch.from_dict(mismatch, "the benchmark's mismatch"), rate)
@@ -121,23 +122,16 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     Args:
         robot: The nominal robot on its stand (fixed base); its floating twin is loaded from the same file.
         dataset: The stand recordings the corrections are fitted on.
-        cfg: Sizes. task: :class:`~.floor_env.FloorTaskConfig`; ppo: :class:`~.train.SkillPPOConfig`.
+        cfg: Sizes. task: :class:`~wresdyn.skills.floor_env.FloorTaskConfig`;
+            ppo: :class:`~wresdyn.skills.skill_ppo.SkillPPOConfig`.
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
-        policies: Which of :data:`~.benchmark.POLICIES` to train and deploy (``a_nominal`` always).
+        policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always).
 
     Returns:
         The results written to ``results.json``.
     """
     import torch
-
-    from ..data.real_robot import Mismatch, RealRobot
-    from ..robot import load_robot
-    from .floor_env import FloorTaskConfig
-    from .floor_evaluate import deploy_floor, floor_metrics
-    from .floor_motions import make_floor_motions
-    from .plants import RealPlant, sim_plant
-    from .train import SkillPPOConfig, load_skill
 
     t_start = time.perf_counter()
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
@@ -155,7 +149,7 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     log("[1/4] floor motions: " + ", ".join(f"{s} {len(motions[s])}" for s in counts)
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
     t0 = time.perf_counter()
-    calibrated, delta = _fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
+    calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
                                          need_delta="c_delta_action" in policies)
     fit_s = time.perf_counter() - t0
     log(f"[2/4] corrections fitted on the stand: calibrated {calibrated}, delta action {delta} ({fit_s:.0f} s)")
@@ -218,13 +212,9 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
         f"{1e3 * r['mean'].get('mpjpe', float('nan')):.1f} mrad, g-MPJPE {1e3 * r['mean'].get('g_mpjpe', float('nan')):.0f} mm"
         for n, r in held.items()) + "".join(
         f"; gap closed by {k[0]} {100 * v:.0f} % (MPJPE)" for k, v in results["gap_closed_mpjpe"].items()))
-    from .floor_report import write_floor_report
-
     results["wall_s"] = time.perf_counter() - t_start
     write_floor_report(out, floating, results, rollouts, motions["heldout"], rate / task.decimation,
                        animation=animation)
-    tmp = out / "results.json.tmp"
-    tmp.write_text(json.dumps(results, indent=1, default=_json))
-    tmp.replace(out / "results.json")
+    write_results(out, results)
     log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
     return results

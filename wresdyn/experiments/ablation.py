@@ -113,7 +113,7 @@ def cells(cfg: AblationConfig) -> list[dict]:
 
 
 def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> dict:
-    from .open_loop import evaluate_split
+    from ..evaluation.open_loop import evaluate_split
 
     summary, _ = evaluate_split(robot, dataset.split(split), dataset.rate_hz, policy, kind=kind, solver=cfg.solver,
                                 device=cfg.device, weights=dataset.fit_weights())
@@ -315,6 +315,6 @@ def plot_curves(results: list[dict], path: str | Path) -> Path:
     axes[0].set_ylabel(f"{split} mean |Δq| [rad]")
     axes[1].legend(fontsize=7)
     fig.tight_layout()
-    from .plots import save_figure
+    from ..evaluation.plots import save_figure
 
     return save_figure(fig, path, dpi=120)

@@ -254,7 +254,7 @@ def _plain(desc: str, n: int):
 def test_ppo_draws_a_line_per_iteration_and_keeps_rsl_rls_tables_in_the_run(robot, data, tmp_path):
     import io
 
-    from test_ppo import tiny
+    from conftest import tiny_ppo_config as tiny
 
     from wresdyn.learn.ppo import train
     from wresdyn.progress import Log
@@ -296,7 +296,7 @@ def test_a_skill_draws_a_line_per_iteration_named_after_its_policy(humanoid, tmp
     from wresdyn.skills.env import SkillConfig, TrackingEnv
     from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import SimPlant
-    from wresdyn.skills.train import SkillPPOConfig, train_skill
+    from wresdyn.skills.skill_ppo import SkillPPOConfig, train_skill
 
     motions = make_motions(humanoid, {"train": 1}, duration=0.4, rate_hz=500.0, seed=3)
     env = TrackingEnv(SimPlant(humanoid, 3, 500.0, 5), motions.split("train"), SkillConfig(decimation=5))

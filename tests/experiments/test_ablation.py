@@ -11,7 +11,7 @@ from PIL import Image
 
 from wresdyn.cli import main
 from wresdyn.data.dataset import load_dataset
-from wresdyn.evaluation.ablation import AblationConfig, cells, run_ablation
+from wresdyn.experiments.ablation import AblationConfig, cells, run_ablation
 from wresdyn.learn.ppo import load_policy
 
 

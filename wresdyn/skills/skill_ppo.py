@@ -2,7 +2,7 @@
 
 A run folder holds ``config.json`` (what it trains: task, PPO, setting, the policy it started from), rsl-rl
 checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.learn.ppo.Runner`), ``policy.pt``
-(a ``torch.export`` archive, :mod:`wresdyn.export.program`: observation (N, 6n) -> action (N, n), the deterministic
+(a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the deterministic
 mean), ``train_summary.json`` and rsl-rl's
 per-iteration log ``train.log``. A run
 killed mid-way resumes from its last checkpoint; one asked to resume with another configuration is refused in
@@ -154,7 +154,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
     wall = time.perf_counter() - t0
     actor = runner.alg.get_policy()
-    from ..export.program import save_program
+    from ..learn.network_file import save_program
 
     obs = torch.zeros(2, actor.obs_dim)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
     save_program(actor.as_jit().cpu().eval(), (obs,), ({0: torch.export.Dim("batch", min=1)},),
@@ -172,6 +172,6 @@ def load_skill(run_dir) -> torch.nn.Module:
     path = Path(run_dir) / "policy.pt"
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir}: no policy.pt; train the skill first")
-    from ..export.program import load_program
+    from ..learn.network_file import load_program
 
     return load_program(path)[0].module()

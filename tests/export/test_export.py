@@ -136,7 +136,7 @@ def test_plain_newton_reproduces_the_corrected_replay(exported, humanoid, data):
     wresdyn's interpolated command) and the PD (explicit in the actuator, implicit damping in SolverReplay);
     measured 2.4e-3 rad mean over 2 s of the default benchmark (README). The residual's own effect is asserted
     larger, so dropping it would fail."""
-    from wresdyn.export.program import load_residual
+    from wresdyn.learn.network_file import load_residual
     from wresdyn.sim.physics import PhysicalParams
     from wresdyn.sim.rollout import replay_trajectories
 
@@ -216,7 +216,7 @@ def test_a_torchscript_or_corrupt_model_file_is_refused_in_one_line(tmp_path):
     import torch
 
     from wresdyn.errors import WresdynError
-    from wresdyn.export.program import load_program
+    from wresdyn.learn.network_file import load_program
 
     old = tmp_path / "policy.pt"
     torch.jit.save(torch.jit.script(torch.nn.Linear(2, 2)), str(old))

@@ -1,16 +1,18 @@
 """The zero-shot deployment benchmark (``wresdyn deploy``): four skill policies, each deployed on the "real" robot.
 
-1. Motions (:mod:`.motions`): training, validation and held-out draws of the training families, plus a held-out family.
+1. Motions (:mod:`wresdyn.skills.motions`): training, validation and held-out draws of the training families, plus a
+   held-out family.
 2. The corrected simulators: the calibrated robot (a hybrid ``wresdyn fit`` run: identified physics + torque residual)
    and the ASAP-style delta-action residual alone (``wresdyn fit --model network --residual delta_action``); both
-   fitted here on the dataset when not given.
-3. Policies (PPO, rsl-rl, :mod:`.train`): (a) trained in the nominal simulator; (b) (a) fine-tuned in the calibrated
-   one; (c) (a) fine-tuned with the delta-action residual; (d) the oracle, (a) fine-tuned on the "real" robot itself
-   (:class:`~.plants.RealPlant`). (b), (c) and (d) get the same number of fine-tuning iterations.
-4. Deployment (:mod:`.evaluate`): every policy, and the reference played open loop, on the "real" robot (the
-   dataset's mismatch) over the validation and held-out motions; each policy also in the simulator it was trained in.
-   Gap closed = (a − b) / (a − d) on held-out MPJPE. ``report.md``, ``results.json``, tracking plots and a USD
-   animation of the held-out rollouts side by side.
+   fitted here on the dataset when not given (:mod:`.zero_shot`).
+3. Policies (PPO, rsl-rl, :mod:`wresdyn.skills.skill_ppo`): (a) trained in the nominal simulator; (b) (a) fine-tuned
+   in the calibrated one; (c) (a) fine-tuned with the delta-action residual; (d) the oracle, (a) fine-tuned on the
+   "real" robot itself (:class:`~wresdyn.skills.plants.RealPlant`). (b), (c) and (d) get the same number of
+   fine-tuning iterations.
+4. Deployment (:mod:`wresdyn.skills.evaluate`): every policy, and the reference played open loop, on the "real" robot
+   (the dataset's mismatch) over the validation and held-out motions; each policy also in the simulator it was
+   trained in. Gap closed = (a − b) / (a − d) on held-out MPJPE. ``report.md``, ``results.json``, tracking plots and
+   a USD animation of the held-out rollouts side by side.
 
 No choice here looks at held-out motions: the task and PPO settings were set on validation motions, and every policy
 is its last iterate (no checkpoint selection on the real robot, which a user could not do before deploying).
@@ -18,20 +20,21 @@ is its last iterate (no checkpoint selection on the real robot, which a user cou
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-import numpy as np
-
 from ..choices import check_number
+from ..data.real_robot import Mismatch, RealRobot
+from ..skills.env import SkillConfig, TrackingEnv
+from ..skills.evaluate import deploy_skill, gap_closed, metrics
+from ..skills.motions import make_motions
+from ..skills.plants import RealPlant, sim_plant
+from ..skills.report import write_report
+from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from .zero_shot import POLICIES, fit_corrections, write_results
 
-__all__ = ["DeployConfig", "POLICIES", "run_benchmark", "gap_closed"]
-
-POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real"}
-"""Policy run folders and the plant each trains on."""
-
+__all__ = ["DeployConfig", "run_benchmark"]
 
 @dataclass(frozen=True)
 class DeployConfig:
@@ -73,39 +76,6 @@ class DeployConfig:
         check_number(self.duration, "deploy.duration", gt=0)
 
 
-def gap_closed(a: float, b: float, d: float) -> float:
-    """(a − b) / (a − d): the fraction of the nominal-to-oracle tracking gap that ``b`` closes (NaN if a = d)."""
-    return float((a - b) / (a - d)) if a != d else float("nan")
-
-
-def _fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, device, log, need_delta=True):
-    """Run folders of the calibrated robot and the delta-action residual, fitted into ``out`` when not given."""
-    from ..learn.gradfit import GradFitConfig, export_run, fit
-
-    if calibrated is None:
-        calibrated = out / "calibrated"
-        if not (calibrated / "policy.pt").is_file():
-            from ..learn.hybrid import HYBRID_ITERATIONS
-            from ..learn.hybrid import fit_hybrid
-            from ..learn.sysid import SysIdConfig
-
-            log(f"fitting the calibrated robot (hybrid, `wresdyn fit`) -> {calibrated}")
-            cfg = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS, device=device)
-            _, policy, _, cfg, _ = fit_hybrid(robot, dataset, replace(SysIdConfig(), device=device), cfg, calibrated,
-                                              data_path=data_path, log=lambda s: None)
-            export_run(policy, calibrated, cfg, dataset, data_path)
-    if delta is None and need_delta:
-        delta = out / "delta_action"
-        if not (delta / "policy.pt").is_file():
-            log(f"fitting the delta-action residual alone (`wresdyn fit --model network --residual delta_action`) "
-                f"-> {delta}")
-            cfg = GradFitConfig()
-            cfg = replace(cfg, model="network", device=device, residual=replace(cfg.residual, kind="delta_action"))
-            policy, _ = fit(robot, dataset, cfg, out=delta, log=lambda s: None)
-            export_run(policy, delta, cfg, dataset, data_path)
-    return Path(calibrated), None if delta is None else Path(delta)
-
-
 def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, data_path=None, calibrated=None,
                   delta=None, mismatch=None, task=None, ppo=None, animation: bool = True, policies=tuple(POLICIES),
                   log=print) -> dict:
@@ -119,21 +89,15 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         data_path: Where ``dataset`` was read from (recorded in the fitted runs).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
-        task: :class:`~.env.SkillConfig`; ppo: :class:`~.train.SkillPPOConfig` (its size fields are set from ``cfg``).
-        policies: Which of :data:`POLICIES` to train and deploy (``a_nominal`` always; without ``c_delta_action`` no
-            delta-action residual is fitted; the gap closed needs ``d_oracle``).
+        task: :class:`~wresdyn.skills.env.SkillConfig`; ppo: :class:`~wresdyn.skills.skill_ppo.SkillPPOConfig` (its
+            size fields are set from ``cfg``).
+        policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
+            ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``).
 
     Returns:
         The results written to ``results.json``.
     """
     import torch
-
-    from ..data.real_robot import Mismatch, RealRobot
-    from .env import SkillConfig, TrackingEnv
-    from .evaluate import deploy_skill, metrics
-    from .motions import make_motions
-    from .plants import RealPlant, sim_plant
-    from .train import SkillPPOConfig, load_skill, train_skill
 
     t_start = time.perf_counter()
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
@@ -150,7 +114,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     log("[1/4] motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
     t0 = time.perf_counter()
-    calibrated, delta = _fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
+    calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
                                          need_delta="c_delta_action" in policies)
     fit_s = time.perf_counter() - t0
     log(f"[2/4] corrections: calibrated {calibrated}, delta action {delta} ({fit_s:.0f} s)")
@@ -200,20 +164,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     log(f"[4/4] deployed on the real robot ({len(motions.split('heldout'))} held-out motions), MPJPE: " + ", ".join(
         f"{n} {1e3 * v:.1f} mrad" for n, v in mean.items()) + "".join(
         f"; gap closed by {k[0]} {100 * v:.0f} %" for k, v in results["gap_closed"].items()))
-    from .report import write_report
-
     results["wall_s"] = time.perf_counter() - t_start
     write_report(out, robot, results, rollouts, motions.split("heldout"), rate / task.decimation, animation=animation)
-    tmp = out / "results.json.tmp"
-    tmp.write_text(json.dumps(results, indent=1, default=_json))
-    tmp.replace(out / "results.json")
+    write_results(out, results)
     log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
     return results
 
-
-def _json(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, Path):
-        return str(x)
-    raise TypeError(type(x))

@@ -9,7 +9,7 @@ from wresdyn.data.real_robot import Mismatch, MismatchError, RealRobot, collect
 from wresdyn.evaluation.open_loop import pd_gap
 
 RATE = 500.0
-DEFAULT_TOML = Path(__file__).resolve().parents[1] / "data" / "mismatch_default.toml"
+DEFAULT_TOML = Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml"
 
 
 def _command(robot, seconds=0.6, seed=0):
@@ -179,7 +179,7 @@ def test_per_joint_and_per_link_mismatch_by_name_pattern(humanoid, tmp_path):
     assert t.body_mass[torso] == pytest.approx(1.5 * humanoid.body_mass[torso])
     np.testing.assert_allclose(t.body_com[torso], humanoid.body_com[torso] + [0.01, 0.0, 0.02], atol=1e-9)
     assert Mismatch.from_dict(mm.to_dict()) == mm
-    assert not Mismatch.load(Path(__file__).parents[1] / "data" / "mismatch_uneven.toml").is_nominal()
+    assert not Mismatch.load(Path(__file__).parents[2] / "data" / "mismatch_uneven.toml").is_nominal()
     with pytest.raises(MismatchError, match="unknown key 'frction'"):
         Mismatch.from_dict({"joint": [{"match": "*", "frction": 0.1}]})
     with pytest.raises(MismatchError, match="com_offset"):

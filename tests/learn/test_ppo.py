@@ -24,15 +24,7 @@ from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, Residua
 from wresdyn.learn.rewards import RewardConfig
 from wresdyn.learn.runs import load_checkpoint
 
-
-def tiny(arch="mlp", iterations=2, kind="torque"):
-    return TrainConfig(
-        env=ReplayEnvConfig(horizon=8),
-        residual=ResidualConfig(kind=kind, arch=arch, hidden_dims=(32, 32), critic_hidden_dims=(32, 32),
-                                gru_hidden_dim=32),
-        ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=iterations, save_interval=1, num_mini_batches=2,
-                      num_learning_epochs=2),
-    )
+from conftest import tiny_ppo_config as tiny
 
 
 def test_config_round_trips_through_json():
@@ -268,7 +260,7 @@ def test_export_loads_back_with_the_same_outputs(tmp_path, which):
     obs = [torch.randn(5, 12), torch.randn(5, 12)]
     policy.reset()
     expect = [policy(o).detach() for o in obs]  # two steps: the GRU carries its state
-    from wresdyn.export.program import load_residual
+    from wresdyn.learn.network_file import load_residual
 
     export_policy(policy, tmp_path / "p.pt", tmp_path / "p.onnx")
     loaded = load_residual(tmp_path / "p.pt")
@@ -296,7 +288,7 @@ def test_example_smoke_run(tmp_path):
     import sys
     from pathlib import Path
 
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     res = subprocess.run([sys.executable, "examples/train_residual_ppo.py", "--test", "--out", str(tmp_path / "ex")],
                          capture_output=True, text=True, cwd=root, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]

@@ -1,0 +1,57 @@
+"""What the two zero-shot skill benchmarks (:mod:`.stand_skills`, :mod:`.floor_skills`) share: the four policies and
+the plant each trains on, the corrections fitted on the stand's dataset, and the results file."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..learn.gradfit import GradFitConfig, export_run, fit
+from ..learn.hybrid import HYBRID_ITERATIONS, fit_hybrid
+from ..learn.sysid import SysIdConfig
+
+__all__ = ["POLICIES", "fit_corrections", "write_results"]
+
+POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real"}
+"""Policy run folders and the plant each trains on."""
+
+
+def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, device, log, need_delta=True):
+    """Run folders of the calibrated robot and the delta-action residual, fitted into ``out`` when not given."""
+    if calibrated is None:
+        calibrated = out / "calibrated"
+        if not (calibrated / "policy.pt").is_file():
+            log(f"fitting the calibrated robot (hybrid, `wresdyn fit`) -> {calibrated}")
+            cfg = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS, device=device)
+            _, policy, _, cfg, _ = fit_hybrid(robot, dataset, replace(SysIdConfig(), device=device), cfg, calibrated,
+                                              data_path=data_path, log=lambda s: None)
+            export_run(policy, calibrated, cfg, dataset, data_path)
+    if delta is None and need_delta:
+        delta = out / "delta_action"
+        if not (delta / "policy.pt").is_file():
+            log(f"fitting the delta-action residual alone (`wresdyn fit --model network --residual delta_action`) "
+                f"-> {delta}")
+            cfg = GradFitConfig()
+            cfg = replace(cfg, model="network", device=device, residual=replace(cfg.residual, kind="delta_action"))
+            policy, _ = fit(robot, dataset, cfg, out=delta, log=lambda s: None)
+            export_run(policy, delta, cfg, dataset, data_path)
+    return Path(calibrated), None if delta is None else Path(delta)
+
+
+def write_results(out: Path, results: dict) -> Path:
+    """Write ``results`` to ``out/results.json`` (written next to it and renamed into place); returns the path."""
+    tmp = out / "results.json.tmp"
+    tmp.write_text(json.dumps(results, indent=1, default=_json))
+    tmp.replace(out / "results.json")
+    return out / "results.json"
+
+
+def _json(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(type(x))
