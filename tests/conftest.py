@@ -111,7 +111,8 @@ def record():
 def ppo_best_actor(run_dir, dataset, robot, cfg):
     """The rsl-rl actor a PPO run kept in ``best.pt`` (the networks :func:`wresdyn.learn.ppo.train` builds, in eval
     mode) and a fresh :class:`~wresdyn.learn.replay_env.ReplayEnv` set up as ``train`` sets up its own."""
-    from wresdyn.learn.ppo import Runner, runner_cfg
+    from wresdyn.learn.ppo import runner_cfg
+    from wresdyn.learn.ppo_runner import Runner
     from wresdyn.learn.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
     from wresdyn.learn.runs import load_checkpoint

@@ -37,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from ..data.dataset import load_dataset
     from ..evaluation.evaluate_run import evaluate_run
     from ..learn.gradfit import GradFitConfig, export_run
-    from ..learn.ppo import default_config, train
+    from ..learn.ppo import train
+    from ..learn.ppo_config import default_config
     from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
     from ..robot.description import load_robot
     from ..sim.parity import pd_agreement
