@@ -30,10 +30,10 @@ import numpy as np
 from ..progress import bar
 from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig
 from .ppo_runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
-                         rsl_runner_cfg, seed_processes, write_config)
+                         rsl_runner_cfg, seed_processes)
 from .replay_env import ReplayEnv
 from .residual import actor_critic_cfg, export_run_files, obs_stats, policy_from_actor
-from .runs import RunError, check_resume, load_checkpoint, save_checkpoint
+from .runs import RunError, check_resume, load_checkpoint, save_checkpoint, write_json
 from .selection import ValidationScore
 
 __all__ = ["train", "export", "load_policy", "runner_cfg", "BestOnValidation", "RunError"]
@@ -74,7 +74,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     session = _start(dataset, robot, cfg, run_dir, ranks, log)
     start = resume_runner(session.runner, ckpt, run_dir, log) if ckpt is not None else 0
     if ranks.main:  # written once the checkpoint has loaded: a refused resume leaves the folder as it was
-        write_config(run_dir / "config.json", saved)
+        write_json(saved, run_dir / "config.json")
     score = _validation_score(dataset, robot, cfg, session)
     best = BestOnValidation(run_dir / "best.pt", resumed=start > 0)
     done, reached, wall = _learn_and_select(session, cfg, score, best, start, stop_below, log)
@@ -156,7 +156,8 @@ def _run_record(dataset, robot, cfg: TrainConfig, ranks: Ranks, data_path) -> di
     info = {"robot_file": str(getattr(dataset, "robot_file", "")), "robot_sha256": getattr(dataset, "robot_sha256", ""),
             "rate_hz": float(dataset.rate_hz), "joint_names": list(dataset.joint_names),
             "train": [t.name for t in dataset.split("train")]}
-    return {"config": asdict(cfg), "dataset": info, "data_path": None if data_path is None else str(Path(data_path).resolve())}
+    path = None if data_path is None else str(Path(data_path).resolve())
+    return {"config": asdict(cfg), "dataset": info, "data_path": path}
 
 
 def _checkpoint_to_resume(run_dir: Path, saved: dict, resume: bool) -> Path | None:

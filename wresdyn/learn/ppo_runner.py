@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from dataclasses import dataclass
@@ -25,7 +24,7 @@ from ..progress import into_file
 from .runs import RunError, load_checkpoint, save_checkpoint
 
 __all__ = ["Ranks", "Runner", "CHECKPOINT_KEYS", "rsl_runner_cfg", "make_runner", "resume_runner", "learn",
-           "on_iteration", "seed_processes", "latest_checkpoint", "write_config"]
+           "on_iteration", "seed_processes", "latest_checkpoint"]
 
 
 @dataclass(frozen=True)
@@ -207,12 +206,7 @@ def on_iteration(runner, progress, each=None) -> None:
 
 def latest_checkpoint(run_dir: str | Path) -> Path | None:
     """The rsl-rl checkpoint ``model_<it>.pt`` with the highest iteration in ``run_dir``, if any."""
-    found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt") if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
+    found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
+             if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
     return max(found)[1] if found else None
 
-
-def write_config(path: Path, saved: dict) -> None:
-    """Write a run's ``config.json`` atomically (a kill mid-write leaves the previous one)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(saved, indent=2))
-    tmp.replace(path)

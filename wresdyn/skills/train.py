@@ -21,8 +21,8 @@ import torch
 from ..choices import check_number
 from ..export.program import load_program, save_program
 from ..learn.ppo_runner import (latest_checkpoint, learn, make_runner, on_iteration, resume_runner, rsl_runner_cfg,
-                                seed_processes, write_config)
-from ..learn.runs import check_resume
+                                seed_processes)
+from ..learn.runs import check_resume, write_json
 from ..progress import bar
 
 __all__ = ["SkillPPOConfig", "train_skill", "load_skill"]
@@ -122,7 +122,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         start = resume_runner(runner, ckpt, run_dir, log)
     elif init is not None:
         _start_from(runner, init, cfg.restart_std)
-    write_config(cfg_path, saved)
+    write_json(saved, cfg_path)
     todo = max(cfg.iterations - start, 0)
     t0 = time.perf_counter()
     if todo:
