@@ -32,7 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str, graph: bool = True) -> dict:
-    from wresdyn.learn.ppo import default_config, train
+    from wresdyn.learn.ppo import train
+    from wresdyn.learn.ppo_config import default_config
 
     cfg = default_config()
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),

@@ -99,7 +99,8 @@ def run_gradient(robot, dataset, args, target: float, out: Path, graph: bool) ->
 
 
 def run_ppo(robot, dataset, args, target: float, out: Path, graph: bool) -> dict:
-    from wresdyn.learn.ppo import default_config, load_policy, set_fields, train
+    from wresdyn.learn.ppo import load_policy, train
+    from wresdyn.learn.ppo_config import default_config, set_fields
 
     cfg = set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
                                         "ppo.iterations": args.ppo_iterations, "ppo.select_every": args.check,

@@ -14,7 +14,8 @@ import torch
 
 from wresdyn.experiments.ablation import cell_devices
 from wresdyn.learn.gradfit import GradFitConfig, fit
-from wresdyn.learn.ppo import default_config, set_fields, train
+from wresdyn.learn.ppo import train
+from wresdyn.learn.ppo_config import default_config, set_fields
 from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
 from wresdyn.learn.residual import ResidualConfig
 

@@ -8,17 +8,9 @@ import pytest
 import torch
 
 from wresdyn.errors import WresdynError
-from wresdyn.learn.ppo import (
-    PPOConfig,
-    RunError,
-    TrainConfig,
-    apply_overrides,
-    config_from_dict,
-    default_config,
-    latest_checkpoint,
-    load_policy,
-    train,
-)
+from wresdyn.learn.ppo import RunError, load_policy, train
+from wresdyn.learn.ppo_config import PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config
+from wresdyn.learn.ppo_runner import latest_checkpoint
 from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
 from wresdyn.learn.rewards import RewardConfig

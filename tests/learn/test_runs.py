@@ -1,4 +1,6 @@
-"""Run-folder helpers shared by the learners: field-naming config comparison, weights-only checkpoints."""
+"""Run folders shared by the learners: field-naming config comparison, weights-only checkpoints, the RunFolder."""
+
+import json
 
 import pytest
 import torch
@@ -61,3 +63,52 @@ def test_load_checkpoint_reads_weights_only_and_names_the_file(tmp_path):
     with pytest.raises(TypeError, match="more than tensors and plain containers"):
         save_checkpoint({"w": _Marker(marker)}, tmp_path / "d.pt")
     assert not (tmp_path / "d.pt").exists() and not marker.exists()
+
+
+def test_run_folder_resumes_its_checkpoint_and_refuses_another_config(tmp_path):
+    from wresdyn.learn.runs import RunFolder
+
+    net = torch.nn.Linear(2, 1)
+    run = RunFolder(tmp_path / "run", {"lr": 0.1, "device": "cpu"}, may_change=("device",), key="fit",
+                    record={"learner": "gradient"})
+    assert run.resume(keys=("net",)) is None  # fresh: nothing to load, the record written
+    assert json.loads((tmp_path / "run" / "config.json").read_text()) == {"learner": "gradient",
+                                                                         "fit": {"lr": 0.1, "device": "cpu"}}
+    assert run.best.consider(0.5, 0, net) and not run.best.consider(0.7, 1, net)
+    first = net.weight.detach().clone()
+    with torch.no_grad():
+        net.weight.add_(1.0)  # the snapshot is a copy
+    run.curve += [{"iteration": 1, "wall": 0.1, "loss": 2.0}, {"iteration": 2, "wall": 0.25, "loss": 1.0}]
+    run.save({"net": net.state_dict()}, rng={"state": 3})
+    run.write_curve()
+    assert (run.iteration, run.wall) == (2, 0.25)
+    assert json.loads((tmp_path / "run" / "curve.json").read_text()) == run.curve
+
+    again = RunFolder(tmp_path / "run", {"lr": 0.1, "device": "cuda:0"}, may_change=("device",), key="fit",
+                      record={"learner": "gradient"})
+    data = again.resume(keys=("net",))
+    assert torch.equal(data["net"]["weight"], net.weight) and again.meta["rng"] == {"state": 3}
+    assert (again.iteration, again.wall, again.curve) == (2, 0.25, run.curve)
+    assert (again.best.value, again.best.iteration) == (0.5, 0)
+    assert torch.equal(again.best.state["weight"], first)
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["fit"]["device"] == "cuda:0"
+
+    refused = RunFolder(tmp_path / "run", {"lr": 0.2, "device": "cpu"}, may_change=("device",), key="fit")
+    with pytest.raises(RunError, match=r"^\S+ was trained with lr = 0.1, now 0.2; "):
+        refused.resume(keys=("net",))
+    # a refused resume leaves the record of the run as it was
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["fit"]["lr"] == 0.1
+    with pytest.raises(RunError, match="no missing"):
+        RunFolder(tmp_path / "run", {"lr": 0.1, "device": "cpu"}, key="fit").resume(keys=("missing",))
+
+
+def test_run_folder_without_a_path_keeps_everything_in_memory(tmp_path, monkeypatch):
+    from wresdyn.learn.runs import RunFolder
+
+    monkeypatch.chdir(tmp_path)
+    run = RunFolder(None, {"lr": 0.1})
+    assert run.resume() is None and run.checkpoint is None
+    run.curve.append({"iteration": 1, "wall": 0.5})
+    run.save({"w": torch.ones(1)})
+    run.write_curve()
+    assert run.iteration == 1 and not list(tmp_path.iterdir())

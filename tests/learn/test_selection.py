@@ -8,7 +8,9 @@ import pytest
 import torch
 
 from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit
-from wresdyn.learn.ppo import PPOConfig, TrainConfig, latest_checkpoint, load_policy, train
+from wresdyn.learn.ppo import load_policy, train
+from wresdyn.learn.ppo_config import PPOConfig, TrainConfig
+from wresdyn.learn.ppo_runner import latest_checkpoint
 from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import ResidualConfig, obs_stats, policy_from_actor
 from wresdyn.learn.runs import load_checkpoint

@@ -176,7 +176,7 @@ def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
 
 def load_skill_std(run) -> float:
     """Mean action noise std of a skill run's last checkpoint."""
-    from wresdyn.learn.ppo import latest_checkpoint
+    from wresdyn.learn.ppo_runner import latest_checkpoint
 
     state = torch.load(latest_checkpoint(run), map_location="cpu", weights_only=True)["actor_state_dict"]
     return float(state["distribution.log_std_param"].exp().mean())

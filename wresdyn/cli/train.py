@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--physics", default=None, metavar="JSON",
                    help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override any field of the run configuration (wresdyn.learn.ppo.TrainConfig), e.g. "
+                   help="override any field of the run configuration (wresdyn.learn.ppo_config.TrainConfig), e.g. "
                         "--set ppo.desired_kl=0.05 --set residual.hidden_dims=128,64; repeatable, applied last")
     p.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD trajectories afterwards (like `wresdyn eval`)")
@@ -48,11 +48,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace):
-    """The default :class:`~wresdyn.learn.ppo.TrainConfig` with the flags given on the command line applied.
+    """The default :class:`~wresdyn.learn.ppo_config.TrainConfig` with the flags given on the command line applied.
 
     Flags and ``--set`` items are applied in one step (``--set`` wins for the same field), so the config's own
     checks, across fields too, see what was asked for as a whole; a refused value is a one-line error."""
-    from ..learn.ppo import default_config, parse_overrides, set_fields
+    from ..learn.ppo_config import default_config, parse_overrides, set_fields
     from . import UserError
 
     cfg = default_config()
@@ -72,7 +72,8 @@ def config_from_args(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from ..learn.ppo import Ranks, RunError, train
+    from ..learn.ppo import RunError, train
+    from ..learn.ppo_runner import Ranks
     from . import UserError
 
     cfg = config_from_args(args)

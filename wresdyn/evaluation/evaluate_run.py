@@ -63,7 +63,9 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
     import json
     from pathlib import Path
 
-    from ..learn.ppo import RunError, config_from_dict, load_policy
+    from ..learn.ppo import load_policy
+    from ..learn.ppo_config import config_from_dict
+    from ..learn.runs import RunError
     from ..sim.physics import PhysicalParams
 
     run_dir = Path(run_dir)

@@ -54,7 +54,7 @@ class AblationConfig:
     device: str = "cpu"
     """Device for simulation and networks."""
     ppo_overrides: dict = field(default_factory=dict)
-    """Dotted overrides of :class:`wresdyn.learn.ppo.TrainConfig` (e.g. ``{"ppo.num_envs": 64}``)."""
+    """Dotted overrides of :class:`wresdyn.learn.ppo_config.TrainConfig` (e.g. ``{"ppo.num_envs": 64}``)."""
     gradient_overrides: dict = field(default_factory=dict)
     """Overrides of :class:`wresdyn.learn.gradfit.GradFitConfig` fields (e.g. ``{"windows": 32}``)."""
 
@@ -82,7 +82,7 @@ class AblationConfig:
     def _check_overrides(self) -> None:
         """A typo in an override fails here, not after hours of other cells. Imports the learners (torch)."""
         if self.ppo_overrides and "ppo" in self.learners:
-            from ..learn.ppo import default_config, set_fields
+            from ..learn.ppo_config import default_config, set_fields
 
             for arch in self.archs:  # a GRU batches by world: fewer worlds can be too few for the mini-batches
                 try:
@@ -121,7 +121,8 @@ def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> 
 
 
 def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
-    from ..learn.ppo import default_config, load_policy, set_field, set_fields, train
+    from ..learn.ppo import load_policy, train
+    from ..learn.ppo_config import default_config, set_field, set_fields
 
     cell_fields = {"residual.arch": cell["arch"], "residual.kind": cell["kind"], "ppo.seed": cell["seed"],
                    "ppo.device": cfg.device, "env.solver": cfg.solver,

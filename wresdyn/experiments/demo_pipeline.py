@@ -28,7 +28,8 @@ from ..evaluation.evaluate_run import evaluate_run
 from ..export.usd import export_run as export_usd
 from ..learn.gradfit import GradFitConfig, export_run
 from ..learn.hybrid import HYBRID_ITERATIONS, fit_hybrid
-from ..learn.ppo import default_config, train
+from ..learn.ppo import train
+from ..learn.ppo_config import default_config
 from ..learn.sysid import SysIdConfig
 from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
 from ..robot.description import load_robot

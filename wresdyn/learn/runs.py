@@ -1,9 +1,11 @@
-"""Run folders shared by the learners (PPO, gradient fit): resume only what was started, load only weights.
+"""Run folders shared by the learners: resume only what was started, load only weights, keep the best.
 
-A resumed run must learn what it started learning, so the configuration saved in the run folder is compared
-with the new one field by field (:func:`config_diff`, :func:`check_resume`), and the refusal names the fields.
-Checkpoints are read with ``torch.load(..., weights_only=True)`` (:func:`load_checkpoint`): tensors and plain
-containers only, so a run folder from elsewhere cannot run code by being resumed.
+A :class:`RunFolder` owns a learner's folder: its ``config.json``, the resume check, the weights-only checkpoint, the
+learning curve (``curve.json``) and the best iterate on validation. A resumed run must learn what it started
+learning, so the configuration saved with the checkpoint is compared with the new one field by field
+(:func:`config_diff`, :func:`check_resume`), and the refusal names the fields. Checkpoints are read with
+``torch.load(..., weights_only=True)`` (:func:`load_checkpoint`): tensors and plain containers only, so a run folder
+from elsewhere cannot run code by being resumed.
 """
 
 from __future__ import annotations
@@ -11,11 +13,13 @@ from __future__ import annotations
 import json
 import math
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import WresdynError
 
-__all__ = ["RunError", "config_diff", "describe_diff", "check_resume", "load_checkpoint", "save_checkpoint"]
+__all__ = ["RunError", "RunFolder", "Best", "config_diff", "describe_diff", "check_resume", "load_checkpoint",
+           "save_checkpoint", "write_json"]
 
 
 class RunError(WresdynError):
@@ -180,6 +184,122 @@ def save_checkpoint(data: dict, path) -> Path:
     tmp.write_bytes(buf.getvalue())
     tmp.replace(path)
     return path
+
+
+def write_json(data, path) -> Path:
+    """Write ``data`` as indented JSON, atomically (a kill mid-write leaves the previous file)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2))
+    tmp.replace(path)
+    return path
+
+
+@dataclass
+class Best:
+    """The best iterate on validation so far: a selection candidate."""
+
+    value: float = math.inf
+    """Its validation error (the learner's score, e.g. mean |Δq| [rad]); ``inf`` before any."""
+    iteration: int = 0
+    """The iteration it was scored after (0: the starting point)."""
+    state: dict | None = None
+    """A copy of the module's ``state_dict`` then; ``None`` before any."""
+
+    def consider(self, value: float, iteration: int, module) -> bool:
+        """Keep ``module``'s current state if ``value`` beats the best so far; whether it did."""
+        if not value < self.value:
+            return False
+        self.value, self.iteration = value, iteration
+        self.state = {k: v.detach().clone() for k, v in module.state_dict().items()}
+        return True
+
+
+class RunFolder:
+    """A learner's run folder: ``config.json``, the resume check, a weights-only checkpoint, ``curve.json`` and the
+    best iterate on validation.
+
+    The checkpoint holds the learner's own entries (weights, optimiser, generator states) plus ``"best"`` (the best
+    state) and ``"meta"`` (the configuration it was trained with, the curve, the iteration, the wall-clock, the best
+    value and iteration, and the learner's extra bookkeeping), so it alone is enough to resume. ``config.json`` is
+    the run's record (``record`` with the configuration under ``key``), written once :meth:`resume` has found the
+    folder fit to continue, never over the record of a refused run.
+
+    Args:
+        path: The folder, made when first written; ``None`` for a run kept in memory only (nothing is read or written).
+        config: The learner's configuration as a JSON-like dict (``dataclasses.asdict`` of its config): compared
+            with the checkpoint's on resume and stored in both files.
+        may_change: Dotted paths of ``config`` a resumed run may change (:func:`check_resume`).
+        key: Where ``config`` goes in ``config.json``.
+        record: The rest of ``config.json`` (what reads the run needs, e.g. ``{"learner": "identify"}``).
+        checkpoint: The checkpoint's file name.
+    """
+
+    def __init__(self, path, config: dict, may_change=(), key: str = "config", record: dict | None = None,
+                 checkpoint: str = "checkpoint.pt") -> None:
+        self.path = None if path is None else Path(path)
+        """The folder, or ``None`` (in memory)."""
+        self.config = config
+        """The configuration this run learns with (JSON-like)."""
+        self.may_change = tuple(may_change)
+        """Paths of :attr:`config` a resume may change."""
+        self.key, self.record = key, dict(record or {})
+        self.checkpoint = None if self.path is None else self.path / checkpoint
+        """The checkpoint file, or ``None``."""
+        self.curve: list[dict] = []
+        """The learning curve: one dict per iteration (``iteration``, ``wall`` [s], the learner's loss parts,
+        ``validation`` where scored)."""
+        self.best = Best()
+        """The best iterate on validation so far."""
+        self.iteration = 0
+        """Iterations done (where a resumed run continues)."""
+        self.wall = 0.0
+        """Training wall-clock of those iterations [s]."""
+        self.meta: dict = {}
+        """The resumed checkpoint's ``meta`` (the learner's extra bookkeeping is there); empty for a fresh run."""
+
+    def resume(self, keys=(), map_location=None) -> dict | None:
+        """Continue from the checkpoint if there is one: read it as weights only (with ``keys``, ``"best"`` and
+        ``"meta"``), refuse it with a one-line :class:`RunError` naming the fields if it was trained with another
+        configuration, and take its curve, iteration, wall-clock and best. Then write ``config.json``.
+
+        Returns:
+            The checkpoint (the learner restores its own entries from it), or ``None`` for a fresh run.
+        """
+        data = None
+        if self.checkpoint is not None and self.checkpoint.exists():
+            data = load_checkpoint(self.checkpoint, map_location=map_location, keys=(*keys, "best", "meta"))
+            meta = data["meta"]
+            check_resume(self.path, meta["config"], self.config, self.may_change)
+            self.meta, self.curve, self.iteration, self.wall = meta, meta["curve"], meta["iteration"], meta["wall"]
+            self.best = Best(meta["best_validation"], meta["best_iteration"], data["best"] or None)
+        self.write_config()
+        return data
+
+    def write_config(self, **record) -> None:
+        """Write ``config.json``: the record (updated with ``record``) and the configuration under ``key``."""
+        self.record.update(record)
+        if self.path is not None:
+            write_json({**self.record, self.key: self.config}, self.path / "config.json")
+
+    def save(self, state: dict, **meta) -> None:
+        """Checkpoint ``state`` (the learner's weights-only entries) with the best and the bookkeeping, atomically;
+        ``meta``: the learner's extra bookkeeping (e.g. its window sampler's state). Sets :attr:`iteration` and
+        :attr:`wall` from the curve's last row."""
+        if self.curve:
+            self.iteration, self.wall = self.curve[-1]["iteration"], self.curve[-1]["wall"]
+        if self.checkpoint is None:
+            return
+        meta = {"config": self.config, **meta, "curve": self.curve, "iteration": self.iteration, "wall": self.wall,
+                "best_validation": self.best.value, "best_iteration": self.best.iteration}
+        save_checkpoint({**state, "meta": meta, "best": self.best.state or {}}, self.checkpoint)
+
+    def write_curve(self) -> None:
+        """Write ``curve.json``."""
+        if self.path is not None:
+            self.path.mkdir(parents=True, exist_ok=True)
+            (self.path / "curve.json").write_text(json.dumps(self.curve, indent=1))
 
 
 def check_window_fit_config(cfg) -> None:

@@ -1,12 +1,11 @@
 """Train a tracking skill with PPO (rsl-rl) on a plant, or fine-tune one; checkpoints and resume.
 
 A run folder holds ``config.json`` (what it trains: task, PPO, setting, the policy it started from), rsl-rl
-checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.learn.ppo.Runner`), ``policy.pt``
-(a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the deterministic
-mean), ``train_summary.json`` and rsl-rl's
-per-iteration log ``train.log``. A run
-killed mid-way resumes from its last checkpoint; one asked to resume with another configuration is refused in
-one line, naming what changed.
+checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.learn.ppo_runner.Runner`),
+``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
+deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
+from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
+changed. The rsl-rl glue (runner, checkpoints, progress) is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
 """
 
 from __future__ import annotations
@@ -20,6 +19,11 @@ import numpy as np
 import torch
 
 from ..choices import check_number
+from ..learn.network_file import load_program, save_program
+from ..learn.ppo_runner import (latest_checkpoint, learn, make_runner, on_iteration, resume_runner, rsl_runner_cfg,
+                                seed_processes)
+from ..learn.runs import check_resume, write_json
+from ..progress import bar
 
 __all__ = ["SkillPPOConfig", "train_skill", "load_skill"]
 
@@ -63,21 +67,15 @@ def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
     """rsl-rl's runner config; ``critic_groups``: the observation groups the critic sees (the actor sees
     ``policy``; more groups make an asymmetric actor-critic)."""
     dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "log"}
-    return {
-        "num_steps_per_env": cfg.num_steps_per_env, "save_interval": cfg.save_interval,
-        "obs_groups": {"actor": ["policy"], "critic": list(critic_groups)},
-        "algorithm": {"class_name": "PPO", "num_learning_epochs": cfg.num_learning_epochs,
-                      "num_mini_batches": cfg.num_mini_batches, "clip_param": 0.2, "gamma": cfg.gamma,
-                      "lam": cfg.lam, "value_loss_coef": 1.0, "entropy_coef": cfg.entropy_coef,
-                      "learning_rate": cfg.learning_rate, "max_grad_norm": 1.0, "schedule": "adaptive",
-                      "desired_kl": cfg.desired_kl},
-        "actor": {"class_name": "wresdyn.learn.residual:ResidualMLPModel", "hidden_dims": list(cfg.hidden_dims),
-                  "activation": "elu", "obs_normalization": True, "distribution_cfg": dist,
-                  "output_gain": cfg.output_gain},
-        "critic": {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu",
-                   "obs_normalization": True},
-        "logger": "tensorboard", "run_name": "", "check_for_nan": True,
-    }
+    actor = {"class_name": "wresdyn.learn.residual:ResidualMLPModel", "hidden_dims": list(cfg.hidden_dims),
+             "activation": "elu", "obs_normalization": True, "distribution_cfg": dist, "output_gain": cfg.output_gain}
+    critic = {"class_name": "MLPModel", "hidden_dims": list(cfg.hidden_dims), "activation": "elu",
+              "obs_normalization": True}
+    return rsl_runner_cfg(
+        num_steps_per_env=cfg.num_steps_per_env, save_interval=cfg.save_interval, actor=actor, critic=critic,
+        critic_groups=critic_groups, num_learning_epochs=cfg.num_learning_epochs, num_mini_batches=cfg.num_mini_batches,
+        clip_param=0.2, gamma=cfg.gamma, lam=cfg.lam, value_loss_coef=1.0, entropy_coef=cfg.entropy_coef,
+        learning_rate=cfg.learning_rate, max_grad_norm=1.0, desired_kl=cfg.desired_kl)
 
 
 def _set_std(actor, std: float) -> None:
@@ -107,10 +105,6 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     Returns:
         The summary written to ``train_summary.json``.
     """
-    from ..learn.ppo import Runner, latest_checkpoint, on_iteration
-    from ..progress import bar, into_file
-    from ..learn.runs import check_resume
-
     run_dir = Path(run_dir)
     saved = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
              **(meta or {})}
@@ -120,42 +114,24 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     if ckpt is not None:
         old = json.loads(cfg_path.read_text()) if cfg_path.is_file() else {}
         check_resume(run_dir, old, saved, may_change=["ppo.iterations", "ppo.device", "ppo.torch_threads"])
-    if cfg.torch_threads > 0:
-        torch.set_num_threads(cfg.torch_threads)
-    torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)
+    seed_processes(cfg.seed, cfg.torch_threads)
     run_dir.mkdir(parents=True, exist_ok=True)
-    with into_file(run_dir / "train.log"):  # rsl-rl prints the networks
-        runner = Runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), log_dir=str(run_dir),
-                        device=str(env.device))
+    runner = make_runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), run_dir)
     start = 0
     if ckpt is not None:
-        runner.load(str(ckpt), map_location=str(env.device))
-        start = runner.current_learning_iteration + 1
-        log(f"resuming {run_dir} from {ckpt.name} at iteration {start}")
+        start = resume_runner(runner, ckpt, run_dir, log)
     elif init is not None:
-        base = latest_checkpoint(init)
-        if base is None:
-            raise FileNotFoundError(f"{init}: no checkpoint to fine-tune from")
-        runner.load(str(base), map_location=str(env.device))
-        runner.current_learning_iteration = 0
-        if cfg.restart_std > 0:
-            _set_std(runner.alg.actor, cfg.restart_std)
-    tmp = cfg_path.with_name(cfg_path.name + ".tmp")
-    tmp.write_text(json.dumps(saved, indent=2))
-    tmp.replace(cfg_path)
+        _start_from(runner, init, cfg.restart_std)
+    write_json(saved, cfg_path)
     todo = max(cfg.iterations - start, 0)
     t0 = time.perf_counter()
     if todo:
-        runner.current_learning_iteration = start
-        with bar(log, cfg.iterations, run_dir.name, start) as progress, into_file(run_dir / "train.log"):
+        with bar(log, cfg.iterations, run_dir.name, start) as progress:
             on_iteration(runner, progress)
-            runner.learn(todo)  # rsl-rl's per-iteration table goes to train.log
+            learn(runner, start, todo, run_dir / "train.log")  # rsl-rl's per-iteration table goes to train.log
         runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
     wall = time.perf_counter() - t0
     actor = runner.alg.get_policy()
-    from ..learn.network_file import save_program
-
     obs = torch.zeros(2, actor.obs_dim)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
     save_program(actor.as_jit().cpu().eval(), (obs,), ({0: torch.export.Dim("batch", min=1)},),
                  run_dir / "policy.pt", {"kind": "skill"})
@@ -167,11 +143,21 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     return summary
 
 
+def _start_from(runner, init, restart_std: float) -> None:
+    """Load the last checkpoint of the skill run ``init`` into ``runner`` (actor, critic, optimiser) to fine-tune it
+    from iteration 0, its action noise reset to ``restart_std`` (> 0; else kept)."""
+    base = latest_checkpoint(init)
+    if base is None:
+        raise FileNotFoundError(f"{init}: no checkpoint to fine-tune from")
+    runner.load(str(base), map_location=str(runner.env.device))
+    runner.current_learning_iteration = 0
+    if restart_std > 0:
+        _set_std(runner.alg.actor, restart_std)
+
+
 def load_skill(run_dir) -> torch.nn.Module:
     """The trained skill of a run: ``policy(obs (N, 6n)) -> action (N, n)`` (the exported program, CPU)."""
     path = Path(run_dir) / "policy.pt"
     if not path.is_file():
         raise FileNotFoundError(f"{run_dir}: no policy.pt; train the skill first")
-    from ..learn.network_file import load_program
-
     return load_program(path)[0].module()

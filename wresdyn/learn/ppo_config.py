@@ -1,0 +1,216 @@
+"""The configuration of a residual-learning run (:func:`wresdyn.learn.ppo.train`) and how to change it by name.
+
+:class:`TrainConfig` gathers the replay environment, the residual, the Table I rewards and the PPO settings;
+:func:`set_fields` and :func:`parse_overrides` change nested fields by their dotted names, as ``wresdyn train --set
+SECTION.FIELD=VALUE`` does. This module imports neither torch nor rsl-rl itself: the command line reads its fields
+without building a learner.
+"""
+
+from __future__ import annotations
+
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
+
+from ..choices import check_device, check_number
+from ..errors import WresdynError
+from .replay_env import ReplayEnvConfig
+from .residual import ResidualConfig
+from .rewards import RewardConfig
+
+__all__ = ["PPOConfig", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config", "config_from_dict",
+           "parse_overrides", "apply_overrides", "set_fields", "set_field"]
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO and runner settings (rsl-rl ``PPO`` / ``OnPolicyRunner``)."""
+
+    num_envs: int = 256
+    """Parallel replay worlds."""
+    num_steps_per_env: int = 24
+    """Rollout length per world per iteration [steps]."""
+    iterations: int = 4000
+    """Total PPO iterations of the run (a resumed run continues up to this number). 4000 (24.6 M env-steps,
+    about 35 min on 2 CPU cores with the replay solver) cut the shipped benchmark's held-out error 3.17x
+    (seed 1: 2.996x); the training error flattens after about 2500."""
+    save_interval: int = 50
+    """Checkpoint every this many iterations."""
+    learning_rate: float = 1e-3
+    """Initial Adam step size (adapted to ``desired_kl``)."""
+    num_learning_epochs: int = 5
+    """Passes over each rollout."""
+    num_mini_batches: int = 4
+    """Mini-batches per pass."""
+    gamma: float = 0.9
+    """Discount per step; 1/(1−γ) = 10 steps = 20 ms at 500 Hz, about the PD time constants: a residual's
+    effect on tracking shows within that window, and a longer one only adds variance. Chosen by the sweep in
+    ``benchmarks/results/h200_ppo_sweep``, which scored on the held-out split: not yet checked on validation."""
+    lam: float = 0.9
+    """GAE λ."""
+    clip_param: float = 0.2
+    """PPO ratio clip."""
+    entropy_coef: float = 0.0
+    """Entropy bonus; zero so the exploration noise can shrink to the precision the residual needs."""
+    value_loss_coef: float = 1.0
+    """Value loss weight."""
+    desired_kl: float = 0.03
+    """Target KL for the adaptive learning rate; 0.01 (rsl-rl's default) halved the progress per iteration
+    on the shipped benchmark (1.3x vs 1.8x held-out after 500 iterations), 0.08 was no better than 0.03."""
+    max_grad_norm: float = 1.0
+    """Gradient clip."""
+    seed: int = 0
+    """Seed of torch and of the episode sampler."""
+    device: str = "cpu"
+    """Simulation and learning device (``cpu``, ``cuda:0``)."""
+    torch_threads: int = 1
+    """CPU threads for torch (0: torch's default). One is fastest for these small batches: on a busy 2-core
+    machine two intra-op threads made a (256, 84) gather-and-normalise 600x slower (20 ms vs 31 us)."""
+    select_every: int = 0
+    """Replay the validation split open loop every this many iterations and export the residual with the lowest
+    validation error (model selection on validation); 0 = ten times per run."""
+    cuda_graph: bool = True
+    """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.learn.replay_env.ReplayEnv`); the
+    runner's per-step NaN check (a host sync) is then off: the environment keeps non-finite states out of what it
+    returns (diverged worlds are reset and counted)."""
+
+    def __post_init__(self) -> None:
+        for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
+                     "num_mini_batches"):
+            check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
+        for name in ("learning_rate", "clip_param", "desired_kl", "max_grad_norm"):
+            check_number(getattr(self, name), f"ppo.{name}", gt=0)
+        for name in ("entropy_coef", "value_loss_coef"):
+            check_number(getattr(self, name), f"ppo.{name}", ge=0)
+        check_number(self.gamma, "ppo.gamma", gt=0, le=1)
+        check_number(self.lam, "ppo.lam", ge=0, le=1)
+        check_number(self.seed, "ppo.seed", integer=True, ge=0, le=2**32 - 1)  # numpy's seed range
+        check_number(self.torch_threads, "ppo.torch_threads", integer=True, ge=0)
+        check_number(self.select_every, "ppo.select_every", integer=True, ge=0)
+        check_device(self.device, "ppo.device")
+
+
+RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph")
+""":class:`PPOConfig` fields a resumed run may change: how long, where and how it runs, not what it learns."""
+
+DATASET_IDENTITY = ("train", "joint_names", "rate_hz")
+"""What of the data in ``config.json`` a resumed run must share: the training trajectories (by name), the joints
+and the sample rate. The dataset's path may change (a run moved to another machine)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a residual-learning run depends on besides the data."""
+
+    env: ReplayEnvConfig = field(default_factory=ReplayEnvConfig)
+    """Replay environment."""
+    residual: ResidualConfig = field(default_factory=ResidualConfig)
+    """Residual kind and network."""
+    rewards: RewardConfig = field(default_factory=RewardConfig)
+    """Table I weights and widths."""
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    """PPO and runner."""
+
+    def __post_init__(self) -> None:
+        for name, cls in (("env", ReplayEnvConfig), ("residual", ResidualConfig), ("rewards", RewardConfig),
+                          ("ppo", PPOConfig)):
+            value = getattr(self, name)
+            if not isinstance(value, cls):
+                raise TypeError(f"TrainConfig.{name} must be a {cls.__name__}, not {type(value).__name__}")
+        # rsl-rl splits a rollout into mini-batches by world for a recurrent policy, by sample otherwise, and
+        # an empty mini-batch fails deep inside the update
+        p = self.ppo
+        per_batch = p.num_envs if self.residual.arch == "gru" else p.num_envs * p.num_steps_per_env
+        if p.num_mini_batches > per_batch:
+            unit = "worlds (a GRU is batched by world)" if self.residual.arch == "gru" else "samples per rollout"
+            raise WresdynError(f"ppo.num_mini_batches = {p.num_mini_batches} is more than the {per_batch} {unit}")
+
+
+def default_config() -> TrainConfig:
+    """The default task: torque residual, MLP, Table I rewards, sized for a 2-core CPU demo run."""
+    return TrainConfig()
+
+
+def config_from_dict(d: dict) -> TrainConfig:
+    """Inverse of ``dataclasses.asdict`` for :class:`TrainConfig` (lists back to tuples)."""
+
+    def build(cls, values):
+        kw = {}
+        for f in fields(cls):
+            if f.name not in values:
+                continue
+            v = values[f.name]
+            sub = f.default_factory() if f.default_factory is not MISSING else None  # type: ignore[misc]
+            if is_dataclass(sub):
+                v = build(type(sub), v)
+            elif isinstance(v, list):
+                v = tuple(v)
+            kw[f.name] = v
+        return cls(**kw)
+
+    return build(TrainConfig, d)
+
+
+def parse_overrides(cfg: TrainConfig, items) -> dict:
+    """``SECTION.FIELD=VALUE`` items (as on ``wresdyn train --set``) as ``{"SECTION.FIELD": value}``.
+
+    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type in ``cfg``
+    (tuples as comma-separated numbers, booleans as true/false); a later item for the same field wins. Raises
+    ``ValueError`` with a one-line message for an unknown key or a value of the wrong type.
+    """
+    sections = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
+    out = {}
+    for item in items:
+        key, sep, text = str(item).partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not sep or not dot:
+            raise ValueError(f"override {item!r} is not SECTION.FIELD=VALUE (sections: {', '.join(sections)})")
+        if section not in sections:
+            raise ValueError(f"override {item!r}: unknown section {section!r}; choose from {', '.join(sections)}")
+        names = [f.name for f in fields(sections[section])]
+        if name not in names:
+            raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
+        out[f"{section}.{name}"] = _parse_like(getattr(sections[section], name), text.strip(), item)
+    return out
+
+
+def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
+    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set`` (see
+    :func:`parse_overrides`); a value the config refuses (:class:`WresdynError`) is a ``ValueError`` too."""
+    return set_fields(cfg, parse_overrides(cfg, items))
+
+
+def set_fields(cfg, values: dict):
+    """``cfg`` (a frozen dataclass) with the nested fields ``{"ppo.seed": 1, ...}`` set, all at once: each
+    config is rebuilt once, so checks across fields (:class:`TrainConfig`'s mini-batch check) see the final
+    values whatever the order. Unknown fields raise ``TypeError``, refused values :class:`WresdynError`."""
+    direct, nested = {}, {}
+    for dotted, value in values.items():
+        head, _, rest = dotted.partition(".")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[head] = value
+    for head, sub in nested.items():
+        if not hasattr(cfg, head) or not is_dataclass(getattr(cfg, head)):
+            raise TypeError(f"{type(cfg).__name__} has no section {head!r}")
+        direct[head] = set_fields(getattr(cfg, head), sub)
+    return replace(cfg, **direct)
+
+
+def set_field(cfg, dotted: str, value):
+    """``cfg`` (a frozen dataclass) with the nested field at ``dotted`` (e.g. ``"ppo.seed"``) set to ``value``."""
+    return set_fields(cfg, {dotted: value})
+
+
+def _parse_like(current, text: str, item):
+    """``text`` parsed as the type of ``current`` (bool, int, float, str, tuple of numbers)."""
+    try:
+        if isinstance(current, bool):
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return text.lower() in ("true", "1")
+        if isinstance(current, tuple):
+            kind = type(current[0]) if current else float
+            return tuple(kind(v) for v in text.split(",") if v.strip())
+        return type(current)(text)
+    except ValueError:
+        raise ValueError(f"override {item!r}: {text!r} is not a {type(current).__name__}") from None
