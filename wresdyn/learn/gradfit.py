@@ -15,7 +15,8 @@ Windows come from the simulation layer's :class:`~wresdyn.sim.TrajectoryBank` an
 
 Model selection is made on the validation split: every ``select_every`` iterations the current residual replays
 the validation trajectories open loop (whole trajectories, the evaluation's metric), and the fit returns the
-residual with the lowest validation error. Held-out and OOD data are never read here.
+residual with the lowest validation error. Held-out and OOD data are never read here. The loop itself (schedule,
+resume, checkpoints, selection) is :func:`~wresdyn.learn.window_fit.run_window_fit`, shared with identification.
 """
 
 from __future__ import annotations
