@@ -18,7 +18,8 @@ __all__ = ["GridChoice", "grid_search"]
 
 @dataclass(frozen=True)
 class GridChoice:
-    """What one grid search of :func:`~wresdyn.learn.sysid.identify` chose (its ``on_search`` receives one per search)."""
+    """What one grid search of :func:`~wresdyn.learn.sysid.identify` chose (its ``on_search`` receives one per
+    search)."""
 
     field: str
     """The field searched: ``"kp"`` (``gain_grid``, per joint), ``"delay"`` or ``"effort"`` (all joints at once)."""

@@ -14,9 +14,9 @@ but the gradient goes to the parameters: the Warp tape of every step returns ``â
 
 A saturating drive has no gradient while the simulated drive does not saturate, so the effort limit starts
 from a coarse search: the training loss of a few windows at a geometric grid of fractions of the robot file's
-limit (forward only, :mod:`.grid_search`); the gradient refines from the best. Model selection on the validation split, as for
-every learner: every ``select_every`` iterations the current parameters replay the validation trajectories and
-the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
+limit (forward only, :mod:`.grid_search`); the gradient refines from the best. Model selection on the validation
+split, as for every learner: every ``select_every`` iterations the current parameters replay the validation
+trajectories and the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
 each step validated the same way. Held-out and OOD data are never read. The Adam loop is the gradient fit's
 (:func:`~wresdyn.learn.window_fit.run_window_fit`).
 """
