@@ -46,7 +46,7 @@ def main() -> None:
     from wresdyn.data.loading import load_data
     from wresdyn.data.real_robot import Mismatch, RealRobot
     from wresdyn.evaluation.open_loop import evaluate_split
-    from wresdyn.learn.runs import joint_weights, squared_error
+    from wresdyn.learn.window_fit import joint_weights, squared_error
     from wresdyn.learn.sysid import SysIdConfig
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.sim import Simulator, TrajectoryBank, rollout

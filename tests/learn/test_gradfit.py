@@ -110,6 +110,26 @@ def test_interrupted_fit_resumes_to_the_same_policy(tmp_path, quadruped, record)
     assert not torch.equal(next(iter(noiseless.parameters())), next(iter(straight.parameters())))
 
 
+def test_the_fit_takes_physics_as_parameters_and_refuses_a_path_alone(tmp_path, quadruped, record):
+    """Physics travel as :class:`PhysicalParams`: the fit steps with them and the run carries them; ``cfg.physics``
+    only records where they came from, so a config naming a file with no parameters given is refused, not ignored."""
+    from wresdyn.learn.gradfit import export_run
+    from wresdyn.sim.physics import PhysicalParams
+
+    data = record(quadruped, REAL, {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.4)
+    cfg = GradFitConfig(residual=ResidualConfig(hidden_dims=(16,)), horizon=4, horizon_curriculum=(), windows=2,
+                        iterations=2, solver="featherstone", physics="elsewhere/physics.json")
+    with pytest.raises(ValueError, match="elsewhere/physics.json"):
+        fit(quadruped, data, cfg, log=lambda *_: None)
+    physics = PhysicalParams.nominal(quadruped)
+    physics.kp = physics.kp * 0.5
+    lines = []
+    policy, _ = fit(quadruped, data, cfg, out=tmp_path, log=lines.append, physics=physics)
+    assert any(ln.startswith("validation at the start: ") for ln in lines)  # the identified model alone, a candidate
+    export_run(policy, tmp_path, cfg, data, physics=physics)
+    assert PhysicalParams.load(tmp_path / "physics.json", quadruped).kp.tolist() == physics.kp.tolist()
+
+
 def test_parametric_baseline_fits_friction_and_gains(quadruped, record):
     """The real quadruped (:data:`REAL`) has extra dry friction and damping and 0.9x kp / 1.2x kd. Fitted through
     SolverReplay, the default solver, whose implicit drive damping is the real robot's integration scheme."""

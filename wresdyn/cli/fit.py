@@ -112,12 +112,13 @@ def run(args: argparse.Namespace) -> int:
     log = Log(out / "fit.log", quiet=args.quiet)
     log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
           f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}")
-    from ..learn.gradfit import load_physics
+    from ..sim.physics import PhysicalParams
     from ..sim.warmup import compile_kernels
 
+    physics = PhysicalParams.load(cfg.physics, robot) if cfg.physics else None
     # the hybrid's stage 2 runs on the identified physics: fit_hybrid compiles those kernels once stage 1 is done
     compile_kernels(robot, ds.rate_hz, ("forward", "param_grads") if identify_first else ("forward", "grad"),
-                    solver=cfg.solver, device=cfg.device, physics=load_physics(cfg.physics, robot), say=log)
+                    solver=cfg.solver, device=cfg.device, physics=physics, say=log)
     try:
         if identify_first:
             from ..learn.hybrid import fit_hybrid
@@ -128,14 +129,15 @@ def run(args: argparse.Namespace) -> int:
             if gain_grid is not None:
                 stage1["gain_grid"] = gain_grid
             sysid = replace(SysIdConfig(), device=cfg.device, seed=cfg.seed, solver=cfg.solver, **stage1)
-            _, policy, curve, cfg, id_wall = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data,
-                                                          log=log)
+            hybrid = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data, log=log)
+            policy, curve, cfg, id_wall, physics = (hybrid.policy, hybrid.curve, hybrid.config, hybrid.identify_wall,
+                                                    hybrid.physics)
         else:
-            policy, curve = fit(robot, ds, cfg, out=out, log=log)
+            policy, curve = fit(robot, ds, cfg, out=out, log=log, physics=physics)
             id_wall = None
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
-    export_run(policy, out, cfg, ds, args.data)
+    export_run(policy, out, cfg, ds, args.data, physics=physics)
     if cfg.model == "parametric":
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
         (out / "parameters.json").write_text(json.dumps(params, indent=1))

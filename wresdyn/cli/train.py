@@ -89,11 +89,11 @@ def run(args: argparse.Namespace) -> int:
     log(f"training a {cfg.residual.kind} residual ({cfg.residual.arch}) on {len(ds.split('train'))} trajectories of "
           f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.ppo.num_envs} worlds x {cfg.ppo.num_steps_per_env} steps "
           f"-> {args.out}")
-    from ..learn.gradfit import load_physics
+    from ..sim.physics import PhysicalParams
     from ..sim.warmup import compile_kernels
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=cfg.env.solver, device=Ranks.from_env().device(cfg.ppo.device),
-                    physics=load_physics(cfg.env.physics or "", robot), say=log)
+                    physics=PhysicalParams.load(cfg.env.physics, robot) if cfg.env.physics else None, say=log)
     try:
         summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data, log=log)
     except RunError as e:

@@ -88,8 +88,9 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
     print(f"[3/5] the calibrated robot: gradient fit through the simulation ({scfg.iterations} identification + "
           f"{gcfg.iterations} residual iterations, `wresdyn fit`) ...", flush=True)
     fit_dir = out / "fit"
-    _, policy, curve, gcfg, id_wall = fit_hybrid(robot, data, scfg, gcfg, fit_dir, data_path=data_path, log=log)
-    export_run(policy, fit_dir, gcfg, data, data_path)
+    hybrid = fit_hybrid(robot, data, scfg, gcfg, fit_dir, data_path=data_path, log=log)
+    policy, curve, gcfg, id_wall = hybrid.policy, hybrid.curve, hybrid.config, hybrid.identify_wall
+    export_run(policy, fit_dir, gcfg, data, data_path, physics=hybrid.physics)
     print(f"      ... and a torque residual by PPO ({tcfg.ppo.iterations} iterations, `wresdyn train`)", flush=True)
     ppo_dir = out / "ppo"
     summary = train(data, robot, tcfg, ppo_dir, resume=True)

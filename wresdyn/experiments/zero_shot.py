@@ -26,9 +26,9 @@ def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, dev
         if not (calibrated / "policy.pt").is_file():
             log(f"fitting the calibrated robot (hybrid, `wresdyn fit`) -> {calibrated}")
             cfg = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS, device=device)
-            _, policy, _, cfg, _ = fit_hybrid(robot, dataset, replace(SysIdConfig(), device=device), cfg, calibrated,
-                                              data_path=data_path, log=lambda s: None)
-            export_run(policy, calibrated, cfg, dataset, data_path)
+            hybrid = fit_hybrid(robot, dataset, replace(SysIdConfig(), device=device), cfg, calibrated,
+                                data_path=data_path, log=lambda s: None)
+            export_run(hybrid.policy, calibrated, hybrid.config, dataset, data_path, physics=hybrid.physics)
     if delta is None and need_delta:
         delta = out / "delta_action"
         if not (delta / "policy.pt").is_file():

@@ -15,24 +15,27 @@ Windows come from the simulation layer's :class:`~wresdyn.sim.TrajectoryBank` an
 
 Model selection is made on the validation split: every ``select_every`` iterations the current residual replays
 the validation trajectories open loop (whole trajectories, the evaluation's metric), and the fit returns the
-residual with the lowest validation error. Held-out and OOD data are never read here.
+residual with the lowest validation error. Held-out and OOD data are never read here. The loop itself (schedule,
+resume, checkpoints, selection) is :func:`~wresdyn.learn.window_fit.run_window_fit`, shared with identification.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from ..choices import ModelKind, SolverKind, check_choice, check_number
-from ..progress import bar
+from ..sim import Simulator, TrajectoryBank, rollout
+from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
-from .residual import ResidualConfig, obs_stats
+from .parametric import ParametricResidual
+from .residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
+from .runs import RunFolder
+from .selection import ValidationScore
+from .window_fit import check_window_fit_config, joint_weights, run_window_fit, squared_error, start_window_fit
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
 
@@ -100,12 +103,11 @@ class GradFitConfig:
     length, with no host synchronisation inside (:class:`_Iteration`). The CPU runs the same code eagerly; off,
     CUDA does too. May change on resume."""
     physics: str = ""
-    """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned
-    on top of the identified model (the hybrid), with its command delay; "" = the robot file's."""
+    """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
+    identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
+    file's. :func:`fit` takes the parameters themselves (``physics``)."""
 
     def __post_init__(self) -> None:
-        from .runs import check_window_fit_config
-
         check_choice(self.model, ModelKind, "model")
         check_window_fit_config(self)
         check_number(self.horizon, "horizon", integer=True, ge=1)
@@ -118,12 +120,8 @@ def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "ne
     or the ``"parametric"`` baseline."""
     from rsl_rl.modules.mlp import MLP
 
-    from .residual import GRUResidualPolicy, MLPResidualPolicy
-
     n = robot.n_dof
     if model == "parametric":
-        from .parametric import ParametricResidual
-
         return ParametricResidual(robot, residual_scale(robot, "torque", cfg.fraction))
     if model != "network":
         raise ValueError(f"unknown residual model {model!r}; choose 'network' or 'parametric'")
@@ -151,8 +149,6 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
     penalty (``None`` for a delta action, which applies no residual torque). ``weights`` (n,) weigh each joint's
     position and velocity error (0 for a joint the dataset excludes from fitting; ``None``: all 1).
     """
-    from .runs import squared_error
-
     pos, vel = squared_error(q, q_ref, weights), squared_error(qd, qd_ref, weights)
     tau = torch.zeros((), device=q.device)
     if scale is not None:
@@ -169,7 +165,7 @@ shapes the learning-rate and horizon schedule, so it is part of what it learns).
 
 
 def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None,
-        stop_below: float | None = None):
+        stop_below: float | None = None, physics: PhysicalParams | None = None):
     """Fit a residual to ``dataset``'s training split by gradient descent through the simulation.
 
     Args:
@@ -177,149 +173,104 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         dataset: A :class:`wresdyn.data.dataset.Dataset` (only ``q``, ``qd``, ``qdd``, ``q_cmd`` are read; recorded
             torques never). Its ``validation`` split, when present, selects the returned residual.
         cfg: Settings.
-        out: Optional run folder: ``checkpoint.pt`` (resumed if present; a changed config is refused),
-            ``curve.json``.
+        out: Optional run folder (:class:`~wresdyn.learn.runs.RunFolder`): ``config.json``, ``checkpoint.pt``
+            (resumed if present; a changed config is refused), ``curve.json``.
         log: Progress printer.
         until: Stop (and checkpoint) after this many iterations of the ``cfg.iterations`` schedule (horizon
             curriculum and learning rate), to resume later; ``None`` runs the whole schedule.
         stop_below: End the fit at the first validation check whose error is at or below this [rad] (time to
             fidelity, ``benchmarks/time_to_fidelity.py``), returning the residual selected so far.
+        physics: Physical parameters of the simulator (identified: the hybrid), with their command delay; ``None``
+            = the robot file's. ``cfg.physics`` records where they came from.
 
     Returns:
         ``(policy, curve)``: the trained :class:`~wresdyn.learn.residual.ResidualPolicy` (the one with the lowest
         validation error when the dataset has a validation split, else the last) and the learning curve rows
         (iteration, wall-clock [s], simulated env-steps, loss parts, validation error where evaluated).
     """
-    from ..sim import Simulator, TrajectoryBank
-    from .runs import check_resume, joint_weights, load_checkpoint, save_checkpoint, start_window_fit
-    from .selection import ValidationScore
-
+    if cfg.physics and physics is None:
+        raise ValueError(f"the config records physics from {cfg.physics} but none were given: pass "
+                         "physics=PhysicalParams.load(...)")
     rng, train, dt = start_window_fit(cfg, dataset)
-    mean, std = obs_stats(train)
-    policy = build_policy(robot, cfg.residual, mean, std, cfg.model).to(cfg.device)
-    horizons = cfg.horizon_curriculum or (cfg.horizon,)
-    sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True)
-    graph = cfg.cuda_graph and sim.device.type == "cuda"
-    optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr, capturable=graph)
-    physics = load_physics(cfg.physics, robot)
-    delay = 0.0
-    if physics is not None:
-        sim.set_physics(physics)
-        delay = torch.as_tensor(physics.delay / dt, dtype=torch.float32, device=sim.device)
-    bank = TrajectoryBank(train, sim.device, delay)
-    validation = dataset.split("validation")
-    score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics,
-                            weights=dataset.fit_weights()) if validation else None
-    weights = joint_weights(dataset, sim.device)
-    select_every = max(1, cfg.select_every or cfg.iterations // 10)
-    log_every = max(1, cfg.iterations // 20)
-    obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
-    noise_gen = torch.Generator(device=cfg.device)
-    noise_gen.manual_seed(cfg.seed)
-    curve, start_it, sim_steps, wall0 = [], 0, 0, 0.0
-    best = {"validation": float("inf"), "iteration": 0, "state": None}
-    config = dataclasses.asdict(cfg)
-    ckpt = Path(out) / "checkpoint.pt" if out else None
-    if ckpt and ckpt.exists():
-        state = load_checkpoint(ckpt, map_location=cfg.device, keys=("policy", "optim", "noise_rng", "best", "meta"))
-        meta = state["meta"]
-        check_resume(ckpt.parent, meta["config"], config, RESUME_MAY_CHANGE)
-        policy.load_state_dict(state["policy"])
-        optim.load_state_dict(state["optim"])
-        rng.bit_generator.state = meta["rng"]
-        noise_gen.set_state(state["noise_rng"].cpu())
-        curve, start_it, sim_steps, wall0 = meta["curve"], meta["iteration"], meta["sim_steps"], meta["wall"]
-        best = {"validation": meta["best_validation"], "iteration": meta["best_iteration"],
-                "state": state["best"] or None}
-        log(f"resumed from {ckpt} at iteration {start_it}")
-    step = _Iteration(cfg, sim, bank, policy, optim, obs_noise, graph, weights)
-    if score is None and start_it == 0:
-        log("no validation split: the fit returns its last iteration (`wresdyn migrate` adds one)")
-    if score is not None and start_it == 0 and physics is not None:
-        # on identified physics (the hybrid) the zero-residual start is a candidate too: the hybrid is never
-        # selected worse than the identified model alone
-        value = score(policy)
-        best = {"validation": value, "iteration": 0,
-                "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
-        log(f"validation at the start: {value:.4f} rad")
-    t0 = time.perf_counter() - wall0
-    stop = cfg.iterations if until is None else min(until, cfg.iterations)
-    reached = False
-    pending: list[tuple[dict, torch.Tensor]] = []  # rows whose loss parts are still on the device
-
-    def settle() -> None:
-        """Read the pending rows' loss parts from the device (one sync) and fail at the first non-finite loss."""
-        if not pending:
-            return
-        values = torch.stack([p for _, p in pending]).tolist()
-        for (row, _), v in zip(pending, values):
-            row.update(zip(_PARTS, v))
-            if not np.isfinite(row["loss"]):
-                raise FloatingPointError(f"gradient fit: non-finite loss at iteration {row['iteration']} "
-                                         "(simulation diverged)")
-        pending.clear()
-
-    with bar(log, stop, "fit", start_it) as progress:
-        for it in range(start_it, stop):
-            h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
-            lr = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
-            traj, start = bank.draw(rng, cfg.windows, h)
-            noise = torch.stack([torch.randn((cfg.windows, 4 * robot.n_dof), generator=noise_gen, device=sim.device)
-                                 for _ in range(h)]) if obs_noise > 0.0 else None
-            parts = step(traj, start, h, noise, lr)
-            sim_steps += cfg.windows * h * 2  # forward + backward through each step
-            row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "sim_steps": sim_steps}
-            pending.append((row, parts))
-            if not graph or it < start_it + 2:
-                # eager: each iteration is checked before the next; with graphs, the first two of a session (warm-up and
-                # capture) wait for the device, so their rows' wall-clock is exact (a reference for throughput)
-                settle()
-                row["wall"] = time.perf_counter() - t0
-            validate = score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations)
-            report = (it + 1) % log_every == 0 or it + 1 == stop
-            if validate or report:
-                settle()
-                row["wall"] = time.perf_counter() - t0  # the device has caught up: the row's true wall-clock
-            if validate:
-                t_eval = time.perf_counter()
-                row["validation"] = score(policy)
-                t0 += time.perf_counter() - t_eval  # wall-clock counts training only
-                if row["validation"] < best["validation"]:
-                    best = {"validation": row["validation"], "iteration": it + 1,
-                            "state": {k: v.detach().clone() for k, v in policy.state_dict().items()}}
-                reached = stop_below is not None and row["validation"] <= stop_below
-            curve.append(row)
-            progress.update(1, f"H={h}" + (f"  loss {row['loss']:.2e}" if "loss" in row else ""))
-            if report or reached:
-                msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
-                log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "")
-                    + f"  {row['wall']:.0f}s")
-                if ckpt:
-                    meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
-                            "sim_steps": sim_steps, "wall": row["wall"], "best_validation": best["validation"],
-                            "best_iteration": best["iteration"]}
-                    save_checkpoint({"policy": policy.state_dict(), "optim": optim.state_dict(), "meta": meta,
-                                     "noise_rng": noise_gen.get_state(), "best": best["state"] or {}}, ckpt)
-            if reached:
-                log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
-                break
-    settle()
-    if out:
-        Path(out, "curve.json").write_text(json.dumps(curve, indent=1))
-    if best["state"] is not None and (stop == cfg.iterations or reached):
-        policy.load_state_dict(best["state"])
-        log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
-    return policy.eval(), curve
+    learner = _FitLearner(robot, dataset, cfg, physics, rng, train, dt, log)
+    run = RunFolder(out, dataclasses.asdict(cfg), RESUME_MAY_CHANGE, key="gradfit", record=run_record(cfg))
+    curve = run_window_fit(cfg, learner, run, rng, log, until=until, stop_below=stop_below)
+    return learner.policy.eval(), curve
 
 
-_PARTS = ("loss", "pos", "vel", "torque", "rate")
-"""The loss and its parts, in the order :class:`_Iteration` returns them."""
+class _FitLearner:
+    """The gradient fit as a :class:`~wresdyn.learn.window_fit.WindowLearner`: the residual, Adam, the training
+    windows and their observation noise, one :class:`_Iteration` per step."""
+
+    name, what, parts, checkpoint_keys = "fit", "gradient fit", ("loss", "pos", "vel", "torque", "rate"), \
+        ("policy", "optim", "noise_rng")
+
+    def __init__(self, robot, dataset, cfg: GradFitConfig, physics, rng, train, dt: float, log) -> None:
+        self.cfg, self.rng, self.log, self.physics = cfg, rng, log, physics
+        self.n_obs = 4 * robot.n_dof
+        self.policy = self.module = build_policy(robot, cfg.residual, *obs_stats(train), cfg.model).to(cfg.device)
+        self.horizons = cfg.horizon_curriculum or (cfg.horizon,)
+        self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True)
+        self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
+        self.optim = torch.optim.Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred)
+        self.map_location = cfg.device
+        delay = 0.0
+        if physics is not None:
+            self.sim.set_physics(physics)
+            delay = torch.as_tensor(physics.delay / dt, dtype=torch.float32, device=self.sim.device)
+        self.bank = TrajectoryBank(train, self.sim.device, delay)
+        validation = dataset.split("validation")
+        self._score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics,
+                                      weights=dataset.fit_weights()) if validation else None
+        weights = joint_weights(dataset, self.sim.device)
+        self.obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
+        self.noise_gen = torch.Generator(device=cfg.device)
+        self.noise_gen.manual_seed(cfg.seed)
+        self.sim_steps = 0
+        self._iteration = _Iteration(cfg, self.sim, self.bank, self.policy, self.optim, self.obs_noise, self.deferred,
+                                     weights)
+
+    def begin(self, run: RunFolder) -> None:
+        if self._score is None:
+            self.log("no validation split: the fit returns its last iteration (`wresdyn migrate` adds one)")
+        elif self.physics is not None:
+            # on identified physics (the hybrid) the zero-residual start is a candidate too: the hybrid is never
+            # selected worse than the identified model alone
+            run.best.take(self._score(self.policy), 0, self.policy)
+            self.log(f"validation at the start: {run.best.value:.4f} rad")
+
+    def step(self, it: int, h: int, lr: float):
+        cfg = self.cfg
+        traj, start = self.bank.draw(self.rng, cfg.windows, h)
+        noise = torch.stack([torch.randn((cfg.windows, self.n_obs), generator=self.noise_gen, device=self.sim.device)
+                             for _ in range(h)]) if self.obs_noise > 0.0 else None
+        parts = self._iteration(traj, start, h, noise, lr)
+        self.sim_steps += cfg.windows * h * 2  # forward + backward through each step
+        return {"sim_steps": self.sim_steps}, parts
+
+    def score(self) -> float | None:
+        return None if self._score is None else self._score(self.policy)
+
+    def state(self) -> dict:
+        return {"policy": self.policy.state_dict(), "optim": self.optim.state_dict(),
+                "noise_rng": self.noise_gen.get_state()}
+
+    def meta(self) -> dict:
+        return {"sim_steps": self.sim_steps}
+
+    def restore(self, data: dict) -> None:
+        self.policy.load_state_dict(data["policy"])
+        self.optim.load_state_dict(data["optim"])
+        self.noise_gen.set_state(data["noise_rng"].cpu())
+        self.sim_steps = data["meta"]["sim_steps"]
+        self._iteration.adopt_optimiser()
 
 
 class _Iteration:
     """One optimiser step of the fit: windows of ``h`` steps at (trajectory, start) (B,) each, the rollout with the
     residual in the loop, the loss, the backward pass (torch's autograd through each step's Warp tape), gradient
-    clipping and Adam. A call returns :data:`_PARTS` as one tensor (5,) on the device, without waiting for it.
+    clipping and Adam. A call returns the loss and its parts (:attr:`_FitLearner.parts`) as one tensor (5,) on the
+    device, without waiting for it.
 
     With ``graph`` (CUDA) every call runs on the simulator's own stream and, from the second call at a window
     length on, is replayed from a CUDA graph captured for that length: torch's capture, which the Warp launches
@@ -337,17 +288,21 @@ class _Iteration:
         self.torque_scale = policy.scale if policy.kind == "torque" else None
         self._warm: set[int] = set()
         self._graphs: dict[int, tuple] = {}  # window length -> (graph, (traj, start, noise) buffers, output)
+        self.adopt_optimiser()
+
+    def adopt_optimiser(self) -> None:
+        """Put Adam's learning rate and step count where this mode wants them (a device tensor with ``graph``, a
+        float and a CPU tensor without); again after a resumed optimiser state is loaded."""
+        graph, optim = self.graph, self.optim
         for group in optim.param_groups:  # a resumed optimiser takes its flag from the checkpoint: set it here
             group["capturable"] = graph
             lr = float(group["lr"])
-            group["lr"] = torch.tensor(lr, device=sim.device) if graph else lr
+            group["lr"] = torch.tensor(lr, device=self.sim.device) if graph else lr
         for state in optim.state.values():  # Adam's step count lives where capturable wants it
             if "step" in state:
-                state["step"] = state["step"].to(sim.device if graph else "cpu", torch.float32)
+                state["step"] = state["step"].to(self.sim.device if graph else "cpu", torch.float32)
 
     def _run(self, traj, start, h: int, noise) -> torch.Tensor:
-        from ..sim import rollout
-
         window = self.bank.window(traj, start, h)
         run = rollout(self.sim, window, self.policy, grad=True, truncation=self.cfg.grad_truncation,
                       obs_noise=self.obs_noise, noise=noise)
@@ -356,7 +311,7 @@ class _Iteration:
         loss.backward()
         torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.cfg.grad_clip)
         self.optim.step()
-        return torch.stack([loss.detach(), *(parts[k] for k in _PARTS[1:])])
+        return torch.stack([loss.detach(), *(parts[k] for k in _FitLearner.parts[1:])])
 
     def __call__(self, traj, start, h: int, noise, lr: float) -> torch.Tensor:
         if not self.graph:
@@ -399,37 +354,28 @@ class _Iteration:
         return out.clone()
 
 
-def load_physics(path: str, robot):
-    """The :class:`~wresdyn.sim.physics.PhysicalParams` at ``path`` (checked against ``robot``), ``None`` for ""."""
-    if not path:
-        return None
-    from ..sim.physics import PhysicalParams
-
-    return PhysicalParams.load(path, robot)
-
-
-def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: str | Path | None = None) -> None:
-    """Write the run files ``wresdyn eval`` reads: ``config.json``, ``policy.pt``, ``policy.onnx``, ``residual.json``.
-
-    ``config.json`` carries the replay settings in the layout of a PPO run (``config.env``, ``config.residual``)
-    plus the full gradient-fit config under ``gradfit``.
-    """
-    from .residual import export_run_files
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    policy = policy.cpu().eval()
-    kind = policy.kind
-    arch = "parametric" if cfg.model == "parametric" else cfg.residual.arch
+def run_record(cfg: GradFitConfig) -> dict:
+    """What ``config.json`` of a gradient-fit run holds beside the config itself (under ``gradfit``): the learner and
+    the replay settings in the layout of a PPO run (``config.env``, ``config.residual``), which ``wresdyn eval``
+    reads."""
+    kind = "torque" if cfg.model == "parametric" else cfg.residual.kind  # the parametric model is a torque residual
     residual = {**dataclasses.asdict(cfg.residual), "kind": kind}
     if cfg.model == "parametric":
         residual["arch"] = "mlp"  # no network; keeps the PPO config layout valid
-    config = {"learner": "parametric" if cfg.model == "parametric" else "gradient",
-              "config": {"env": {"solver": cfg.solver, "substeps": 1}, "residual": residual},
-              "gradfit": dataclasses.asdict(cfg), "data_path": str(data_path) if data_path else None}
-    (out / "config.json").write_text(json.dumps(config, indent=2))
-    export_run_files(policy, out, dataset, arch=arch, learner=config["learner"])
-    if cfg.physics:  # the run carries the model it was fitted on: evaluation replays with it
-        from ..sim.physics import PhysicalParams
+    return {"learner": "parametric" if cfg.model == "parametric" else "gradient",
+            "config": {"env": {"solver": cfg.solver, "substeps": 1}, "residual": residual}}
 
-        PhysicalParams.load(cfg.physics).save(out / "physics.json")
+
+def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: str | Path | None = None,
+               physics: PhysicalParams | None = None) -> None:
+    """Write the run files ``wresdyn eval`` reads: ``config.json`` (:func:`run_record`, the gradient-fit config
+    under ``gradfit``, ``data_path``), ``policy.pt``, ``policy.onnx``, ``residual.json``, and ``physics.json`` when
+    the residual was fitted on ``physics`` (evaluation replays with them)."""
+    out = Path(out)
+    policy = policy.cpu().eval()
+    record = {**run_record(cfg), "data_path": str(data_path) if data_path else None}
+    RunFolder(out, dataclasses.asdict(cfg), key="gradfit", record=record).write_config()
+    arch = "parametric" if cfg.model == "parametric" else cfg.residual.arch
+    export_run_files(policy, out, dataset, arch=arch, learner=record["learner"])
+    if physics is not None:
+        physics.save(out / "physics.json")

@@ -10,14 +10,30 @@ is never selected worse than the model it starts from.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-__all__ = ["fit_hybrid", "save_identify_config", "HYBRID_ITERATIONS"]
+__all__ = ["fit_hybrid", "HybridFit", "save_identify_config", "HYBRID_ITERATIONS"]
 
 HYBRID_ITERATIONS = 1000
 """Residual iterations of the hybrid by default: on the identified model the residual's validation error stops
 improving within a few hundred (``benchmarks/results/grey_box/``)."""
+
+
+@dataclass(frozen=True)
+class HybridFit:
+    """What :func:`fit_hybrid` returns."""
+
+    physics: object
+    """The identified :class:`~wresdyn.sim.physics.PhysicalParams` (stage 1), which stage 2 ran on."""
+    policy: object
+    """The selected residual (:class:`~wresdyn.learn.residual.ResidualPolicy`)."""
+    curve: list
+    """Stage 2's learning curve rows."""
+    config: object
+    """The stage-2 :class:`~wresdyn.learn.gradfit.GradFitConfig` actually run."""
+    identify_wall: float
+    """Stage 1's training wall-clock [s]."""
 
 
 def save_identify_config(out: str | Path, cfg, rate_hz: float, data_path=None) -> None:
@@ -26,21 +42,20 @@ def save_identify_config(out: str | Path, cfg, rate_hz: float, data_path=None) -
                                                      "sysid": asdict(cfg), "data_path": str(data_path)}, indent=2))
 
 
-def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=None, log=print):
+def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=None,
+               log=print) -> HybridFit:
     """Identify the physics, then fit the residual on top.
 
     Args:
         robot, dataset: As for :func:`~wresdyn.learn.gradfit.fit`.
         sysid_cfg: :class:`~wresdyn.learn.sysid.SysIdConfig` of stage 1.
-        fit_cfg: :class:`~wresdyn.learn.gradfit.GradFitConfig` of stage 2 (a network; its ``physics`` is set here).
+        fit_cfg: :class:`~wresdyn.learn.gradfit.GradFitConfig` of stage 2 (a network; its ``physics`` record is set
+            here).
         out: Run folder; stage 1 lives in ``out/identify``.
         data_path: Where the dataset was read from (recorded in the run's config).
-
-    Returns:
-        ``(params, policy, curve, fit_cfg, identify_wall)``: the identified
-        :class:`~wresdyn.sim.physics.PhysicalParams`, the selected residual, its learning curve, the stage-2 config
-        actually run and stage 1's training wall-clock [s].
     """
+    # torch and Warp load here, not when the CLI reads HYBRID_ITERATIONS for its --help
+    from ..sim.warmup import compile_kernels
     from .gradfit import fit
     from .sysid import identify
 
@@ -51,11 +66,9 @@ def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=No
     params, id_curve = identify(robot, dataset, sysid_cfg, out=id_dir, log=log)
     save_identify_config(id_dir, sysid_cfg, dataset.rate_hz, data_path)
     cfg = replace(fit_cfg, model="network", physics=str(id_dir / "physics.json"))
-    from ..sim.warmup import compile_kernels
-
     compile_kernels(robot, dataset.rate_hz, ("forward", "grad"), solver=cfg.solver, device=cfg.device, physics=params,
                     say=log)
     log(f"stage 2/2: {cfg.residual.kind} residual ({cfg.residual.arch}) on the identified model "
         f"({cfg.iterations} iterations)")
-    policy, curve = fit(robot, dataset, cfg, out=out, log=log)
-    return params, policy, curve, cfg, (id_curve[-1]["wall"] if id_curve else 0.0)
+    policy, curve = fit(robot, dataset, cfg, out=out, log=log, physics=params)
+    return HybridFit(params, policy, curve, cfg, id_curve[-1]["wall"] if id_curve else 0.0)

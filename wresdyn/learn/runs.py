@@ -207,12 +207,16 @@ class Best:
     state: dict | None = None
     """A copy of the module's ``state_dict`` then; ``None`` before any."""
 
+    def take(self, value: float, iteration: int, module) -> None:
+        """Keep ``module``'s current state as the best, scored ``value`` after ``iteration``."""
+        self.value, self.iteration = value, iteration
+        self.state = {k: v.detach().clone() for k, v in module.state_dict().items()}
+
     def consider(self, value: float, iteration: int, module) -> bool:
         """Keep ``module``'s current state if ``value`` beats the best so far; whether it did."""
         if not value < self.value:
             return False
-        self.value, self.iteration = value, iteration
-        self.state = {k: v.detach().clone() for k, v in module.state_dict().items()}
+        self.take(value, iteration, module)
         return True
 
 
@@ -301,54 +305,3 @@ class RunFolder:
             self.path.mkdir(parents=True, exist_ok=True)
             (self.path / "curve.json").write_text(json.dumps(self.curve, indent=1))
 
-
-def check_window_fit_config(cfg) -> None:
-    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
-    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
-    from ..choices import SolverKind, check_choice, check_device, check_number
-
-    check_choice(cfg.solver, SolverKind, "solver")
-    check_device(cfg.device, "device")
-    for name in ("iterations", "windows"):
-        check_number(getattr(cfg, name), name, integer=True, ge=1)
-    for i, h in enumerate(cfg.horizon_curriculum):
-        check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
-    for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
-        check_number(getattr(cfg, name), name, integer=True, ge=0)
-    for name in ("lr", "lr_final", "grad_clip"):
-        check_number(getattr(cfg, name), name, gt=0)
-    for name in ("w_q", "w_qd"):
-        check_number(getattr(cfg, name), name, ge=0)
-
-
-def start_window_fit(cfg, dataset):
-    """Pin torch's threads, seed torch and the window sampler, and take the training split: ``(rng, train, dt)``
-    with ``dt`` the sample period [s]. Shared by the two window fits."""
-    import numpy as np
-    import torch
-
-    if cfg.torch_threads > 0:
-        torch.set_num_threads(cfg.torch_threads)
-    torch.manual_seed(cfg.seed)
-    train = dataset.split("train")
-    if not train:
-        raise ValueError("the dataset has no training trajectories")
-    return np.random.default_rng(cfg.seed), train, 1.0 / dataset.rate_hz
-
-
-def joint_weights(dataset, device):
-    """The dataset's per-joint fit weights (:meth:`~wresdyn.data.dataset.Dataset.fit_weights`: 0 for a joint
-    excluded from fitting) as a float32 tensor (n,) on ``device``, or ``None`` when every joint is fitted (the losses
-    then skip the weighting). Shared by the two window fits."""
-    import torch
-
-    if not dataset.excluded_joints:
-        return None
-    return torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=device)
-
-
-def squared_error(x, ref, weights=None):
-    """Window-fit error term: Σ_j w_j (x_j − ref_j)² over the joints (last axis), mean over everything else.
-    ``x``, ``ref`` (..., n); ``weights`` (n,) or ``None`` (all 1). Shared by the gradient fit and identification."""
-    sq = (x - ref) ** 2
-    return (sq if weights is None else sq * weights).sum(-1).mean()

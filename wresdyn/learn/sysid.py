@@ -14,16 +14,16 @@ but the gradient goes to the parameters: the Warp tape of every step returns ``�
 
 A saturating drive has no gradient while the simulated drive does not saturate, so the effort limit starts
 from a coarse search: the training loss of a few windows at a geometric grid of fractions of the robot file's
-limit (forward only); the gradient refines from the best. Model selection on the validation split, as for
-every learner: every ``select_every`` iterations the current parameters replay the validation trajectories and
-the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
-each step validated the same way. Held-out and OOD data are never read.
+limit (forward only, :mod:`.grid_search`); the gradient refines from the best. Model selection on the validation
+split, as for every learner: every ``select_every`` iterations the current parameters replay the validation
+trajectories and the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
+each step validated the same way. Held-out and OOD data are never read. The Adam loop is the gradient fit's
+(:func:`~wresdyn.learn.window_fit.run_window_fit`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,11 +32,15 @@ import numpy as np
 import torch
 
 from ..choices import SolverKind, check_number
-from ..progress import bar
+from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.physics import JOINT_FIELDS, PhysicalParams, PhysicsModel
+from .grid_search import GridChoice, grid_search
+from .runs import RunFolder
 from .selection import ValidationScore
+from .unexcited_limits import limit_unexcited_efforts
+from .window_fit import check_window_fit_config, joint_weights, run_window_fit, squared_error, start_window_fit
 
-__all__ = ["SysIdConfig", "identify", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE"]
+__all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE"]
 
 FIT_FIELDS = (*JOINT_FIELDS, "bodies")
 """What can be identified: the per-joint fields and ``"bodies"`` (every moving link's mass, com, inertia)."""
@@ -117,8 +121,6 @@ class SysIdConfig:
     """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
 
     def __post_init__(self) -> None:
-        from .runs import check_window_fit_config
-
         check_window_fit_config(self)
         bad = sorted(set(self.fit) - set(FIT_FIELDS))
         if bad:
@@ -155,8 +157,6 @@ class PhysicsScore(ValidationScore):
 def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log):
     """The selected parameters with the effort limits the training data never reaches set from the saturating
     joints' ratio (:mod:`.unexcited_limits`), unless that is worse on validation."""
-    from .unexcited_limits import limit_unexcited_efforts
-
     shared, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=dataset.fit_weights() > 0,
                                             saturated_min=cfg.saturated_min)
     log(found.describe())
@@ -173,83 +173,11 @@ def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validatio
 def _window_loss(cfg, model, sim, window, weights=None):
     """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
     per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
-    from ..sim import rollout
-    from .runs import squared_error
-
     sim.set_physics(model())
     run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation)
     pos = squared_error(run.q[:, 1:], window.q[:, 1:], weights)
     vel = squared_error(run.qd[:, 1:], window.qd[:, 1:], weights)
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
-
-
-@dataclass(frozen=True)
-class GridChoice:
-    """What one grid search of :func:`identify` chose (its ``on_search`` receives one per search)."""
-
-    field: str
-    """The field searched: ``"kp"`` (``gain_grid``, per joint), ``"delay"`` or ``"effort"`` (all joints at once)."""
-    choice: dict[str, float | None]
-    """Grid point each joint took, by joint name; ``None`` for a joint excluded from fitting (it keeps its value)."""
-    losses: np.ndarray
-    """Training loss of each grid point, shape (len(grid),), or per joint (len(grid), n_dof) for a per-joint
-    search (mean squared position error [rad²])."""
-    validation: float | None = None
-    """Validation score of the parameters right after the search [rad] (the kp search, with a validation split)."""
-
-
-def _grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, weights=None,
-                 per_joint: bool = False) -> GridChoice | None:
-    """Set ``field`` to the grid point of least training loss on a few windows (forward only); return what was
-    chosen (``None`` for an empty grid).
-
-    ``values(g)`` maps a grid point to the field's values (n,) [SI]; every other field keeps its current value.
-    ``weights``: per-joint weights (n,) tensor of the position error (0: excluded from fitting), ``None``: all 1.
-    ``per_joint``: each joint takes the grid point of its own least position error (the joints are tried together,
-    one rollout per grid point, so their coupling is ignored: a start for the gradient steps, not a fit).
-    """
-    from ..sim import TrajectoryBank, rollout
-    from .runs import squared_error
-
-    if not len(grid):
-        return None
-    h = max(cfg.horizon_curriculum or (64,))
-    bank = TrajectoryBank(train, sim.device)
-    traj, start = bank.draw(rng, cfg.windows, h)  # the same windows for every grid point
-    base = model.values()
-    losses = []
-    for g in grid:
-        p = base.copy()
-        setattr(p, field, values(g))
-        sim.set_physics(p)
-        bank.set_delay(torch.as_tensor(p.delay / model.dt, dtype=torch.float32, device=sim.device))
-        window = bank.window(traj, start, h)
-        with torch.no_grad():
-            run = rollout(sim, window)
-        if per_joint:  # (n,) mean squared position error of each joint
-            losses.append(((run.q[:, 1:] - window.q[:, 1:]) ** 2).reshape(-1, run.q.shape[-1]).mean(0).cpu().numpy())
-        else:
-            losses.append(float(squared_error(run.q[:, 1:], window.q[:, 1:], weights)))
-    losses = np.nan_to_num(np.asarray(losses, dtype=np.float64), nan=np.inf)  # a diverged rollout never wins
-    if per_joint:
-        pick = np.argmin(losses, axis=0)  # (n,) grid index of each joint
-        fitted = np.ones(len(pick), bool) if weights is None else weights.detach().cpu().numpy() > 0
-        # a joint excluded from fitting keeps its value: its error is no one's to fit
-        model.assign(field, np.stack([values(g) for g in grid])[pick, np.arange(len(pick))], keep=~fitted)
-        choice = {j: float(grid[k]) if f else None for j, k, f in zip(model.robot.joint_names, pick, fitted)}
-        log(f"{field} search, per joint: " + "  ".join(f"{j}:{'excluded' if g is None else f'{g:.3g}'}"
-                                                       for j, g in choice.items()))
-    else:
-        best = grid[int(np.argmin(losses))]
-        model.assign(field, values(best))
-        choice = dict.fromkeys(model.robot.joint_names, float(best))
-        log(f"{field} search: " + "  ".join(f"{g:.3g}:{x:.2e}" for g, x in zip(grid, losses)) + f"  -> {best:.3g}")
-    return GridChoice(field, choice, losses)
-
-
-def _snapshot(model) -> dict:
-    """A copy of ``model``'s state, a selection candidate."""
-    return {k: v.clone() for k, v in model.state_dict().items()}
 
 
 def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
@@ -261,8 +189,6 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     loss keeps falling along the straight line to the true parameters (``benchmarks/sysid_valley.py``), and a
     quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
     2 cores, rerun on resume."""
-    from ..sim import Simulator
-
     fields = [f for f in cfg.fit if f not in ("effort", "delay")]
     model = PhysicsModel(robot, start, fit=fields, dt=dt)
     h = max(cfg.horizon_curriculum or (64,))
@@ -315,8 +241,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         robot: The nominal robot (the simulator side).
         dataset: A :class:`~wresdyn.data.dataset.Dataset` (``q``, ``qd``, ``q_cmd`` of train; validation selects).
         cfg: Settings.
-        out: Optional run folder: ``checkpoint.pt`` (resumed; a changed config is refused), ``physics.json`` (the
-            selected parameters), ``curve.json``.
+        out: Optional run folder (:class:`~wresdyn.learn.runs.RunFolder`): ``config.json``, ``checkpoint.pt``
+            (resumed; a changed config is refused), ``physics.json`` (the selected parameters), ``curve.json``.
         log: Progress printer.
         start: Values to start from (default the robot file's).
         on_search: Optional ``callable(GridChoice)``, called after each grid search (kp, delay, effort) with what
@@ -325,118 +251,120 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     Returns:
         ``(params, curve)``: the selected :class:`~wresdyn.sim.physics.PhysicalParams` and the learning curve.
     """
-    from ..sim import Simulator, TrajectoryBank
-    from .runs import check_resume, joint_weights, load_checkpoint, save_checkpoint, start_window_fit
-
     rng, train, dt = start_window_fit(cfg, dataset)
-    model = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
-    groups = [[model.u_kp, model.u_kd, model.u_armature],
-              [model.u_damping, model.u_friction, model.u_effort, model.u_delay],
-              [model.u_body_logdiag, model.u_body_off]]
-    optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
-                              for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
-    effort_from = int(round(cfg.effort_after * cfg.iterations)) if "effort" in cfg.fit else cfg.iterations
-    validation = dataset.split("validation")
-    score = PhysicsScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device,
-                         weights=dataset.fit_weights()) if validation else None
-    select_every = max(1, cfg.select_every or cfg.iterations // 10)
-    config = dataclasses.asdict(cfg)
-    ckpt = Path(out) / "checkpoint.pt" if out else None
-    curve, start_it, wall0 = [], 0, 0.0
-    best = {"validation": float("inf"), "iteration": 0, "state": None}
-    if ckpt and ckpt.exists():
-        state = load_checkpoint(ckpt, map_location="cpu", keys=("model", "optim", "best", "meta"))
-        meta = state["meta"]
-        check_resume(ckpt.parent, meta["config"], config, RESUME_MAY_CHANGE)
-        model.load_state_dict(state["model"])
-        optim.load_state_dict(state["optim"])
-        rng.bit_generator.state = meta["rng"]
-        curve, start_it, wall0 = meta["curve"], meta["iteration"], meta["wall"]
-        best = {"validation": meta["best_validation"], "iteration": meta["best_iteration"],
-                "state": state["best"] or None}
-        log(f"resumed from {ckpt} at iteration {start_it}")
-    else:
-        if score is not None:
-            v0 = score(model.values())
-            best = {"validation": v0, "iteration": 0, "state": _snapshot(model)}
-            log(f"start: validation {v0:.4f} rad")
-    sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                    param_grads=True)
-    bank = TrajectoryBank(train, sim.device)
-    weights = joint_weights(dataset, sim.device)  # joints excluded from fitting weigh 0 in the loss
-    horizons = cfg.horizon_curriculum or (64,)
-    t0 = time.perf_counter() - wall0
-    if start_it == 0 and cfg.gain_grid:
-        start_kp = model.values().kp
-        searched = _grid_search(cfg, model, sim, train, rng, "kp", cfg.gain_grid, lambda g: g * start_kp, log,
-                                weights, per_joint=True)
-        if score is not None:  # the searched start is a candidate of the selection too, as the file's is
-            v = score(model.values())  # counted in the wall-clock, as the search itself
-            log(f"after the kp search: validation {v:.4f} rad")
-            searched = dataclasses.replace(searched, validation=v)
-            if v < best["validation"]:
-                best = {"validation": v, "iteration": 0, "state": _snapshot(model)}
-        if on_search:
-            on_search(searched)
-    with bar(log, cfg.iterations, "identify", start_it) as progress:
-        for it in range(start_it, cfg.iterations):
-            h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
-            for group in optim.param_groups:
-                group["lr"] = group["scale"] * float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) *
-                                                     (1 + np.cos(np.pi * it / cfg.iterations)))
-            if it == effort_from:
-                file_effort = np.asarray(robot.effort, dtype=np.float64)
-                searched = [_grid_search(cfg, model, sim, train, rng, "delay", cfg.delay_grid,
-                                         lambda g: np.full(robot.n_dof, g * dt), log, weights)
-                            if "delay" in cfg.fit else None,
-                            _grid_search(cfg, model, sim, train, rng, "effort", cfg.effort_grid,
-                                         lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf), log,
-                                         weights)]
-                for choice in searched:
-                    if choice is not None and on_search:
-                        on_search(choice)
-            bank.set_delay(model.delay_steps().float().to(sim.device))
-            window = bank.sample(rng, cfg.windows, h)
-            loss, parts = _window_loss(cfg, model, sim, window, weights)
-            loss = loss + cfg.w_prior * model.prior().to(loss.device)
-            if not torch.isfinite(loss):
-                raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")
-            optim.zero_grad()
-            loss.backward()
-            if it < effort_from and model.u_effort.grad is not None:
-                model.u_effort.grad = None  # not yet part of the fit (Adam skips a parameter without gradient)
-            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-            optim.step()
-            model.project()
-            row = {"iteration": it + 1, "wall": time.perf_counter() - t0, "loss": float(loss.detach()), **parts}
-            if score is not None and ((it + 1) % select_every == 0 or it + 1 == cfg.iterations):
-                t_eval = time.perf_counter()
-                row["validation"] = score(model.values())
-                t0 += time.perf_counter() - t_eval
-                if row["validation"] < best["validation"]:
-                    best = {"validation": row["validation"], "iteration": it + 1, "state": _snapshot(model)}
-            curve.append(row)
-            progress.update(1, f"H={h}  loss {row['loss']:.2e}")
-            if (it + 1) % max(1, cfg.iterations // 20) == 0 or it + 1 == cfg.iterations:
-                msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {parts['pos']:.3e}"
-                log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") +
-                    f"  {row['wall']:.0f}s")
-                if ckpt:
-                    meta = {"config": config, "rng": rng.bit_generator.state, "curve": curve, "iteration": it + 1,
-                            "wall": row["wall"], "best_validation": best["validation"],
-                            "best_iteration": best["iteration"]}
-                    save_checkpoint({"model": model.state_dict(), "optim": optim.state_dict(), "meta": meta,
-                                     "best": best["state"] or {}}, ckpt)
-    if best["state"] is not None:
-        model.load_state_dict(best["state"])
-        log(f"selected iteration {best['iteration']} by validation ({best['validation']:.4f} rad)")
-    params = model.values()
+    learner = _IdentifyLearner(robot, dataset, cfg, start, rng, train, dt, log, on_search)
+    run = RunFolder(out, dataclasses.asdict(cfg), RESUME_MAY_CHANGE, key="sysid", record=run_record(cfg, dataset))
+    curve = run_window_fit(cfg, learner, run, rng, log)
+    params = learner.model.values()
     if cfg.share_effort_ratio and "effort" in cfg.fit:
-        params = _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, best["validation"], log)
+        params = _share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score, run.best.value,
+                                     log)
     if cfg.refine:
-        params = _refine(cfg, robot, bank, dt, params, score, best["validation"], weights, curve, log)
-    if out:
-        Path(out).mkdir(parents=True, exist_ok=True)
-        params.save(Path(out) / "physics.json")
-        Path(out, "curve.json").write_text(json.dumps(curve, indent=1))
+        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, run.best.value, learner.weights,
+                         curve, log)
+    if run.path is not None:
+        params.save(run.path / "physics.json")
+        run.write_curve()
     return params, curve
+
+
+def run_record(cfg: SysIdConfig, dataset) -> dict:
+    """What ``config.json`` of an identification run holds beside the config itself (under ``sysid``), for
+    ``wresdyn eval``."""
+    return {"learner": "identify", "rate_hz": dataset.rate_hz, "solver": cfg.solver}
+
+
+class _IdentifyLearner:
+    """Identification as a :class:`~wresdyn.learn.window_fit.WindowLearner`: the physical parameters
+    (:class:`~wresdyn.sim.physics.PhysicsModel`) under Adam, with the grid searches before the first step (kp) and
+    where the effort limit joins the fit (delay, effort)."""
+
+    name, what, parts, checkpoint_keys, map_location, deferred = \
+        "identify", "identification", ("loss", "pos", "vel"), ("model", "optim"), "cpu", False
+
+    def __init__(self, robot, dataset, cfg: SysIdConfig, start, rng, train, dt: float, log, on_search) -> None:
+        self.robot, self.cfg, self.rng, self.train, self.dt, self.log = robot, cfg, rng, train, dt, log
+        self.on_search = on_search
+        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
+        model = self.model
+        groups = [[model.u_kp, model.u_kd, model.u_armature],
+                  [model.u_damping, model.u_friction, model.u_effort, model.u_delay],
+                  [model.u_body_logdiag, model.u_body_off]]
+        self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
+                                       for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
+        self.effort_from = int(round(cfg.effort_after * cfg.iterations)) if "effort" in cfg.fit else cfg.iterations
+        validation = dataset.split("validation")
+        self.physics_score = PhysicsScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device,
+                                          weights=dataset.fit_weights()) if validation else None
+        self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
+                             param_grads=True)
+        self.bank = TrajectoryBank(train, self.sim.device)
+        self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
+        self.horizons = cfg.horizon_curriculum or (64,)
+        self.run = None
+
+    def begin(self, run: RunFolder) -> None:
+        self.run = run
+        if self.physics_score is not None:
+            run.best.take(self.score(), 0, self.model)
+            self.log(f"start: validation {run.best.value:.4f} rad")
+
+    def _search(self, field: str, grid, values, per_joint: bool = False) -> GridChoice | None:
+        return grid_search(self.cfg, self.model, self.sim, self.train, self.rng, field, grid, values, self.log,
+                            self.weights, per_joint=per_joint)
+
+    def _events(self, it: int) -> None:
+        """The grid searches: kp before the first step, delay and effort where the effort limit joins the fit."""
+        cfg, searched = self.cfg, []
+        if it == 0 and cfg.gain_grid:
+            start_kp = self.model.values().kp
+            choice = self._search("kp", cfg.gain_grid, lambda g: g * start_kp, per_joint=True)
+            if self.physics_score is not None:  # the searched start is a candidate of the selection too
+                v = self.score()  # counted in the wall-clock, as the search itself
+                self.log(f"after the kp search: validation {v:.4f} rad")
+                choice = dataclasses.replace(choice, validation=v)
+                self.run.best.consider(v, 0, self.model)
+            searched.append(choice)
+        if it == self.effort_from:
+            n, dt = self.robot.n_dof, self.dt
+            file_effort = np.asarray(self.robot.effort, dtype=np.float64)
+            if "delay" in cfg.fit:
+                searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(n, g * dt)))
+            searched.append(self._search("effort", cfg.effort_grid,
+                                         lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf)))
+        for choice in searched:
+            if choice is not None and self.on_search:
+                self.on_search(choice)
+
+    def step(self, it: int, h: int, lr: float):
+        cfg, model = self.cfg, self.model
+        for group in self.optim.param_groups:
+            group["lr"] = group["scale"] * lr
+        self._events(it)
+        self.bank.set_delay(model.delay_steps().float().to(self.sim.device))
+        window = self.bank.sample(self.rng, cfg.windows, h)
+        loss, parts = _window_loss(cfg, model, self.sim, window, self.weights)
+        loss = loss + cfg.w_prior * model.prior().to(loss.device)
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")
+        self.optim.zero_grad()
+        loss.backward()
+        if it < self.effort_from and model.u_effort.grad is not None:
+            model.u_effort.grad = None  # not yet part of the fit (Adam skips a parameter without gradient)
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        self.optim.step()
+        model.project()
+        return {"loss": float(loss.detach()), **parts}, None
+
+    def score(self) -> float | None:
+        return None if self.physics_score is None else self.physics_score(self.model.values())
+
+    def state(self) -> dict:
+        return {"model": self.model.state_dict(), "optim": self.optim.state_dict()}
+
+    def meta(self) -> dict:
+        return {}
+
+    def restore(self, data: dict) -> None:
+        self.model.load_state_dict(data["model"])
+        self.optim.load_state_dict(data["optim"])

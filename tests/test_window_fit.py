@@ -1,0 +1,117 @@
+"""The window-fit loop (:mod:`wresdyn.learn.window_fit`) on a toy learner: the schedule, scoring and selection on
+validation, a run stopped with ``until`` and resumed equal to one run straight through, ``stop_below``, and loss
+parts read back late (the CUDA-graph path) giving the same rows."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import torch
+
+from wresdyn.learn.runs import RunFolder
+from wresdyn.learn.window_fit import run_window_fit, schedule
+
+
+@dataclass(frozen=True)
+class Cfg:
+    iterations: int = 20
+    lr: float = 0.1
+    lr_final: float = 0.01
+    select_every: int = 4
+
+
+class Toy:
+    """Descends (w − 3)² with a noisy gradient drawn from the window sampler; validation prefers w = 2, so the
+    selected iterate is the one passing closest to 2."""
+
+    name, what, parts, checkpoint_keys, map_location = "toy", "toy fit", ("loss", "pos"), ("w",), "cpu"
+    horizons = (2, 4)
+
+    def __init__(self, rng, deferred=False):
+        self.rng, self.deferred = rng, deferred
+        self.module = torch.nn.Linear(1, 1, bias=False)
+        with torch.no_grad():
+            self.module.weight.fill_(0.0)
+        self.seen = []
+
+    def begin(self, run):
+        run.best.take(self.score(), 0, self.module)
+
+    def step(self, it, h, lr):
+        self.seen.append((it, h, lr))
+        w = self.module.weight
+        noise = float(self.rng.normal()) * 0.01
+        with torch.no_grad():
+            w -= lr * (2 * (w - 3.0) + noise)
+        loss = (w.detach() - 3.0) ** 2
+        parts = torch.stack([loss.reshape(()), loss.reshape(()) * 0.5])
+        if self.deferred:
+            return {"h": h}, parts
+        return {"h": h, "loss": float(parts[0]), "pos": float(parts[1])}, None
+
+    def score(self):
+        return abs(float(self.module.weight.detach()) - 2.0)
+
+    def state(self):
+        return {"w": self.module.state_dict()}
+
+    def meta(self):
+        return {}
+
+    def restore(self, data):
+        self.module.load_state_dict(data["w"])
+
+
+def test_schedule_steps_the_horizons_and_decays_the_learning_rate():
+    cfg = Cfg(iterations=10)
+    assert [schedule(cfg, (2, 4), it)[0] for it in range(10)] == [2] * 5 + [4] * 5
+    assert schedule(cfg, (2,), 0)[1] == pytest.approx(0.1)
+    assert schedule(cfg, (2,), 5)[1] == pytest.approx(0.055)  # halfway down the cosine
+    assert schedule(cfg, (2,), 9)[1] > 0.01
+
+
+def _run(out, until=None, stop_below=None, deferred=False, cfg=Cfg()):
+    rng = np.random.default_rng(0)
+    toy = Toy(rng, deferred)
+    run = RunFolder(out, {"iterations": cfg.iterations}, key="toy")
+    curve = run_window_fit(cfg, toy, run, rng, log=lambda *_: None, until=until, stop_below=stop_below)
+    return toy, run, [{k: v for k, v in r.items() if k != "wall"} for r in curve]
+
+
+def test_the_loop_scores_selects_and_resumes_to_the_same_numbers(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    toy, run, curve = _run(None)
+    assert [r["iteration"] for r in curve] == list(range(1, 21))
+    scored = [r for r in curve if "validation" in r]
+    assert [r["iteration"] for r in scored] == [4, 8, 12, 16, 20]
+    best = min(scored, key=lambda r: r["validation"])
+    assert run.best.iteration == best["iteration"] and toy.score() == best["validation"]  # the best one, restored
+    assert not list(tmp_path.iterdir())  # a run without a folder writes nothing
+
+    _, stopped, first = _run(tmp_path / "run", until=7)
+    assert len(first) == 7 and stopped.best.iteration == 4 and (tmp_path / "run" / "checkpoint.pt").is_file()
+    toy2, _, resumed = _run(tmp_path / "run")
+    assert toy2.seen[0][0] == 7  # continued where it stopped
+    assert resumed == curve  # the same rows as straight through, the window sampler included
+    assert toy2.module.weight.item() == toy.module.weight.item()
+
+    _, _, late = _run(None, deferred=True)
+    assert late == curve  # parts read back late land in the same rows
+
+
+def test_stop_below_ends_at_the_first_score_that_reaches_it():
+    _, _, curve = _run(None, stop_below=0.5)
+    scores = [r["validation"] for r in curve if "validation" in r]
+    assert scores[-1] <= 0.5 and all(v > 0.5 for v in scores[:-1]) and "validation" in curve[-1]
+    assert len(curve) < 20
+
+
+def test_a_non_finite_loss_read_back_late_names_its_iteration():
+    class Diverging(Toy):
+        def step(self, it, h, lr):
+            fields, parts = super().step(it, h, lr)
+            return fields, parts * (float("nan") if it == 2 else 1.0)
+
+    rng = np.random.default_rng(0)
+    with pytest.raises(FloatingPointError, match="toy fit: non-finite loss at iteration 3"):
+        run_window_fit(Cfg(), Diverging(rng, deferred=True), RunFolder(None, {}), rng, log=lambda *_: None)

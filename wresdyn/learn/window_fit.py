@@ -1,0 +1,207 @@
+"""The window-fit loop shared by identification (:mod:`.sysid`) and the gradient fit of a residual (:mod:`.gradfit`).
+
+Both fit by multiple shooting: each iteration replays B windows of H recorded steps from their recorded start state
+and descends the mismatch. What they share lives here, as rsl_rl splits its runner from the algorithm: the
+schedule (the horizon curriculum in equal parts of training, the cosine learning rate from ``cfg.lr`` to
+``cfg.lr_final``), the run folder (:class:`~wresdyn.learn.runs.RunFolder`: resume, checkpoints, the curve), scoring
+on the validation split every ``select_every`` iterations (the wall-clock counts training only), the log line and
+checkpoint every ``iterations // 20``, the stops (``until``, ``stop_below``) and the final selection of the best
+iterate on validation. A learner (:class:`WindowLearner`) keeps its model, its loss and its step, with whatever
+it does at given iterations.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+import numpy as np
+import torch
+
+from ..choices import SolverKind, check_choice, check_device, check_number
+from ..progress import bar
+from .runs import RunFolder
+
+__all__ = ["WindowLearner", "run_window_fit", "schedule", "check_window_fit_config", "start_window_fit",
+           "joint_weights", "squared_error"]
+
+
+class WindowLearner(Protocol):
+    """What :func:`run_window_fit` drives: a model, its optimiser and its loss on windows."""
+
+    name: str
+    """What the progress bar calls the loop (``"fit"``, ``"identify"``)."""
+    what: str
+    """What a message calls the learner (``"gradient fit"``)."""
+    module: torch.nn.Module
+    """What is selected: its ``state_dict`` is kept at each new best on validation and restored at the end."""
+    horizons: tuple[int, ...]
+    """Window lengths [steps] in equal parts of training."""
+    parts: tuple[str, ...]
+    """Names of the loss parts a deferred step returns as one device tensor, the loss first."""
+    deferred: bool
+    """Whether :meth:`step` returns its loss parts without waiting for the device (read back at log, validation
+    and checkpoint times, and for the first two iterations of a session)."""
+    checkpoint_keys: tuple[str, ...]
+    """The learner's entries in a checkpoint (its :meth:`state`)."""
+    map_location: str
+    """Where a resumed checkpoint's tensors are loaded (``torch.load``'s ``map_location``)."""
+
+    def begin(self, run: RunFolder) -> None:
+        """Before the first iteration of a fresh run: score the starting point as a candidate if it is one."""
+
+    def step(self, it: int, h: int, lr: float) -> tuple[dict, torch.Tensor | None]:
+        """One optimiser step at iteration ``it`` (from 0) on windows of ``h`` steps at learning rate ``lr``; returns
+        the curve row's fields and, when :attr:`deferred`, the tensor of :attr:`parts` still on the device."""
+
+    def score(self) -> float | None:
+        """The current model's validation error [rad]; ``None`` without a validation split."""
+
+    def state(self) -> dict:
+        """The learner's checkpoint entries (weights, optimiser, generators): tensors and plain containers."""
+
+    def meta(self) -> dict:
+        """The learner's extra bookkeeping, stored in the checkpoint's ``meta``."""
+
+    def restore(self, data: dict) -> None:
+        """Take back :meth:`state` and :meth:`meta` (``data["meta"]``) from a checkpoint."""
+
+
+def schedule(cfg, horizons, it: int) -> tuple[int, float]:
+    """Window length [steps] and learning rate at iteration ``it`` of ``cfg.iterations``: the horizons in equal parts
+    of training, the learning rate on a cosine from ``cfg.lr`` (first iteration) to ``cfg.lr_final`` (the end)."""
+    h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
+    lr = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
+    return h, lr
+
+
+def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.Generator, log=print,
+                   until: int | None = None, stop_below: float | None = None) -> list[dict]:
+    """Resume ``run`` if it holds a checkpoint, iterate ``learner`` to the end of the schedule (or ``until``), and
+    leave ``learner.module`` at the best iterate on validation when the schedule is done (or ``stop_below`` reached).
+
+    Args:
+        cfg: The learner's config: ``iterations``, ``lr``, ``lr_final``, ``select_every`` (0: ten times per run).
+        learner: The model, its loss and its step.
+        run: The run folder (``RunFolder(None, ...)`` keeps it in memory).
+        rng: The window sampler, checkpointed with the run.
+        log: Progress printer.
+        until: Stop (and checkpoint) after this many iterations of the schedule, to resume later; ``None``: the end.
+        stop_below: End at the first validation score at or below this [rad], with the best selected so far.
+
+    Returns:
+        The learning curve (``run.curve``), also written to ``curve.json``.
+    """
+    data = run.resume(keys=learner.checkpoint_keys, map_location=learner.map_location)
+    if data is not None:
+        learner.restore(data)
+        rng.bit_generator.state = data["meta"]["rng"]
+        log(f"resumed from {run.checkpoint} at iteration {run.iteration}")
+    else:
+        learner.begin(run)
+    start_it, curve, best = run.iteration, run.curve, run.best
+    select_every = max(1, cfg.select_every or cfg.iterations // 10)
+    log_every = max(1, cfg.iterations // 20)
+    stop = cfg.iterations if until is None else min(until, cfg.iterations)
+    t0 = time.perf_counter() - run.wall
+    reached = False
+    pending: list[tuple[dict, torch.Tensor]] = []  # rows whose loss parts are still on the device
+
+    def settle() -> None:
+        """Read the pending rows' loss parts from the device (one sync) and fail at the first non-finite loss."""
+        if not pending:
+            return
+        values = torch.stack([p for _, p in pending]).tolist()
+        for (row, _), v in zip(pending, values):
+            row.update(zip(learner.parts, v))
+            if not np.isfinite(row["loss"]):
+                raise FloatingPointError(f"{learner.what}: non-finite loss at iteration {row['iteration']} "
+                                         "(simulation diverged)")
+        pending.clear()
+
+    with bar(log, stop, learner.name, start_it) as progress:
+        for it in range(start_it, stop):
+            h, lr = schedule(cfg, learner.horizons, it)
+            fields, parts = learner.step(it, h, lr)
+            row = {"iteration": it + 1, "wall": time.perf_counter() - t0, **fields}
+            if parts is not None:
+                pending.append((row, parts))
+            if not learner.deferred or it < start_it + 2:
+                # eager: each iteration is checked before the next; deferred, the first two of a session (warm-up and
+                # capture) wait for the device, so their rows' wall-clock is exact (a reference for throughput)
+                settle()
+                row["wall"] = time.perf_counter() - t0
+            validate = (it + 1) % select_every == 0 or it + 1 == cfg.iterations
+            report = (it + 1) % log_every == 0 or it + 1 == stop
+            if validate or report:
+                settle()
+                row["wall"] = time.perf_counter() - t0  # the device has caught up: the row's true wall-clock
+            if validate:
+                t_eval = time.perf_counter()
+                value = learner.score()
+                t0 += time.perf_counter() - t_eval  # wall-clock counts training only
+                if value is not None:
+                    row["validation"] = value
+                    best.consider(value, it + 1, learner.module)
+                    reached = stop_below is not None and value <= stop_below
+            curve.append(row)
+            progress.update(1, f"H={h}" + (f"  loss {row['loss']:.2e}" if "loss" in row else ""))
+            if report or reached:
+                msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
+                log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "")
+                    + f"  {row['wall']:.0f}s")
+                run.save(learner.state(), rng=rng.bit_generator.state, **learner.meta())
+            if reached:
+                log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
+                break
+    settle()
+    run.write_curve()
+    if best.state is not None and (stop == cfg.iterations or reached):
+        learner.module.load_state_dict(best.state)
+        log(f"selected iteration {best.iteration} by validation ({best.value:.4f} rad)")
+    return curve
+
+
+def check_window_fit_config(cfg) -> None:
+    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
+    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
+    check_choice(cfg.solver, SolverKind, "solver")
+    check_device(cfg.device, "device")
+    for name in ("iterations", "windows"):
+        check_number(getattr(cfg, name), name, integer=True, ge=1)
+    for i, h in enumerate(cfg.horizon_curriculum):
+        check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
+    for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
+        check_number(getattr(cfg, name), name, integer=True, ge=0)
+    for name in ("lr", "lr_final", "grad_clip"):
+        check_number(getattr(cfg, name), name, gt=0)
+    for name in ("w_q", "w_qd"):
+        check_number(getattr(cfg, name), name, ge=0)
+
+
+def start_window_fit(cfg, dataset):
+    """Pin torch's threads, seed torch and the window sampler, and take the training split: ``(rng, train, dt)``
+    with ``dt`` the sample period [s]."""
+    if cfg.torch_threads > 0:
+        torch.set_num_threads(cfg.torch_threads)
+    torch.manual_seed(cfg.seed)
+    train = dataset.split("train")
+    if not train:
+        raise ValueError("the dataset has no training trajectories")
+    return np.random.default_rng(cfg.seed), train, 1.0 / dataset.rate_hz
+
+
+def joint_weights(dataset, device):
+    """The dataset's per-joint fit weights (:meth:`~wresdyn.data.dataset.Dataset.fit_weights`: 0 for a joint
+    excluded from fitting) as a float32 tensor (n,) on ``device``, or ``None`` when every joint is fitted (the losses
+    then skip the weighting)."""
+    if not dataset.excluded_joints:
+        return None
+    return torch.as_tensor(dataset.fit_weights(), dtype=torch.float32, device=device)
+
+
+def squared_error(x, ref, weights=None):
+    """Window-fit error term: Σ_j w_j (x_j − ref_j)² over the joints (last axis), mean over everything else.
+    ``x``, ``ref`` (..., n); ``weights`` (n,) or ``None`` (all 1)."""
+    sq = (x - ref) ** 2
+    return (sq if weights is None else sq * weights).sum(-1).mean()
