@@ -9,15 +9,15 @@ come out where the search left them (1.6x the true ones on the shipped data, ``b
 
 What the data does say about such a joint:
 
-- a lower bound: the drive delivered the torque the replay demands of it, τ = kp·(q_cmd(t − delay) − q) − kd·q̇
-  on the recorded states, so its limit is at least that (taken at the ``1 − saturated_min`` quantile of |τ|,
-  the level at which the joint would count as saturated);
+- a lower bound: the drive delivered every torque the replay demands of it, τ = kp·(q_cmd(t − delay) − q) − kd·q̇
+  on the recorded states, so its limit is at least the largest |τ| (with it the training data replays as before:
+  the change is one the data cannot see);
 - how far below the file the drives of this robot are derated: the ratio identified / file of the joints that do
   saturate (battery voltage, current limits and firmware derating act on every drive alike).
 
 :func:`limit_unexcited_efforts` gives each joint that saturates on fewer than ``saturated_min`` of the training
 samples the median ratio of those that do, times its own file limit, and never below its lower bound:
-``effort_j = max(r̃ · effort_file_j, quantile_{1 − s}(|τ_j|))``. It changes nothing where no joint saturates
+``effort_j = max(r̃ · effort_file_j, max_t |τ_j(t)|)``. It changes nothing where no joint saturates
 (no ratio to share), on joints excluded from fitting and on unlimited drives.
 """
 
@@ -39,7 +39,7 @@ class UnexcitedLimits:
     saturated: np.ndarray
     """Fraction of training samples on which each joint's demanded torque exceeds its identified limit, (n,)."""
     bound: np.ndarray
-    """Lower bound of each joint's limit from the data [N·m], (n,)."""
+    """Lower bound of each joint's limit from the data: the largest demanded torque [N·m], (n,)."""
     ratio: float | None
     """Median identified / file limit over the saturating joints (``None``: no joint saturates)."""
     changed: tuple[str, ...]
@@ -98,7 +98,7 @@ def limit_unexcited_efforts(params: PhysicalParams, file_effort, trajectories, d
     fitted = np.ones(n, dtype=bool) if fitted is None else np.asarray(fitted, dtype=bool)
     limited = fitted & np.isfinite(before) & np.isfinite(file_effort) & (file_effort > 0)
     saturated = (tau > before).mean(0)
-    bound = np.quantile(tau, 1.0 - saturated_min, axis=0)
+    bound = tau.max(0)
     seen = limited & (saturated >= saturated_min)
     out = params.copy()
     if not seen.any():
