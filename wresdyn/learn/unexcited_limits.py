@@ -10,7 +10,7 @@ come out where the search left them (1.6x the true ones on the shipped data, ``b
 What the data does say about such a joint:
 
 - a lower bound: the drive delivered every torque the replay demands of it, τ = kp·(q_cmd(t − delay) − q) − kd·q̇
-  on the recorded states, so its limit is at least the largest |τ| (with it the training data replays as before:
+  on the recorded states, so its limit is at least the largest |τ| (with it the training data replays unchanged:
   the change is one the data cannot see);
 - how far below the file the drives of this robot are derated: the ratio identified / file of the joints that do
   saturate (battery voltage, current limits and firmware derating act on every drive alike).
@@ -26,8 +26,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from ..robot.physical import PhysicalParams
+from ..sim.bank import delay_commands
 
 __all__ = ["UnexcitedLimits", "demanded_torque", "limit_unexcited_efforts"]
 
@@ -60,19 +62,16 @@ class UnexcitedLimits:
                 f"({', '.join(self.changed)})")
 
 
-def _delayed(q_cmd: np.ndarray, delay_steps: np.ndarray) -> np.ndarray:
-    """Commands seen through each joint's delay [steps] (fractional: linear interpolation; the first command held
-    before the recording starts), as the replay applies them. ``q_cmd`` (T, n)."""
-    t = np.arange(len(q_cmd), dtype=np.float64)
-    return np.stack([np.interp(t - d, t, q_cmd[:, j]) for j, d in enumerate(delay_steps)], axis=1)
-
-
 def demanded_torque(params: PhysicalParams, trajectories, dt: float) -> np.ndarray:
     """|τ| the PD drives of ``params`` demand on the recorded states, unsaturated [N·m], shape (Σ T, n):
-    τ = kp·(q_cmd(t − delay) − q) − kd·q̇."""
-    steps = np.asarray(params.delay, dtype=np.float64) / dt
-    tau = [params.kp * (_delayed(np.asarray(tr.q_cmd, np.float64), steps) - tr.q) - params.kd * tr.qd
-           for tr in trajectories]
+    τ = kp·(q_cmd(t − delay) − q) − kd·q̇, the delayed command as the replay interpolates it
+    (:func:`~wresdyn.sim.bank.delay_commands`)."""
+    steps = torch.as_tensor(np.asarray(params.delay, dtype=np.float64) / dt)
+    tau = []
+    for tr in trajectories:
+        rows = torch.arange(len(tr.q_cmd))
+        target = delay_commands(torch.as_tensor(tr.q_cmd, dtype=torch.float64), rows, torch.zeros_like(rows), steps)
+        tau.append(params.kp * (target.numpy() - tr.q) - params.kd * tr.qd)
     return np.abs(np.concatenate(tau))
 
 
