@@ -28,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--floor", action="store_true",
                    help="skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, "
                         "kick, wave; stepping held out), corrections still fitted on the stand (see "
-                        "wresdyn.experiments.floor_skills; defaults: 3 training motions per family, 4 s, 300 + 100 "
+                        "wresdyn.experiments.floor_skills; defaults: 3 training motions per family, 4 s, 200 + 60 "
                         "iterations)")
     p.add_argument("--full", action="store_true",
                    help="the full size, for a GPU: 4096 worlds, 16 training / 2 validation / 4 held-out motions per "

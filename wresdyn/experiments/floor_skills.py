@@ -55,9 +55,9 @@ class FloorDeployConfig:
     """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (0: ``envs``)."""
     finetune_std: float = 0.0
     """Action noise the fine-tunings restart from (0: (a)'s own)."""
-    iterations: int = 300
+    iterations: int = 200
     """PPO iterations of (a) in the nominal simulator."""
-    finetune: int = 100
+    finetune: int = 60
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
     oracle_beside: bool | None = None
     """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU, where the
