@@ -22,12 +22,10 @@ resume, checkpoints, selection) is :func:`~wresdyn.learn.window_fit.run_window_f
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
-from ..choices import ModelKind, SolverKind, check_choice, check_number
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
@@ -35,84 +33,10 @@ from .parametric import ParametricResidual
 from .residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
 from .runs import RunFolder
 from .selection import ValidationScore
-from .window_fit import check_window_fit_config, joint_weights, run_window_fit, squared_error, start_window_fit
+from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
+from .window_fit_config import GradFitConfig
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
-
-
-@dataclass(frozen=True)
-class GradFitConfig:
-    """Gradient fit settings (defaults: a small CPU run on the shipped data)."""
-
-    residual: ResidualConfig = ResidualConfig(fraction=0.25)
-    """Residual kind (torque / delta action), network (MLP / GRU) and authority: 0.25 of each effort limit,
-    chosen on validation (0.0282 rad against 0.0294 at 0.5, both with ``obs_noise`` 0.1;
-    ``benchmarks/results/validation_protocol/fit_sweep_summary.md``)."""
-    model: ModelKind = "network"
-    """``"network"`` (``residual``'s MLP or GRU) or ``"parametric"`` (per-joint gain scales, damping, friction,
-    armature: :class:`wresdyn.learn.parametric.ParametricResidual`, a torque residual)."""
-    horizon: int = 64
-    """Window length H [steps] (at 500 Hz, 64 steps = 128 ms) when there is no curriculum."""
-    horizon_curriculum: tuple[int, ...] = (2, 4, 8, 16, 32, 64)
-    """Window lengths stepped through in equal parts of training; empty = always ``horizon``. Doubling
-    matters: a residual fitted on 4-step windows can make the 16-step closed loop unstable, and training
-    does not recover from there."""
-    grad_truncation: int = 16
-    """Truncated backpropagation: gradients flow through at most this many steps [steps] (the state is
-    detached every ``grad_truncation`` steps; the rollout and its loss still span the whole window). Through
-    stiff PD dynamics, longer gradient paths explode; 0 = never truncate."""
-    windows: int = 32
-    """Parallel windows B (Newton worlds) per iteration."""
-    iterations: int = 2000
-    """Optimiser steps."""
-    lr: float = 1e-3
-    """Adam learning rate at the start."""
-    lr_final: float = 1e-4
-    """Learning rate at the last iteration (cosine decay from ``lr``)."""
-    w_q: float = 1.0
-    """Weight of the joint position error [1/rad²]."""
-    w_qd: float = 0.01
-    """Weight of the joint velocity error [s²/rad²]."""
-    w_torque: float = 0.5e-5
-    """Weight of |τ_res|² [1/(N·m)²] (Table I joint torque)."""
-    w_action_rate: float = 0.5e-4
-    """Weight of |a_k − a_{k−1}|² in normalised action units (Table I action rate)."""
-    grad_clip: float = 1.0
-    """Global gradient-norm clip."""
-    obs_noise: float = 0.1
-    """Gaussian noise added to the policy's observation during training, in units of each channel's
-    normalising std (the simulation itself is not perturbed). A regulariser: with 16 training recordings the
-    network otherwise fits the training windows' states too closely. Chosen on validation among 0, 0.03, 0.1
-    and 0.3 (0.0316, 0.0301, 0.0294, 0.0302 rad at authority 0.5); 0 = off. Not applied to the parametric
-    model."""
-    solver: SolverKind = "auto"
-    """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
-    device: str = "cpu"
-    """Warp / torch device."""
-    torch_threads: int = 1
-    """CPU threads for torch (0: torch's default). One is fastest for these small networks, and an unpinned fit
-    ran 12x slower on a loaded 2-core machine (threads contending with the simulation and each other)."""
-    seed: int = 0
-    """Seed of the window sampler and network initialisation."""
-    select_every: int = 0
-    """Evaluate on the validation split every this many iterations and return the best residual (model
-    selection on validation); 0 = ten times per run."""
-    cuda_graph: bool = True
-    """On CUDA, replay each iteration (the rollout with the residual in the loop, the loss, the backward pass
-    through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
-    length, with no host synchronisation inside (:class:`_Iteration`). The CPU runs the same code eagerly; off,
-    CUDA does too. May change on resume."""
-    physics: str = ""
-    """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
-    identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
-    file's. :func:`fit` takes the parameters themselves (``physics``)."""
-
-    def __post_init__(self) -> None:
-        check_choice(self.model, ModelKind, "model")
-        check_window_fit_config(self)
-        check_number(self.horizon, "horizon", integer=True, ge=1)
-        for name in ("w_torque", "w_action_rate", "obs_noise"):
-            check_number(getattr(self, name), name, ge=0)
 
 
 def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "network"):

@@ -12,9 +12,8 @@ from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
 
 from ..choices import check_device, check_number
 from ..errors import WresdynError
-from .replay_env import ReplayEnvConfig
-from .residual import ResidualConfig
-from .rewards import RewardConfig
+from .replay_env_config import ReplayEnvConfig, RewardConfig
+from .residual_config import ResidualConfig
 
 __all__ = ["PPOConfig", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config", "config_from_dict",
            "parse_overrides", "apply_overrides", "set_fields", "set_field"]

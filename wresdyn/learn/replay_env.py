@@ -16,63 +16,20 @@ judges divergence, as for every other consumer of the replay.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from ..choices import SolverKind, check_choice, check_number
-from ..errors import WresdynError
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
 from ..sim.residual_kinds import apply_residual, observation, residual_scale
+from .replay_env_config import ReplayEnvConfig
 from .residual import ResidualConfig, obs_stats
 from .rewards import TERMS, RewardConfig, reward_terms
 
 __all__ = ["ReplayEnvConfig", "ReplayEnv"]
-
-
-@dataclass(frozen=True)
-class ReplayEnvConfig:
-    """Episode and simulation settings of the replay environment."""
-
-    horizon: int = 250
-    """Episode length [steps] (shorter when the trajectory ends first)."""
-    substeps: int = 1
-    """Simulator steps per recorded sample; the sim step is 1 / (rate_hz · substeps) [s]."""
-    solver: SolverKind = "auto"
-    """Newton solver kind (:data:`wresdyn.sim.SOLVERS`); "auto" takes :class:`wresdyn.sim.solver_replay.SolverReplay`
-    for a fixed base: 100-200k env-steps/s with 256 worlds on 2 busy CPU cores against ~1k for
-    ``SolverFeatherstone``, with the same PD-only gap on the shipped benchmark (0.0801 vs 0.0798 rad held-out)."""
-    max_qd: float = 100.0
-    """Runaway joint speed [rad/s]: a world past it is reset."""
-    limit_margin: float = 0.5
-    """Runaway distance beyond a joint limit [rad]."""
-    max_error: float = 1.0
-    """Runaway distance from the recording, max over joints [rad]."""
-    obs_noise: float = 0.0
-    """Gaussian noise on the policy's (normalised) observation [normalising stds], a regulariser as in the
-    gradient fit (:attr:`wresdyn.learn.gradfit.GradFitConfig.obs_noise`); the critic and the simulation see the
-    clean state. 0 = off."""
-    physics: str = ""
-    """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned on
-    top of the identified model (the hybrid), whose command delay then is ``physics.delay``. "" = the robot
-    file's values, no delay."""
-    critic_err_scale_q: float = 0.05
-    """Scale of q − q_r in the critic's privileged observation [rad]."""
-    critic_err_scale_qd: float = 0.5
-    """Scale of q̇ − q̇_r in the critic's privileged observation [rad/s]."""
-
-    def __post_init__(self) -> None:
-        check_choice(self.solver, SolverKind, "env.solver")
-        check_number(self.horizon, "env.horizon", integer=True, ge=1)
-        check_number(self.substeps, "env.substeps", integer=True, ge=1)
-        check_number(self.obs_noise, "env.obs_noise", ge=0)
-        for name in ("max_qd", "limit_margin", "critic_err_scale_q", "critic_err_scale_qd"):
-            check_number(getattr(self, name), f"env.{name}", gt=0)
-        if not (isinstance(self.max_error, (int, float)) and self.max_error > 0):  # inf: no check
-            raise WresdynError(f"env.max_error = {self.max_error!r} must be > 0")
 
 
 class ReplayEnv(VecEnv):

@@ -26,11 +26,9 @@ Action acceleration        −0.5e-6    |a_t − 2a_{t−1} + a_{t−2}|²
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-
 import torch
 
-from ..choices import check_number
+from .replay_env_config import RewardConfig
 
 __all__ = [
     "RewardConfig",
@@ -46,44 +44,6 @@ __all__ = [
     "action_acc",
     "reward_terms",
 ]
-
-
-@dataclass(frozen=True)
-class RewardConfig:
-    """Weights and kernel widths of the reward terms (Table I)."""
-
-    joint_pos_mimic: float = 5.0
-    """Weight of φ(q − q_r)."""
-    joint_vel_mimic: float = 3.0
-    """Weight of φ(q̇ − q̇_r)."""
-    joint_pos_bonus: float = 10.0
-    """Weight of the fraction of joints within ``bonus_tol`` of the recording."""
-    joint_torque: float = -0.5e-5
-    """Weight of |τ|² [1/(N*m)²]; τ is the total joint torque, PD plus residual."""
-    joint_vel: float = -0.5e-3
-    """Weight of |q̇|² [1/(rad/s)²]."""
-    joint_acc: float = -0.5e-6
-    """Weight of |q̈|² [1/(rad/s²)²]."""
-    action_rate: float = -0.5e-4
-    """Weight of |a_t − a_{t−1}|² on the normalised actions."""
-    action_acc: float = -0.5e-6
-    """Weight of |a_t − 2a_{t−1} + a_{t−2}|² on the normalised actions."""
-    sigma_q: float = 0.1
-    """Width σ of the position mimic kernel [rad²]: φ = e^{-1} at |q − q_r|² = σ, 0.07 rad rms per joint
-    over 21 joints, the PD-only gap of the shipped benchmark in training episodes, so φ still has slope
-    there (σ = 0.01 gives φ ≈ e^{-24}: no signal) and keeps it down to a few mrad."""
-    sigma_qd: float = 10.0
-    """Width σ of the velocity mimic kernel [(rad/s)²]: e^{-1} at 0.7 rad/s rms per joint, as ``sigma_q``."""
-    bonus_tol: float = 1e-3
-    """Joint position bonus tolerance [rad]."""
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            check_number(getattr(self, f.name), f"rewards.{f.name}")  # weights may have either sign
-        # a zero width divides by zero in the kernel; a negative one turns φ into a growing exponential
-        check_number(self.sigma_q, "rewards.sigma_q", gt=0)
-        check_number(self.sigma_qd, "rewards.sigma_qd", gt=0)
-        check_number(self.bonus_tol, "rewards.bonus_tol", ge=0)
 
 
 TERMS = ("joint_pos_mimic", "joint_vel_mimic", "joint_pos_bonus", "joint_torque", "joint_vel", "joint_acc",

@@ -25,120 +25,21 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from ..choices import SolverKind, check_number
 from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.physics import JOINT_FIELDS, PhysicalParams, PhysicsModel
+from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .runs import RunFolder
 from .selection import ValidationScore
 from .unexcited_limits import limit_unexcited_efforts
-from .window_fit import check_window_fit_config, joint_weights, run_window_fit, squared_error, start_window_fit
+from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
+from .window_fit_config import SysIdConfig
 
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE"]
-
-FIT_FIELDS = (*JOINT_FIELDS, "bodies")
-"""What can be identified: the per-joint fields and ``"bodies"`` (every moving link's mass, com, inertia)."""
-
-
-@dataclass(frozen=True)
-class SysIdConfig:
-    """Identification settings (defaults: a CPU run of a few minutes on the shipped data)."""
-
-    fit: tuple[str, ...] = FIT_FIELDS
-    """Fields to identify (:data:`FIT_FIELDS`); the others keep the robot file's values."""
-    iterations: int = 800
-    """Optimiser steps."""
-    windows: int = 32
-    """Windows B (Newton worlds) per iteration."""
-    horizon_curriculum: tuple[int, ...] = (16, 32, 64, 128)
-    """Window lengths [steps] in equal parts of training: short windows first (a far-off start diverges over
-    long ones), long windows last (delay, friction and saturation act over tens of steps)."""
-    grad_truncation: int = 0
-    """Detach the state every this many steps; 0 = full backpropagation (the parameters are few and the
-    identified model is stable, unlike a residual network early in training)."""
-    lr: float = 0.01
-    """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel` (log scales and
-    reference units, all O(0.1-1))."""
-    lr_final: float = 0.001
-    """Learning rate at the last iteration (cosine decay)."""
-    w_q: float = 1.0
-    """Weight of the joint position error [1/rad²]."""
-    w_qd: float = 0.01
-    """Weight of the joint velocity error [s²/rad²]."""
-    w_prior: float = 1e-5
-    """Weight of the squared distance of the coordinates from the start."""
-    effort_grid: tuple[float, ...] = tuple(round(float(x), 4) for x in np.geomspace(0.05, 1.0, 9))
-    """Fractions of the robot file's effort limits tried when the effort limit joins the fit (forward only, on
-    training windows); empty = continue from the file's limits."""
-    delay_grid: tuple[float, ...] = ()
-    """Command delays [steps] tried (one for every joint) when the effort limit joins the fit, before it. Off by
-    default: on the shipped data (true delay 3 steps) the grid 0-8 picked 0 there, the gains, damping and
-    friction having already absorbed the delay, and the final error did not change (0.0057 vs 0.0055 rad
-    held-out)."""
-    gain_grid: tuple[float, ...] = ()
-    """Factors on the start's position gain kp tried before the first step, each joint taking the factor of its own
-    least training error (forward only, every joint at one factor per rollout); empty = start from the file's kp.
-    Off by default. Where the file's kp is so stiff that the drive saturates on every move (the SO-101's servo
-    model: kp 998 N·m/rad against 3.35 N·m), the loss barely depends on kp and Adam cannot walk down to a soft
-    servo's: ``benchmarks/so101_real.sh`` uses it."""
-    effort_after: float = 0.4
-    """Fraction of the iterations after which the effort limit joins the fit. Before, the drives keep the
-    file's limits: a low limit started from the file's other values mimics the friction and delay not yet
-    identified (a local minimum where saturation stands in for friction)."""
-    lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
-    """Learning-rate factors of the gain/armature log scales, the linear fields (damping, friction, effort,
-    delay: their coordinates run to a few units) and the link pseudo-inertia factors."""
-    grad_clip: float = 1.0
-    """Global gradient-norm clip."""
-    solver: SolverKind = "auto"
-    """Newton solver; must be differentiable (SolverReplay)."""
-    device: str = "cpu"
-    """Warp / torch device."""
-    torch_threads: int = 1
-    """CPU threads for torch (0: torch's default); see :class:`wresdyn.learn.gradfit.GradFitConfig`."""
-    seed: int = 0
-    """Seed of the window sampler."""
-    select_every: int = 0
-    """Validate every this many iterations (0: ten times per run)."""
-    refine: int = 0
-    """L-BFGS steps after Adam (0: off), each up to 20 evaluations with a strong-Wolfe line search, on
-    ``refine_windows`` fixed training windows of the longest horizon, from the parameters selected so far; every
-    step is validated and the best kept. The fields of ``fit`` except the effort limit and the delay (both kept)."""
-    refine_windows: int = 64
-    """Fixed training windows of the refinement."""
-    share_effort_ratio: bool = True
-    """After the selection, give the effort limits the training data never reaches the ratio to the file's limit that
-    the saturating joints share, bounded below by the torque the data demands
-    (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
-    when the effort limit is fitted."""
-    saturated_min: float = 0.01
-    """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
-
-    def __post_init__(self) -> None:
-        check_window_fit_config(self)
-        bad = sorted(set(self.fit) - set(FIT_FIELDS))
-        if bad:
-            raise ValueError(f"fit: unknown field(s) {bad}; choose from {list(FIT_FIELDS)}")
-        check_number(self.w_prior, "w_prior", ge=0)
-        for i, f in enumerate(self.effort_grid):
-            check_number(f, f"effort_grid[{i}]", gt=0)
-        for i, f in enumerate(self.gain_grid):
-            check_number(f, f"gain_grid[{i}]", gt=0)
-        if self.gain_grid and "kp" not in self.fit:
-            raise ValueError("gain_grid searches kp, which is not among the fitted fields (fit)")
-        check_number(self.effort_after, "effort_after", ge=0)
-        for i, f in enumerate(self.lr_scale):
-            check_number(f, f"lr_scale[{i}]", gt=0)
-        check_number(self.refine, "refine", integer=True, ge=0)
-        check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
-        check_number(self.saturated_min, "saturated_min", gt=0, le=1)
-
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where it runs and the L-BFGS refinement, which

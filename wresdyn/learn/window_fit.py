@@ -18,11 +18,10 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from ..choices import SolverKind, check_choice, check_device, check_number
 from ..progress import bar
 from .runs import RunFolder
 
-__all__ = ["WindowLearner", "run_window_fit", "schedule", "check_window_fit_config", "start_window_fit",
+__all__ = ["WindowLearner", "run_window_fit", "schedule", "start_window_fit",
            "joint_weights", "squared_error"]
 
 
@@ -160,23 +159,6 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         learner.module.load_state_dict(best.state)
         log(f"selected iteration {best.iteration} by validation ({best.value:.4f} rad)")
     return curve
-
-
-def check_window_fit_config(cfg) -> None:
-    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
-    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
-    check_choice(cfg.solver, SolverKind, "solver")
-    check_device(cfg.device, "device")
-    for name in ("iterations", "windows"):
-        check_number(getattr(cfg, name), name, integer=True, ge=1)
-    for i, h in enumerate(cfg.horizon_curriculum):
-        check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
-    for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
-        check_number(getattr(cfg, name), name, integer=True, ge=0)
-    for name in ("lr", "lr_final", "grad_clip"):
-        check_number(getattr(cfg, name), name, gt=0)
-    for name in ("w_q", "w_qd"):
-        check_number(getattr(cfg, name), name, ge=0)
 
 
 def start_window_fit(cfg, dataset):

@@ -1,0 +1,205 @@
+"""The configurations of the two window fits, identification (:class:`SysIdConfig`) and the gradient fit of a
+residual (:class:`GradFitConfig`), and their shared checks, apart from the learners (:mod:`.sysid`, :mod:`.gradfit`)
+so that the command line reads them without importing torch or Warp."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..choices import ModelKind, SolverKind, check_choice, check_device, check_number
+from ..robot.physical import JOINT_FIELDS
+from .residual_config import ResidualConfig
+
+__all__ = ["FIT_FIELDS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
+
+
+def check_window_fit_config(cfg) -> None:
+    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
+    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
+    check_choice(cfg.solver, SolverKind, "solver")
+    check_device(cfg.device, "device")
+    for name in ("iterations", "windows"):
+        check_number(getattr(cfg, name), name, integer=True, ge=1)
+    for i, h in enumerate(cfg.horizon_curriculum):
+        check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
+    for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
+        check_number(getattr(cfg, name), name, integer=True, ge=0)
+    for name in ("lr", "lr_final", "grad_clip"):
+        check_number(getattr(cfg, name), name, gt=0)
+    for name in ("w_q", "w_qd"):
+        check_number(getattr(cfg, name), name, ge=0)
+
+
+FIT_FIELDS = (*JOINT_FIELDS, "bodies")
+"""What can be identified: the per-joint fields and ``"bodies"`` (every moving link's mass, com, inertia)."""
+
+
+@dataclass(frozen=True)
+class SysIdConfig:
+    """Identification settings (defaults: a CPU run of a few minutes on the shipped data)."""
+
+    fit: tuple[str, ...] = FIT_FIELDS
+    """Fields to identify (:data:`FIT_FIELDS`); the others keep the robot file's values."""
+    iterations: int = 800
+    """Optimiser steps."""
+    windows: int = 32
+    """Windows B (Newton worlds) per iteration."""
+    horizon_curriculum: tuple[int, ...] = (16, 32, 64, 128)
+    """Window lengths [steps] in equal parts of training: short windows first (a far-off start diverges over
+    long ones), long windows last (delay, friction and saturation act over tens of steps)."""
+    grad_truncation: int = 0
+    """Detach the state every this many steps; 0 = full backpropagation (the parameters are few and the
+    identified model is stable, unlike a residual network early in training)."""
+    lr: float = 0.01
+    """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel` (log scales and
+    reference units, all O(0.1-1))."""
+    lr_final: float = 0.001
+    """Learning rate at the last iteration (cosine decay)."""
+    w_q: float = 1.0
+    """Weight of the joint position error [1/rad²]."""
+    w_qd: float = 0.01
+    """Weight of the joint velocity error [s²/rad²]."""
+    w_prior: float = 1e-5
+    """Weight of the squared distance of the coordinates from the start."""
+    effort_grid: tuple[float, ...] = tuple(round(float(x), 4) for x in np.geomspace(0.05, 1.0, 9))
+    """Fractions of the robot file's effort limits tried when the effort limit joins the fit (forward only, on
+    training windows); empty = continue from the file's limits."""
+    delay_grid: tuple[float, ...] = ()
+    """Command delays [steps] tried (one for every joint) when the effort limit joins the fit, before it. Off by
+    default: on the shipped data (true delay 3 steps) the grid 0-8 picked 0 there, the gains, damping and
+    friction having already absorbed the delay, and the final error did not change (0.0057 vs 0.0055 rad
+    held-out)."""
+    gain_grid: tuple[float, ...] = ()
+    """Factors on the start's position gain kp tried before the first step, each joint taking the factor of its own
+    least training error (forward only, every joint at one factor per rollout); empty = start from the file's kp.
+    Off by default. Where the file's kp is so stiff that the drive saturates on every move (the SO-101's servo
+    model: kp 998 N·m/rad against 3.35 N·m), the loss barely depends on kp and Adam cannot walk down to a soft
+    servo's: ``benchmarks/so101_real.sh`` uses it."""
+    effort_after: float = 0.4
+    """Fraction of the iterations after which the effort limit joins the fit. Before, the drives keep the
+    file's limits: a low limit started from the file's other values mimics the friction and delay not yet
+    identified (a local minimum where saturation stands in for friction)."""
+    lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
+    """Learning-rate factors of the gain/armature log scales, the linear fields (damping, friction, effort,
+    delay: their coordinates run to a few units) and the link pseudo-inertia factors."""
+    grad_clip: float = 1.0
+    """Global gradient-norm clip."""
+    solver: SolverKind = "auto"
+    """Newton solver; must be differentiable (SolverReplay)."""
+    device: str = "cpu"
+    """Warp / torch device."""
+    torch_threads: int = 1
+    """CPU threads for torch (0: torch's default); see :class:`wresdyn.learn.gradfit.GradFitConfig`."""
+    seed: int = 0
+    """Seed of the window sampler."""
+    select_every: int = 0
+    """Validate every this many iterations (0: ten times per run)."""
+    refine: int = 0
+    """L-BFGS steps after Adam (0: off), each up to 20 evaluations with a strong-Wolfe line search, on
+    ``refine_windows`` fixed training windows of the longest horizon, from the parameters selected so far; every
+    step is validated and the best kept. The fields of ``fit`` except the effort limit and the delay (both kept)."""
+    refine_windows: int = 64
+    """Fixed training windows of the refinement."""
+    share_effort_ratio: bool = True
+    """After the selection, give the effort limits the training data never reaches the ratio to the file's limit that
+    the saturating joints share, bounded below by the torque the data demands
+    (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
+    when the effort limit is fitted."""
+    saturated_min: float = 0.01
+    """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
+
+    def __post_init__(self) -> None:
+        check_window_fit_config(self)
+        bad = sorted(set(self.fit) - set(FIT_FIELDS))
+        if bad:
+            raise ValueError(f"fit: unknown field(s) {bad}; choose from {list(FIT_FIELDS)}")
+        check_number(self.w_prior, "w_prior", ge=0)
+        for i, f in enumerate(self.effort_grid):
+            check_number(f, f"effort_grid[{i}]", gt=0)
+        for i, f in enumerate(self.gain_grid):
+            check_number(f, f"gain_grid[{i}]", gt=0)
+        if self.gain_grid and "kp" not in self.fit:
+            raise ValueError("gain_grid searches kp, which is not among the fitted fields (fit)")
+        check_number(self.effort_after, "effort_after", ge=0)
+        for i, f in enumerate(self.lr_scale):
+            check_number(f, f"lr_scale[{i}]", gt=0)
+        check_number(self.refine, "refine", integer=True, ge=0)
+        check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
+        check_number(self.saturated_min, "saturated_min", gt=0, le=1)
+
+
+@dataclass(frozen=True)
+class GradFitConfig:
+    """Gradient fit settings (defaults: a small CPU run on the shipped data)."""
+
+    residual: ResidualConfig = ResidualConfig(fraction=0.25)
+    """Residual kind (torque / delta action), network (MLP / GRU) and authority: 0.25 of each effort limit,
+    chosen on validation (0.0282 rad against 0.0294 at 0.5, both with ``obs_noise`` 0.1;
+    ``benchmarks/results/validation_protocol/fit_sweep_summary.md``)."""
+    model: ModelKind = "network"
+    """``"network"`` (``residual``'s MLP or GRU) or ``"parametric"`` (per-joint gain scales, damping, friction,
+    armature: :class:`wresdyn.learn.parametric.ParametricResidual`, a torque residual)."""
+    horizon: int = 64
+    """Window length H [steps] (at 500 Hz, 64 steps = 128 ms) when there is no curriculum."""
+    horizon_curriculum: tuple[int, ...] = (2, 4, 8, 16, 32, 64)
+    """Window lengths stepped through in equal parts of training; empty = always ``horizon``. Doubling
+    matters: a residual fitted on 4-step windows can make the 16-step closed loop unstable, and training
+    does not recover from there."""
+    grad_truncation: int = 16
+    """Truncated backpropagation: gradients flow through at most this many steps [steps] (the state is
+    detached every ``grad_truncation`` steps; the rollout and its loss still span the whole window). Through
+    stiff PD dynamics, longer gradient paths explode; 0 = never truncate."""
+    windows: int = 32
+    """Parallel windows B (Newton worlds) per iteration."""
+    iterations: int = 2000
+    """Optimiser steps."""
+    lr: float = 1e-3
+    """Adam learning rate at the start."""
+    lr_final: float = 1e-4
+    """Learning rate at the last iteration (cosine decay from ``lr``)."""
+    w_q: float = 1.0
+    """Weight of the joint position error [1/rad²]."""
+    w_qd: float = 0.01
+    """Weight of the joint velocity error [s²/rad²]."""
+    w_torque: float = 0.5e-5
+    """Weight of |τ_res|² [1/(N·m)²] (Table I joint torque)."""
+    w_action_rate: float = 0.5e-4
+    """Weight of |a_k − a_{k−1}|² in normalised action units (Table I action rate)."""
+    grad_clip: float = 1.0
+    """Global gradient-norm clip."""
+    obs_noise: float = 0.1
+    """Gaussian noise added to the policy's observation during training, in units of each channel's
+    normalising std (the simulation itself is not perturbed). A regulariser: with 16 training recordings the
+    network otherwise fits the training windows' states too closely. Chosen on validation among 0, 0.03, 0.1
+    and 0.3 (0.0316, 0.0301, 0.0294, 0.0302 rad at authority 0.5); 0 = off. Not applied to the parametric
+    model."""
+    solver: SolverKind = "auto"
+    """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
+    device: str = "cpu"
+    """Warp / torch device."""
+    torch_threads: int = 1
+    """CPU threads for torch (0: torch's default). One is fastest for these small networks, and an unpinned fit
+    ran 12x slower on a loaded 2-core machine (threads contending with the simulation and each other)."""
+    seed: int = 0
+    """Seed of the window sampler and network initialisation."""
+    select_every: int = 0
+    """Evaluate on the validation split every this many iterations and return the best residual (model
+    selection on validation); 0 = ten times per run."""
+    cuda_graph: bool = True
+    """On CUDA, replay each iteration (the rollout with the residual in the loop, the loss, the backward pass
+    through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
+    length, with no host synchronisation inside (:class:`_Iteration`). The CPU runs the same code eagerly; off,
+    CUDA does too. May change on resume."""
+    physics: str = ""
+    """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
+    identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
+    file's. :func:`fit` takes the parameters themselves (``physics``)."""
+
+    def __post_init__(self) -> None:
+        check_choice(self.model, ModelKind, "model")
+        check_window_fit_config(self)
+        check_number(self.horizon, "horizon", integer=True, ge=1)
+        for name in ("w_torque", "w_action_rate", "obs_noise"):
+            check_number(getattr(self, name), name, ge=0)
