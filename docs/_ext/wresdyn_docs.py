@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 from pathlib import Path
 
@@ -22,16 +21,9 @@ HELP_COLUMNS = "100"  # a fixed width: argparse wraps to the terminal, and the p
 
 def cli_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     """The ``wresdyn`` parser and its subcommands' parsers, registered as :func:`wresdyn.cli.main` does."""
-    from wresdyn.cli import COMMANDS, _Parser
+    from wresdyn.cli import build_parser
 
-    parser = _Parser(prog="wresdyn", description=importlib.import_module("wresdyn.cli").__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    subs = {}
-    for name, (module, help_) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_, description=help_)
-        importlib.import_module(module).add_arguments(p)
-        subs[name] = p
-    return parser, subs
+    return build_parser()
 
 
 def _help(parser: argparse.ArgumentParser) -> str:

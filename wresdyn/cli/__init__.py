@@ -46,14 +46,21 @@ def _user_errors():
     return (UserError, WresdynError, SimulationDiverged, FileNotFoundError)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    """The ``wresdyn`` parser and each command's own (its module's ``add_arguments``), by command name."""
     parser = _Parser(prog="wresdyn", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    subs = {}
     for name, (module, help_) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_, description=help_)
+        p = subs[name] = sub.add_parser(name, help=help_, description=help_)
         p.set_defaults(_module=module)
         # argument definitions are cheap; import the module lazily only for its parser hook
         importlib.import_module(module).add_arguments(p)
+    return parser, subs
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser, _ = build_parser()
     args = parser.parse_args(argv)
     mod = importlib.import_module(args._module)
     try:
