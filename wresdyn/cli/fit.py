@@ -15,11 +15,23 @@ physics (the residual alone, nothing identified). ``--model parametric`` fits th
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
-from ..choices import Arch, FitModel, ResidualKind, SolverKind, choices
+from ..choices import FitModel, choices
 from ..learn.hybrid import HYBRID_ITERATIONS
-from .identify import GAIN_GRID_HELP, parse_grid
+from ..learn.window_fit_config import GradFitConfig, SysIdConfig
+from .config_flags import add_config_flags, build_config, given_fields
 
+FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
+               "horizon_curriculum": ("--curriculum",)}
+"""The short spellings of the gradient fit's flags, as in earlier releases."""
+
+IDENTIFY_SHARED = ("device", "seed", "solver")
+"""Fields of the hybrid's identification (``--identify.*``) that are the fit's own: both stages run alike."""
+
+
+def _hybrid() -> GradFitConfig:
+    return replace(GradFitConfig(), iterations=HYBRID_ITERATIONS)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,64 +43,43 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=choices(FitModel), default="hybrid",
                    help="hybrid: identified physics + residual network (default); network: the residual alone; "
                         "parametric: the residual-torque baseline")
-    p.add_argument("--residual", choices=choices(ResidualKind), default="torque",
-                   help="torque (paper) or delta_action (ASAP)")
-    p.add_argument("--arch", choices=choices(Arch), default="mlp", help="network: mlp (ELU) or gru (GRU + MLP)")
-    p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
-    p.add_argument("--iterations", type=int, default=None,
-                   help=f"optimiser steps of the residual (default {HYBRID_ITERATIONS} for hybrid, else 2000)")
-    p.add_argument("--identify-iterations", type=int, default=None,
-                   help="optimiser steps of the hybrid's identification (default 800, as `wresdyn identify`)")
-    p.add_argument("--gain-grid", default=None, metavar="FACTORS",
-                   help="the hybrid's identification: " + GAIN_GRID_HELP + "; as `wresdyn identify --gain-grid`")
-    p.add_argument("--refine", type=int, default=None, metavar="STEPS",
-                   help="L-BFGS steps after the hybrid's identification, as `wresdyn identify --refine` (default 0)")
-    p.add_argument("--windows", type=int, default=None,
-                   help="parallel windows (worlds) per step, of both hybrid stages (default 32)")
-    p.add_argument("--horizon", type=int, default=None, help="final window length [steps]")
-    p.add_argument("--curriculum", default=None, help="window lengths to step through, e.g. 2,4,8,16,32,64 ('' for none)")
-    p.add_argument("--lr", type=float, default=None, help="initial Adam learning rate")
-    p.add_argument("--obs-noise", type=float, default=None,
-                   help="training noise on the network's observation, in normalising stds (0 = off)")
-    p.add_argument("--solver", choices=choices(SolverKind), default=None, help="simulation solver (default: auto)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda:0")
-    p.add_argument("--no-cuda-graph", action="store_true",
-                   help="CUDA: run each iteration eagerly instead of replaying it from a CUDA graph")
-    p.add_argument("--seed", type=int, default=0, help="seed")
-    p.add_argument("--physics", default=None, metavar="JSON",
-                   help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards (like `wresdyn eval`)")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
+    add_config_flags(p, _hybrid(), skip=("model",), aliases=FIT_ALIASES,
+                     variants={"--model network or parametric": GradFitConfig()},
+                     title="gradient fit (wresdyn.learn.window_fit_config.GradFitConfig; --horizon-curriculum "
+                           "without --horizon also sets the horizon to its last length)")
+    add_config_flags(p, SysIdConfig(), prefix="identify.", skip=IDENTIFY_SHARED,
+                     aliases={"iterations": ("--identify-iterations",), "gain_grid": ("--gain-grid",),
+                              "refine": ("--refine",)},
+                     title="the hybrid's identification (wresdyn.learn.window_fit_config.SysIdConfig, as `wresdyn "
+                           "identify`; device, seed and solver are the fit's, --windows too unless "
+                           "--identify.windows is given)")
 
 
-def config_from_args(args: argparse.Namespace):
-    """The default :class:`~wresdyn.learn.gradfit.GradFitConfig` with the flags applied."""
-    from dataclasses import replace
+def config_from_args(args: argparse.Namespace) -> GradFitConfig:
+    """The :class:`~wresdyn.learn.window_fit_config.GradFitConfig` of ``--model`` with the flags given applied."""
+    given = given_fields(args)
+    curriculum = given.get("horizon_curriculum")
+    if curriculum and "horizon" not in given:
+        given["horizon"] = curriculum[-1]
+    given["model"] = "parametric" if args.model == "parametric" else "network"
+    return build_config(_hybrid() if args.model == "hybrid" else GradFitConfig(), given)
 
-    from ..learn.gradfit import GradFitConfig
 
-    cfg = GradFitConfig()
-    res = {"kind": args.residual, "arch": args.arch}
-    if args.fraction is not None:
-        res["fraction"] = args.fraction
-    kw = {k: v for k, v in (("iterations", args.iterations), ("windows", args.windows), ("horizon", args.horizon),
-                            ("lr", args.lr), ("solver", args.solver), ("obs_noise", args.obs_noise),
-                            ("physics", args.physics)) if v is not None}
-    if args.curriculum is not None:
-        kw["horizon_curriculum"] = tuple(int(h) for h in args.curriculum.split(",") if h)
-        if kw["horizon_curriculum"] and "horizon" not in kw:
-            kw["horizon"] = kw["horizon_curriculum"][-1]
-    if args.model == "hybrid" and args.iterations is None:
-        kw["iterations"] = HYBRID_ITERATIONS
-    model = "parametric" if args.model == "parametric" else "network"
-    return replace(cfg, residual=replace(cfg.residual, **res), model=model, device=args.device, seed=args.seed,
-                   cuda_graph=not args.no_cuda_graph, **kw)
+def identify_config_from_args(args: argparse.Namespace, cfg: GradFitConfig) -> SysIdConfig:
+    """The hybrid's identification: :class:`~wresdyn.learn.window_fit_config.SysIdConfig` with the ``--identify.*``
+    flags given, on the fit's device, seed and solver (and ``--windows`` unless ``--identify.windows`` is given)."""
+    given = {name: getattr(cfg, name) for name in IDENTIFY_SHARED} | given_fields(args, "identify.")
+    if "windows" in given_fields(args):
+        given.setdefault("windows", cfg.windows)
+    return build_config(SysIdConfig(), given)
 
 
 def run(args: argparse.Namespace) -> int:
     import json
-    from dataclasses import asdict, replace
+    from dataclasses import asdict
     from pathlib import Path
 
     import numpy as np
@@ -98,10 +89,10 @@ def run(args: argparse.Namespace) -> int:
     from . import UserError
 
     cfg = config_from_args(args)
-    gain_grid = None if args.gain_grid is None else parse_grid(args.gain_grid, "--gain-grid", "factors on kp")
+    identify_first = args.model == "hybrid" and not cfg.physics
+    sysid = identify_config_from_args(args, cfg) if identify_first else None
     ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
-    identify_first = args.model == "hybrid" and not cfg.physics
     what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"
     if identify_first:
         what = f"hybrid (identified physics + {what})"
@@ -122,13 +113,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if identify_first:
             from ..learn.hybrid import fit_hybrid
-            from ..learn.sysid import SysIdConfig
 
-            stage1 = {k: v for k, v in (("iterations", args.identify_iterations), ("windows", args.windows),
-                                        ("refine", args.refine)) if v is not None}
-            if gain_grid is not None:
-                stage1["gain_grid"] = gain_grid
-            sysid = replace(SysIdConfig(), device=cfg.device, seed=cfg.seed, solver=cfg.solver, **stage1)
             hybrid = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data, log=log)
             policy, curve, cfg, id_wall, physics = (hybrid.policy, hybrid.curve, hybrid.config, hybrid.identify_wall,
                                                     hybrid.physics)
