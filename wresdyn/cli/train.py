@@ -10,7 +10,15 @@ from __future__ import annotations
 
 import argparse
 
-from ..choices import Arch, ResidualKind, SolverKind, choices
+from ..learn.ppo_config import TrainConfig, default_config
+from .config_flags import add_config_flags, build_config, given_fields, parse_assignments
+
+TRAIN_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
+                 "ppo.iterations": ("--iterations",), "ppo.num_envs": ("--num-envs",),
+                 "ppo.num_steps_per_env": ("--steps-per-env",), "env.horizon": ("--horizon",),
+                 "env.obs_noise": ("--obs-noise",), "env.solver": ("--solver",), "ppo.device": ("--device",),
+                 "ppo.seed": ("--seed",), "ppo.save_interval": ("--save-interval",), "env.physics": ("--physics",)}
+"""The short spellings of the run configuration's common flags, as in earlier releases."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -19,54 +27,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
     p.add_argument("--gains", default=None,
                    help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
-    p.add_argument("--residual", choices=choices(ResidualKind), default=None,
-                   help="torque (paper) or delta_action (ASAP); default torque")
-    p.add_argument("--arch", choices=choices(Arch), default=None,
-                   help="policy network: mlp (ELU) or gru (GRU + MLP); default mlp")
-    p.add_argument("--iterations", type=int, default=None, help="total PPO iterations of the run")
-    p.add_argument("--num-envs", type=int, default=None, help="parallel replay worlds")
-    p.add_argument("--steps-per-env", type=int, default=None, help="rollout steps per world per iteration")
-    p.add_argument("--horizon", type=int, default=None, help="episode length [steps]")
-    p.add_argument("--obs-noise", type=float, default=None,
-                   help="noise on the policy's normalised observation during training [stds] (default 0)")
-    p.add_argument("--fraction", type=float, default=None, help="residual authority, fraction of each effort limit")
-    p.add_argument("--solver", choices=choices(SolverKind), default=None,
-                   help="Newton solver for wresdyn.sim.solvers.make_solver (default: auto)")
-    p.add_argument("--device", default=None, help="cpu or cuda:0 (default: cpu)")
-    p.add_argument("--seed", type=int, default=None, help="seed (default 0)")
-    p.add_argument("--save-interval", type=int, default=None, help="checkpoint every N iterations")
-    p.add_argument("--physics", default=None, metavar="JSON",
-                   help="learn the residual on top of identified physics (physics.json of `wresdyn identify`)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override any field of the run configuration (wresdyn.learn.ppo_config.TrainConfig), e.g. "
-                        "--set ppo.desired_kl=0.05 --set residual.hidden_dims=128,64; repeatable, applied last")
+                   help="set any field of the run configuration by its dotted name, e.g. --set ppo.desired_kl=0.05 "
+                        "--set residual.hidden_dims=128,64 (the same as --ppo.desired-kl 0.05); repeatable, applied "
+                        "after the flags")
     p.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run")
     p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD trajectories afterwards (like `wresdyn eval`)")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while training (OUT/train.log keeps every line and rsl-rl's tables; the "
                         "progress bar is not drawn)")
+    add_config_flags(p, default_config(), aliases=TRAIN_ALIASES,
+                     title="run configuration (wresdyn.learn.ppo_config.TrainConfig)")
 
 
-def config_from_args(args: argparse.Namespace):
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
     """The default :class:`~wresdyn.learn.ppo_config.TrainConfig` with the flags given on the command line applied.
 
     Flags and ``--set`` items are applied in one step (``--set`` wins for the same field), so the config's own
     checks, across fields too, see what was asked for as a whole; a refused value is a one-line error."""
-    from ..learn.ppo_config import default_config, parse_overrides, set_fields
-    from . import UserError
-
-    cfg = default_config()
-    flags = {"env.horizon": args.horizon, "env.solver": args.solver, "env.obs_noise": args.obs_noise,
-             "env.physics": getattr(args, "physics", None),
-             "residual.kind": args.residual, "residual.arch": args.arch, "residual.fraction": args.fraction,
-             "ppo.iterations": args.iterations, "ppo.num_envs": args.num_envs,
-             "ppo.num_steps_per_env": args.steps_per_env, "ppo.device": args.device, "ppo.seed": args.seed,
-             "ppo.save_interval": args.save_interval}
-    try:
-        given = {k: v for k, v in flags.items() if v is not None}
-        return set_fields(cfg, given | parse_overrides(cfg, getattr(args, "overrides", [])))
-    except ValueError as e:  # a malformed --set, or a value the config refuses (WresdynError is a ValueError)
-        raise UserError(str(e)) from None
+    overrides = parse_assignments(TrainConfig, getattr(args, "overrides", []))
+    return build_config(default_config(), given_fields(args) | overrides)
 
 
 def run(args: argparse.Namespace) -> int:
