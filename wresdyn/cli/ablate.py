@@ -12,71 +12,48 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..choices import Arch, Learner, ResidualKind, SolverKind, choices
-
-
-def _tuple(kind):
-    return lambda s: tuple(kind(x) for x in s.split(",") if x)
-
-
-def _choice_list(literal):
-    """argparse type: a comma list of ``literal``'s values, refused in one line naming the allowed ones."""
-    allowed = choices(literal)
-
-    def parse(text: str) -> tuple[str, ...]:
-        values = tuple(x.strip() for x in text.split(",") if x.strip())
-        bad = [v for v in values if v not in allowed]
-        if bad or not values:
-            raise argparse.ArgumentTypeError(f"{text!r}: give a comma list from {','.join(allowed)}")
-        return values
-
-    return parse
+from ..choices import Learner, choices
+from ..experiments.ablation import AblationConfig
+from .config_flags import add_config_flags, build_config, comma_list, given_fields
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", default=None, help="dataset (.npz; default: data/dataset.npz)")
     p.add_argument("--robot", default=None, help="robot file (default: scenes/humanoid.usda)")
     p.add_argument("--out", default="runs/ablation", help="output folder")
-    p.add_argument("--learners", type=_choice_list(Learner), default=choices(Learner),
-                   help=f"comma list from {','.join(choices(Learner))}")
-    p.add_argument("--archs", type=_choice_list(Arch), default=choices(Arch), help="comma list: mlp,gru")
-    p.add_argument("--kinds", type=_choice_list(ResidualKind), default=choices(ResidualKind),
-                   help=f"comma list from {','.join(choices(ResidualKind))}")
-    p.add_argument("--seeds", type=_tuple(int), default=(0, 1, 2), help="comma list of seeds")
-    p.add_argument("--ppo-iterations", type=int, default=60, help="PPO iterations per cell")
-    p.add_argument("--gradient-iterations", type=int, default=2000, help="gradient-fit iterations per cell")
-    p.add_argument("--segments", type=int, default=4, help="evaluation points per learning curve")
-    p.add_argument("--solver", choices=choices(SolverKind), default="auto",
-                   help="simulation solver for training and evaluation")
-    p.add_argument("--device", default="cpu",
-                   help="device (cpu, cuda:0; cuda spreads the cells over every GPU of the host, --jobs at a time)")
     p.add_argument("--ppo-envs", type=int, default=None, help="override PPO's number of parallel envs")
     p.add_argument("--windows", type=int, default=None, help="override the gradient fit's parallel windows")
     p.add_argument("--horizon", type=int, default=None, help="override the gradient fit's window length [steps]")
     p.add_argument("--jobs", type=int, default=1,
                    help="cells run in parallel worker processes, one core (or a share of a GPU) each (default 1)")
-    p.add_argument("--delays", type=_tuple(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
+    p.add_argument("--delays", type=comma_list(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
     p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
     p.add_argument("--delay-learner", choices=choices(Learner), default="gradient", help="learner of the delay sweep")
-    p.add_argument("--delay-trajectories", type=_tuple(int), default=(16, 4, 4, 4),
+    p.add_argument("--delay-trajectories", type=comma_list(int, 4), default=(16, 4, 4, 4),
                    help="train,validation,heldout,ood trajectories recorded per delay")
+    add_config_flags(p, AblationConfig(), skip=("ppo_overrides", "gradient_overrides"),
+                     title="the grid (wresdyn.experiments.ablation.AblationConfig; device cuda spreads the cells over "
+                           "every GPU of the host, --jobs at a time)")
+
+
+def config_from_args(args: argparse.Namespace) -> AblationConfig:
+    """The default :class:`~wresdyn.experiments.ablation.AblationConfig` with the flags given applied."""
+    grad = {k: v for k, v in {"windows": args.windows, "horizon": args.horizon}.items() if v is not None}
+    return build_config(AblationConfig(), given_fields(args) | {
+        "ppo_overrides": {"ppo.num_envs": args.ppo_envs} if args.ppo_envs is not None else {},
+        "gradient_overrides": grad})
 
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from ..data.dataset import load_dataset
-    from ..experiments.ablation import AblationConfig, run_ablation
+    from ..experiments.ablation import run_ablation
     from ..paths import DEFAULT_DATASET
     from ..robot.description import DEFAULT_ROBOT, load_robot
 
-    grad = {k: v for k, v in {"windows": args.windows, "horizon": args.horizon}.items() if v is not None}
     # the config checks itself before the robot and data load: a bad flag fails at once
-    cfg = AblationConfig(learners=args.learners, archs=args.archs, kinds=args.kinds, seeds=args.seeds,
-                         ppo_iterations=args.ppo_iterations, gradient_iterations=args.gradient_iterations,
-                         segments=args.segments, solver=args.solver, device=args.device,
-                         ppo_overrides={"ppo.num_envs": args.ppo_envs} if args.ppo_envs is not None else {},
-                         gradient_overrides=grad)
+    cfg = config_from_args(args)
     robot = load_robot(args.robot or DEFAULT_ROBOT)
     data_path = Path(args.data) if args.data else DEFAULT_DATASET
     dataset = load_dataset(data_path, robot=robot)
@@ -85,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
     # once, before the cells (Warp's disk cache then serves every cell's process); "cuda" spreads cells over GPUs
     compile_kernels(robot, dataset.rate_hz, ("forward", "grad", "param_grads"),
-                    device="cuda:0" if args.device == "cuda" else args.device)
+                    device="cuda:0" if cfg.device == "cuda" else cfg.device)
     if not args.delays_only:
         run_ablation(robot, dataset, cfg, out, jobs=args.jobs)
         print((out / "table.md").read_text())
@@ -103,11 +80,8 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
     from ..data.dataset import load_dataset
     from ..data.real_robot import Mismatch, collect
     from ..experiments.ablation import cells, run_cells, write_summary
-    from . import UserError
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()
-    if len(args.delay_trajectories) != 4:
-        raise UserError("--delay-trajectories takes four counts: train,validation,heldout,ood")
     n_train, n_val, n_held, n_ood = args.delay_trajectories
     grid = cells(cfg)
     folders, tasks = {}, []
