@@ -20,10 +20,9 @@ No choice looks at held-out motions; every policy is its last iterate.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
-from ..choices import check_number
 from ..data.real_robot import Mismatch, RealRobot
 from ..robot import load_robot
 from ..skills.evaluate import gap_closed
@@ -33,51 +32,10 @@ from ..skills.floor_motions import make_floor_motions
 from ..skills.floor_report import write_floor_report
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from .deploy_config import FloorDeployConfig
 from .zero_shot import POLICIES, fit_corrections, write_results
 
 __all__ = ["FloorDeployConfig", "run_floor_benchmark"]
-
-
-@dataclass(frozen=True)
-class FloorDeployConfig:
-    """Sizes of the floor benchmark (the defaults: the CPU configuration, about 20 minutes on 2 cores)."""
-
-    train_per_family: int = 3
-    """Training motions per training family."""
-    validation_per_family: int = 1
-    heldout_per_family: int = 1
-    """Held-out motions per family (training families and the held-out one)."""
-    duration: float = 4.0
-    """Length of a motion [s]."""
-    envs: int = 64
-    """Parallel worlds of PPO."""
-    oracle_envs: int = 0
-    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (0: ``envs``)."""
-    finetune_std: float = 0.0
-    """Action noise the fine-tunings restart from (0: (a)'s own)."""
-    iterations: int = 200
-    """PPO iterations of (a) in the nominal simulator."""
-    finetune: int = 60
-    """PPO iterations of each fine-tuning: (b), (c), (d)."""
-    oracle_beside: bool | None = None
-    """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU, where the
-    oracle's real robot steps on otherwise idle host cores)."""
-    seed: int = 0
-    device: str = "cpu"
-
-    @classmethod
-    def full(cls, **kw) -> "FloorDeployConfig":
-        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
-        1000 + 300 iterations; the oracle on 256 worlds of MuJoCo C on the host's cores."""
-        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
-                             oracle_envs=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})
-
-    def __post_init__(self) -> None:
-        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
-            check_number(getattr(self, k), f"floor.{k}", integer=True, ge=1)
-        check_number(self.oracle_envs, "floor.oracle_envs", integer=True, ge=0)
-        check_number(self.finetune_std, "floor.finetune_std", ge=0)
-        check_number(self.duration, "floor.duration", gt=0)
 
 
 def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: FloorDeployConfig, runs: dict,
@@ -86,7 +44,7 @@ def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: Fl
     on the floor of its plant; returns the wall-clock time [s]."""
     setting = POLICIES[name]
     t0 = time.perf_counter()
-    envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
+    envs = cfg.oracle_worlds if setting == "real" else cfg.envs
     if setting == "real":
         plant = RealPlant(real, envs, task.decimation, seed=cfg.seed + 1, imu_noise=(task.gyro_noise, task.gravity_noise))
     else:
@@ -95,7 +53,7 @@ def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: Fl
     env = FloorTrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
     run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
     it = cfg.iterations if i == 0 else cfg.finetune
-    train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.finetune_std),
+    train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.restart_std),
                 out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
     wall = time.perf_counter() - t0
     log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds on the floor of the {setting} "
@@ -176,7 +134,7 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
                                        log)
         if pool is not None:
             wall["d_oracle"] = oracle.get()
-            log(f"[3/4] policy d_oracle: {cfg.finetune} PPO iterations x {cfg.oracle_envs or cfg.envs} worlds on the "
+            log(f"[3/4] policy d_oracle: {cfg.finetune} PPO iterations x {cfg.oracle_worlds} worlds on the "
                 f"floor of the real robot ({wall['d_oracle']:.0f} s, beside the others)")
     finally:
         if pool is not None:

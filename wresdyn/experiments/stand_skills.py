@@ -21,10 +21,9 @@ is its last iterate (no checkpoint selection on the real robot, which a user cou
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
-from ..choices import check_number
 from ..data.real_robot import Mismatch, RealRobot
 from ..skills.env import SkillConfig, TrackingEnv
 from ..skills.evaluate import deploy_skill, gap_closed, metrics
@@ -32,48 +31,10 @@ from ..skills.motions import make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.report import write_report
 from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from .deploy_config import DeployConfig
 from .zero_shot import POLICIES, fit_corrections, write_results
 
 __all__ = ["DeployConfig", "run_benchmark"]
-
-@dataclass(frozen=True)
-class DeployConfig:
-    """Sizes of the benchmark (the defaults: the CPU configuration, minutes on 2 cores)."""
-
-    train_per_family: int = 4
-    """Training motions per training family."""
-    validation_per_family: int = 1
-    heldout_per_family: int = 2
-    """Held-out motions per family (training families and the held-out one)."""
-    duration: float = 2.0
-    """Length of a motion [s]."""
-    envs: int = 64
-    """Parallel worlds of PPO."""
-    oracle_envs: int = 0
-    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (0: ``envs``)."""
-    finetune_std: float = 0.0
-    """Action noise the fine-tunings (b), (c), (d) restart from (0: (a)'s own; see ``SkillPPOConfig.restart_std``)."""
-    iterations: int = 300
-    """PPO iterations of (a) in the nominal simulator."""
-    finetune: int = 300
-    """PPO iterations of each fine-tuning: (b), (c), (d)."""
-    seed: int = 0
-    device: str = "cpu"
-
-    @classmethod
-    def full(cls, **kw) -> "DeployConfig":
-        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family
-        (the same PPO iterations). The oracle trains on 1024 worlds: its real robot is MuJoCo C on the CPU cores
-        (4-6 s per iteration at 4096 worlds on 16 cores, 10-15x the simulated plants on the GPU)."""
-        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
-                             oracle_envs=1024, finetune_std=0.3), **kw})
-
-    def __post_init__(self) -> None:
-        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
-            check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
-        check_number(self.oracle_envs, "deploy.oracle_envs", integer=True, ge=0)
-        check_number(self.finetune_std, "deploy.finetune_std", ge=0)
-        check_number(self.duration, "deploy.duration", gt=0)
 
 
 def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, data_path=None, calibrated=None,
@@ -125,7 +86,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     for i, name in enumerate(policies):
         setting = POLICIES[name]
         t0 = time.perf_counter()
-        envs = (cfg.oracle_envs or cfg.envs) if setting == "real" else cfg.envs
+        envs = cfg.oracle_worlds if setting == "real" else cfg.envs
         if setting == "real":
             plant = RealPlant(real, envs, task.decimation, seed=cfg.seed + 1)
         else:
@@ -133,7 +94,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         env = TrackingEnv(plant, motions.split("train"), task, seed=cfg.seed + i, device=cfg.device)
         run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
         it = cfg.iterations if i == 0 else cfg.finetune
-        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.finetune_std),
+        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.restart_std),
                     out / "skills" / name, log=log,
                     init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
         wall[name] = time.perf_counter() - t0

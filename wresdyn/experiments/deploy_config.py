@@ -1,0 +1,128 @@
+"""The sizes of the zero-shot deployment benchmarks, on the stand (:class:`DeployConfig`, :mod:`.stand_skills`) and on
+the floor (:class:`FloorDeployConfig`, :mod:`.floor_skills`), apart from them so that the command line reads them
+without importing torch or Warp."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..choices import check_device, check_number
+
+__all__ = ["DeployConfig", "FloorDeployConfig"]
+
+
+@dataclass(frozen=True)
+class DeployConfig:
+    """Sizes of the benchmark (the defaults: the CPU configuration, minutes on 2 cores)."""
+
+    train_per_family: int = 4
+    """Training motions per training family."""
+    validation_per_family: int = 1
+    """Validation motions per family (the task and PPO settings were chosen on them)."""
+    heldout_per_family: int = 2
+    """Held-out motions per family (training families and the held-out one)."""
+    duration: float = 2.0
+    """Length of a motion [s]."""
+    envs: int = 64
+    """Parallel worlds of PPO."""
+    oracle_envs: int | None = None
+    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (``None``: ``envs``)."""
+    finetune_std: float | None = None
+    """Action noise the fine-tunings (b), (c), (d) restart from (``None``: (a)'s own; see
+    ``SkillPPOConfig.restart_std``)."""
+    iterations: int = 300
+    """PPO iterations of (a) in the nominal simulator."""
+    finetune: int = 300
+    """PPO iterations of each fine-tuning: (b), (c), (d)."""
+    seed: int = 0
+    """Seed of the motions and of PPO."""
+    device: str = "cpu"
+    """Device of PPO and the simulated plants (the real robot always steps on the CPU)."""
+
+    @classmethod
+    def full(cls, **kw) -> "DeployConfig":
+        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family
+        (the same PPO iterations). The oracle trains on 1024 worlds: its real robot is MuJoCo C on the CPU cores
+        (4-6 s per iteration at 4096 worlds on 16 cores, 10-15x the simulated plants on the GPU)."""
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
+                             oracle_envs=1024, finetune_std=0.3), **kw})
+
+    @property
+    def oracle_worlds(self) -> int:
+        """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
+        return self.envs if self.oracle_envs is None else self.oracle_envs
+
+    @property
+    def restart_std(self) -> float:
+        """``SkillPPOConfig.restart_std`` of a fine-tuning: ``finetune_std``, else 0 ((a)'s own)."""
+        return 0.0 if self.finetune_std is None else self.finetune_std
+
+    def __post_init__(self) -> None:
+        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
+            check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
+        if self.oracle_envs is not None:
+            check_number(self.oracle_envs, "deploy.oracle_envs", integer=True, ge=1)
+        if self.finetune_std is not None:
+            check_number(self.finetune_std, "deploy.finetune_std", gt=0)
+        check_number(self.seed, "deploy.seed", integer=True, ge=0)
+        check_device(self.device, "deploy.device")
+        check_number(self.duration, "deploy.duration", gt=0)
+
+
+@dataclass(frozen=True)
+class FloorDeployConfig:
+    """Sizes of the floor benchmark (the defaults: the CPU configuration, about 20 minutes on 2 cores)."""
+
+    train_per_family: int = 3
+    """Training motions per training family."""
+    validation_per_family: int = 1
+    """Validation motions per family (the task and PPO settings were chosen on them)."""
+    heldout_per_family: int = 1
+    """Held-out motions per family (training families and the held-out one)."""
+    duration: float = 4.0
+    """Length of a motion [s]."""
+    envs: int = 64
+    """Parallel worlds of PPO."""
+    oracle_envs: int | None = None
+    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (``None``: ``envs``)."""
+    finetune_std: float | None = None
+    """Action noise the fine-tunings restart from (``None``: (a)'s own)."""
+    iterations: int = 200
+    """PPO iterations of (a) in the nominal simulator."""
+    finetune: int = 60
+    """PPO iterations of each fine-tuning: (b), (c), (d)."""
+    oracle_beside: bool | None = None
+    """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU, where the
+    oracle's real robot steps on otherwise idle host cores)."""
+    seed: int = 0
+    """Seed of the motions and of PPO."""
+    device: str = "cpu"
+    """Device of PPO and the simulated plants (the real robot always steps on the CPU)."""
+
+    @classmethod
+    def full(cls, **kw) -> "FloorDeployConfig":
+        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
+        1000 + 300 iterations; the oracle on 256 worlds of MuJoCo C on the host's cores."""
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
+                             oracle_envs=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})
+
+    @property
+    def oracle_worlds(self) -> int:
+        """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
+        return self.envs if self.oracle_envs is None else self.oracle_envs
+
+    @property
+    def restart_std(self) -> float:
+        """``SkillPPOConfig.restart_std`` of a fine-tuning: ``finetune_std``, else 0 ((a)'s own)."""
+        return 0.0 if self.finetune_std is None else self.finetune_std
+
+    def __post_init__(self) -> None:
+        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
+            check_number(getattr(self, k), f"floor.{k}", integer=True, ge=1)
+        if self.oracle_envs is not None:
+            check_number(self.oracle_envs, "floor.oracle_envs", integer=True, ge=1)
+        if self.finetune_std is not None:
+            check_number(self.finetune_std, "floor.finetune_std", gt=0)
+        check_number(self.seed, "floor.seed", integer=True, ge=0)
+        check_device(self.device, "floor.device")
+        check_number(self.duration, "floor.duration", gt=0)
