@@ -1,0 +1,201 @@
+"""Every command's flags: generated from its config (each field a flag, with its docstring and its true default),
+every flag of earlier releases still accepted with the same meaning, ``--help`` fast, bad values in one line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import asdict, fields, replace
+
+import pytest
+
+from wresdyn.cli import build_parser, main
+from wresdyn.cli.config_flags import config_fields, plain_help
+from wresdyn.experiments.ablation import AblationConfig
+from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
+from wresdyn.learn.hybrid import HYBRID_ITERATIONS
+from wresdyn.learn.ppo_config import default_config
+from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
+
+OLD_FLAGS = {
+    "inspect": ("--gains", "--floating", "--seconds", "--dt", "--solver"),
+    "demo": ("--out", "--collect", "--ppo-iterations", "--skill-iterations", "--quick"),
+    "collect": ("--robot", "--gains", "--mismatch", "--train", "--validation", "--heldout", "--ood", "--duration",
+                "--rate", "--seed", "--out", "--no-tau", "--no-gap", "--quiet", "--excitation", "--frames",
+                "--max-velocity", "--logs", "--map", "--split", "--assign", "--split-map", "--validation-fraction",
+                "--heldout-fraction"),
+    "migrate": ("--out", "--validation", "--force", "--robot", "--gains", "--no-gap"),
+    "train": ("--out", "--robot", "--gains", "--residual", "--arch", "--iterations", "--num-envs", "--steps-per-env",
+              "--horizon", "--obs-noise", "--fraction", "--solver", "--device", "--seed", "--save-interval",
+              "--physics", "--set", "--no-resume", "--eval", "--quiet"),
+    "eval": ("--data", "--robot", "--gains", "--splits", "--out", "--solver", "--device", "--joints", "--compare"),
+    "bench": ("--robot", "--gains", "--worlds", "--device", "--steps", "--horizon", "--slow-steps", "--slow-max-worlds",
+              "--threads", "--solvers", "--dt", "--min-time", "--json"),
+    "identify": ("--out", "--robot", "--gains", "--iterations", "--windows", "--fit", "--delay-grid", "--gain-grid",
+                 "--refine", "--solver", "--device", "--seed", "--eval", "--quiet"),
+    "fit": ("--out", "--robot", "--gains", "--model", "--residual", "--arch", "--fraction", "--iterations",
+            "--identify-iterations", "--gain-grid", "--refine", "--windows", "--horizon", "--curriculum", "--lr",
+            "--obs-noise", "--solver", "--device", "--no-cuda-graph", "--seed", "--physics", "--eval", "--quiet"),
+    "view": ("--split", "--index", "--data", "--host", "--port", "--seconds", "--device"),
+    "export": ("--out", "--force", "--physics-only", "--data", "--gains"),
+    "deploy": ("--out", "--calibrated", "--delta", "--mismatch", "--floor", "--full", "--iterations", "--finetune",
+               "--envs", "--oracle-envs", "--oracle-beside", "--motions", "--heldout", "--duration", "--finetune-std",
+               "--seed", "--device", "--no-animation", "--quiet"),
+    "ablate": ("--data", "--robot", "--out", "--learners", "--archs", "--kinds", "--seeds", "--ppo-iterations",
+               "--gradient-iterations", "--segments", "--solver", "--device", "--ppo-envs", "--windows", "--horizon",
+               "--jobs", "--delays", "--delays-only", "--delay-learner", "--delay-trajectories"),
+}
+"""The flags of every command before they were generated from the configs (``wresdyn CMD --help`` at edbe496)."""
+
+CONFIG_FLAGS = {
+    "identify": [(SysIdConfig(), "", ())],
+    "fit": [(replace(GradFitConfig(), iterations=HYBRID_ITERATIONS), "", ("model",)),
+            (SysIdConfig(), "identify.", ("device", "seed", "solver"))],
+    "train": [(default_config(), "", ())],
+    "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig)))],
+    "ablate": [(AblationConfig(), "", ("ppo_overrides", "gradient_overrides"))],
+}
+"""Each command's configs: ``(defaults, flag prefix, fields without a flag)``."""
+
+PARSER, COMMANDS = build_parser()
+
+
+def _options(command: str) -> dict:
+    return {s: a for a in COMMANDS[command]._actions for s in a.option_strings}
+
+
+def _typed(value) -> str:
+    if isinstance(value, tuple):
+        return ",".join(map(str, value)) if value else "empty"
+    return "none" if value is None else str(value)
+
+
+def test_every_command_helps_in_full(capsys):
+    assert set(COMMANDS) == set(OLD_FLAGS)
+    for command in COMMANDS:
+        with pytest.raises(SystemExit) as ex:
+            main([command, "--help"])
+        assert ex.value.code == 0
+        assert capsys.readouterr().out.startswith(f"usage: wresdyn {command}")
+
+
+@pytest.mark.parametrize("command", sorted(CONFIG_FLAGS))
+def test_every_config_field_is_a_flag_with_its_docstring_and_true_default(command):
+    options = _options(command)
+    for defaults, prefix, skip in CONFIG_FLAGS[command]:
+        for dotted, _, doc in config_fields(type(defaults)):
+            if dotted in skip:
+                continue
+            head, _, name = (prefix + dotted).rpartition(".")
+            flag = "--" + (f"{head}." if head else "") + name.replace("_", "-")
+            assert flag in options, f"wresdyn {command}: no {flag}"
+            value = defaults
+            for part in dotted.split("."):
+                value = getattr(value, part)
+            assert doc and options[flag].help.startswith(plain_help(doc)), flag
+            assert f"(default: {_typed(value)}" in options[flag].help, flag
+
+
+@pytest.mark.parametrize("command", sorted(OLD_FLAGS))
+def test_every_flag_of_earlier_releases_is_still_accepted(command):
+    assert not set(OLD_FLAGS[command]) - set(_options(command))
+
+
+def _config(argv: list[str]):
+    args = PARSER.parse_args(argv)
+    return sys.modules[args._module].config_from_args(args)
+
+
+# each line with the fields the code before generated flags built from it (the rest: the defaults)
+FIT = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS)
+SAME = [
+    (["identify", "d.npz", "--iterations", "8", "--windows", "2", "--fit", "kp, kd,effort", "--delay-grid", "0,10",
+      "--gain-grid", "1,0.1", "--refine", "8", "--solver", "replay", "--device", "cuda:0", "--seed", "3"],
+     replace(SysIdConfig(), iterations=8, windows=2, fit=("kp", "kd", "effort"), delay_grid=(0.0, 10.0),
+             gain_grid=(1.0, 0.1), refine=8, solver="replay", device="cuda:0", seed=3)),
+    (["fit", "d.npz"], FIT),
+    (["fit", "d.npz", "--model", "network", "--residual", "delta_action", "--arch", "gru", "--fraction", "0.5"],
+     replace(GradFitConfig(), residual=replace(GradFitConfig().residual, kind="delta_action", arch="gru",
+                                               fraction=0.5))),
+    (["fit", "d.npz", "--model", "parametric", "--no-cuda-graph", "--curriculum", "2,4,8"],
+     replace(GradFitConfig(), model="parametric", cuda_graph=False, horizon_curriculum=(2, 4, 8), horizon=8)),
+    (["fit", "d.npz", "--curriculum", "", "--horizon", "32", "--lr", "0.003", "--obs-noise", "0", "--windows", "16",
+      "--iterations", "5", "--solver", "replay", "--device", "cuda:0", "--seed", "2", "--physics", "p.json"],
+     replace(FIT, horizon_curriculum=(), horizon=32, lr=0.003, obs_noise=0.0, windows=16, iterations=5,
+             solver="replay", device="cuda:0", seed=2, physics="p.json")),
+    (["train", "d.npz", "--residual", "delta_action", "--arch", "gru", "--fraction", "0.25", "--iterations", "7",
+      "--num-envs", "64", "--steps-per-env", "12", "--horizon", "500", "--obs-noise", "0.1", "--solver", "replay",
+      "--device", "cuda:0", "--seed", "4", "--save-interval", "5", "--physics", "p.json",
+      "--set", "ppo.desired_kl=0.05", "--set", "residual.hidden_dims=128,64", "--set", "ppo.iterations=9"],
+     replace(default_config(),
+             env=replace(default_config().env, horizon=500, obs_noise=0.1, solver="replay", physics="p.json"),
+             residual=replace(default_config().residual, kind="delta_action", arch="gru", fraction=0.25,
+                              hidden_dims=(128, 64)),
+             ppo=replace(default_config().ppo, iterations=9, num_envs=64, num_steps_per_env=12, device="cuda:0",
+                         seed=4, save_interval=5, desired_kl=0.05))),
+    (["deploy", "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
+      "--motions", "1", "--heldout", "1", "--duration", "0.5", "--seed", "2", "--device", "cuda:0"],
+     DeployConfig(iterations=2, finetune=1, envs=4, oracle_envs=3, finetune_std=0.6, train_per_family=1,
+                  heldout_per_family=1, duration=0.5, seed=2, device="cuda:0")),
+    (["deploy", "--floor", "--full", "--oracle-beside"], FloorDeployConfig.full(oracle_beside=True)),
+    (["ablate", "--learners", "gradient,ppo", "--archs", "gru", "--kinds", "torque", "--seeds", "0,5", "--segments",
+      "2", "--ppo-iterations", "9", "--gradient-iterations", "40", "--solver", "replay", "--device", "cuda",
+      "--ppo-envs", "16", "--windows", "8", "--horizon", "16"],
+     AblationConfig(learners=("gradient", "ppo"), archs=("gru",), kinds=("torque",), seeds=(0, 5), segments=2,
+                    ppo_iterations=9, gradient_iterations=40, solver="replay", device="cuda",
+                    ppo_overrides={"ppo.num_envs": 16}, gradient_overrides={"windows": 8, "horizon": 16})),
+]
+
+
+@pytest.mark.parametrize("argv,expected", SAME, ids=[" ".join(a[:3]) for a, _ in SAME])
+def test_command_lines_of_earlier_releases_build_the_same_config(argv, expected):
+    assert asdict(_config(argv)) == asdict(expected)
+
+
+def test_the_hybrids_identification_shares_the_fits_device_seed_solver_and_windows():
+    from wresdyn.cli.fit import identify_config_from_args
+
+    args = PARSER.parse_args(["fit", "d.npz", "--identify-iterations", "6", "--gain-grid", "1,0.5", "--refine", "2",
+                              "--windows", "4", "--seed", "3", "--solver", "replay", "--device", "cuda:0"])
+    sysid = identify_config_from_args(args, _config(["fit", "d.npz", "--windows", "4", "--seed", "3", "--solver",
+                                                     "replay", "--device", "cuda:0"]))
+    assert sysid == replace(SysIdConfig(), iterations=6, gain_grid=(1.0, 0.5), refine=2, windows=4, seed=3,
+                            solver="replay", device="cuda:0")
+    args = PARSER.parse_args(["fit", "d.npz", "--windows", "4", "--identify.windows", "8"])
+    assert identify_config_from_args(args, _config(["fit", "d.npz", "--windows", "4"])).windows == 8
+
+
+def test_help_and_every_parser_import_no_heavy_library():
+    code = ("import sys\nfrom wresdyn.cli import build_parser, main\nbuild_parser()\n"
+            "try: main(['fit', '--help'])\nexcept SystemExit: pass\n"
+            "heavy = [m for m in ('torch', 'warp', 'newton', 'mujoco', 'pxr', 'rsl_rl') if m in sys.modules]\n"
+            "assert not heavy, heavy")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-500:]
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["fit", "d.npz", "--iterations", "x"], "argument --iterations: invalid int value: 'x'"),
+    (["train", "d.npz", "--residual", "torqu"], "argument --residual.kind/--residual: invalid choice: 'torqu'"),
+    (["deploy", "--floor", "--motions", "1.5"], "argument --train-per-family/--motions: invalid int value: '1.5'"),
+])
+def test_a_malformed_flag_is_one_line_and_exit_2(argv, message, capsys):
+    with pytest.raises(SystemExit) as ex:
+        main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert ex.value.code == 2 and len(err) == 1 and message in err[0], err
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["identify", "none.npz", "--windows", "0"], "wresdyn identify: error: windows = 0 must be >= 1"),
+    (["train", "none.npz", "--set", "ppo.num_envs=1", "--set", "ppo.num_steps_per_env=2"],
+     "wresdyn train: error: ppo.num_mini_batches = 4 is more than the 2 samples per rollout"),
+    (["train", "none.npz", "--set", "ppo.gama=0.9"],
+     "wresdyn train: error: --set 'ppo.gama=0.9': no field 'ppo.gama' (sections: env, ppo, residual, rewards)"),
+    (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_envs = 0 must be >= 1"),
+    (["deploy", "--oracle-beside"], "wresdyn deploy: error: --oracle-beside trains the floor's oracle; it needs --floor"),
+    (["fit", "none.npz", "--gain-grid", "1,-0.5"], "wresdyn fit: error: gain_grid[1] = -0.5 must be > 0"),
+])
+def test_a_value_the_config_refuses_is_one_line_and_exit_2(argv, message, capsys):
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [message]
