@@ -15,8 +15,8 @@ from typing import Literal, get_args
 
 from .errors import WresdynError
 
-__all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "FitModel", "Learner", "choices", "check_choice",
-           "check_number", "check_device"]
+__all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "FitModel", "Learner", "ExcitationMode", "choices",
+           "check_choice", "check_number", "check_device"]
 
 ResidualKind = Literal["torque", "delta_action"]
 """Joint torque added to τ_pd (the paper, eq. 1) or offset added to the PD target (ASAP)."""
@@ -31,6 +31,8 @@ FitModel = Literal["hybrid", "network", "parametric"]
 robot file's physics (or on ``--physics``), or the residual-torque parametric baseline."""
 Learner = Literal["ppo", "gradient", "parametric"]
 """Learners of the ablation."""
+ExcitationMode = Literal["auto", "foot", "joint"]
+"""Excitation of ``wresdyn collect``: foot IK targets, joint space, or foot when the robot has all the frames."""
 
 
 def choices(literal) -> tuple[str, ...]:

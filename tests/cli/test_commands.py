@@ -10,7 +10,9 @@ from dataclasses import asdict, fields, replace
 import pytest
 
 from wresdyn.cli import build_parser, main
+from wresdyn.cli.collect import CollectConfig
 from wresdyn.cli.config_flags import config_fields, plain_help
+from wresdyn.data.signals import ExcitationConfig
 from wresdyn.experiments.ablation import AblationConfig
 from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
 from wresdyn.learn.hybrid import HYBRID_ITERATIONS
@@ -48,6 +50,7 @@ OLD_FLAGS = {
 """The flags of every command before they were generated from the configs (``wresdyn CMD --help`` at edbe496)."""
 
 CONFIG_FLAGS = {
+    "collect": [(CollectConfig(), "", ())],
     "identify": [(SysIdConfig(), "", ())],
     "fit": [(replace(GradFitConfig(), iterations=HYBRID_ITERATIONS), "", ("model",)),
             (SysIdConfig(), "identify.", ("device", "seed", "solver"))],
@@ -109,6 +112,12 @@ def _config(argv: list[str]):
 # each line with the fields the code before generated flags built from it (the rest: the defaults)
 FIT = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS)
 SAME = [
+    (["collect", "--train", "2", "--validation", "0", "--heldout", "1", "--ood", "3", "--duration", "2.5", "--rate",
+      "250", "--seed", "7", "--frames", "a, b", "--max-velocity", "3"],
+     CollectConfig(train=2, validation=0, heldout=1, ood=3, duration=2.5, rate=250.0, seed=7,
+                   excitation=ExcitationConfig(mode="foot", frames=("a", "b"), max_velocity=3.0,
+                                               joint_max_velocity=3.0))),
+    (["collect", "--excitation", "joint"], CollectConfig(excitation=ExcitationConfig(mode="joint"))),
     (["identify", "d.npz", "--iterations", "8", "--windows", "2", "--fit", "kp, kd,effort", "--delay-grid", "0,10",
       "--gain-grid", "1,0.1", "--refine", "8", "--solver", "replay", "--device", "cuda:0", "--seed", "3"],
      replace(SysIdConfig(), iterations=8, windows=2, fit=("kp", "kd", "effort"), delay_grid=(0.0, 10.0),
@@ -187,6 +196,10 @@ def test_a_malformed_flag_is_one_line_and_exit_2(argv, message, capsys):
 
 
 @pytest.mark.parametrize("argv,message", [
+    (["collect", "--train", "0", "--validation", "0", "--heldout", "0", "--ood", "0"],
+     "wresdyn collect: error: train/validation/heldout/ood are all 0: nothing to record"),
+    (["collect", "--frames", "gripperframe", "--excitation", "joint"], "wresdyn collect: error: --frames sets the IK "
+     "targets of the foot excitation; it has no use with --excitation joint"),
     (["identify", "none.npz", "--windows", "0"], "wresdyn identify: error: windows = 0 must be >= 1"),
     (["train", "none.npz", "--set", "ppo.num_envs=1", "--set", "ppo.num_steps_per_env=2"],
      "wresdyn train: error: ppo.num_mini_batches = 4 is more than the 2 samples per rollout"),

@@ -19,9 +19,54 @@ elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..choices import check_number
+from ..data.dataset import SPLITS  # numpy only: cheap
+from ..data.signals import ExcitationConfig
+from ..errors import WresdynError
+from .config_flags import add_config_flags, build_config, given_fields
+
 DEFAULT_MISMATCH = Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml"  # wresdyn.paths, no import
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """What ``wresdyn collect`` records on the simulated real robot (:func:`wresdyn.data.real_robot.collect`)."""
+
+    train: int = 16
+    """Training trajectories."""
+    validation: int = 4
+    """Validation trajectories (same family as train; for every tuning choice)."""
+    heldout: int = 4
+    """Held-out trajectories (same family as train)."""
+    ood: int = 4
+    """Out-of-distribution trajectories (chirp, kick; joint space: chirp, steps)."""
+    duration: float = 4.0
+    """Length of each trajectory [s]."""
+    rate: float = 500.0
+    """Command and recording rate [Hz] (logs: the grid they are resampled onto)."""
+    seed: int = 0
+    """Master seed (same seed, same data)."""
+    excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
+    """The excitation's mode, frames and parameter ranges."""
+
+    def __post_init__(self) -> None:
+        check_number(self.rate, "rate", gt=0)
+        counts = [self.train, self.validation, self.heldout, self.ood]
+        for name, n in zip(SPLITS, counts):
+            check_number(n, name, integer=True, ge=0)
+        if not any(counts):
+            raise WresdynError("train/validation/heldout/ood are all 0: nothing to record")
+        check_number(self.duration, "duration", gt=0)
+        if not self.duration * self.rate >= 2:
+            raise WresdynError(f"duration {self.duration} s at {self.rate:g} Hz gives fewer than 2 samples")
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Trajectories per split."""
+        return {"train": self.train, "validation": self.validation, "heldout": self.heldout, "ood": self.ood}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,49 +75,60 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mismatch", default=str(DEFAULT_MISMATCH),
                    help="mismatch config (TOML) of the real robot, or 'none' for the nominal robot "
                         "(default: data/mismatch_default.toml)")
-    p.add_argument("--train", type=int, default=16, help="number of training trajectories")
-    p.add_argument("--validation", type=int, default=4,
-                   help="number of validation trajectories (same family as train; for every tuning choice)")
-    p.add_argument("--heldout", type=int, default=4, help="number of held-out trajectories (same family as train)")
-    p.add_argument("--ood", type=int, default=4, help="number of out-of-distribution trajectories (chirp, kick)")
-    p.add_argument("--duration", type=float, default=4.0, help="length of each trajectory [s]")
-    p.add_argument("--rate", type=float, default=500.0, help="command and recording rate [Hz]")
-    p.add_argument("--seed", type=int, default=0, help="master seed (same seed, same data)")
     p.add_argument("--out", default="data", help="output folder (default: data)")
     p.add_argument("--no-tau", action="store_true", help="do not store the measured (diagnostic) torque")
     p.add_argument("--no-gap", action="store_true", help="skip the PD-only Newton replay that measures the gap")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while collecting (OUT/collect.log keeps every line; no progress bar)")
-    p.add_argument("--excitation", default="auto", choices=("auto", "foot", "joint"),
-                   help="foot: IK paths of --frames (the paper's); joint: joint-space multisines, chirps and steps "
-                        "within limits, speed and effort; auto (default): foot when --frames is given or the robot "
-                        "has left_sole and right_sole sites, joint otherwise")
-    p.add_argument("--frames", default=None, metavar="A,B,...",
-                   help="IK target frames (sites or bodies, comma-separated, any count) for the foot excitation "
-                        "(default: left_sole,right_sole)")
     p.add_argument("--max-velocity", type=float, default=None, metavar="RAD_S",
-                   help="command speed bound [rad/s] (default: 12 for foot paths, 5 in joint space)")
-    p.add_argument("--logs", nargs="+", default=None, metavar="LOG",
-                   help="import these real logs instead of simulating: .csv/.npz files, SAGE run folders, LeRobot "
-                        "dataset folders (one trajectory per episode) or folders of runs (docs/dataset.md)")
-    from ..data.dataset import SPLITS  # numpy only: cheap
+                   help="command speed bound [rad/s] of both modes: --excitation.max-velocity and "
+                        "--excitation.joint-max-velocity at once")
+    add_config_flags(p, CollectConfig(), aliases={"excitation.mode": ("--excitation",),
+                                                   "excitation.frames": ("--frames",)},
+                     title="recording (CollectConfig; --excitation.mode auto is foot when --excitation.frames is "
+                           "given or the robot has left_sole and right_sole sites, joint otherwise)")
+    logs = p.add_argument_group("importing real logs instead")
+    logs.add_argument("--logs", nargs="+", default=None, metavar="LOG",
+                      help="import these real logs instead of simulating: .csv/.npz files, SAGE run folders, LeRobot "
+                           "dataset folders (one trajectory per episode) or folders of runs (docs/dataset.md)")
+    logs.add_argument("--map", default=None, metavar="TOML",
+                      help="mapping file (log joint -> robot joint, units, excluded joints)")
+    logs.add_argument("--split", default=None, choices=SPLITS,
+                      help="split of every run no --assign/--split-map pattern or fraction assigns (default: "
+                           "heldout; train when any of those is given)")
+    logs.add_argument("--assign", action="append", default=[], metavar="PATTERN=SPLIT",
+                      help="runs whose name matches the fnmatch PATTERN go to SPLIT (repeatable; first match wins)")
+    logs.add_argument("--split-map", default=None, metavar="TOML",
+                      help="file of '\"PATTERN\" = \"SPLIT\"' lines, tried after --assign")
+    logs.add_argument("--validation-fraction", type=float, default=0.0, metavar="F",
+                      help="this fraction of the unassigned runs goes to validation (whole runs, deterministic)")
+    logs.add_argument("--heldout-fraction", type=float, default=0.0, metavar="F",
+                      help="this fraction of the unassigned runs goes to heldout (whole runs, deterministic)")
 
-    p.add_argument("--map", default=None, metavar="TOML",
-                   help="logs: mapping file (log joint -> robot joint, units, excluded joints)")
-    p.add_argument("--split", default=None, choices=SPLITS,
-                   help="logs: split of every run no --assign/--split-map pattern or fraction assigns (default: "
-                        "heldout; train when any of those is given)")
-    p.add_argument("--assign", action="append", default=[], metavar="PATTERN=SPLIT",
-                   help="logs: runs whose name matches the fnmatch PATTERN go to SPLIT (repeatable; first match wins)")
-    p.add_argument("--split-map", default=None, metavar="TOML",
-                   help="logs: file of '\"PATTERN\" = \"SPLIT\"' lines, tried after --assign")
-    p.add_argument("--validation-fraction", type=float, default=0.0, metavar="F",
-                   help="logs: this fraction of the unassigned runs goes to validation (whole runs, deterministic)")
-    p.add_argument("--heldout-fraction", type=float, default=0.0, metavar="F",
-                   help="logs: this fraction of the unassigned runs goes to heldout (whole runs, deterministic)")
+
+def config_from_args(args: argparse.Namespace) -> CollectConfig:
+    """The default :class:`CollectConfig` with the flags given applied: frames without a mode select the foot mode,
+    ``--max-velocity`` bounds both modes."""
+    from . import UserError
+
+    given = given_fields(args)
+    frames = given.get("excitation.frames")
+    if frames is not None:
+        if given.get("excitation.mode") == "joint":
+            raise UserError("--frames sets the IK targets of the foot excitation; it has no use with "
+                            "--excitation joint")
+        if not frames:
+            raise UserError("--frames names no frame")
+        if given.get("excitation.mode", "auto") == "auto":
+            given["excitation.mode"] = "foot"
+    if args.max_velocity is not None:
+        if not args.max_velocity > 0:
+            raise UserError(f"--max-velocity must be > 0, not {args.max_velocity}")
+        given["excitation.max_velocity"] = given["excitation.joint_max_velocity"] = args.max_velocity
+    return build_config(CollectConfig(), given)
 
 
-def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path, log) -> int:
+def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: Path, log) -> int:
     """``--logs``: read every run, assign splits, report the sampling of each log and the PD-only gap, and only
     then write the dataset (an error anywhere leaves nothing behind)."""
     from ..data.importers import SplitRule, import_runs, load_split_map, parse_assign
@@ -85,10 +141,10 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path, log) ->
     ruled = bool(patterns) or args.validation_fraction > 0 or args.heldout_fraction > 0
     rule = SplitRule(args.split or ("train" if ruled else "heldout"), tuple(patterns), args.validation_fraction,
                      args.heldout_fraction)
-    ds = import_runs(args.logs, robot, args.rate, log_map, rule, store_tau=not args.no_tau)
+    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=not args.no_tau)
     for p in rule.unused([tr.name for tr in ds.trajectories]):
         log(f"note: split pattern {p!r} matches no run")
-    log(f"imported {len(ds.trajectories)} run(s) onto {args.rate:g} Hz:")
+    log(f"imported {len(ds.trajectories)} run(s) onto {rate:g} Hz:")
     for s in ds.meta["source_logs"]:
         log(f"  {s['name']:28s} {s['split']:10s} {s['format']:7s} {s['samples']:6d} samples {s['duration_s']:8.2f} s  "
              f"median {s['median_rate_hz']:8.3f} Hz  jitter {100 * s['jitter']:.3f} %  max gap "
@@ -97,7 +153,7 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path, log) ->
     if excluded:
         log(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
     if not args.no_gap:
-        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "run(s)", log)
+        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, rate, "run(s)", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
     counts = ", ".join(f"{len(ds.split(s))} {s}" for s in ("train", "validation", "heldout", "ood") if ds.split(s))
@@ -106,58 +162,36 @@ def _import_logs(args: argparse.Namespace, robot, out: Path, path: Path, log) ->
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..data.dataset import SPLITS
     from ..robot.description import DEFAULT_ROBOT, load_robot
     from . import UserError
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: --out must be a folder")
-    if not args.rate > 0:
-        raise UserError(f"--rate must be > 0, not {args.rate}")
+    cfg = config_from_args(args)
     robot = load_robot(args.robot or DEFAULT_ROBOT, gains=args.gains)
     path = out / "dataset.npz"
     from ..progress import Log
 
     log = Log(out / "collect.log", quiet=args.quiet)
     if args.logs:
-        return _import_logs(args, robot, out, path, log)
+        return _import_logs(args, cfg.rate, robot, out, path, log)
 
     robot.check_replay()  # simulating needs PD gains and stated effort limits
-    import dataclasses
-
-    from ..data.excitation import ExcitationConfig, plot_spectrum
+    from ..data.excitation import plot_spectrum
     from ..data.real_robot import Mismatch, collect
 
-    counts = {"train": args.train, "validation": args.validation, "heldout": args.heldout, "ood": args.ood}
-    if any(n < 0 for n in counts.values()) or sum(counts.values()) == 0:
-        raise UserError("--train/--validation/--heldout/--ood must be >= 0 and not all 0")
-    if not args.duration * args.rate >= 2:
-        raise UserError(f"--duration {args.duration} s at {args.rate:g} Hz gives fewer than 2 samples")
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
-    cfg = ExcitationConfig(mode="foot" if args.frames and args.excitation == "auto" else args.excitation)
-    if args.frames is not None:
-        if args.excitation == "joint":
-            raise UserError("--frames sets the IK targets of the foot excitation; it has no use with "
-                            "--excitation joint")
-        frames = tuple(f.strip() for f in args.frames.split(",") if f.strip())
-        if not frames:
-            raise UserError(f"--frames {args.frames!r} names no frame")
-        cfg = dataclasses.replace(cfg, frames=frames)
-    if args.max_velocity is not None:
-        if not args.max_velocity > 0:
-            raise UserError(f"--max-velocity must be > 0, not {args.max_velocity}")
-        cfg = dataclasses.replace(cfg, max_velocity=args.max_velocity, joint_max_velocity=args.max_velocity)
-    log(f"collecting {sum(counts.values())} trajectories of {args.duration:g} s at {args.rate:g} Hz on "
+    log(f"collecting {sum(cfg.counts.values())} trajectories of {cfg.duration:g} s at {cfg.rate:g} Hz on "
          f"{robot.source.name} with mismatch {'none (nominal)' if mismatch.is_nominal() else args.mismatch}, "
-         f"seed {args.seed}")
-    ds = collect(robot, mismatch, counts, args.duration, args.rate, args.seed, cfg, store_tau=not args.no_tau,
-                 progress=log)
+         f"seed {cfg.seed}")
+    ds = collect(robot, mismatch, cfg.counts, cfg.duration, cfg.rate, cfg.seed, cfg.excitation,
+                 store_tau=not args.no_tau, progress=log)
     if not args.no_gap:
-        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, args.rate, "trajectories", log)
+        ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, cfg.rate, "trajectories", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
-    plot_spectrum({s: [tr.q_cmd for tr in ds.split(s)] for s in SPLITS}, args.rate, out / "spectrum.png",
+    plot_spectrum({s: [tr.q_cmd for tr in ds.split(s)] for s in SPLITS}, cfg.rate, out / "spectrum.png",
                   ds.joint_names)
     log(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {out / 'spectrum.png'}")
     return 0

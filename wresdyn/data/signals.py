@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..choices import ExcitationMode, choices
 from ..robot.description import Robot
 from .ik import SOLES
 
@@ -27,7 +28,7 @@ JOINT_TRAIN_FAMILIES = ("multisine",)
 JOINT_OOD_FAMILIES = ("chirp", "steps")
 """Joint-space mode: families for out-of-distribution data."""
 JOINT_FAMILIES = JOINT_TRAIN_FAMILIES + JOINT_OOD_FAMILIES
-MODES = ("auto", "foot", "joint")
+MODES = choices(ExcitationMode)
 """Excitation modes: foot IK targets, joint space, or foot when the robot has all the frames."""
 
 
@@ -70,7 +71,7 @@ class ExcitationConfig:
     min_foot_y: float = 0.05
     """The box of each foot stays this far on its own side of the sagittal plane, so feet never cross [m]
     (with two or more frames, each on a clear side)."""
-    mode: str = "auto"
+    mode: ExcitationMode = "auto"
     """One of :data:`MODES`; :func:`plan` resolves ``"auto"`` (and records the resolved mode)."""
     frames: tuple[str, ...] = SOLES
     """IK frames of the foot mode (sites or bodies), one ellipsoid path each."""
