@@ -5,7 +5,8 @@ import json
 import pytest
 import torch
 
-from wresdyn.learn.runs import RunError, check_resume, config_diff, describe_diff, load_checkpoint, save_checkpoint
+from wresdyn.learn.runs import (RunError, check_resume, config_diff, describe_diff, load_checkpoint, read_unset,
+                                save_checkpoint)
 
 
 def test_config_diff_names_nested_fields_as_json_reads_them():
@@ -30,6 +31,24 @@ def test_check_resume_allows_only_the_listed_fields():
         check_resume("runs/x", old, {"ppo": {"gamma": 0.95, "iterations": 20}}, may_change=["ppo.iterations"])
     assert str(err.value) == ("runs/x was trained with ppo.gamma = 0.9, now 0.95; resume with the same configuration "
                               "or choose another folder")
+
+
+def test_a_run_folder_written_with_0_for_unset_resumes_and_reads_back_as_none():
+    """select_every, grad_truncation and torch_threads say "use another value" with None; folders written before saved
+    0 for it: they resume with the config that means the same, and another value is still refused."""
+    from dataclasses import asdict
+
+    from wresdyn.learn.ppo_config import config_from_dict, default_config
+
+    new = asdict(default_config())
+    old = {**new, "ppo": {**new["ppo"], "select_every": 0}}
+    assert new["ppo"]["select_every"] is None and read_unset(old) == new
+    check_resume("runs/x", old, new)
+    with pytest.raises(RunError, match="ppo.select_every = 3, now null"):
+        check_resume("runs/x", {**new, "ppo": {**new["ppo"], "select_every": 3}}, new)
+    assert read_unset({"sysid": {"grad_truncation": 0, "refine": 0, "flag": False}}) == {
+        "sysid": {"grad_truncation": None, "refine": 0, "flag": False}}
+    assert config_from_dict(old) == default_config()
 
 
 class _Marker:

@@ -228,7 +228,7 @@ class _Iteration:
 
     def _run(self, traj, start, h: int, noise) -> torch.Tensor:
         window = self.bank.window(traj, start, h)
-        run = rollout(self.sim, window, self.policy, grad=True, truncation=self.cfg.grad_truncation,
+        run = rollout(self.sim, window, self.policy, grad=True, truncation=self.cfg.grad_truncation or 0,
                       obs_noise=self.obs_noise, noise=noise)
         loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],
                                   window.qd[:, 1:], self.torque_scale, self.weights)

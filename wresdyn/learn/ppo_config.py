@@ -14,6 +14,7 @@ from ..choices import check_device, check_number
 from ..errors import WresdynError
 from .replay_env_config import ReplayEnvConfig, RewardConfig
 from .residual_config import ResidualConfig
+from .runs import read_unset
 
 __all__ = ["PPOConfig", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config", "config_from_dict",
            "parse_overrides", "apply_overrides", "set_fields", "set_field"]
@@ -60,12 +61,12 @@ class PPOConfig:
     """Seed of torch and of the episode sampler."""
     device: str = "cpu"
     """Simulation and learning device (``cpu``, ``cuda:0``)."""
-    torch_threads: int = 1
-    """CPU threads for torch (0: torch's default). One is fastest for these small batches: on a busy 2-core
+    torch_threads: int | None = 1
+    """CPU threads for torch (``None``: torch's default). One is fastest for these small batches: on a busy 2-core
     machine two intra-op threads made a (256, 84) gather-and-normalise 600x slower (20 ms vs 31 us)."""
-    select_every: int = 0
+    select_every: int | None = None
     """Replay the validation split open loop every this many iterations and export the residual with the lowest
-    validation error (model selection on validation); 0 = ten times per run."""
+    validation error (model selection on validation); ``None`` = ten times per run."""
     cuda_graph: bool = True
     """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.learn.replay_env.ReplayEnv`); the
     runner's per-step NaN check (a host sync) is then off: the environment keeps non-finite states out of what it
@@ -82,8 +83,9 @@ class PPOConfig:
         check_number(self.gamma, "ppo.gamma", gt=0, le=1)
         check_number(self.lam, "ppo.lam", ge=0, le=1)
         check_number(self.seed, "ppo.seed", integer=True, ge=0, le=2**32 - 1)  # numpy's seed range
-        check_number(self.torch_threads, "ppo.torch_threads", integer=True, ge=0)
-        check_number(self.select_every, "ppo.select_every", integer=True, ge=0)
+        for name in ("torch_threads", "select_every"):
+            if getattr(self, name) is not None:
+                check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
         check_device(self.device, "ppo.device")
 
 
@@ -129,7 +131,8 @@ def default_config() -> TrainConfig:
 
 
 def config_from_dict(d: dict) -> TrainConfig:
-    """Inverse of ``dataclasses.asdict`` for :class:`TrainConfig` (lists back to tuples)."""
+    """Inverse of ``dataclasses.asdict`` for :class:`TrainConfig` (lists back to tuples; a run folder's legacy 0 for
+    "unset" as ``None``, :func:`~wresdyn.learn.runs.read_unset`)."""
 
     def build(cls, values):
         kw = {}
@@ -145,7 +148,7 @@ def config_from_dict(d: dict) -> TrainConfig:
             kw[f.name] = v
         return cls(**kw)
 
-    return build(TrainConfig, d)
+    return build(TrainConfig, read_unset(d))
 
 
 def parse_overrides(cfg: TrainConfig, items) -> dict:

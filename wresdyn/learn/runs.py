@@ -18,8 +18,8 @@ from pathlib import Path
 
 from ..errors import WresdynError
 
-__all__ = ["RunError", "RunFolder", "Best", "config_diff", "describe_diff", "check_resume", "load_checkpoint",
-           "save_checkpoint", "write_json"]
+__all__ = ["RunError", "RunFolder", "Best", "config_diff", "describe_diff", "check_resume", "read_unset",
+           "UNSET_WAS_ZERO", "load_checkpoint", "save_checkpoint", "write_json"]
 
 
 class RunError(WresdynError):
@@ -98,12 +98,25 @@ def describe_diff(old: dict, new: dict, paths=None, limit: int = 3) -> str:
     return "; ".join(parts)
 
 
+UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads")
+"""Config fields whose "use another value" is ``None``, and was 0 in the run folders written before it was: a 0 saved
+there reads as ``None`` (:func:`read_unset`), so those runs resume and evaluate as they were."""
+
+
+def read_unset(config):
+    """``config`` (JSON-like) with a 0 in a :data:`UNSET_WAS_ZERO` field, at any depth, read as ``None``."""
+    if isinstance(config, dict):
+        return {k: None if k in UNSET_WAS_ZERO and type(v) is int and v == 0 else read_unset(v)
+                for k, v in config.items()}
+    return config
+
+
 def check_resume(run_dir, old: dict, new: dict, may_change=(), what: str = "configuration") -> None:
     """Raise :class:`RunError` naming the fields if ``new`` differs from the saved ``old`` outside ``may_change``.
 
     Args:
         run_dir: The run folder (named in the message).
-        old, new: JSON-like configs (the saved one and the one asked for).
+        old, new: JSON-like configs (the saved one and the one asked for), both read with :func:`read_unset`.
         may_change: Dotted paths (as :func:`config_diff` gives them) that a resumed run may change, e.g.
             ``("ppo.iterations", "ppo.device")``; a path also covers everything under it.
         what: What the dicts are, for the message (``"configuration"``, ``"data"``).
@@ -113,6 +126,7 @@ def check_resume(run_dir, old: dict, new: dict, may_change=(), what: str = "conf
     def allowed(p: str) -> bool:
         return any(p == k or p.startswith(k + ".") or p.startswith(k + "[") for k in keep)
 
+    old, new = read_unset(old), read_unset(new)
     changed = [p for p in config_diff(old, new) if not allowed(p)]
     if not changed:
         return

@@ -75,7 +75,7 @@ def _window_loss(cfg, model, sim, window, weights=None):
     """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
     per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
     sim.set_physics(model())
-    run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation)
+    run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation or 0)
     pos = squared_error(run.q[:, 1:], window.q[:, 1:], weights)
     vel = squared_error(run.qd[:, 1:], window.qd[:, 1:], weights)
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}

@@ -80,7 +80,7 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
     leave ``learner.module`` at the best iterate on validation when the schedule is done (or ``stop_below`` reached).
 
     Args:
-        cfg: The learner's config: ``iterations``, ``lr``, ``lr_final``, ``select_every`` (0: ten times per run).
+        cfg: The learner's config: ``iterations``, ``lr``, ``lr_final``, ``select_every`` (``None``: ten times per run).
         learner: The model, its loss and its step.
         run: The run folder (``RunFolder(None, ...)`` keeps it in memory).
         rng: The window sampler, checkpointed with the run.
@@ -164,7 +164,7 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
 def start_window_fit(cfg, dataset):
     """Pin torch's threads, seed torch and the window sampler, and take the training split: ``(rng, train, dt)``
     with ``dt`` the sample period [s]."""
-    if cfg.torch_threads > 0:
+    if cfg.torch_threads is not None:
         torch.set_num_threads(cfg.torch_threads)
     torch.manual_seed(cfg.seed)
     train = dataset.split("train")

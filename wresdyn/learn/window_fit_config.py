@@ -24,8 +24,10 @@ def check_window_fit_config(cfg) -> None:
         check_number(getattr(cfg, name), name, integer=True, ge=1)
     for i, h in enumerate(cfg.horizon_curriculum):
         check_number(h, f"horizon_curriculum[{i}]", integer=True, ge=1)
-    for name in ("grad_truncation", "select_every", "seed", "torch_threads"):
-        check_number(getattr(cfg, name), name, integer=True, ge=0)
+    check_number(cfg.seed, "seed", integer=True, ge=0)
+    for name in ("grad_truncation", "select_every", "torch_threads"):
+        if getattr(cfg, name) is not None:
+            check_number(getattr(cfg, name), name, integer=True, ge=1)
     for name in ("lr", "lr_final", "grad_clip"):
         check_number(getattr(cfg, name), name, gt=0)
     for name in ("w_q", "w_qd"):
@@ -49,8 +51,8 @@ class SysIdConfig:
     horizon_curriculum: tuple[int, ...] = (16, 32, 64, 128)
     """Window lengths [steps] in equal parts of training: short windows first (a far-off start diverges over
     long ones), long windows last (delay, friction and saturation act over tens of steps)."""
-    grad_truncation: int = 0
-    """Detach the state every this many steps; 0 = full backpropagation (the parameters are few and the
+    grad_truncation: int | None = None
+    """Detach the state every this many steps; ``None`` = full backpropagation (the parameters are few and the
     identified model is stable, unlike a residual network early in training)."""
     lr: float = 0.01
     """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel` (log scales and
@@ -90,12 +92,12 @@ class SysIdConfig:
     """Newton solver; must be differentiable (SolverReplay)."""
     device: str = "cpu"
     """Warp / torch device."""
-    torch_threads: int = 1
-    """CPU threads for torch (0: torch's default); see :class:`wresdyn.learn.gradfit.GradFitConfig`."""
+    torch_threads: int | None = 1
+    """CPU threads for torch (``None``: torch's default); see :class:`wresdyn.learn.gradfit.GradFitConfig`."""
     seed: int = 0
     """Seed of the window sampler."""
-    select_every: int = 0
-    """Validate every this many iterations (0: ten times per run)."""
+    select_every: int | None = None
+    """Validate every this many iterations (``None``: ten times per run)."""
     refine: int = 0
     """L-BFGS steps after Adam (0: off), each up to 20 evaluations with a strong-Wolfe line search, on
     ``refine_windows`` fixed training windows of the longest horizon, from the parameters selected so far; every
@@ -147,10 +149,10 @@ class GradFitConfig:
     """Window lengths stepped through in equal parts of training; empty = always ``horizon``. Doubling
     matters: a residual fitted on 4-step windows can make the 16-step closed loop unstable, and training
     does not recover from there."""
-    grad_truncation: int = 16
+    grad_truncation: int | None = 16
     """Truncated backpropagation: gradients flow through at most this many steps [steps] (the state is
     detached every ``grad_truncation`` steps; the rollout and its loss still span the whole window). Through
-    stiff PD dynamics, longer gradient paths explode; 0 = never truncate."""
+    stiff PD dynamics, longer gradient paths explode; ``None`` = never truncate."""
     windows: int = 32
     """Parallel windows B (Newton worlds) per iteration."""
     iterations: int = 2000
@@ -179,14 +181,14 @@ class GradFitConfig:
     """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
     device: str = "cpu"
     """Warp / torch device."""
-    torch_threads: int = 1
-    """CPU threads for torch (0: torch's default). One is fastest for these small networks, and an unpinned fit
+    torch_threads: int | None = 1
+    """CPU threads for torch (``None``: torch's default). One is fastest for these small networks, and an unpinned fit
     ran 12x slower on a loaded 2-core machine (threads contending with the simulation and each other)."""
     seed: int = 0
     """Seed of the window sampler and network initialisation."""
-    select_every: int = 0
+    select_every: int | None = None
     """Evaluate on the validation split every this many iterations and return the best residual (model
-    selection on validation); 0 = ten times per run."""
+    selection on validation); ``None`` = ten times per run."""
     cuda_graph: bool = True
     """On CUDA, replay each iteration (the rollout with the residual in the loop, the loss, the backward pass
     through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
