@@ -12,55 +12,20 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from ..choices import check_number
 from ..learn.network_file import load_program, save_program
 from ..learn.ppo_runner import (latest_checkpoint, learn, make_runner, on_iteration, resume_runner, rsl_runner_cfg,
                                 seed_processes)
 from ..learn.runs import check_resume, write_json
 from ..progress import bar
+from .skill_config import SkillPPOConfig
 
 __all__ = ["SkillPPOConfig", "train_skill", "load_skill"]
-
-
-@dataclass(frozen=True)
-class SkillPPOConfig:
-    """PPO of the skills (rsl-rl ``OnPolicyRunner``)."""
-
-    num_envs: int = 64
-    iterations: int = 300
-    num_steps_per_env: int = 24
-    hidden_dims: tuple = (256, 128)
-    init_std: float = 0.3
-    """Initial action noise [-] (× action_scale rad)."""
-    restart_std: float = 0.0
-    """Action noise a fine-tuning restarts from [-] (0: the initial policy's own). PPO on many worlds shrinks the
-    noise far (0.30 -> 0.05 in 300 iterations at 4096 worlds), and a fine-tuning from there barely explores."""
-    output_gain: float = 0.01
-    """The actor's last layer starts scaled by this: the untrained policy plays the reference (zero action)."""
-    learning_rate: float = 1e-3
-    gamma: float = 0.97
-    lam: float = 0.95
-    entropy_coef: float = 0.002
-    num_learning_epochs: int = 5
-    num_mini_batches: int = 4
-    desired_kl: float = 0.01
-    save_interval: int = 50
-    seed: int = 0
-    device: str = "cpu"
-    torch_threads: int = 2
-    """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine); 0 = torch's default."""
-
-    def __post_init__(self) -> None:
-        for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
-                  "save_interval"):
-            check_number(getattr(self, k), f"ppo.{k}", integer=True, ge=1)
-        check_number(self.restart_std, "ppo.restart_std", ge=0)
 
 
 def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
