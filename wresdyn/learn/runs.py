@@ -98,15 +98,16 @@ def describe_diff(old: dict, new: dict, paths=None, limit: int = 3) -> str:
     return "; ".join(parts)
 
 
-UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads")
+UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads", "restart_std")
 """Config fields whose "use another value" is ``None``, and was 0 in the run folders written before it was: a 0 saved
 there reads as ``None`` (:func:`read_unset`), so those runs resume and evaluate as they were."""
 
 
 def read_unset(config):
-    """``config`` (JSON-like) with a 0 in a :data:`UNSET_WAS_ZERO` field, at any depth, read as ``None``."""
+    """``config`` (JSON-like) with a 0 (or 0.0: ``restart_std``) in a :data:`UNSET_WAS_ZERO` field, at any depth,
+    read as ``None``."""
     if isinstance(config, dict):
-        return {k: None if k in UNSET_WAS_ZERO and type(v) is int and v == 0 else read_unset(v)
+        return {k: None if k in UNSET_WAS_ZERO and type(v) in (int, float) and v == 0 else read_unset(v)
                 for k, v in config.items()}
     return config
 

@@ -109,8 +109,8 @@ class SkillPPOConfig:
     hidden_dims: tuple = (256, 128)
     init_std: float = 0.3
     """Initial action noise [-] (× action_scale rad)."""
-    restart_std: float = 0.0
-    """Action noise a fine-tuning restarts from [-] (0: the initial policy's own). PPO on many worlds shrinks the
+    restart_std: float | None = None
+    """Action noise a fine-tuning restarts from [-] (``None``: the initial policy's own). PPO on many worlds shrinks the
     noise far (0.30 -> 0.05 in 300 iterations at 4096 worlds), and a fine-tuning from there barely explores."""
     output_gain: float = 0.01
     """The actor's last layer starts scaled by this: the untrained policy plays the reference (zero action)."""
@@ -124,11 +124,15 @@ class SkillPPOConfig:
     save_interval: int = 50
     seed: int = 0
     device: str = "cpu"
-    torch_threads: int = 2
-    """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine); 0 = torch's default."""
+    torch_threads: int | None = 2
+    """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine; ``None``: torch's
+    default)."""
 
     def __post_init__(self) -> None:
         for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
                   "save_interval"):
             check_number(getattr(self, k), f"ppo.{k}", integer=True, ge=1)
-        check_number(self.restart_std, "ppo.restart_std", ge=0)
+        if self.restart_std is not None:
+            check_number(self.restart_std, "ppo.restart_std", gt=0)
+        if self.torch_threads is not None:
+            check_number(self.torch_threads, "ppo.torch_threads", integer=True, ge=1)

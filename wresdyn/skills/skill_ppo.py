@@ -108,15 +108,15 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     return summary
 
 
-def _start_from(runner, init, restart_std: float) -> None:
+def _start_from(runner, init, restart_std: float | None) -> None:
     """Load the last checkpoint of the skill run ``init`` into ``runner`` (actor, critic, optimiser) to fine-tune it
-    from iteration 0, its action noise reset to ``restart_std`` (> 0; else kept)."""
+    from iteration 0, its action noise reset to ``restart_std`` (``None``: kept)."""
     base = latest_checkpoint(init)
     if base is None:
         raise FileNotFoundError(f"{init}: no checkpoint to fine-tune from")
     runner.load(str(base), map_location=str(runner.env.device))
     runner.current_learning_iteration = 0
-    if restart_std > 0:
+    if restart_std is not None:
         _set_std(runner.alg.actor, restart_std)
 
 
