@@ -81,8 +81,8 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     Args:
         robot: The nominal robot on its stand (fixed base); its floating twin is loaded from the same file.
         dataset: The stand recordings the corrections are fitted on.
-        cfg: Sizes. task: :class:`~wresdyn.skills.floor_env.FloorTaskConfig`;
-            ppo: :class:`~wresdyn.skills.skill_ppo.SkillPPOConfig`.
+        cfg: Sizes. task: :class:`~wresdyn.skills.skill_config.FloorTaskConfig`;
+            ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always).

@@ -50,8 +50,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         data_path: Where ``dataset`` was read from (recorded in the fitted runs).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
-        task: :class:`~wresdyn.skills.env.SkillConfig`; ppo: :class:`~wresdyn.skills.skill_ppo.SkillPPOConfig` (its
-            size fields are set from ``cfg``).
+        task: :class:`~wresdyn.skills.skill_config.SkillConfig`;
+            ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
             ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``).
 

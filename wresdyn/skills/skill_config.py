@@ -31,8 +31,11 @@ class SkillConfig:
     sigma_qd: float = 1.5
     """Width of the joint-velocity kernel [rad/s]."""
     w_q: float = 1.0
+    """Weight of the coarse joint-position kernel [-]."""
     w_q_fine: float = 1.0
+    """Weight of the fine joint-position kernel [-]."""
     w_qd: float = 0.2
+    """Weight of the joint-velocity kernel [-]."""
     w_action_rate: float = 0.05
     """Weight of the mean squared action change per step [-]."""
     fail_error: float = 0.5
@@ -68,10 +71,15 @@ class FloorTaskConfig:
     sigma_base: float = 0.1
     """Width of the base-position kernel [m]."""
     w_q: float = 1.0
+    """Weight of the coarse joint-position kernel [-]."""
     w_q_fine: float = 0.5
+    """Weight of the fine joint-position kernel [-]."""
     w_qd: float = 0.2
+    """Weight of the joint-velocity kernel [-]."""
     w_orientation: float = 1.0
+    """Weight of the base-orientation kernel [-]."""
     w_base: float = 0.5
+    """Weight of the base-position kernel [-]."""
     w_slip: float = 1.0
     """Weight of the mean squared horizontal speed of the planted soles [per (m/s)^2]."""
     w_action_rate: float = 0.05
@@ -104,9 +112,13 @@ class SkillPPOConfig:
     """PPO of the skills (rsl-rl ``OnPolicyRunner``)."""
 
     num_envs: int = 64
+    """Parallel worlds."""
     iterations: int = 300
+    """PPO iterations (a resumed run may raise it)."""
     num_steps_per_env: int = 24
-    hidden_dims: tuple = (256, 128)
+    """Policy steps each world collects per iteration."""
+    hidden_dims: tuple[int, ...] = (256, 128)
+    """Hidden layer widths of the actor and of the critic."""
     init_std: float = 0.3
     """Initial action noise [-] (× action_scale rad)."""
     restart_std: float | None = None
@@ -115,15 +127,25 @@ class SkillPPOConfig:
     output_gain: float = 0.01
     """The actor's last layer starts scaled by this: the untrained policy plays the reference (zero action)."""
     learning_rate: float = 1e-3
+    """Adam's initial learning rate (then adapted to ``desired_kl``)."""
     gamma: float = 0.97
+    """Discount factor per policy step."""
     lam: float = 0.95
+    """GAE lambda."""
     entropy_coef: float = 0.002
+    """Weight of the entropy bonus."""
     num_learning_epochs: int = 5
+    """Passes over each rollout per iteration."""
     num_mini_batches: int = 4
+    """Mini-batches per pass."""
     desired_kl: float = 0.01
+    """Target KL divergence per update of the adaptive learning rate."""
     save_interval: int = 50
+    """Iterations between checkpoints ``model_<it>.pt``."""
     seed: int = 0
+    """Seed of torch and numpy's global generator."""
     device: str = "cpu"
+    """Torch device of the policy and the update."""
     torch_threads: int | None = 2
     """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine; ``None``: torch's
     default)."""
