@@ -10,7 +10,6 @@ changed. The rsl-rl glue (runner, checkpoints, progress) is the residual learner
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -21,11 +20,14 @@ import torch
 from ..learn.network_file import load_program, save_program
 from ..learn.ppo_runner import (latest_checkpoint, learn, make_runner, on_iteration, resume_runner, rsl_runner_cfg,
                                 seed_processes)
-from ..learn.runs import check_resume, write_json
+from ..learn.runs import RunnerFolder
 from ..progress import bar
 from .skill_config import SkillPPOConfig
 
-__all__ = ["SkillPPOConfig", "train_skill", "load_skill"]
+__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "RESUME_MAY_CHANGE"]
+
+RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads")
+"""What a resumed skill run may change: a run may be extended, or moved to another device or machine."""
 
 
 def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
@@ -71,14 +73,11 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         The summary written to ``train_summary.json``.
     """
     run_dir = Path(run_dir)
-    saved = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
-             **(meta or {})}
-    saved = json.loads(json.dumps(saved))  # tuples as lists, as read back
-    cfg_path = run_dir / "config.json"
+    record = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
+              **(meta or {})}
+    run = RunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO")
     ckpt = latest_checkpoint(run_dir)
-    if ckpt is not None:
-        old = json.loads(cfg_path.read_text()) if cfg_path.is_file() else {}
-        check_resume(run_dir, old, saved, may_change=["ppo.iterations", "ppo.device", "ppo.torch_threads"])
+    run.check(ckpt)
     seed_processes(cfg.seed, cfg.torch_threads)
     run_dir.mkdir(parents=True, exist_ok=True)
     runner = make_runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), run_dir)
@@ -87,7 +86,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         start = resume_runner(runner, ckpt, run_dir, log)
     elif init is not None:
         _start_from(runner, init, cfg.restart_std)
-    write_json(saved, cfg_path)
+    run.write_config()
     todo = max(cfg.iterations - start, 0)
     t0 = time.perf_counter()
     if todo:
@@ -104,7 +103,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
                "env_steps_this_session": env.steps_total, "failed_episodes": env.failed_total,
                "diverged": env.diverged_total, "episodes": env.episodes_total,
                "env_steps_per_s": env.steps_total / env.step_seconds if env.step_seconds else None}
-    (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    run.write_summary(summary)
     return summary
 
 
