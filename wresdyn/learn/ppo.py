@@ -14,8 +14,8 @@ residual replays the validation trajectories open loop (:class:`wresdyn.learn.se
 the residual with the lowest error is the one exported. Held-out and OOD data are never read in training.
 
 A resume is refused, naming the fields, when the configuration or the training data differ from what the folder
-was started with (:data:`~wresdyn.learn.ppo_config.RESUME_MAY_CHANGE` may differ), and checkpoints are read as
-weights only (:class:`~wresdyn.learn.ppo_runner.Runner`).
+(a :class:`~wresdyn.learn.runs.RunnerFolder`) was started with (:data:`~wresdyn.learn.ppo_config.RESUME_MAY_CHANGE`
+may differ), and checkpoints are read as weights only (:class:`~wresdyn.learn.ppo_runner.Runner`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
-changed. The rsl-rl glue (runner, checkpoints, progress) is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
+changed (the folder is a :class:`wresdyn.learn.runs.RunnerFolder`). The rsl-rl glue (runner, checkpoints, progress)
+is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
 """
 
 from __future__ import annotations
