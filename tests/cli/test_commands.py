@@ -18,6 +18,7 @@ from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
 from wresdyn.learn.hybrid import HYBRID_ITERATIONS
 from wresdyn.learn.ppo_config import default_config
 from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
+from wresdyn.skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 
 OLD_FLAGS = {
     "inspect": ("--gains", "--floating", "--seconds", "--dt", "--solver"),
@@ -55,7 +56,10 @@ CONFIG_FLAGS = {
     "fit": [(replace(GradFitConfig(), iterations=HYBRID_ITERATIONS), "", ("model",)),
             (SysIdConfig(), "identify.", ("device", "seed", "solver"))],
     "train": [(default_config(), "", ())],
-    "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig)))],
+    "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig))),
+               (SkillConfig(), "task.", ()),
+               (FloorTaskConfig(), "task.", tuple(f.name for f in fields(SkillConfig))),
+               (SkillPPOConfig(), "ppo.", ("num_envs", "iterations", "restart_std", "seed", "device"))],
     "ablate": [(AblationConfig(), "", ("ppo_overrides", "gradient_overrides"))],
 }
 """Each command's configs: ``(defaults, flag prefix, fields without a flag)``."""
@@ -161,6 +165,39 @@ def test_command_lines_of_earlier_releases_build_the_same_config(argv, expected)
     assert asdict(_config(argv)) == asdict(expected)
 
 
+@pytest.mark.parametrize("floor", [False, True], ids=["stand", "floor"])
+def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_path):
+    """``--task.*`` and ``--ppo.*`` build the task and PPO configs that ``wresdyn deploy`` hands the benchmark (stopped
+    there: nothing is loaded, compiled or trained); without them, the benchmark's own defaults."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    import wresdyn.data.loading
+    import wresdyn.experiments.floor_skills
+    import wresdyn.experiments.stand_skills
+    import wresdyn.sim.warmup
+
+    robot = SimpleNamespace(source=Path("humanoid.usda"), n_dof=3)
+    monkeypatch.setattr(wresdyn.data.loading, "load_data", lambda path: (SimpleNamespace(rate_hz=500.0), robot))
+    monkeypatch.setattr(wresdyn.sim.warmup, "compile_kernels", lambda *a, **k: None)
+    passed = []
+    module, name = ((wresdyn.experiments.floor_skills, "run_floor_benchmark") if floor
+                    else (wresdyn.experiments.stand_skills, "run_benchmark"))
+    monkeypatch.setattr(module, name, lambda robot, ds, out, cfg, **kw: passed.append((cfg, kw)))
+    head = ["deploy", "d.npz", "--out", str(tmp_path), "--quiet", "--envs", "8"] + (["--floor"] if floor else [])
+    task_cls = FloorTaskConfig if floor else SkillConfig
+    own = ["--task.sigma-base", "0.2"] if floor else ["--task.fail-error", "0.7"]
+    assert main(head + ["--task.action-scale", "0.3", "--task.decimation", "5", *own, "--ppo.hidden-dims", "64,32",
+                        "--ppo.gamma", "0.99", "--ppo.torch-threads", "none", "--ppo.init-std", "0.5"]) == 0
+    cfg, kw = passed[-1]
+    assert cfg == (FloorDeployConfig if floor else DeployConfig)(envs=8)
+    task = task_cls(action_scale=0.3, decimation=5, **({"sigma_base": 0.2} if floor else {"fail_error": 0.7}))
+    assert kw["task"] == task
+    assert kw["ppo"] == SkillPPOConfig(hidden_dims=(64, 32), gamma=0.99, torch_threads=None, init_std=0.5)
+    assert main(head) == 0
+    assert passed[-1][1]["task"] == task_cls() and passed[-1][1]["ppo"] == SkillPPOConfig()
+
+
 def test_the_hybrids_identification_shares_the_fits_device_seed_solver_and_windows():
     from wresdyn.cli.fit import identify_config_from_args
 
@@ -207,6 +244,12 @@ def test_a_malformed_flag_is_one_line_and_exit_2(argv, message, capsys):
      "wresdyn train: error: --set 'ppo.gama=0.9': no field 'ppo.gama' (sections: env, ppo, residual, rewards)"),
     (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_envs = 0 must be >= 1"),
     (["deploy", "--oracle-beside"], "wresdyn deploy: error: --oracle-beside trains the floor's oracle; it needs --floor"),
+    (["deploy", "--task.w-fall", "3"],
+     "wresdyn deploy: error: --task.w-fall sets the task on the floor; it needs --floor"),
+    (["deploy", "--floor", "--task.fail-error", "1"],
+     "wresdyn deploy: error: --task.fail-error sets the task on the stand; it has no use with --floor"),
+    (["deploy", "--ppo.torch-threads", "0"], "wresdyn deploy: error: ppo.torch_threads = 0 must be >= 1"),
+    (["deploy", "--task.sigma-q", "0"], "wresdyn deploy: error: skill.sigma_q = 0.0 must be > 0"),
     (["fit", "none.npz", "--gain-grid", "1,-0.5"], "wresdyn fit: error: gain_grid[1] = -0.5 must be > 0"),
 ])
 def test_a_value_the_config_refuses_is_one_line_and_exit_2(argv, message, capsys):

@@ -131,3 +131,66 @@ def test_run_folder_without_a_path_keeps_everything_in_memory(tmp_path, monkeypa
     run.save({"w": torch.ones(1)})
     run.write_curve()
     assert run.iteration == 1 and not list(tmp_path.iterdir())
+
+
+def _skill_record(**ppo) -> dict:
+    """The ``config.json`` of a skill run (:func:`wresdyn.skills.skill_ppo.train_skill`), with ``ppo`` fields set."""
+    from dataclasses import asdict, replace
+
+    from wresdyn.skills.skill_config import SkillConfig, SkillPPOConfig
+
+    return {"ppo": asdict(replace(SkillPPOConfig(), **ppo)), "task": asdict(SkillConfig()), "init": None,
+            "setting": "nominal"}
+
+
+def test_runner_folder_checks_its_record_and_writes_it_once_fit(tmp_path):
+    """A runner keeping its own checkpoints (rsl-rl's PPO): ``config.json`` is the record a resume is checked against,
+    refused in one line naming the fields, and written only by a run found fit to continue."""
+    from wresdyn.learn.runs import RunnerFolder
+    from wresdyn.skills.skill_ppo import RESUME_MAY_CHANGE
+
+    path = tmp_path / "skill"
+    first = RunnerFolder(path, _skill_record(), RESUME_MAY_CHANGE)
+    assert first.check(None) is None  # a fresh run: nothing to check
+    first.write_config()
+    first.write_summary({"iterations": 3})
+    saved = (path / "config.json").read_text()
+    assert json.loads(saved) == json.loads(json.dumps(_skill_record()))
+    assert json.loads((path / "train_summary.json").read_text()) == {"iterations": 3}
+    ckpt = path / "model_2.pt"
+    # extended, or moved to another device, it goes on
+    assert RunnerFolder(path, _skill_record(iterations=9, device="cuda:0"), RESUME_MAY_CHANGE).check(ckpt) == \
+        json.loads(saved)
+    refused = RunnerFolder(path, _skill_record(gamma=0.9, iterations=9), RESUME_MAY_CHANGE)
+    with pytest.raises(RunError) as err:
+        refused.check(ckpt)
+    assert str(err.value) == (f"{path} was trained with ppo.gamma = 0.97, now 0.9; resume with the same "
+                              "configuration or choose another folder")
+    assert (path / "config.json").read_text() == saved
+    # the compared part of a record under a key (the residual's PPO: the config beside the data's identity)
+    nested = RunnerFolder(tmp_path / "ppo", {"config": {"lr": 0.1}, "dataset": {"rate_hz": 500.0}}, key="config",
+                          writer="`wresdyn train`")
+    nested.write_config()
+    assert list(json.loads((tmp_path / "ppo" / "config.json").read_text())) == ["config", "dataset"]
+    with pytest.raises(RunError, match=r"lr = 0.1, now 0.2"):
+        RunnerFolder(tmp_path / "ppo", {"config": {"lr": 0.2}, "dataset": {}}, key="config").check(ckpt)
+    (tmp_path / "ppo" / "config.json").write_text("[1]")
+    with pytest.raises(RunError, match=r"config.json: not a run configuration written by `wresdyn train`$"):
+        nested.check(ckpt)
+    with pytest.raises(RunError, match="holds checkpoints but no config.json"):
+        RunnerFolder(tmp_path / "none", _skill_record()).check(ckpt)
+
+
+def test_a_skill_run_written_with_0_for_unset_resumes():
+    """The skills' PPO wrote 0.0 for "the initial policy's own noise" (``restart_std``) and 0 for "torch's default
+    threads" (``torch_threads``), both ``None`` now: such a folder resumes, and another value is still refused."""
+    from wresdyn.learn.runs import RunnerFolder
+
+    old = _skill_record()
+    old["ppo"].update(restart_std=0.0, torch_threads=0)  # what SkillPPOConfig(restart_std=0.0, torch_threads=0) saved
+    new = _skill_record(restart_std=None, torch_threads=None)
+    check_resume("runs/x", old, new)
+    assert read_unset(old) == read_unset(new)
+    with pytest.raises(RunError, match=r"ppo.restart_std = 0.5, now null"):
+        check_resume("runs/x", _skill_record(restart_std=0.5), new)
+    assert RunnerFolder("runs/x", new).config["ppo"]["restart_std"] is None

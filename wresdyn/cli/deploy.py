@@ -6,6 +6,10 @@ Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tr
 given, and the four policies live in ``OUT/skills/``. Rerunning the same command resumes. Every line printed is also
 in ``OUT/deploy.log`` (rsl-rl's tables in each policy's ``train.log``); on a terminal a progress bar per policy shows
 the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
+
+The sizes are ``DeployConfig`` (``FloorDeployConfig`` with ``--floor``), the task ``--task.*`` is ``SkillConfig``
+(``FloorTaskConfig`` with ``--floor``) and the PPO of every policy ``--ppo.*`` is ``SkillPPOConfig``
+(:mod:`wresdyn.skills.skill_config`).
 """
 
 from __future__ import annotations
@@ -14,7 +18,18 @@ import argparse
 from dataclasses import fields
 
 from ..experiments.deploy_config import DeployConfig, FloorDeployConfig
+from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 from .config_flags import add_config_flags, build_config, given_fields
+
+PPO_FROM_SIZES = ("num_envs", "iterations", "restart_std", "seed", "device")
+"""Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``envs``/``oracle_envs``, ``iterations``/
+``finetune``, ``finetune_std``, ``seed``, ``device``): no ``--ppo.*`` flag of their own."""
+
+_STAND, _FLOOR = {f.name for f in fields(SkillConfig)}, {f.name for f in fields(FloorTaskConfig)}
+STAND_ONLY = tuple(f.name for f in fields(SkillConfig) if f.name not in _FLOOR)
+"""Fields of the task on the stand that the task on the floor lacks."""
+FLOOR_ONLY = tuple(f.name for f in fields(FloorTaskConfig) if f.name not in _STAND)
+"""Fields of the task on the floor that the task on the stand lacks."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,6 +61,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      title="sizes (wresdyn.experiments.deploy_config.DeployConfig, FloorDeployConfig with --floor)")
     add_config_flags(p, FloorDeployConfig(), skip=[f.name for f in fields(DeployConfig)],
                      title="on the floor (--floor)")
+    add_config_flags(p, SkillConfig(), prefix="task.", skip=STAND_ONLY, variants={"--floor": FloorTaskConfig()},
+                     title="the tracking task (wresdyn.skills.skill_config.SkillConfig, FloorTaskConfig with --floor)")
+    shared = [f.name for f in fields(SkillConfig) if f.name in _FLOOR]
+    add_config_flags(p, SkillConfig(), prefix="task.", skip=shared, title="the task on the stand only (without --floor)")
+    add_config_flags(p, FloorTaskConfig(), prefix="task.", skip=shared, title="the task on the floor only (--floor)")
+    add_config_flags(p, SkillPPOConfig(), prefix="ppo.", skip=PPO_FROM_SIZES,
+                     title="PPO of every policy (wresdyn.skills.skill_config.SkillPPOConfig; worlds, iterations, "
+                           "restart noise, seed and device come from the sizes above)")
 
 
 def config_from_args(args: argparse.Namespace) -> DeployConfig | FloorDeployConfig:
@@ -59,6 +82,20 @@ def config_from_args(args: argparse.Namespace) -> DeployConfig | FloorDeployConf
     return build_config(cls.full() if args.full else cls(), given)
 
 
+def skill_configs_from_args(args: argparse.Namespace) -> tuple[SkillConfig | FloorTaskConfig, SkillPPOConfig]:
+    """The task (:class:`SkillConfig`, :class:`FloorTaskConfig` with ``--floor``) and the PPO of the skills, with the
+    ``--task.*`` and ``--ppo.*`` flags given applied."""
+    from . import UserError
+
+    task = given_fields(args, "task.")
+    other, where = (STAND_ONLY, "on the stand; it has no use with --floor") if args.floor else \
+        (FLOOR_ONLY, "on the floor; it needs --floor")
+    for name in (n for n in other if n in task):
+        raise UserError(f"--task.{name.replace('_', '-')} sets the task {where}")
+    return (build_config(FloorTaskConfig() if args.floor else SkillConfig(), task),
+            build_config(SkillPPOConfig(), given_fields(args, "ppo.")))
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -66,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import Mismatch
 
     cfg = config_from_args(args)
+    task, ppo = skill_configs_from_args(args)
     if args.floor:
         from ..experiments.floor_skills import run_floor_benchmark as bench
     else:
@@ -89,6 +127,5 @@ def run(args: argparse.Namespace) -> int:
         compile_kernels(robot, ds.rate_hz, ("forward",), device=cfg.device,
                         physics=PhysicalParams.load(calibrated, robot), say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
-                  mismatch=mismatch, animation=not args.no_animation,
-                  log=log)
+          mismatch=mismatch, task=task, ppo=ppo, animation=not args.no_animation, log=log)
     return 0

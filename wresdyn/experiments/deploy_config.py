@@ -52,11 +52,6 @@ class DeployConfig:
         """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
         return self.envs if self.oracle_envs is None else self.oracle_envs
 
-    @property
-    def restart_std(self) -> float:
-        """``SkillPPOConfig.restart_std`` of a fine-tuning: ``finetune_std``, else 0 ((a)'s own)."""
-        return 0.0 if self.finetune_std is None else self.finetune_std
-
     def __post_init__(self) -> None:
         for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
             check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
@@ -86,7 +81,7 @@ class FloorDeployConfig:
     oracle_envs: int | None = None
     """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (``None``: ``envs``)."""
     finetune_std: float | None = None
-    """Action noise the fine-tunings restart from (``None``: (a)'s own)."""
+    """Action noise the fine-tunings restart from (``None``: (a)'s own; ``SkillPPOConfig.restart_std``)."""
     iterations: int = 200
     """PPO iterations of (a) in the nominal simulator."""
     finetune: int = 60
@@ -110,11 +105,6 @@ class FloorDeployConfig:
     def oracle_worlds(self) -> int:
         """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
         return self.envs if self.oracle_envs is None else self.oracle_envs
-
-    @property
-    def restart_std(self) -> float:
-        """``SkillPPOConfig.restart_std`` of a fine-tuning: ``finetune_std``, else 0 ((a)'s own)."""
-        return 0.0 if self.finetune_std is None else self.finetune_std
 
     def __post_init__(self) -> None:
         for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):

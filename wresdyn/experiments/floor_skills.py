@@ -53,7 +53,7 @@ def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: Fl
     env = FloorTrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
     run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
     it = cfg.iterations if i == 0 else cfg.finetune
-    train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.restart_std),
+    train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=None if i == 0 else cfg.finetune_std),
                 out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
     wall = time.perf_counter() - t0
     log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds on the floor of the {setting} "
@@ -66,7 +66,8 @@ def _train_oracle(source: str, gains, mismatch: dict, rate: float, i: int, motio
     """:func:`_train_policy` of the oracle in a process of its own (its lines go to its ``train.log`` only)."""
     import torch
 
-    torch.set_num_threads(max(ppo.torch_threads, 1))
+    if ppo.torch_threads is not None:
+        torch.set_num_threads(ppo.torch_threads)
     floating = load_robot(source, gains=gains, base="floating")
     real = RealRobot(floating, Mismatch.from_dict(mismatch, "the benchmark's mismatch"), rate)
     return _train_policy(i, "d_oracle", floating, real, motions, task, ppo, cfg, runs, meta, out, lambda s: None)
@@ -80,8 +81,8 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     Args:
         robot: The nominal robot on its stand (fixed base); its floating twin is loaded from the same file.
         dataset: The stand recordings the corrections are fitted on.
-        cfg: Sizes. task: :class:`~wresdyn.skills.floor_env.FloorTaskConfig`;
-            ppo: :class:`~wresdyn.skills.skill_ppo.SkillPPOConfig`.
+        cfg: Sizes. task: :class:`~wresdyn.skills.skill_config.FloorTaskConfig`;
+            ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always).
@@ -97,7 +98,8 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     out.mkdir(parents=True, exist_ok=True)
     task = task or FloorTaskConfig()
     ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
-    torch.set_num_threads(max(ppo.torch_threads, 1))
+    if ppo.torch_threads is not None:
+        torch.set_num_threads(ppo.torch_threads)
     mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
     floating = load_robot(robot.source, gains=robot.gains, base="floating")
     rate = float(dataset.rate_hz)

@@ -50,8 +50,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         data_path: Where ``dataset`` was read from (recorded in the fitted runs).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
         mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
-        task: :class:`~wresdyn.skills.env.SkillConfig`; ppo: :class:`~wresdyn.skills.skill_ppo.SkillPPOConfig` (its
-            size fields are set from ``cfg``).
+        task: :class:`~wresdyn.skills.skill_config.SkillConfig`;
+            ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
             ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``).
 
@@ -66,7 +66,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     out.mkdir(parents=True, exist_ok=True)
     task = task or SkillConfig()
     ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
-    torch.set_num_threads(max(ppo.torch_threads, 1))
+    if ppo.torch_threads is not None:
+        torch.set_num_threads(ppo.torch_threads)
     mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
     rate = float(dataset.rate_hz)
     counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
@@ -94,7 +95,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         env = TrackingEnv(plant, motions.split("train"), task, seed=cfg.seed + i, device=cfg.device)
         run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
         it = cfg.iterations if i == 0 else cfg.finetune
-        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=0.0 if i == 0 else cfg.restart_std),
+        train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=None if i == 0 else cfg.finetune_std),
                     out / "skills" / name, log=log,
                     init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
         wall[name] = time.perf_counter() - t0

@@ -14,8 +14,8 @@ residual replays the validation trajectories open loop (:class:`wresdyn.learn.se
 the residual with the lowest error is the one exported. Held-out and OOD data are never read in training.
 
 A resume is refused, naming the fields, when the configuration or the training data differ from what the folder
-was started with (:data:`~wresdyn.learn.ppo_config.RESUME_MAY_CHANGE` may differ), and checkpoints are read as
-weights only (:class:`~wresdyn.learn.ppo_runner.Runner`).
+(a :class:`~wresdyn.learn.runs.RunnerFolder`) was started with (:data:`~wresdyn.learn.ppo_config.RESUME_MAY_CHANGE`
+may differ), and checkpoints are read as weights only (:class:`~wresdyn.learn.ppo_runner.Runner`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from .ppo_runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, o
                          rsl_runner_cfg, seed_processes)
 from .replay_env import ReplayEnv
 from .residual import actor_critic_cfg, export_run_files, obs_stats, policy_from_actor
-from .runs import RunError, check_resume, load_checkpoint, save_checkpoint, write_json
+from .runs import RunError, RunnerFolder, check_resume, load_checkpoint, save_checkpoint
 from .selection import ValidationScore
 
 __all__ = ["train", "export", "load_policy", "runner_cfg", "BestOnValidation", "RunError"]
@@ -69,18 +69,19 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
             checkpoint of these networks.
     """
     run_dir, ranks = Path(run_dir), Ranks.from_env()
-    saved = _run_record(dataset, robot, cfg, ranks, data_path)
-    ckpt = _checkpoint_to_resume(run_dir, saved, resume)
+    run = RunnerFolder(run_dir, _run_record(dataset, robot, cfg, ranks, data_path),
+                       [f"ppo.{k}" for k in RESUME_MAY_CHANGE], key="config", writer="`wresdyn train`")
+    ckpt = _checkpoint_to_resume(run, resume)
     session = _start(dataset, robot, cfg, run_dir, ranks, log)
     start = resume_runner(session.runner, ckpt, run_dir, log) if ckpt is not None else 0
     if ranks.main:  # written once the checkpoint has loaded: a refused resume leaves the folder as it was
-        write_json(saved, run_dir / "config.json")
+        run.write_config()
     score = _validation_score(dataset, robot, cfg, session)
     best = BestOnValidation(run_dir / "best.pt", resumed=start > 0)
     done, reached, wall = _learn_and_select(session, cfg, score, best, start, stop_below, log)
     summary = _summary(session, cfg, best, done - start, wall, reached)
     if ranks.main:
-        _write_results(session, cfg, best, summary, dataset, run_dir)
+        _write_results(session, cfg, best, summary, dataset, run)
     ranks.close()
     return summary
 
@@ -160,30 +161,21 @@ def _run_record(dataset, robot, cfg: TrainConfig, ranks: Ranks, data_path) -> di
     return {"config": asdict(cfg), "dataset": info, "data_path": path}
 
 
-def _checkpoint_to_resume(run_dir: Path, saved: dict, resume: bool) -> Path | None:
+def _checkpoint_to_resume(run: RunnerFolder, resume: bool) -> Path | None:
     """The checkpoint to continue from, if any; refused (naming what changed) when the folder was started with
-    another configuration or other data, or when ``resume`` is false."""
-    ckpt = latest_checkpoint(run_dir)
-    if ckpt is None:
+    another configuration (a run may be extended, or moved to another device or machine: ``RESUME_MAY_CHANGE``) or
+    other data, or when ``resume`` is false."""
+    ckpt = latest_checkpoint(run.path)
+    if ckpt is not None and not resume:
+        raise RunError(f"{run.path} already holds checkpoints ({ckpt.name}); resume it or choose another folder")
+    old = run.check(ckpt)
+    if old is None:
         return None
-    if not resume:
-        raise RunError(f"{run_dir} already holds checkpoints ({ckpt.name}); resume it or choose another folder")
-    cfg_path = run_dir / "config.json"
-    if not cfg_path.is_file():
-        raise RunError(f"{run_dir} holds checkpoints but no config.json, so what they learned is unknown; "
-                       "choose another folder")
-    try:
-        old = json.loads(cfg_path.read_text())
-        old_cfg = old["config"]
-    except (ValueError, KeyError, TypeError):
-        raise RunError(f"{cfg_path}: not a run configuration written by `wresdyn train`") from None
-    # a run may be extended, or moved to another device or machine
-    check_resume(run_dir, old_cfg, saved["config"], may_change=[f"ppo.{k}" for k in RESUME_MAY_CHANGE])
     # a run folder may hold only some of the identity fields (the others unrecorded): compare those it has
     old_data = old.get("dataset") or {}
     keys = [k for k in DATASET_IDENTITY if k in old_data]
-    check_resume(run_dir, {"dataset": {k: old_data[k] for k in keys}},
-                 {"dataset": {k: saved["dataset"][k] for k in keys}}, what="data")
+    check_resume(run.path, {"dataset": {k: old_data[k] for k in keys}},
+                 {"dataset": {k: run.record["dataset"][k] for k in keys}}, what="data")
     return ckpt
 
 
@@ -296,7 +288,7 @@ def _summary(session: _Session, cfg: TrainConfig, best: BestOnValidation, todo: 
 
 
 def _write_results(session: _Session, cfg: TrainConfig, best: BestOnValidation, summary: dict, dataset,
-                   run_dir: Path) -> None:
+                   run: RunnerFolder) -> None:
     """Export the residual selected on validation (the last one without validation), the physics it was trained
     on (the hybrid's, for evaluation to replay with) and ``train_summary.json``."""
     actor = session.runner.alg.get_policy()
@@ -304,10 +296,10 @@ def _write_results(session: _Session, cfg: TrainConfig, best: BestOnValidation, 
         # into the actor itself: training is over and its last checkpoint written, and a deepcopy of it fails on
         # the non-leaf outputs its distribution keeps from the last update
         actor.load_state_dict(best.best["actor"])
-    export(actor, run_dir, cfg, session.mean, session.std, session.env.scale.cpu().numpy(), dataset)
+    export(actor, run.path, cfg, session.mean, session.std, session.env.scale.cpu().numpy(), dataset)
     if session.env.physics is not None:
-        session.env.physics.save(run_dir / "physics.json")
-    (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
+        session.env.physics.save(run.path / "physics.json")
+    run.write_summary(summary)
 
 
 def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) -> None:

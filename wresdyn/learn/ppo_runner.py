@@ -150,8 +150,8 @@ def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, c
 
 
 def seed_processes(seed: int, torch_threads: int | None) -> None:
-    """Pin torch's CPU threads (``None`` or 0, the skills' config's spelling, leave torch's default) and seed torch
-    and numpy's global generator (rsl-rl and the environments draw from them)."""
+    """Pin torch's CPU threads (``None`` leaves torch's default) and seed torch and numpy's global generator (rsl-rl
+    and the environments draw from them)."""
     import torch
 
     if torch_threads:

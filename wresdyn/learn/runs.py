@@ -1,7 +1,8 @@
 """Run folders shared by the learners: resume only what was started, load only weights, keep the best.
 
 A :class:`RunFolder` owns a learner's folder: its ``config.json``, the resume check, the weights-only checkpoint, the
-learning curve (``curve.json``) and the best iterate on validation. A resumed run must learn what it started
+learning curve (``curve.json``) and the best iterate on validation; a :class:`RunnerFolder` the folder of a runner that
+keeps its own checkpoints (rsl-rl's PPO): the record, the resume check against it and the summary. A resumed run must learn what it started
 learning, so the configuration saved with the checkpoint is compared with the new one field by field
 (:func:`config_diff`, :func:`check_resume`), and the refusal names the fields. Checkpoints are read with
 ``torch.load(..., weights_only=True)`` (:func:`load_checkpoint`): tensors and plain containers only, so a run folder
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from ..errors import WresdynError
 
-__all__ = ["RunError", "RunFolder", "Best", "config_diff", "describe_diff", "check_resume", "read_unset",
+__all__ = ["RunError", "RunFolder", "RunnerFolder", "Best", "config_diff", "describe_diff", "check_resume", "read_unset",
            "UNSET_WAS_ZERO", "load_checkpoint", "save_checkpoint", "write_json"]
 
 
@@ -98,15 +99,16 @@ def describe_diff(old: dict, new: dict, paths=None, limit: int = 3) -> str:
     return "; ".join(parts)
 
 
-UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads")
+UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads", "restart_std")
 """Config fields whose "use another value" is ``None``, and was 0 in the run folders written before it was: a 0 saved
 there reads as ``None`` (:func:`read_unset`), so those runs resume and evaluate as they were."""
 
 
 def read_unset(config):
-    """``config`` (JSON-like) with a 0 in a :data:`UNSET_WAS_ZERO` field, at any depth, read as ``None``."""
+    """``config`` (JSON-like) with a 0 (or 0.0: ``restart_std``) in a :data:`UNSET_WAS_ZERO` field, at any depth,
+    read as ``None``."""
     if isinstance(config, dict):
-        return {k: None if k in UNSET_WAS_ZERO and type(v) is int and v == 0 else read_unset(v)
+        return {k: None if k in UNSET_WAS_ZERO and type(v) in (int, float) and v == 0 else read_unset(v)
                 for k, v in config.items()}
     return config
 
@@ -319,3 +321,63 @@ class RunFolder:
             self.path.mkdir(parents=True, exist_ok=True)
             (self.path / "curve.json").write_text(json.dumps(self.curve, indent=1))
 
+
+    def write_summary(self, summary: dict) -> None:
+        """Write ``train_summary.json``: what the session did (iterations, speeds, the selection)."""
+        if self.path is not None:
+            write_json(summary, self.path / "train_summary.json")
+
+
+class RunnerFolder(RunFolder):
+    """The run folder of a runner that keeps its own checkpoints (rsl-rl's ``model_<it>.pt``: PPO of the residual,
+    :mod:`wresdyn.learn.ppo`, and of the skills, :mod:`wresdyn.skills.skill_ppo`).
+
+    It owns the record ``config.json``, the resume check against it (:meth:`check`: the runner's checkpoint holds
+    weights only, so the configuration it was trained with is the one ``config.json`` recorded) and
+    ``train_summary.json``; the checkpoints stay the runner's. As for :class:`RunFolder`, ``config.json`` is written
+    (:meth:`write_config`) once the folder is found fit to continue and the checkpoint has loaded.
+
+    Args:
+        path: The folder.
+        record: All of ``config.json`` (JSON-like).
+        may_change: Dotted paths of the compared configuration a resumed run may change (:func:`check_resume`).
+        key: Where the compared configuration lies in ``record`` (``None``: the whole record).
+        writer: What writes such folders, for the refusal of a ``config.json`` that is not one.
+    """
+
+    def __init__(self, path, record: dict, may_change=(), key: str | None = None, writer: str = "this learner"):
+        record = _plain(record)
+        super().__init__(path, record if key is None else record[key], may_change, key or "", record)
+        self.checkpoint = None
+        self.writer = writer
+
+    def check(self, checkpoint) -> dict | None:
+        """Whether the runner may continue ``checkpoint`` (its latest; ``None``: a fresh run, nothing to check).
+
+        Raises a one-line :class:`RunError` if the folder has no ``config.json``, one not written by
+        :attr:`writer`, or one that records another configuration (naming the fields, outside ``may_change``).
+
+        Returns:
+            The saved record (the learner checks the rest of it, e.g. the data), or ``None`` for a fresh run.
+        """
+        if checkpoint is None:
+            return None
+        path = self.path / "config.json"
+        if not path.is_file():
+            raise RunError(f"{self.path} holds checkpoints but no config.json, so what they learned is unknown; "
+                           "choose another folder")
+        try:
+            old = json.loads(path.read_text())
+            saved = old[self.key] if self.key else old
+            if not isinstance(saved, dict):
+                raise TypeError
+        except (ValueError, KeyError, TypeError):
+            raise RunError(f"{path}: not a run configuration written by {self.writer}") from None
+        check_resume(self.path, saved, self.config, self.may_change)
+        return old
+
+    def write_config(self, **record) -> None:
+        """Write ``config.json``: the record (updated with ``record``)."""
+        self.record.update(record)
+        if self.path is not None:
+            write_json(self.record, self.path / "config.json")

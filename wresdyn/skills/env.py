@@ -16,52 +16,19 @@ penalty (:class:`SkillConfig`). An episode ends at the motion's end (a time-out)
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from ..choices import check_number
+from .skill_config import SkillConfig
 
 __all__ = ["SkillConfig", "TrackingEnv", "OBS_TERMS", "reference_tensors"]
 
 OBS_TERMS = ("error", "qd", "ref_next", "ref_ahead", "ref", "last_action")
 """The policy's observation, n values each, in this order."""
-
-
-@dataclass(frozen=True)
-class SkillConfig:
-    """The tracking task: timing, action, rewards and termination."""
-
-    decimation: int = 10
-    """Sample periods per policy step: 10 at 500 Hz is a 50 Hz policy."""
-    action_scale: float = 0.2
-    """PD-target offset per unit action [rad]."""
-    action_clip: float = 3.0
-    """Actions are clipped to ±this [-] before scaling."""
-    ahead: int = 5
-    """The far look-ahead of the observation [policy steps]."""
-    sigma_q: float = 0.1
-    """Width of the coarse joint-position kernel [rad]."""
-    sigma_q_fine: float = 0.03
-    """Width of the fine joint-position kernel [rad]."""
-    sigma_qd: float = 1.5
-    """Width of the joint-velocity kernel [rad/s]."""
-    w_q: float = 1.0
-    w_q_fine: float = 1.0
-    w_qd: float = 0.2
-    w_action_rate: float = 0.05
-    """Weight of the mean squared action change per step [-]."""
-    fail_error: float = 0.5
-    """A joint this far from its reference ends the episode as a failure [rad]."""
-
-    def __post_init__(self) -> None:
-        check_number(self.decimation, "skill.decimation", integer=True, ge=1)
-        check_number(self.ahead, "skill.ahead", integer=True, ge=1)
-        for k in ("action_scale", "action_clip", "sigma_q", "sigma_q_fine", "sigma_qd", "fail_error"):
-            check_number(getattr(self, k), f"skill.{k}", gt=0)
 
 
 def reference_tensors(motions, decimation: int, ahead: int, device) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -20,14 +20,14 @@ reference or tilted past ``fall_tilt``, or more than ``max_base_error`` from the
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from ..choices import check_number
+from .skill_config import FloorTaskConfig
 
 __all__ = ["FloorTaskConfig", "FloorTrackingEnv", "ACTOR_TERMS", "CRITIC_TERMS", "base_frame_imu", "quat_rotate_inv",
            "FOOT_BODIES", "FAILURE_CAUSES"]
@@ -41,60 +41,6 @@ FAILURE_CAUSES = ("fell_low", "tilted", "drifted", "diverged")
 more than ``max_base_error`` from the reference, or the simulation diverged (the first that holds, in this order)."""
 FOOT_BODIES = ("left_foot", "right_foot")
 """The bodies whose slip is penalised where the reference plants them."""
-
-
-@dataclass(frozen=True)
-class FloorTaskConfig:
-    """The tracking task on the floor: timing, action, rewards and the fall rule."""
-
-    decimation: int = 10
-    """Sample periods per policy step: 10 at 500 Hz is a 50 Hz policy."""
-    action_scale: float = 0.25
-    """PD-target offset per unit action [rad]."""
-    action_clip: float = 3.0
-    """Actions are clipped to ±this [-] before scaling."""
-    ahead: int = 5
-    """The far look-ahead of the observation [policy steps]."""
-    sigma_q: float = 0.1
-    """Width of the coarse joint-position kernel [rad]."""
-    sigma_q_fine: float = 0.03
-    """Width of the fine joint-position kernel [rad]."""
-    sigma_qd: float = 1.5
-    """Width of the joint-velocity kernel [rad/s]."""
-    sigma_orientation: float = 0.15
-    """Width of the base-orientation kernel [rad]."""
-    sigma_base: float = 0.1
-    """Width of the base-position kernel [m]."""
-    w_q: float = 1.0
-    w_q_fine: float = 0.5
-    w_qd: float = 0.2
-    w_orientation: float = 1.0
-    w_base: float = 0.5
-    w_slip: float = 1.0
-    """Weight of the mean squared horizontal speed of the planted soles [per (m/s)^2]."""
-    w_action_rate: float = 0.05
-    """Weight of the mean squared action change per step [-]."""
-    w_fall: float = 10.0
-    """Penalty on the step an episode fails."""
-    fall_height: float = 0.25
-    """The base this far below its reference height is a fall [m]."""
-    fall_tilt: float = 0.8
-    """The base tilted this far from upright is a fall [rad]."""
-    max_base_error: float = 0.5
-    """The base this far from its reference position ends the episode as a failure [m] (ASAP's success rule)."""
-    gyro_noise: float = 0.02
-    """The real robot's IMU: white noise on the angular velocity [rad/s]."""
-    gravity_noise: float = 0.01
-    """... and on the measured gravity direction [-]."""
-
-    def __post_init__(self) -> None:
-        check_number(self.decimation, "floor.decimation", integer=True, ge=1)
-        check_number(self.ahead, "floor.ahead", integer=True, ge=1)
-        for k in ("action_scale", "action_clip", "sigma_q", "sigma_q_fine", "sigma_qd", "sigma_orientation",
-                  "sigma_base", "fall_height", "fall_tilt", "max_base_error"):
-            check_number(getattr(self, k), f"floor.{k}", gt=0)
-        for k in ("gyro_noise", "gravity_noise"):
-            check_number(getattr(self, k), f"floor.{k}", ge=0)
 
 
 def quat_rotate_inv(quat_xyzw: torch.Tensor, v: torch.Tensor) -> torch.Tensor:

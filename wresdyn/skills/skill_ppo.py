@@ -5,62 +5,30 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
-changed. The rsl-rl glue (runner, checkpoints, progress) is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
+changed (the folder is a :class:`wresdyn.learn.runs.RunnerFolder`). The rsl-rl glue (runner, checkpoints, progress)
+is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
 """
 
 from __future__ import annotations
 
-import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from ..choices import check_number
 from ..learn.network_file import load_program, save_program
 from ..learn.ppo_runner import (latest_checkpoint, learn, make_runner, on_iteration, resume_runner, rsl_runner_cfg,
                                 seed_processes)
-from ..learn.runs import check_resume, write_json
+from ..learn.runs import RunnerFolder
 from ..progress import bar
+from .skill_config import SkillPPOConfig
 
-__all__ = ["SkillPPOConfig", "train_skill", "load_skill"]
+__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "RESUME_MAY_CHANGE"]
 
-
-@dataclass(frozen=True)
-class SkillPPOConfig:
-    """PPO of the skills (rsl-rl ``OnPolicyRunner``)."""
-
-    num_envs: int = 64
-    iterations: int = 300
-    num_steps_per_env: int = 24
-    hidden_dims: tuple = (256, 128)
-    init_std: float = 0.3
-    """Initial action noise [-] (× action_scale rad)."""
-    restart_std: float = 0.0
-    """Action noise a fine-tuning restarts from [-] (0: the initial policy's own). PPO on many worlds shrinks the
-    noise far (0.30 -> 0.05 in 300 iterations at 4096 worlds), and a fine-tuning from there barely explores."""
-    output_gain: float = 0.01
-    """The actor's last layer starts scaled by this: the untrained policy plays the reference (zero action)."""
-    learning_rate: float = 1e-3
-    gamma: float = 0.97
-    lam: float = 0.95
-    entropy_coef: float = 0.002
-    num_learning_epochs: int = 5
-    num_mini_batches: int = 4
-    desired_kl: float = 0.01
-    save_interval: int = 50
-    seed: int = 0
-    device: str = "cpu"
-    torch_threads: int = 2
-    """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine); 0 = torch's default."""
-
-    def __post_init__(self) -> None:
-        for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
-                  "save_interval"):
-            check_number(getattr(self, k), f"ppo.{k}", integer=True, ge=1)
-        check_number(self.restart_std, "ppo.restart_std", ge=0)
+RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads")
+"""What a resumed skill run may change: a run may be extended, or moved to another device or machine."""
 
 
 def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
@@ -106,14 +74,11 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         The summary written to ``train_summary.json``.
     """
     run_dir = Path(run_dir)
-    saved = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
-             **(meta or {})}
-    saved = json.loads(json.dumps(saved))  # tuples as lists, as read back
-    cfg_path = run_dir / "config.json"
+    record = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
+              **(meta or {})}
+    run = RunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO")
     ckpt = latest_checkpoint(run_dir)
-    if ckpt is not None:
-        old = json.loads(cfg_path.read_text()) if cfg_path.is_file() else {}
-        check_resume(run_dir, old, saved, may_change=["ppo.iterations", "ppo.device", "ppo.torch_threads"])
+    run.check(ckpt)
     seed_processes(cfg.seed, cfg.torch_threads)
     run_dir.mkdir(parents=True, exist_ok=True)
     runner = make_runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), run_dir)
@@ -122,7 +87,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         start = resume_runner(runner, ckpt, run_dir, log)
     elif init is not None:
         _start_from(runner, init, cfg.restart_std)
-    write_json(saved, cfg_path)
+    run.write_config()
     todo = max(cfg.iterations - start, 0)
     t0 = time.perf_counter()
     if todo:
@@ -139,19 +104,19 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
                "env_steps_this_session": env.steps_total, "failed_episodes": env.failed_total,
                "diverged": env.diverged_total, "episodes": env.episodes_total,
                "env_steps_per_s": env.steps_total / env.step_seconds if env.step_seconds else None}
-    (run_dir / "train_summary.json").write_text(json.dumps(summary, indent=2))
+    run.write_summary(summary)
     return summary
 
 
-def _start_from(runner, init, restart_std: float) -> None:
+def _start_from(runner, init, restart_std: float | None) -> None:
     """Load the last checkpoint of the skill run ``init`` into ``runner`` (actor, critic, optimiser) to fine-tune it
-    from iteration 0, its action noise reset to ``restart_std`` (> 0; else kept)."""
+    from iteration 0, its action noise reset to ``restart_std`` (``None``: kept)."""
     base = latest_checkpoint(init)
     if base is None:
         raise FileNotFoundError(f"{init}: no checkpoint to fine-tune from")
     runner.load(str(base), map_location=str(runner.env.device))
     runner.current_learning_iteration = 0
-    if restart_std > 0:
+    if restart_std is not None:
         _set_std(runner.alg.actor, restart_std)
 
 
