@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..robot.description import Robot, RobotError
+from ..robot.pinocchio_model import build_pinocchio
 
 __all__ = ["FootIK", "IKConfig", "SOLES", "POSE_DOF", "MIN_CHAIN_DOF"]
 
@@ -70,8 +71,6 @@ class FootIK:
     def __init__(self, robot: Robot, frames: tuple[str, ...] = SOLES, config: IKConfig | None = None,
                  position_only: bool | None = None):
         import pinocchio as pin
-
-        from ..robot.pinocchio_model import build_pinocchio
 
         if robot.base != "fixed":
             raise RobotError(f"{robot.source}: foot IK needs a fixed-base robot (load_robot(..., base='fixed'))")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot.description import Robot, RobotError
+from ..robot.pinocchio_model import build_pinocchio
 from .signals import (
     JOINT_FAMILIES,
     Excitation,
@@ -33,8 +34,6 @@ class JointDynamics:
 
     def __init__(self, robot: Robot):
         import pinocchio as pin
-
-        from ..robot.pinocchio_model import build_pinocchio
 
         self.robot, self._pin = robot, pin
         self.model = build_pinocchio(robot)

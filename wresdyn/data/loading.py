@@ -5,6 +5,10 @@ from __future__ import annotations
 
 import warnings
 
+from ..paths import REPO
+from ..robot.description import load_robot
+from .dataset import load_dataset
+
 __all__ = ["load_data", "dataset_robot"]
 
 
@@ -22,7 +26,6 @@ def load_data(data: str, robot_file: str | None = None, gains=None):
         RobotError: the robot has no PD gains or a placeholder effort limit (nothing to replay faithfully).
         DatasetError: the dataset cannot be read or does not match the robot's joints.
     """
-    from .dataset import load_dataset
 
     ds = load_dataset(data)
     if gains is not None and ds.gains is not None:
@@ -40,9 +43,6 @@ def dataset_robot(recorded: str, robot_file: str | None = None, gains=None):
     :func:`~wresdyn.robot.description.load_robot` (pass a dataset's stored ``Dataset.gains_config`` to get the
     robot it was recorded on)."""
     from pathlib import Path
-
-    from ..paths import REPO
-    from ..robot.description import load_robot
 
     path = robot_file or recorded
     if robot_file is None and not Path(path).is_absolute() and not Path(path).exists():

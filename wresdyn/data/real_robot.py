@@ -27,8 +27,13 @@ import tomllib
 
 from ..errors import SimulationDiverged
 from ..paths import REPO
+from ..progress import bar
 from ..robot.description import Robot, RobotError
+from ..robot.ground import FloatingState, check_floating
+from ..robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco
 from ..robot.physical import PhysicalParams
+from . import excitation as ex
+from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 
 __all__ = ["Mismatch", "MismatchError", "RealRobot", "SPAWN_KEYS", "collect"]
 
@@ -152,12 +157,8 @@ class RealRobot:
     def __init__(self, robot: Robot, mismatch: Mismatch | None = None, rate_hz: float = 500.0, contact=None):
         import mujoco
 
-        from ..robot.mujoco_model import build_mujoco
-
         floating = robot.base == "floating"
         if floating:
-            from ..robot.ground import check_floating
-
             check_floating(robot)
         elif contact is not None:
             raise RobotError(f"{robot.source}: contact settings need a floating base: the fixed base hangs on a stand")
@@ -284,7 +285,6 @@ class RealRobot:
         The delay line is filled with ``state.q`` (the motors held the start pose before it); ``rng`` draws the
         sensor noise of every following :meth:`step` (required when a noise is on).
         """
-        from ..robot.mujoco_model import free_to_mujoco
 
         if not self.floating:
             raise ValueError(f"{self.robot.source.name}: reset and step drive a floating-base robot; a fixed base "
@@ -306,8 +306,6 @@ class RealRobot:
     def state(self):
         """The true (noise-free) :class:`~wresdyn.robot.ground.FloatingState` after the last :meth:`reset` or
         :meth:`step`."""
-        from ..robot.ground import FloatingState
-        from ..robot.mujoco_model import free_from_mujoco
 
         d = self._data
         if d is None:
@@ -324,7 +322,6 @@ class RealRobot:
         Raises:
             SimulationDiverged: the simulation produced a non-finite state.
         """
-        from ..robot.ground import FloatingState
 
         if self._data is None:
             raise RuntimeError("call reset(state) first")
@@ -434,10 +431,6 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
             draw and one line per recorded trajectory; a :class:`wresdyn.progress.Log` also draws a bar over them.
     """
     import time
-
-    from ..progress import bar
-    from . import excitation as ex
-    from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 
     unknown = sorted(set(counts) - set(SPLITS))
     if unknown:

@@ -23,6 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from .dataset import SCHEMA_VERSION, SPLITS, Dataset, DatasetError, load_dataset, read_header
+from .excitation import ExcitationConfig
+from .loading import dataset_robot
+from .real_robot import Mismatch, collect
 
 __all__ = ["Migration", "migrate", "recorded_by_collect"]
 
@@ -100,10 +103,6 @@ def _move_from_train(ds: Dataset, k: int, path: Path) -> tuple[Dataset, list[str
 
 
 def _record_validation(ds: Dataset, k: int, robot, path: Path, progress):
-    from .excitation import ExcitationConfig
-    from .loading import dataset_robot
-    from .real_robot import Mismatch, collect
-
     meta = ds.meta
     if not isinstance(meta.get("duration_s"), (int, float)) or not isinstance(meta.get("excitation"), dict):
         raise DatasetError(f"{path}: meta lacks the collect parameters (duration_s, excitation) to record more")

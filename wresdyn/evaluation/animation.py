@@ -20,6 +20,7 @@ import numpy as np
 from ..choices import check_number
 from ..errors import WresdynError
 from ..robot.description import Robot
+from ..robot.ground import base_index
 
 __all__ = ["RobotRow", "sample_frames", "write_animation"]
 
@@ -193,8 +194,6 @@ class RobotRow:
 
         rows = np.asarray(rows, dtype=np.float64)
         if self.floating:
-            from ..robot.ground import base_index
-
             b = base_index(self.robot)[0]
             self._q[:, b:b + 7], self._q[:, self.robot.q_index] = rows[:, :7], rows[:, 7:]
         else:

@@ -2,6 +2,14 @@
 
 from __future__ import annotations
 
+from ..learn.ppo import load_policy
+from ..learn.ppo_config import config_from_dict
+from ..learn.runs import RunError
+from ..sim.physics import PhysicalParams
+from ..sim.warmup import compile_kernels
+from .open_loop import evaluate_split, summary_line, write_report
+from .plots import plot_fig3, plot_learning_curves
+
 __all__ = ["evaluate_run", "load_run_model"]
 
 
@@ -16,14 +24,10 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
 
     import torch
 
-    from .open_loop import evaluate_split, summary_line, write_report
-    from .plots import plot_fig3, plot_learning_curves
-
     torch.set_num_threads(1)
     run_dir = Path(run)
     policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
     out_dir = Path(out) if out else run_dir / "eval"
-    from ..sim.warmup import compile_kernels
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device, physics=physics)
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
@@ -62,11 +66,6 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
     """
     import json
     from pathlib import Path
-
-    from ..learn.ppo import load_policy
-    from ..learn.ppo_config import config_from_dict
-    from ..learn.runs import RunError
-    from ..sim.physics import PhysicalParams
 
     run_dir = Path(run_dir)
     physics = PhysicalParams.load(run_dir / "physics.json", robot) if (run_dir / "physics.json").exists() else None

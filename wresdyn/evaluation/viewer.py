@@ -20,7 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.loading import load_data
 from ..errors import WresdynError
+from ..robot.description import load_robot
+from .animation import RobotRow, sample_frames
+from .evaluate_run import load_run_model
+from .open_loop import evaluate_split
 
 __all__ = ["ViewerConfig", "Scene", "run_scene", "animation_scene", "load_scene", "serve"]
 
@@ -76,10 +81,6 @@ def run_scene(run, split: str = "heldout", index: int = 0, data: str | None = No
               device: str = "cpu") -> Scene:
     """The scene of a run folder: trajectory ``index`` of ``split`` as recorded, replayed with PD alone and with
     the run's calibrated model (its ``physics.json`` and residual), open loop from the first recorded state."""
-    from ..data.loading import load_data
-    from .animation import sample_frames
-    from .open_loop import evaluate_split
-    from .evaluate_run import load_run_model
 
     run = Path(run)
     cfg_path = run / "config.json"
@@ -110,8 +111,6 @@ def animation_scene(path) -> Scene:
     """The scene of a USD animation written by :func:`~wresdyn.evaluation.animation.write_animation` (e.g. a deploy
     folder's ``deployed_heldout.usda``), from the joint positions and robot file stored on its default prim."""
     from pxr import Usd
-
-    from ..robot.description import load_robot
 
     stage = Usd.Stage.Open(str(path))
     root = stage.GetDefaultPrim()
@@ -179,8 +178,6 @@ def serve(scene: Scene, cfg: ViewerConfig = ViewerConfig(), say=print) -> None:
     except ImportError:
         raise WresdynError("the viewer needs viser: pip install 'wresdyn[view]' (or pip install viser)") from None
     import newton
-
-    from .animation import RobotRow
 
     n_frames, n_worlds, width = scene.poses.shape
     spacing = scene.spacing if scene.spacing is not None else cfg.spacing

@@ -24,6 +24,9 @@ import numpy as np
 
 from ..choices import Arch, Learner, ResidualKind, SolverKind, check_choice, check_device, check_number, choices
 from ..errors import WresdynError
+from ..evaluation.plots import save_figure
+from ..learn.ppo_config import default_config, set_field, set_fields
+from ..learn.window_fit_config import GradFitConfig
 
 __all__ = ["AblationConfig", "cells", "run_cell", "run_cells", "run_ablation", "write_summary", "table_markdown",
            "plot_curves"]
@@ -80,18 +83,14 @@ class AblationConfig:
         self._check_overrides()
 
     def _check_overrides(self) -> None:
-        """A typo in an override fails here, not after hours of other cells. Imports the learners (torch)."""
+        """A typo in an override fails here, not after hours of other cells."""
         if self.ppo_overrides and "ppo" in self.learners:
-            from ..learn.ppo_config import default_config, set_fields
-
             for arch in self.archs:  # a GRU batches by world: fewer worlds can be too few for the mini-batches
                 try:
                     set_fields(default_config(), {**self.ppo_overrides, "residual.arch": arch})
                 except (TypeError, WresdynError) as e:
                     raise WresdynError(f"ablation ppo_overrides: {e}") from None
         if self.gradient_overrides and {"gradient", "parametric"} & set(self.learners):
-            from ..learn.gradfit import GradFitConfig
-
             try:
                 dataclasses.replace(GradFitConfig(), **self.gradient_overrides)
             except (TypeError, WresdynError) as e:
@@ -122,7 +121,6 @@ def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> 
 
 def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
     from ..learn.ppo import load_policy, train
-    from ..learn.ppo_config import default_config, set_field, set_fields
 
     cell_fields = {"residual.arch": cell["arch"], "residual.kind": cell["kind"], "ppo.seed": cell["seed"],
                    "ppo.device": cfg.device, "env.solver": cfg.solver,
@@ -136,7 +134,7 @@ def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
 
 
 def _gradient_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
-    from ..learn.gradfit import GradFitConfig, fit
+    from ..learn.gradfit import fit
 
     residual = dataclasses.replace(GradFitConfig().residual, kind=cell["kind"],
                                    arch=cell["arch"] if cell["arch"] != "-" else "mlp")
@@ -316,6 +314,4 @@ def plot_curves(results: list[dict], path: str | Path) -> Path:
     axes[0].set_ylabel(f"{split} mean |Δq| [rad]")
     axes[1].legend(fontsize=7)
     fig.tight_layout()
-    from ..evaluation.plots import save_figure
-
     return save_figure(fig, path, dpi=120)

@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..learn.network_file import load_residual
+
 __all__ = ["ResidualTorque"]
 
 
@@ -74,8 +76,6 @@ class ResidualTorque:
         """Read the ``wresdyn_residual`` prim of an exported ``actuated.usda`` and load its network (the
         ``torch.export`` archive its ``wresdyn:program`` names)."""
         from pxr import Usd
-
-        from ..learn.network_file import load_residual
 
         stage = Usd.Stage.Open(str(usd_path))
         prim = next((p for p in stage.Traverse() if p.GetName() == "wresdyn_residual"), None)

@@ -41,7 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.dataset import load_dataset
+from ..data.loading import dataset_robot
 from ..errors import WresdynError
+from ..robot.description import dof_by_label
+from ..sim.physics import PhysicalParams
 
 __all__ = ["ExportError", "export_run", "write_layers", "inertia_principal"]
 
@@ -85,9 +89,7 @@ def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
 
 def _joint_paths(robot) -> list[str]:
     """USD prim path of each actuated joint, in ``robot.joint_names`` order."""
-    from ..robot.description import _dof_by_label
-
-    by_dof = {dof: label for label, dof in _dof_by_label(robot.builder).items()}
+    by_dof = {dof: label for label, dof in dof_by_label(robot.builder).items()}
     return [by_dof[int(d)] for d in robot.qd_index]
 
 
@@ -213,9 +215,6 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
         ExportError: not a run, no residual (unless ``physics_only``), a delta-action residual, the robot file
             changed since the run's data were recorded, not a USD robot, ``out`` exists without ``force``.
     """
-    from ..data.dataset import load_dataset
-    from ..data.loading import dataset_robot
-    from ..sim.physics import PhysicalParams
 
     run = Path(run)
     out = Path(out) if out is not None else run / "export"

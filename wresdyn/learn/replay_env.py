@@ -24,6 +24,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
+from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import apply_residual, observation, residual_scale
 from .replay_env_config import ReplayEnvConfig
 from .residual import ResidualConfig, obs_stats
@@ -62,8 +63,6 @@ class ReplayEnv(VecEnv):
         self.physics = None
         delay = 0.0
         if cfg.physics:
-            from ..sim.physics import PhysicalParams
-
             self.physics = PhysicalParams.load(cfg.physics, robot)
             self.sim.set_physics(self.physics)
             delay = torch.as_tensor(self.physics.delay * rate_hz, dtype=torch.float32, device=self.device)

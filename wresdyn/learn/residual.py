@@ -31,6 +31,7 @@ import torch.nn as nn
 from rsl_rl.models import MLPModel, RNNModel
 
 from ..choices import Arch, choices
+from .network_file import export_onnx, save_program
 from .residual_config import ResidualConfig
 
 __all__ = [
@@ -209,7 +210,6 @@ def export_policy(policy: ResidualPolicy, path: str | Path, onnx_path: str | Pat
     MLP: ``obs`` (N, 4n) -> ``residual`` (N, n). GRU: (``obs``, ``h_in`` (layers, N, H)) -> (``residual``,
     ``h_out``); the caller carries the hidden state, starting from zeros (``load_residual`` does).
     """
-    from .network_file import export_onnx, save_program
 
     n_obs = policy.obs_mean.shape[0]
     batch = torch.export.Dim("batch", min=1)

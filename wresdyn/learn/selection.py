@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.dataset import fitted_mask
+from ..sim import Simulator
+from ..sim.rollout import replay_trajectories
 
 __all__ = ["ValidationScore"]
 
@@ -32,7 +34,6 @@ class ValidationScore:
 
     def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
                  delay=0.0, physics=None, weights=None) -> None:
-        from ..sim import Simulator
 
         self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay
         self.physics = physics
@@ -46,8 +47,6 @@ class ValidationScore:
 
     def __call__(self, policy=None, kind: str | None = None) -> float:
         import torch
-
-        from ..sim.rollout import replay_trajectories
 
         was_training = isinstance(policy, torch.nn.Module) and policy.training
         if was_training:

@@ -29,8 +29,8 @@ from ..errors import RobotError
 from ..paths import DEFAULT_ROBOT
 from .contact import ContactSettings
 
-__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "read_gains", "DEFAULT_ROBOT",
-           "PLACEHOLDER_EFFORT"]
+__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "read_gains", "dof_by_label",
+           "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
 
 
 _SUFFIX_KIND = {".usd": "usd", ".usda": "usd", ".usdc": "usd", ".usdz": "usd", ".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
@@ -244,7 +244,7 @@ def _import(builder, path: Path, kind: str, floating: bool) -> None:
         _mjcf_actuator_limits(builder, path)
 
 
-def _dof_by_label(builder) -> dict[str, int]:
+def dof_by_label(builder) -> dict[str, int]:
     """Joint label (full USD prim path or MJCF path) -> DoF index, for 1-DoF joints."""
     out = {}
     for j, label in enumerate(builder.joint_label):
@@ -274,7 +274,7 @@ def _mjcf_actuator_limits(builder, path: Path) -> None:
     except Exception:  # Newton extensions MuJoCo does not know: keep what Newton read
         return
     by_name: dict[str, list[int]] = {}
-    for label, dof in _dof_by_label(builder).items():
+    for label, dof in dof_by_label(builder).items():
         by_name.setdefault(_short(label), []).append(dof)
     for a in range(m.nu):
         if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or not m.actuator_forcelimited[a]:
@@ -299,7 +299,7 @@ def _usd_mjc_attributes(builder, path: Path) -> None:
     stage = Usd.Stage.Open(str(path))
     if stage is None:
         return
-    dofs = _dof_by_label(builder)
+    dofs = dof_by_label(builder)
 
     def value(prim, name, default=None):
         attr = prim.GetAttribute(name)

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .contact import ContactSettings
 from .description import Robot
+from .ground import collision_shapes
 
 __all__ = ["build_mujoco", "free_from_mujoco", "free_to_mujoco", "quat_xyzw_to_wxyz"]
 
@@ -138,8 +140,6 @@ def _add_ground(spec, robot: Robot, contact) -> dict[int, list]:
     """The floor and the solver options on ``spec``, and the robot's collision geoms per body (keyword arguments
     of ``add_geom``), each field as Newton's ``SolverMuJoCo`` writes it (its geom names included)."""
     import mujoco
-
-    from .ground import ContactSettings, collision_shapes
 
     c = contact or ContactSettings()
     spec.option.cone = getattr(mujoco.mjtCone, f"mjCONE_{c.cone.upper()}")

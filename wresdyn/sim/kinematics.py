@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import torch
 
+from ..robot.ground import base_index
+
 __all__ = ["BodyPositions"]
 
 
@@ -20,8 +22,6 @@ class BodyPositions:
 
     def __init__(self, robot, n_worlds: int, device: str = "cpu") -> None:
         import warp as wp
-
-        from ..robot.ground import base_index
 
         self.robot, self.n_worlds = robot, int(n_worlds)
         self.model = robot.build_model(self.n_worlds, device)

@@ -7,6 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..robot.description import Robot
+from ..robot.mujoco_model import build_mujoco, mujoco_replay
+from .rollout import replay
+from .solvers import resolve_solver
 
 __all__ = ["joint_table", "multisine_command", "PdAgreement", "pd_agreement"]
 
@@ -65,9 +68,6 @@ def pd_agreement(robot: Robot, seconds: float = 2.0, dt: float = 0.002, integrat
     float32 round-off: ``"Euler"`` (semi-implicit Euler, explicit PD) for Featherstone, ``"implicitfast"``
     (implicit drive damping) for SolverReplay and SolverMuJoCo. Across schemes they differ by O(dt).
     """
-    from ..robot.mujoco_model import build_mujoco, mujoco_replay
-    from .rollout import replay
-    from .solvers import resolve_solver
 
     robot.check_gains()
     if integrator is None:

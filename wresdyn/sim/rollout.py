@@ -18,6 +18,7 @@ import torch
 
 from ..errors import SimulationDiverged
 from .bank import TrajectoryBank, Window
+from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .simulator import DivergenceLimits, Simulator
 
@@ -229,8 +230,6 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
     if physics is None:
         window = TrajectoryBank(trajectories, sim.device, delay).whole().repeat(len(groups))
     else:
-        from .physics import PhysicalParams
-
         mw = slice(None) if pw is None else pw
         if pw is not None:
             sim.set_physics(PhysicalParams.nominal(robot), worlds=slice(0, w))

@@ -29,6 +29,8 @@ import numpy as np
 import torch
 
 from ..errors import SimulationDiverged
+from ..robot.ground import base_index
+from .physics import MODEL_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
@@ -135,8 +137,6 @@ class Simulator:
         (DoFs of the actuated joints selected by the caller), (W, nb[, 3[, 3]]) for body fields."""
         import warp as wp
 
-        from .physics import MODEL_ARRAYS
-
         a = getattr(self.model, MODEL_ARRAYS[field])
         t = wp.to_torch(a.grad if grad else a, requires_grad=False)
         return t.view(self.n_worlds, -1, *t.shape[1:]) if field.startswith("body_") else t.view(self.n_worlds, -1)
@@ -150,7 +150,6 @@ class Simulator:
         :meth:`step_diff`. An infinite effort is written as 0 (Newton's "unlimited"). ``worlds``: only these
         worlds (e.g. a nominal baseline next to a calibrated model in one batch; no gradients then).
         """
-        from .physics import MODEL_ARRAYS, PhysicalParams
 
         if isinstance(values, PhysicalParams):
             values.check(self.robot)
@@ -219,7 +218,6 @@ class Simulator:
         if self.robot.base != "floating":
             raise ValueError(f"{self.robot.source.name}: the base is fixed; load_robot(..., base='floating') for a "
                              "base pose")
-        from ..robot.ground import base_index
 
         q0, qd0 = base_index(self.robot)
         return slice(q0, q0 + 7), slice(qd0, qd0 + 6)

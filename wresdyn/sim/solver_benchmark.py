@@ -22,6 +22,9 @@ import functools
 import json
 import time
 
+from ..robot.description import DEFAULT_ROBOT, load_robot
+from ..robot.mujoco_model import build_mujoco
+
 __all__ = ["SOLVERS", "run_bench"]
 
 SOLVERS = ("replay", "featherstone", "mujoco-warp", "mujoco-c")
@@ -181,8 +184,6 @@ class _Bench:
         import mujoco
         from mujoco import rollout
 
-        from ..robot.mujoco_model import build_mujoco
-
         np, args = self.np, self.args
         m = build_mujoco(self.robot, args.dt, "implicitfast")
         d = mujoco.MjData(m)
@@ -203,8 +204,6 @@ class _Bench:
 def run_bench(args) -> int:
     """Run the benchmark for the parsed ``wresdyn bench`` arguments; prints the table (and writes ``--json``)."""
     import warp as wp
-
-    from ..robot.description import DEFAULT_ROBOT, load_robot
 
     wp.config.quiet = True
     robot = load_robot(args.robot or DEFAULT_ROBOT, gains=args.gains)

@@ -19,6 +19,11 @@ import os
 
 import numpy as np
 
+from ..robot.contact import ContactSettings
+from ..robot.ground import base_index
+from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
+from .physics import MODEL_ARRAYS
+
 __all__ = ["SolverMuJoCoThreads"]
 
 
@@ -42,8 +47,6 @@ class SolverMuJoCoThreads:
         import mujoco
         import newton
         from mujoco import rollout
-
-        from ..robot.ground import ContactSettings, base_index
 
         c = contact or ContactSettings()
         self.model, self.robot = model, robot
@@ -81,7 +84,6 @@ class SolverMuJoCoThreads:
 
     def notify_model_changed(self, flags) -> None:
         """Copy world 0's parameters into the one-world template and let Newton rewrite its MuJoCo model."""
-        from .physics import MODEL_ARRAYS
 
         for name in MODEL_ARRAYS.values():
             dst = getattr(self._template, name)
@@ -91,7 +93,6 @@ class SolverMuJoCoThreads:
     def step(self, state_in, state_out, control, contacts, dt: float) -> None:
         """One step of ``dt`` [s] for every world: PD targets ``control.joint_target_q`` and joint forces
         ``control.joint_f`` (actuated DoFs) held over it."""
-        from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 
         w, n, m = self.n_worlds, self.robot.n_dof, self.mj_model
         jq = state_in.joint_q.numpy().reshape(w, self._nq).astype(np.float64)

@@ -33,7 +33,10 @@ import warnings
 import numpy as np
 
 from ..choices import SolverKind, check_choice, choices
+from ..robot.contact import ContactSettings
 from ..robot.description import Robot
+from ..robot.pinocchio_model import build_pinocchio
+from .solver_threads import SolverMuJoCoThreads
 
 __all__ = ["SOLVERS", "explicit_pd_margin", "resolve_solver", "make_solver"]
 
@@ -48,8 +51,6 @@ def explicit_pd_margin(robot: Robot, dt: float, q: np.ndarray | None = None) -> 
     (default: the neutral pose). Shape (n_dof,).
     """
     import pinocchio as pin
-
-    from ..robot.pinocchio_model import build_pinocchio
 
     model = build_pinocchio(robot)
     data = model.createData()
@@ -114,10 +115,7 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, param_gra
         return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=mujoco_c, disable_contacts=True,
                                            integrator="implicitfast")
     if not str(model.device).startswith("cuda") and model.world_count > 1:
-        from .solver_threads import SolverMuJoCoThreads
-
         return SolverMuJoCoThreads(model, robot, contact)
-    from ..robot.ground import ContactSettings
 
     c = contact or ContactSettings()
     return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=mujoco_c, disable_contacts=False,

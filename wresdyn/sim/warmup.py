@@ -15,6 +15,9 @@ import time
 import weakref
 from pathlib import Path
 
+from ..errors import WresdynError
+from .simulator import Simulator
+
 __all__ = ["VARIANTS", "compile_kernels"]
 
 VARIANTS = {"forward": (False, False), "grad": (True, False), "param_grads": (True, True)}
@@ -58,9 +61,6 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     """
     import torch
     import warp as wp
-
-    from ..errors import WresdynError
-    from .simulator import Simulator
 
     bad = [v for v in variants if v not in VARIANTS]
     if bad:

@@ -19,6 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..data.ik import FootIK
+from .env import TrackingEnv
+
 __all__ = ["Deployment", "deploy_skill", "metrics", "METRICS", "gap_closed"]
 
 METRICS = ("mpjpe", "foot_error", "success", "action_rate", "torque_rate")
@@ -46,7 +49,6 @@ class Deployment:
 def deploy_skill(policy, plant, motions, cfg) -> Deployment:
     """Play ``motions`` on ``plant`` (``n_worlds`` = number of motions) under ``policy`` (``None``: the reference
     played open loop, zero action) with the task ``cfg`` (:class:`~wresdyn.skills.env.SkillConfig`)."""
-    from .env import TrackingEnv
 
     if plant.n_worlds != len(motions):
         raise ValueError(f"{len(motions)} motions need as many worlds, the plant has {plant.n_worlds}")
@@ -91,7 +93,6 @@ def deploy_skill(policy, plant, motions, cfg) -> Deployment:
 def metrics(dep: Deployment, robot, frames=None) -> dict:
     """Per-motion and mean figures of a deployment (:data:`METRICS`), NaN-free: a failed motion's errors are
     averaged up to its failure and it counts as a failure in ``success``."""
-    from ..data.ik import FootIK
 
     ik = FootIK(robot) if frames is None else FootIK(robot, tuple(frames))
     per = []

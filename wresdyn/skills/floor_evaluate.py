@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .floor_env import FAILURE_CAUSES
+from ..sim.kinematics import BodyPositions
+from .floor_env import FAILURE_CAUSES, FloorTrackingEnv
 
 __all__ = ["FloorDeployment", "deploy_floor", "floor_metrics", "FLOOR_METRICS"]
 
@@ -66,8 +67,6 @@ class FloorDeployment:
 def deploy_floor(policy, plant, motions, cfg) -> FloorDeployment:
     """Play ``motions`` on the floor ``plant`` (``n_worlds`` = number of motions) under ``policy`` (``None``: the
     reference played open loop) with the task ``cfg`` (:class:`~wresdyn.skills.floor_env.FloorTaskConfig`)."""
-    from ..sim.kinematics import BodyPositions
-    from .floor_env import FloorTrackingEnv
 
     if plant.n_worlds != len(motions):
         raise ValueError(f"{len(motions)} motions need as many worlds, the plant has {plant.n_worlds}")

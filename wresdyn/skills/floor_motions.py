@@ -24,6 +24,8 @@ import numpy as np
 
 from ..data.ik import FootIK
 from ..robot.description import Robot, RobotError
+from ..robot.ground import standing_state
+from ..robot.pinocchio_model import build_pinocchio
 from .motions import _arm_keys, _keyframes, _leg_keys, stance
 
 __all__ = ["FLOOR_FAMILIES", "FLOOR_TRAIN_FAMILIES", "FLOOR_HELD_OUT_FAMILIES", "FloorMotion", "make_floor_motions",
@@ -73,7 +75,6 @@ def _com(robot: Robot, model, data, q: np.ndarray) -> np.ndarray:
 
 def _shift_over(robot: Robot, ik: FootIK, q0, home, rot, foot: int, iterations: int = 6) -> float:
     """Sideways shift of both soles [m] that puts the centre of mass above sole ``foot`` (0 left, 1 right)."""
-    from ..robot.pinocchio_model import build_pinocchio
 
     model = build_pinocchio(robot)
     data = model.createData()
@@ -128,7 +129,6 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
 
 def _place(robot: Robot, floating: Robot, feet: np.ndarray, q: np.ndarray):
     """The reference base (T, 7) and planted soles (T, 2) of sole paths ``feet`` (T, 2, 3) in the stand frame."""
-    from ..robot.ground import standing_state
 
     low = feet[:, :, 2].min(axis=1)
     planted = feet[:, :, 2] - low[:, None] < PLANTED_TOL

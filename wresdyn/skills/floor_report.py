@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..evaluation.animation import write_animation
 from .report import COLOURS, LABELS
 
 __all__ = ["write_floor_report", "floor_table", "plot_floor_tracking"]
@@ -91,8 +92,6 @@ def write_floor_report(out, floating, results: dict, rollouts: dict, motions, po
     plot_floor_tracking(rollouts, motions, floating, out / "tracking_heldout.png", policy_rate_hz)
     anim = ""
     if animation:
-        from ..evaluation.animation import write_animation
-
         i = next((k for k, m in enumerate(motions) if m.family == "step"), 0)
         ref = rollouts["reference"]
         traj = {"reference": np.concatenate([ref.base_ref[i], ref.q_ref[i]], axis=-1)}

@@ -22,7 +22,11 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..learn.ppo import load_policy
+from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 from ..sim import DivergenceLimits, Simulator
+from ..sim.physics import PhysicalParams
+from .floor_env import base_frame_imu
 
 __all__ = ["SimPlant", "RealPlant", "SETTINGS", "sim_plant"]
 
@@ -139,9 +143,6 @@ def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: in
     links)."""
     from pathlib import Path
 
-    from ..learn.ppo import load_policy
-    from ..sim.physics import PhysicalParams
-
     if setting not in SETTINGS:
         raise WresdynError(f"unknown training setting {setting!r}; choose from {SETTINGS}")
     if setting == "nominal":
@@ -232,7 +233,6 @@ class RealPlant:
     def reset_full(self, ids, base_pose, base_twist, q, qd) -> None:
         """Place worlds ``ids`` of the robot on the floor: base pose (k, 7), twist (k, 6) in Newton's free-joint
         convention (:mod:`wresdyn.robot.ground`), joints ``q``, ``qd`` (k, n); the delay line holds ``q``."""
-        from ..robot.mujoco_model import free_to_mujoco
 
         qpos, qvel = free_to_mujoco(self.robot, np.asarray(torch.as_tensor(base_pose).cpu(), np.float64),
                                     np.asarray(torch.as_tensor(base_twist).cpu(), np.float64))
@@ -264,8 +264,6 @@ class RealPlant:
         return self._base()[1]
 
     def _base(self):
-        from ..robot.mujoco_model import free_from_mujoco
-
         s = self.state
         pose, twist = free_from_mujoco(self.robot, s[:, self._iq0:self._iq0 + 7], s[:, self._iv0:self._iv0 + 6])
         f32 = dict(dtype=torch.float32)
@@ -274,7 +272,6 @@ class RealPlant:
     def imu(self) -> tuple[torch.Tensor, torch.Tensor]:
         """What the base IMU reports: angular velocity [rad/s] and the unit gravity direction, both in base axes,
         (N, 3) each, with ``imu_noise``."""
-        from .floor_env import base_frame_imu
 
         gyro, grav = base_frame_imu(self.base_pose, self.base_twist)
         sg, sd = self.imu_noise

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..evaluation.animation import write_animation
+
 __all__ = ["write_report", "plot_tracking", "table"]
 
 LABELS = {"reference": "reference played open loop (no policy)", "a_nominal": "(a) nominal simulator",
@@ -79,8 +81,6 @@ def write_report(out, robot, results: dict, rollouts: dict, motions, policy_rate
     plot_tracking(rollouts, motions, robot, out / "tracking_heldout.png", policy_rate_hz)
     anim = ""
     if animation:
-        from ..evaluation.animation import write_animation
-
         i = next((k for k, m in enumerate(motions) if m.family not in ("kick", "squat", "wave")), 0)
         traj = {"reference": rollouts["a_nominal"].q_ref[i]}
         traj.update({n: d.q[i] for n, d in rollouts.items() if n != "reference"})
