@@ -38,17 +38,7 @@ LONG_MODULES = {
 }
 """Modules over :data:`MAX_LINES` today, each being split; the list only shrinks."""
 
-EDITED_IN_PARALLEL = "edited in parallel; next step"
 IMPORTS_INSIDE_FUNCTIONS = {
-    "skills/skill_ppo.py": EDITED_IN_PARALLEL,
-    "skills/env.py": EDITED_IN_PARALLEL,
-    "skills/floor_env.py": EDITED_IN_PARALLEL,
-    "learn/ppo.py": EDITED_IN_PARALLEL,
-    "learn/ppo_runner.py": EDITED_IN_PARALLEL,
-    "learn/runs.py": EDITED_IN_PARALLEL,
-    "experiments/floor_skills.py": EDITED_IN_PARALLEL,
-    "experiments/stand_skills.py": EDITED_IN_PARALLEL,
-    "experiments/deploy_config.py": EDITED_IN_PARALLEL,
     # --help reads these modules, so what imports torch stays inside the function that needs it
     "learn/hybrid.py -> wresdyn.sim.warmup": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
     "learn/hybrid.py -> wresdyn.learn.gradfit": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",

@@ -31,6 +31,7 @@ from ..progress import bar
 from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig
 from .ppo_runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
                          rsl_runner_cfg, seed_processes)
+from .network_file import load_residual
 from .replay_env import ReplayEnv
 from .residual import actor_critic_cfg, export_run_files, obs_stats, policy_from_actor
 from .runs import RunError, RunnerFolder, check_resume, load_checkpoint, save_checkpoint
@@ -311,8 +312,6 @@ def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) ->
 def load_policy(run_dir: str | Path):
     """The exported residual of a run: ``(policy, meta)`` with ``policy(obs) -> residual``
     (:class:`~wresdyn.learn.network_file.ExportedResidual`, on the CPU) and ``meta`` its ``residual.json``."""
-    from .network_file import load_residual
-
     run_dir = Path(run_dir)
     path, meta_path = run_dir / "policy.pt", run_dir / "residual.json"
     if not path.is_file() or not meta_path.is_file():

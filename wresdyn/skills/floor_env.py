@@ -27,6 +27,7 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from ..sim.kinematics import BodyPositions
 from .skill_config import FloorTaskConfig
 
 __all__ = ["FloorTaskConfig", "FloorTrackingEnv", "ACTOR_TERMS", "CRITIC_TERMS", "base_frame_imu", "quat_rotate_inv",
@@ -116,8 +117,6 @@ class FloorTrackingEnv(VecEnv):
 
     def __init__(self, plant, motions, cfg: FloorTaskConfig = FloorTaskConfig(), seed: int = 0,
                  random_start: bool = True, device=None):
-        from ..sim.kinematics import BodyPositions
-
         if plant.decimation != cfg.decimation:
             raise ValueError(f"plant decimation {plant.decimation} != task decimation {cfg.decimation}")
         self.plant, self.cfg, self.motions = plant, cfg, list(motions)
