@@ -124,7 +124,7 @@ def test_missing_calibration_and_bad_input_fail_in_one_line(tmp_path, capsys):
 
     names = [f"{j}.pos" for j in SO101_JOINTS]
     _write_lerobot(tmp_path / "pan", "v3.0", _episodes((5,)), ["pan.pos"] + names[1:])
-    with pytest.raises(DatasetError, match=r"action: joint\(s\) \['pan'\] are neither joints of the robot"):
+    with pytest.raises(DatasetError, match=r"observation.state: joint\(s\) \['pan'\] are neither joints"):
         import_runs([tmp_path / "pan"], robot, RATE, lerobot=LeRobotUnits(arm="degrees"))
     assert not out.exists()
 
@@ -144,4 +144,4 @@ def test_cli_imports_the_fixture_without_a_map(tmp_path, capsys):
     assert "LeRobot so_follower, no map: joints by motor name, arm in range units" in text, text
     ds = load_dataset(out / "dataset.npz", load_robot(so101))
     assert ds.excluded_joints == ["gripper"] and [tr.split for tr in ds.trajectories] == ["train", "validation",
-                                                                                           "heldout", "heldout"]
+                                                                                           "train", "train"]
