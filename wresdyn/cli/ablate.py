@@ -78,7 +78,8 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
     import numpy as np
 
     from ..data.dataset import load_dataset
-    from ..data.real_robot import Mismatch, collect
+    from ..data.mismatch import Mismatch
+    from ..data.real_robot import collect
     from ..experiments.ablation import cells, run_cells, write_summary
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()

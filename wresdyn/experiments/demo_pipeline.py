@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from ..data.dataset import load_dataset
-from ..data.real_robot import Mismatch
+from ..data.mismatch import Mismatch
 from ..data.real_robot import collect as record_dataset
 from ..evaluation.evaluate_run import evaluate_run
 from ..export.usd import export_run as export_usd

@@ -23,7 +23,8 @@ import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from ..data.real_robot import Mismatch, RealRobot
+from ..data.mismatch import Mismatch
+from ..data.real_robot import RealRobot
 from ..robot import load_robot
 from ..skills.evaluate import gap_closed
 from ..skills.floor_env import FloorTaskConfig, FloorTrackingEnv
@@ -84,7 +85,7 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
         cfg: Sizes. task: :class:`~wresdyn.skills.skill_config.FloorTaskConfig`;
             ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
-        mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
+        mismatch: The real robot's :class:`~wresdyn.data.mismatch.Mismatch` (default: the dataset's).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always).
 
     Returns:

@@ -24,7 +24,8 @@ import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from ..data.real_robot import Mismatch, RealRobot
+from ..data.mismatch import Mismatch
+from ..data.real_robot import RealRobot
 from ..skills.env import SkillConfig, TrackingEnv
 from ..skills.evaluate import deploy_skill, gap_closed, metrics
 from ..skills.motions import make_motions
@@ -49,7 +50,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         cfg: Sizes.
         data_path: Where ``dataset`` was read from (recorded in the fitted runs).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
-        mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
+        mismatch: The "real" robot's :class:`~wresdyn.data.mismatch.Mismatch` (default: the dataset's).
         task: :class:`~wresdyn.skills.skill_config.SkillConfig`;
             ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
