@@ -36,13 +36,6 @@ LONG_MODULES: set[str] = set()
 """Modules over :data:`MAX_LINES` today, each being split; the list only shrinks."""
 
 IMPORTS_INSIDE_FUNCTIONS = {
-    # --help reads these modules, so what imports torch stays inside the function that needs it
-    "learn/hybrid.py -> wresdyn.sim.warmup": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
-    "learn/hybrid.py -> wresdyn.learn.gradfit": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
-    "learn/hybrid.py -> wresdyn.learn.sysid": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
-    "experiments/ablation.py -> wresdyn.evaluation.open_loop": "cli/ablate.py reads AblationConfig from here; torch",
-    "experiments/ablation.py -> wresdyn.learn.ppo": "cli/ablate.py reads AblationConfig from here; torch, rsl_rl",
-    "experiments/ablation.py -> wresdyn.learn.gradfit": "cli/ablate.py reads AblationConfig from here; torch",
     # solver_replay imports newton and warp at module level; sim imports them where a solver is built
     "sim/solvers.py -> wresdyn.sim.solver_replay": "newton and warp load with the replay solver only",
     "sim/solver_benchmark.py -> wresdyn.sim.solver_replay": "newton and warp load with the replay solver only",

@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 
 from ..choices import Learner, choices
-from ..experiments.ablation import AblationConfig
+from ..experiments.ablation_config import AblationConfig
 from .config_flags import add_config_flags, build_config, comma_list, given_fields
 
 

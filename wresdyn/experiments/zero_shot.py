@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from ..learn.gradfit import GradFitConfig, export_run, fit
-from ..learn.hybrid import HYBRID_ITERATIONS, fit_hybrid
+from ..learn.hybrid import fit_hybrid
 from ..learn.sysid import SysIdConfig
+from ..learn.window_fit_config import HYBRID_ITERATIONS
 
 __all__ = ["POLICIES", "fit_corrections", "write_results"]
 
