@@ -32,9 +32,9 @@ from ..skills.floor_evaluate import deploy_floor, floor_metrics
 from ..skills.floor_motions import make_floor_motions
 from ..skills.floor_report import write_floor_report
 from ..skills.plants import RealPlant, sim_plant
-from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from ..skills.skill_ppo import load_skill, train_skill
 from .deploy_config import FloorDeployConfig
-from .zero_shot import POLICIES, fit_corrections, write_results
+from .zero_shot import POLICIES, fit_corrections, start_benchmark, write_results
 
 __all__ = ["FloorDeployConfig", "run_floor_benchmark"]
 
@@ -91,21 +91,12 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     Returns:
         The results written to ``results.json``.
     """
-    import torch
-
     t_start = time.perf_counter()
-    policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     task = task or FloorTaskConfig()
-    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
-    if ppo.torch_threads is not None:
-        torch.set_num_threads(ppo.torch_threads)
-    mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
+    policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     floating = load_robot(robot.source, gains=robot.gains, base="floating")
     rate = float(dataset.rate_hz)
-    counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
-              "heldout": cfg.heldout_per_family}
     motions = make_floor_motions(robot, floating, counts, cfg.duration, rate, cfg.seed)
     log("[1/4] floor motions: " + ", ".join(f"{s} {len(motions[s])}" for s in counts)
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
