@@ -194,7 +194,8 @@ def run(args: argparse.Namespace) -> int:
 
     robot.check_replay()  # simulating needs PD gains and stated effort limits
     from ..data.excitation import plot_spectrum
-    from ..data.real_robot import Mismatch, collect
+    from ..data.mismatch import Mismatch
+    from ..data.real_robot import collect
 
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
     log(f"collecting {sum(cfg.counts.values())} trajectories of {cfg.duration:g} s at {cfg.rate:g} Hz on "

@@ -44,7 +44,7 @@ import numpy as np
 from ..data.dataset import load_dataset
 from ..data.loading import dataset_robot
 from ..errors import WresdynError
-from ..robot.description import dof_by_label
+from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
 
 __all__ = ["ExportError", "export_run", "write_layers", "inertia_principal"]

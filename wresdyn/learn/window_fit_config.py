@@ -12,7 +12,7 @@ from ..choices import ModelKind, SolverKind, check_choice, check_device, check_n
 from ..robot.physical import JOINT_FIELDS
 from .residual_config import ResidualConfig
 
-__all__ = ["FIT_FIELDS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
+__all__ = ["FIT_FIELDS", "HYBRID_ITERATIONS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
 
 
 def check_window_fit_config(cfg) -> None:
@@ -36,6 +36,9 @@ def check_window_fit_config(cfg) -> None:
 
 FIT_FIELDS = (*JOINT_FIELDS, "bodies")
 """What can be identified: the per-joint fields and ``"bodies"`` (every moving link's mass, com, inertia)."""
+HYBRID_ITERATIONS = 1000
+"""Residual iterations of the hybrid (:mod:`wresdyn.learn.hybrid`) by default: on the identified model the
+residual's validation error stops improving within a few hundred (``benchmarks/results/grey_box/``)."""
 
 
 @dataclass(frozen=True)
