@@ -222,31 +222,25 @@ def physical_params(model, robot):
                           inertia)
 
 
-def lean_rollout(models, datas, control_signal, initial_states, rollout_signal_mapping, rollout_state_mapping,
-                 ctrl_mapping, batch: int = 256, **_):
-    """The peer's default rollout (``sysid_rollout``: ``mujoco.rollout`` of every model and sequence, the last
-    command dropped) in batches of ``batch`` rollouts, keeping of the state only time, qpos and qvel, which is all
-    the residual reads. A ``custom_rollout`` of the peer's API: its default keeps the full state of every step of
-    all (parameters + 1) x sequences rollouts at once, control history included, 7.7 GB for one Jacobian of 32
-    sequences of 200 steps here."""
-    import mujoco.rollout as mj_rollout
+def cached_build(size: int):
+    """A ``build_model`` for ``build_residual_fn`` (the peer's documented hook; its default is
+    ``apply_param_modifiers``) that keeps the last ``size`` compiled models by parameter vector. The peer's
+    ``residual`` calls ``model_residual`` once per sequence, and each call compiles a model for every column of the
+    finite-difference batch: without the cache one Jacobian compiles (parameters + 1) x sequences models, each
+    compiling the spec once more per link in the pseudo-inertia writer (33 ms for this humanoid)."""
     from mujoco import sysid
 
-    keep = 1 + models[0].nq + models[0].nv
-    out = []
-    for a in range(0, len(models), batch):
-        b = min(a + batch, len(models))
-        control = np.stack([c.data[:-1] for c in control_signal[a:b]])
-        state, sensordata = mj_rollout.rollout(models[a:b], datas, np.stack(initial_states[a:b]), control)
-        state = np.ascontiguousarray(state[:, :, :keep])
-        for i in range(b - a):
-            c = control_signal[a + i]
-            out.append(sysid.SystemTrajectory(
-                model=models[a + i], control=sysid.TimeSeries(c.times[:-1], control[i], ctrl_mapping),
-                sensordata=sysid.TimeSeries(state[i, :, 0], sensordata[i], rollout_signal_mapping),
-                initial_state=initial_states[a + i],
-                state=sysid.TimeSeries(state[i, :, 0], state[i], rollout_state_mapping)))
-    return out
+    cache = {}
+
+    def build(params, spec):
+        key = params.as_vector().tobytes()
+        if key not in cache:
+            if len(cache) >= size:
+                cache.clear()
+            cache[key] = sysid.apply_param_modifiers(params, spec)
+        return cache[key]
+
+    return build
 
 
 class _Budget(Exception):
@@ -295,7 +289,8 @@ def identify_peer(robot, trajectories, rate_hz: float, fields=(*JOINT_FIELDS, "b
     spec = peer_spec(robot, rate_hz)
     params = peer_parameters(spec, robot, fields)
     ms = sequences(spec, trajectories, rate_hz, horizon, chunks)
-    residual_fn = sysid.build_residual_fn(models_sequences=[ms], n_threads=threads, custom_rollout=lean_rollout)
+    residual_fn = sysid.build_residual_fn(models_sequences=[ms], n_threads=threads,
+                                           build_model=cached_build(2 * (params.size + 1)))
     evaluations, iters = [], [0]
 
     def timed(x, p, **kw):
