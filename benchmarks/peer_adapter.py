@@ -204,6 +204,33 @@ def replay(model, trajectories, threads: int = 2) -> Replays:
     return out
 
 
+def with_params(spec, params):
+    """``spec`` compiled with every joint field of ``params`` (a :class:`~wresdyn.robot.physical.PhysicalParams`,
+    e.g. the real robot's truth) written into it and its link inertias written into the compiled model's fields, as
+    the real robot writes its own (a perturbed inertia may break the triangle inequality the compiler enforces):
+    the best the peer's model class can do."""
+    from scipy.spatial.transform import Rotation
+
+    for i, j in enumerate(params.joint_names):
+        a, jt = spec.actuator(j), spec.joint(j)
+        a.gainprm[0], a.biasprm[1], a.biasprm[2] = params.kp[i], -params.kp[i], -params.kd[i]
+        if np.isfinite(params.effort[i]):
+            a.forcerange = [-params.effort[i], params.effort[i]]
+        a.delay = float(params.delay[i])
+        jt.armature, jt.frictionloss = float(params.armature[i]), float(params.friction[i])
+        jt.damping[0] = float(params.damping[i])
+    model = spec.compile()
+    for b, m in enumerate(params.body_mass):
+        if m <= 0:
+            continue
+        w, v = np.linalg.eigh(0.5 * (params.body_inertia[b] + params.body_inertia[b].T))
+        if np.linalg.det(v) < 0:
+            v[:, 0] = -v[:, 0]
+        model.body_mass[b + 1], model.body_ipos[b + 1], model.body_inertia[b + 1] = m, params.body_com[b], w
+        model.body_iquat[b + 1] = Rotation.from_matrix(v).as_quat(scalar_first=True)
+    return model
+
+
 def physical_params(model, robot):
     """The compiled peer model's parameters as :class:`~wresdyn.robot.physical.PhysicalParams` (inertias rotated
     from MuJoCo's principal frame into the body frame, as :meth:`~wresdyn.data.real_robot.RealRobot.physics`)."""

@@ -30,7 +30,8 @@ def peer():
 
 def test_inertia_round_trip_and_nominal_replay(peer, humanoid, data):
     """At its start (the file's values) every link's pseudo-inertia written by the peer compiles back to the same
-    mass, centre of mass and inertia, and the peer's replay with zero delay is the nominal MuJoCo replay."""
+    mass, centre of mass and inertia, so does every field written by ``with_params``, and the peer's replay with
+    zero delay is the nominal MuJoCo replay."""
     from mujoco import sysid
 
     from wresdyn.robot.mujoco_model import build_mujoco, mujoco_replay
@@ -43,6 +44,10 @@ def test_inertia_round_trip_and_nominal_replay(peer, humanoid, data):
     want = peer.physical_params(build_mujoco(humanoid, 1.0 / data.rate_hz), humanoid)
     for f in ("body_mass", "body_com", "body_inertia"):
         np.testing.assert_allclose(getattr(got, f), getattr(want, f), atol=EXACT, err_msg=f)
+    written = peer.physical_params(peer.with_params(peer.peer_spec(humanoid, data.rate_hz), want), humanoid)
+    for f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "body_mass", "body_com",
+              "body_inertia"):
+        np.testing.assert_allclose(getattr(written, f), getattr(want, f), atol=EXACT, err_msg=f)
     t = data.split("train")[0]
     q, qd = mujoco_replay(build_mujoco(humanoid, 1.0 / data.rate_hz), t.q_cmd[:-1], t.q[0], t.qd[0])
     run = peer.replay(spec.compile(), [t], threads=1)
