@@ -46,12 +46,15 @@ class ReplayEnv(VecEnv):
     divergence, rewards, resets, observations) is captured once per starting state buffer as a CUDA graph (torch's
     capture on the simulator's stream, Warp's launches joining it as an external capture) and replayed; the CPU runs
     the same code eagerly.
+
+    ``physics``: the :class:`~wresdyn.sim.physics.PhysicalParams` the worlds simulate (the hybrid's identified
+    ones, their delay on the commands), or ``None``: the robot file's values, no delay.
     """
 
     def __init__(self, robot, trajectories, rate_hz: float, num_envs: int, cfg: ReplayEnvConfig = ReplayEnvConfig(),
                  residual: ResidualConfig = ResidualConfig(), rewards: RewardConfig = RewardConfig(),
                  device: str | None = "cpu", seed: int = 0, obs_mean=None, obs_std=None, graph: bool = True,
-                 weights=None, physics: PhysicalParams | None = None) -> None:
+                 weights=None, physics=None) -> None:
         self.robot, self.env_cfg, self.residual_cfg, self.reward_cfg = robot, cfg, residual, rewards
         self.dt = 1.0 / rate_hz
         self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device)
