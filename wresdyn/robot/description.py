@@ -28,6 +28,7 @@ import tomllib
 from ..errors import RobotError
 from ..paths import DEFAULT_ROBOT
 from .contact import ContactSettings
+from .servo import SERVO_KEYS, ServoDrives, attach_servo, read_servo
 
 __all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "read_gains", "dof_by_label",
            "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
@@ -124,6 +125,9 @@ class Robot:
     """Path of the gains TOML as given (``None`` when none, or when given as a dict)."""
     effort_given: np.ndarray | None = None
     """True where the gains config sets the joint's effort limit explicitly, shape (n_dof,) (``None``: nowhere)."""
+    servo: ServoDrives | None = None
+    """The joints whose drive is a smart servo and their servo parameters (:mod:`wresdyn.robot.servo`; gains config
+    ``drive = "servo"``); ``None``: every drive is PD."""
 
     @property
     def n_dof(self) -> int:
@@ -218,7 +222,10 @@ class Robot:
             scene.add_ground_plane(cfg=cfg)
         elif contact is not None:
             raise ValueError("contact settings without a ground: pass ground=True")
-        return scene.finalize(device=device, requires_grad=requires_grad)
+        model = scene.finalize(device=device, requires_grad=requires_grad)
+        if self.servo is not None:
+            attach_servo(model, self.servo, self.qd_index, n_worlds)
+        return model
 
 
 def _sha256(path: Path) -> str:
@@ -409,6 +416,7 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     robot = _describe(builder, path, base)
     robot.gains, robot.gains_file = config, gains_file
     robot.effort_given = np.array([int(d) in effort_dofs for d in robot.qd_index], dtype=bool)
+    robot.servo = read_servo(config, robot.joint_names, robot.effort, gains_file or "gains config")
     robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
     return robot
 
@@ -535,7 +543,8 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
         effort = 50.0          # effort limit [N*m]
         armature = 0.01        # reflected rotor inertia [kg*m^2]
 
-    Keys: ``kp kd effort armature friction damping lower upper``. A pattern that matches no joint is an
+    Keys: ``kp kd effort armature friction damping lower upper``, and the servo drive's ``drive deadband
+    noload_speed goal_accel`` (read by :func:`wresdyn.robot.servo.read_servo`, not here). A pattern that matches no joint is an
     error, so typos do not pass silently. An effort limit set here is taken as stated, even a huge one (see
     :meth:`Robot.check_effort`). Returns the DoF indices whose effort limit the config set.
     """
@@ -557,13 +566,16 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
         pattern = e.pop("match", None)
         if not isinstance(pattern, str):
             raise RobotError(f"{where}: every [[joint]] needs a match = \"pattern\" string")
-        unknown = set(e) - set(_OVERRIDE_FIELDS)
+        unknown = set(e) - set(_OVERRIDE_FIELDS) - set(SERVO_KEYS)
         if unknown:
-            raise RobotError(f"{where}: unknown key(s) {sorted(unknown)} for match {pattern!r}; allowed: {list(_OVERRIDE_FIELDS)}")
+            raise RobotError(f"{where}: unknown key(s) {sorted(unknown)} for match {pattern!r}; allowed: "
+                             f"{list(_OVERRIDE_FIELDS) + list(SERVO_KEYS)}")
         hits = [j for j, n in enumerate(labels) if fnmatch.fnmatchcase(n, pattern) and dof_dim[j] == 1]
         if not hits:
             raise RobotError(f"{where}: pattern {pattern!r} matches no 1-DoF joint of {source or 'the robot'}")
         for key, value in e.items():
+            if key in SERVO_KEYS:
+                continue  # the drive law's keys: read_servo
             try:
                 value = float(value)
             except (TypeError, ValueError):
