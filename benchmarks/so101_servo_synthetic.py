@@ -23,7 +23,7 @@ from wresdyn.robot.servo import STS3215
 from wresdyn.sim import replay_trajectories
 
 RATE_HZ = 250.0
-"""Recording and replay rate [Hz]; the MuJoCo robot steps at 1 ms."""
+"""Recording and replay rate [Hz]; the MuJoCo robot steps at the same rate (its servo law, like the replay's, treats its velocity term implicitly)."""
 TRUTH = {"kp": 6.0, "kd": 0.01, "deadband": 0.004, "noload_speed": 5.0, "goal_accel": 25.0}
 """The "real" servos (every joint), near the STS3215's priors (:data:`wresdyn.robot.servo.STS3215`)."""
 START = {"kp": 1.4, "deadband": 0.5, "noload_speed": 1.3, "goal_accel": 1.6}
@@ -48,10 +48,10 @@ def main(out: Path, iterations: int) -> None:
 
     true_robot = load_robot(SO101, gains=gains(TRUTH))
     t0 = time.perf_counter()
-    ds = collect(true_robot, Mismatch(substep=0.001), {"train": 8, "validation": 2, "heldout": 2}, duration=4.0,
+    ds = collect(true_robot, Mismatch(), {"train": 8, "validation": 2, "heldout": 2}, duration=4.0,
                  rate_hz=RATE_HZ, seed=3)
     say(f"collected {len(ds.trajectories)} runs of 4 s at {RATE_HZ:.0f} Hz in {time.perf_counter() - t0:.0f} s")
-    truth = RealRobot(true_robot, Mismatch(substep=0.001), RATE_HZ).physics()
+    truth = RealRobot(true_robot, Mismatch(), RATE_HZ).physics()
 
     # (1) parity: the true parameters replayed open loop from each recording's first state
     t0 = time.perf_counter()

@@ -32,7 +32,7 @@ from ..robot.description import Robot, RobotError
 from ..robot.ground import FloatingState, check_floating
 from ..robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco
 from ..robot.physical import PhysicalParams
-from ..robot.servo import GoalProfile, servo_torque
+from ..robot.servo import GoalProfile
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 
@@ -216,9 +216,10 @@ class RealRobot:
         m.actuator_forcerange[:n] *= jv["torque_limit_scale"][:, None]
 
     def _servo_motors(self) -> dict | None:
-        """Turn the (perturbed) position actuators of servo joints (:attr:`Robot.servo`) into motors (force = ctrl,
-        within the force range) whose ctrl :meth:`_servo_ctrl` computes each physics step; returns the servo law's
-        parameters, or None for a robot without servos (its actuators stay untouched)."""
+        """Turn the (perturbed) position actuators of servo joints (:attr:`Robot.servo`) into affine actuators
+        (force = ctrl + bias_v qd, within the force range) whose ctrl and ``bias_v`` :meth:`_servo_ctrl` sets each
+        physics step; returns the servo law's parameters, or None for a robot without servos (its actuators stay
+        untouched)."""
         servo, m, n = self.robot.servo, self.model, self.robot.n_dof
         if servo is None:
             return None
@@ -235,12 +236,21 @@ class RealRobot:
         return law
 
     def _servo_ctrl(self, d, command, profile) -> np.ndarray:
-        """MuJoCo ctrl for one physics step: the command on PD joints, the servo law's torque on servo joints."""
-        law = self._servo
+        """MuJoCo ctrl for one physics step: the command on PD joints; on servo joints the servo law
+        (:mod:`wresdyn.robot.servo`) split into its velocity term, the actuator's ``biasprm[2]`` (which
+        ``implicitfast`` integrates implicitly, as SolverReplay does the law's), and the rest as ctrl."""
+        law, m = self._servo, self.model
+        n = len(command)
         goal = profile(command)
-        tau = servo_torque(goal, d.qpos, d.qvel, law["kp"], law["kd"], law["deadband"], law["effort"],
-                           law["noload_speed"])
-        return np.where(law["mask"], tau, command)
+        e = goal - d.qpos[:n]
+        e_b = e - np.clip(e, -law["deadband"], law["deadband"])
+        raw = law["kp"] * e_b - law["kd"] * d.qvel[:n]
+        free = np.abs(raw) < law["effort"]
+        emf = np.divide(law["effort"], law["noload_speed"], out=np.zeros(n), where=law["noload_speed"] > 0)
+        ctrl = np.where(free, law["kp"] * e_b, np.sign(raw) * law["effort"])
+        s = law["mask"]
+        m.actuator_biasprm[:n, 2] = np.where(s, -(free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
+        return np.where(s, ctrl, command)
 
     def physics(self):
         """The true physical parameters of this robot in the simulator's terms
