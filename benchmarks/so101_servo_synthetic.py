@@ -1,10 +1,14 @@
 """The servo drive's synthetic check (issue 30): a "real" SO-101 whose drives are servos of known parameters, recorded
-in MuJoCo C (:class:`wresdyn.data.real_robot.RealRobot`, motor actuators driven by the servo law each physics step),
+in MuJoCo C (:class:`wresdyn.data.real_robot.RealRobot`, affine actuators driven by the servo law each physics step),
 then (1) replayed with its true parameters in SolverReplay (how closely the two simulators agree) and (2) identified
-by ``wresdyn identify``'s learner from a start off by 20-60 % on the servo fields, which must come back within 10 %
+by ``wresdyn identify``'s learner from a start off by 30-60 % on the servo fields, which must come back within 10 %
 where the excitation exercises them.
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/so101_servo_synthetic.py OUT_DIR [ITERATIONS]
+The commands are the joint-space multisines of ``wresdyn collect``, sent as a teleoperated arm gets them: updated at
+``COMMAND_HZ`` and held in between, so each update is a step the servo's goal profile smooths (LeRobot sends goals at
+30 Hz). Smooth commands at the recording rate barely exercise the profile (below).
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/so101_servo_synthetic.py OUT_DIR [ADAM_ITERATIONS [LBFGS_STEPS]]
 
 Raw output: ``benchmarks/results/so101_servo/``. Which fields the excitation exercises is measured, not assumed: the
 training loss's relative change when a field moves by 10 % on one joint from the truth (``sensitivity``).
@@ -16,7 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from wresdyn.data.real_robot import Mismatch, RealRobot, collect
+from wresdyn.data import excitation as ex
+from wresdyn.data.dataset import Dataset, Trajectory, derive_qdd
+from wresdyn.data.real_robot import Mismatch, RealRobot
 from wresdyn.learn.sysid import SysIdConfig, identify
 from wresdyn.robot.description import load_robot
 from wresdyn.robot.servo import STS3215
@@ -24,10 +30,12 @@ from wresdyn.sim import replay_trajectories
 
 RATE_HZ = 250.0
 """Recording and replay rate [Hz]; the MuJoCo robot steps at the same rate (its servo law, like the replay's, treats its velocity term implicitly)."""
-TRUTH = {"kp": 6.0, "kd": 0.01, "deadband": 0.004, "noload_speed": 5.0, "goal_accel": 25.0}
+TRUTH = {"kp": 6.0, "kd": 0.01, "deadband": 0.004, "noload_speed": 5.0, "goal_accel": 8.0}
 """The "real" servos (every joint), near the STS3215's priors (:data:`wresdyn.robot.servo.STS3215`)."""
 START = {"kp": 1.4, "deadband": 0.5, "noload_speed": 1.3, "goal_accel": 1.6}
 """Factors on the truth the identification starts from."""
+COMMAND_HZ = 31.25
+"""Command update rate [Hz] (every 8th sample)."""
 FIT = ("kp", "deadband", "noload_speed", "goal_accel")
 SO101 = Path(__file__).resolve().parent.parent / "scenes" / "so101" / "so101.xml"
 
@@ -36,7 +44,27 @@ def gains(values: dict) -> dict:
     return {"joint": [{"match": "*", "drive": "servo", "effort": STS3215.effort, **values}]}
 
 
-def main(out: Path, iterations: int) -> None:
+def record(robot, counts: dict, duration: float, seed: int) -> Dataset:
+    """Multisine commands held at :data:`COMMAND_HZ`, executed by the MuJoCo servo robot (noise-free, float32 as
+    stored by ``collect``)."""
+    real = RealRobot(robot, Mismatch(), RATE_HZ)
+    plan = ex.plan(robot)
+    hold = int(round(RATE_HZ / COMMAND_HZ))
+    trajs = []
+    for split, count in counts.items():
+        for i in range(count):
+            rng = np.random.default_rng([seed, len(trajs)])
+            q_cmd = plan.generate("multisine", duration, RATE_HZ, rng).q_cmd
+            q_cmd = q_cmd[np.arange(len(q_cmd)) // hold * hold].astype(np.float32).astype(np.float64)
+            q, qd, _ = real.record(q_cmd)
+            q, qd = q.astype(np.float32).astype(np.float64), qd.astype(np.float32).astype(np.float64)
+            trajs.append(Trajectory(f"{split}_{i:03d}", split, np.arange(len(q)) / RATE_HZ, q, qd,
+                                    derive_qdd(qd, RATE_HZ), q_cmd))
+    return Dataset(list(robot.joint_names), RATE_HZ, trajs, str(SO101), robot.source_sha256, Mismatch().to_dict(),
+                   seed, {"generator": "benchmarks/so101_servo_synthetic.py"}, robot.gains_record())
+
+
+def main(out: Path, iterations: int, refine: int) -> None:
     out.mkdir(parents=True, exist_ok=True)
     log = open(out / "log.txt", "w")
 
@@ -48,9 +76,9 @@ def main(out: Path, iterations: int) -> None:
 
     true_robot = load_robot(SO101, gains=gains(TRUTH))
     t0 = time.perf_counter()
-    ds = collect(true_robot, Mismatch(), {"train": 8, "validation": 2, "heldout": 2}, duration=4.0,
-                 rate_hz=RATE_HZ, seed=3)
-    say(f"collected {len(ds.trajectories)} runs of 4 s at {RATE_HZ:.0f} Hz in {time.perf_counter() - t0:.0f} s")
+    ds = record(true_robot, {"train": 8, "validation": 2, "heldout": 2}, duration=4.0, seed=3)
+    say(f"recorded {len(ds.trajectories)} runs of 4 s at {RATE_HZ:.0f} Hz, commands at {COMMAND_HZ} Hz, in "
+        f"{time.perf_counter() - t0:.0f} s")
     truth = RealRobot(true_robot, Mismatch(), RATE_HZ).physics()
 
     # (1) parity: the true parameters replayed open loop from each recording's first state
@@ -80,8 +108,10 @@ def main(out: Path, iterations: int) -> None:
     start_values = {**TRUTH, **{k: TRUTH[k] * f for k, f in START.items()}}
     start_robot = load_robot(SO101, gains=gains(start_values))
     cfg = SysIdConfig(fit=FIT, iterations=iterations, windows=16, horizon_curriculum=(32, 64, 128), effort_grid=(),
-                      select_every=max(iterations // 10, 1), lr=0.03, lr_final=0.003, share_effort_ratio=False)
-    say(f"identify {', '.join(FIT)} from {START} x truth, {iterations} iterations, 16 windows")
+                      select_every=max(iterations // 10, 1), lr=0.03, lr_final=0.003, share_effort_ratio=False,
+                      refine=refine, refine_windows=32)
+    say(f"identify {', '.join(FIT)} from {START} x truth, {iterations} Adam iterations (16 windows), {refine} L-BFGS "
+        "steps (32 windows)")
     t0 = time.perf_counter()
     params, curve = identify(start_robot, ds, cfg, log=say)
     say(f"identified in {time.perf_counter() - t0:.0f} s")
@@ -101,4 +131,4 @@ def main(out: Path, iterations: int) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else 200)
+    main(Path(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else 400, int(sys.argv[3]) if len(sys.argv) > 3 else 10)

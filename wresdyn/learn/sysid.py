@@ -96,15 +96,21 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True)
-    bank.set_command_path(torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device),
-                          servo_goal_accel(robot, start, dt, sim.device))
-    window = bank.sample(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
+    delay = torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device)
+    bank.set_command_path(delay, servo_goal_accel(robot, start, dt, sim.device))
+    traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
+    window = bank.window(traj, first, h)
+    profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.LBFGS(params, lr=1.0, max_iter=20, history_size=50, line_search_fn="strong_wolfe")
 
     def closure():
         optim.zero_grad()
-        loss, _ = _window_loss(cfg, model, sim, window, weights)
+        w = window
+        if profiled:  # the servo goals of the fixed windows move with the fitted goal acceleration
+            bank.set_command_path(delay, model.goal_accel_steps().float().to(sim.device))
+            w = bank.window(traj, first, h)
+        loss, _ = _window_loss(cfg, model, sim, w, weights)
         if not torch.isfinite(loss):
             raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
         loss.backward()

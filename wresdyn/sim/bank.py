@@ -177,6 +177,7 @@ class TrajectoryBank:
         self.first = torch.repeat_interleave(self.start, self.length)
         """First row of each row's trajectory, (T_total,)."""
         self.device = self.q.device
+        self.delay = self.goal_accel = self._fixed = None
         self.set_command_path(delay, goal_accel)
 
     @property
@@ -195,13 +196,24 @@ class TrajectoryBank:
     def set_command_path(self, delay, goal_accel) -> None:
         """Set the delay [steps] and the servo goal acceleration [rad/step²] (or ``None``) together; without
         gradients to either, the targets are computed once for the whole table."""
+        same = goal_accel is not None and self._same(delay, self.delay) and self._same(goal_accel, self.goal_accel)
         self.delay = delay
         self.goal_accel = None if goal_accel is None else torch.as_tensor(goal_accel, device=self.device)
         if self.goal_accel is not None:
-            self._fixed = None if self._grad() else self._profiled()
+            if not (same and self._fixed is not None):  # the profile runs over every sample: only when it changed
+                self._fixed = None if self._grad() else self._profiled()
             return
         self._fixed = None if torch.is_tensor(delay) and delay.requires_grad else delay_commands(
             self.q_cmd, torch.arange(len(self.q_cmd), device=self.device), self.first, delay)
+
+    @staticmethod
+    def _same(a, b) -> bool:
+        """Whether two delays or goal accelerations are the same values without gradients."""
+        if torch.is_tensor(a) != torch.is_tensor(b):
+            return False
+        if not torch.is_tensor(a):
+            return a == b
+        return not (a.requires_grad or b.requires_grad) and a.shape == b.shape and bool(torch.equal(a, b.to(a.device)))
 
     def _grad(self) -> bool:
         return any(torch.is_tensor(x) and x.requires_grad for x in (self.delay, self.goal_accel))
