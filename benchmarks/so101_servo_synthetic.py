@@ -4,9 +4,11 @@ then (1) replayed with its true parameters in SolverReplay (how closely the two 
 by ``wresdyn identify``'s learner from a start off by 30-60 % on the servo fields, which must come back within 10 %
 where the excitation exercises them.
 
-The commands are the joint-space multisines of ``wresdyn collect``, sent as a teleoperated arm gets them: updated at
-``COMMAND_HZ`` and held in between, so each update is a step the servo's goal profile smooths (LeRobot sends goals at
-30 Hz). Smooth commands at the recording rate barely exercise the profile (below).
+The commands are ``wresdyn collect``'s joint-space families in turn (multisines, minimum-jerk steps with pauses,
+chirps: :data:`FAMILIES`), sent as a teleoperated arm gets them: updated at ``COMMAND_HZ`` and held in between, so
+each update is a step the servo's goal profile smooths (LeRobot sends goals at 30 Hz). Multisines alone left the
+dead band and the no-load speed 20-37 % off on three joints (kp trades with both while the arm tracks smoothly);
+the steps' pauses show the band, their fast moves the torque-speed line.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/so101_servo_synthetic.py OUT_DIR [ADAM_ITERATIONS [LBFGS_STEPS]]
 
@@ -34,6 +36,8 @@ TRUTH = {"kp": 6.0, "kd": 0.01, "deadband": 0.004, "noload_speed": 5.0, "goal_ac
 """The "real" servos (every joint), near the STS3215's priors (:data:`wresdyn.robot.servo.STS3215`)."""
 START = {"kp": 1.4, "deadband": 0.5, "noload_speed": 1.3, "goal_accel": 1.6}
 """Factors on the truth the identification starts from."""
+FAMILIES = ("multisine", "steps", "chirp")
+"""Excitation families, one per trajectory in turn."""
 COMMAND_HZ = 31.25
 """Command update rate [Hz] (every 8th sample)."""
 FIT = ("kp", "deadband", "noload_speed", "goal_accel")
@@ -45,7 +49,7 @@ def gains(values: dict) -> dict:
 
 
 def record(robot, counts: dict, duration: float, seed: int) -> Dataset:
-    """Multisine commands held at :data:`COMMAND_HZ`, executed by the MuJoCo servo robot (noise-free, float32 as
+    """Commands of :data:`FAMILIES` held at :data:`COMMAND_HZ`, executed by the MuJoCo servo robot (noise-free, float32 as
     stored by ``collect``)."""
     real = RealRobot(robot, Mismatch(), RATE_HZ)
     plan = ex.plan(robot)
@@ -54,7 +58,7 @@ def record(robot, counts: dict, duration: float, seed: int) -> Dataset:
     for split, count in counts.items():
         for i in range(count):
             rng = np.random.default_rng([seed, len(trajs)])
-            q_cmd = plan.generate("multisine", duration, RATE_HZ, rng).q_cmd
+            q_cmd = plan.generate(FAMILIES[i % len(FAMILIES)], duration, RATE_HZ, rng).q_cmd
             q_cmd = q_cmd[np.arange(len(q_cmd)) // hold * hold].astype(np.float32).astype(np.float64)
             q, qd, _ = real.record(q_cmd)
             q, qd = q.astype(np.float32).astype(np.float64), qd.astype(np.float32).astype(np.float64)
@@ -87,7 +91,7 @@ def main(out: Path, iterations: int, refine: int) -> None:
     err = [np.abs(q - t.q) for q, t in zip(rep.q, ds.trajectories)]
     moved = [np.abs(t.q - t.q[0]).max() for t in ds.trajectories]
     say(f"parity: SolverReplay with the true parameters against the MuJoCo recording ({time.perf_counter() - t0:.0f} s):"
-        f" mean |dq| {np.mean([e.mean() for e in err]):.5f} rad, max {max(e.max() for e in err):.5f} rad "
+        f" mean |dq| {np.mean([e.mean() for e in err]):.2e} rad, max {max(e.max() for e in err):.2e} rad "
         f"(joints move up to {max(moved):.2f} rad)")
 
     # which fields the excitation exercises: each moved by 10 % on one joint, the training runs' replay error
