@@ -132,6 +132,11 @@ def main(out: Path, iterations: int, refine: int) -> None:
             row += f"  {t:8.4f} -> {v:8.4f} ({rel:+6.1%})"
         say(row)
     say("worst relative error per field: " + ", ".join(f"{f} {w:.1%}" for f, w in worst.items()))
+    # where a hold ends: the drive lets go at |e| = b, friction holds the joint until kp (|e| - b) exceeds it
+    offset = [p.deadband + p.friction / p.kp for p in (truth, params)]
+    say("hold offset b + friction / kp [mrad], truth -> identified: " + ", ".join(
+        f"{name} {1e3 * t:.2f} -> {1e3 * v:.2f} ({(v - t) / t:+.1%})"
+        for name, t, v in zip(true_robot.joint_names, *offset)))
 
 
 if __name__ == "__main__":
