@@ -19,7 +19,8 @@ def main() -> None:
     args = p.parse_args()
 
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
 

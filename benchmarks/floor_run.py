@@ -11,7 +11,8 @@ def held_out(run, data=None):
     """``(results, task, floating robot, held-out motions, real robot)`` of the floor run folder ``run``; ``data``:
     the dataset whose robot file it used (default: the shipped one)."""
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
     from wresdyn.skills.floor_env import FloorTaskConfig

@@ -65,7 +65,8 @@ def true_parameters(data: str, laws: dict) -> None:
 
     from wresdyn.data.dataset import Trajectory, derive_qdd
     from wresdyn.data.loading import load_data
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
     from wresdyn.evaluation.open_loop import metrics
     from wresdyn.sim import Simulator
     from wresdyn.sim.rollout import replay_trajectories

@@ -26,7 +26,8 @@ def main() -> None:
     args = ap.parse_args()
 
     from wresdyn.data.loading import load_data
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
 
     ds, robot = load_data(args.data, None)
     if not ds.mismatch:

@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # The real-hardware benchmark (issue 13): the full SAGE SO-101 set (40 runs, ../shared/real/so101/), whole runs
 # (each its own motion family) held out, PD-only vs the hybrid and identification, each started from a kp search
-# (--gain-grid) and from the file's kp, the residual alone and identification with a delay search.
+# (--gain-grid) and from the file's kp, the residual alone and identification with a delay search; then the
+# baselines (LeRobot's MuJoCo model, a BAM-style drive) replayed in MuJoCo on the same runs.
 # Raw output: benchmarks/results/so101/.
 #   bash benchmarks/so101_real.sh SO101_TARBALL_DIR OUT_DIR
 set -euo pipefail
 src=${1:?usage: so101_real.sh DIR_WITH_so101-sage-logs.tar.xz OUT_DIR}
 out=${2:?usage: so101_real.sh DIR OUT_DIR}
 w=${WRESDYN:-.venv/bin/wresdyn}
+py=${PYTHON:-.venv/bin/python}
 mkdir -p "$out/logs" && tar -xJf "$src/so101-sage-logs.tar.xz" -C "$out/logs"
 $w collect --robot scenes/so101/so101.xml --logs "$out/logs/logs" --map data/so101/map.toml \
     --assign 'pick_place=ood' --assign 'figure_eight=ood' --validation-fraction 0.15 --heldout-fraction 0.15 \
@@ -19,3 +21,4 @@ $w identify "$out/data/dataset.npz" --gain-grid $grid --out "$out/identify_gain_
 $w fit "$out/data/dataset.npz" --out "$out/hybrid" --eval
 $w fit "$out/data/dataset.npz" --model network --out "$out/network" --eval
 $w identify "$out/data/dataset.npz" --delay-grid 0,10,25,40,55,70 --out "$out/identify_delay" --eval
+$py benchmarks/so101_baselines.py "$out/data/dataset.npz" --json "$out/baselines.json" | tee "$out/baselines.txt"

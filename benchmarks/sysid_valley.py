@@ -44,7 +44,8 @@ def main() -> None:
     import warp as wp
 
     from wresdyn.data.loading import load_data
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
     from wresdyn.evaluation.open_loop import evaluate_split
     from wresdyn.learn.window_fit import joint_weights, squared_error
     from wresdyn.learn.sysid import SysIdConfig

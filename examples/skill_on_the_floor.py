@@ -34,7 +34,8 @@ def main() -> None:
     from dataclasses import replace
 
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
     from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv

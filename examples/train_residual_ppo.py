@@ -21,7 +21,8 @@ from wresdyn.robot.description import DEFAULT_ROBOT
 
 def tiny_dataset(robot):
     """Two training, one held-out and one OOD trajectory of 0.5 s on the default mismatched "real" robot."""
-    from wresdyn.data.real_robot import Mismatch, collect
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import collect
     from wresdyn.paths import DEFAULT_MISMATCH
 
     return collect(robot, Mismatch.load(DEFAULT_MISMATCH), {"train": 2, "validation": 1, "heldout": 1, "ood": 1}, duration=0.5)

@@ -63,7 +63,7 @@ def robot(humanoid):
 @pytest.fixture(scope="session")
 def shipped_mismatch():
     """The shipped benchmark's real robot (data/mismatch_default.toml): friction, gains, delay, saturation, noise."""
-    from wresdyn.data.real_robot import Mismatch
+    from wresdyn.data.mismatch import Mismatch
     from wresdyn.paths import DEFAULT_MISMATCH
 
     return Mismatch.load(DEFAULT_MISMATCH)

@@ -13,11 +13,10 @@ from wresdyn.cli import build_parser, main
 from wresdyn.cli.collect import CollectConfig
 from wresdyn.cli.config_flags import config_fields, plain_help
 from wresdyn.data.signals import ExcitationConfig
-from wresdyn.experiments.ablation import AblationConfig
+from wresdyn.experiments.ablation_config import AblationConfig
 from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
-from wresdyn.learn.hybrid import HYBRID_ITERATIONS
 from wresdyn.learn.ppo_config import default_config
-from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
+from wresdyn.learn.window_fit_config import HYBRID_ITERATIONS, GradFitConfig, SysIdConfig
 from wresdyn.skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 
 OLD_FLAGS = {

@@ -215,7 +215,8 @@ def test_unknown_split_query():
 
 def test_collected_dataset_round_trips_and_is_reproducible(tmp_path, humanoid):
     """The real pipeline, tiny: same seed gives the same data, another seed other data, and the file is exact."""
-    from wresdyn.data.real_robot import Mismatch, collect
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import collect
 
     mm = Mismatch.load(Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml")
     counts = {"train": 1, "ood": 2}
@@ -305,7 +306,8 @@ def test_migrate_log_dataset_moves_train_to_validation(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def collected(humanoid):
     """A tiny collect with a validation split (0.1 s per trajectory, the real pipeline)."""
-    from wresdyn.data.real_robot import Mismatch, collect
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import collect
 
     mm = Mismatch.load(Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml")
     return collect(humanoid, mm, {"train": 1, "validation": 2, "heldout": 1}, duration=0.1, seed=5)

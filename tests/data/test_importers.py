@@ -14,6 +14,7 @@ import pytest
 
 from wresdyn.data.dataset import DatasetError, load_dataset
 from wresdyn.data.importers import SplitRule, import_runs, load_split_map, parse_assign, read_runs, read_sage
+from wresdyn.data.lerobot import LeRobotUnits
 from wresdyn.data.logs import LogMap, import_log, resample
 
 REPO = Path(__file__).resolve().parents[2]
@@ -22,6 +23,8 @@ SHIPPED = REPO / "data" / "so101"
 SO101_JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 SAGE_JOINTS = ["Rotation", "Pitch", "Elbow", "Wrist_Pitch", "Wrist_Roll", "Jaw"]
 RATE = 500.0
+SO101_GRIPPER = (-0.17453297762778586, 1.7453291995659765)
+"""The gripper's range in scenes/so101/so101.xml [rad]."""
 
 
 @dataclass
@@ -34,6 +37,15 @@ class FakeRobot:
 
     def gains_record(self):
         return None
+
+    @property
+    def lower(self):
+        """Joint lower limits [rad]: the SO-101 file's gripper range for a joint named gripper, else -pi."""
+        return np.array([SO101_GRIPPER[0] if j == "gripper" else -math.pi for j in self.joint_names])
+
+    @property
+    def upper(self):
+        return np.array([SO101_GRIPPER[1] if j == "gripper" else math.pi for j in self.joint_names])
 
 
 def _write_map(path: Path, text: str) -> LogMap:
@@ -211,7 +223,8 @@ def test_lerobot_v2_and_v3_give_the_same_dataset(tmp_path):
     eps = _episodes((12, 18))
     for v in ("v2.0", "v3.0"):
         _write_lerobot(tmp_path / v / "ds", v, eps, [f"{j}.pos" for j in SO101_JOINTS])
-    a, b = (import_runs([tmp_path / v / "ds"], FakeRobot(SO101_JOINTS), RATE) for v in ("v2.0", "v3.0"))
+    a, b = (import_runs([tmp_path / v / "ds"], FakeRobot(SO101_JOINTS), RATE, lerobot=LeRobotUnits(arm="degrees"))
+            for v in ("v2.0", "v3.0"))
     for x, y in zip(a.trajectories, b.trajectories):
         assert x.name == y.name
         np.testing.assert_array_equal(x.q, y.q)
@@ -357,7 +370,7 @@ def test_bad_lerobot_datasets_fail_in_one_line(tmp_path):
 
     def expect(root, file, match):
         with pytest.raises(DatasetError, match=match) as e:
-            import_runs([root], robot, RATE)
+            import_runs([root], robot, RATE, lerobot=LeRobotUnits(arm="degrees"))
         _one_line(e, file)
 
     root, f = make("nan")

@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wresdyn.data.real_robot import Mismatch, MismatchError, RealRobot, collect
+from wresdyn.data.mismatch import Mismatch, MismatchError
+from wresdyn.data.real_robot import RealRobot, collect
 from wresdyn.evaluation.open_loop import pd_gap
 
 RATE = 500.0

@@ -49,7 +49,7 @@ def test_so101_loads_with_its_servo_model(so101):
 
 
 def test_so101_mismatch_loads_and_scales():
-    from wresdyn.data.real_robot import Mismatch
+    from wresdyn.data.mismatch import Mismatch
 
     mm = Mismatch.load(REPO / "scenes" / "so101" / "mismatch.toml")
     assert mm.torque_limit_scale * 3.35 == pytest.approx(1.91, abs=0.01)  # 7.4 V STS3215 stall torque

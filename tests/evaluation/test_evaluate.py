@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.data.real_robot import Mismatch, collect
+from wresdyn.data.mismatch import Mismatch
+from wresdyn.data.real_robot import collect
 from wresdyn.evaluation.open_loop import evaluate_split, write_report
 from wresdyn.evaluation.plots import plot_fig3
 from wresdyn.sim.rollout import replay_trajectories
@@ -23,7 +24,7 @@ def data(robot):  # longer than the shared tiny recording, no training split
 
 class Oracle(torch.nn.Module):
     """The residual that explains ``RealRobot(robot, mismatch)``, from raw [q, q̇, q̈, q_cmd], written from the
-    :class:`~wresdyn.data.real_robot.Mismatch` fields as the real robot defines them: its drive is
+    :class:`~wresdyn.data.mismatch.Mismatch` fields as the real robot defines them: its drive is
     kp_scale·kp·(q_cmd − q) − kd_scale·kd·q̇ and its joints have extra damping·kd·q̇ of viscous friction, so
 
         τ_res = (kp_scale − 1)·kp·(q_cmd − q) − (kd_scale − 1 + damping)·kd·q̇,

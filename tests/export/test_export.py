@@ -155,7 +155,8 @@ def test_plain_newton_reproduces_the_corrected_replay(exported, humanoid, data):
 
 
 def test_export_refuses_bad_runs_and_writes_nothing(tmp_path, humanoid, data, capsys):
-    from wresdyn.data.real_robot import Mismatch, collect
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import collect
 
     no_res = _run(tmp_path, humanoid, data, residual=False)
     out = tmp_path / "out"

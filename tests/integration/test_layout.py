@@ -32,20 +32,10 @@ RANK = {"errors": 0, "choices": 0, "paths": 0, "progress": 0, "robot": 1, "data"
 MAX_LINES = 450
 """Longest module, in lines (rsl_rl's largest file is under 500 lines)."""
 
-LONG_MODULES = {
-    "robot/description.py",  # the robot description and the gains overrides: two concerns, to split
-    "data/real_robot.py",  # the simulated real robot and its mismatch config: two concerns, to split
-}
+LONG_MODULES: set[str] = set()
 """Modules over :data:`MAX_LINES` today, each being split; the list only shrinks."""
 
 IMPORTS_INSIDE_FUNCTIONS = {
-    # --help reads these modules, so what imports torch stays inside the function that needs it
-    "learn/hybrid.py -> wresdyn.sim.warmup": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
-    "learn/hybrid.py -> wresdyn.learn.gradfit": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
-    "learn/hybrid.py -> wresdyn.learn.sysid": "cli/fit.py reads HYBRID_ITERATIONS from here for --help; torch",
-    "experiments/ablation.py -> wresdyn.evaluation.open_loop": "cli/ablate.py reads AblationConfig from here; torch",
-    "experiments/ablation.py -> wresdyn.learn.ppo": "cli/ablate.py reads AblationConfig from here; torch, rsl_rl",
-    "experiments/ablation.py -> wresdyn.learn.gradfit": "cli/ablate.py reads AblationConfig from here; torch",
     # solver_replay imports newton and warp at module level; sim imports them where a solver is built
     "sim/solvers.py -> wresdyn.sim.solver_replay": "newton and warp load with the replay solver only",
     "sim/solver_benchmark.py -> wresdyn.sim.solver_replay": "newton and warp load with the replay solver only",

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.data.real_robot import Mismatch
+from wresdyn.data.mismatch import Mismatch
 from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit, window_loss
 from wresdyn.learn.residual import ResidualConfig, obs_stats
 from wresdyn.learn.runs import RunError

@@ -10,8 +10,8 @@ from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
 from wresdyn.learn.residual import ResidualConfig
 
 
-def make_env(robot, data, n=4, **cfg):
-    return ReplayEnv(robot, data.split("train"), data.rate_hz, n, ReplayEnvConfig(**cfg))
+def make_env(robot, data, n=4, physics=None, **cfg):
+    return ReplayEnv(robot, data.split("train"), data.rate_hz, n, ReplayEnvConfig(**cfg), physics=physics)
 
 
 def test_worlds_start_in_the_recorded_state(robot, data):
@@ -105,7 +105,7 @@ def test_observation_noise_reaches_the_policy_only(robot, data):
     assert 0.08 < float(diff.std()) < 0.12  # noise of 0.1 normalising std on the policy's view
 
 
-def test_identified_physics_sets_the_model_and_the_command_delay(robot, data, tmp_path):
+def test_identified_physics_sets_the_model_and_the_command_delay(robot, data):
     """`env.physics` (the hybrid): the worlds step with the file's gains and friction and its delayed commands,
     exactly as a simulator given the same physics and a bank with the same delay."""
     from wresdyn.sim import Simulator, TrajectoryBank
@@ -114,8 +114,7 @@ def test_identified_physics_sets_the_model_and_the_command_delay(robot, data, tm
     p = PhysicalParams.nominal(robot)
     p.kp, p.friction = 0.6 * p.kp, p.friction + 0.05 * p.effort
     p.delay = np.full(robot.n_dof, 1.5 / data.rate_hz)
-    p.save(tmp_path / "physics.json")
-    env = make_env(robot, data, n=1, horizon=50, physics=str(tmp_path / "physics.json"))
+    env = make_env(robot, data, n=1, horizon=50, physics=p)
     plain = make_env(robot, data, n=1, horizon=50)
     g0 = int(env.g[0])
     traj = int(torch.searchsorted(env.bank.start, env.g, right=True)[0]) - 1

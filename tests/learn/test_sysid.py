@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from wresdyn.cli import main
-from wresdyn.data.real_robot import Mismatch, RealRobot
+from wresdyn.data.mismatch import Mismatch
+from wresdyn.data.real_robot import RealRobot
 from wresdyn.learn.runs import RunError, load_checkpoint
 from wresdyn.learn.sysid import PhysicsScore, SysIdConfig, identify
 from wresdyn.sim.physics import PhysicalParams

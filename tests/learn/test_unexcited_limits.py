@@ -75,7 +75,7 @@ def test_identification_shares_the_ratio_and_never_selects_worse(humanoid, recor
     # on a robot whose drives are all derated to a fifth of the file, small commands saturate some drives and not
     # others: identification gives the others the saturating ones' ratio, exactly as the function does on the
     # parameters it would otherwise return (the two runs are the same up to that last step)
-    from wresdyn.data.real_robot import Mismatch
+    from wresdyn.data.mismatch import Mismatch
     from wresdyn.learn.sysid import PhysicsScore
 
     data = record(humanoid, Mismatch(torque_limit_scale=0.2), {"train": 2, "validation": 1}, seconds=0.3,

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.data.real_robot import Mismatch, RealRobot
+from wresdyn.data.mismatch import Mismatch
+from wresdyn.data.real_robot import RealRobot
 from wresdyn.robot.description import RobotError, load_robot
 from wresdyn.robot.ground import ContactSettings, FloatingState, standing_state
 from wresdyn.robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco

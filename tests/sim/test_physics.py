@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.data.real_robot import Mismatch, RealRobot
+from wresdyn.data.mismatch import Mismatch
+from wresdyn.data.real_robot import RealRobot
 from wresdyn.sim import Simulator, TrajectoryBank
 from wresdyn.sim.physics import PhysicalParams, PhysicsError, PhysicsModel, pseudo_inertia
 

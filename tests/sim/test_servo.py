@@ -219,7 +219,8 @@ def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path):
     """The MuJoCo "real" robot's servo joints (elbow a PD drive): the recorded actuator torque is the law
     (:func:`servo_torque`) at the recorded state and profiled goal, and SolverReplay replaying its true parameters
     follows the recording (a command step, so the profile, the band and the torque-speed line all act)."""
-    from wresdyn.data.real_robot import Mismatch, RealRobot
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
     from wresdyn.sim import replay_trajectories
 
     robot = make_robot(tmp_path, effort=5.0, joints="[ss]*")

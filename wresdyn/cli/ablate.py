@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 
 from ..choices import Learner, choices
-from ..experiments.ablation import AblationConfig
+from ..experiments.ablation_config import AblationConfig
 from .config_flags import add_config_flags, build_config, comma_list, given_fields
 
 
@@ -78,7 +78,8 @@ def _delay_sweep(robot, dataset, cfg, args, out: Path) -> None:
     import numpy as np
 
     from ..data.dataset import load_dataset
-    from ..data.real_robot import Mismatch, collect
+    from ..data.mismatch import Mismatch
+    from ..data.real_robot import collect
     from ..experiments.ablation import cells, run_cells, write_summary
 
     base = Mismatch.from_dict(dataset.mismatch) if dataset.mismatch else Mismatch()

@@ -12,7 +12,7 @@ _SOLVERS = ("replay", "featherstone", "mujoco-warp", "mujoco-c")  # solver_bench
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robot", default=None, help="robot file (default: the project humanoid)")
-    p.add_argument("--gains", default=None, help="gains override TOML (see wresdyn.robot.description.apply_overrides)")
+    p.add_argument("--gains", default=None, help="gains override TOML (see wresdyn.robot.gains.apply_overrides)")
     p.add_argument("--worlds", default=None,
                    help="comma list of world counts (default 1,16,128 on CPU; 1024,4096,16384 on CUDA)")
     p.add_argument("--device", default="cpu", help="Warp device: cpu or cuda:0")

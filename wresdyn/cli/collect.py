@@ -93,6 +93,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                            "dataset folders (one trajectory per episode) or folders of runs (docs/dataset.md)")
     logs.add_argument("--map", default=None, metavar="TOML",
                       help="mapping file (log joint -> robot joint, units, excluded joints)")
+    logs.add_argument("--lerobot-units", default=None, choices=("degrees", "range"),
+                      help="LeRobot datasets of an SO-100/SO-101 follower read without --map: the arm joints were "
+                           "recorded in degrees (--robot.use_degrees=true) or in -100..100 range units (false) "
+                           "(default: the robot type's LeRobot default: so_follower degrees, so100_follower and "
+                           "so101_follower range)")
+    logs.add_argument("--lerobot-calibration", default=None, metavar="JSON",
+                      help="the follower's calibration file (~/.cache/huggingface/lerobot/calibration/robots/"
+                           "<robot_type>/<id>.json): converts range units to radians")
     logs.add_argument("--split", default=None, choices=SPLITS,
                       help="split of every run no --assign/--split-map pattern or fraction assigns (default: "
                            "heldout; train when any of those is given)")
@@ -132,6 +140,7 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
     """``--logs``: read every run, assign splits, report the sampling of each log and the PD-only gap, and only
     then write the dataset (an error anywhere leaves nothing behind)."""
     from ..data.importers import SplitRule, import_runs, load_split_map, parse_assign
+    from ..data.lerobot import LeRobotUnits
     from ..data.logs import LogMap
 
     if not args.no_gap:
@@ -141,7 +150,9 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
     ruled = bool(patterns) or args.validation_fraction > 0 or args.heldout_fraction > 0
     rule = SplitRule(args.split or ("train" if ruled else "heldout"), tuple(patterns), args.validation_fraction,
                      args.heldout_fraction)
-    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=not args.no_tau)
+    lerobot = (LeRobotUnits.load(args.lerobot_calibration, args.lerobot_units)
+               if args.lerobot_calibration or args.lerobot_units else None)
+    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=not args.no_tau, lerobot=lerobot)
     for p in rule.unused([tr.name for tr in ds.trajectories]):
         log(f"note: split pattern {p!r} matches no run")
     log(f"imported {len(ds.trajectories)} run(s) onto {rate:g} Hz:")
@@ -149,6 +160,10 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
         log(f"  {s['name']:28s} {s['split']:10s} {s['format']:7s} {s['samples']:6d} samples {s['duration_s']:8.2f} s  "
              f"median {s['median_rate_hz']:8.3f} Hz  jitter {100 * s['jitter']:.3f} %  max gap "
              f"{1e3 * s['max_gap_s']:.2f} ms")
+    for file, u in {s["file"]: s["units"] for s in ds.meta["source_logs"] if "units" in s}.items():
+        calibration = f" (calibration {u['calibration']})" if u["calibration"] else ""
+        log(f"{file}: LeRobot {u['robot_type']}, no map: joints by motor name, arm in {u['arm_units']} units"
+            f"{calibration} -> rad about the robot file's zero, gripper 0..100 -> its joint range")
     excluded = ds.meta["excluded_joints"]
     if excluded:
         log(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
@@ -179,7 +194,8 @@ def run(args: argparse.Namespace) -> int:
 
     robot.check_replay()  # simulating needs PD gains and stated effort limits
     from ..data.excitation import plot_spectrum
-    from ..data.real_robot import Mismatch, collect
+    from ..data.mismatch import Mismatch
+    from ..data.real_robot import collect
 
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
     log(f"collecting {sum(cfg.counts.values())} trajectories of {cfg.duration:g} s at {cfg.rate:g} Hz on "

@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..data.loading import load_data
-    from ..data.real_robot import Mismatch
+    from ..data.mismatch import Mismatch
 
     cfg = config_from_args(args)
     task, ppo = skill_configs_from_args(args)

@@ -18,8 +18,7 @@ import argparse
 from dataclasses import replace
 
 from ..choices import FitModel, choices
-from ..learn.hybrid import HYBRID_ITERATIONS
-from ..learn.window_fit_config import GradFitConfig, SysIdConfig
+from ..learn.window_fit_config import HYBRID_ITERATIONS, GradFitConfig, SysIdConfig
 from .config_flags import add_config_flags, build_config, given_fields
 
 FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),

@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
         truth = None
         if ds.mismatch:
-            from ..data.real_robot import Mismatch, RealRobot
+            from ..data.mismatch import Mismatch
+            from ..data.real_robot import RealRobot
 
             truth = RealRobot(robot, Mismatch.from_dict(ds.mismatch), ds.rate_hz).physics()
         report = write_identification_report(out, params, truth, ds.split("train"))

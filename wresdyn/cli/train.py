@@ -72,10 +72,12 @@ def run(args: argparse.Namespace) -> int:
     from ..sim.physics import PhysicalParams
     from ..sim.warmup import compile_kernels
 
+    physics = PhysicalParams.load(cfg.env.physics, robot) if cfg.env.physics else None
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=cfg.env.solver, device=Ranks.from_env().device(cfg.ppo.device),
-                    physics=PhysicalParams.load(cfg.env.physics, robot) if cfg.env.physics else None, say=log)
+                    physics=physics, say=log)
     try:
-        summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data, log=log)
+        summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data, log=log,
+                        physics=physics)
     except RunError as e:
         raise UserError(str(e)) from None
     if not main:

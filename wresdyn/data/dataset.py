@@ -116,7 +116,7 @@ class Dataset:
     robot_sha256: str
     """SHA-256 of that robot file's bytes."""
     mismatch: dict = field(default_factory=dict)
-    """Mismatch config of the simulated real robot (:class:`wresdyn.data.real_robot.Mismatch` fields); empty for
+    """Mismatch config of the simulated real robot (:class:`wresdyn.data.mismatch.Mismatch` fields); empty for
     real logs."""
     seed: int | None = None
     """Seed the data was generated with (``None`` for real logs)."""

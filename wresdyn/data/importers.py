@@ -7,7 +7,8 @@
 * **LeRobot** datasets, codebase v2.x (``data/chunk-*/episode_*.parquet``) and v3.0
   (``data/chunk-*/file-*.parquet`` with an ``episode_index`` column), read with ``pyarrow`` only:
   ``observation.state`` = measured positions, ``action`` = commands, ``timestamp`` [s]; one trajectory per
-  episode, named ``<dataset>_ep<k>``.
+  episode, named ``<dataset>_ep<k>``. Without a mapping file, a follower arm whose ``robot_type`` is known
+  (:mod:`wresdyn.data.lerobot`) is mapped from its own metadata and LeRobot's units.
 
 :func:`import_runs` reads any mix of these and of CSV / NPZ logs (:mod:`wresdyn.data.log_files`) into one
 :class:`~wresdyn.data.dataset.Dataset`, assigning each run a split by name pattern or by a deterministic fraction
@@ -20,18 +21,18 @@ from __future__ import annotations
 import csv
 import fnmatch
 import hashlib
-import itertools
-import json
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from .dataset import SPLITS, Dataset, DatasetError
+from .lerobot import LeRobotUnits, lerobot_root, read_lerobot, read_lerobot_runs
 from .log_files import (
     IDENTITY,
     LogMap,
+    Run,
     check_finite,
     check_stamps,
     log_stats,
@@ -47,24 +48,6 @@ __all__ = ["Run", "SplitRule", "sage_run", "lerobot_root", "read_sage", "read_le
 SAGE_FILES = ("control.csv", "state_motor.csv")
 SAGE_STAMP_UNIT = 1e-6
 """SAGE time stamps are microseconds."""
-LEROBOT_SUFFIXES = (".pos", ".vel", ".effort")
-"""LeRobot names motor features ``<motor>.pos`` (``.vel``, ``.effort``); the suffix is dropped to get the joint."""
-
-
-@dataclass
-class Run:
-    """One log read into robot order, before resampling."""
-
-    name: str
-    """Trajectory name: the file stem, the SAGE run folder, or ``<dataset>_ep<k>``."""
-    format: str
-    """``"csv"``, ``"npz"``, ``"sage"`` or ``"lerobot"``."""
-    file: str
-    """File or folder it was read from."""
-    log: dict
-    """:func:`~wresdyn.data.logs.read_log` arrays (``t``, ``q``, ``qd``, ``q_cmd``, ``tau``, optional ``t_cmd``)."""
-    info: dict = field(default_factory=dict)
-    """Format-specific facts for the dataset's meta (trimmed seconds, LeRobot fps and version, ...)."""
 
 
 # ---------------------------------------------------------------------------------------------------------- SAGE
@@ -191,140 +174,14 @@ def _sage_events(path: Path) -> tuple[float | None, float | None]:
     return (min(start) if start else None), (max(end) if end else None)
 
 
-# ------------------------------------------------------------------------------------------------------- LeRobot
-
-def lerobot_root(path) -> Path | None:
-    """``path`` if it is a LeRobot dataset folder (it has ``meta/info.json``), else ``None``."""
-    p = Path(path)
-    return p if (p / "meta" / "info.json").is_file() else None
-
-
-def read_lerobot(path, joint_names: list[str], log_map: LogMap | None = None) -> list[tuple[str, dict]]:
-    """Every episode of a LeRobot dataset (v2.x or v3.0) as ``(name, read_log arrays)``, in episode order:
-    ``t`` (N,) [s] from the ``timestamp`` column, ``q`` (N, n) from ``observation.state``, ``q_cmd`` (N, n) from
-    ``action`` (both in the map's units, e.g. degrees), ``qd`` from ``observation.velocity`` and ``tau`` from
-    ``observation.effort`` where the dataset has them, else ``None``."""
-    return [(r.name, r.log) for r in _read_lerobot(Path(path), joint_names, log_map or IDENTITY)]
-
-
-def _feature_names(features: dict, key: str, info_path: Path) -> list[str] | None:
-    feat = features.get(key)
-    if feat is None:
-        return None
-    names = feat.get("names") if isinstance(feat, dict) else None
-    if isinstance(names, dict) and len(names) == 1:  # v2.0 style {"motors": [...]}
-        names = next(iter(names.values()))
-    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
-        raise DatasetError(f"{info_path}: features[{key!r}] has no list of joint names (names: {names!r})")
-    shape = feat.get("shape")
-    if isinstance(shape, list) and shape and shape[0] != len(names):
-        raise DatasetError(f"{info_path}: features[{key!r}] has shape {shape} but {len(names)} names")
-    out = []
-    for n in names:
-        for suffix in LEROBOT_SUFFIXES:
-            if n.endswith(suffix):
-                n = n[: -len(suffix)]
-                break
-        out.append(n)
-    return out
-
-
-_FEATURES = {"q": "observation.state", "q_cmd": "action", "qd": "observation.velocity", "tau": "observation.effort"}
-
-
-def _read_lerobot(root: Path, joint_names: list[str], log_map: LogMap) -> list[Run]:
-    import pyarrow.compute as pc
-    import pyarrow.parquet as pq
-
-    info_path = root / "meta" / "info.json"
-    try:
-        info = json.loads(info_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise DatasetError(f"{info_path}: not a readable JSON file: {e}") from None
-    features = info.get("features") if isinstance(info, dict) else None
-    if not isinstance(features, dict):
-        raise DatasetError(f"{info_path}: no 'features' table")
-    names = {k: _feature_names(features, f, info_path) for k, f in _FEATURES.items()}
-    for k in ("q", "q_cmd"):
-        if names[k] is None:
-            raise DatasetError(f"{info_path}: features has no {_FEATURES[k]!r} (it has: {', '.join(features)})")
-    files = sorted((root / "data").rglob("*.parquet"))
-    if not files:
-        raise DatasetError(f"{root}: LeRobot dataset has no data/**/*.parquet file")
-    parts: dict[int, list[dict]] = {}
-    for file in files:
-        try:
-            schema = pq.read_schema(file).names
-        except Exception as e:  # pyarrow raises several types on a corrupt file; report one line
-            raise DatasetError(f"{file}: not a readable parquet file: {type(e).__name__}: {e}") from None
-        for col in ("timestamp", _FEATURES["q"], _FEATURES["q_cmd"]):
-            if col not in schema:
-                raise DatasetError(f"{file}: no column {col!r} (columns: {', '.join(schema)})")
-        keys = [k for k in _FEATURES if names[k] is not None and _FEATURES[k] in schema]
-        table = pq.read_table(file, columns=["timestamp"] + [_FEATURES[k] for k in keys]
-                              + (["episode_index"] if "episode_index" in schema else []))
-        n_rows = table.num_rows
-        t = table.column("timestamp").to_numpy().astype(np.float64)
-        check_finite(str(file), "timestamp", t, ["'timestamp'"], np.arange(n_rows), "row")
-        if "episode_index" in schema:
-            ep = table.column("episode_index").to_numpy()
-        else:
-            m = re.search(r"episode_(\d+)", file.stem)
-            if m is None:
-                raise DatasetError(f"{file}: no 'episode_index' column and no episode number in the file name")
-            ep = np.full(n_rows, int(m.group(1)))
-        arrays = {}
-        for k in keys:
-            col, n = table.column(_FEATURES[k]).combine_chunks(), len(names[k])
-            if col.null_count:
-                r = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
-                raise DatasetError(f"{file}: row {r}, column {_FEATURES[k]!r} is null")
-            lengths = pc.list_value_length(col).to_numpy(zero_copy_only=False)
-            if (lengths != n).any():
-                r = int(np.flatnonzero(lengths != n)[0])
-                raise DatasetError(f"{file}: row {r}, column {_FEATURES[k]!r} has {lengths[r]} values, info.json "
-                                   f"names {n}")
-            a = col.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(n_rows, n)
-            check_finite(str(file), _FEATURES[k], a, [f"{_FEATURES[k]!r}[{j}] ({names[k][j]})" for j in range(n)],
-                         np.arange(n_rows), "row")
-            arrays[k] = a
-        order = np.argsort(ep, kind="stable")  # rows of each episode, in file order
-        for rows in np.split(order, np.flatnonzero(np.diff(ep[order])) + 1):
-            e = ep[rows[0]]
-            check_stamps(f"{file}: episode {int(e)}", t[rows], rows, "row")
-            parts.setdefault(int(e), []).append({"file": file, "rows": rows, "t": t[rows],
-                                                 **{k: a[rows] for k, a in arrays.items()}})
-    dataset = root.resolve().name
-    runs = []
-    for e in sorted(parts):
-        ps = parts[e]
-        for a, b in itertools.pairwise(ps):
-            if not b["t"][0] > a["t"][-1]:
-                raise DatasetError(f"{b['file']}: episode {e}: time stamp at row {b['rows'][0]} is not after the "
-                                   f"episode's previous row in {a['file'].name}")
-        cat = {k: np.concatenate([p[k] for p in ps]) if all(k in p for p in ps) else None
-               for k in ("t", "q", "q_cmd", "qd", "tau")}
-        mapped = {}
-        for k in ("q", "q_cmd", "qd", "tau"):
-            if cat[k] is not None:
-                mapped.update(map_joints(names[k], {k: cat[k]}, joint_names, log_map, f"{info_path}: {_FEATURES[k]}"))
-            else:
-                mapped[k] = None
-        if log_map.velocity == "derived":
-            mapped["qd"] = None
-        log = {"t": cat["t"], **mapped}
-        runs.append(Run(f"{dataset}_ep{e}", "lerobot", str(root), log,
-                        {"format": "lerobot", "codebase_version": info.get("codebase_version"), "fps": info.get("fps"),
-                         "episode_index": e}))
-    return runs
-
-
 # ------------------------------------------------------------------------------------------------ many runs, splits
 
-def read_runs(path, joint_names: list[str], log_map: LogMap | None = None) -> list[Run]:
+def read_runs(path, joint_names: list[str], log_map: LogMap | None = None, lerobot: LeRobotUnits | None = None
+              ) -> list[Run]:
     """The runs at ``path``, format detected: a SAGE run (folder with control.csv and state_motor.csv, or one of
-    those files), a LeRobot dataset folder (meta/info.json: one run per episode), a ``.csv`` / ``.npz`` log, or a
-    folder whose sub-folders are SAGE runs or LeRobot datasets (each of them, in name order)."""
+    those files), a LeRobot dataset folder (meta/info.json: one run per episode; ``lerobot``: its units where no
+    ``log_map`` is given, :func:`read_lerobot`), a ``.csv`` / ``.npz`` log, or a folder whose sub-folders are SAGE
+    runs or LeRobot datasets (each of them, in name order)."""
     log_map = log_map or IDENTITY
     p = Path(path)
     run = sage_run(p)
@@ -335,13 +192,13 @@ def read_runs(path, joint_names: list[str], log_map: LogMap | None = None) -> li
             name = f"{run.resolve().parent.name}_{name}"
         return [Run(name, "sage", str(run), log, info)]
     if lerobot_root(p) is not None:
-        return _read_lerobot(p, joint_names, log_map)
+        return read_lerobot_runs(p, joint_names, log_map, lerobot)
     if p.is_dir():
         subs = sorted(c for c in p.iterdir() if c.is_dir() and (sage_run(c) or lerobot_root(c)))
         if not subs:
             raise DatasetError(f"{p}: neither a SAGE run (control.csv, state_motor.csv), a LeRobot dataset "
                                "(meta/info.json) nor a folder of them")
-        return [r for s in subs for r in read_runs(s, joint_names, log_map)]
+        return [r for s in subs for r in read_runs(s, joint_names, log_map, lerobot)]
     log = read_file(p, joint_names, log_map)
     return [Run(p.stem, p.suffix.lower().lstrip("."), str(p), log, {"format": p.suffix.lower().lstrip(".")})]
 
@@ -412,18 +269,28 @@ class SplitRule:
 
 
 def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = None, splits: SplitRule | None = None,
-                store_tau: bool = True) -> Dataset:
+                store_tau: bool = True, lerobot: LeRobotUnits | None = None) -> Dataset:
     """A :class:`~wresdyn.data.dataset.Dataset` of real logs (no mismatch, no seed): every run of every path
     (:func:`read_runs`), resampled onto ``rate_hz``, its split from ``splits``. Names are made unique with the
     run's index when two runs share one. ``meta`` gets ``source_logs`` (per run: name, split, file, format,
-    samples, duration, median rate, jitter, max gap), ``excluded_joints`` and ``log_map``."""
+    samples, duration, median rate, jitter, max gap; LeRobot followers read without a map: their ``units``),
+    ``excluded_joints`` and ``log_map``. ``lerobot``: calibration and units of LeRobot datasets read without a
+    ``log_map`` (a map sets the units itself: giving both is an error)."""
     joint_names = list(robot.joint_names)
+    if log_map is not None and lerobot is not None:
+        raise DatasetError(f"{log_map.source}: a mapping file sets the units itself; give it or LeRobot's "
+                           "calibration / degrees, not both")
     log_map = log_map or IDENTITY
     log_map.check(joint_names, Path(robot.source).name)
     splits = splits or SplitRule()
-    runs = [r for p in paths for r in read_runs(p, joint_names, log_map)]
+    ranges = {j: (float(lo), float(hi)) for j, lo, hi in zip(joint_names, robot.lower, robot.upper)}
+    lerobot = replace(lerobot or LeRobotUnits(), ranges=ranges)
+    runs = [r for p in paths for r in read_runs(p, joint_names, log_map, lerobot)]
     if not runs:
         raise DatasetError("no logs given")
+    maps = [r.log_map or log_map for r in runs]
+    excluded = [j for j in joint_names if any(j in m.excluded_joints(joint_names) for m in maps)]
+    shown = maps[0] if all(m == maps[0] for m in maps) else log_map  # one derived map for every run, or the given
     names = [r.name for r in runs]
     names = [f"{n}_{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
     trajs, sources = [], []
@@ -431,8 +298,8 @@ def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = N
         where = f"{run.file}: episode {run.info['episode_index']}" if run.format == "lerobot" else run.file
         trajs.append(to_trajectory(run.log, rate_hz, name, split, where, store_tau))
         sources.append({"name": name, "split": split, "file": run.file, **log_stats(run.log["t"]), **run.info})
-    meta = {"generator": "wresdyn collect --logs", "source_logs": sources,
-            "excluded_joints": log_map.excluded_joints(joint_names), "log_map": log_map.to_dict(),
+    meta = {"generator": "wresdyn collect --logs", "source_logs": sources, "excluded_joints": excluded,
+            "log_map": shown.to_dict(),
             "split_rule": {"default": splits.default, "patterns": [list(p) for p in splits.patterns],
                            "validation_fraction": splits.validation_fraction,
                            "heldout_fraction": splits.heldout_fraction}}

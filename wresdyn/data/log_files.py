@@ -25,8 +25,8 @@ import tomllib
 
 from .dataset import SPLITS, DatasetError, Trajectory, derive_qdd
 
-__all__ = ["LogMap", "IDENTITY", "UNIT_SCALES", "read_toml", "map_joints", "check_finite", "check_stamps", "read_file",
-           "resample", "log_stats", "to_trajectory"]
+__all__ = ["Run", "LogMap", "IDENTITY", "UNIT_SCALES", "read_toml", "map_joints", "check_finite", "check_stamps",
+           "read_file", "resample", "log_stats", "to_trajectory"]
 
 _ZOH_EPS = 1e-6
 """A grid time within this fraction of a step after a logged command time counts as at or after it, so
@@ -162,6 +162,24 @@ def _unit(v, where: str) -> tuple[float, float]:
 
 IDENTITY = LogMap()
 """No renaming, radians, nothing excluded."""
+
+
+@dataclass
+class Run:
+    """One log read into robot order, before resampling."""
+
+    name: str
+    """Trajectory name: the file stem, the SAGE run folder, or ``<dataset>_ep<k>``."""
+    format: str
+    """``"csv"``, ``"npz"``, ``"sage"`` or ``"lerobot"``."""
+    file: str
+    """File or folder it was read from."""
+    log: dict
+    """:func:`~wresdyn.data.logs.read_log` arrays (``t``, ``q``, ``qd``, ``q_cmd``, ``tau``, optional ``t_cmd``)."""
+    info: dict = field(default_factory=dict)
+    """Format-specific facts for the dataset's meta (trimmed seconds, LeRobot fps and version, ...)."""
+    log_map: LogMap | None = None
+    """The mapping it was read with where it came from the log's own metadata (a LeRobot follower), else ``None``."""
 
 
 def map_joints(names: list[str], arrays: dict, joint_names: list[str], log_map: LogMap, where: str) -> dict:

@@ -25,7 +25,8 @@ import numpy as np
 from .dataset import SCHEMA_VERSION, SPLITS, Dataset, DatasetError, load_dataset, read_header
 from .excitation import ExcitationConfig
 from .loading import dataset_robot
-from .real_robot import Mismatch, collect
+from .mismatch import Mismatch
+from .real_robot import collect
 
 __all__ = ["Migration", "migrate", "recorded_by_collect"]
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from ..learn.ppo import load_policy
 from ..learn.ppo_config import config_from_dict
-from ..learn.runs import RunError
-from ..sim.physics import PhysicalParams
+from ..learn.runs import RunError, run_physics
 from ..sim.warmup import compile_kernels
 from .open_loop import evaluate_split, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves
@@ -68,7 +67,7 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
     from pathlib import Path
 
     run_dir = Path(run_dir)
-    physics = PhysicalParams.load(run_dir / "physics.json", robot) if (run_dir / "physics.json").exists() else None
+    physics = run_physics(run_dir, robot)
     if physics is not None and not (run_dir / "policy.pt").exists():  # identified physics alone
         config = json.loads((run_dir / "config.json").read_text())
         policy, meta = None, {"kind": None, "arch": "none", "joint_names": physics.joint_names,

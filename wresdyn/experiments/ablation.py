@@ -17,84 +17,21 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..choices import Arch, Learner, ResidualKind, SolverKind, check_choice, check_device, check_number, choices
 from ..errors import WresdynError
+from ..evaluation.open_loop import evaluate_split
 from ..evaluation.plots import save_figure
+from ..learn.gradfit import fit
+from ..learn.ppo import load_policy, train
 from ..learn.ppo_config import default_config, set_field, set_fields
 from ..learn.window_fit_config import GradFitConfig
+from .ablation_config import AblationConfig
 
 __all__ = ["AblationConfig", "cells", "run_cell", "run_cells", "run_ablation", "write_summary", "table_markdown",
            "plot_curves"]
-
-LEARNERS = choices(Learner)
-
-
-@dataclass(frozen=True)
-class AblationConfig:
-    """Which cells to run and how long each trains."""
-
-    learners: tuple[Learner, ...] = LEARNERS
-    """Learners to compare."""
-    archs: tuple[Arch, ...] = ("mlp", "gru")
-    """Networks (ignored by ``parametric``)."""
-    kinds: tuple[ResidualKind, ...] = ("torque", "delta_action")
-    """Residual kinds (``parametric`` is torque only)."""
-    seeds: tuple[int, ...] = (0, 1, 2)
-    """Seeds per cell."""
-    ppo_iterations: int = 60
-    """PPO iterations per cell."""
-    gradient_iterations: int = 2000
-    """Gradient-fit iterations per cell (network and parametric)."""
-    segments: int = 4
-    """Evaluation points on each learning curve."""
-    solver: SolverKind = "auto"
-    """Simulation solver, the same for training and evaluation."""
-    device: str = "cpu"
-    """Device for simulation and networks."""
-    ppo_overrides: dict = field(default_factory=dict)
-    """Dotted overrides of :class:`wresdyn.learn.ppo_config.TrainConfig` (e.g. ``{"ppo.num_envs": 64}``)."""
-    gradient_overrides: dict = field(default_factory=dict)
-    """Overrides of :class:`wresdyn.learn.gradfit.GradFitConfig` fields (e.g. ``{"windows": 32}``)."""
-
-    def __post_init__(self) -> None:
-        for name, literal in (("learners", Learner), ("archs", Arch), ("kinds", ResidualKind)):
-            values = getattr(self, name)
-            if isinstance(values, str) or not values:
-                raise WresdynError(f"ablation {name} = {values!r}: give a non-empty list")
-            for v in values:
-                check_choice(v, literal, f"ablation {name}")
-        if not self.seeds:
-            raise WresdynError("ablation seeds: give at least one seed")
-        for seed in self.seeds:
-            check_number(seed, "ablation seeds", integer=True, ge=0)
-        check_number(self.segments, "ablation segments", integer=True, ge=1)
-        # every segment trains at least one iteration: the first evaluation point is after segment 1
-        if "ppo" in self.learners:
-            check_number(self.ppo_iterations, "ablation ppo_iterations", integer=True, ge=self.segments)
-        if {"gradient", "parametric"} & set(self.learners):
-            check_number(self.gradient_iterations, "ablation gradient_iterations", integer=True, ge=self.segments)
-        check_choice(self.solver, SolverKind, "ablation solver")
-        check_device(self.device, "ablation device")
-        self._check_overrides()
-
-    def _check_overrides(self) -> None:
-        """A typo in an override fails here, not after hours of other cells."""
-        if self.ppo_overrides and "ppo" in self.learners:
-            for arch in self.archs:  # a GRU batches by world: fewer worlds can be too few for the mini-batches
-                try:
-                    set_fields(default_config(), {**self.ppo_overrides, "residual.arch": arch})
-                except (TypeError, WresdynError) as e:
-                    raise WresdynError(f"ablation ppo_overrides: {e}") from None
-        if self.gradient_overrides and {"gradient", "parametric"} & set(self.learners):
-            try:
-                dataclasses.replace(GradFitConfig(), **self.gradient_overrides)
-            except (TypeError, WresdynError) as e:
-                raise WresdynError(f"ablation gradient_overrides: {e}") from None
 
 
 def cells(cfg: AblationConfig) -> list[dict]:
@@ -112,16 +49,12 @@ def cells(cfg: AblationConfig) -> list[dict]:
 
 
 def _evaluate(robot, dataset, policy, kind, cfg: AblationConfig, split: str) -> dict:
-    from ..evaluation.open_loop import evaluate_split
-
     summary, _ = evaluate_split(robot, dataset.split(split), dataset.rate_hz, policy, kind=kind, solver=cfg.solver,
                                 device=cfg.device, weights=dataset.fit_weights())
     return summary
 
 
 def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
-    from ..learn.ppo import load_policy, train
-
     cell_fields = {"residual.arch": cell["arch"], "residual.kind": cell["kind"], "ppo.seed": cell["seed"],
                    "ppo.device": cfg.device, "env.solver": cfg.solver,
                    "ppo.save_interval": max(1, cfg.ppo_iterations // cfg.segments)}
@@ -134,8 +67,6 @@ def _ppo_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
 
 
 def _gradient_segments(cell, robot, dataset, cfg: AblationConfig, out: Path):
-    from ..learn.gradfit import fit
-
     residual = dataclasses.replace(GradFitConfig().residual, kind=cell["kind"],
                                    arch=cell["arch"] if cell["arch"] != "-" else "mlp")
     gc = GradFitConfig(residual=residual,

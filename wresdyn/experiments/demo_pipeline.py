@@ -22,15 +22,16 @@ import time
 from pathlib import Path
 
 from ..data.dataset import load_dataset
-from ..data.real_robot import Mismatch
+from ..data.mismatch import Mismatch
 from ..data.real_robot import collect as record_dataset
 from ..evaluation.evaluate_run import evaluate_run
 from ..export.usd import export_run as export_usd
 from ..learn.gradfit import GradFitConfig, export_run
-from ..learn.hybrid import HYBRID_ITERATIONS, fit_hybrid
+from ..learn.hybrid import fit_hybrid
 from ..learn.ppo import train
 from ..learn.ppo_config import default_config
 from ..learn.sysid import SysIdConfig
+from ..learn.window_fit_config import HYBRID_ITERATIONS
 from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
 from ..robot.description import load_robot
 from ..sim.parity import pd_agreement

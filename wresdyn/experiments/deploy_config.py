@@ -12,8 +12,10 @@ __all__ = ["DeployConfig", "FloorDeployConfig"]
 
 
 @dataclass(frozen=True)
-class DeployConfig:
-    """Sizes of the benchmark (the defaults: the CPU configuration, minutes on 2 cores)."""
+class _BenchmarkSizes:
+    """The sizes both benchmarks share, in their order (the stand's defaults). Each benchmark's config adds its own
+    fields after these and ends with its ``seed`` and ``device``, which :meth:`__post_init__` checks too, with the
+    benchmark's :attr:`_prefix` in its messages."""
 
     train_per_family: int = 4
     """Training motions per training family."""
@@ -34,6 +36,32 @@ class DeployConfig:
     """PPO iterations of (a) in the nominal simulator."""
     finetune: int = 300
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
+
+    _prefix = "deploy"
+    """How the fields are named in a message (not a field: no annotation)."""
+
+    @property
+    def oracle_worlds(self) -> int:
+        """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
+        return self.envs if self.oracle_envs is None else self.oracle_envs
+
+    def __post_init__(self) -> None:
+        p = self._prefix
+        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
+            check_number(getattr(self, k), f"{p}.{k}", integer=True, ge=1)
+        if self.oracle_envs is not None:
+            check_number(self.oracle_envs, f"{p}.oracle_envs", integer=True, ge=1)
+        if self.finetune_std is not None:
+            check_number(self.finetune_std, f"{p}.finetune_std", gt=0)
+        check_number(self.seed, f"{p}.seed", integer=True, ge=0)
+        check_device(self.device, f"{p}.device")
+        check_number(self.duration, f"{p}.duration", gt=0)
+
+
+@dataclass(frozen=True)
+class DeployConfig(_BenchmarkSizes):
+    """Sizes of the benchmark (the defaults: the CPU configuration, minutes on 2 cores)."""
+
     seed: int = 0
     """Seed of the motions and of PPO."""
     device: str = "cpu"
@@ -47,39 +75,17 @@ class DeployConfig:
         return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
                              oracle_envs=1024, finetune_std=0.3), **kw})
 
-    @property
-    def oracle_worlds(self) -> int:
-        """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
-        return self.envs if self.oracle_envs is None else self.oracle_envs
-
-    def __post_init__(self) -> None:
-        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
-            check_number(getattr(self, k), f"deploy.{k}", integer=True, ge=1)
-        if self.oracle_envs is not None:
-            check_number(self.oracle_envs, "deploy.oracle_envs", integer=True, ge=1)
-        if self.finetune_std is not None:
-            check_number(self.finetune_std, "deploy.finetune_std", gt=0)
-        check_number(self.seed, "deploy.seed", integer=True, ge=0)
-        check_device(self.device, "deploy.device")
-        check_number(self.duration, "deploy.duration", gt=0)
-
 
 @dataclass(frozen=True)
-class FloorDeployConfig:
+class FloorDeployConfig(_BenchmarkSizes):
     """Sizes of the floor benchmark (the defaults: the CPU configuration, about 20 minutes on 2 cores)."""
 
     train_per_family: int = 3
     """Training motions per training family."""
-    validation_per_family: int = 1
-    """Validation motions per family (the task and PPO settings were chosen on them)."""
     heldout_per_family: int = 1
     """Held-out motions per family (training families and the held-out one)."""
     duration: float = 4.0
     """Length of a motion [s]."""
-    envs: int = 64
-    """Parallel worlds of PPO."""
-    oracle_envs: int | None = None
-    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (``None``: ``envs``)."""
     finetune_std: float | None = None
     """Action noise the fine-tunings restart from (``None``: (a)'s own; ``SkillPPOConfig.restart_std``)."""
     iterations: int = 200
@@ -94,25 +100,11 @@ class FloorDeployConfig:
     device: str = "cpu"
     """Device of PPO and the simulated plants (the real robot always steps on the CPU)."""
 
+    _prefix = "floor"
+
     @classmethod
     def full(cls, **kw) -> "FloorDeployConfig":
         """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
         1000 + 300 iterations; the oracle on 256 worlds of MuJoCo C on the host's cores."""
         return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
                              oracle_envs=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})
-
-    @property
-    def oracle_worlds(self) -> int:
-        """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
-        return self.envs if self.oracle_envs is None else self.oracle_envs
-
-    def __post_init__(self) -> None:
-        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
-            check_number(getattr(self, k), f"floor.{k}", integer=True, ge=1)
-        if self.oracle_envs is not None:
-            check_number(self.oracle_envs, "floor.oracle_envs", integer=True, ge=1)
-        if self.finetune_std is not None:
-            check_number(self.finetune_std, "floor.finetune_std", gt=0)
-        check_number(self.seed, "floor.seed", integer=True, ge=0)
-        check_device(self.device, "floor.device")
-        check_number(self.duration, "floor.duration", gt=0)

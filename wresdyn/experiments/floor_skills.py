@@ -23,7 +23,8 @@ import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from ..data.real_robot import Mismatch, RealRobot
+from ..data.mismatch import Mismatch
+from ..data.real_robot import RealRobot
 from ..robot import load_robot
 from ..skills.evaluate import gap_closed
 from ..skills.floor_env import FloorTaskConfig, FloorTrackingEnv
@@ -31,9 +32,9 @@ from ..skills.floor_evaluate import deploy_floor, floor_metrics
 from ..skills.floor_motions import make_floor_motions
 from ..skills.floor_report import write_floor_report
 from ..skills.plants import RealPlant, sim_plant
-from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from ..skills.skill_ppo import load_skill, train_skill
 from .deploy_config import FloorDeployConfig
-from .zero_shot import POLICIES, fit_corrections, write_results
+from .zero_shot import POLICIES, fit_corrections, start_benchmark, write_results
 
 __all__ = ["FloorDeployConfig", "run_floor_benchmark"]
 
@@ -84,27 +85,18 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
         cfg: Sizes. task: :class:`~wresdyn.skills.skill_config.FloorTaskConfig`;
             ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
-        mismatch: The real robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
+        mismatch: The real robot's :class:`~wresdyn.data.mismatch.Mismatch` (default: the dataset's).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always).
 
     Returns:
         The results written to ``results.json``.
     """
-    import torch
-
     t_start = time.perf_counter()
-    policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     task = task or FloorTaskConfig()
-    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
-    if ppo.torch_threads is not None:
-        torch.set_num_threads(ppo.torch_threads)
-    mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
+    policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     floating = load_robot(robot.source, gains=robot.gains, base="floating")
     rate = float(dataset.rate_hz)
-    counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
-              "heldout": cfg.heldout_per_family}
     motions = make_floor_motions(robot, floating, counts, cfg.duration, rate, cfg.seed)
     log("[1/4] floor motions: " + ", ".join(f"{s} {len(motions[s])}" for s in counts)
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")

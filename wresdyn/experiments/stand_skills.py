@@ -24,15 +24,15 @@ import time
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from ..data.real_robot import Mismatch, RealRobot
+from ..data.real_robot import RealRobot
 from ..skills.env import SkillConfig, TrackingEnv
 from ..skills.evaluate import deploy_skill, gap_closed, metrics
 from ..skills.motions import make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.report import write_report
-from ..skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
+from ..skills.skill_ppo import load_skill, train_skill
 from .deploy_config import DeployConfig
-from .zero_shot import POLICIES, fit_corrections, write_results
+from .zero_shot import POLICIES, fit_corrections, start_benchmark, write_results
 
 __all__ = ["DeployConfig", "run_benchmark"]
 
@@ -49,7 +49,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
         cfg: Sizes.
         data_path: Where ``dataset`` was read from (recorded in the fitted runs).
         calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
-        mismatch: The "real" robot's :class:`~wresdyn.data.real_robot.Mismatch` (default: the dataset's).
+        mismatch: The "real" robot's :class:`~wresdyn.data.mismatch.Mismatch` (default: the dataset's).
         task: :class:`~wresdyn.skills.skill_config.SkillConfig`;
             ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
@@ -58,20 +58,11 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig = DeployConfig(), *, da
     Returns:
         The results written to ``results.json``.
     """
-    import torch
-
     t_start = time.perf_counter()
-    policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     task = task or SkillConfig()
-    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
-    if ppo.torch_threads is not None:
-        torch.set_num_threads(ppo.torch_threads)
-    mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
+    policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     rate = float(dataset.rate_hz)
-    counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
-              "heldout": cfg.heldout_per_family}
     motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
     log("[1/4] motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")

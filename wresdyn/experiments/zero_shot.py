@@ -6,17 +6,51 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
+import torch
 
+from ..data.mismatch import Mismatch
 from ..learn.gradfit import GradFitConfig, export_run, fit
-from ..learn.hybrid import HYBRID_ITERATIONS, fit_hybrid
+from ..learn.hybrid import fit_hybrid
 from ..learn.sysid import SysIdConfig
+from ..learn.window_fit_config import HYBRID_ITERATIONS
+from ..skills.skill_config import SkillPPOConfig
 
-__all__ = ["POLICIES", "fit_corrections", "write_results"]
+__all__ = ["POLICIES", "BenchmarkStart", "start_benchmark", "fit_corrections", "write_results"]
 
 POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real"}
 """Policy run folders and the plant each trains on."""
+
+
+class BenchmarkStart(NamedTuple):
+    """What :func:`start_benchmark` resolves."""
+
+    policies: list[str]
+    """The policies to train and deploy, in :data:`POLICIES` order (``a_nominal`` always)."""
+    ppo: SkillPPOConfig
+    """The skills' PPO with the benchmark's sizes (``num_envs``, ``seed``, ``device``)."""
+    mismatch: Mismatch
+    """The real robot's mismatch."""
+    counts: dict[str, int]
+    """Motions per family of each split."""
+
+
+def start_benchmark(out: Path, cfg, ppo, mismatch, dataset, policies) -> BenchmarkStart:
+    """Create ``out``, resolve what a benchmark's arguments leave to their defaults (``ppo``: a default
+    :class:`~wresdyn.skills.skill_config.SkillPPOConfig`; ``mismatch``: the dataset's) and pin torch's threads to
+    ``ppo.torch_threads``. ``cfg``: the benchmark's :class:`~wresdyn.experiments.deploy_config.DeployConfig` or
+    :class:`~wresdyn.experiments.deploy_config.FloorDeployConfig`."""
+    policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
+    out.mkdir(parents=True, exist_ok=True)
+    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
+    if ppo.torch_threads is not None:
+        torch.set_num_threads(ppo.torch_threads)
+    mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
+    counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
+              "heldout": cfg.heldout_per_family}
+    return BenchmarkStart(policies, ppo, mismatch, counts)
 
 
 def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, device, log, need_delta=True):

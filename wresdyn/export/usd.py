@@ -44,7 +44,8 @@ import numpy as np
 from ..data.dataset import load_dataset
 from ..data.loading import dataset_robot
 from ..errors import WresdynError
-from ..robot.description import dof_by_label
+from ..learn.runs import run_physics
+from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
 
 __all__ = ["ExportError", "export_run", "write_layers", "inertia_principal"]
@@ -247,8 +248,9 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
                           f"{Path(robot.source).suffix} first (e.g. mujoco-usd-converter for MJCF)")
     if residual is not None and list(residual["joint_names"]) != list(robot.joint_names):
         raise ExportError(f"{run}: the residual's joints do not match {robot.source.name}'s")
-    physics = (PhysicalParams.load(run / "physics.json", robot) if (run / "physics.json").is_file()
-               else PhysicalParams.nominal(robot))
+    physics = run_physics(run, robot)
+    if physics is None:  # a residual on the robot file's physics
+        physics = PhysicalParams.nominal(robot)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:

@@ -13,11 +13,11 @@ import json
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-__all__ = ["fit_hybrid", "HybridFit", "save_identify_config", "HYBRID_ITERATIONS"]
+from ..sim.warmup import compile_kernels
+from .gradfit import fit
+from .sysid import identify
 
-HYBRID_ITERATIONS = 1000
-"""Residual iterations of the hybrid by default: on the identified model the residual's validation error stops
-improving within a few hundred (``benchmarks/results/grey_box/``)."""
+__all__ = ["fit_hybrid", "HybridFit", "save_identify_config"]
 
 
 @dataclass(frozen=True)
@@ -54,11 +54,6 @@ def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=No
         out: Run folder; stage 1 lives in ``out/identify``.
         data_path: Where the dataset was read from (recorded in the run's config).
     """
-    # torch and Warp load here, not when the CLI reads HYBRID_ITERATIONS for its --help
-    from ..sim.warmup import compile_kernels
-    from .gradfit import fit
-    from .sysid import identify
-
     out = Path(out)
     id_dir = out / "identify"
     id_dir.mkdir(parents=True, exist_ok=True)

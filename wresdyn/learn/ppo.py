@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..progress import bar
+from ..sim.physics import PhysicalParams
 from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig
 from .ppo_runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
                          rsl_runner_cfg, seed_processes)
@@ -41,7 +42,8 @@ __all__ = ["train", "export", "load_policy", "runner_cfg", "BestOnValidation", "
 
 
 def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = True,
-          data_path: str | Path | None = None, stop_below: float | None = None, log=print) -> dict:
+          data_path: str | Path | None = None, stop_below: float | None = None, log=print,
+          physics: PhysicalParams | None = None) -> dict:
     """Train a residual with PPO on the ``train`` split of ``dataset``; resume from the latest checkpoint.
 
     Args:
@@ -55,6 +57,8 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         stop_below: Stop at the first validation check whose error is at or below this [rad] (time to fidelity,
             ``benchmarks/time_to_fidelity.py``); the run is then exported as if it had ended there.
         log: Printer of the run's lines; a :class:`wresdyn.progress.Log` also draws a bar over the iterations.
+        physics: The identified physics the residual is learned on (the hybrid; ``cfg.env.physics`` records where
+            they came from), or ``None``: the robot file's values, no delay.
 
     Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``num_envs / WORLD_SIZE`` worlds on its own device
     (``cuda:<LOCAL_RANK>``, or the CPU over gloo) with seed ``seed + RANK``, and rsl-rl averages the gradients
@@ -73,7 +77,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
     run = RunnerFolder(run_dir, _run_record(dataset, robot, cfg, ranks, data_path),
                        [f"ppo.{k}" for k in RESUME_MAY_CHANGE], key="config", writer="`wresdyn train`")
     ckpt = _checkpoint_to_resume(run, resume)
-    session = _start(dataset, robot, cfg, run_dir, ranks, log)
+    session = _start(dataset, robot, cfg, run_dir, ranks, log, physics)
     start = resume_runner(session.runner, ckpt, run_dir, log) if ckpt is not None else 0
     if ranks.main:  # written once the checkpoint has loaded: a refused resume leaves the folder as it was
         run.write_config()
@@ -180,7 +184,7 @@ def _checkpoint_to_resume(run: RunnerFolder, resume: bool) -> Path | None:
     return ckpt
 
 
-def _start(dataset, robot, cfg: TrainConfig, run_dir: Path, ranks: Ranks, log) -> _Session:
+def _start(dataset, robot, cfg: TrainConfig, run_dir: Path, ranks: Ranks, log, physics) -> _Session:
     """Seed this process (``seed + RANK``), build its replay worlds and the runner (rsl-rl prints the networks
     into ``train.log``); rank 0 makes the run folder."""
     seed = cfg.ppo.seed + ranks.rank
@@ -190,7 +194,7 @@ def _start(dataset, robot, cfg: TrainConfig, run_dir: Path, ranks: Ranks, log) -
     mean, std = obs_stats(train_trajs)
     env = ReplayEnv(robot, train_trajs, dataset.rate_hz, num_envs, cfg.env, cfg.residual, cfg.rewards,
                     device=ranks.device(cfg.ppo.device), seed=seed, obs_mean=mean, obs_std=std,
-                    graph=cfg.ppo.cuda_graph, weights=dataset.fit_weights())
+                    graph=cfg.ppo.cuda_graph, weights=dataset.fit_weights(), physics=physics)
     if ranks.main:
         run_dir.mkdir(parents=True, exist_ok=True)
     log(f"{num_envs} replay worlds on {env.device}, {type(env.sim.solver).__name__}")  # writes the waiting lines too

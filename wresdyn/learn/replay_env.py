@@ -52,7 +52,7 @@ class ReplayEnv(VecEnv):
     def __init__(self, robot, trajectories, rate_hz: float, num_envs: int, cfg: ReplayEnvConfig = ReplayEnvConfig(),
                  residual: ResidualConfig = ResidualConfig(), rewards: RewardConfig = RewardConfig(),
                  device: str | None = "cpu", seed: int = 0, obs_mean=None, obs_std=None, graph: bool = True,
-                 weights=None) -> None:
+                 weights=None, physics: PhysicalParams | None = None) -> None:
         self.robot, self.env_cfg, self.residual_cfg, self.reward_cfg = robot, cfg, residual, rewards
         self.dt = 1.0 / rate_hz
         self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device)
@@ -61,14 +61,14 @@ class ReplayEnv(VecEnv):
         self.num_envs, self.num_actions = num_envs, robot.n_dof
         self.max_episode_length = cfg.horizon
         self.cfg = {"env": asdict(cfg), "residual": asdict(residual), "rewards": asdict(rewards), "rate_hz": rate_hz}
-        self.physics = None
+        self.physics = physics
+        """The physical parameters the worlds simulate (the hybrid's identified ones), or ``None``: the robot file's."""
         delay = 0.0
-        if cfg.physics:
-            self.physics = PhysicalParams.load(cfg.physics, robot)
-            self.sim.set_physics(self.physics)
-            delay = torch.as_tensor(self.physics.delay * rate_hz, dtype=torch.float32, device=self.device)
+        if physics is not None:
+            self.sim.set_physics(physics)
+            delay = torch.as_tensor(physics.delay * rate_hz, dtype=torch.float32, device=self.device)
         self.bank = TrajectoryBank(trajectories, self.device, delay,
-                                   servo_goal_accel(robot, self.physics, 1.0 / rate_hz, self.device))
+                                   servo_goal_accel(robot, physics, 1.0 / rate_hz, self.device))
         if obs_mean is None or obs_std is None:
             obs_mean, obs_std = obs_stats(trajectories)
         dev, f32 = self.device, torch.float32

@@ -36,7 +36,8 @@ class ReplayEnvConfig:
     physics: str = ""
     """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned on
     top of the identified model (the hybrid), whose command delay then is ``physics.delay``. "" = the robot
-    file's values, no delay."""
+    file's values, no delay. The command line reads the file; :func:`~wresdyn.learn.ppo.train` takes the parameters
+    themselves (``physics``) and this records where they came from."""
     critic_err_scale_q: float = 0.05
     """Scale of q − q_r in the critic's privileged observation [rad]."""
     critic_err_scale_qd: float = 0.5

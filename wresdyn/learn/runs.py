@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import WresdynError
+from ..robot.physical import PhysicalParams
 
 __all__ = ["RunError", "RunFolder", "RunnerFolder", "Best", "config_diff", "describe_diff", "check_resume", "read_unset",
-           "UNSET_WAS_ZERO", "load_checkpoint", "save_checkpoint", "write_json"]
+           "UNSET_WAS_ZERO", "run_physics", "load_checkpoint", "save_checkpoint", "write_json"]
 
 
 class RunError(WresdynError):
@@ -102,6 +103,13 @@ def describe_diff(old: dict, new: dict, paths=None, limit: int = 3) -> str:
 UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads", "restart_std")
 """Config fields whose "use another value" is ``None``, and was 0 in the run folders written before it was: a 0 saved
 there reads as ``None`` (:func:`read_unset`), so those runs resume and evaluate as they were."""
+
+
+def run_physics(run: str | Path, robot) -> PhysicalParams | None:
+    """The identified physics a run folder holds (its ``physics.json``: ``wresdyn identify``, a hybrid ``wresdyn
+    fit``, a PPO residual on identified physics), checked against ``robot``; ``None`` where it holds none."""
+    path = Path(run) / "physics.json"
+    return PhysicalParams.load(path, robot) if path.is_file() else None
 
 
 def read_unset(config):

@@ -12,7 +12,7 @@ from ..choices import ModelKind, SolverKind, check_choice, check_device, check_n
 from ..robot.physical import JOINT_FIELDS, SERVO_FIELDS
 from .residual_config import ResidualConfig
 
-__all__ = ["DEFAULT_FIT", "FIT_FIELDS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
+__all__ = ["DEFAULT_FIT", "FIT_FIELDS", "HYBRID_ITERATIONS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
 
 
 def check_window_fit_config(cfg) -> None:
@@ -39,6 +39,9 @@ FIT_FIELDS = (*JOINT_FIELDS, *SERVO_FIELDS, "bodies")
 read on servo joints only) and ``"bodies"`` (every moving link's mass, com, inertia)."""
 DEFAULT_FIT = (*JOINT_FIELDS, "bodies")
 """What is identified unless told: :data:`FIT_FIELDS` without the servo fields."""
+HYBRID_ITERATIONS = 1000
+"""Residual iterations of the hybrid (:mod:`wresdyn.learn.hybrid`) by default: on the identified model the
+residual's validation error stops improving within a few hundred (``benchmarks/results/grey_box/``)."""
 
 
 @dataclass(frozen=True)

@@ -5,11 +5,10 @@ Newton's importers are the single parser. The robot is loaded once into a single
 plain-numpy view of everything the rest of wresdyn needs: the kinematic tree, inertias, actuated
 joints with limits, PD gains, effort limits, armature and friction, and named frames (sites).
 
-What Newton's importers leave out but the file states is read here: the force range of MJCF actuators
-(compiled by MuJoCo itself, defaults classes resolved) and, in a USD converted from MJCF, the ``mjc:``
-attributes (joint ``mjc:actuatorfrcrange``; ``MjcActuator`` prims' ``mjc:forceRange``, ``mjc:gainPrm`` and
-``mjc:biasPrm``). An effort limit that nothing states keeps Newton's placeholder (1e6) and is refused by
-:meth:`Robot.check_effort` before any replay, with the fix in the message (``effort = ...`` in a gains config).
+What Newton's importers leave out but the file states is read by :mod:`wresdyn.robot.file_import`; a gains config
+(:mod:`wresdyn.robot.gains`) overrides drive and joint parameters by joint-name pattern. An effort limit that
+nothing states keeps Newton's placeholder (1e6) and is refused by :meth:`Robot.check_effort` before any replay,
+with the fix in the message (``effort = ...`` in a gains config).
 The MuJoCo and Pinocchio models are built from this view (:mod:`wresdyn.robot.mujoco_model`,
 :mod:`wresdyn.robot.pinocchio_model`), never through a lossy file round trip.
 """
@@ -17,27 +16,25 @@ The MuJoCo and Pinocchio models are built from this view (:mod:`wresdyn.robot.mu
 from __future__ import annotations
 
 import copy
-import fnmatch
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import tomllib
 
 from ..errors import RobotError
 from ..paths import DEFAULT_ROBOT
 from .contact import ContactSettings
-from .servo import SERVO_KEYS, ServoDrives, attach_servo, read_servo
+from .file_import import import_file, short_label
+from .gains import apply_overrides, read_gains
+from .servo import ServoDrives, attach_servo, read_servo
 
-__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "apply_overrides", "read_gains", "dof_by_label",
-           "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
+__all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
 
 
 _SUFFIX_KIND = {".usd": "usd", ".usda": "usd", ".usdc": "usd", ".usdz": "usd", ".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
 _UNLIMITED = 1e5
 """Joint limits at or beyond this magnitude [rad or m] mean "no limit"."""
-_OVERRIDE_FIELDS = ("kp", "kd", "effort", "armature", "friction", "damping", "lower", "upper")
 PLACEHOLDER_EFFORT = 1e5
 """An effort limit at or above this [N*m or N] (Newton's importers write 1e6 when a file states none; 0 and inf
 are read as "none" too) is a placeholder, not a property of the robot: :meth:`Robot.check_effort` refuses it
@@ -236,130 +233,6 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _short(label: str) -> str:
-    return label.rstrip("/").split("/")[-1]
-
-
-def _import(builder, path: Path, kind: str, floating: bool) -> None:
-    if kind == "usd":
-        builder.add_usd(str(path), floating=floating, enable_self_collisions=False, load_visual_shapes=False)
-        _usd_mjc_attributes(builder, path)
-    elif kind == "urdf":
-        builder.add_urdf(str(path), floating=floating, enable_self_collisions=False)
-    else:
-        builder.add_mjcf(str(path), floating=floating, enable_self_collisions=False, parse_visuals=False)
-        _mjcf_actuator_limits(builder, path)
-
-
-def dof_by_label(builder) -> dict[str, int]:
-    """Joint label (full USD prim path or MJCF path) -> DoF index, for 1-DoF joints."""
-    out = {}
-    for j, label in enumerate(builder.joint_label):
-        lin, ang = builder.joint_dof_dim[j]
-        if int(lin) + int(ang) == 1:
-            out[label] = int(builder.joint_qd_start[j])
-    return out
-
-
-def _tighten_effort(builder, dof: int, limit: float) -> None:
-    """Lower a DoF's effort limit to ``limit`` (the file states both: the tighter one bounds the torque)."""
-    current = float(builder.joint_effort_limit[dof])
-    if limit > 0.0 and np.isfinite(limit) and (not current > 0.0 or limit < current):
-        builder.joint_effort_limit[dof] = limit
-
-
-def _mjcf_actuator_limits(builder, path: Path) -> None:
-    """Effort limits from MJCF actuators, which Newton's MJCF importer leaves out: compiled by MuJoCo (so
-    default classes and ``autolimits`` resolve as MuJoCo does), every force-limited actuator on a joint bounds
-    that joint's effort by ``|gear| * max(|forcerange|)``. Newton already reads the joint's own
-    ``actuatorfrcrange`` and a position actuator's ``kp``/``kv``. A file MuJoCo cannot compile is left as
-    Newton read it."""
-    try:
-        import mujoco
-
-        m = mujoco.MjModel.from_xml_path(str(path))
-    except Exception:  # Newton extensions MuJoCo does not know: keep what Newton read
-        return
-    by_name: dict[str, list[int]] = {}
-    for label, dof in dof_by_label(builder).items():
-        by_name.setdefault(_short(label), []).append(dof)
-    for a in range(m.nu):
-        if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or not m.actuator_forcelimited[a]:
-            continue
-        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, int(m.actuator_trnid[a, 0]))
-        dofs = by_name.get(name or "", [])
-        if len(dofs) == 1:
-            limit = abs(float(m.actuator_gear[a, 0])) * float(np.abs(m.actuator_forcerange[a]).max())
-            _tighten_effort(builder, dofs[0], limit)
-
-
-def _usd_mjc_attributes(builder, path: Path) -> None:
-    """MuJoCo attributes of a USD converted from MJCF that Newton's default USD import leaves out: a joint's
-    ``mjc:actuatorfrcrange:min/max`` (with ``mjc:actuatorfrclimited``) and, for an ``MjcActuator`` prim whose
-    ``mjc:target`` is a 1-DoF joint, its ``mjc:forceRange:min/max`` (with ``mjc:forceLimited`` and
-    ``mjc:gear``) bound the effort; its ``mjc:gainPrm`` / ``mjc:biasPrm`` give kp and kd when they have the
-    position-actuator shape (gain ``[kp]``, bias ``[0, -kp, -kv]``) and Newton found no drive on the joint."""
-    if not _has_text(path, b"mjc:"):
-        return
-    from pxr import Usd
-
-    stage = Usd.Stage.Open(str(path))
-    if stage is None:
-        return
-    dofs = dof_by_label(builder)
-
-    def value(prim, name, default=None):
-        attr = prim.GetAttribute(name)
-        return attr.Get() if attr and attr.HasAuthoredValue() else default
-
-    def limit(prim, rng: str, limited: str) -> float | None:
-        lo, hi = value(prim, f"{rng}:min"), value(prim, f"{rng}:max")
-        if lo is None and hi is None:
-            return None
-        lo, hi = float(lo or 0.0), float(hi or 0.0)
-        flag = str(value(prim, limited, "auto"))
-        return max(abs(lo), abs(hi)) if flag == "true" or (flag == "auto" and lo < hi) else None
-
-    import newton
-
-    for prim in stage.Traverse():
-        path_str = str(prim.GetPath())
-        if path_str in dofs:
-            e = limit(prim, "mjc:actuatorfrcrange", "mjc:actuatorfrclimited")
-            if e is not None:
-                _tighten_effort(builder, dofs[path_str], e)
-        if prim.GetTypeName() != "MjcActuator":
-            continue
-        rel = prim.GetRelationship("mjc:target")
-        targets = [str(t) for t in rel.GetTargets()] if rel else []
-        if len(targets) != 1 or targets[0] not in dofs:
-            continue
-        dof = dofs[targets[0]]
-        gear = list(value(prim, "mjc:gear", None) or [1.0])
-        e = limit(prim, "mjc:forceRange", "mjc:forceLimited")
-        if e is not None:
-            _tighten_effort(builder, dof, abs(float(gear[0])) * e)
-        gain, bias = value(prim, "mjc:gainPrm"), value(prim, "mjc:biasPrm")
-        if gain is None or bias is None or len(gain) < 1 or len(bias) < 3:
-            continue
-        kp, kv = float(gain[0]), -float(bias[2])
-        position_shaped = kp > 0 and abs(float(bias[0])) < 1e-12 and abs(float(bias[1]) + kp) <= 1e-9 * kp and kv >= 0
-        if position_shaped and float(gear[0]) == 1.0 and not builder.joint_target_ke[dof] > 0 \
-                and not builder.joint_target_kd[dof] > 0:
-            builder.joint_target_ke[dof], builder.joint_target_kd[dof] = kp, kv
-            builder.joint_target_mode[dof] = int(newton.JointTargetMode.POSITION)
-
-
-def _has_text(path: Path, needle: bytes) -> bool:
-    """Whether a (text or binary) USD file mentions ``needle`` at all: skips opening the stage twice for files
-    without MuJoCo attributes."""
-    with open(path, "rb") as f:
-        tail = b""
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            if needle in tail + chunk:
-                return True
-            tail = chunk[-len(needle):]
-    return False
 
 
 def resolve_path(path: str | Path) -> Path:
@@ -380,7 +253,8 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         path: USD (``.usd/.usda/.usdc``), URDF (``.urdf``) or MJCF (``.xml``) file, or ``newton:NAME`` for an
             asset bundled with newton.
         gains: Optional overrides by joint-name pattern, a TOML file or the parsed dict
-            (see :func:`apply_overrides`); kept on the robot (:attr:`Robot.gains`) so a dataset can store it.
+            (see :func:`~wresdyn.robot.gains.apply_overrides`); kept on the robot (:attr:`Robot.gains`) so a dataset
+            can store it.
         base: ``"fixed"`` (the robot hangs on a stand, as in data collection) or ``"floating"``.
 
     Raises:
@@ -403,7 +277,7 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         raise RobotError(f"{path}: unknown robot file type {path.suffix!r} (expected .usd/.usda/.usdc, .urdf or .xml)")
     builder = newton.ModelBuilder()
     try:
-        _import(builder, path, kind, floating=(base == "floating"))
+        import_file(builder, path, kind, floating=(base == "floating"))
     except Exception as e:  # importers raise many types on malformed input; report one line
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise RobotError(f"{path}: cannot parse {kind.upper()} file: {msg}") from None
@@ -472,7 +346,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
     for s, label in enumerate(builder.shape_label):
         flags = int(builder.shape_flags[s])
         if flags & int(newton.ShapeFlags.SITE) and builder.shape_body[s] >= 0:
-            frames[_short(label)] = (int(builder.shape_body[s]), np.asarray(builder.shape_transform[s], dtype=np.float64))
+            frames[short_label(label)] = (int(builder.shape_body[s]), np.asarray(builder.shape_transform[s], dtype=np.float64))
 
     lower, upper = arr("joint_limit_lower"), arr("joint_limit_upper")
     # importers write +-1e6 (Newton's default) for an unlimited joint
@@ -484,7 +358,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
         source_sha256=_sha256(path),
         base=base,
         builder=builder,
-        body_names=[_short(builder.body_label[b]) for b in range(nb)],
+        body_names=[short_label(builder.body_label[b]) for b in range(nb)],
         body_parent=np.array([parent[by_child[b]] for b in range(nb)], dtype=np.int64),
         joint_type=[names[JT(jt[by_child[b]])] for b in range(nb)],
         joint_X_p=np.array([builder.joint_X_p[by_child[b]] for b in range(nb)], dtype=np.float64),
@@ -492,7 +366,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
         body_mass=np.asarray(builder.body_mass, dtype=np.float64),
         body_com=np.asarray(builder.body_com, dtype=np.float64).reshape(nb, 3),
         body_inertia=np.asarray(builder.body_inertia, dtype=np.float64).reshape(nb, 3, 3),
-        joint_names=[_short(builder.joint_label[j]) for j, _ in dof_joint],
+        joint_names=[short_label(builder.joint_label[j]) for j, _ in dof_joint],
         dof_body=np.array([child[j] for j, _ in dof_joint], dtype=np.int64),
         q_index=np.array([q_start[j] for j, _ in dof_joint], dtype=np.int64),
         qd_index=np.array(dofs, dtype=np.int64),
@@ -508,91 +382,3 @@ def _describe(builder, path: Path, base: str) -> Robot:
         frames=frames,
         gravity=np.array([0.0, 0.0, -9.81]) if builder.up_axis == newton.Axis.Z else np.array([0.0, -9.81, 0.0]),
     )
-
-
-def read_gains(gains: str | Path | dict) -> tuple[dict, str | None]:
-    """A gains config as ``(parsed dict, file path or None)``: a TOML file is read, a dict is copied.
-
-    Raises:
-        RobotError: the file is missing or not TOML.
-    """
-    if isinstance(gains, dict):
-        return copy.deepcopy(gains), None
-    gp = Path(gains)
-    if not gp.is_file():
-        raise RobotError(f"{gp}: gains config not found")
-    try:
-        return tomllib.loads(gp.read_text()), str(gains)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise RobotError(f"{gp}: malformed TOML: {e}") from None
-
-
-def apply_overrides(builder, gains: str | Path | dict, source: Path | None = None,
-                    where: str | None = None) -> set[int]:
-    """Override per-joint drive and joint parameters by joint-name pattern, in place.
-
-    The config (TOML) holds ``[[joint]]`` tables applied in order, later ones winning::
-
-        [[joint]]
-        match = "*"            # fnmatch pattern on the joint name (last path element)
-        kp = 100.0             # PD stiffness [N*m/rad]
-        kd = 5.0               # PD damping [N*m*s/rad]
-        [[joint]]
-        match = "*_ankle_*"
-        kp = 40.0
-        effort = 50.0          # effort limit [N*m]
-        armature = 0.01        # reflected rotor inertia [kg*m^2]
-
-    Keys: ``kp kd effort armature friction damping lower upper``, and the servo drive's ``drive deadband
-    noload_speed goal_accel`` (read by :func:`wresdyn.robot.servo.read_servo`, not here). A pattern that matches no joint is an
-    error, so typos do not pass silently. An effort limit set here is taken as stated, even a huge one (see
-    :meth:`Robot.check_effort`). Returns the DoF indices whose effort limit the config set.
-    """
-    if where is None:
-        where = str(gains) if not isinstance(gains, dict) else "gains config"
-    gains, _ = read_gains(gains)
-    entries = gains.get("joint", [])
-    if not isinstance(entries, list) or not entries:
-        raise RobotError(f"{where}: expected one or more [[joint]] tables")
-    attr = {"kp": "joint_target_ke", "kd": "joint_target_kd", "effort": "joint_effort_limit", "armature": "joint_armature",
-            "friction": "joint_friction", "damping": "joint_damping", "lower": "joint_limit_lower", "upper": "joint_limit_upper"}
-    labels = [_short(label) for label in builder.joint_label]
-    qd_start = list(builder.joint_qd_start)
-    dof_dim = [int(a) + int(b) for a, b in builder.joint_dof_dim]
-    effort_dofs: set[int] = set()
-    for e in entries:
-        if not isinstance(e, dict):
-            raise RobotError(f"{where}: every [[joint]] entry must be a table")
-        pattern = e.pop("match", None)
-        if not isinstance(pattern, str):
-            raise RobotError(f"{where}: every [[joint]] needs a match = \"pattern\" string")
-        unknown = set(e) - set(_OVERRIDE_FIELDS) - set(SERVO_KEYS)
-        if unknown:
-            raise RobotError(f"{where}: unknown key(s) {sorted(unknown)} for match {pattern!r}; allowed: "
-                             f"{list(_OVERRIDE_FIELDS) + list(SERVO_KEYS)}")
-        hits = [j for j, n in enumerate(labels) if fnmatch.fnmatchcase(n, pattern) and dof_dim[j] == 1]
-        if not hits:
-            raise RobotError(f"{where}: pattern {pattern!r} matches no 1-DoF joint of {source or 'the robot'}")
-        for key, value in e.items():
-            if key in SERVO_KEYS:
-                continue  # the drive law's keys: read_servo
-            try:
-                value = float(value)
-            except (TypeError, ValueError):
-                raise RobotError(f"{where}: {key} = {value!r} for {pattern!r} is not a number") from None
-            if key in ("kp", "kd", "effort", "armature", "friction", "damping") and not value >= 0.0:
-                raise RobotError(f"{where}: {key} = {value} for {pattern!r} must be >= 0")
-            lst = getattr(builder, attr[key])
-            for j in hits:
-                lst[qd_start[j]] = value
-                if key == "effort":
-                    effort_dofs.add(int(qd_start[j]))
-    # a joint given gains but still in "no drive" mode would ignore them
-    import newton
-
-    for j in range(len(labels)):
-        if dof_dim[j] == 1:
-            d = qd_start[j]
-            if builder.joint_target_ke[d] > 0.0 or builder.joint_target_kd[d] > 0.0:
-                builder.joint_target_mode[d] = int(newton.JointTargetMode.POSITION)
-    return effort_dofs

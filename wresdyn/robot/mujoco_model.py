@@ -7,7 +7,7 @@ With ``ground=True`` the robot gets a floor and its collision geometry, written 
 writes them (:mod:`wresdyn.robot.ground`): the same geoms, materials and solver options, so the MuJoCo C robot
 and Newton's stand on the same contact. :func:`free_to_mujoco` / :func:`free_from_mujoco` convert the free
 joint between Newton's convention and MuJoCo's.
-The integrator is ``implicitfast``, MuJoCo's recommended default, which treats the actuator's
+:func:`mujoco_spec` gives the uncompiled spec. The integrator is ``implicitfast``, MuJoCo's recommended default, which treats the actuator's
 velocity gain implicitly (stable with high drive damping).
 """
 
@@ -19,7 +19,7 @@ from .contact import ContactSettings
 from .description import Robot
 from .ground import collision_shapes
 
-__all__ = ["build_mujoco", "free_from_mujoco", "free_to_mujoco", "quat_xyzw_to_wxyz"]
+__all__ = ["build_mujoco", "mujoco_spec", "free_from_mujoco", "free_to_mujoco", "quat_xyzw_to_wxyz"]
 
 
 def quat_xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
@@ -45,7 +45,13 @@ def _tf_inv(a: np.ndarray) -> np.ndarray:
 
 def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast", ground: bool = False,
                  contact=None):
-    """Build a :class:`mujoco.MjModel` of ``robot``.
+    """Build a :class:`mujoco.MjModel` of ``robot``: :func:`mujoco_spec` compiled (the arguments are its)."""
+    return mujoco_spec(robot, dt, integrator, ground, contact).compile()
+
+
+def mujoco_spec(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast", ground: bool = False,
+                contact=None):
+    """The :class:`mujoco.MjSpec` of ``robot`` (uncompiled: a peer tool may edit it, e.g. ``mujoco.sysid``).
 
     Args:
         robot: The robot description.
@@ -58,8 +64,9 @@ def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfas
             ``ground``.
 
     Returns:
-        ``mujoco.MjModel`` whose ``nu`` actuators and dof order are ``robot.joint_names`` (plus the free
-        joint's 6 DoF first for a floating base: MuJoCo dof ``6 + i`` and qpos ``7 + i`` are joint ``i``).
+        ``mujoco.MjSpec`` whose ``nu`` actuators and dof order are ``robot.joint_names`` (plus the free
+        joint's 6 DoF first for a floating base: MuJoCo dof ``6 + i`` and qpos ``7 + i`` are joint ``i``), each
+        actuator named after its joint.
     """
     import mujoco
     from scipy.spatial.transform import Rotation as R
@@ -129,7 +136,7 @@ def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfas
         if np.isfinite(robot.effort[i]):
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange = [-robot.effort[i], robot.effort[i]]
-    return spec.compile()
+    return spec
 
 
 _GEOM = {"box": "mjGEOM_BOX", "sphere": "mjGEOM_SPHERE", "capsule": "mjGEOM_CAPSULE", "cylinder": "mjGEOM_CYLINDER",

@@ -25,7 +25,7 @@ from tensordict import TensorDict
 
 from .skill_config import SkillConfig
 
-__all__ = ["SkillConfig", "TrackingEnv", "OBS_TERMS", "reference_tensors"]
+__all__ = ["SkillConfig", "TrackingEnv", "OBS_TERMS", "reference_tensors", "start_points"]
 
 OBS_TERMS = ("error", "qd", "ref_next", "ref_ahead", "ref", "last_action")
 """The policy's observation, n values each, in this order."""
@@ -44,6 +44,19 @@ def reference_tensors(motions, decimation: int, ahead: int, device) -> tuple[tor
         qd[i, :len(sub)] = m.qd[::decimation][:k[i] + 1]
     f = dict(dtype=torch.float32, device=device)
     return torch.as_tensor(q, **f), torch.as_tensor(qd, **f), torch.as_tensor(k, dtype=torch.long, device=device)
+
+
+def start_points(ids: torch.Tensor, ref_len: torch.Tensor, random_start: bool, gen: torch.Generator, device
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Motion and policy step each reset world of ``ids`` starts from: drawn at random (``random_start``, from
+    ``gen`` on ``device``: a motion, then a step below its length ``ref_len``) or in turn, each motion from its
+    start."""
+    if random_start:
+        m = torch.randint(len(ref_len), (len(ids),), generator=gen, device=device)
+        t = (torch.rand(len(ids), generator=gen, device=device) * ref_len[m]).long()
+    else:
+        m, t = ids % len(ref_len), torch.zeros_like(ids)
+    return m, t
 
 
 class TrackingEnv(VecEnv):
@@ -88,12 +101,7 @@ class TrackingEnv(VecEnv):
     def _reset(self, ids: torch.Tensor) -> None:
         if len(ids) == 0:
             return
-        k = len(ids)
-        if self.random_start:
-            m = torch.randint(len(self.motions), (k,), generator=self.gen, device=self.device)
-            t = (torch.rand(k, generator=self.gen, device=self.device) * self.ref_len[m]).long()
-        else:
-            m, t = ids % len(self.motions), torch.zeros_like(ids)
+        m, t = start_points(ids, self.ref_len, self.random_start, self.gen, self.device)
         self.motion[ids], self.t[ids] = m, t
         q0, qd0 = self.ref_q[m, t], self.ref_qd[m, t]
         self.plant.reset(ids, q0, qd0)

@@ -28,6 +28,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from ..sim.kinematics import BodyPositions
+from .env import start_points
 from .skill_config import FloorTaskConfig
 
 __all__ = ["FloorTaskConfig", "FloorTrackingEnv", "ACTOR_TERMS", "CRITIC_TERMS", "base_frame_imu", "quat_rotate_inv",
@@ -172,11 +173,7 @@ class FloorTrackingEnv(VecEnv):
         if len(ids) == 0:
             return
         k = len(ids)
-        if self.random_start:
-            m = torch.randint(len(self.motions), (k,), generator=self.gen, device=self.device)
-            t = (torch.rand(k, generator=self.gen, device=self.device) * self.ref_len[m]).long()
-        else:
-            m, t = ids % len(self.motions), torch.zeros_like(ids)
+        m, t = start_points(ids, self.ref_len, self.random_start, self.gen, self.device)
         self.motion[ids], self.t[ids] = m, t
         r = self.ref_data
         twist = torch.zeros(k, 6, device=self.device)

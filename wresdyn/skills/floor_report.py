@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..evaluation.animation import write_animation
-from .report import COLOURS, LABELS
+from .report import LABELS, gaps_text, one_per_family, plot_rollouts
 
 __all__ = ["write_floor_report", "floor_table", "plot_floor_tracking"]
 
@@ -49,12 +49,7 @@ def plot_floor_tracking(rollouts: dict, motions, robot, path, rate_hz: float, ma
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    picked, seen = [], set()
-    for i, m in enumerate(motions):
-        if m.family not in seen:
-            picked.append(i)
-            seen.add(m.family)
-    picked = picked[:max_motions]
+    picked = one_per_family(motions, max_motions)
     cols = 2 + joints
     fig, axes = plt.subplots(len(picked), cols, figsize=(3.6 * cols, 2.4 * len(picked)), squeeze=False)
     any_dep = next(iter(rollouts.values()))
@@ -67,10 +62,7 @@ def plot_floor_tracking(rollouts: dict, motions, robot, path, rate_hz: float, ma
                    for j in order]
         for c, (label, get, ref) in enumerate(series):
             ax = axes[r, c]
-            ax.plot(t, ref, "k--", lw=1.5, label="reference")
-            for name, dep in rollouts.items():
-                if name in COLOURS:
-                    ax.plot(t, get(dep), color=COLOURS[name], lw=1, label=name)
+            plot_rollouts(ax, t, ref, rollouts, get)
             ax.set_title(f"{motions[i].name}: {label}", fontsize=8)
             ax.set_xlabel("t [s]", fontsize=8)
     axes[0, 0].legend(fontsize=6)
@@ -79,10 +71,6 @@ def plot_floor_tracking(rollouts: dict, motions, robot, path, rate_hz: float, ma
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
-
-
-def _gaps(g: dict) -> str:
-    return ", ".join(f"{LABELS[k][:3]} **{100 * v:.0f} %**" for k, v in g.items()) or "– (needs the oracle (d))"
 
 
 def write_floor_report(out, floating, results: dict, rollouts: dict, motions, policy_rate_hz: float,
@@ -118,9 +106,9 @@ policy is its last iterate; nothing was selected on the real robot or on held-ou
 
 {floor_table(results['real']['heldout'], results['sim']['heldout'])}
 
-**Gap closed** (a − x) / (a − d): MPJPE {_gaps(results['gap_closed_mpjpe'])}; g-MPJPE
-{_gaps(results['gap_closed_g_mpjpe'])} (validation motions: MPJPE {_gaps(results['gap_closed_validation_mpjpe'])},
-g-MPJPE {_gaps(results['gap_closed_validation_g_mpjpe'])}).
+**Gap closed** (a − x) / (a − d): MPJPE {gaps_text(results['gap_closed_mpjpe'])}; g-MPJPE
+{gaps_text(results['gap_closed_g_mpjpe'])} (validation motions: MPJPE {gaps_text(results['gap_closed_validation_mpjpe'])},
+g-MPJPE {gaps_text(results['gap_closed_validation_g_mpjpe'])}).
 
 ## Validation motions, deployed on the real robot's floor
 

@@ -23,9 +23,9 @@ import torch
 
 from ..errors import WresdynError
 from ..learn.ppo import load_policy
+from ..learn.runs import run_physics
 from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 from ..sim import DivergenceLimits, Simulator
-from ..sim.physics import PhysicalParams
 from .floor_env import base_frame_imu
 
 __all__ = ["SimPlant", "RealPlant", "SETTINGS", "sim_plant"]
@@ -150,7 +150,7 @@ def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: in
     if not run:
         raise WresdynError(f"the {setting} setting needs a run folder (wresdyn fit)")
     run = Path(run)
-    physics = PhysicalParams.load(run / "physics.json", robot) if (run / "physics.json").is_file() else None
+    physics = run_physics(run, robot)
     policy, meta = load_policy(run) if (run / "policy.pt").is_file() else (None, {"kind": None})
     if list(meta.get("joint_names", robot.joint_names)) != list(robot.joint_names):
         raise WresdynError(f"{run}: fitted on joints {meta['joint_names'][:3]}..., not this robot's")

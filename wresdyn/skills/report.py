@@ -8,7 +8,7 @@ import numpy as np
 
 from ..evaluation.animation import write_animation
 
-__all__ = ["write_report", "plot_tracking", "table"]
+__all__ = ["write_report", "plot_tracking", "table", "one_per_family", "plot_rollouts", "gaps_text"]
 
 LABELS = {"reference": "reference played open loop (no policy)", "a_nominal": "(a) nominal simulator",
           "b_calibrated": "(b) (a) fine-tuned, calibrated robot", "c_delta_action": "(c) (a) fine-tuned, delta action",
@@ -35,6 +35,24 @@ def table(split: dict, sim: dict | None = None) -> str:
     return "\n".join(rows)
 
 
+def one_per_family(motions, most: int) -> list[int]:
+    """Indices of up to ``most`` motions, one of each family first, in the order they come."""
+    picked, seen = [], set()
+    for i, m in enumerate(motions):
+        if m.family not in seen:
+            picked.append(i)
+            seen.add(m.family)
+    return picked[:most]
+
+
+def plot_rollouts(ax, t: np.ndarray, ref: np.ndarray, rollouts: dict, get) -> None:
+    """The reference (dashed) and ``get(rollout)`` of every policy's rollout in :data:`COLOURS`, against ``t`` [s]."""
+    ax.plot(t, ref, "k--", lw=1.5, label="reference")
+    for name, dep in rollouts.items():
+        if name in COLOURS:
+            ax.plot(t, get(dep), color=COLOURS[name], lw=1, label=name)
+
+
 def plot_tracking(rollouts: dict, motions, robot, path, rate_hz: float, max_motions: int = 4, joints: int = 3) -> Path:
     """Reference vs the real robot's joints under each policy, for up to ``max_motions`` held-out motions (one of each
     family first) and their ``joints`` most moving joints."""
@@ -43,12 +61,7 @@ def plot_tracking(rollouts: dict, motions, robot, path, rate_hz: float, max_moti
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    picked, seen = [], set()
-    for i, m in enumerate(motions):
-        if m.family not in seen:
-            picked.append(i)
-            seen.add(m.family)
-    picked = picked[:max_motions]
+    picked = one_per_family(motions, max_motions)
     fig, axes = plt.subplots(len(picked), joints, figsize=(4.2 * joints, 2.6 * len(picked)), squeeze=False)
     ref = next(iter(rollouts.values())).q_ref
     for r, i in enumerate(picked):
@@ -56,10 +69,7 @@ def plot_tracking(rollouts: dict, motions, robot, path, rate_hz: float, max_moti
         t = np.arange(ref.shape[1]) / rate_hz
         for c, j in enumerate(order):
             ax = axes[r, c]
-            ax.plot(t, ref[i, :, j], "k--", lw=1.5, label="reference")
-            for name, dep in rollouts.items():
-                if name in COLOURS:
-                    ax.plot(t, dep.q[i, :, j], color=COLOURS[name], lw=1, label=name)
+            plot_rollouts(ax, t, ref[i, :, j], rollouts, lambda d: d.q[i, :, j])
             ax.set_title(f"{motions[i].name}: {robot.joint_names[j]}", fontsize=9)
             ax.set_xlabel("t [s]")
             ax.set_ylabel("q [rad]")
@@ -71,7 +81,8 @@ def plot_tracking(rollouts: dict, motions, robot, path, rate_hz: float, max_moti
     return path
 
 
-def _gaps(g: dict) -> str:
+def gaps_text(g: dict) -> str:
+    """The gaps closed (``{policy: fraction}``) as one line of the report."""
     return ", ".join(f"{LABELS[k][:3]} **{100 * v:.0f} %**" for k, v in g.items()) or "– (needs the oracle (d))"
 
 
@@ -102,7 +113,7 @@ Every policy is its last iterate; nothing was selected on the real robot or on h
 
 {table(results['real']['heldout'], results['sim']['heldout'])}
 
-**Gap closed** (a − x) / (a − d) on MPJPE: {_gaps(g)} (validation motions: {_gaps(gv)}).
+**Gap closed** (a − x) / (a − d) on MPJPE: {gaps_text(g)} (validation motions: {gaps_text(gv)}).
 
 ## Validation motions, deployed on the real robot
 

@@ -13,8 +13,9 @@ __all__ = ["SkillConfig", "FloorTaskConfig", "SkillPPOConfig"]
 
 
 @dataclass(frozen=True)
-class SkillConfig:
-    """The tracking task: timing, action, rewards and termination."""
+class _TrackingTask:
+    """What both tracking tasks start with, in their order (the stand's defaults): timing, action and the widths of
+    the joint kernels. Each task adds its own fields after these."""
 
     decimation: int = 10
     """Sample periods per policy step: 10 at 500 Hz is a 50 Hz policy."""
@@ -30,6 +31,12 @@ class SkillConfig:
     """Width of the fine joint-position kernel [rad]."""
     sigma_qd: float = 1.5
     """Width of the joint-velocity kernel [rad/s]."""
+
+
+@dataclass(frozen=True)
+class SkillConfig(_TrackingTask):
+    """The tracking task: timing, action, rewards and termination."""
+
     w_q: float = 1.0
     """Weight of the coarse joint-position kernel [-]."""
     w_q_fine: float = 1.0
@@ -49,23 +56,11 @@ class SkillConfig:
 
 
 @dataclass(frozen=True)
-class FloorTaskConfig:
+class FloorTaskConfig(_TrackingTask):
     """The tracking task on the floor: timing, action, rewards and the fall rule."""
 
-    decimation: int = 10
-    """Sample periods per policy step: 10 at 500 Hz is a 50 Hz policy."""
     action_scale: float = 0.25
     """PD-target offset per unit action [rad]."""
-    action_clip: float = 3.0
-    """Actions are clipped to ±this [-] before scaling."""
-    ahead: int = 5
-    """The far look-ahead of the observation [policy steps]."""
-    sigma_q: float = 0.1
-    """Width of the coarse joint-position kernel [rad]."""
-    sigma_q_fine: float = 0.03
-    """Width of the fine joint-position kernel [rad]."""
-    sigma_qd: float = 1.5
-    """Width of the joint-velocity kernel [rad/s]."""
     sigma_orientation: float = 0.15
     """Width of the base-orientation kernel [rad]."""
     sigma_base: float = 0.1

@@ -1,0 +1,150 @@
+"""The mismatch config: how the simulated "real" robot (:class:`~wresdyn.data.real_robot.RealRobot`) differs from
+the nominal model (physics, PD gains, delay, torque limits, sensors), as global scalars and per-joint / per-link
+entries, read from TOML with its keys, types and signs checked."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tomllib
+
+from ..robot.description import RobotError
+
+__all__ = ["Mismatch", "MismatchError", "JOINT_KEYS", "LINK_KEYS"]
+
+
+class MismatchError(RobotError):
+    """A mismatch config that cannot be used; the message is one line naming the file."""
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """How the real robot differs from the nominal model. The defaults are all off (the nominal robot)."""
+
+    friction: float = 0.0
+    """Coulomb (dry) joint friction torque as a fraction of each joint's effort limit [-] (MuJoCo frictionloss,
+    added to the model's own)."""
+    damping: float = 0.0
+    """Viscous joint damping as a fraction of each joint's PD kd [-] (added to the model's own damping)."""
+    armature_scale: float = 1.0
+    """Factor on every joint's reflected rotor inertia (armature) [-]."""
+    mass_error: float = 0.0
+    """Relative standard deviation of each link's mass error [-]; the link's inertia scales with it."""
+    com_error: float = 0.0
+    """Standard deviation of each link's centre-of-mass offset, per axis [m]."""
+    inertia_error: float = 0.0
+    """Relative standard deviation of each principal moment of inertia, on top of the mass scaling [-]."""
+    kp_scale: float = 1.0
+    """Factor on every joint's PD stiffness [-]."""
+    kd_scale: float = 1.0
+    """Factor on every joint's PD damping [-]."""
+    gain_error: float = 0.0
+    """Relative standard deviation of a per-joint factor on kp and kd, on top of the scales [-]."""
+    delay: float = 0.0
+    """Actuator delay: a command reaches the motor this much later [s], rounded to whole substeps."""
+    torque_limit_scale: float = 1.0
+    """Factor on every joint's effort limit (torque saturation) [-]; joints without a limit stay unlimited."""
+    position_noise: float = 0.0
+    """Standard deviation of the white noise on measured joint positions [rad]."""
+    velocity_noise: float = 0.0
+    """Standard deviation of the white noise on measured joint velocities [rad/s]."""
+    encoder_resolution: float = 0.0
+    """Measured positions are rounded to multiples of this (encoder quantisation) [rad]; 0 = off."""
+    velocity_resolution: float = 0.0
+    """Measured velocities are rounded to multiples of this (the drive's velocity word) [rad/s]; 0 = off."""
+    torque_resolution: float = 0.0
+    """Recorded (diagnostic) torques are rounded to multiples of this [N*m]; 0 = off."""
+    substep: float = 0.0
+    """Physics step of the real robot [s], must divide the recording step; 0 = the recording step."""
+    seed: int = 0
+    """Seed of the per-link and per-joint errors (one fixed "physical" robot)."""
+    joint: tuple = ()
+    """Per-joint entries ``{"match": fnmatch pattern, key: value}`` overriding the global scalars on the joints
+    they match, in order (later entries win); keys: :data:`JOINT_KEYS`. TOML: ``[[joint]]`` tables."""
+    link: tuple = ()
+    """Per-link entries ``{"match": pattern on the body name, ...}`` applied on top of the random link errors;
+    keys :data:`LINK_KEYS`: ``mass_scale`` [-] (inertia scales with it), ``com_offset`` [m] (3 numbers, body
+    frame), ``inertia_scale`` [-]. TOML: ``[[link]]`` tables."""
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Mismatch":
+        """Read a TOML file of ``key = value`` lines (keys: the field names); unknown keys are an error."""
+        path = Path(path)
+        if not path.is_file():
+            raise MismatchError(f"{path}: mismatch config not found")
+        try:
+            data = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            raise MismatchError(f"{path}: malformed TOML: {e}") from None
+        return cls.from_dict(data, where=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "mismatch config") -> "Mismatch":
+        """Build from a dict, checking keys, types and signs."""
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - set(fields))
+        if unknown:
+            raise MismatchError(f"{where}: unknown key(s) {unknown}; allowed: {list(fields)}")
+        values = {}
+        for key, allowed in (("joint", JOINT_KEYS), ("link", LINK_KEYS)):
+            if key in data:
+                values[key] = tuple(_entry(e, allowed, f"{where}: [[{key}]] {i}") for i, e in enumerate(data[key]))
+        for key, value in data.items():
+            if key in ("joint", "link"):
+                continue
+            want = int if key == "seed" else float
+            if isinstance(value, bool) or not isinstance(value, int if want is int else (int, float)):
+                raise MismatchError(f"{where}: {key} = {value!r} must be {'an integer' if want is int else 'a number'}")
+            value = want(value)
+            if want is float and not (np.isfinite(value) and value >= 0.0):
+                raise MismatchError(f"{where}: {key} = {value} must be finite and >= 0")
+            values[key] = value
+        for key in ("armature_scale", "kp_scale", "torque_limit_scale"):
+            if key in values and values[key] <= 0.0:
+                raise MismatchError(f"{where}: {key} = {values[key]} must be > 0")
+        return cls(**values)
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["joint"], d["link"] = [dict(e) for e in self.joint], [dict(e) for e in self.link]
+        return d
+
+    def is_nominal(self) -> bool:
+        """True when the physics and sensors are those of the nominal model (``substep`` and ``seed`` aside)."""
+        ignore = ("substep", "seed", "joint", "link")
+        if self.joint or self.link:
+            return False
+        return all(getattr(self, f.name) == f.default for f in dataclasses.fields(self) if f.name not in ignore)
+
+
+JOINT_KEYS = ("friction", "damping", "armature_scale", "kp_scale", "kd_scale", "torque_limit_scale")
+"""Keys of a ``[[joint]]`` mismatch entry (besides ``match``): the per-joint forms of the global scalars."""
+LINK_KEYS = ("mass_scale", "com_offset", "inertia_scale")
+"""Keys of a ``[[link]]`` mismatch entry (besides ``match``)."""
+
+
+def _entry(e, allowed, where: str) -> dict:
+    """Check one per-joint / per-link entry: a pattern and known keys with finite, sensible values."""
+    if not isinstance(e, dict) or not isinstance(e.get("match"), str):
+        raise MismatchError(f"{where}: needs match = \"PATTERN\"")
+    out = {"match": e["match"]}
+    for k, v in e.items():
+        if k == "match":
+            continue
+        if k not in allowed:
+            raise MismatchError(f"{where}: unknown key {k!r}; allowed: match, {', '.join(allowed)}")
+        if k == "com_offset":
+            if not (isinstance(v, list | tuple) and len(v) == 3 and all(isinstance(x, int | float) and
+                                                                         np.isfinite(x) for x in v)):
+                raise MismatchError(f"{where}: com_offset must be 3 numbers [m]")
+            out[k] = tuple(float(x) for x in v)
+            continue
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v) or v < 0:
+            raise MismatchError(f"{where}: {k} = {v!r} must be a finite number >= 0")
+        if k.endswith("_scale") and v <= 0:
+            raise MismatchError(f"{where}: {k} = {v} must be > 0")
+        out[k] = float(v)
+    return out
