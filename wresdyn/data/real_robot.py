@@ -30,6 +30,7 @@ from ..robot.description import Robot, RobotError
 from ..robot.ground import FloatingState, check_floating
 from ..robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco
 from ..robot.physical import PhysicalParams
+from ..robot.servo import GoalProfile
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 from .mismatch import JOINT_KEYS, Mismatch, MismatchError
@@ -69,6 +70,7 @@ class RealRobot:
         self.n_delay = int(round(self.mismatch.delay / self.substep))
         self.model = build_mujoco(robot, self.substep, "implicitfast", ground=floating, contact=contact)
         self._perturb(self.model, np.random.default_rng(self.mismatch.seed))
+        self._servo = self._servo_motors()
         self._mujoco = mujoco
         self._data = self._fifo = self._rng = None  # reset / step
 
@@ -108,6 +110,43 @@ class RealRobot:
         m.actuator_biasprm[:n, 2] = -kd
         m.actuator_forcerange[:n] *= jv["torque_limit_scale"][:, None]
 
+    def _servo_motors(self) -> dict | None:
+        """Turn the (perturbed) position actuators of servo joints (:attr:`Robot.servo`) into affine actuators
+        (force = ctrl + bias_v qd, within the force range) whose ctrl and ``bias_v`` :meth:`_servo_ctrl` sets each
+        physics step; returns the servo law's parameters, or None for a robot without servos (its actuators stay
+        untouched)."""
+        servo, m, n = self.robot.servo, self.model, self.robot.n_dof
+        if servo is None:
+            return None
+        if self.floating:
+            raise RobotError(f"{self.robot.source}: servo drives are supported on a fixed base only")
+        s = servo.mask
+        law = {"mask": s, "kp": m.actuator_gainprm[:n, 0].copy(), "kd": -m.actuator_biasprm[:n, 2].copy(),
+               "effort": m.actuator_forcerange[:n, 1].copy(), "deadband": servo.deadband,
+               "noload_speed": servo.noload_speed, "goal_accel": servo.goal_accel}
+        idx = np.flatnonzero(s)
+        m.actuator_gainprm[idx, 0] = 1.0
+        m.actuator_biasprm[idx, :3] = 0.0
+        m.actuator_ctrllimited[idx] = 0
+        return law
+
+    def _servo_ctrl(self, d, command, profile) -> np.ndarray:
+        """MuJoCo ctrl for one physics step: the command on PD joints; on servo joints the servo law
+        (:mod:`wresdyn.robot.servo`) split into its velocity term, the actuator's ``biasprm[2]`` (which
+        ``implicitfast`` integrates implicitly, as SolverReplay does the law's), and the rest as ctrl."""
+        law, m = self._servo, self.model
+        n = len(command)
+        goal = profile(command)
+        e = goal - d.qpos[:n]
+        e_b = e - np.clip(e, -law["deadband"], law["deadband"])
+        raw = law["kp"] * e_b - law["kd"] * d.qvel[:n]
+        free = np.abs(raw) < law["effort"]
+        emf = np.divide(law["effort"], law["noload_speed"], out=np.zeros(n), where=law["noload_speed"] > 0)
+        ctrl = np.where(free, law["kp"] * e_b, np.sign(raw) * law["effort"])
+        s = law["mask"]
+        m.actuator_biasprm[:n, 2] = np.where(s, -(free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
+        return np.where(s, ctrl, command)
+
     def physics(self):
         """The true physical parameters of this robot in the simulator's terms
         (:class:`~wresdyn.robot.physical.PhysicalParams`), read back from the perturbed MuJoCo model: what an
@@ -120,10 +159,16 @@ class RealRobot:
         rot = Rotation.from_quat(m.body_iquat[1:], scalar_first=True).as_matrix()
         inertia = rot @ (m.body_inertia[1:, :, None] * np.eye(3)) @ rot.transpose(0, 2, 1)
         effort = np.where(np.isfinite(r.effort), m.actuator_forcerange[:n, 1], np.inf)
-        return PhysicalParams(list(r.joint_names), list(r.body_names), m.actuator_gainprm[:n, 0].copy(),
-                              -m.actuator_biasprm[:n, 2].copy(), m.dof_armature[dof].copy(), m.dof_damping[dof].copy(),
-                              m.dof_frictionloss[dof].copy(), effort, np.full(n, self.n_delay * self.substep),
-                              m.body_mass[1:].copy(), m.body_ipos[1:].copy(), inertia)
+        kp, kd = m.actuator_gainprm[:n, 0].copy(), -m.actuator_biasprm[:n, 2].copy()
+        servo = {}
+        if self._servo is not None:  # the motors' gains are the servo law's
+            law = self._servo
+            kp, kd = np.where(law["mask"], law["kp"], kp), np.where(law["mask"], law["kd"], kd)
+            servo = {f: np.array(law[f], dtype=np.float64) for f in ("deadband", "noload_speed", "goal_accel")}
+        return PhysicalParams(list(r.joint_names), list(r.body_names), kp, kd, m.dof_armature[dof].copy(),
+                              m.dof_damping[dof].copy(), m.dof_frictionloss[dof].copy(), effort,
+                              np.full(n, self.n_delay * self.substep), m.body_mass[1:].copy(), m.body_ipos[1:].copy(),
+                              inertia, **servo)
 
     def record(self, q_cmd: np.ndarray, rng: np.random.Generator | None = None, settle: float = 0.5
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -154,10 +199,11 @@ class RealRobot:
         d.qpos[:] = q_cmd[0]
         d.qvel[:] = 0.0
         fifo = deque([q_cmd[0]] * self.n_delay)
+        profile = None if self._servo is None else GoalProfile(self._servo["goal_accel"], self.substep, q_cmd[0])
 
         def step(cmd):
             fifo.append(cmd)
-            d.ctrl[:] = fifo.popleft()
+            d.ctrl[:] = fifo.popleft() if profile is None else self._servo_ctrl(d, fifo.popleft(), profile)
             mujoco.mj_step(m, d)
 
         for _ in range(int(round(settle / self.substep))):

@@ -240,6 +240,9 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     if robot.source_sha256 != ds.robot_sha256:
         raise ExportError(f"{robot.source}: the robot file changed since the run's data were recorded (sha256 "
                           f"{robot.source_sha256[:12]} != {ds.robot_sha256[:12]}); the export would describe another robot")
+    if robot.servo is not None:
+        raise ExportError(f"{robot.source}: servo drives (drive = \"servo\") have no Newton actuator to export to yet; "
+                          "the export would describe PD drives")
     if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
         raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
                           f"{Path(robot.source).suffix} first (e.g. mujoco-usd-converter for MJCF)")

@@ -27,6 +27,7 @@ from pathlib import Path
 import torch
 
 from ..sim import Simulator, TrajectoryBank, rollout
+from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
 from .parametric import ParametricResidual
@@ -142,7 +143,7 @@ class _FitLearner:
         if physics is not None:
             self.sim.set_physics(physics)
             delay = torch.as_tensor(physics.delay / dt, dtype=torch.float32, device=self.sim.device)
-        self.bank = TrajectoryBank(train, self.sim.device, delay)
+        self.bank = TrajectoryBank(train, self.sim.device, delay, servo_goal_accel(robot, physics, dt, self.sim.device))
         validation = dataset.split("validation")
         self._score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics,
                                       weights=dataset.fit_weights()) if validation else None

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from ..sim import TrajectoryBank, rollout
+from ..sim.bank import servo_goal_accel
 from .window_fit import squared_error
 
 __all__ = ["GridChoice", "grid_search"]
@@ -53,7 +54,11 @@ def grid_search(cfg, model, sim, train, rng, field: str, grid, values, log, weig
         p = base.copy()
         setattr(p, field, values(g))
         sim.set_physics(p)
-        bank.set_delay(torch.as_tensor(p.delay / model.dt, dtype=torch.float32, device=sim.device))
+        delay = torch.as_tensor(p.delay / model.dt, dtype=torch.float32, device=sim.device)
+        if getattr(model.robot, "servo", None) is None:
+            bank.set_delay(delay)
+        else:
+            bank.set_command_path(delay, servo_goal_accel(model.robot, p, model.dt, sim.device))
         window = bank.window(traj, start, h)
         with torch.no_grad():
             run = rollout(sim, window)

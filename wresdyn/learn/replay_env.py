@@ -24,6 +24,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
+from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import apply_residual, observation, residual_scale
 from .replay_env_config import ReplayEnvConfig
@@ -69,7 +70,8 @@ class ReplayEnv(VecEnv):
         if physics is not None:
             self.sim.set_physics(physics)
             delay = torch.as_tensor(physics.delay * rate_hz, dtype=torch.float32, device=self.device)
-        self.bank = TrajectoryBank(trajectories, self.device, delay)
+        self.bank = TrajectoryBank(trajectories, self.device, delay,
+                                   servo_goal_accel(robot, physics, 1.0 / rate_hz, self.device))
         if obs_mean is None or obs_std is None:
             obs_mean, obs_std = obs_stats(trajectories)
         dev, f32 = self.device, torch.float32

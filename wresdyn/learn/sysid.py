@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from ..sim import Simulator, TrajectoryBank, rollout
+from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .runs import RunFolder
@@ -95,14 +96,21 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True)
-    bank.set_delay(torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device))
-    window = bank.sample(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
+    delay = torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device)
+    bank.set_command_path(delay, servo_goal_accel(robot, start, dt, sim.device))
+    traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
+    window = bank.window(traj, first, h)
+    profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.LBFGS(params, lr=1.0, max_iter=20, history_size=50, line_search_fn="strong_wolfe")
 
     def closure():
         optim.zero_grad()
-        loss, _ = _window_loss(cfg, model, sim, window, weights)
+        w = window
+        if profiled:  # the servo goals of the fixed windows move with the fitted goal acceleration
+            bank.set_command_path(delay, model.goal_accel_steps().float().to(sim.device))
+            w = bank.window(traj, first, h)
+        loss, _ = _window_loss(cfg, model, sim, w, weights)
         if not torch.isfinite(loss):
             raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
         loss.backward()
@@ -188,8 +196,8 @@ class _IdentifyLearner:
         self.on_search = on_search
         self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
         model = self.model
-        groups = [[model.u_kp, model.u_kd, model.u_armature],
-                  [model.u_damping, model.u_friction, model.u_effort, model.u_delay],
+        groups = [[model.u_kp, model.u_kd, model.u_armature, model.u_noload_speed, model.u_goal_accel],
+                  [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband],
                   [model.u_body_logdiag, model.u_body_off]]
         self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
                                        for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
@@ -242,7 +250,11 @@ class _IdentifyLearner:
         for group in self.optim.param_groups:
             group["lr"] = group["scale"] * lr
         self._events(it)
-        self.bank.set_delay(model.delay_steps().float().to(self.sim.device))
+        delay = model.delay_steps().float().to(self.sim.device)
+        if getattr(self.robot, "servo", None) is None:
+            self.bank.set_delay(delay)
+        else:
+            self.bank.set_command_path(delay, model.goal_accel_steps().float().to(self.sim.device))
         window = self.bank.sample(self.rng, cfg.windows, h)
         loss, parts = _window_loss(cfg, model, self.sim, window, self.weights)
         loss = loss + cfg.w_prior * model.prior().to(loss.device)

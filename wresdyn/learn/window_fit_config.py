@@ -9,10 +9,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..choices import ModelKind, SolverKind, check_choice, check_device, check_number
-from ..robot.physical import JOINT_FIELDS
+from ..robot.physical import JOINT_FIELDS, SERVO_FIELDS
 from .residual_config import ResidualConfig
 
-__all__ = ["FIT_FIELDS", "HYBRID_ITERATIONS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
+__all__ = ["DEFAULT_FIT", "FIT_FIELDS", "HYBRID_ITERATIONS", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
 
 
 def check_window_fit_config(cfg) -> None:
@@ -34,8 +34,11 @@ def check_window_fit_config(cfg) -> None:
         check_number(getattr(cfg, name), name, ge=0)
 
 
-FIT_FIELDS = (*JOINT_FIELDS, "bodies")
-"""What can be identified: the per-joint fields and ``"bodies"`` (every moving link's mass, com, inertia)."""
+FIT_FIELDS = (*JOINT_FIELDS, *SERVO_FIELDS, "bodies")
+"""What can be identified: the per-joint fields, the servo drive's (:data:`~wresdyn.robot.physical.SERVO_FIELDS`,
+read on servo joints only) and ``"bodies"`` (every moving link's mass, com, inertia)."""
+DEFAULT_FIT = (*JOINT_FIELDS, "bodies")
+"""What is identified unless told: :data:`FIT_FIELDS` without the servo fields."""
 HYBRID_ITERATIONS = 1000
 """Residual iterations of the hybrid (:mod:`wresdyn.learn.hybrid`) by default: on the identified model the
 residual's validation error stops improving within a few hundred (``benchmarks/results/grey_box/``)."""
@@ -45,8 +48,9 @@ residual's validation error stops improving within a few hundred (``benchmarks/r
 class SysIdConfig:
     """Identification settings (defaults: a CPU run of a few minutes on the shipped data)."""
 
-    fit: tuple[str, ...] = FIT_FIELDS
-    """Fields to identify (:data:`FIT_FIELDS`); the others keep the robot file's values."""
+    fit: tuple[str, ...] = DEFAULT_FIT
+    """Fields to identify (:data:`FIT_FIELDS`, default :data:`DEFAULT_FIT`); the others keep the robot file's
+    values."""
     iterations: int = 800
     """Optimiser steps."""
     windows: int = 32

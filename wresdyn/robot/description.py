@@ -27,6 +27,7 @@ from ..paths import DEFAULT_ROBOT
 from .contact import ContactSettings
 from .file_import import import_file, short_label
 from .gains import apply_overrides, read_gains
+from .servo import ServoDrives, attach_servo, read_servo
 
 __all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
 
@@ -121,6 +122,9 @@ class Robot:
     """Path of the gains TOML as given (``None`` when none, or when given as a dict)."""
     effort_given: np.ndarray | None = None
     """True where the gains config sets the joint's effort limit explicitly, shape (n_dof,) (``None``: nowhere)."""
+    servo: ServoDrives | None = None
+    """The joints whose drive is a smart servo and their servo parameters (:mod:`wresdyn.robot.servo`; gains config
+    ``drive = "servo"``); ``None``: every drive is PD."""
 
     @property
     def n_dof(self) -> int:
@@ -215,7 +219,10 @@ class Robot:
             scene.add_ground_plane(cfg=cfg)
         elif contact is not None:
             raise ValueError("contact settings without a ground: pass ground=True")
-        return scene.finalize(device=device, requires_grad=requires_grad)
+        model = scene.finalize(device=device, requires_grad=requires_grad)
+        if self.servo is not None:
+            attach_servo(model, self.servo, self.qd_index, n_worlds)
+        return model
 
 
 def _sha256(path: Path) -> str:
@@ -283,6 +290,7 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     robot = _describe(builder, path, base)
     robot.gains, robot.gains_file = config, gains_file
     robot.effort_given = np.array([int(d) in effort_dofs for d in robot.qd_index], dtype=bool)
+    robot.servo = read_servo(config, robot.joint_names, robot.effort, gains_file or "gains config")
     robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
     return robot
 
@@ -374,4 +382,3 @@ def _describe(builder, path: Path, base: str) -> Robot:
         frames=frames,
         gravity=np.array([0.0, 0.0, -9.81]) if builder.up_axis == newton.Axis.Z else np.array([0.0, -9.81, 0.0]),
     )
-

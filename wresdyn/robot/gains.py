@@ -12,6 +12,7 @@ import tomllib
 
 from ..errors import RobotError
 from .file_import import short_label
+from .servo import SERVO_KEYS
 
 __all__ = ["read_gains", "apply_overrides"]
 
@@ -51,8 +52,9 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
         effort = 50.0          # effort limit [N*m]
         armature = 0.01        # reflected rotor inertia [kg*m^2]
 
-    Keys: ``kp kd effort armature friction damping lower upper``. A pattern that matches no joint is an
-    error, so typos do not pass silently. An effort limit set here is taken as stated, even a huge one (see
+    Keys: ``kp kd effort armature friction damping lower upper``, and the servo drive's ``drive deadband
+    noload_speed goal_accel`` (read by :func:`wresdyn.robot.servo.read_servo`, not here). A pattern that matches no
+    joint is an error, so typos do not pass silently. An effort limit set here is taken as stated, even a huge one (see
     :meth:`~wresdyn.robot.description.Robot.check_effort`). Returns the DoF indices whose effort limit the config set.
     """
     if where is None:
@@ -73,13 +75,16 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
         pattern = e.pop("match", None)
         if not isinstance(pattern, str):
             raise RobotError(f"{where}: every [[joint]] needs a match = \"pattern\" string")
-        unknown = set(e) - set(_OVERRIDE_FIELDS)
+        unknown = set(e) - set(_OVERRIDE_FIELDS) - set(SERVO_KEYS)
         if unknown:
-            raise RobotError(f"{where}: unknown key(s) {sorted(unknown)} for match {pattern!r}; allowed: {list(_OVERRIDE_FIELDS)}")
+            raise RobotError(f"{where}: unknown key(s) {sorted(unknown)} for match {pattern!r}; allowed: "
+                             f"{list(_OVERRIDE_FIELDS) + list(SERVO_KEYS)}")
         hits = [j for j, n in enumerate(labels) if fnmatch.fnmatchcase(n, pattern) and dof_dim[j] == 1]
         if not hits:
             raise RobotError(f"{where}: pattern {pattern!r} matches no 1-DoF joint of {source or 'the robot'}")
         for key, value in e.items():
+            if key in SERVO_KEYS:
+                continue  # the drive law's keys: read_servo
             try:
                 value = float(value)
             except (TypeError, ValueError):

@@ -17,10 +17,13 @@ import numpy as np
 
 from ..errors import WresdynError
 
-__all__ = ["JOINT_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsError"]
+__all__ = ["JOINT_FIELDS", "SERVO_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsError"]
 
 JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
 """Per-joint fields of :class:`PhysicalParams`, each (n_dof,)."""
+SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel")
+"""Per-joint fields of the servo drive law (:mod:`wresdyn.robot.servo`), each (n_dof,); read only on joints whose
+drive is a servo, 0 elsewhere. Files written before they existed load with zeros."""
 BODY_FIELDS = ("body_mass", "body_com", "body_inertia")
 """Per-body fields, (n_bodies,), (n_bodies, 3), (n_bodies, 3, 3)."""
 
@@ -47,15 +50,28 @@ class PhysicalParams:
     body_mass: np.ndarray
     body_com: np.ndarray
     body_inertia: np.ndarray
+    deadband: np.ndarray | None = None
+    """Servo dead band half-width [rad] (0: none); ``None`` on construction means zeros."""
+    noload_speed: np.ndarray | None = None
+    """Servo motor no-load speed [rad/s] (0: no torque-speed line)."""
+    goal_accel: np.ndarray | None = None
+    """Servo goal acceleration limit [rad/s²] (0: no goal profile)."""
+
+    def __post_init__(self) -> None:
+        for f in SERVO_FIELDS:
+            if getattr(self, f) is None:
+                setattr(self, f, np.zeros(len(self.joint_names)))
 
     @classmethod
     def nominal(cls, robot) -> "PhysicalParams":
         """The robot file's values (no delay)."""
         n = robot.n_dof
+        servo = getattr(robot, "servo", None)
         return cls(list(robot.joint_names), list(robot.body_names), *(np.array(getattr(robot, f), dtype=np.float64)
                    for f in ("kp", "kd", "armature", "damping", "friction", "effort")), np.zeros(n),
                    np.array(robot.body_mass, dtype=np.float64), np.array(robot.body_com, dtype=np.float64),
-                   np.array(robot.body_inertia, dtype=np.float64))
+                   np.array(robot.body_inertia, dtype=np.float64),
+                   **({} if servo is None else {f: np.array(getattr(servo, f), dtype=np.float64) for f in SERVO_FIELDS}))
 
     def copy(self) -> "PhysicalParams":
         return PhysicalParams(**{f.name: (list(v) if isinstance(v := getattr(self, f.name), list) else v.copy())
@@ -70,20 +86,21 @@ class PhysicalParams:
             raise PhysicsError(f"{where}: body names do not match the robot's ({len(self.body_names)} vs "
                                f"{robot.n_bodies} bodies)")
         n, nb = robot.n_dof, robot.n_bodies
-        want = {**{f: (n,) for f in JOINT_FIELDS}, "body_mass": (nb,), "body_com": (nb, 3), "body_inertia": (nb, 3, 3)}
+        want = {**{f: (n,) for f in (*JOINT_FIELDS, *SERVO_FIELDS)}, "body_mass": (nb,), "body_com": (nb, 3), "body_inertia": (nb, 3, 3)}
         for f, shape in want.items():
             a = getattr(self, f)
             if a.shape != shape:
                 raise PhysicsError(f"{where}: {f} has shape {a.shape}, expected {shape}")
             if np.isnan(a).any() or (f != "effort" and not np.isfinite(a).all()):
                 raise PhysicsError(f"{where}: {f} is not finite")
-            if f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "body_mass") and (a < 0).any():
+            if f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "body_mass", *SERVO_FIELDS) \
+                    and (a < 0).any():
                 raise PhysicsError(f"{where}: {f} must be >= 0")
 
     # ------------------------------------------------------------------------------------------------ JSON
     def to_json(self) -> dict:
         d = {"format": "wresdyn.physics/1", "joint_names": self.joint_names, "body_names": self.body_names}
-        for f in (*JOINT_FIELDS, *BODY_FIELDS):
+        for f in (*JOINT_FIELDS, *BODY_FIELDS, *SERVO_FIELDS):
             a = getattr(self, f)
             d[f] = np.where(np.isfinite(a), a, -1.0).tolist() if f == "effort" else a.tolist()
         return d
@@ -106,6 +123,7 @@ class PhysicalParams:
             if d.get("format") != "wresdyn.physics/1":
                 raise PhysicsError(f"{path}: not a wresdyn physics file (format {d.get('format')!r})")
             arrays = {f: np.asarray(d[f], dtype=np.float64) for f in (*JOINT_FIELDS, *BODY_FIELDS)}
+            arrays.update({f: np.asarray(d[f], dtype=np.float64) for f in SERVO_FIELDS if f in d})
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as e:
             if isinstance(e, PhysicsError):
                 raise

@@ -14,6 +14,11 @@ c_{k−m−1} for the first α of the step and c_{k−m} for the rest, so the st
 
 continuous and piecewise linear in δ (differentiable, as the grey-box identification needs). Before a
 trajectory's first sample the first command is held, as on a robot that holds its start pose before recording.
+
+Servo joints (:mod:`wresdyn.robot.servo`) then move their internal goal toward the delayed command with at most
+``a_max`` (:meth:`TrajectoryBank.set_goal_accel`, :func:`profile_goals`): from rest at the first command, step
+``k``'s goal is one :func:`~wresdyn.robot.servo.profile_step` from step ``k − 1``'s toward ``target_k``, computed in
+torch over each whole trajectory, so the loss has a gradient in ``a_max``.
 """
 
 from __future__ import annotations
@@ -23,7 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["Window", "TrajectoryBank", "delay_commands"]
+from ..robot.servo import profile_step
+
+__all__ = ["Window", "TrajectoryBank", "delay_commands", "profile_goals", "servo_goal_accel"]
 
 
 @dataclass
@@ -94,6 +101,46 @@ def delay_commands(q_cmd: torch.Tensor, rows: torch.Tensor, first: torch.Tensor,
     return (1.0 - alpha) * q_cmd[r0, col] + alpha * q_cmd[r1, col]
 
 
+def servo_goal_accel(robot, physics, dt: float, device) -> torch.Tensor | None:
+    """The goal acceleration [rad/step²] of ``robot``'s servo joints (0 on the others) for a bank at sample period
+    ``dt`` [s]: ``physics.goal_accel`` (:class:`~wresdyn.robot.physical.PhysicalParams`), or the robot's own with
+    ``physics`` None; ``None`` for a robot without servo drives."""
+    servo = getattr(robot, "servo", None)
+    if servo is None:
+        return None
+    accel = servo.goal_accel if physics is None else physics.goal_accel
+    return torch.as_tensor(np.where(servo.mask, accel, 0.0) * dt * dt, dtype=torch.float32, device=device)
+
+
+def profile_goals(targets: torch.Tensor, first: torch.Tensor, accel: torch.Tensor) -> torch.Tensor:
+    """Servo goals for the targets of a concatenated table: each trajectory's goal starts at rest on its first target
+    and follows :func:`~wresdyn.robot.servo.profile_step`; joints with ``accel`` 0 follow the targets.
+
+    Args:
+        targets: Delayed commands [rad], (R, n): trajectories concatenated along time.
+        first: First row of each row's trajectory, (R,) long.
+        accel: Goal acceleration limit per joint [rad/step²], (n,) (differentiable).
+
+    Returns:
+        Goals [rad], (R, n).
+    """
+    starts = torch.unique_consecutive(first)
+    traj = torch.searchsorted(starts, first)  # trajectory of each row
+    k = torch.arange(len(first), device=first.device) - first  # sample of each row
+    t_max = int(k.max()) + 1
+    last = torch.cat([starts[1:], torch.tensor([len(first)], device=first.device)]) - 1
+    rows = torch.minimum(starts[:, None] + torch.arange(t_max, device=first.device)[None], last[:, None])
+    goal = targets[rows]  # (J, T, n), each trajectory held at its end
+    on = accel > 0
+    a = torch.where(on, accel, torch.ones_like(accel)).to(targets.dtype)
+    pos, vel = goal[:, 0], torch.zeros_like(goal[:, 0])
+    out = []
+    for t in range(t_max):
+        pos, vel = profile_step(torch, goal[:, t], pos, vel, a)
+        out.append(pos)
+    return torch.where(on, torch.stack(out, 1)[traj, k], targets)
+
+
 class TrajectoryBank:
     """Recorded trajectories concatenated along time on the device; row ``start[j] + k`` is sample k of j.
 
@@ -103,9 +150,11 @@ class TrajectoryBank:
         device: Torch device.
         delay: Actuator delay of the simulated command path [steps], a float or a tensor (n,); see the module
             docstring.
+        goal_accel: Servo goal acceleration limit [rad/step²], a tensor (n,) (:func:`servo_goal_accel`), or
+            ``None`` for no servo profile.
     """
 
-    def __init__(self, trajectories, device, delay=0.0) -> None:
+    def __init__(self, trajectories, device, delay=0.0, goal_accel=None) -> None:
         trajectories = list(trajectories)
         if not trajectories:
             raise ValueError("no trajectories to replay")
@@ -128,7 +177,8 @@ class TrajectoryBank:
         self.first = torch.repeat_interleave(self.start, self.length)
         """First row of each row's trajectory, (T_total,)."""
         self.device = self.q.device
-        self.set_delay(delay)
+        self.delay = self.goal_accel = self._fixed = None
+        self.set_command_path(delay, goal_accel)
 
     @property
     def n_trajectories(self) -> int:
@@ -136,14 +186,48 @@ class TrajectoryBank:
 
     def set_delay(self, delay) -> None:
         """Set the command delay [steps]; a constant delay is applied once to the whole table."""
+        self.set_command_path(delay, self.goal_accel)
+
+    def set_goal_accel(self, accel) -> None:
+        """Set the servo goal acceleration limit per joint [rad/step²], a tensor (n,) (0 on joints without a profile),
+        or ``None`` for none (see the module docstring)."""
+        self.set_command_path(self.delay, accel)
+
+    def set_command_path(self, delay, goal_accel) -> None:
+        """Set the delay [steps] and the servo goal acceleration [rad/step²] (or ``None``) together; without
+        gradients to either, the targets are computed once for the whole table."""
+        same = goal_accel is not None and self._same(delay, self.delay) and self._same(goal_accel, self.goal_accel)
         self.delay = delay
+        self.goal_accel = None if goal_accel is None else torch.as_tensor(goal_accel, device=self.device)
+        if self.goal_accel is not None:
+            if not (same and self._fixed is not None):  # the profile runs over every sample: only when it changed
+                self._fixed = None if self._grad() else self._profiled()
+            return
         self._fixed = None if torch.is_tensor(delay) and delay.requires_grad else delay_commands(
             self.q_cmd, torch.arange(len(self.q_cmd), device=self.device), self.first, delay)
 
+    @staticmethod
+    def _same(a, b) -> bool:
+        """Whether two delays or goal accelerations are the same values without gradients."""
+        if torch.is_tensor(a) != torch.is_tensor(b):
+            return False
+        if not torch.is_tensor(a):
+            return a == b
+        return not (a.requires_grad or b.requires_grad) and a.shape == b.shape and bool(torch.equal(a, b.to(a.device)))
+
+    def _grad(self) -> bool:
+        return any(torch.is_tensor(x) and x.requires_grad for x in (self.delay, self.goal_accel))
+
+    def _profiled(self) -> torch.Tensor:
+        rows = torch.arange(len(self.q_cmd), device=self.device)
+        return profile_goals(delay_commands(self.q_cmd, rows, self.first, self.delay), self.first, self.goal_accel)
+
     def target(self, rows: torch.Tensor) -> torch.Tensor:
-        """PD targets (delayed commands) at ``rows`` [rad], shape rows.shape + (n,)."""
+        """PD targets (delayed commands, servo goals after their profile) at ``rows`` [rad], shape rows.shape + (n,)."""
         if self._fixed is not None:
             return self._fixed[rows]
+        if self.goal_accel is not None:
+            return self._profiled()[rows]
         return delay_commands(self.q_cmd, rows, self.first[rows], self.delay)
 
     def rows(self, traj: torch.Tensor, start: torch.Tensor, steps: int) -> torch.Tensor:

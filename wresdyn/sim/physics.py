@@ -12,6 +12,9 @@ field                     shape, unit                model array (per world)
 ``friction``              (n,) N·m                   ``joint_friction`` (dry friction with stiction)
 ``effort``                (n,) N·m                   ``joint_effort_limit`` (the drive saturates there)
 ``delay``                 (n,) s                     the command path (:class:`~wresdyn.sim.bank.TrajectoryBank`)
+``deadband``              (n,) rad                   ``joint_servo_deadband`` (servo joints: dead band b)
+``noload_speed``          (n,) rad/s                 ``joint_servo_noload_speed`` (servo joints: motor w0)
+``goal_accel``            (n,) rad/s²                the command path (servo joints: goal profile a_max)
 ``body_mass``             (nb,) kg                   ``body_mass``
 ``body_com``              (nb, 3) m, body frame      ``body_com``
 ``body_inertia``          (nb, 3, 3) kg·m², at com   ``body_inertia``
@@ -20,8 +23,12 @@ field                     shape, unit                model array (per world)
 :class:`~wresdyn.robot.physical.PhysicalParams` holds the values (numpy, float64) and reads/writes them as JSON
 (never a pickle); :class:`PhysicsModel` is the torch module that produces them from unconstrained coordinates:
 
-- gains, armature, mass: ``nominal · exp(u)`` (positive, scale-free steps);
-- damping, friction, effort and delay: ``reference · u`` with ``u`` projected onto ``u ≥ 0``
+On a servo joint (:mod:`wresdyn.robot.servo`) ``kp``, ``kd`` are the servo's position-loop gains in torque units and
+``effort`` its stall torque U; the servo law reads the three servo fields, which PD joints ignore.
+
+- gains, armature, mass, no-load speed, goal acceleration: ``nominal · exp(u)`` (positive, scale-free steps; a
+  nominal 0 stays 0: no torque-speed line, no profile);
+- damping, friction, effort, delay and dead band: ``reference · u`` with ``u`` projected onto ``u ≥ 0``
   (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
 - each link's mass, centre of mass and inertia through the log-Cholesky factor of its 4×4 pseudo-inertia
   ``J = [[Σ, h], [hᵀ, m]] = U Uᵀ`` (Rucker & Wensing 2022), ``Σ = ∫ r rᵀ dm`` about the body origin and
@@ -34,15 +41,22 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..robot.physical import BODY_FIELDS, JOINT_FIELDS, PhysicalParams, PhysicsError
+from ..robot.physical import BODY_FIELDS, JOINT_FIELDS, SERVO_FIELDS, PhysicalParams, PhysicsError
 
-__all__ = ["JOINT_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsModel", "PhysicsError", "pseudo_inertia",
-           "from_pseudo_inertia"]
+__all__ = ["JOINT_FIELDS", "SERVO_FIELDS", "BODY_FIELDS", "PhysicalParams", "PhysicsModel", "PhysicsError",
+           "pseudo_inertia", "from_pseudo_inertia"]
 
 MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "joint_armature",
                 "damping": "joint_damping", "friction": "joint_friction", "effort": "joint_effort_limit",
                 "body_mass": "body_mass", "body_com": "body_com", "body_inertia": "body_inertia"}
 """Newton model array of each field (``delay`` is the command path's, not the model's)."""
+SERVO_ARRAYS = {"deadband": "joint_servo_deadband", "noload_speed": "joint_servo_noload_speed"}
+"""Model array of each servo field, present on models of robots with servo joints
+(:func:`wresdyn.robot.servo.attach_servo`; ``goal_accel`` is the command path's)."""
+DEADBAND_REF = 0.01
+"""Unit of the dead band's coordinate [rad] (the SO-101's joints stop 8-36 mrad short of a target)."""
+_LOG_FIELDS = ("kp", "kd", "armature", "noload_speed", "goal_accel")
+"""Joint fields with the coordinate ``nominal · exp(u)``."""
 
 
 def pseudo_inertia(mass, com, inertia):
@@ -86,7 +100,8 @@ class PhysicsModel(torch.nn.Module):
         robot: The robot (nominal values, names, which bodies move).
         start: Values to start from (default the robot's nominal ones); the exp-parametrised fields are
             relative to them, the linear ones measured in the reference units below.
-        fit: Fields to fit (default all of :data:`JOINT_FIELDS` and ``"bodies"``); the others stay at ``start``.
+        fit: Fields to fit (default all of :data:`JOINT_FIELDS` and ``"bodies"``; :data:`SERVO_FIELDS` only when
+            named); the others stay at ``start``.
         dt: Sample period [s]; the delay's unit.
     """
 
@@ -127,10 +142,18 @@ class PhysicsModel(torch.nn.Module):
         self.register_buffer("start_mass", torch.as_tensor(start.body_mass, **f64))
         self.register_buffer("start_com", torch.as_tensor(start.body_com, **f64))
         self.register_buffer("start_inertia", torch.as_tensor(start.body_inertia, **f64))
+        # the servo fields last: a robot without servos keeps the parameter order it had before they existed
+        self.ref["deadband"] = np.full(n, DEADBAND_REF)
+        self.register_buffer("ref_deadband", torch.as_tensor(self.ref["deadband"], **f64))
+        self.register_parameter("u_deadband", torch.nn.Parameter(torch.as_tensor(start.deadband / DEADBAND_REF, **f64),
+                                                                 "deadband" in self.fit))
+        for f in ("noload_speed", "goal_accel"):
+            self.register_buffer(f"start_{f}", torch.as_tensor(getattr(start, f), **f64))
+            self.register_parameter(f"u_{f}", torch.nn.Parameter(torch.zeros(n, **f64), f in self.fit))
 
     def forward(self) -> dict[str, torch.Tensor]:
         """Current values, float64 tensors named as :class:`PhysicalParams` fields (delay in seconds)."""
-        out = {f: getattr(self, f"start_{f}") * torch.exp(getattr(self, f"u_{f}")) for f in ("kp", "kd", "armature")}
+        out = {f: getattr(self, f"start_{f}") * torch.exp(getattr(self, f"u_{f}")) for f in _LOG_FIELDS}
         for f in self.ref:
             out[f] = getattr(self, f"ref_{f}") * getattr(self, f"u_{f}")
         nm = len(self.moving)
@@ -152,15 +175,18 @@ class PhysicsModel(torch.nn.Module):
 
     @torch.no_grad()
     def assign(self, field: str, value, keep=None) -> None:
-        """Set a joint field (:data:`JOINT_FIELDS`) to ``value`` (n,) [SI]: the inverse of :meth:`forward` on its
-        coordinates. Joints where ``keep`` (n,) bool is true, or where ``value`` is not finite, keep their value."""
+        """Set a joint field (:data:`JOINT_FIELDS`, :data:`SERVO_FIELDS`) to ``value`` (n,) [SI]: the inverse of
+        :meth:`forward` on its coordinates. Joints where ``keep`` (n,) bool is true, where ``value`` is not finite, or
+        where a log-scale field starts at 0, keep their value."""
         u = getattr(self, f"u_{field}")
         v = torch.as_tensor(np.asarray(value, dtype=np.float64), device=u.device)
+        hold = ~torch.isfinite(v)
         if field in self.ref:  # linear: value = ref * u
             new = v / getattr(self, f"ref_{field}")
-        else:  # exp-parametrised (gains, armature): value = start * exp(u)
-            new = torch.log(v / getattr(self, f"start_{field}"))
-        hold = ~torch.isfinite(v)
+        else:  # exp-parametrised (gains, armature, servo speeds): value = start * exp(u); a start of 0 stays 0
+            start = getattr(self, f"start_{field}")
+            new = torch.log(v / start)
+            hold |= start == 0
         if keep is not None:
             hold |= torch.as_tensor(np.asarray(keep, dtype=bool), device=u.device)
         u.copy_(torch.where(hold, u, new))
@@ -168,6 +194,11 @@ class PhysicsModel(torch.nn.Module):
     def delay_steps(self) -> torch.Tensor:
         """The delay in sample periods, (n,) float64 (what :class:`~wresdyn.sim.bank.TrajectoryBank` takes)."""
         return self.ref_delay * self.u_delay / self.dt
+
+    def goal_accel_steps(self) -> torch.Tensor:
+        """The servo goal acceleration in rad per sample period², (n,) float64 (what
+        :meth:`~wresdyn.sim.bank.TrajectoryBank.set_goal_accel` takes; 0: no profile)."""
+        return self.start_goal_accel * torch.exp(self.u_goal_accel) * self.dt ** 2
 
     def values(self) -> PhysicalParams:
         """The current values as :class:`PhysicalParams` (numpy)."""
@@ -178,7 +209,7 @@ class PhysicsModel(torch.nn.Module):
     def prior(self) -> torch.Tensor:
         """Squared distance of the coordinates from the start, in their own units (a weak prior for what the
         data cannot tell apart, e.g. the mass of a link against its centre of mass along the joint axis)."""
-        terms = [getattr(self, f"u_{f}") ** 2 for f in ("kp", "kd", "armature") if f in self.fit]
+        terms = [getattr(self, f"u_{f}") ** 2 for f in _LOG_FIELDS if f in self.fit]
         if "bodies" in self.fit:
             terms.append((self.u_body_logdiag - self.u0_body_logdiag) ** 2)
             scale = torch.exp(self.u0_body_logdiag).amax(-1, keepdim=True)  # off-diagonals relative to the factor

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ..errors import SimulationDiverged
-from .bank import TrajectoryBank, Window
+from .bank import TrajectoryBank, Window, servo_goal_accel
 from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .simulator import DivergenceLimits, Simulator
@@ -228,15 +228,17 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
         sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device)
     pw = slice(groups.index("residual") * w, (groups.index("residual") + 1) * w) if len(groups) == 2 else None
     if physics is None:
-        window = TrajectoryBank(trajectories, sim.device, delay).whole().repeat(len(groups))
+        accel = servo_goal_accel(robot, None, 1.0 / rate_hz, sim.device)
+        window = TrajectoryBank(trajectories, sim.device, delay, accel).whole().repeat(len(groups))
     else:
         mw = slice(None) if pw is None else pw
         if pw is not None:
             sim.set_physics(PhysicalParams.nominal(robot), worlds=slice(0, w))
         sim.set_physics(physics, worlds=mw)
         model_delay = torch.as_tensor(np.asarray(physics.delay) * rate_hz, dtype=torch.float32, device=sim.device)
-        parts = ([TrajectoryBank(trajectories, sim.device, delay).whole()] if pw is not None else []) + \
-            [TrajectoryBank(trajectories, sim.device, model_delay).whole()]
+        nominal_accel, model_accel = (servo_goal_accel(robot, p, 1.0 / rate_hz, sim.device) for p in (None, physics))
+        parts = ([TrajectoryBank(trajectories, sim.device, delay, nominal_accel).whole()] if pw is not None else []) \
+            + [TrajectoryBank(trajectories, sim.device, model_delay, model_accel).whole()]
         window = Window(*(torch.cat([getattr(p, f) for p in parts]) for f in ("q", "qd", "qdd", "cmd", "target",
                                                                                "length")))
     with torch.no_grad():

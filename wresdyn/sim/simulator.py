@@ -30,7 +30,7 @@ import torch
 
 from ..errors import SimulationDiverged
 from ..robot.ground import base_index
-from .physics import MODEL_ARRAYS, PhysicalParams
+from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
@@ -100,6 +100,9 @@ class Simulator:
             raise ValueError(f"{robot.source.name}: SolverMuJoCo is not differentiable; gradients need the replay "
                              "or featherstone solver (add armature so explicit PD is stable)"
                              + ("; a ground needs SolverMuJoCo" if self.ground else ""))
+        if getattr(robot, "servo", None) is not None and self.solver_kind != "replay":
+            raise ValueError(f"{robot.source.name}: servo drives (drive = \"servo\") run on the replay solver only, "
+                             f"not {self.solver_kind}")
         self.requires_grad = bool(requires_grad)
         self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
                                        contact=contact)
@@ -137,7 +140,7 @@ class Simulator:
         (DoFs of the actuated joints selected by the caller), (W, nb[, 3[, 3]]) for body fields."""
         import warp as wp
 
-        a = getattr(self.model, MODEL_ARRAYS[field])
+        a = getattr(self.model, MODEL_ARRAYS.get(field) or SERVO_ARRAYS[field])
         t = wp.to_torch(a.grad if grad else a, requires_grad=False)
         return t.view(self.n_worlds, -1, *t.shape[1:]) if field.startswith("body_") else t.view(self.n_worlds, -1)
 
@@ -151,14 +154,15 @@ class Simulator:
         worlds (e.g. a nominal baseline next to a calibrated model in one batch; no gradients then).
         """
 
+        arrays = MODEL_ARRAYS if getattr(self.robot, "servo", None) is None else {**MODEL_ARRAYS, **SERVO_ARRAYS}
         if isinstance(values, PhysicalParams):
             values.check(self.robot)
-            values = {f: torch.as_tensor(getattr(values, f)) for f in MODEL_ARRAYS}
+            values = {f: torch.as_tensor(getattr(values, f)) for f in arrays}
         self._physics = {}
         w = slice(None) if worlds is None else worlds
         with torch.no_grad():
             for f, v in values.items():
-                if f not in MODEL_ARRAYS:
+                if f not in arrays:
                     continue
                 v32 = v.detach().to(self.device, torch.float32)
                 if f == "effort":

@@ -10,7 +10,7 @@ to carry gradients.
 One world step (see :mod:`wresdyn.sim.solver_replay.solver` for the equation):
 
 1. FK, RNEA bias ``c(q, qd)``, CRBA ``M(q)`` (:func:`~.dynamics.dynamics`);
-2. drive, passive and limit torques, and the implicit diagonal;
+2. drive (PD or servo, chosen per DoF: :func:`_servo_drive`), passive and limit torques, and the implicit diagonal;
 3. the frictionless velocity ``v* = qd + dt H^-1 rhs`` (:func:`~.dynamics.solve_ltdl`);
 4. dry friction: Gauss-Seidel sweeps on ``min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i)``
    (:func:`_friction`);
@@ -42,15 +42,21 @@ class LiveParams:
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
+_SERVO_PARAMS = ("sdb", "sw0")
+"""Per-DoF arrays the kernels of a robot with servo drives also read: dead band, no-load speed."""
 _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
 
-def _load_params(e: Emitter, tree: ReplayTree, friction: np.ndarray) -> dict:
-    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) only where ``friction``."""
+def _load_params(e: Emitter, tree: ReplayTree, friction: np.ndarray, servo: np.ndarray | None = None) -> dict:
+    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) only where ``friction``,
+    the servo arrays only where ``servo``."""
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
+    for name in _SERVO_PARAMS if servo is not None else ():
+        out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") if servo[k] else None
+                     for k in range(tree.n_dof)]
     out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction[k] else None for k in range(tree.n_dof)]
     return out
 
@@ -128,23 +134,54 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
     return v
 
 
+def _servo_drive(e: Emitter, ke, kd, eff, db, w0, q, qd, tq, tqd) -> tuple[str, str, str]:
+    """The servo law of :mod:`wresdyn.robot.servo` for one DoF: (torque, its velocity derivative's magnitude
+    ``d``, its position derivative's magnitude ``k``), ``d``/``k`` 0 where a clamp is saturated (and ``k`` inside
+    the dead band)::
+
+        e_b = e - clamp(e, -b, b),  u = clamp(ke e_b + kd (qd* - qd), -U, U),  tau = clamp(u - (U / w0) qd, -U, U)
+
+    ``U`` the effort limit (here finite), ``w0 = 0``: no torque-speed line."""
+    err = e.let(f"{tq} - {q}")
+    err_b = e.let(f"{err} - wp.clamp({err}, -{db}, {db})")
+    raw = e.let(f"{ke} * {err_b} + {kd} * ({tqd} - {qd})")
+    duty = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
+    w0_safe = e.let(f"wp.where({w0} > S(0.0), {w0}, S(1.0))")  # no division by 0 in the branch not taken
+    emf = e.let(f"wp.where({w0} > S(0.0), {eff} / {w0_safe}, S(0.0))")
+    out = e.let(f"{duty} - {emf} * {qd}")
+    tau = e.let(f"wp.clamp({out}, -{eff}, {eff})")
+    free_u = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")
+    free_t = e.let(f"wp.where(wp.abs({out}) < {eff}, S(1.0), S(0.0))")
+    outside = e.let(f"wp.where(wp.abs({err}) > {db}, S(1.0), S(0.0))")
+    return tau, e.let(f"{free_t} * ({free_u} * {kd} + {emf})"), e.let(f"{free_t} * {free_u} * {outside} * {ke}")
+
+
 def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, jf, g,
-          sweeps: int, friction: np.ndarray) -> tuple[list, list]:
-    """Emit one world step; returns the new (q, qd) symbols."""
+          sweeps: int, friction: np.ndarray, servo: np.ndarray | None = None) -> tuple[list, list]:
+    """Emit one world step; returns the new (q, qd) symbols. DoFs where ``servo`` get the servo law."""
     n = tree.n_dof
     bias, m_diag, m_off = dynamics(e, tree, groups, q, qd, g)
     rhs, h_diag = [], []
     for k in range(n):
         e.mark(f"dof {k}: drive, passive and limit torques; implicit diagonal")
         ke, kd, arm, _, damp, eff, lo, hi, lke, lkd = (p[name][k] for name in _PARAMS)
-        raw = e.let(f"{ke} * ({tq[k]} - {q[k]}) + {kd} * ({tqd[k]} - {qd[k]})")
-        eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")  # importers write 0 for "no limit"
-        pd = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
-        free = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")  # saturated: no velocity derivative
+        if servo is not None and servo[k]:
+            eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")
+            pd, drive_d, drive_k = _servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], q[k], qd[k], tq[k], tqd[k])
+            free = None
+        else:
+            raw = e.let(f"{ke} * ({tq[k]} - {q[k]}) + {kd} * ({tqd[k]} - {qd[k]})")
+            eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")  # importers write 0 for "no limit"
+            pd = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
+            free = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")  # saturated: no velocity derivative
         viol = e.let(f"wp.where({q[k]} < {lo}, {lo} - {q[k]}, wp.where({q[k]} > {hi}, {hi} - {q[k]}, S(0.0)))")
         on = e.let(f"wp.where({q[k]} < {lo}, S(1.0), wp.where({q[k]} > {hi}, S(1.0), S(0.0)))")
-        damp_k = e.let(f"{free} * {kd} + {damp} + {on} * {lkd}")
-        stiff_k = e.let(f"kp_implicit * {free} * {ke} + {on} * {lke}")
+        if free is None:
+            damp_k = e.let(f"{drive_d} + {damp} + {on} * {lkd}")
+            stiff_k = e.let(f"kp_implicit * {drive_k} + {on} * {lke}")
+        else:
+            damp_k = e.let(f"{free} * {kd} + {damp} + {on} * {lkd}")
+            stiff_k = e.let(f"kp_implicit * {free} * {ke} + {on} * {lke}")
         rhs.append(e.let(
             f"{pd} + {jf[k]} - {e.sym(bias[k])} - {damp} * {qd[k]} + {lke} * {viol}"
             f" - {on} * {lkd} * {qd[k]} - dt * {stiff_k} * {qd[k]}"
@@ -167,8 +204,13 @@ V3 = wp.vec3{suffix}
 M33 = wp.mat33{suffix}
 '''
 
-_PARAM_ARGS = (", ".join(f"{name}: wp.array(dtype=S)" for name in _PARAMS)
-               + ", body_mass: wp.array(dtype=S), body_com: wp.array(dtype=V3), body_inertia: wp.array(dtype=M33)")
+def _param_args(servo: bool) -> str:
+    """The parameter arrays' kernel arguments, in the order of the solver's ``_params``."""
+    names = (*_PARAMS, *(_SERVO_PARAMS if servo else ()))
+    return (", ".join(f"{name}: wp.array(dtype=S)" for name in names)
+            + ", body_mass: wp.array(dtype=S), body_com: wp.array(dtype=V3), body_inertia: wp.array(dtype=M33)")
+
+
 _GRAVITY = ["g = gravity[w]", "gx = g[0]", "gy = g[1]", "gz = g[2]"]
 
 _FLAT = {"q": "joint_q[bq + {}]", "qd": "joint_qd[bd + {}]", "tq": "target_q[bd + {}]",
@@ -180,7 +222,7 @@ _TIME_MAJOR = {"q": "q[t, w, {}]", "qd": "qd[t, w, {}]", "tq": "target_q[t, w, {
 """Array accesses of the rollout kernel (time, world, coordinate)."""
 
 
-def _step_code(tree: ReplayTree, access: dict, sweeps: int, live: LiveParams | None
+def _step_code(tree: ReplayTree, access: dict, sweeps: int, live: LiveParams | None, servo: np.ndarray | None = None
                ) -> tuple[list[str], list[str], list[str], list[str]]:
     """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores)."""
     n = tree.n_dof
@@ -188,21 +230,22 @@ def _step_code(tree: ReplayTree, access: dict, sweeps: int, live: LiveParams | N
     do = [int(x) for x in tree.qd_offset]
     e = Emitter()
     friction = np.ones(n, bool) if live is None else live.friction
-    p = _load_params(e, tree, friction & (sweeps > 0))
+    p = _load_params(e, tree, friction & (sweeps > 0), servo)
     groups = inertial_params(e, tree, None if live is None else live.body)
     params, e.lines = unmarked(e.lines) + _GRAVITY, []
     q = [e.let(access["q"].format(co[k]), prefix="q_") for k in range(n)]
     qd, tq, tqd, jf = ([e.let(access[kind].format(do[k]), prefix=f"{kind}_") for k in range(n)]
                        for kind in ("qd", "tq", "tqd", "jf"))
     loads, e.lines = e.lines, []
-    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, friction)
+    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, friction, servo)
     stores = [f"{access['q_out'].format(co[k])} = {qn[k]}" for k in range(n)]
     stores += [f"{access['qd_out'].format(do[k])} = {qdn[k]}" for k in range(n)]
     return params, loads, e.lines, stores
 
 
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
-                    inline: bool | None = False, friction_sweeps: int = 4, live: LiveParams | None = None) -> str:
+                    inline: bool | None = False, friction_sweeps: int = 4, live: LiveParams | None = None,
+                    servo: np.ndarray | None = None) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
@@ -213,12 +256,15 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     adjoint; its code is cut into functions with the given ``inline`` hint (see :func:`~.emit.outline`).
     ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`_friction`); 0 leaves the
     friction code out. ``live`` (default: everything) names the parameters the kernels read; the others
-    are folded as 0.
+    are folded as 0. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
+    kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
     """
     n = tree.n_dof
+    servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
+    param_args = _param_args(servo is not None)
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
 
-    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, live)
+    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, live, servo)
     if backward:
         external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
         funcs, compute = outline(compute, "step_part", inline, stores, external)
@@ -227,7 +273,7 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
 @wp.kernel(enable_backward={backward}, module="unique")
 def replay_step(
     world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, fric_m0: wp.array(dtype=S),
-    {_PARAM_ARGS}, gravity: wp.array(dtype=V3),
+    {param_args}, gravity: wp.array(dtype=V3),
     joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
     target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),
     joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),
@@ -239,12 +285,12 @@ def replay_step(
 {indent(params + loads + unmarked(compute) + stores, 1)}
 ''')
 
-    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, live)
+    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, live, servo)
     src.append(f'''
 @wp.kernel(enable_backward=False, module="unique")
 def replay_rollout(
     world_start: int, n_steps: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S,
-    fric_m0: wp.array(dtype=S), {_PARAM_ARGS},
+    fric_m0: wp.array(dtype=S), {param_args},
     gravity: wp.array(dtype=V3), target_q: wp.array3d(dtype=S), target_qd: wp.array3d(dtype=S),
     joint_f: wp.array3d(dtype=S),
     q: wp.array3d(dtype=S), qd: wp.array3d(dtype=S),

@@ -20,11 +20,23 @@ differentiable by Warp's Tape. One step, with ``H`` the matrix the kernel factor
 - ``tau_pd = clamp(ke (q* - q) + kd (qd* - qd), -effort, effort)``, the position actuator of eq. (1)
   of the paper (``Model.joint_target_ke/kd``, ``joint_effort_limit`` with 0 meaning unlimited,
   ``Control.joint_target_q/qd``).
+- On a DoF whose drive is a smart servo (``Model.joint_servo`` 1, set by
+  :func:`wresdyn.robot.servo.attach_servo`; chosen when the kernels are generated, so PD DoFs compile to the
+  same code as without servos), ``tau_pd`` is the servo law instead, in SI units::
+
+      e_b = e - clamp(e, -b, b),  e = q* - q                        dead band b [rad] (soft threshold)
+      u   = clamp(ke e_b + kd (qd* - qd), -U, U)                    duty in torque units [N m], U = effort
+      tau = clamp(u - (U / w0) qd, -U, U)                           DC motor line, no-load speed w0 [rad/s]
+
+  (``b = Model.joint_servo_deadband``, ``w0 = Model.joint_servo_noload_speed``, 0: no line; ``q*`` is the goal
+  after the servo's acceleration profile, which the command path applies: :mod:`wresdyn.sim.bank`).
 - ``D``: velocity derivatives treated implicitly, as MuJoCo's ``implicitfast`` integrator does:
-  drive ``kd`` while the drive is not saturated (a clamped force has no velocity derivative),
-  passive damping ``d`` (``Model.joint_damping``) and the limit damping.
+  drive ``kd`` while the drive is not saturated (a clamped force has no velocity derivative; a servo's
+  ``kd + U / w0`` while neither its duty nor its torque is clamped), passive damping ``d`` (``Model.joint_damping``)
+  and the limit damping.
 - ``K``: position derivatives treated implicitly: the joint-limit stiffness always, the drive ``ke``
-  only with ``implicit_stiffness=True`` (off by default to match ``implicitfast``).
+  only with ``implicit_stiffness=True`` (off by default to match ``implicitfast``; a servo's only outside its
+  dead band).
 - ``tau_lim``: penalty ``limit_ke * violation - limit_kd * qd`` outside ``[lower, upper]``
   (``Model.joint_limit_*``); unlike Newton's semi-implicit convention the drive stays on at a limit.
 - ``joint_f``: the residual torque ``tau_res`` of eq. (1), added unclamped.
@@ -89,12 +101,14 @@ FRICTION_SWEEPS = 8
 _JOINT_PARAMS = ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_damping",
                  "joint_effort_limit", "joint_limit_lower", "joint_limit_upper", "joint_limit_ke", "joint_limit_kd")
 """Per-DoF model arrays the kernels read, in the order of their arguments."""
+_SERVO_PARAMS = ("joint_servo_deadband", "joint_servo_noload_speed")
+"""Per-DoF model arrays the kernels of a model with servo drives also read."""
 _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 """Per-body model arrays the kernels read."""
 
 
 def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
-                  live: LiveParams | None):
+                  live: LiveParams | None, servo: np.ndarray | None = None):
     """Generate and load (:func:`~.cache.load_module`) the kernel module for ``tree``.
 
     The step kernel's adjoint is outlined into non-inlined functions for Clang (CPU), where the whole step
@@ -102,7 +116,7 @@ def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fri
     minutes outlined at full optimisation, 45 s force-inlined), so CUDA inlines.
     """
     return load_module(generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
-                                       live=live))
+                                       live=live, servo=servo))
 
 
 class SolverReplay(SolverBase):
@@ -190,6 +204,7 @@ class SolverReplay(SolverBase):
     # ------------------------------------------------------------------ set-up
     def _build(self) -> None:
         self.tree: ReplayTree = tree_from_model(self.model)
+        self.servo = self._servo_dofs()
         self._load()
         self._m0 = self._reference_inertia()
 
@@ -205,12 +220,23 @@ class SolverReplay(SolverBase):
         dt = np.float64 if self.dtype == wp.float64 else np.float32
         return wp.array((1.0 / np.diag(inv)).astype(dt), dtype=self.dtype, device=self.model.device)
 
+    def _servo_dofs(self) -> np.ndarray | None:
+        """Which DoFs of a world (in DoF order) have a servo drive (``Model.joint_servo``), or None for none."""
+        flags = getattr(self.model, "joint_servo", None)
+        if flags is None:
+            return None
+        tr = self.tree
+        per_world = flags.numpy().reshape(tr.world_count, tr.dofs_per_world)[:, tr.qd_offset] != 0
+        if not (per_world == per_world[:1]).all():
+            raise ValueError("SolverReplay: every world needs the same servo joints (Model.joint_servo)")
+        return per_world[0] if per_world[0].any() else None
+
     def _load(self) -> None:
         scalar = "float64" if self.dtype == wp.float64 else "float32"
         self._live = self._live_params()
         sweeps = self.friction_sweeps if self.friction_kappa != 0.0 else 0  # kappa = 0: no friction at all
         self.kernels = _load_kernels(self.tree, scalar, self.requires_grad, self.model.device.is_cuda, sweeps,
-                                     self._live)
+                                     self._live, self.servo)
         self._refresh_params()
 
     def _live_params(self) -> LiveParams | None:
@@ -229,7 +255,8 @@ class SolverReplay(SolverBase):
     def _refresh_params(self) -> None:
         self._plans.clear()  # recorded launches hold the parameter arrays
         m = self.model
-        names = (*_JOINT_PARAMS, *_BODY_PARAMS, "gravity")
+        joint = (*_JOINT_PARAMS, *(_SERVO_PARAMS if self.servo is not None else ()))
+        names = (*joint, *_BODY_PARAMS, "gravity")
         if self.dtype == wp.float32:
             self.parameters = {n: getattr(m, n) for n in names}
         else:
@@ -239,7 +266,7 @@ class SolverReplay(SolverBase):
                             requires_grad=self.requires_grad and n != "gravity")
                 for n in names
             }
-        self._params = [self.parameters[n] for n in (*_JOINT_PARAMS, *_BODY_PARAMS)]
+        self._params = [self.parameters[n] for n in (*joint, *_BODY_PARAMS)]
         self._gravity = self.parameters["gravity"]
 
     def notify_model_changed(self, flags: int) -> None:

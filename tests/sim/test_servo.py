@@ -1,0 +1,246 @@
+"""Servo drives in SolverReplay (issue 30): selection per joint, the law against its numpy form, gradients of the
+new fields against central finite differences (float64, the set-up of ``test_replay_gradients.py``), the goal
+profile in torch against numpy, and the parameter file round trip.
+"""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import warp as wp
+from test_replay_gradients import ATOL, DT, RTOL, N, Problem, T, W, check, random_inputs
+from test_solver_replay import TRI_URDF
+
+from wresdyn.robot.description import load_robot
+from wresdyn.robot.physical import PhysicalParams
+from wresdyn.robot.servo import GoalProfile, read_servo, servo_torque
+from wresdyn.sim.bank import profile_goals
+from wresdyn.sim.solver_replay import SolverReplay
+from wresdyn.sim.solver_replay.codegen import generate_source
+from wresdyn.errors import RobotError
+
+SERVO = {"drive": "servo", "deadband": 0.05, "noload_speed": 10.0, "goal_accel": 40.0}
+"""Servo settings of the test robot's revolute joints: a dead band the 0.2 rad targets leave, a torque-speed line
+(U / w0 = 2 N m s/rad) that matters against kp = 30."""
+
+
+def make_robot(tmp_path, effort=20.0, joints="*"):
+    path = tmp_path / "tri.urdf"
+    path.write_text(TRI_URDF)
+    gains = {"joint": [{"match": "*", "kp": 30.0, "kd": 1.0, "armature": 0.01, "damping": 0.2, "friction": 0.3,
+                        "effort": effort},
+                       {"match": joints, **SERVO}]}
+    return load_robot(path, gains=gains)
+
+
+def test_selection_per_joint(tmp_path):
+    robot = make_robot(tmp_path, joints="elbow")
+    assert robot.servo.mask.tolist() == [False, True, False]
+    assert robot.servo.deadband.tolist() == [0.0, 0.05, 0.0]
+    model = robot.build_model(2, "cpu")
+    assert model.joint_servo.numpy().tolist() == [0, 1, 0, 0, 1, 0]
+    assert make_robot(tmp_path, joints="*").servo.mask.all()
+    p = PhysicalParams.nominal(robot)
+    assert p.noload_speed.tolist() == [0.0, 10.0, 0.0]
+    with pytest.raises(RobotError, match="drive"):
+        read_servo({"joint": [{"match": "*", "drive": "bam"}]}, ["a"], [1.0])
+    with pytest.raises(RobotError, match="effort"):
+        read_servo({"joint": [{"match": "*", "drive": "servo"}]}, ["a"], [np.inf])
+    assert read_servo({"joint": [{"match": "*", "kp": 1.0}]}, ["a"], [1.0]) is None
+
+
+def test_pd_robot_source_unchanged(tmp_path):
+    """A model without servo joints generates the source it did before servos existed: no new arguments or
+    statements (the bit-for-bit guarantee for PD robots)."""
+    from wresdyn.sim.solver_replay.tree import tree_from_model
+
+    path = tmp_path / "tri.urdf"
+    path.write_text(TRI_URDF)
+    tree = tree_from_model(load_robot(path, gains={"joint": [{"match": "*", "kp": 30.0}]}).build_model(1, "cpu"))
+    pd = generate_source(tree)
+    assert pd == generate_source(tree, servo=np.zeros(N, bool))
+    assert "sdb" not in pd and "sdb" in generate_source(tree, servo=np.array([False, True, False]))
+
+
+def test_one_step_matches_the_law(tmp_path):
+    """One float64 step without dry friction against the law written in numpy (:func:`servo_torque`) and the step of
+    the solver's docstring: ``H (v - qd) = dt (tau - c - d qd)``, ``H = M + A + dt D``, ``D`` the servo's
+    ``kd + U / w0`` plus the passive damping, once with the errors outside the dead band and once inside."""
+    robot = make_robot(tmp_path, joints="*")
+    solver = SolverReplay(robot.build_model(1, "cpu"), dtype=wp.float64, friction_kappa=0.0)
+    q0, qd0 = np.array([0.1, -0.2, 0.02]), np.array([0.5, -0.3, 0.1])
+    # the model stores its parameters in float32: the reference uses the same numbers
+    kp, kd, db, eff, w0, damp, arm = (float(np.float32(x)) for x in (30.0, 1.0, 0.05, 20.0, 10.0, 0.2, 0.01))
+    mass, bias = solver.dynamics_terms(q0, qd0)
+    for tq in (np.array([0.3, -0.5, 0.1]), np.array([0.12, -0.21, 0.0])):  # outside / inside the dead band
+        q = wp.array(np.stack([q0, np.zeros(N)])[:, None], dtype=wp.float64)
+        qd = wp.array(np.stack([qd0, np.zeros(N)])[:, None], dtype=wp.float64)
+        solver.rollout(q, qd, wp.array(tq[None, None], dtype=wp.float64), DT)
+        tau = servo_torque(tq, q0, qd0, kp, kd, db, eff, w0)
+        assert (np.abs(tau) < eff).all()  # neither clamp saturated: D = kd + U / w0
+        h = mass[0] + np.diag(np.full(N, arm + DT * (kd + eff / w0 + damp)))
+        expected = qd0 + DT * np.linalg.solve(h, tau - bias[0] - damp * qd0)
+        np.testing.assert_allclose(qd.numpy()[1, 0], expected, rtol=1e-10, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def servo_problem(tmp_path_factory):
+    """Two of three joints servos (elbow a PD drive): sliding friction, unsaturated drives, targets 0.2 rad off so
+    the error leaves the 0.05 rad dead band."""
+    robot = make_robot(tmp_path_factory.mktemp("servo"), joints="[ss]*")
+    assert robot.servo.mask.tolist() == [True, False, True]
+    return Problem(robot, *random_inputs(0, qd_scale=2.0, target_scale=0.2))
+
+
+SERVO_ENTRIES = [(name, (k,)) for name in ("joint_servo_deadband", "joint_servo_noload_speed", "joint_target_ke",
+                                            "joint_target_kd", "joint_effort_limit", "joint_damping") for k in (0, 5)]
+"""The servo fields and the reused ones on the shoulder (world 0) and the slide (world 1)."""
+
+
+def test_servo_parameter_gradients(servo_problem):
+    grads = servo_problem.gradients()
+    check(servo_problem, SERVO_ENTRIES + [("joint_target_ke", (4,)), ("tq", (0, 0, 0)), ("q0", (1, 2))], grads)
+    assert all(abs(grads[name][idx]) > 1e-6 for name, idx in SERVO_ENTRIES if name != "joint_effort_limit")
+    # the elbow is a PD drive: its servo entries are not read
+    assert grads["joint_servo_deadband"][[1, 4]].tolist() == [0.0, 0.0]
+    assert grads["joint_servo_noload_speed"][[1, 4]].tolist() == [0.0, 0.0]
+
+
+def test_saturated_servo_effort_gradient(tmp_path):
+    """Targets 1 rad off with kp = 30 against a 2 N m stall torque: the duty saturates, the effort limit moves the
+    torque both as U and through the torque-speed line U / w0."""
+    robot = make_robot(tmp_path, effort=2.0, joints="*")
+    q0, qd0, _, jf = random_inputs(2, qd_scale=0.5, target_scale=0.0)
+    targets = np.broadcast_to(q0 + np.array([1.0, -1.0, 0.3]), (T, W, N)).copy()
+    problem = Problem(robot, q0, qd0, targets, jf)
+    grads = problem.gradients()
+    check(problem, [("joint_effort_limit", (0,)), ("joint_effort_limit", (4,)), ("joint_servo_noload_speed", (0,))],
+          grads)
+    assert abs(grads["joint_effort_limit"][0]) > 1e-6
+
+
+def test_goal_profile_torch_matches_numpy():
+    """The bank's differentiable profile (torch, whole trajectories) is the MuJoCo robot's (numpy, step by step);
+    a joint with a_max = 0 follows its command."""
+    rng = np.random.default_rng(0)
+    cmd = np.cumsum(rng.normal(scale=0.02, size=(300, 3)), 0)
+    cmd[100:] += 0.5
+    accel = np.array([39.0, 0.0, 10.0])
+    dt = 0.002
+    profile = GoalProfile(accel, dt, cmd[0])
+    expected = np.array([profile(c) for c in cmd])
+    table = torch.tensor(np.concatenate([cmd, cmd[:50]]))
+    first = torch.tensor([0] * 300 + [300] * 50)
+    a = torch.tensor(accel * dt * dt, requires_grad=True)
+    goals = profile_goals(table, first, a)
+    np.testing.assert_array_equal(goals[:300].detach().numpy(), expected)
+    np.testing.assert_array_equal(goals[300:].detach().numpy(), expected[:50])
+    np.testing.assert_array_equal(expected[:, 1], cmd[:, 1])
+    assert np.abs(expected[:, 0] - cmd[:, 0]).max() > 0.1  # the 0.5 rad step is profiled
+    goals.sum().backward()
+    assert a.grad[1] == 0.0 and a.grad[0] != 0.0 and torch.isfinite(a.grad).all()
+
+
+def test_physics_file_round_trip(tmp_path):
+    robot = make_robot(tmp_path, joints="*")
+    p = PhysicalParams.nominal(robot)
+    p.save(tmp_path / "p.json")
+    back = PhysicalParams.load(tmp_path / "p.json", robot)
+    for f in ("deadband", "noload_speed", "goal_accel", "kp"):
+        np.testing.assert_array_equal(getattr(back, f), getattr(p, f))
+    old = json.loads((tmp_path / "p.json").read_text())
+    for f in ("deadband", "noload_speed", "goal_accel"):
+        del old[f]
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    assert not PhysicalParams.load(tmp_path / "old.json", robot).deadband.any()
+
+
+def test_physics_model_gradients_reach_the_servo_fields(tmp_path):
+    """The fit's path: PhysicsModel coordinates of kp and the three servo fields -> the model arrays and the bank's
+    goal profile (torch) -> :meth:`Simulator.step_diff` (float32); directional derivatives against central differences
+    with the tolerance of ``test_physics.py``'s check (float32 steps)."""
+    from wresdyn.sim import Simulator, TrajectoryBank
+    from wresdyn.sim.physics import PhysicsModel
+
+    robot = make_robot(tmp_path, joints="*")
+    model = PhysicsModel(robot, fit=("kp", "deadband", "noload_speed", "goal_accel"), dt=DT)
+    b, h, t_len = 2, 8, 16
+    sim = Simulator(robot, b, DT, solver="replay", requires_grad=True, param_grads=True)
+    rng = np.random.default_rng(0)
+    traj = []
+    for i in range(b):  # a command step at sample 4: the profile is still accelerating in the window
+        cmd = np.tile(rng.uniform(-0.1, 0.1, N), (t_len, 1))
+        cmd[4:] += rng.uniform(0.2, 0.4, N) * np.array([1.0, -1.0, 0.2])
+        traj.append(type("T", (), {"q": cmd.copy(), "qd": np.zeros_like(cmd), "qdd": np.zeros_like(cmd),
+                                   "q_cmd": cmd})())
+    q_ref = torch.as_tensor(rng.uniform(-0.2, 0.2, (b, h, N)), dtype=torch.float32)
+
+    def loss():
+        bank = TrajectoryBank(traj, sim.device, 0.0, model.goal_accel_steps().float())
+        w = bank.window(torch.arange(b), torch.full((b,), 5), h)
+        sim.set_physics(model())
+        q, qd, total = w.q[:, 0], w.qd[:, 0] + 0.5, 0.0
+        for k in range(h):
+            q, qd = sim.step_diff(k, q, qd, w.target[:, k])
+            total = total + ((q - q_ref[:, k]) ** 2).sum() + 0.01 * (qd ** 2).sum()
+        return total
+
+    params = {k: p for k, p in model.named_parameters() if p.requires_grad}
+    assert set(params) == {"u_kp", "u_deadband", "u_noload_speed", "u_goal_accel"}
+    model.zero_grad()
+    loss().backward()
+    gen = torch.Generator().manual_seed(0)
+    eps = 1e-2
+    for name, p in params.items():
+        d = torch.randn(p.shape, generator=gen, dtype=p.dtype)
+        d /= d.norm()
+        with torch.no_grad():
+            p.add_(eps * d)
+            plus = float(loss())
+            p.sub_(2 * eps * d)
+            minus = float(loss())
+            p.add_(eps * d)
+        fd = (plus - minus) / (2 * eps)
+        tape = float((p.grad * d).sum())
+        assert p.grad.abs().max() > 1e-5, name
+        assert abs(tape - fd) <= 2e-2 * float(p.grad.norm()) + 1e-6, (name, tape, fd)
+
+
+PARITY_TOL = 1.5e-4, 4e-4
+"""Max |q| difference [rad or m] between SolverReplay with the true parameters and the MuJoCo servo robot at the same
+step (dt = 2 ms, 1 s), on the servo joints and on the PD elbow: both integrate the law's velocity term implicitly,
+so what is left is the two simulators' parity under dry friction (0.0003 rad on the humanoid's shipped data);
+measured 6e-5 and 2.4e-4. A servo commanded to the edge of its dead band is not a fair case: there friction alone
+decides whether it moves (a 0.05 m command against the 0.05 m band gave 0.011 m)."""
+
+
+def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path):
+    """The MuJoCo "real" robot's servo joints (elbow a PD drive): the recorded actuator torque is the law
+    (:func:`servo_torque`) at the recorded state and profiled goal, and SolverReplay replaying its true parameters
+    follows the recording (a command step, so the profile, the band and the torque-speed line all act)."""
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
+    from wresdyn.sim import replay_trajectories
+
+    robot = make_robot(tmp_path, effort=5.0, joints="[ss]*")
+    rate = 1.0 / DT
+    real = RealRobot(robot, Mismatch(), rate)
+    cmd = np.tile(np.array([0.1, -0.2, 0.05]), (500, 1))
+    cmd[50:] += np.array([0.4, 0.3, 0.15])
+    cmd[300:] -= np.array([0.2, 0.1, 0.08])
+    q, qd, tau = real.record(cmd, settle=0.0)
+    profile = GoalProfile(np.where(robot.servo.mask, robot.servo.goal_accel, 0.0), DT, cmd[0])
+    goal = np.array([profile(c) for c in cmd])
+    law = servo_torque(goal, q, qd, 30.0, 1.0, 0.05, 5.0, 10.0)
+    np.testing.assert_allclose(tau[:, [0, 2]], law[:, [0, 2]], rtol=1e-6, atol=1e-6)  # float32 model parameters
+    assert np.abs(goal[:, 0] - cmd[:, 0]).max() > 0.05  # the profile acts
+
+    truth = real.physics()
+    np.testing.assert_allclose(truth.kp, 30.0, rtol=1e-6)
+    assert truth.deadband.tolist() == [0.05, 0.0, 0.05]
+    traj = type("T", (), {"q": q, "qd": qd, "qdd": np.zeros_like(q), "q_cmd": cmd, "name": "step"})()
+    rep = replay_trajectories(robot, [traj], rate, solver="replay", physics=truth)["residual"]
+    err = np.abs(rep.q[0] - q).max(0)
+    assert err[[0, 2]].max() < PARITY_TOL[0] and err[1] < PARITY_TOL[1], err
+    assert np.abs(q - q[0]).max() > 0.3  # the joints moved

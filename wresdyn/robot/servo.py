@@ -1,0 +1,185 @@
+"""Smart-servo drives: joints whose actuator closes its own position loop (Feetech STS, Dynamixel-style servos).
+
+A servo joint is selected per joint in the gains config (``drive = "servo"``, :func:`read_servo`) and replaces the
+PD drive of eq. (1) by the servo law, in SI units, per joint (the same law in
+:mod:`wresdyn.sim.solver_replay` and in the MuJoCo "real" robot, :func:`servo_torque`)::
+
+    e    = q*_s - q                                   position error against the profiled goal [rad]
+    e_b  = e - clamp(e, -b, b)                        dead band of half-width b [rad] (soft threshold)
+    u    = clamp(kp e_b + kd (qd* - qd), -U, U)       duty in torque units [N*m], U = effort (stall torque)
+    tau  = clamp(u - (U / w0) qd, -U, U)              DC motor torque-speed line, no-load speed w0 [rad/s]
+
+Inside the band the position loop is off (the joint rests where friction, gravity and its history leave it, so
+the hysteresis lives in the mechanical state) and the soft threshold keeps a gradient in ``b``. ``w0 = 0``
+leaves the torque-speed line out. Gear friction is the joint's ``friction`` (dry) and ``damping`` (viscous).
+
+The goal q*_s is the command after the servo's acceleration profile (:class:`GoalProfile`): the internal goal
+moves toward the command with at most ``a_max`` [rad/s²], braking in time to stop on it (``a_max = 0``: the
+command itself, Feetech's "acceleration 0"). It acts on the command path, after the delay.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import RobotError
+
+__all__ = ["SERVO_KEYS", "STS3215", "GoalProfile", "ServoDrives", "attach_servo", "profile_step", "read_servo",
+           "servo_torque"]
+
+SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel")
+"""Keys of a gains config's ``[[joint]]`` table that set the drive law (the others are
+:func:`wresdyn.robot.description.apply_overrides`')."""
+
+_TICK = 2.0 * math.pi / 4096.0
+"""One encoder tick of a 12-bit servo [rad]."""
+
+
+@dataclass(frozen=True)
+class _Prior:
+    kp: float
+    kd: float
+    effort: float
+    deadband: float
+    noload_speed: float
+    goal_accel: float
+
+
+STS3215 = _Prior(
+    # duty = firmware P * error_gain * e [rad]; error_gain = 0.166 /rad per unit of P, measured with an oscilloscope
+    # by BAM (Duclusaud & Passault 2025, bam/feetech/sts3215.py); LeRobot's SO-101 follower writes P_Coefficient 16;
+    # full duty is the stall torque: kp = 16 * 0.166 * 1.91 = 5.07 N*m/rad (the arm's measured 4.6-12.3)
+    kp=16 * 0.166 * 1.91,
+    # D_Coefficient 32 on the error's change per firmware cycle, taken as 1 ms with P's scale: a guess (no
+    # published mapping), small against the motor's own back-EMF damping 1.91 / 5.45 = 0.35 N*m*s/rad
+    kd=32 * 0.166 * 1.91 * 1e-3,
+    # 7.4 V STS3215 stall torque 19.5 kg*cm (Feetech data sheet; scenes/so101/mismatch.toml)
+    effort=1.91,
+    # the CW/CCW dead zone registers' default of one tick
+    deadband=_TICK,
+    # no-load speed 0.192 s / 60 deg (52 rpm) at 7.4 V: the 19.5 kg*cm STS3215's data sheet (DFRobot SER0069 /
+    # Feetech; scenes/so101/README.md); 0.222 s / 60 deg is the 12 V, 30 kg*cm C018's
+    noload_speed=(math.pi / 3.0) / 0.192,
+    # Acceleration 254 (LeRobot's follower) in units of 100 ticks/s^2 (Feetech's control table, address 41)
+    goal_accel=254 * 100 * _TICK,
+)
+"""Priors of the 7.4 V Feetech STS3215 as LeRobot configures it on the SO-101 follower (sources inline)."""
+
+
+@dataclass(frozen=True)
+class ServoDrives:
+    """Which joints are servos and their servo-only parameters, per actuated joint in DoF order."""
+
+    mask: np.ndarray
+    """True where the joint's drive is a servo, shape (n_dof,)."""
+    deadband: np.ndarray
+    """Dead band half-width b [rad], shape (n_dof,)."""
+    noload_speed: np.ndarray
+    """Motor no-load speed w0 [rad/s] (0: no torque-speed line), shape (n_dof,)."""
+    goal_accel: np.ndarray
+    """Goal acceleration limit a_max [rad/s²] (0: no profile), shape (n_dof,)."""
+
+
+def read_servo(config: dict | None, joint_names, effort, where: str = "gains config") -> ServoDrives | None:
+    """The servo drives a gains config selects (``drive = "servo"`` in ``[[joint]]`` tables, later ones winning),
+    or ``None`` when it selects none.
+
+    ``deadband`` [rad], ``noload_speed`` [rad/s] and ``goal_accel`` [rad/s²] may be set in any entry; a servo
+    joint not given one takes zero (no band, no torque-speed line, no profile). A servo needs a finite effort
+    limit (its stall torque).
+
+    Raises:
+        RobotError: an unknown drive name, a negative value, or a servo without an effort limit.
+    """
+    if not config:
+        return None
+    n = len(joint_names)
+    drive = np.zeros(n, dtype=bool)
+    values = {k: np.zeros(n) for k in SERVO_KEYS[1:]}
+    for e in config.get("joint", []):
+        if not isinstance(e, dict) or not any(k in e for k in SERVO_KEYS):
+            continue
+        hits = np.array([fnmatch.fnmatchcase(name, str(e.get("match", ""))) for name in joint_names], dtype=bool)
+        if "drive" in e:
+            if e["drive"] not in ("servo", "pd"):
+                raise RobotError(f"{where}: drive = {e['drive']!r} for {e.get('match')!r}: choose \"servo\" or \"pd\"")
+            drive[hits] = e["drive"] == "servo"
+        for k in SERVO_KEYS[1:]:
+            if k in e:
+                try:
+                    v = float(e[k])
+                except (TypeError, ValueError):
+                    raise RobotError(f"{where}: {k} = {e[k]!r} for {e.get('match')!r} is not a number") from None
+                if not (math.isfinite(v) and v >= 0.0):
+                    raise RobotError(f"{where}: {k} = {v} for {e.get('match')!r} must be finite and >= 0")
+                values[k][hits] = v
+    if not drive.any():
+        return None
+    bad = [name for name, s, f in zip(joint_names, drive, effort) if s and not np.isfinite(f)]
+    if bad:
+        raise RobotError(f"{where}: servo joint(s) {', '.join(bad[:4])} need an effort limit (the stall torque): "
+                         "set effort = ... [N*m]")
+    return ServoDrives(drive, *(np.where(drive, values[k], 0.0) for k in SERVO_KEYS[1:]))
+
+
+def attach_servo(model, servo: ServoDrives, qd_index, n_worlds: int) -> None:
+    """Give a finalized Newton model the servo arrays :class:`~wresdyn.sim.solver_replay.SolverReplay` reads, per
+    DoF of every world (Newton's flat layout, zeros on the DoFs of other joints): ``joint_servo`` (int32, 1 on a
+    servo), ``joint_servo_deadband`` [rad] and ``joint_servo_noload_speed`` [rad/s] (float32, gradients as the
+    model's)."""
+    import warp as wp
+
+    width = model.joint_dof_count // n_worlds
+    idx = np.asarray(qd_index, dtype=np.int64)
+
+    def per_dof(values, dtype):
+        full = np.zeros((n_worlds, width))
+        full[:, idx] = values
+        return wp.array(full.reshape(-1).astype(dtype), device=model.device,
+                        requires_grad=bool(model.requires_grad) and dtype == np.float32)
+
+    model.joint_servo = per_dof(servo.mask.astype(float), np.int32)
+    model.joint_servo_deadband = per_dof(servo.deadband, np.float32)
+    model.joint_servo_noload_speed = per_dof(servo.noload_speed, np.float32)
+
+
+def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0):
+    """The servo law of the module docstring (numpy, any broadcastable shapes): the drive torque [N*m]."""
+    e = q_goal - q
+    e_b = e - np.clip(e, -deadband, deadband)
+    u = np.clip(kp * e_b + kd * (qd_goal - qd), -effort, effort)
+    emf = np.divide(effort, noload_speed, out=np.zeros(np.broadcast(effort, noload_speed).shape),
+                    where=np.asarray(noload_speed) > 0)
+    return np.clip(u - emf * qd, -effort, effort)
+
+
+def profile_step(xp, goal, pos, vel, accel):
+    """One step of the goal profile in step units (``xp``: numpy or torch): the internal goal ``pos`` [rad] and its
+    speed ``vel`` [rad/step] move toward the command ``goal`` with at most ``accel`` [rad/step²] > 0, at the speed
+    that still stops on it (``sqrt(2 a |e|)``, and at most the whole distance in one step). Returns (pos, vel)."""
+    e = goal - pos
+    dist = xp.abs(e)
+    # the floor keeps sqrt's derivative finite at e = 0, where the distance term is the smaller one anyway
+    brake = xp.sqrt(xp.clip(2.0 * accel * dist, 1e-30, None))
+    want = xp.sign(e) * xp.minimum(brake, dist)
+    vel = vel + xp.clip(want - vel, -accel, accel)
+    return pos + vel, vel
+
+
+class GoalProfile:
+    """The servo's internal goal for commands arriving one physics step apart (numpy), for the MuJoCo robot:
+    :func:`profile_step` with ``a_max dt²`` on the joints with ``a_max > 0``; the others follow the command."""
+
+    def __init__(self, goal_accel: np.ndarray, dt: float, start: np.ndarray) -> None:
+        self.on = np.asarray(goal_accel, dtype=np.float64) > 0
+        self.accel = np.where(self.on, goal_accel, 1.0) * dt * dt
+        self.pos, self.vel = np.array(start, dtype=np.float64), np.zeros(len(self.on))
+
+    def __call__(self, command: np.ndarray) -> np.ndarray:
+        pos, vel = profile_step(np, command, self.pos, self.vel, self.accel)
+        self.pos, self.vel = np.where(self.on, pos, command), np.where(self.on, vel, 0.0)
+        return self.pos.copy()
