@@ -25,7 +25,6 @@ from tensordict import TensorDict
 
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
 from ..sim.bank import servo_goal_accel
-from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import apply_residual, observation, residual_scale
 from .replay_env_config import ReplayEnvConfig
 from .residual import ResidualConfig, obs_stats
