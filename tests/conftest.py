@@ -31,6 +31,27 @@ def tiny_ppo_config(arch="mlp", iterations=2, kind="torque"):
     )
 
 
+def check_directional_gradients(loss, params: dict, grads: dict, eps: float, rtol: float = 2e-2) -> None:
+    """Each parameter's gradient ``grads[name]`` against a central difference of ``loss()`` along one random unit
+    direction (seeded): every field must move the loss, and the two slopes agree within ``rtol`` of the gradient's norm."""
+    import torch
+
+    gen = torch.Generator().manual_seed(0)
+    for name, p in params.items():
+        d = torch.randn(p.shape, generator=gen, dtype=p.dtype)
+        d /= d.norm()
+        with torch.no_grad():
+            p.add_(eps * d)
+            plus = float(loss())
+            p.sub_(2 * eps * d)
+            minus = float(loss())
+            p.add_(eps * d)
+        fd = (plus - minus) / (2 * eps)
+        tape = float((grads[name] * d).sum())
+        assert grads[name].abs().max() > 1e-5, name  # the field really moves the loss
+        assert abs(tape - fd) <= rtol * float(grads[name].norm()) + 1e-6, (name, tape, fd)
+
+
 def pytest_addoption(parser):
     parser.addoption("--run-slow", action="store_true", help="also run tests marked slow")
     parser.addoption("--run-browser", action="store_true",

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import check_directional_gradients
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
 from wresdyn.sim import Simulator, TrajectoryBank
@@ -112,18 +113,4 @@ def test_parameter_gradients_match_finite_differences(humanoid):
     params = {k: p for k, p in model.named_parameters() if p.requires_grad}  # the servo fields are not fitted here
     model.zero_grad()
     loss().backward()
-    grads = {k: p.grad.clone() for k, p in params.items()}
-    gen = torch.Generator().manual_seed(0)
-    for name, p in params.items():
-        d = torch.randn(p.shape, generator=gen, dtype=p.dtype)
-        d /= d.norm()
-        with torch.no_grad():
-            p.add_(EPS * d)
-            plus = float(loss())
-            p.sub_(2 * EPS * d)
-            minus = float(loss())
-            p.add_(EPS * d)
-        fd = (plus - minus) / (2 * EPS)
-        tape = float((grads[name] * d).sum())
-        assert grads[name].abs().max() > 1e-5, name  # the field really moves the loss
-        assert abs(tape - fd) <= 2e-2 * float(grads[name].norm()) + 1e-6, (name, tape, fd)
+    check_directional_gradients(loss, params, {k: p.grad.clone() for k, p in params.items()}, eps=EPS)
