@@ -185,7 +185,8 @@ def main(path: str, runs=()) -> None:
               f"{np.abs(val[0][:, j]).mean():10.4f} {np.abs(val[0][:, j] - v_mat @ coef).mean():9.4f}")
     print(f"the robot file's kp: {', '.join(f'{k:.0f}' for k in robot.kp)} N·m/rad; "
           f"effort limit {', '.join(f'{e:.2f}' for e in robot.effort)} N·m")
-    print("\nrepeatability: where a run's command repeats (the last 1 s within 2 mrad of the one L earlier, and moving), how "
+    print("\nrepeatability: where a run's command repeats (the last 1 s within 2 mrad of the one L earlier, and "
+          "moving), how "
           "close the arm comes to where it was then, against its distance from the command (all joints but the "
           "excluded ones) [rad]")
     keep = np.flatnonzero(fitted)
