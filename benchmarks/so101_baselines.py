@@ -1,5 +1,5 @@
-"""Published servo models replayed on the SO-101 real benchmark's validation, held-out and OOD runs (issue 30,
-item 5), scored as ``wresdyn eval`` scores the project's models: mean |Δq| [rad] over the five arm joints of whole
+"""Published servo models replayed on the SO-101 real benchmark's validation, held-out and OOD runs,
+scored as ``wresdyn eval`` scores the project's models: mean |Δq| [rad] over the five arm joints of whole
 runs, open loop from the first recorded state, and the improvement over the same PD-only Newton replay
 (:func:`wresdyn.evaluation.open_loop.evaluate_split`). The models and their sources:
 :mod:`wresdyn.evaluation.servo_baselines`.

@@ -1,4 +1,4 @@
-"""The servo drive's synthetic check (issue 30): a "real" SO-101 whose drives are servos of known parameters, recorded
+"""The servo drive's synthetic check: a "real" SO-101 whose drives are servos of known parameters, recorded
 in MuJoCo C (:class:`wresdyn.data.real_robot.RealRobot`, affine actuators driven by the servo law each physics step),
 then (1) replayed with its true parameters in SolverReplay (how closely the two simulators agree) and (2) identified
 by ``wresdyn identify``'s learner from a start off by 30-60 % on the servo fields, which must come back within 10 %

@@ -1,4 +1,4 @@
-"""Servo drives in SolverReplay (issue 30): selection per joint, the law against its numpy form, gradients of the
+"""Servo drives in SolverReplay: selection per joint, the law against its numpy form, gradients of the
 new fields against central finite differences (float64, the set-up of ``test_replay_gradients.py``), the goal
 profile in torch against numpy, and the parameter file round trip.
 """
