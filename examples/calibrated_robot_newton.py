@@ -4,6 +4,7 @@ Only Newton (with MuJoCo, for ``SolverMuJoCo``) and the small residual component
 ``actuated.usda`` carries the identified physics (armature, damping, friction, masses, inertias) and the drive
 path as ``newton.actuators`` (PD, delay, effort clamping), which Newton's importer builds into
 ``model.actuators``; :class:`~wresdyn.export.residual_torque.ResidualTorque` adds the residual network's torque.
+Servo joints' actuators use the drive the export ships in ``servo_actuator.py`` (:func:`register_servo`).
 
     python examples/calibrated_robot_newton.py runs/fit/export data/dataset.npz --split heldout
 
@@ -15,6 +16,9 @@ friction (``joint_friction``), which the identified model relies on.
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -25,6 +29,7 @@ def load_calibrated(usd_path: str, device: str = "cpu"):
 
     from wresdyn.export.residual_torque import ResidualTorque
 
+    register_servo(Path(usd_path).parent)
     builder = newton.ModelBuilder()
     builder.add_usd(usd_path, floating=False, enable_self_collisions=False, load_visual_shapes=False)
     model = builder.finalize(device=device)
@@ -32,6 +37,19 @@ def load_calibrated(usd_path: str, device: str = "cpu"):
                                          integrator="implicitfast")
     residual = ResidualTorque.from_usd(usd_path, model) if _has_residual(usd_path) else None
     return model, solver, residual
+
+
+def register_servo(export: Path) -> None:
+    """Load the export's ``servo_actuator.py`` (a robot with servo drives) and register its drive and USD schema
+    with Newton, once per process and before any USD stage is opened (USD builds its schema registry once)."""
+    path = export / "servo_actuator.py"
+    if not path.is_file() or "servo_actuator" in sys.modules:
+        return
+    spec = importlib.util.spec_from_file_location("servo_actuator", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["servo_actuator"] = module
+    spec.loader.exec_module(module)
+    module.register()
 
 
 def _has_residual(usd_path: str) -> bool:
@@ -88,16 +106,17 @@ def main() -> None:
     p.add_argument("--split", default="heldout")
     p.add_argument("--seconds", type=float, default=2.0, help="replay length per trajectory [s]")
     p.add_argument("--compare", action="store_true", help="also replay with wresdyn and print the difference")
+    p.add_argument("--save", default=None, help="write the replayed q [rad] per trajectory name to this .npz")
     args = p.parse_args()
     from wresdyn.data.dataset import load_dataset
 
     ds = load_dataset(args.data)
     dt = 1.0 / ds.rate_hz
     steps = int(round(args.seconds * ds.rate_hz)) + 1
-    errs, diffs = [], []
+    errs, diffs, saved = [], [], {}
     for t in ds.split(args.split):
         n = min(steps, len(t.q))
-        q = replay(f"{args.export}/actuated.usda", t.q[0], t.qd[0], t.qdd[0], t.q_cmd[:n], dt)
+        q = saved[t.name] = replay(f"{args.export}/actuated.usda", t.q[0], t.qd[0], t.qdd[0], t.q_cmd[:n], dt)
         errs.append(np.abs(q - t.q[:n]).mean())
         line = f"{t.name}: plain Newton vs recording {errs[-1]:.4f} rad"
         if args.compare:
@@ -105,6 +124,8 @@ def main() -> None:
             diffs.append(np.abs(q - qw).mean())
             line += f", vs wresdyn's corrected replay {diffs[-1]:.4f} rad (max {np.abs(q - qw).max():.4f})"
         print(line, flush=True)
+    if args.save:
+        np.savez(args.save, **saved)
     print(f"{args.split}: {len(errs)} trajectories, mean |dq| {np.mean(errs):.4f} rad"
           + (f", vs wresdyn {np.mean(diffs):.4f} rad" if diffs else ""))
 

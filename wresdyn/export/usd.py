@@ -27,6 +27,18 @@ nothing behind):
                        where they came from (run, dataset, robot file and its sha256).
 =====================  ========================================================================================
 
+Servo joints (``drive = "servo"``, :mod:`wresdyn.robot.servo`): their ``NewtonActuator`` prim in ``actuated.usda``
+applies ``WresdynServoControlAPI`` in place of the PD (the drive of :mod:`wresdyn.export.servo_actuator`: dead band,
+goal-acceleration profile, back-EMF damping U / w0) with Newton's ``NewtonActuatorDelayAPI`` and
+``NewtonDCMotorClampingAPI`` (stall torque U, no-load speed w0; ``NewtonMaxEffortClampingAPI`` where w0 = 0), which
+together are the servo law. ``robot.usda`` records ``wresdyn:drive = "servo"`` and ``wresdyn:servo:deadband``
+[rad], ``wresdyn:servo:noloadSpeed`` [rad/s], ``wresdyn:servo:goalAccel`` [rad/s²] on the joint (Newton's importer
+does not read them: loaded as it is, the joint runs its PD drive). The folder then also holds
+``servo_actuator.py`` (newton, warp and pxr only) and ``wresdyn_servo_schema/``, the codeless USD schema plugin
+Newton's importer needs to see the custom schema; ``export.json`` names them under ``"servo"``. A plain script
+calls ``servo_actuator.register()`` before it opens any USD stage. Robot files other than USD (MJCF, URDF) are
+refused with the conversion step named.
+
 :mod:`wresdyn.export.residual_torque` runs the residual in a plain Newton loop.
 """
 
@@ -54,6 +66,11 @@ ACTUATOR_SCOPE = "wresdyn_actuators"
 """Child of the robot's default prim that holds the actuator prims."""
 RESIDUAL_PRIM = "wresdyn_residual"
 """Child of the robot's default prim that references the residual network."""
+SERVO_SCHEMA = "WresdynServoControlAPI"
+"""The applied schema of a servo joint's actuator prim (:mod:`wresdyn.export.servo_actuator`'s drive)."""
+_SERVO_ATTRS = {"wresdyn:servo:deadband": "deadband", "wresdyn:servo:noloadSpeed": "noload_speed",
+                "wresdyn:servo:goalAccel": "goal_accel"}
+"""Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s²], by PhysicalParams field."""
 
 
 class ExportError(WresdynError):
@@ -114,6 +131,7 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
     from pxr import Gf, Sdf, Usd, UsdPhysics
 
     physics.check(robot, "physics")
+    servo = getattr(robot, "servo", None)
     src = Path(robot.source).resolve()
     root_path = out / "robot.usda"
     stage = Usd.Stage.CreateNew(str(root_path))
@@ -144,6 +162,10 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         _set(prim, "newton:damping", Sdf.ValueTypeNames.Float, physics.damping[i] * per)  # per degree too
         _set(prim, "newton:friction", Sdf.ValueTypeNames.Float, physics.friction[i])
         _set(prim, "wresdyn:delay", Sdf.ValueTypeNames.Double, physics.delay[i])  # [s], the identified delay
+        if servo is not None and servo.mask[i]:  # read by actuated.usda's servo actuators, not by the importer
+            _set(prim, "wresdyn:drive", Sdf.ValueTypeNames.Token, "servo")
+            for attr, field in _SERVO_ATTRS.items():
+                _set(prim, attr, Sdf.ValueTypeNames.Double, getattr(physics, field)[i])
     for b, path in enumerate(robot.builder.body_label):
         if not (physics.body_mass[b] > 0):
             continue
@@ -172,7 +194,8 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         _set(joint, f"drive:{axis}:physics:stiffness", Sdf.ValueTypeNames.Float, 0.0)  # the actuator drives it
         _set(joint, f"drive:{axis}:physics:damping", Sdf.ValueTypeNames.Float, 0.0)
         prim = act.DefinePrim(f"{scope}/{name}", "NewtonActuator")
-        schemas = ["NewtonPDControlAPI"]
+        is_servo = servo is not None and bool(servo.mask[i])
+        schemas = [SERVO_SCHEMA if is_servo else "NewtonPDControlAPI"]
         prim.CreateRelationship("newton:targets").SetTargets([path])
         _set(prim, "newton:kp", Sdf.ValueTypeNames.Float, physics.kp[i])
         _set(prim, "newton:kd", Sdf.ValueTypeNames.Float, physics.kd[i])
@@ -180,7 +203,9 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         if steps > 0:
             schemas.append("NewtonActuatorDelayAPI")
             _set(prim, "newton:delaySteps", Sdf.ValueTypeNames.Int, steps)
-        if np.isfinite(physics.effort[i]):
+        if is_servo:
+            schemas.append(_servo_prim(prim, physics, i))
+        elif np.isfinite(physics.effort[i]):
             schemas.append("NewtonMaxEffortClampingAPI")
             _set(prim, "newton:maxEffort", Sdf.ValueTypeNames.Float, physics.effort[i])
         for s in schemas:
@@ -199,6 +224,25 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
     act.GetRootLayer().Save()
 
 
+def _servo_prim(prim, physics, i: int) -> str:
+    """Author servo joint ``i``'s drive on its actuator prim (``servo_actuator.py``'s ``WresdynServoControlAPI``:
+    dead band, goal profile, back-EMF U / w0) and its clamp: ``NewtonDCMotorClampingAPI`` (stall torque U, no-load
+    speed w0) or, without a torque-speed line, ``NewtonMaxEffortClampingAPI``; returns the clamp's schema."""
+    from pxr import Sdf
+
+    effort, w0 = float(physics.effort[i]), float(physics.noload_speed[i])
+    _set(prim, "newton:servoDeadband", Sdf.ValueTypeNames.Float, physics.deadband[i])
+    _set(prim, "newton:servoGoalAccel", Sdf.ValueTypeNames.Float, physics.goal_accel[i])
+    _set(prim, "newton:servoBackEmf", Sdf.ValueTypeNames.Float, effort / w0 if w0 > 0 else 0.0)
+    if w0 > 0:
+        _set(prim, "newton:saturationEffort", Sdf.ValueTypeNames.Float, effort)
+        _set(prim, "newton:velocityLimit", Sdf.ValueTypeNames.Float, w0)
+        _set(prim, "newton:maxMotorEffort", Sdf.ValueTypeNames.Float, effort)
+        return "NewtonDCMotorClampingAPI"
+    _set(prim, "newton:maxEffort", Sdf.ValueTypeNames.Float, effort)
+    return "NewtonMaxEffortClampingAPI"
+
+
 def _set(prim, name: str, type_name, value) -> None:
     attr = prim.GetAttribute(name)
     if not attr:
@@ -206,6 +250,20 @@ def _set(prim, name: str, type_name, value) -> None:
     if isinstance(value, (np.floating, float)):
         value = float(value)
     attr.Set(value)
+
+
+def _write_servo_component(robot, out: Path) -> dict | None:
+    """For a robot with servo drives: copy :mod:`~wresdyn.export.servo_actuator` and its USD schema plugin into
+    ``out``; returns what ``export.json`` records of them (``None`` without servos)."""
+    if getattr(robot, "servo", None) is None:
+        return None
+    from . import servo_actuator
+
+    shutil.copyfile(servo_actuator.__file__, out / "servo_actuator.py")
+    servo_actuator.write_schema(out / servo_actuator.SCHEMA_DIR)
+    return {"component": "servo_actuator.py", "schema": SERVO_SCHEMA, "schema_plugin": servo_actuator.SCHEMA_DIR,
+            "joints": [n for n, s in zip(robot.joint_names, robot.servo.mask) if s],
+            "load": "import servo_actuator; servo_actuator.register() before the first USD stage is opened"}
 
 
 def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = False, physics_only: bool = False,
@@ -240,12 +298,10 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     if robot.source_sha256 != ds.robot_sha256:
         raise ExportError(f"{robot.source}: the robot file changed since the run's data were recorded (sha256 "
                           f"{robot.source_sha256[:12]} != {ds.robot_sha256[:12]}); the export would describe another robot")
-    if robot.servo is not None:
-        raise ExportError(f"{robot.source}: servo drives (drive = \"servo\") have no Newton actuator to export to yet; "
-                          "the export would describe PD drives")
     if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
         raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
-                          f"{Path(robot.source).suffix} first (e.g. mujoco-usd-converter for MJCF)")
+                          f"{Path(robot.source).suffix} to USD first (for MJCF: mujoco-usd-converter), then record "
+                          "or import the data and identify against the .usd file")
     if residual is not None and list(residual["joint_names"]) != list(robot.joint_names):
         raise ExportError(f"{run}: the residual's joints do not match {robot.source.name}'s")
     physics = run_physics(run, robot)
@@ -256,6 +312,7 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     try:
         write_layers(robot, physics, tmp, ds.rate_hz, residual)
         physics.save(tmp / "physics.json")
+        servo = _write_servo_component(robot, tmp)
         if residual is not None:
             shutil.copyfile(run / "policy.pt", tmp / "residual.pt2")
             if (run / "policy.onnx").is_file():
@@ -264,7 +321,7 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
         (tmp / "export.json").write_text(json.dumps({
             "format": "wresdyn.export/1", "run": str(run), "dataset": str(data), "robot_file": str(robot.source),
             "robot_sha256": robot.source_sha256, "rate_hz": ds.rate_hz, "residual": residual is not None,
-            "gains": ds.gains_config}, indent=2))
+            "gains": ds.gains_config, "servo": servo}, indent=2))
         if out.exists():
             shutil.rmtree(out)
         tmp.replace(out)
