@@ -48,8 +48,9 @@ def _physics(robot):
     return p
 
 
-def _run(tmp_path: Path, robot, data, physics=True, residual=True) -> Path:
-    """A run folder as `wresdyn fit` leaves it, from the real writers."""
+def _run(tmp_path: Path, robot, data, physics=True, residual=True, scale=100.0) -> Path:
+    """A run folder as `wresdyn fit` leaves it, from the real writers; the residual's last layer is ``scale``
+    times its near-zero start."""
     from wresdyn.learn.gradfit import build_policy
     from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
 
@@ -67,7 +68,7 @@ def _run(tmp_path: Path, robot, data, physics=True, residual=True) -> Path:
         policy = build_policy(robot, ResidualConfig(fraction=0.1), mean, std)
         with torch.no_grad():
             last = [m for m in policy.mlp.modules() if isinstance(m, torch.nn.Linear)][-1]
-            last.weight.mul_(100.0)  # undo the near-zero start: a residual of a few N*m
+            last.weight.mul_(scale)  # undo the near-zero start: 100 gives the humanoid a residual of a few N*m
         export_run_files(policy, run, data, arch="mlp", learner="gradient")
     return run
 
