@@ -117,7 +117,7 @@ def servo_export(tmp_path_factory, record):
 
 
 def test_servo_export_writes_the_component_schema_and_parameters(servo_export):
-    from pxr import Usd
+    from pxr import Sdf, Usd
 
     from wresdyn.export import servo_actuator, usd
     from wresdyn.sim.physics import PhysicalParams
@@ -125,7 +125,8 @@ def test_servo_export_writes_the_component_schema_and_parameters(servo_export):
     robot, _, run, out, _ = servo_export
     assert usd.SERVO_SCHEMA == servo_actuator.SCHEMA
     assert (out / "servo_actuator.py").read_bytes() == Path(servo_actuator.__file__).read_bytes()
-    assert (out / servo_actuator.SCHEMA_DIR / "plugInfo.json").is_file()
+    schema = Sdf.Layer.FindOrOpen(str(out / servo_actuator.SCHEMA_DIR / "generatedSchema.usda"))
+    assert set(schema.GetPrimAtPath(f"/{servo_actuator.SCHEMA}").properties.keys()) == set(servo_actuator._ATTRS)
     meta = json.loads((out / "export.json").read_text())["servo"]
     assert meta["joints"] == ["shoulder", "elbow"] and meta["schema"] == "WresdynServoControlAPI"
     want = PhysicalParams.load(run / "physics.json", robot)

@@ -67,7 +67,10 @@ ACTUATOR_SCOPE = "wresdyn_actuators"
 RESIDUAL_PRIM = "wresdyn_residual"
 """Child of the robot's default prim that references the residual network."""
 SERVO_SCHEMA = "WresdynServoControlAPI"
-"""The applied schema of a servo joint's actuator prim (:mod:`wresdyn.export.servo_actuator`'s drive)."""
+"""The applied schema of a servo joint's actuator prim (:mod:`wresdyn.export.servo_actuator`'s drive, which
+imports newton: the export copies its file and schema plugin without importing it)."""
+_SERVO_FILES = (Path(__file__).with_name("servo_actuator.py"), Path(__file__).with_name("wresdyn_servo_schema"))
+"""The drive's file and its USD schema plugin folder, shipped next to the layers."""
 _SERVO_ATTRS = {"wresdyn:servo:deadband": "deadband", "wresdyn:servo:noloadSpeed": "noload_speed",
                 "wresdyn:servo:goalAccel": "goal_accel"}
 """Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s²], by PhysicalParams field."""
@@ -257,11 +260,10 @@ def _write_servo_component(robot, out: Path) -> dict | None:
     ``out``; returns what ``export.json`` records of them (``None`` without servos)."""
     if getattr(robot, "servo", None) is None:
         return None
-    from . import servo_actuator
-
-    shutil.copyfile(servo_actuator.__file__, out / "servo_actuator.py")
-    servo_actuator.write_schema(out / servo_actuator.SCHEMA_DIR)
-    return {"component": "servo_actuator.py", "schema": SERVO_SCHEMA, "schema_plugin": servo_actuator.SCHEMA_DIR,
+    component, schema = _SERVO_FILES
+    shutil.copyfile(component, out / component.name)
+    shutil.copytree(schema, out / schema.name, ignore=shutil.ignore_patterns("__pycache__"))
+    return {"component": component.name, "schema": SERVO_SCHEMA, "schema_plugin": schema.name,
             "joints": [n for n, s in zip(robot.joint_names, robot.servo.mask) if s],
             "load": "import servo_actuator; servo_actuator.register() before the first USD stage is opened"}
 
