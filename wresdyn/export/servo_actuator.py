@@ -1,9 +1,9 @@
 """A smart-servo drive for ``newton.actuators``: the part of the servo law Newton's stock components lack.
 
 ``wresdyn export`` copies this file next to the layers of a robot with servo drives; it imports newton, warp and
-pxr only (nothing of wresdyn). A servo joint's ``NewtonActuator`` prim applies ``WresdynServoControlAPI`` (this drive) with Newton's
-own ``NewtonActuatorDelayAPI`` (the command delay) and ``NewtonDCMotorClampingAPI`` (the DC motor's torque–speed
-line, or ``NewtonMaxEffortClampingAPI`` without one). Per actuator step of ``dt`` [s], in SI units::
+pxr only (nothing of wresdyn). A servo joint's ``NewtonActuator`` prim applies ``WresdynServoControlAPI`` (this
+drive) with Newton's own ``NewtonActuatorDelayAPI`` (the command delay) and ``NewtonDCMotorClampingAPI`` (the DC
+motor's torque–speed line, or ``NewtonMaxEffortClampingAPI`` without one). Per actuator step of ``dt`` [s], in SI units::
 
     g, v  <- profile(g, v, q*)                       internal goal g [rad] toward the delayed command q* with at
                                                      most a_max [rad/s²], braking in time to stop on it
@@ -53,7 +53,8 @@ _ATTRS = {  # USD name: (kwarg, doc in the schema)
     "newton:kp": ("kp", "Position-loop gain on the dead-banded error [N m/rad]"),
     "newton:kd": ("kd", "Velocity gain [N m s/rad]"),
     "newton:servoDeadband": ("servo_deadband", "Dead band half-width b [rad]"),
-    "newton:servoGoalAccel": ("servo_goal_accel", "Goal acceleration limit a_max [rad/s^2]; 0: the goal is the command"),
+    "newton:servoGoalAccel": ("servo_goal_accel",
+                              "Goal acceleration limit a_max [rad/s^2]; 0: the goal is the command"),
     "newton:servoBackEmf": ("servo_back_emf", "Back-EMF damping U / w0 [N m s/rad]; 0: no torque-speed line"),
 }
 
@@ -63,8 +64,9 @@ def register() -> None:
     Call it before the first USD stage of the process is opened.
 
     Raises:
-        RuntimeError: the plugin folder is missing, or USD's schema registry was built before the schema was registered, so Newton's importer would
-            not see it (import and register earlier, or put the plugin folder on ``PXR_PLUGINPATH_NAME``).
+        RuntimeError: the plugin folder is missing, or USD's schema registry was built before the schema was
+            registered, so Newton's importer would not see it (import and register earlier, or put the plugin
+            folder on ``PXR_PLUGINPATH_NAME``).
     """
     from pxr import Plug, Usd
 
