@@ -67,7 +67,8 @@ def arm_usda() -> str:
     joints = "".join(_JOINT.format(name=n, axis=a, parent=p, child=c, offset=o) for n, a, p, c, o in (
         ("shoulder", "Y", "base", "upper", 0.0), ("elbow", "Y", "upper", "lower", -0.15),
         ("wrist", "X", "lower", "hand", -0.15)))
-    return ('#usda 1.0\n(\n    defaultPrim = "arm"\n    metersPerUnit = 1\n    kilogramsPerUnit = 1\n    upAxis = "Z"\n)\n\n'
+    return ('#usda 1.0\n(\n    defaultPrim = "arm"\n    metersPerUnit = 1\n    kilogramsPerUnit = 1\n'
+            '    upAxis = "Z"\n)\n\n'
             'def PhysicsScene "physicsScene"\n{\n    vector3f physics:gravityDirection = (0, 0, -1)\n'
             '    float physics:gravityMagnitude = 9.81\n}\n\ndef Xform "arm"\n{' + links
             + '\n    def "joints"\n    {' + joints + "    }\n}\n")

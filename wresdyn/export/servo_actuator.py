@@ -3,7 +3,8 @@
 ``wresdyn export`` copies this file next to the layers of a robot with servo drives; it imports newton, warp and
 pxr only (nothing of wresdyn). A servo joint's ``NewtonActuator`` prim applies ``WresdynServoControlAPI`` (this
 drive) with Newton's own ``NewtonActuatorDelayAPI`` (the command delay) and ``NewtonDCMotorClampingAPI`` (the DC
-motor's torque–speed line, or ``NewtonMaxEffortClampingAPI`` without one). Per actuator step of ``dt`` [s], in SI units::
+motor's torque–speed line, or ``NewtonMaxEffortClampingAPI`` without one). Per actuator step of ``dt`` [s], in SI
+units::
 
     g, v  <- profile(g, v, q*)                       internal goal g [rad] toward the delayed command q* with at
                                                      most a_max [rad/s²], braking in time to stop on it
