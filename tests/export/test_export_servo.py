@@ -150,6 +150,16 @@ def test_servo_export_writes_the_component_schema_and_parameters(servo_export):
         assert joint.GetAttribute("wresdyn:servo:deadband").Get() == pytest.approx(want.deadband[i])
 
 
+def test_registering_after_usd_built_its_schema_registry_is_refused(servo_export):
+    """This process has opened USD stages (the fixture's export), so USD's schema registry is built without the
+    servo schema: Newton's importer would not see the servo drive (its parser stops at \"no drive schema\"), and
+    :func:`register` says why first."""
+    from wresdyn.export import servo_actuator
+
+    with pytest.raises(RuntimeError, match="before opening any USD stage"):
+        servo_actuator.register()
+
+
 _LAW = """
 import sys, numpy as np, warp as wp
 sys.path.insert(0, sys.argv[1])
