@@ -152,7 +152,7 @@ def test_servo_export_writes_the_component_schema_and_parameters(servo_export):
 
 def test_registering_after_usd_built_its_schema_registry_is_refused(servo_export):
     """This process has opened USD stages (the fixture's export), so USD's schema registry is built without the
-    servo schema: Newton's importer would not see the servo drive (its parser stops at \"no drive schema\"), and
+    servo schema: Newton's importer would not see the servo drive (its parser stops at "no drive schema"), and
     :func:`register` says why first."""
     from wresdyn.export import servo_actuator
 
