@@ -17,7 +17,7 @@ from wresdyn.sim.physics import PhysicalParams
 
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, torque_limit_scale=0.5)
 """The real robot of these tests: gains, friction, damping and saturation off the file's, no delay, no noise."""
-TINY = AdaptConfig(window=1.2, holdout=0.3, update_every=0.4, steps=3, windows=4, horizon=16, one_step_every=10)
+TINY = AdaptConfig(window=1.2, holdout=0.3, update_every=0.4, iterations=3, windows=4, horizon=16, one_step_every=10)
 """A few updates on 1.6 s of stream."""
 
 

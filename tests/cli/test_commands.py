@@ -40,7 +40,7 @@ OLD_FLAGS = {
             "--identify-iterations", "--gain-grid", "--refine", "--windows", "--horizon", "--curriculum", "--lr",
             "--obs-noise", "--solver", "--device", "--no-cuda-graph", "--seed", "--physics", "--eval", "--quiet"),
     "adapt": ("--out", "--robot", "--rate-hz", "--split", "--track", "--quiet", "--window", "--holdout",
-              "--update-every", "--steps", "--windows", "--horizon", "--fit", "--lr"),
+              "--update-every", "--iterations", "--windows", "--horizon", "--fit", "--lr"),
     "view": ("--split", "--index", "--data", "--host", "--port", "--seconds", "--device"),
     "export": ("--out", "--force", "--physics-only", "--data", "--gains"),
     "deploy": ("--out", "--calibrated", "--delta", "--mismatch", "--floor", "--full", "--iterations", "--finetune",

@@ -19,8 +19,6 @@ A jump in time of more than 1.5 sample periods starts a new segment: windows nev
 is the end of the latest segment.
 """
 
-from __future__ import annotations
-
 import json
 import time
 from dataclasses import dataclass, field
@@ -33,10 +31,11 @@ import torch
 from ..errors import WresdynError
 from ..learn.sysid import physics_window_loss
 from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.physics import PhysicalParams, PhysicsModel
+from ..robot.physical import PhysicalParams
+from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
 
-__all__ = ["Adapter", "AdaptConfig", "StreamError", "Update"]
+__all__ = ["Adapter", "StreamError", "Update"]
 
 _JOINT_PARAMS = ("kp", "kd", "armature", "damping", "friction", "effort")
 """Joint fields whose coordinates an unexcited joint keeps."""
@@ -227,13 +226,13 @@ class Adapter:
         return u
 
     def _steps(self, train, excited: np.ndarray) -> float:
-        """``cfg.steps`` Adam steps on windows of ``train``; joints not ``excited`` keep their joint fields. Returns the
-        last loss (``nan`` if the simulation diverged)."""
+        """``cfg.iterations`` Adam steps on windows of ``train``; joints not ``excited`` keep their joint fields.
+        Returns the last loss (``nan`` if the simulation diverged)."""
         cfg, model = self.cfg, self.model
         bank = TrajectoryBank(train, self.device, self.delay.to(self.device))
         frozen = torch.as_tensor(~excited)
         loss = float("nan")
-        for _ in range(cfg.steps):
+        for _ in range(cfg.iterations):
             held = {f: getattr(model, f"u_{f}").detach().clone() for f in _JOINT_PARAMS}
             window = bank.sample(self.rng, cfg.windows, cfg.horizon)
             value, _ = physics_window_loss(cfg, model, self.sim, window)
@@ -278,7 +277,8 @@ class Adapter:
     def publish(self, update: Update) -> Path | None:
         """Write ``update``'s physics to the publish folder: ``physics_<t>.json`` (``t`` in ms) and ``physics.json``
         (the latest), each the :meth:`~wresdyn.robot.physical.PhysicalParams.save` format with ``t`` [s] and the
-        held-back error added (:meth:`PhysicalParams.load` reads them). Returns the timestamped file."""
+        held-back error added (:meth:`~wresdyn.robot.physical.PhysicalParams.load` reads them). Returns the
+        timestamped file."""
         if self.publish_dir is None:
             return None
         data = {**update.physics.to_json(), "t": update.t, "open_loop": update.open_loop}

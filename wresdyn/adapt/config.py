@@ -26,7 +26,7 @@ class AdaptConfig:
     error there (whole segment replayed from its first recorded state)."""
     update_every: float = 1.0
     """Robot time between updates [s]."""
-    steps: int = 4
+    iterations: int = 4
     """Adam steps per update (bounded compute: each replays ``windows`` x ``horizon`` steps with gradients)."""
     windows: int = 8
     """Windows B (Newton worlds) drawn from the training part of the buffer per step."""
@@ -80,7 +80,7 @@ class AdaptConfig:
         for name in ("w_q", "w_qd", "w_prior", "excited_min"):
             check_number(getattr(self, name), name, ge=0)
         check_number(self.min_gain, "min_gain", ge=0, le=0.5)
-        for name in ("steps", "windows", "horizon", "one_step_every"):
+        for name in ("iterations", "windows", "horizon", "one_step_every"):
             check_number(getattr(self, name), name, integer=True, ge=1)
         check_number(self.seed, "seed", integer=True, ge=0)
         for name in ("torch_threads", "grad_truncation"):

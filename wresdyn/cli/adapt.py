@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     adapter = Adapter(robot, start, rate, cfg, publish=out / "physics")
     names = tracked_names(start, cfg.fit, args.track)
     log(f"adapting {', '.join(cfg.fit)} of {args.run} on {args.log} at {rate:g} Hz: window {cfg.window:g} s, "
-        f"held back {cfg.holdout:g} s, {cfg.steps} steps x {cfg.windows} windows x {cfg.horizon} every "
+        f"held back {cfg.holdout:g} s, {cfg.iterations} Adam steps x {cfg.windows} windows x {cfg.horizon} every "
         f"{cfg.update_every:g} s -> {out}")
     streamed = 0.0
     try:
