@@ -126,3 +126,22 @@ def test_cli_bad_input_is_one_line_and_exit_2(humanoid, stream, tmp_path, capsys
     err = capsys.readouterr().err
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("wresdyn adapt: error:") and message in err, err
+
+
+def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    PhysicalParams.nominal(humanoid).save(run / "physics.json")
+    stream.save(tmp_path / "data.npz")
+    out = tmp_path / "out"
+    code = main(["adapt", str(run), str(tmp_path / "data.npz"), "--out", str(out), "--window", "1.2",
+                 "--holdout", "0.3", "--update-every", "0.4", "--iterations", "2", "--windows", "4", "--horizon", "16",
+                 "--lr", "0.02", "--track", "friction:*knee"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    summary = json.loads((out / "updates.json").read_text())
+    rows = (out / "updates.csv").read_text().splitlines()
+    assert summary["n_updates"] == len(summary["updates"]) == len(rows) - 1 >= 2
+    assert "friction[left_knee]" in rows[0] and printed.count("friction[left_knee]") == summary["n_updates"]
+    assert (out / "adapt.png").is_file()
+    assert len(list((out / "physics").glob("physics_*.json"))) == summary["accepted"] >= 1

@@ -67,7 +67,7 @@ def write_updates(out: Path, updates, fit, summary: dict) -> tuple[Path, Path]:
 
 def plot_updates(path: Path, updates, start, names: list[str]) -> Path:
     """Two panels over robot time: the held-back open-loop error of the adapted model and of the warm start held
-    fixed, and the one-step error; the parameters ``names`` relative to the warm start."""
+    fixed, and the one-step error; the parameters ``names`` relative to the warm start (where it is not 0)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -86,7 +86,10 @@ def plot_updates(path: Path, updates, start, names: list[str]) -> Path:
     ref = parameter_columns(start, {n.split("[")[0] for n in names} | {"bodies"})
     for n in names:
         vals = [parameter_columns(u.physics, {n.split("[")[0]} | {"bodies"})[n] for u in updates]
-        ax[1].plot(t, np.array(vals) / ref[n], label=n)
+        if ref[n] != 0:
+            ax[1].plot(t, np.array(vals) / ref[n], label=n)
+        else:  # nothing to divide by (a friction the warm start does not have): the value itself
+            ax[1].plot(t, vals, label=f"{n} (value, warm start 0)")
     ax[1].set_ylabel("value / warm start")
     ax[1].set_xlabel("robot time [s]")
     ax[1].legend(fontsize=8)

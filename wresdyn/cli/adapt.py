@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     rtf = streamed / adapter.compute if adapter.compute > 0 else float("inf")
     summary = {"run": str(args.run), "log": str(args.log), "rate_hz": rate, "config": dataclasses.asdict(cfg),
                "robot_time_s": streamed, "compute_s": adapter.compute, "real_time_factor": rtf,
-               "updates": len(ups), "accepted": sum(u.accepted for u in ups)}
+               "n_updates": len(ups), "accepted": sum(u.accepted for u in ups)}
     csv_path, _ = write_updates(out, ups, cfg.fit, summary)
     plot = plot_updates(out / "adapt.png", ups, start, names if args.track else
                         tracked_names(start, cfg.fit, latest=ups[-1].physics))
