@@ -2,8 +2,8 @@
 
     python benchmarks/sysid_valley.py RUN/physics.json [DATA]      # DATA: default the shipped dataset
 
-Identification's own loss (:func:`wresdyn.learn.sysid._window_loss`: w_q |Δq|² + w_qd |Δq̇|², the training split's
-windows, open loop from each window's recorded start) is evaluated, forward only, on the same fixed windows for:
+Identification's own loss (:func:`wresdyn.learn.sysid.physics_window_loss`: w_q |Δq|² + w_qd |Δq̇|², the training
+split's windows, open loop from each window's recorded start) is evaluated, forward only, on the same fixed windows for:
 
 - the identified parameters (RUN/physics.json) and the real robot's true parameters (``RealRobot.physics()``);
 - the identified parameters with armature, damping or both set to the truth;

@@ -9,6 +9,7 @@ from dataclasses import asdict, fields, replace
 
 import pytest
 
+from wresdyn.adapt.config import AdaptConfig
 from wresdyn.cli import build_parser, main
 from wresdyn.cli.collect import CollectConfig
 from wresdyn.cli.config_flags import config_fields, plain_help
@@ -38,6 +39,8 @@ OLD_FLAGS = {
     "fit": ("--out", "--robot", "--gains", "--model", "--residual", "--arch", "--fraction", "--iterations",
             "--identify-iterations", "--gain-grid", "--refine", "--windows", "--horizon", "--curriculum", "--lr",
             "--obs-noise", "--solver", "--device", "--no-cuda-graph", "--seed", "--physics", "--eval", "--quiet"),
+    "adapt": ("--out", "--robot", "--rate-hz", "--split", "--track", "--quiet", "--window", "--holdout",
+              "--update-every", "--iterations", "--windows", "--horizon", "--fit", "--lr"),
     "view": ("--split", "--index", "--data", "--host", "--port", "--seconds", "--device"),
     "export": ("--out", "--force", "--physics-only", "--data", "--gains"),
     "deploy": ("--out", "--calibrated", "--delta", "--mismatch", "--floor", "--full", "--iterations", "--finetune",
@@ -47,11 +50,13 @@ OLD_FLAGS = {
                "--gradient-iterations", "--segments", "--solver", "--device", "--ppo-envs", "--windows", "--horizon",
                "--jobs", "--delays", "--delays-only", "--delay-learner", "--delay-trajectories"),
 }
-"""The flags of every command before they were generated from the configs (``wresdyn CMD --help`` at edbe496)."""
+"""The flags of every command before they were generated from the configs (``wresdyn CMD --help`` at edbe496; a
+command added since: its flags when it came)."""
 
 CONFIG_FLAGS = {
     "collect": [(CollectConfig(), "", ())],
     "identify": [(SysIdConfig(), "", ())],
+    "adapt": [(AdaptConfig(), "", ())],
     "fit": [(replace(GradFitConfig(), iterations=HYBRID_ITERATIONS), "", ("model",)),
             (SysIdConfig(), "identify.", ("device", "seed", "solver"))],
     "train": [(default_config(), "", ())],

@@ -61,6 +61,27 @@ def test_delay_shifts_the_commands_exactly(humanoid):
     np.testing.assert_array_equal(delayed, nominal[: len(q_cmd)])
 
 
+def test_a_mismatch_changed_mid_recording_changes_only_what_follows(humanoid):
+    """The ``on_sample`` hook: a hook that changes nothing leaves the recording as it was; friction doubled at sample
+    k leaves samples 0..k as they were and changes what follows, and ``physics()`` then reads the new friction."""
+    q_cmd = _command(humanoid, 0.3)
+    real = RealRobot(humanoid, Mismatch(friction=0.05), RATE)
+    q, qd, _ = real.record(q_cmd)
+    seen = []
+    np.testing.assert_array_equal(real.record(q_cmd, on_sample=lambda k, m: seen.append(k))[0], q)
+    assert seen == list(range(len(q_cmd)))
+    base = real.model.dof_frictionloss.copy()
+
+    def double_at(k, m):
+        if k == 75:
+            m.dof_frictionloss[:] = 2.0 * base
+
+    q2, qd2, _ = real.record(q_cmd, on_sample=double_at)
+    np.testing.assert_array_equal(q2[:76], q[:76])
+    assert np.abs(q2[76:] - q[76:]).max() > 1e-4
+    np.testing.assert_allclose(real.physics().friction, 2.0 * base)
+
+
 def test_torque_saturation_and_sensors(humanoid):
     q_cmd = _command(humanoid, 0.4)
     q_cmd[50:] += 0.3 * np.sign(0.5 * (humanoid.lower + humanoid.upper) - q_cmd[50:])  # a step: large torques

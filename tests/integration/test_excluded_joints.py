@@ -148,7 +148,7 @@ def test_validation_score_ignores_the_gripper(so101, shipped):
 
 
 def test_identification_loss_ignores_the_gripper(so101, shipped):
-    from wresdyn.learn.sysid import SysIdConfig, _window_loss
+    from wresdyn.learn.sysid import SysIdConfig, physics_window_loss
     from wresdyn.sim import Simulator, TrajectoryBank
     from wresdyn.sim.physics import PhysicsModel
 
@@ -160,7 +160,7 @@ def test_identification_loss_ignores_the_gripper(so101, shipped):
 
     def loss(trs, weights):
         window = TrajectoryBank(trs, sim.device).window(torch.tensor([0]), torch.tensor([0]), 16)
-        value, _ = _window_loss(cfg, model, sim, window, weights)
+        value, _ = physics_window_loss(cfg, model, sim, window, weights)
         return float(value.detach())
 
     _assert_window_loss_ignores_the_gripper(loss, train, w)

@@ -5,7 +5,8 @@ Ranks (an import may point to its own rank or a lower one, never a higher one):
 
 0. the shared leaves at the top of the package: ``errors``, ``choices``, ``paths``, ``progress`` (each imports at
    most another leaf);
-1. ``robot``; 2. ``data``; 3. ``sim``; 4. ``learn``; 5. ``evaluation`` and ``export``; 6. ``skills``;
+1. ``robot``; 2. ``data``; 3. ``sim``; 4. ``learn``; 5. ``evaluation``, ``export`` and ``adapt`` (online
+   identification); 6. ``skills``;
 7. ``experiments`` (the drivers that train and compare several things); 8. ``cli``;
 9. the package's face: ``wresdyn/__init__.py`` (re-exports the robot's API) and ``wresdyn/__main__.py`` (runs the
    command line).
@@ -26,7 +27,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[2] / "wresdyn"
 
 RANK = {"errors": 0, "choices": 0, "paths": 0, "progress": 0, "robot": 1, "data": 2, "sim": 3, "learn": 4,
-        "evaluation": 5, "export": 5, "skills": 6, "experiments": 7, "cli": 8, "__init__": 9, "__main__": 9}
+        "evaluation": 5, "export": 5, "adapt": 5, "skills": 6, "experiments": 7, "cli": 8, "__init__": 9, "__main__": 9}
 """Rank of each top-level module or subpackage of ``wresdyn`` (see the module docstring)."""
 
 MAX_LINES = 450

@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("wresdyn.cli.bench", "env-steps/s of the replay workload for every solver, same robot and worlds"),
     "identify": ("wresdyn.cli.identify", "identify the simulator's own physics (gains, friction, delay, masses...)"),
     "fit": ("wresdyn.cli.fit", "learn a residual by gradient descent through the differentiable simulation"),
+    "adapt": ("wresdyn.cli.adapt", "keep a run's identified physics up to date from a stream of the robot's samples"),
     "view": ("wresdyn.cli.view", "play a run's held-out replay (or a deploy's skills) in the browser, side by side"),
     "export": ("wresdyn.cli.export", "write the calibrated robot: USD layers, Newton actuators and the residual"),
     "deploy": ("wresdyn.cli.deploy", "train tracking skills in nominal and corrected simulators, deploy them on the real robot"),

@@ -170,8 +170,8 @@ class RealRobot:
                               np.full(n, self.n_delay * self.substep), m.body_mass[1:].copy(), m.body_ipos[1:].copy(),
                               inertia, **servo)
 
-    def record(self, q_cmd: np.ndarray, rng: np.random.Generator | None = None, settle: float = 0.5
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def record(self, q_cmd: np.ndarray, rng: np.random.Generator | None = None, settle: float = 0.5,
+               on_sample=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Execute joint commands under PD and record what the robot's sensors report.
 
         The robot starts at rest at ``q_cmd[0]`` and holds it for ``settle`` seconds (it sags under gravity
@@ -182,6 +182,9 @@ class RealRobot:
             q_cmd: Commanded joint positions [rad], shape (T, n_dof).
             rng: Generator for the sensor noise (required when a noise is on).
             settle: Time holding ``q_cmd[0]`` before sample 0 [s].
+            on_sample: Optional ``callable(k, model)`` called before the physics steps of sample k (after settling),
+                which may change the MuJoCo model's fields in place: a robot whose mismatch drifts during the
+                recording (:meth:`physics` reads the fields as they are then). ``None``: the robot stays as built.
 
         Returns:
             ``(q, qd, tau)``: measured joint positions [rad] and velocities [rad/s] at t_k, shape (T, n_dof);
@@ -211,6 +214,8 @@ class RealRobot:
         q, qd, tau = np.empty((t_len, n)), np.empty((t_len, n)), np.zeros((t_len, n))
         for k in range(t_len):
             q[k], qd[k] = d.qpos, d.qvel
+            if on_sample is not None:
+                on_sample(k, m)
             for _ in range(self.n_sub):
                 step(q_cmd[k])
                 tau[k] += d.actuator_force

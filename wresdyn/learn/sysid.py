@@ -40,7 +40,8 @@ from .unexcited_limits import limit_unexcited_efforts
 from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
 from .window_fit_config import SysIdConfig
 
-__all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE"]
+__all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
+           "physics_window_loss"]
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where it runs and the L-BFGS refinement, which
@@ -72,7 +73,7 @@ def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validatio
     return shared
 
 
-def _window_loss(cfg, model, sim, window, weights=None):
+def physics_window_loss(cfg, model, sim, window, weights=None):
     """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
     per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
     sim.set_physics(model())
@@ -110,7 +111,7 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
         if profiled:  # the servo goals of the fixed windows move with the fitted goal acceleration
             bank.set_command_path(delay, model.goal_accel_steps().float().to(sim.device))
             w = bank.window(traj, first, h)
-        loss, _ = _window_loss(cfg, model, sim, w, weights)
+        loss, _ = physics_window_loss(cfg, model, sim, w, weights)
         if not torch.isfinite(loss):
             raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
         loss.backward()
@@ -256,7 +257,7 @@ class _IdentifyLearner:
         else:
             self.bank.set_command_path(delay, model.goal_accel_steps().float().to(self.sim.device))
         window = self.bank.sample(self.rng, cfg.windows, h)
-        loss, parts = _window_loss(cfg, model, self.sim, window, self.weights)
+        loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights)
         loss = loss + cfg.w_prior * model.prior().to(loss.device)
         if not torch.isfinite(loss):
             raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")

@@ -1,0 +1,147 @@
+"""The online identifier (:mod:`wresdyn.adapt`): an update is kept only when it lowers the held-back error, published
+as a physics file with its time; the stream's bad input is refused in one line, by the adapter and by ``wresdyn
+adapt``."""
+
+import json
+
+import numpy as np
+import pytest
+
+from wresdyn.adapt.adapter import Adapter, StreamError
+from wresdyn.adapt.config import AdaptConfig
+from wresdyn.adapt.stream import dataset_blocks, text_blocks
+from wresdyn.cli import main
+from wresdyn.data.mismatch import Mismatch
+from wresdyn.data.real_robot import RealRobot
+from wresdyn.sim.physics import PhysicalParams
+
+REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, torque_limit_scale=0.5)
+"""The real robot of these tests: gains, friction, damping and saturation off the file's, no delay, no noise."""
+TINY = AdaptConfig(window=1.2, holdout=0.3, update_every=0.4, iterations=3, windows=4, horizon=16, one_step_every=10)
+"""A few updates on 1.6 s of stream."""
+
+
+@pytest.fixture(scope="module")
+def stream(humanoid, record):
+    return record(humanoid, REAL, {"train": 1}, seconds=1.6, amplitude=0.3)
+
+
+def _run(adapter, ds):
+    return [u for block in dataset_blocks(ds) for u in adapter.push(*block)]
+
+
+def test_an_update_that_lowers_the_held_back_error_is_accepted_and_published(humanoid, stream, tmp_path):
+    # the robot file's physics is far from the real robot's: a few steps toward it lower the held-back error
+    start = PhysicalParams.nominal(humanoid)
+    adapter = Adapter(humanoid, start, stream.rate_hz, TINY.__class__(**{**TINY.__dict__, "lr": 0.02}),
+                      publish=tmp_path)
+    updates = _run(adapter, stream)
+    assert len(updates) >= 2
+    first = updates[0]
+    assert first.accepted and first.open_loop_candidate < first.open_loop_before
+    assert first.open_loop == first.open_loop_candidate < first.open_loop_start
+    last = [u for u in updates if u.accepted][-1]
+    assert last.open_loop < 0.9 * last.open_loop_start, (last.open_loop, last.open_loop_start)
+    published = PhysicalParams.load(tmp_path / "physics.json", humanoid)
+    assert published.friction.tolist() == adapter.physics.friction.tolist()
+    assert json.loads((tmp_path / "physics.json").read_text())["t"] == pytest.approx(last.t)
+    assert len(list(tmp_path.glob("physics_*.json"))) == sum(u.accepted for u in updates)
+
+
+def test_an_update_that_raises_the_held_back_error_is_rejected(humanoid, stream, tmp_path):
+    # the truth itself as the warm start, and steps far too large: every candidate is worse and none is kept
+    truth = RealRobot(humanoid, REAL).physics()
+    adapter = Adapter(humanoid, truth, stream.rate_hz, TINY.__class__(**{**TINY.__dict__, "lr": 1.0}),
+                      publish=tmp_path)
+    updates = _run(adapter, stream)
+    assert updates and not any(u.accepted for u in updates)
+    for u in updates:
+        assert u.open_loop_candidate > u.open_loop_before == u.open_loop == u.open_loop_start
+    assert adapter.physics is truth
+    assert not list(tmp_path.glob("physics*.json"))
+
+
+def test_the_adapter_refuses_bad_samples(humanoid):
+    adapter = Adapter(humanoid, PhysicalParams.nominal(humanoid), 500.0, TINY)
+    n = humanoid.n_dof
+    z = np.zeros(n)
+    adapter.push(0.0, z, z, z)
+    with pytest.raises(StreamError, match="does not increase"):
+        adapter.push(0.0, z, z, z)
+    with pytest.raises(StreamError, match="not finite"):
+        adapter.push(0.002, np.full(n, np.nan), z, z)
+    with pytest.raises(StreamError, match=f"{n} values"):
+        adapter.push(0.002, z[:-1], z[:-1], z[:-1])
+    with pytest.raises(StreamError, match="under half the sample period"):
+        adapter.push(0.0005, z, z, z)
+
+
+def test_text_stream_parses_and_names_the_bad_line(humanoid):
+    n = humanoid.n_dof
+    good = " ".join(["0.0"] + ["0.1"] * 3 * n)
+    (t, q, qd, q_cmd), = text_blocks(["# header", "", good], n, block=8)
+    assert t.tolist() == [0.0] and q.shape == qd.shape == q_cmd.shape == (1, n)
+    with pytest.raises(StreamError, match="x:2: 3 numbers"):
+        list(text_blocks([good, "0.002 1 2"], n, where="x"))
+
+
+def _write_lines(path, rows):
+    path.write_text("\n".join(" ".join(f"{v:.9g}" for v in r) for r in rows) + "\n")
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing_run", "no such run folder"),
+    ("no_physics", "no physics.json"),
+    ("wrong_dof", "62 numbers, expected 64"),
+    ("nan", "not finite"),
+    ("unsorted", "does not increase"),
+    ("other_robot", "joint"),
+])
+def test_cli_bad_input_is_one_line_and_exit_2(humanoid, stream, tmp_path, capsys, case, message):
+    from wresdyn.robot.description import DEFAULT_ROBOT
+
+    run = tmp_path / "run"
+    run.mkdir()
+    PhysicalParams.nominal(humanoid).save(run / "physics.json")
+    tr = stream.trajectories[0]
+    rows = np.column_stack([tr.t, tr.q, tr.qd, tr.q_cmd])[:50]
+    if case == "wrong_dof":
+        rows = rows[:, :-2]
+    elif case == "nan":
+        rows[10, 3] = np.nan
+    elif case == "unsorted":
+        rows[[10, 11]] = rows[[11, 10]]
+    log = tmp_path / "log.txt"
+    _write_lines(log, rows)
+    if case == "missing_run":
+        run = tmp_path / "nowhere"
+    elif case == "no_physics":
+        (run / "physics.json").unlink()
+    elif case == "other_robot":
+        d = json.loads((run / "physics.json").read_text())
+        d["joint_names"] = d["joint_names"][:-1]
+        (run / "physics.json").write_text(json.dumps(d))
+    code = main(["adapt", str(run), str(log), "--robot", str(DEFAULT_ROBOT), "--out", str(tmp_path / "out"),
+                 "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("wresdyn adapt: error:") and message in err, err
+
+
+def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    PhysicalParams.nominal(humanoid).save(run / "physics.json")
+    stream.save(tmp_path / "data.npz")
+    out = tmp_path / "out"
+    code = main(["adapt", str(run), str(tmp_path / "data.npz"), "--out", str(out), "--window", "1.2",
+                 "--holdout", "0.3", "--update-every", "0.4", "--iterations", "2", "--windows", "4", "--horizon", "16",
+                 "--lr", "0.02", "--track", "friction:*knee"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    summary = json.loads((out / "updates.json").read_text())
+    rows = (out / "updates.csv").read_text().splitlines()
+    assert summary["n_updates"] == len(summary["updates"]) == len(rows) - 1 >= 2
+    assert "friction[left_knee]" in rows[0] and printed.count("friction[left_knee]") == summary["n_updates"]
+    assert (out / "adapt.png").is_file()
+    assert len(list((out / "physics").glob("physics_*.json"))) == summary["accepted"] >= 1

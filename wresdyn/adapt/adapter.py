@@ -1,0 +1,299 @@
+"""Online identification: keep the identified physics true while the robot works.
+
+An :class:`Adapter` starts from an offline calibration (``physics.json`` of ``wresdyn identify`` or a hybrid ``wresdyn
+fit``), consumes the robot's stream of samples (t, q, q̇, q_cmd) and keeps the last :attr:`AdaptConfig.window`
+seconds. Every :attr:`AdaptConfig.update_every` seconds of robot time it runs a bounded number of identification
+steps, the offline loss of :mod:`wresdyn.learn.sysid` (multiple shooting on windows cut from the buffer, through the
+differentiable solver, in the physically consistent coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`)
+
+    L = mean_k [ w_q |q_k − q_r,k|² + w_qd |q̇_k − q̇_r,k|² ] + w_prior |u − u_warm|²,
+
+on the window without its latest :attr:`AdaptConfig.holdout` seconds. The prior pulls toward the warm start, and a
+joint the training part does not move (RMS velocity under :attr:`AdaptConfig.excited_min`) keeps its joint fields:
+what the recent data do not excite stays as the calibration left it. The update is accepted only if the whole
+held-back segment, replayed open loop from its first recorded state, is closer to the recording than with the current
+model; otherwise the coordinates go back to the current model's. Accepted updates are published as
+``physics.json``-compatible files with their robot time (:meth:`Adapter.publish`).
+
+A jump in time of more than 1.5 sample periods starts a new segment: windows never span one, and the held-back part
+is the end of the latest segment.
+"""
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import torch
+
+from ..errors import WresdynError
+from ..learn.sysid import physics_window_loss
+from ..sim import Simulator, TrajectoryBank, rollout
+from ..robot.physical import PhysicalParams
+from ..sim.physics import PhysicsModel
+from .config import AdaptConfig
+
+__all__ = ["Adapter", "StreamError", "Update"]
+
+_JOINT_PARAMS = ("kp", "kd", "armature", "damping", "friction", "effort")
+"""Joint fields whose coordinates an unexcited joint keeps."""
+
+
+class StreamError(WresdynError):
+    """A sample the adapter cannot take (wrong size, not finite, time not increasing); one line."""
+
+
+@dataclass
+class Update:
+    """One update of the adapter: what it tried, what it kept, the errors and the compute it took."""
+
+    t: float
+    """Robot time of the update [s] (the last sample's)."""
+    accepted: bool
+    """Whether the candidate lowered the held-back error and became the model."""
+    open_loop: float
+    """Held-back open-loop error of the model after the decision, mean |q_sim − q| [rad]."""
+    open_loop_before: float
+    """The same for the model before the update [rad]."""
+    open_loop_candidate: float
+    """The same for the candidate [rad]."""
+    open_loop_start: float
+    """The same for the warm start (the offline calibration, held fixed) [rad]."""
+    one_step: float
+    """One-step prediction error of the model after the decision on the held-back samples, mean |q_sim − q| [rad]."""
+    one_step_start: float
+    """The same for the warm start [rad]."""
+    loss: float
+    """Training loss of the last step (with the prior)."""
+    excited: int
+    """Joints the training part excites (their joint fields were adapted)."""
+    compute: float
+    """Wall-clock time of the update [s]."""
+    physics: PhysicalParams = field(repr=False)
+    """The model after the decision."""
+
+    def row(self) -> dict:
+        """The scalar fields, for a CSV / JSON log."""
+        return {k: v for k, v in self.__dict__.items() if k != "physics"}
+
+
+class Adapter:
+    """Online identifier warm-started from ``start`` (module docstring).
+
+    Args:
+        robot: The robot (the simulator side; fixed base).
+        start: The warm start (an offline calibration); also where the prior pulls.
+        rate_hz: Sample rate of the stream [Hz].
+        cfg: Settings.
+        publish: Folder the accepted updates are written to (:meth:`publish`); ``None``: not written.
+    """
+
+    def __init__(self, robot, start: PhysicalParams, rate_hz: float, cfg: AdaptConfig = AdaptConfig(),
+                 publish: str | Path | None = None) -> None:
+        start.check(robot)
+        self.robot, self.start, self.cfg, self.rate_hz = robot, start, cfg, float(rate_hz)
+        self.dt = 1.0 / self.rate_hz
+        if cfg.torch_threads is not None:
+            torch.set_num_threads(cfg.torch_threads)
+        torch.manual_seed(cfg.seed)
+        self.rng = np.random.default_rng(cfg.seed)
+        n = robot.n_dof
+        self.model = PhysicsModel(robot, start, fit=cfg.fit, dt=self.dt)
+        m = self.model
+        groups = [[m.u_kp, m.u_kd, m.u_armature], [m.u_damping, m.u_friction, m.u_effort],
+                  [m.u_body_logdiag, m.u_body_off]]
+        self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "lr": cfg.lr * f}
+                                       for g, f in zip(groups, cfg.lr_scale) if any(p.requires_grad for p in g)],
+                                      lr=cfg.lr)
+        self.physics = start
+        """The current model (the last accepted update, or the warm start)."""
+        self._kept = {k: v.clone() for k, v in m.state_dict().items()}
+        self.delay = torch.as_tensor(start.delay / self.dt, dtype=torch.float32)
+        self.sim = Simulator(robot, cfg.windows, self.dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
+                             param_grads=True)
+        self.device = self.sim.device
+        self.n_holdout = int(round(cfg.holdout * self.rate_hz))
+        self.n_one = max(1, (self.n_holdout - 1) // cfg.one_step_every)
+        # param_grads: parameters are read live from the model arrays, so a new model does not recompile the solver
+        self.sim_val = Simulator(robot, 3, self.dt, solver=cfg.solver, device=cfg.device, param_grads=True)
+        self.sim_one = Simulator(robot, 2 * self.n_one, self.dt, solver=cfg.solver, device=cfg.device,
+                                 param_grads=True)
+        self.sim_one.set_physics(start, worlds=slice(0, self.n_one))
+        self.sim_val.set_physics(start, worlds=slice(0, 1))
+        cap = int(np.ceil(cfg.window * self.rate_hz)) + 1
+        self._cap = cap
+        self._t = np.empty(2 * cap)
+        self._x = np.empty((2 * cap, 3, n))  # q [rad], q̇ [rad/s], q_cmd [rad] of each sample
+        self._seg = np.empty(2 * cap, dtype=np.int64)
+        self._len, self._segment, self._next = 0, 0, None
+        self.publish_dir = None if publish is None else Path(publish)
+        if self.publish_dir is not None:
+            self.publish_dir.mkdir(parents=True, exist_ok=True)
+        self.updates: list[Update] = []
+        self.compute = 0.0
+        """Wall-clock time spent in updates so far [s]."""
+
+    # -------------------------------------------------------------------------------------------- the stream
+    def push(self, t, q, qd, q_cmd) -> list[Update]:
+        """Take samples: ``t`` [s] a scalar or (T,), strictly increasing and after every earlier sample; ``q``
+        [rad], ``qd`` [rad/s], ``q_cmd`` [rad], each (n,) or (T, n). Runs the updates that fall due on the way and
+        returns them."""
+        t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+        x = [np.asarray(a, dtype=np.float64).reshape(len(t), -1) if np.size(a) == len(t) * self.robot.n_dof
+             else None for a in (q, qd, q_cmd)]
+        if any(a is None for a in x) or t.ndim != 1:
+            raise StreamError(f"a sample needs t and {self.robot.n_dof} values each of q, qd and q_cmd "
+                              f"(the robot's joints)")
+        if not (np.isfinite(t).all() and all(np.isfinite(a).all() for a in x)):
+            raise StreamError(f"a sample at t = {t[0]:.6g} s is not finite")
+        prev = self._t[self._len - 1] if self._len else -np.inf
+        steps = np.diff(np.concatenate([[prev], t]))
+        if (steps <= 0).any():
+            k = int(np.flatnonzero(steps <= 0)[0])
+            before = prev if k == 0 else t[k - 1]
+            raise StreamError(f"time does not increase at t = {t[k]:.6g} s (after {before:.6g} s)")
+        if (steps < 0.5 * self.dt).any():
+            k = int(np.flatnonzero(steps < 0.5 * self.dt)[0])
+            raise StreamError(f"a time step of {steps[k]:.6g} s at t = {t[k]:.6g} s is under half the sample period "
+                              f"{self.dt:.6g} s: the stream is not at {self.rate_hz:g} Hz")
+        out = []
+        xs = np.stack(x, 1)
+        for i in range(len(t)):
+            self._append(t[i], xs[i], steps[i] > 1.5 * self.dt)
+            if self._next is None:
+                self._next = t[i] + self.cfg.update_every
+            elif t[i] >= self._next - 1e-9:
+                self._next += self.cfg.update_every * max(1, np.floor((t[i] - self._next) / self.cfg.update_every) + 1)
+                u = self.update()
+                if u is not None:
+                    out.append(u)
+        return out
+
+    def _append(self, t: float, x: np.ndarray, jump: bool) -> None:
+        if jump and self._len:
+            self._segment += 1
+        if self._len == len(self._t):  # full: keep the latest window
+            keep = self._cap
+            for a in (self._t, self._x, self._seg):
+                a[:keep] = a[self._len - keep:self._len]
+            self._len = keep
+        self._t[self._len], self._x[self._len], self._seg[self._len] = t, x, self._segment
+        self._len += 1
+
+    def _buffer(self):
+        """The samples of the last :attr:`AdaptConfig.window` seconds: ``(t, x, seg)``."""
+        t = self._t[:self._len]
+        first = np.searchsorted(t, t[-1] - self.cfg.window, side="left")
+        return t[first:], self._x[first:self._len], self._seg[first:self._len]
+
+    # -------------------------------------------------------------------------------------------- an update
+    def update(self) -> Update | None:
+        """One update on the current buffer (normally called by :meth:`push`); ``None`` when the buffer holds too
+        little yet (a held-back part of :attr:`AdaptConfig.holdout` and a training window of
+        :attr:`AdaptConfig.horizon` steps)."""
+        t0 = time.perf_counter()
+        t, x, seg = self._buffer()
+        latest = seg == seg[-1]
+        if latest.sum() < self.n_holdout + 1:
+            return None
+        hold = np.flatnonzero(latest)[-(self.n_holdout + 1):]
+        before = seg[:hold[0] + 1]  # the training part ends at the held-back part's start state
+        train = [_traj(x[:hold[0] + 1][before == s]) for s in np.unique(before)]
+        train = [tr for tr in train if len(tr.q) > self.cfg.horizon]
+        if not train:
+            return None
+        holdout = _traj(x[hold])
+        excited = np.sqrt(np.mean(np.concatenate([tr.qd for tr in train]) ** 2, 0)) >= self.cfg.excited_min
+        loss = self._steps(train, excited)
+        cand = self.model.values() if np.isfinite(loss) else self.physics
+        ol = self._open_loop(holdout, cand)
+        accepted = bool(np.isfinite(loss) and ol[2] < (1.0 - self.cfg.min_gain) * ol[1])
+        if accepted:
+            self.physics = cand
+            self._kept = {k: v.clone() for k, v in self.model.state_dict().items()}
+        else:
+            self.model.load_state_dict(self._kept)
+        one = self._one_step(holdout)
+        u = Update(float(t[-1]), accepted, ol[2] if accepted else ol[1], ol[1], ol[2], ol[0], one[1], one[0],
+                   float(loss), int(excited.sum()), 0.0, self.physics)
+        u.compute = time.perf_counter() - t0
+        self.compute += u.compute
+        self.updates.append(u)
+        if accepted:
+            self.publish(u)
+        return u
+
+    def _steps(self, train, excited: np.ndarray) -> float:
+        """``cfg.iterations`` Adam steps on windows of ``train``; joints not ``excited`` keep their joint fields.
+        Returns the last loss (``nan`` if the simulation diverged)."""
+        cfg, model = self.cfg, self.model
+        bank = TrajectoryBank(train, self.device, self.delay.to(self.device))
+        frozen = torch.as_tensor(~excited)
+        loss = float("nan")
+        for _ in range(cfg.iterations):
+            held = {f: getattr(model, f"u_{f}").detach().clone() for f in _JOINT_PARAMS}
+            window = bank.sample(self.rng, cfg.windows, cfg.horizon)
+            value, _ = physics_window_loss(cfg, model, self.sim, window)
+            value = value + cfg.w_prior * model.prior().to(value.device)
+            if not torch.isfinite(value):
+                return float("nan")
+            self.optim.zero_grad()
+            value.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            self.optim.step()
+            model.project()
+            with torch.no_grad():
+                for f, v in held.items():
+                    u = getattr(model, f"u_{f}")
+                    u.copy_(torch.where(frozen, v, u))
+            loss = float(value.detach())
+        return loss
+
+    def _open_loop(self, holdout, candidate: PhysicalParams) -> tuple[float, float, float]:
+        """Held-back open-loop error [rad] of the warm start, the current model and ``candidate``."""
+        self.sim_val.set_physics(self.physics, worlds=slice(1, 2))
+        self.sim_val.set_physics(candidate, worlds=slice(2, 3))
+        window = TrajectoryBank([holdout], self.device, self.delay.to(self.device)).whole().repeat(3)
+        with torch.no_grad():
+            run = rollout(self.sim_val, window)
+        err = (run.q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
+        return tuple(float(e) for e in err)
+
+    def _one_step(self, holdout) -> tuple[float, float]:
+        """One-step prediction error [rad] of the warm start and the current model on every
+        :attr:`AdaptConfig.one_step_every`-th held-back sample, each step from its recorded state."""
+        self.sim_one.set_physics(self.physics, worlds=slice(self.n_one, 2 * self.n_one))
+        bank = TrajectoryBank([holdout], self.device, self.delay.to(self.device))
+        start = torch.arange(self.n_one, device=self.device) * self.cfg.one_step_every
+        window = bank.window(torch.zeros_like(start), start, 1).repeat(2)
+        with torch.no_grad():
+            run = rollout(self.sim_one, window)
+        err = (run.q[:, 1] - window.q[:, 1]).abs().mean(-1).cpu().numpy()
+        return float(err[:self.n_one].mean()), float(err[self.n_one:].mean())
+
+    # -------------------------------------------------------------------------------------------- publishing
+    def publish(self, update: Update) -> Path | None:
+        """Write ``update``'s physics to the publish folder: ``physics_<t>.json`` (``t`` in ms) and ``physics.json``
+        (the latest), each the :meth:`~wresdyn.robot.physical.PhysicalParams.save` format with ``t`` [s] and the
+        held-back error added (:meth:`~wresdyn.robot.physical.PhysicalParams.load` reads them). Returns the
+        timestamped file."""
+        if self.publish_dir is None:
+            return None
+        data = {**update.physics.to_json(), "t": update.t, "open_loop": update.open_loop}
+        text = json.dumps(data, indent=1)
+        path = self.publish_dir / f"physics_{int(round(update.t * 1000)):09d}.json"
+        for p in (path, self.publish_dir / "physics.json"):
+            tmp = p.with_name(p.name + ".tmp")
+            tmp.write_text(text)
+            tmp.replace(p)
+        return path
+
+
+def _traj(x: np.ndarray):
+    """A trajectory for :class:`~wresdyn.sim.bank.TrajectoryBank` from buffered samples (T, 3, n); q̈ is not read
+    without a residual policy."""
+    q = np.ascontiguousarray(x[:, 0])
+    return SimpleNamespace(q=q, qd=np.ascontiguousarray(x[:, 1]), qdd=np.zeros_like(q),
+                           q_cmd=np.ascontiguousarray(x[:, 2]))

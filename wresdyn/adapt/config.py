@@ -1,0 +1,96 @@
+"""The online identifier's settings (:class:`AdaptConfig`), apart from :mod:`.adapter` so that the command line reads
+them without importing torch or Warp."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..choices import SolverKind, check_choice, check_device, check_number
+from ..learn.window_fit_config import FIT_FIELDS
+
+__all__ = ["ADAPT_FIT", "AdaptConfig"]
+
+ADAPT_FIT = ("kp", "kd", "armature", "damping", "friction", "effort", "bodies")
+"""What is adapted unless told: the identified fields except the command delay, which stays the warm start's (the
+held-back replay then compares models on the same PD targets)."""
+
+
+@dataclass(frozen=True)
+class AdaptConfig:
+    """Online identification settings (defaults: the 21-DoF humanoid at 500 Hz, about real time on one CPU core)."""
+
+    window: float = 6.0
+    """Length of the sliding window of recent samples kept [s]; an update fits on it without the held-back part."""
+    holdout: float = 1.0
+    """The latest seconds of the window held back [s]: an update is accepted only if it lowers the open-loop replay
+    error there (whole segment replayed from its first recorded state)."""
+    update_every: float = 1.0
+    """Robot time between updates [s]."""
+    iterations: int = 4
+    """Adam steps per update (bounded compute: each replays ``windows`` x ``horizon`` steps with gradients)."""
+    windows: int = 8
+    """Windows B (Newton worlds) drawn from the training part of the buffer per step."""
+    horizon: int = 64
+    """Window length [steps] (at 500 Hz, 128 ms)."""
+    fit: tuple[str, ...] = ADAPT_FIT
+    """Fields adapted (:data:`~wresdyn.learn.window_fit_config.FIT_FIELDS` except ``delay``); the others keep the warm
+    start's values."""
+    lr: float = 0.005
+    """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`. Chosen with ``min_gain``
+    on the drift benchmark (``benchmarks/adapt_drift.py``) among (0.01, 0), (0.005, 0.05), (0.01, 0.1): the lowest
+    error in every drift phase, and with (0.01, 0.1) the least loss without drift."""
+    lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
+    """Learning-rate factors of the gain/armature log scales, the linear fields and the link pseudo-inertia factors
+    (as :attr:`~wresdyn.learn.window_fit_config.SysIdConfig.lr_scale`)."""
+    w_q: float = 1.0
+    """Weight of the joint position error [1/rad²]."""
+    w_qd: float = 0.01
+    """Weight of the joint velocity error [s²/rad²]."""
+    w_prior: float = 1e-4
+    """Weight of the squared distance of the coordinates from the warm start
+    (:meth:`~wresdyn.sim.physics.PhysicsModel.prior`): what a few seconds of data do not excite stays near the
+    offline calibration."""
+    excited_min: float = 0.05
+    """RMS joint velocity [rad/s] below which a joint counts as not excited by the training part of the window: its
+    joint fields keep their values in that update."""
+    min_gain: float = 0.05
+    """An update is accepted when its held-back error is below ``(1 - min_gain)`` times the current model's: a margin
+    against updates that only fit the held-back second's noise (without it, 1.28x the fixed model's error on average
+    without drift in the benchmark; with 0.05, 1.06x)."""
+    one_step_every: int = 5
+    """One-step prediction error on every this many samples of the held-back part."""
+    grad_clip: float = 1.0
+    """Global gradient-norm clip."""
+    grad_truncation: int | None = None
+    """Detach the state every this many steps; ``None``: full backpropagation (as identification)."""
+    solver: SolverKind = "auto"
+    """Newton solver; must be differentiable (SolverReplay)."""
+    device: str = "cpu"
+    """Warp / torch device."""
+    torch_threads: int | None = 1
+    """CPU threads for torch (``None``: torch's default)."""
+    seed: int = 0
+    """Seed of the window sampler."""
+
+    def __post_init__(self) -> None:
+        check_choice(self.solver, SolverKind, "solver")
+        check_device(self.device, "device")
+        for name in ("window", "holdout", "update_every", "lr", "grad_clip"):
+            check_number(getattr(self, name), name, gt=0)
+        for name in ("w_q", "w_qd", "w_prior", "excited_min"):
+            check_number(getattr(self, name), name, ge=0)
+        check_number(self.min_gain, "min_gain", ge=0, le=0.5)
+        for name in ("iterations", "windows", "horizon", "one_step_every"):
+            check_number(getattr(self, name), name, integer=True, ge=1)
+        check_number(self.seed, "seed", integer=True, ge=0)
+        for name in ("torch_threads", "grad_truncation"):
+            if getattr(self, name) is not None:
+                check_number(getattr(self, name), name, integer=True, ge=1)
+        if self.holdout >= self.window:
+            raise ValueError(f"holdout = {self.holdout} s must be shorter than the window ({self.window} s)")
+        for i, f in enumerate(self.lr_scale):
+            check_number(f, f"lr_scale[{i}]", gt=0)
+        bad = sorted(set(self.fit) - (set(FIT_FIELDS) - {"delay"}))
+        if bad:
+            raise ValueError(f"fit: field(s) {bad} cannot be adapted; choose from "
+                             f"{[f for f in FIT_FIELDS if f != 'delay']}")
