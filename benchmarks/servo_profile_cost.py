@@ -2,7 +2,7 @@
 the delay and the goal acceleration differentiable (the whole table profiled each iteration), 32 windows of 128 steps
 drawn, and the backward pass to both; every repeat timed (the first includes Warp's kernel load, if any).
 
-    OMP_NUM_THREADS=1 python benchmarks/servo_profile_cost.py DATA.npz --gains scenes/so101/servo.toml
+    OMP_NUM_THREADS=1 python benchmarks/servo_profile_cost.py DATA.npz --gains scenes/so101/servo.toml [--samples N]
 
 Times the ``wresdyn`` on ``sys.path`` first: ``PYTHONPATH=CHECKOUT`` compares two checkouts on the same data.
 """
@@ -25,10 +25,13 @@ def main() -> None:
     p.add_argument("data")
     p.add_argument("--gains", default=None)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--samples", type=int, default=0, help="cut every run to its first SAMPLES (0: whole runs)")
     args = p.parse_args()
     torch.set_num_threads(1)
     ds, robot = load_data(args.data, None, args.gains)
     train = ds.split("train")
+    if args.samples:
+        train = [type("Run", (), {k: getattr(t, k)[:args.samples] for k in ("q", "qd", "qdd", "q_cmd")}) for t in train]
     dt = 1.0 / ds.rate_hz
     bank = TrajectoryBank(train, torch.device("cpu"))
     accel0 = servo_goal_accel(robot, None, dt, bank.device)
