@@ -17,8 +17,9 @@ trajectory's first sample the first command is held, as on a robot that holds it
 
 Servo joints (:mod:`wresdyn.robot.servo`) then move their internal goal toward the delayed command with at most
 ``a_max`` (:meth:`TrajectoryBank.set_goal_accel`, :func:`profile_goals`): from rest at the first command, step
-``k``'s goal is one :func:`~wresdyn.robot.servo.profile_step` from step ``k − 1``'s toward ``target_k``, computed in
-torch over each whole trajectory, so the loss has a gradient in ``a_max``.
+``k``'s goal is one :func:`~wresdyn.robot.servo.profile_step` from step ``k − 1``'s toward ``target_k``, computed
+over each whole trajectory by a Warp kernel with its adjoint (:mod:`.goal_profile`), so the loss has a gradient in
+``a_max`` and the delay.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..robot.servo import profile_step
+from .goal_profile import profile_goals
 
 __all__ = ["Window", "TrajectoryBank", "delay_commands", "profile_goals", "servo_goal_accel"]
 
@@ -110,35 +111,6 @@ def servo_goal_accel(robot, physics, dt: float, device) -> torch.Tensor | None:
         return None
     accel = servo.goal_accel if physics is None else physics.goal_accel
     return torch.as_tensor(np.where(servo.mask, accel, 0.0) * dt * dt, dtype=torch.float32, device=device)
-
-
-def profile_goals(targets: torch.Tensor, first: torch.Tensor, accel: torch.Tensor) -> torch.Tensor:
-    """Servo goals for the targets of a concatenated table: each trajectory's goal starts at rest on its first target
-    and follows :func:`~wresdyn.robot.servo.profile_step`; joints with ``accel`` 0 follow the targets.
-
-    Args:
-        targets: Delayed commands [rad], (R, n): trajectories concatenated along time.
-        first: First row of each row's trajectory, (R,) long.
-        accel: Goal acceleration limit per joint [rad/step²], (n,) (differentiable).
-
-    Returns:
-        Goals [rad], (R, n).
-    """
-    starts = torch.unique_consecutive(first)
-    traj = torch.searchsorted(starts, first)  # trajectory of each row
-    k = torch.arange(len(first), device=first.device) - first  # sample of each row
-    t_max = int(k.max()) + 1
-    last = torch.cat([starts[1:], torch.tensor([len(first)], device=first.device)]) - 1
-    rows = torch.minimum(starts[:, None] + torch.arange(t_max, device=first.device)[None], last[:, None])
-    goal = targets[rows]  # (J, T, n), each trajectory held at its end
-    on = accel > 0
-    a = torch.where(on, accel, torch.ones_like(accel)).to(targets.dtype)
-    pos, vel = goal[:, 0], torch.zeros_like(goal[:, 0])
-    out = []
-    for t in range(t_max):
-        pos, vel = profile_step(torch, goal[:, t], pos, vel, a)
-        out.append(pos)
-    return torch.where(on, torch.stack(out, 1)[traj, k], targets)
 
 
 class TrajectoryBank:
