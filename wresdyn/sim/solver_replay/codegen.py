@@ -94,8 +94,8 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
     # clamp(beta w, -t, t) = beta clamp(w, -t / beta, t / beta), t = mu dt / H_ii
     beta = [e.let(f"S(1.0) - S(1.0) / (S(1.0) + fric_c * {m0[k]} * {inv_h[k]} + fric_k)") for k in range(n)]
     bound = [e.let(f"dt / {beta[k]} * {mu[k]} * {inv_h[k]}") for k in range(n)]
-    last: dict[int, tuple] = {}  # each moved DoF's latest (u, clamp or None); v is made from it at the end
-    delta: dict[int, object] = {}  # v_j - v*_j of the DoFs that moved
+    last: dict[int, tuple] = {}  # each DoF's latest (u, clamp); v is made from it at the end
+    delta: dict[int, object] = {}  # v_j - v*_j of the DoFs visited so far
     stamp: dict[int, int] = {}  # when each delta was made: the newest is summed last, the rest need not wait
     clock = itertools.count()
     for s in range(sweeps):
