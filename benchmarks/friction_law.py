@@ -93,7 +93,7 @@ def true_parameters(data: str, laws: dict) -> None:
         for name, kw in laws.items():
             sim = Simulator(robot, len(rec), 1.0 / ds.rate_hz, solver="replay")
             if kw:  # the older law: the same model under another SolverReplay
-                sim.solver = SolverReplay(sim.model, fold_zeros=True, **kw)
+                sim.solver = SolverReplay(sim.model, **kw)
             out = replay_trajectories(robot, rec, ds.rate_hz, physics=truth, sim=sim)["residual"]
             row.append(f"{name} {metrics(rec, out).mean_abs_dq:.4f}")
         print("   " + "; ".join(row))

@@ -20,7 +20,7 @@ from wresdyn.sim.warmup import compile_kernels
 
 SO101 = REPO / "scenes" / "so101" / "so101.xml"
 SHIPPED = REPO / "data" / "so101"
-DONE = re.compile(r"^\.\.\. done in \d+\.\d s$")
+DONE = re.compile(r"^\.\.\. done in \d+\.\d s \(.+ \d+\.\d s\)$")
 
 
 def test_compile_kernels_says_what_and_how_long_once_per_robot():
@@ -36,20 +36,21 @@ def test_compile_kernels_says_what_and_how_long_once_per_robot():
     shown = re.fullmatch(r".*, then loaded from (.+) \.\.\.", lines[0])
     assert shown and Path(shown[1]).expanduser() == Path(wp.config.kernel_cache_dir), lines[0]
     assert DONE.match(lines[1]) and seconds > 0
-    # compiled in this process: no second announcement, unless a variant is new
+    assert re.search(r"\(forward \d+\.\d s, grad \d+\.\d s\)$", lines[1]), lines[1]
+    # compiled in this process: no second announcement; identification's variant runs on the gradient fit's module
     assert compile_kernels(robot, 500.0, ("grad", "forward"), say=lines.append) is None and len(lines) == 2
-    assert compile_kernels(robot, 500.0, ("param_grads",), say=lines.append) is not None
-    assert "(6 joints; param_grads)" in lines[2] and DONE.match(lines[3])
-    # another robot object (a new load) is announced again
-    assert compile_kernels(load_robot(SO101), 500.0, say=lines.append) is not None and len(lines) == 6
+    assert compile_kernels(robot, 500.0, ("param_grads",), say=lines.append) is None and len(lines) == 2
+    # another robot object (a new load) is announced again; variants of one module are named together
+    assert compile_kernels(load_robot(SO101), 500.0, ("param_grads", "grad"), say=lines.append) is not None
+    assert "(6 joints; param_grads)" in lines[2] and re.search(r"\(param_grads = grad \d+\.\d s\)$", lines[3])
     with pytest.raises(WresdynError, match="choose from forward, grad, param_grads"):
         compile_kernels(robot, 500.0, ("backward",))
 
 
-def test_compile_kernels_with_identified_physics_compiles_what_the_command_then_runs():
-    """Identified physics makes friction non-zero, which SolverReplay compiled as a constant for the robot file (the
-    humanoid's has none): another module. Warmed up with the physics, a simulator set to it loads no module of its
-    own."""
+def test_identified_physics_runs_on_the_robot_files_modules():
+    """Identified physics makes friction and products of inertia non-zero where the robot file (the humanoid's) has
+    none; SolverReplay reads them as run-time arrays, so a simulator set to it loads no module beyond the warm-up's,
+    forward or with an adjoint."""
     from wresdyn.robot.description import DEFAULT_ROBOT
     from wresdyn.sim import Simulator
     from wresdyn.sim.physics import PhysicalParams
@@ -59,23 +60,22 @@ def test_compile_kernels_with_identified_physics_compiles_what_the_command_then_
     assert not robot.friction.any()
     physics = PhysicalParams.nominal(robot)
     physics.friction[:] = 0.5 + 0.01 * np.arange(robot.n_dof)  # [N*m]
+    physics.body_inertia[1:, 0, 1] = physics.body_inertia[1:, 1, 0] = 1e-5  # [kg*m^2]
 
-    def modules_loaded_by_a_run():
+    def modules_loaded_by_a_run(**kw):
         before = len(cache._MODULES)
-        sim = Simulator(robot, 2, 1 / 500.0)
+        sim = Simulator(robot, 2, 1 / 500.0, **kw)
         sim.set_physics(physics)
         sim.step(sim.q)
         return len(cache._MODULES) - before
 
     lines = []
     cache._MODULES.clear()  # the modules loaded in this process (not Warp's disk cache)
-    compile_kernels(robot, 500.0, ("forward",), say=lines.append)
-    assert modules_loaded_by_a_run() == 1  # the robot file's kernels were not the ones this run needs
-    compile_kernels(load_robot(DEFAULT_ROBOT), 500.0, ("forward",), physics=physics, say=lines.append)
-    assert "(21 joints; forward; identified physics)" in lines[2] and DONE.match(lines[3])
-    cache._MODULES.clear()
-    compile_kernels(robot, 500.0, ("forward",), physics=physics, say=lines.append)
+    compile_kernels(robot, 500.0, ("forward", "param_grads"), say=lines.append)
+    assert len(cache._MODULES) == 2
     assert modules_loaded_by_a_run() == 0
+    assert modules_loaded_by_a_run(requires_grad=True) == 0
+    assert modules_loaded_by_a_run(requires_grad=True, param_grads=True) == 0
 
 
 def test_collect_logs_announces_the_compile_before_the_replay(tmp_path, capsys):

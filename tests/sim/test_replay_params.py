@@ -3,7 +3,7 @@
 - the compiled structure (tree digest) does not depend on masses or inertias;
 - per-world masses, centres of mass and inertias, welded bodies included: M(q) and c(q, qd) against MuJoCo C
   built from the same numbers (float64 kernels: the model's float32 parameters limit the agreement);
-- edits take effect without recompiling (``fold_zeros`` recompiles only when a folded zero becomes non-zero).
+- edits take effect without recompiling, zeros of the robot file made non-zero included: one module per structure.
 """
 
 import dataclasses
@@ -103,7 +103,7 @@ def test_per_world_inertias_match_mujoco(robots, name):
     """World 1 gets other masses, centres of mass and inertias; each world matches MuJoCo built from its own."""
     robot = robots[name]
     model = robot.build_model(2, "cpu")
-    solver = SolverReplay(model, dtype=wp.float64, fold_zeros=False)
+    solver = SolverReplay(model, dtype=wp.float64)
     kernels = solver.kernels
     other = perturbed(robot, 1)
     set_world(model, 1, other)
@@ -113,39 +113,67 @@ def test_per_world_inertias_match_mujoco(robots, name):
     assert_terms_match_mujoco(solver, 1, other)
 
 
-def test_float32_edits_are_live_and_folded_zeros_recompile(robots):
-    """float32 reads the model arrays at every launch; with fold_zeros, making a folded zero non-zero takes
-    notify_model_changed, which loads the wider kernel."""
+def test_float32_edits_are_live_and_never_recompile(robots):
+    """float32 reads the model arrays at every launch: a mass edit, a product of inertia and a friction that were 0
+    in the robot file take effect without notify_model_changed, on the same module; a solver built on the edited
+    model loads that module too and steps to the same bits."""
     robot = robots["tri"]
     model = robot.build_model(1, "cpu")
-    solver = SolverReplay(model)  # fold_zeros: on (no gradients)
+    solver = SolverReplay(model)
     kernels = solver.kernels
 
-    def step():
+    def step(s):
         state, out = model.state(), model.state()
         state.joint_q.assign(np.array([0.3, -0.4, 0.05], np.float32))
         state.joint_qd.assign(np.array([1.0, -0.5, 0.2], np.float32))
-        solver.step(state, out, None, None, DT)
+        s.step(state, out, None, None, DT)
         return out.joint_qd.numpy()
 
-    before = step()
+    before = step(solver)
     mass = model.body_mass.numpy()
     mass[1:] *= 1.5
     model.body_mass.assign(mass)
-    after = step()  # no notify: float32 reads the arrays live
-    assert np.abs(after - before).max() > 1e-3 and solver.kernels is kernels
-    solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
-    assert solver.kernels is kernels, "no folded zero became non-zero"
+    after_mass = step(solver)
+    assert np.abs(after_mass - before).max() > 1e-3
 
     inertia = model.body_inertia.numpy()
-    b, i, j = np.argwhere(inertia[1:] == 0.0)[0] + np.array([1, 0, 0])  # a product of inertia compiled as 0
+    b, i, j = np.argwhere(inertia[1:] == 0.0)[0] + np.array([1, 0, 0])  # a product of inertia the file has as 0
     inertia[b, i, j] = inertia[b, j, i] = 2e-4
     model.body_inertia.assign(inertia)
-    solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
-    assert solver.kernels is not kernels
-    reference = SolverReplay(model, fold_zeros=False)
-    state, a, b = model.state(), model.state(), model.state()
-    state.joint_q.assign(np.array([0.3, -0.4, 0.05], np.float32))
-    solver.step(state, a, None, None, DT)
-    reference.step(state, b, None, None, DT)
-    assert np.array_equal(a.joint_qd.numpy(), b.joint_qd.numpy())
+    after_inertia = step(solver)
+    assert not np.array_equal(after_inertia, after_mass)
+
+    assert not model.joint_friction.numpy().any()
+    model.joint_friction.assign(np.full(model.joint_dof_count, 0.5, np.float32))
+    after_friction = step(solver)
+    assert np.abs(after_friction - after_inertia).max() > 1e-3
+    solver.notify_model_changed(newton.ModelFlags.JOINT_DOF_PROPERTIES | newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+    assert solver.kernels is kernels
+
+    reference = SolverReplay(model)
+    assert reference.kernels is kernels, "the module depends on the robot's structure, not its values"
+    assert np.array_equal(step(reference), after_friction)
+
+
+def test_forward_friction_branch_matches_the_adjoint_modules_step(robots):
+    """The forward kernels run the friction solve only in worlds with friction (a run-time branch); the adjoint
+    module runs it everywhere. One launch with a frictionless world and a world with friction: both modules give
+    the same step, and the friction acts in its world."""
+    robot = robots["tri"]
+    model = robot.build_model(2, "cpu")
+    friction = np.zeros(model.joint_dof_count, np.float32)
+    friction[model.joint_dof_count // 2:] = 0.5  # [N*m], world 1 only
+    model.joint_friction.assign(friction)
+    forward, adjoint = SolverReplay(model), SolverReplay(model, requires_grad=True)
+    assert forward.kernels is not adjoint.kernels
+
+    def step(solver):
+        state, out = model.state(), model.state()
+        state.joint_q.assign(np.tile(np.array([0.3, -0.4, 0.05], np.float32), 2))
+        state.joint_qd.assign(np.tile(np.array([1.0, -0.5, 0.2], np.float32), 2))
+        solver.step(state, out, None, None, DT)
+        return out.joint_qd.numpy().reshape(2, -1)
+
+    a, b = step(forward), step(adjoint)
+    assert np.array_equal(a, b)  # where the branch skips the solve, the solve returns v* exactly (measured: 0)
+    assert np.abs(a[1] - a[0]).max() > 0.02  # the same start: world 1's friction alone moves it (measured 0.054 rad/s)

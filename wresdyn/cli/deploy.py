@@ -120,12 +120,6 @@ def run(args: argparse.Namespace) -> int:
     # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
     variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
-    calibrated = Path(args.calibrated) / "physics.json" if args.calibrated else None
-    if calibrated is not None and calibrated.is_file():  # the calibrated plant's kernels (its friction is live)
-        from ..sim.physics import PhysicalParams
-
-        compile_kernels(robot, ds.rate_hz, ("forward",), device=cfg.device,
-                        physics=PhysicalParams.load(calibrated, robot), say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
           mismatch=mismatch, task=task, ppo=ppo, animation=not args.no_animation, log=log)
     return 0

@@ -106,9 +106,9 @@ def run(args: argparse.Namespace) -> int:
     from ..sim.warmup import compile_kernels
 
     physics = PhysicalParams.load(cfg.physics, robot) if cfg.physics else None
-    # the hybrid's stage 2 runs on the identified physics: fit_hybrid compiles those kernels once stage 1 is done
+    # the hybrid's stage 2 (grad) runs on stage 1's adjoint module (param_grads), whatever physics was identified
     compile_kernels(robot, ds.rate_hz, ("forward", "param_grads") if identify_first else ("forward", "grad"),
-                    solver=cfg.solver, device=cfg.device, physics=physics, say=log)
+                    solver=cfg.solver, device=cfg.device, say=log)
     try:
         if identify_first:
             from ..learn.hybrid import fit_hybrid

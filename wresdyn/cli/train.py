@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
 
     physics = PhysicalParams.load(cfg.env.physics, robot) if cfg.env.physics else None
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=cfg.env.solver, device=Ranks.from_env().device(cfg.ppo.device),
-                    physics=physics, say=log)
+                    say=log)
     try:
         summary = train(ds, robot, cfg, args.out, resume=not args.no_resume, data_path=args.data, log=log,
                         physics=physics)

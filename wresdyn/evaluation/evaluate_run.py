@@ -28,7 +28,7 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
     out_dir = Path(out) if out else run_dir / "eval"
 
-    compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device, physics=physics)
+    compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)

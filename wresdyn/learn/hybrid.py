@@ -61,8 +61,7 @@ def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=No
     params, id_curve = identify(robot, dataset, sysid_cfg, out=id_dir, log=log)
     save_identify_config(id_dir, sysid_cfg, dataset.rate_hz, data_path)
     cfg = replace(fit_cfg, model="network", physics=str(id_dir / "physics.json"))
-    compile_kernels(robot, dataset.rate_hz, ("forward", "grad"), solver=cfg.solver, device=cfg.device, physics=params,
-                    say=log)
+    compile_kernels(robot, dataset.rate_hz, ("forward", "grad"), solver=cfg.solver, device=cfg.device, say=log)
     log(f"stage 2/2: {cfg.residual.kind} residual ({cfg.residual.arch}) on the identified model "
         f"({cfg.iterations} iterations)")
     policy, curve = fit(robot, dataset, cfg, out=out, log=log, physics=params)

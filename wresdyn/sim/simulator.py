@@ -73,8 +73,8 @@ class Simulator:
         substeps: Solver steps per sample period.
         device: Warp device (``"cpu"``, ``"cuda:0"``).
         requires_grad: Build a differentiable model (for :meth:`step_diff`).
-        param_grads: Gradients also reach the model's physical parameters (identification); off, the replay
-            solver folds parameters that are zero everywhere into its kernels (faster).
+        param_grads: Gradients also reach the model's physical parameters (identification). The replay solver's
+            kernels are the same either way (they read every parameter), so this only gates :meth:`set_physics`.
         graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA).
         ground: Stand the robots on a floor (:meth:`wresdyn.robot.Robot.build_model`); needs the ``mujoco``
             solver (``auto`` picks it), so no gradients.
@@ -106,8 +106,8 @@ class Simulator:
         self.requires_grad = bool(requires_grad)
         self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
                                        contact=contact)
-        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, param_grads=param_grads,
-                                  ground=self.ground, contact=contact)
+        self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, ground=self.ground,
+                                  contact=contact)
         self.device = _torch_device(device)
         self._cuda = self.device.type == "cuda"
         self.graph = self._cuda if graph is None else bool(graph) and self._cuda
@@ -177,11 +177,10 @@ class Simulator:
                         raise RuntimeError("gradients to physical parameters need Simulator(requires_grad=True, "
                                            "param_grads=True)")
                     self._physics[f] = v
-        if self.solver_kind == "replay" and not self.solver.fold_zeros:
-            return  # every parameter is read live from the arrays just written (identification's hot loop)
+        if self.solver_kind == "replay":
+            return  # every parameter is read live from the arrays just written: nothing to recompile
         from newton import ModelFlags
 
-        # SolverReplay recompiles only when an entry folded as zero became non-zero
         self.solver.notify_model_changed(ModelFlags.JOINT_DOF_PROPERTIES | ModelFlags.BODY_INERTIAL_PROPERTIES)
         self._graphs.clear()  # captured launches may hold recompiled kernels' predecessors
 

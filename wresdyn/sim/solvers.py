@@ -87,14 +87,8 @@ def resolve_solver(robot: Robot, dt: float, kind: str = "auto", ground: bool = F
     return "mujoco"
 
 
-def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, param_grads: bool = False,
-                ground: bool = False, contact=None):
+def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: bool = False, contact=None):
     """Create the Newton solver for replay. See the module docstring for the choice.
-
-    ``param_grads``: the model's physical parameters (masses, inertias, joint parameters) are fitted, so
-    SolverReplay reads every entry of them; otherwise it compiles the entries that are zero in every world as
-    constants (``fold_zeros``, 25-35% faster forward and backward) and gradients reach only the state and
-    the control (what residual learning needs).
 
     ``ground``: the model has a floor (``Robot.build_model(ground=True)``): SolverMuJoCo with contacts on and the
     solver options of ``contact`` (:class:`~wresdyn.robot.ground.ContactSettings`, default ``ContactSettings()``),
@@ -106,7 +100,7 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, param_gra
     if kind == "replay":
         from .solver_replay import SolverReplay
 
-        return SolverReplay(model, fold_zeros=not param_grads)
+        return SolverReplay(model)
     if kind == "featherstone":
         return newton.solvers.SolverFeatherstone(model)
     # Newton's MuJoCo C backend holds one world; several run on mujoco_warp, on the CPU too (Warp's CPU device)

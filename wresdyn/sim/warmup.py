@@ -4,9 +4,14 @@ Warp compiles a module the first time one of its kernels launches; :class:`~wres
 generates its kernels per robot, so the first ``collect``, ``fit``, ``train``, ``identify`` or ``eval`` of a new
 robot can spend minutes in the compiler (the CPU adjoint of a large robot most of all) before its first step, with
 nothing on the terminal. :func:`compile_kernels` builds a one-world :class:`~wresdyn.sim.Simulator` with the
-settings the command is about to use and takes one step, between a line that says what is happening and one that
-says how long it took. Warp caches the compiled modules on disk (``wp.config.kernel_cache_dir``), so later runs
-only load them (well under a second on the SO-101); the command's own simulators then reuse the loaded modules.
+settings the command is about to use and takes one step per module, between a line that says what is compiled and
+one that says how long each part took. Warp caches the compiled modules on disk (``wp.config.kernel_cache_dir``), so
+later runs only load them (well under a second on the SO-101); the command's own simulators then reuse the loaded
+modules.
+
+A robot has two SolverReplay modules, whatever its physical parameters (they are run-time arrays): the forward one
+(replay, evaluation, PPO, validation) and the one with an adjoint, which serves both the gradient fit and
+identification. Identified physics therefore compiles nothing: stage 2 of ``wresdyn fit`` runs on stage 1's modules.
 """
 
 from __future__ import annotations
@@ -18,21 +23,25 @@ from pathlib import Path
 from ..errors import WresdynError
 from .simulator import Simulator
 
-__all__ = ["VARIANTS", "compile_kernels"]
+__all__ = ["MODULES", "VARIANTS", "compile_kernels"]
 
 VARIANTS = {"forward": (False, False), "grad": (True, False), "param_grads": (True, True)}
 """Kernel variants, name -> (``requires_grad``, ``param_grads``) of :class:`~wresdyn.sim.Simulator`: replay
 (evaluation, PPO, validation), differentiable in the state and residual (gradient fit), differentiable in the
-physical parameters too (identification). Each is its own generated module."""
+physical parameters too (identification)."""
+
+MODULES = {"forward": "forward", "grad": "adjoint", "param_grads": "adjoint"}
+"""Variant -> the module it runs on: the adjoint kernels are the same with or without parameter gradients (the
+model's arrays carry gradients or not), so ``grad`` and ``param_grads`` share one."""
 
 _DONE: dict[tuple, weakref.ref] = {}
-"""(robot object id, solver, device, (variant, id of the physics or None)) -> the robot, for what this process
-has compiled already: not compiled or announced again (the weak reference tells a live robot from a new one that got a
-freed object's id)."""
+"""(robot object id, solver, device, module of :data:`MODULES`) -> the robot, for what this process has compiled
+already: not compiled or announced again (the weak reference tells a live robot from a new one that got a freed
+object's id)."""
 
 
-def _done(robot, solver, device, variant) -> bool:
-    ref = _DONE.get((id(robot), solver, str(device), variant))
+def _done(robot, solver, device, module) -> bool:
+    ref = _DONE.get((id(robot), solver, str(device), module))
     return ref is not None and ref() is robot
 
 
@@ -42,18 +51,17 @@ def _home(path: str) -> str:
 
 
 def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str = "auto", device: str | None = "cpu",
-                    physics=None, say=None) -> float | None:
+                    say=None) -> float | None:
     """Compile (or load from Warp's cache) the kernels ``robot`` needs for ``variants`` (names of :data:`VARIANTS`)
-    with ``solver`` on ``device``, printing through ``say`` one line before and one after.
+    with ``solver`` on ``device``, printing through ``say`` one line before and one after (the seconds of each
+    variant compiled). The robot file's parameter values do not matter: any physics set later runs on these
+    modules.
 
     Args:
         robot: The robot (:class:`wresdyn.robot.Robot`) the command simulates.
         rate_hz: Sample rate of its data [Hz] (the step of the warm-up world).
         variants: Kernel variants the command will use, e.g. ``("forward", "grad")`` for ``wresdyn fit``.
         solver, device: As the command's simulators.
-        physics: Identified physics the command simulates (:class:`~wresdyn.sim.physics.PhysicalParams`), or
-            ``None`` for the robot file's. It matters: ``SolverReplay`` compiles parameters that are zero in the
-            robot file (friction, off-diagonal inertia) as constants, so identified physics is another module.
         say: Progress printer, called with one string per line (default: ``print``, flushed).
 
     Returns:
@@ -65,27 +73,30 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         raise WresdynError(f"kernel variant(s) {bad}: choose from {', '.join(VARIANTS)}")
-    tag = None if physics is None else id(physics)
-    todo = [v for v in dict.fromkeys(variants) if not _done(robot, solver, device, (v, tag))]
+    todo: dict[str, str] = {}  # module -> the first variant asking for it
+    for v in variants:
+        if not _done(robot, solver, device, MODULES[v]):
+            todo.setdefault(MODULES[v], v)
     if not todo:
         return None
     say = say or (lambda line: print(line, flush=True))
     wp.init()
     cache = _home(str(wp.config.kernel_cache_dir))
     name = Path(str(robot.source)).name
-    what = ", ".join(todo) + ("" if physics is None else "; identified physics")
-    say(f"compiling Warp kernels for {name} ({robot.n_dof} joints; {what}): on a robot's first run only, "
-        f"minutes for a large one, then loaded from {cache} ...")
+    say(f"compiling Warp kernels for {name} ({robot.n_dof} joints; {', '.join(todo.values())}): on a robot's first "
+        f"run only, minutes for a large one, then loaded from {cache} ...")
+    parts = []
     t0 = time.perf_counter()
-    for v in todo:
+    for module, v in todo.items():
+        t1 = time.perf_counter()
         requires_grad, param_grads = VARIANTS[v]
         sim = Simulator(robot, 1, 1.0 / rate_hz, solver=solver, device=device, requires_grad=requires_grad,
                         param_grads=param_grads)
-        if physics is not None:
-            sim.set_physics(physics)
         with torch.no_grad():
             sim.step(sim.q)  # hold the start pose for one step: the first launch loads (or compiles) the module
-        _DONE[(id(robot), solver, str(device), (v, tag))] = weakref.ref(robot)
+        _DONE[(id(robot), solver, str(device), module)] = weakref.ref(robot)
+        shared = [u for u in VARIANTS if MODULES[u] == module and u != v and u in variants]
+        parts.append(f"{v}{'' if not shared else ' = ' + ' = '.join(shared)} {time.perf_counter() - t1:.1f} s")
     seconds = time.perf_counter() - t0
-    say(f"... done in {seconds:.1f} s")
+    say(f"... done in {seconds:.1f} s ({', '.join(parts)})")
     return seconds

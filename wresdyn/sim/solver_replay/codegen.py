@@ -20,25 +20,15 @@ One world step (see :mod:`wresdyn.sim.solver_replay.solver` for the equation):
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
 
 import numpy as np
 
-from .dynamics import LiveInertia, dynamics, inertial_params, solve_ltdl
+from .dynamics import dynamics, inertial_params, solve_ltdl
 from .emit import Emitter, indent, outline, unmarked
 from .tree import ReplayTree
 
-__all__ = ["LiveParams", "generate_source"]
+__all__ = ["generate_source"]
 
-
-@dataclass(frozen=True)
-class LiveParams:
-    """Model parameters that are not zero in every world; the rest are compiled as constant 0."""
-
-    body: LiveInertia
-    """Live body mass / centre-of-mass / inertia entries."""
-    friction: np.ndarray
-    """Live ``joint_friction`` per DoF, shape (n_dof,); none: no friction code at all."""
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
@@ -48,21 +38,25 @@ _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
 
-def _load_params(e: Emitter, tree: ReplayTree, friction: np.ndarray, servo: np.ndarray | None = None) -> dict:
-    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) only where ``friction``,
-    the servo arrays only where ``servo``."""
+def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray | None = None,
+                 gate: bool = False) -> dict:
+    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) where ``friction``, the
+    servo arrays only where ``servo``; with ``gate`` also ``fric_on``, true where the world has friction."""
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
     for name in _SERVO_PARAMS if servo is not None else ():
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") if servo[k] else None
                      for k in range(tree.n_dof)]
-    out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction[k] else None for k in range(tree.n_dof)]
+    out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction else None for k in range(tree.n_dof)]
+    if friction and gate:
+        # != rather than >: a NaN friction runs the solve and shows in the state
+        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in out['fric'])} != S(0.0)")
     return out
 
 
 def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: list, mu: list, m0: list,
-              sweeps: int, live: np.ndarray, qd: list) -> list:
+              sweeps: int, qd: list) -> list:
     """Dry friction as the velocity problem of one step, solved by ``sweeps`` Gauss-Seidel sweeps.
 
     With the frictionless velocity ``v*`` (``H (v* - qd) = dt rhs``), friction torques ``tau_f`` change the
@@ -86,8 +80,8 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
     DoF only with its ancestors and descendants, so a sweep costs one multiply-add per such pair. Each
     sweep visits the DoFs by depth (root to leaves, then back: symmetric Gauss-Seidel), which is the DoF
     order up to swaps of DoFs of different branches, which do not couple (the same result). A DoF without
-    friction in any world (not ``live``) still moves, as it answers the friction torques of the DoFs it is
-    coupled to: ``v_i = u``.
+    friction (``mu_i = 0``) still moves, as it answers the friction torques of the DoFs it is coupled to: its
+    bound is 0, so ``v_i = u`` exactly, and a world without friction gets ``v = v*`` exactly.
     """
     n = tree.n_dof
     depth = [len(tree.ancestors(k)) for k in range(n)]
@@ -98,40 +92,29 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
         coupled[k].append((j, e.sp((h, inv_h[k]))))
         coupled[j].append((k, e.sp((h, inv_h[j]))))
     # clamp(beta w, -t, t) = beta clamp(w, -t / beta, t / beta), t = mu dt / H_ii
-    beta: list = [None] * n
-    bound: list = [None] * n
-    for k in range(n):
-        if live[k]:
-            beta[k] = e.let(f"S(1.0) - S(1.0) / (S(1.0) + fric_c * {m0[k]} * {inv_h[k]} + fric_k)")
-            bound[k] = e.let(f"dt / {beta[k]} * {mu[k]} * {inv_h[k]}")
-    last: dict[int, tuple] = {}  # each moved DoF's latest (u, clamp or None); v is made from it at the end
-    delta: dict[int, object] = {}  # v_j - v*_j of the DoFs that moved
+    beta = [e.let(f"S(1.0) - S(1.0) / (S(1.0) + fric_c * {m0[k]} * {inv_h[k]} + fric_k)") for k in range(n)]
+    bound = [e.let(f"dt / {beta[k]} * {mu[k]} * {inv_h[k]}") for k in range(n)]
+    last: dict[int, tuple] = {}  # each DoF's latest (u, clamp); v is made from it at the end
+    delta: dict[int, object] = {}  # v_j - v*_j of the DoFs visited so far
     stamp: dict[int, int] = {}  # when each delta was made: the newest is summed last, the rest need not wait
     clock = itertools.count()
     for s in range(sweeps):
         e.mark(f"friction sweep {s}")
         for i in (order if s % 2 == 0 else order[::-1]):
             terms = sorted((stamp[j], h, delta[j]) for j, h in coupled[i] if j in delta)
-            if bound[i] is None and not terms:
-                continue  # frictionless and nothing moved around it yet: v_i = v*_i
             coupling = e.sp(*[(h, d) for _, h, d in terms])
             u = e.sym(e.sp((v_star[i],), (-1.0, coupling)))
-            c = None
-            if bound[i] is not None:
-                # clamp(w, -b, b) as two selects: with wp.clamp (NaN-aware fmin/fmax) one sweep cost 20 % of
-                # the humanoid's fused step, with selects 4 %
-                b = bound[i]
-                w = e.let(f"{u} - fric_shift * {qd[i]}")
-                c = e.let(f"wp.where({w} > {b}, {b}, wp.where({w} < -{b}, -{b}, {w}))")
-            delta[i] = e.sp((-1.0, coupling)) if c is None else e.sp((-1.0, coupling), (-1.0, beta[i], c))
+            # clamp(w, -b, b) as two selects: with wp.clamp (NaN-aware fmin/fmax) one sweep cost 20 % of
+            # the humanoid's fused step, with selects 4 %
+            b = bound[i]
+            w = e.let(f"{u} - fric_shift * {qd[i]}")
+            c = e.let(f"wp.where({w} > {b}, {b}, wp.where({w} < -{b}, -{b}, {w}))")
+            delta[i] = e.sp((-1.0, coupling), (-1.0, beta[i], c))
             last[i] = (u, c)
             stamp[i] = next(clock)
     e.mark("friction result")
-    v = list(v_star)
-    for i, (u, c) in last.items():
-        # u - beta c, not v* + delta: exactly 0 when the joint sticks with beta = 1
-        v[i] = u if c is None else e.let(f"{u} - {beta[i]} * {c}")
-    return v
+    # u - beta c, not v* + delta: exactly 0 when the joint sticks with beta = 1
+    return [e.let(f"{u} - {beta[i]} * {c}") for i, (u, c) in sorted(last.items())]
 
 
 def _servo_drive(e: Emitter, ke, kd, eff, db, w0, q, qd, tq, tqd) -> tuple[str, str, str]:
@@ -157,8 +140,10 @@ def _servo_drive(e: Emitter, ke, kd, eff, db, w0, q, qd, tq, tqd) -> tuple[str, 
 
 
 def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, jf, g,
-          sweeps: int, friction: np.ndarray, servo: np.ndarray | None = None) -> tuple[list, list]:
-    """Emit one world step; returns the new (q, qd) symbols. DoFs where ``servo`` get the servo law."""
+          sweeps: int, servo: np.ndarray | None = None, gate: str | None = None) -> tuple[list, list]:
+    """Emit one world step; returns the new (q, qd) symbols. DoFs where ``servo`` get the servo law. ``gate``: a
+    kernel variable, true in a world with friction; the friction solve then runs only where it holds (the same
+    result: without friction it returns ``v*`` exactly)."""
     n = tree.n_dof
     bias, m_diag, m_off = dynamics(e, tree, groups, q, qd, g)
     rhs, h_diag = [], []
@@ -190,8 +175,14 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
     qdd = solve_ltdl(e, tree, h_diag, m_off, rhs)
     e.mark("frictionless velocity")
     v = [e.let(f"{qd[k]} + dt * {e.sym(qdd[k])}") for k in range(n)]
-    if sweeps > 0 and friction.any():
-        v = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, friction, qd)
+    if sweeps > 0 and gate is None:
+        v = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, qd)
+    elif sweeps > 0:
+        v = [e.let(v[k], prefix="v_") for k in range(n)]
+        start = len(e.lines)
+        vf = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, qd)
+        block = unmarked(e.lines[start:]) + [f"{v[k]} = {vf[k]}" for k in range(n)]
+        e.lines[start:] = [f"if {gate}:", *("    " + line for line in block)]
     e.mark("semi-implicit Euler")
     return [e.let(f"{q[k]} + dt * {v[k]}") for k in range(n)], v
 
@@ -222,30 +213,31 @@ _TIME_MAJOR = {"q": "q[t, w, {}]", "qd": "qd[t, w, {}]", "tq": "target_q[t, w, {
 """Array accesses of the rollout kernel (time, world, coordinate)."""
 
 
-def _step_code(tree: ReplayTree, access: dict, sweeps: int, live: LiveParams | None, servo: np.ndarray | None = None
+def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None = None, gate: bool = False
                ) -> tuple[list[str], list[str], list[str], list[str]]:
-    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores)."""
+    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores). ``gate``:
+    run the friction solve only in worlds with friction (forward kernels; an adjoint needs it everywhere, as the
+    gradient to a friction of 0 is not 0)."""
     n = tree.n_dof
     co = [int(x) for x in tree.q_offset]
     do = [int(x) for x in tree.qd_offset]
     e = Emitter()
-    friction = np.ones(n, bool) if live is None else live.friction
-    p = _load_params(e, tree, friction & (sweeps > 0), servo)
-    groups = inertial_params(e, tree, None if live is None else live.body)
+    p = _load_params(e, tree, sweeps > 0, servo, gate)
+    groups = inertial_params(e, tree)
     params, e.lines = unmarked(e.lines) + _GRAVITY, []
     q = [e.let(access["q"].format(co[k]), prefix="q_") for k in range(n)]
     qd, tq, tqd, jf = ([e.let(access[kind].format(do[k]), prefix=f"{kind}_") for k in range(n)]
                        for kind in ("qd", "tq", "tqd", "jf"))
     loads, e.lines = e.lines, []
-    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, friction, servo)
+    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, servo,
+                    "fric_on" if gate else None)
     stores = [f"{access['q_out'].format(co[k])} = {qn[k]}" for k in range(n)]
     stores += [f"{access['qd_out'].format(do[k])} = {qdn[k]}" for k in range(n)]
     return params, loads, e.lines, stores
 
 
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
-                    inline: bool | None = False, friction_sweeps: int = 4, live: LiveParams | None = None,
-                    servo: np.ndarray | None = None) -> str:
+                    inline: bool | None = False, friction_sweeps: int = 4, servo: np.ndarray | None = None) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
@@ -255,8 +247,9 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     ``M(q)`` and ``c(q, qd)`` of one world for the parity tests. With ``backward`` the step kernel gets an
     adjoint; its code is cut into functions with the given ``inline`` hint (see :func:`~.emit.outline`).
     ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`_friction`); 0 leaves the
-    friction code out. ``live`` (default: everything) names the parameters the kernels read; the others
-    are folded as 0. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
+    friction code out; the forward kernels skip the solve in a world without friction (a run-time branch, so
+    the same module serves any friction values). Every physical parameter is read from the arrays: the source
+    depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
     kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
     """
     n = tree.n_dof
@@ -264,7 +257,7 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     param_args = _param_args(servo is not None)
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
 
-    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, live, servo)
+    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo, gate=not backward)
     if backward:
         external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
         funcs, compute = outline(compute, "step_part", inline, stores, external)
@@ -285,7 +278,7 @@ def replay_step(
 {indent(params + loads + unmarked(compute) + stores, 1)}
 ''')
 
-    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, live, servo)
+    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo, gate=True)
     src.append(f'''
 @wp.kernel(enable_backward=False, module="unique")
 def replay_rollout(
@@ -304,7 +297,7 @@ def replay_rollout(
 ''')
 
     e = Emitter()
-    groups = inertial_params(e, tree, None if live is None else live.body)
+    groups = inertial_params(e, tree)
     e.lines += _GRAVITY
     q = [e.let(f"q[w, {k}]", prefix="q_") for k in range(n)]
     qd = [e.let(f"qd[w, {k}]", prefix="qd_") for k in range(n)]

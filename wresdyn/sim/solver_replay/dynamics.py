@@ -21,7 +21,7 @@ import numpy as np
 from .emit import Emitter, Sym
 from .tree import ReplayTree
 
-__all__ = ["Group", "LiveInertia", "dynamics", "inertial_params", "solve_ltdl"]
+__all__ = ["Group", "dynamics", "inertial_params", "solve_ltdl"]
 
 _ZERO3 = [0.0, 0.0, 0.0]
 
@@ -91,45 +91,29 @@ class Group:
     about_com: bool
 
 
-@dataclass(frozen=True)
-class LiveInertia:
-    """Which body parameters the kernels read; the others are compiled as constant 0 (``fold_zeros`` of
-    :class:`~wresdyn.sim.solver_replay.SolverReplay`). Shapes per world: (bodies,), (bodies, 3), (bodies, 3, 3)."""
-
-    mass: np.ndarray
-    com: np.ndarray
-    inertia: np.ndarray
-
-
-def inertial_params(e: Emitter, tree: ReplayTree, live: LiveInertia | None = None) -> list[Group | None]:
+def inertial_params(e: Emitter, tree: ReplayTree) -> list[Group | None]:
     """Emit loads of ``body_mass/com/inertia[bb + b]`` and compose each DoF's rigid group in its body frame.
 
     Runs once per launch (before the time loop of the rollout kernel). The inertia is symmetrised,
     ``(I + I^T) / 2``, so its gradient is split evenly between ``I_ij`` and ``I_ji``. Welded bodies enter
     with their constant pose ``(R, p)`` in the DoF's body frame: ``c' = R c + p``, ``I' = R I R^T``, and
     the group is ``m = sum m_b``, ``h = sum m_b c'_b``, ``J_o = sum I'_b + m_b (|c'_b|^2 1 - c'_b c'_b^T)``.
-    Entries that ``live`` marks dead are the constant 0 (a body with neither mass nor inertia is left out).
+    Every entry is read, zero or not, so the code depends on the tree alone and any inertial values reuse it.
     """
     out: list[Group | None] = []
     for k in range(tree.n_dof):
         parts = []
         for b in tree.group(k):
-            lm, lc, li = (True, [True] * 3, np.ones((3, 3), bool)) if live is None else (
-                bool(live.mass[b]), [bool(x) for x in live.com[b]], live.inertia[b])
-            if not lm and not li.any():
-                continue
-            m = e.let(f"body_mass[bb + {b}]", prefix=f"pm{b}_") if lm else 0.0
-            cv = e.let(f"body_com[bb + {b}]", prefix=f"pcv{b}_") if any(lc) else None
-            c = [e.let(f"{cv}[{i}]", prefix=f"pc{b}_") if lc[i] else 0.0 for i in range(3)]
-            iv = e.let(f"body_inertia[bb + {b}]", prefix=f"piv{b}_") if li.any() else None
+            m = e.let(f"body_mass[bb + {b}]", prefix=f"pm{b}_")
+            cv = e.let(f"body_com[bb + {b}]", prefix=f"pcv{b}_")
+            c = [e.let(f"{cv}[{i}]", prefix=f"pc{b}_") for i in range(3)]
+            iv = e.let(f"body_inertia[bb + {b}]", prefix=f"piv{b}_")
             inertia = [[0.0] * 3 for _ in range(3)]
             for i in range(3):
-                if li[i, i]:
-                    inertia[i][i] = e.let(f"{iv}[{i}, {i}]", prefix=f"pi{b}_")
+                inertia[i][i] = e.let(f"{iv}[{i}, {i}]", prefix=f"pi{b}_")
                 for j in range(i + 1, 3):
-                    if li[i, j] or li[j, i]:
-                        inertia[i][j] = inertia[j][i] = e.let(f"S(0.5) * ({iv}[{i}, {j}] + {iv}[{j}, {i}])",
-                                                              prefix=f"pi{b}_")
+                    inertia[i][j] = inertia[j][i] = e.let(f"S(0.5) * ({iv}[{i}, {j}] + {iv}[{j}, {i}])",
+                                                          prefix=f"pi{b}_")
             rot, pos = _mat(tree.rot_db[b]), [float(x) for x in tree.pos_db[b]]
             parts.append((m, e.add(e.mv(rot, c), pos), _rotate_sym(e, rot, inertia)))
         if not parts:

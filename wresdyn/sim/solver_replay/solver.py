@@ -63,9 +63,10 @@ targets and ``joint_f`` and, when the model was finalized with ``requires_grad``
 the per-DoF drive and joint arrays and ``body_mass/body_com/body_inertia`` (of the symmetrised inertia:
 ``I_ij`` and ``I_ji`` get half each). A stuck joint's velocity does not depend on its ``mu`` (gradient 0).
 
-``fold_zeros`` (default: on unless parameter gradients are wanted) compiles the body and friction
-entries that are zero in every world as constants: on the humanoid, whose inertias are diagonal and whose
-joints have no friction, the forward rollout is 1.6x faster than with every entry read.
+The generated code depends on the robot's structure (topology, joint frames and axes, which DoFs have servo
+drives), the friction solver settings and the variant (forward, or with an adjoint) only, never on a parameter's
+value: any masses, inertias, gains or friction, identified ones included, run on the module the robot file's
+values compiled. The forward kernels skip the friction solve in a world whose friction is 0 everywhere.
 
 Not supported: floating bases, contacts, mimic joints, ``joint_target_mode`` (drives act wherever
 ``ke`` or ``kd`` is non-zero), velocity limits. ``State.body_q`` is only refreshed with
@@ -82,8 +83,7 @@ from newton import ModelFlags
 from newton.solvers import SolverBase
 
 from .cache import load_module
-from .codegen import LiveParams, generate_source
-from .dynamics import LiveInertia
+from .codegen import generate_source
 from .launch import cpu_call, grad_of, launch_signature
 from .tree import ReplayTree, tree_from_model
 
@@ -108,7 +108,7 @@ _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 
 
 def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
-                  live: LiveParams | None, servo: np.ndarray | None = None):
+                  servo: np.ndarray | None = None):
     """Generate and load (:func:`~.cache.load_module`) the kernel module for ``tree``.
 
     The step kernel's adjoint is outlined into non-inlined functions for Clang (CPU), where the whole step
@@ -116,7 +116,7 @@ def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fri
     minutes outlined at full optimisation, 45 s force-inlined), so CUDA inlines.
     """
     return load_module(generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
-                                       live=live, servo=servo))
+                                       servo=servo))
 
 
 class SolverReplay(SolverBase):
@@ -142,7 +142,6 @@ class SolverReplay(SolverBase):
         friction_sweeps: int = FRICTION_SWEEPS,
         implicit_stiffness: bool = False,
         requires_grad: bool | None = None,
-        fold_zeros: bool | None = None,
         update_body_q: bool = False,
         threads: int = 1,
         dtype=wp.float32,
@@ -159,16 +158,8 @@ class SolverReplay(SolverBase):
                 kernels (``joint_friction`` is then ignored).
             implicit_stiffness: Also treat the drive stiffness implicitly (``dt^2 ke`` on the diagonal);
                 more stable for very stiff drives, but no longer MuJoCo ``implicitfast`` parity.
-            requires_grad: Compile adjoint kernels (default: ``model.requires_grad``).
-            fold_zeros: Compile the entries of ``body_mass``, ``body_com``, ``body_inertia`` and
-                ``joint_friction`` that are zero in every world as constant zeros, like the zeros of the
-                joint axes (principal-axis inertias, centres of mass on a link axis and frictionless
-                models are common; no friction anywhere leaves the friction solve out). The forward
-                kernels get much faster (the humanoid's fused rollout 1.6x), but those entries get no
-                gradient and an edit that makes one non-zero takes effect only through
-                :meth:`notify_model_changed`, which recompiles. Default: on unless the solver computes
-                gradients and the model's arrays carry them (``requires_grad`` and
-                ``model.requires_grad``), so identification sees every entry.
+            requires_grad: Compile adjoint kernels (default: ``model.requires_grad``). The adjoint reaches the
+                parameter arrays whenever the model's arrays carry gradients (``model.requires_grad``).
             update_body_q: Refresh ``state_out.body_q/body_qd`` with ``newton.eval_fk`` after each step.
             threads: CPU only: split the worlds over this many host threads (Warp runs a CPU kernel's
                 threads one after another; separate launches run concurrently).
@@ -184,9 +175,6 @@ class SolverReplay(SolverBase):
         self.friction_sweeps = int(friction_sweeps)
         self.implicit_stiffness = bool(implicit_stiffness)
         self.requires_grad = bool(model.requires_grad if requires_grad is None else requires_grad)
-        if fold_zeros is None:  # fold only what could not carry a gradient anyway
-            fold_zeros = not (self.requires_grad and model.requires_grad)
-        self.fold_zeros = bool(fold_zeros)
         self.update_body_q = bool(update_body_q)
         self.threads = max(1, int(threads)) if model.device.is_cpu else 1
         self.dtype = dtype
@@ -233,24 +221,10 @@ class SolverReplay(SolverBase):
 
     def _load(self) -> None:
         scalar = "float64" if self.dtype == wp.float64 else "float32"
-        self._live = self._live_params()
         sweeps = self.friction_sweeps if self.friction_kappa != 0.0 else 0  # kappa = 0: no friction at all
         self.kernels = _load_kernels(self.tree, scalar, self.requires_grad, self.model.device.is_cuda, sweeps,
-                                     self._live, self.servo)
+                                     self.servo)
         self._refresh_params()
-
-    def _live_params(self) -> LiveParams | None:
-        """The parameters that are non-zero in some world (``fold_zeros``), else None (all read)."""
-        if not self.fold_zeros:
-            return None
-        m, tr = self.model, self.tree
-        w, bpw = tr.world_count, tr.bodies_per_world
-        inertia = m.body_inertia.numpy().reshape(w, bpw, 3, 3) != 0.0
-        body = LiveInertia(mass=(m.body_mass.numpy().reshape(w, bpw) != 0.0).any(axis=0),
-                           com=(m.body_com.numpy().reshape(w, bpw, 3) != 0.0).any(axis=0),
-                           inertia=(inertia | inertia.transpose(0, 1, 3, 2)).any(axis=0))
-        friction = m.joint_friction.numpy().reshape(w, tr.dofs_per_world)[:, tr.qd_offset] != 0.0
-        return LiveParams(body=body, friction=friction.any(axis=0))
 
     def _refresh_params(self) -> None:
         self._plans.clear()  # recorded launches hold the parameter arrays
@@ -270,13 +244,10 @@ class SolverReplay(SolverBase):
         self._gravity = self.parameters["gravity"]
 
     def notify_model_changed(self, flags: int) -> None:
-        """Recompile after joint-frame edits (``JOINT_PROPERTIES``), or when an inertia or friction edit
-        makes an entry folded as zero non-zero (``fold_zeros``); otherwise masses, inertias, gains, limits,
-        armature, friction and gravity are read live (float32) or re-copied here (float64)."""
+        """Regenerate after joint-frame edits (``JOINT_PROPERTIES``); masses, inertias, gains, limits, armature,
+        friction and gravity are read live (float32) or re-copied here (float64), never recompiled."""
         if int(flags) & int(ModelFlags.JOINT_PROPERTIES):
             self._build()
-        elif self.fold_zeros and not _same_live(self._live, self._live_params()):
-            self._load()
         else:
             self._refresh_params()
 
@@ -434,9 +405,3 @@ class SolverReplay(SolverBase):
                   outputs=[m_out, c_out], device=dev)
         return m_out.numpy(), c_out.numpy()
 
-
-def _same_live(a: LiveParams | None, b: LiveParams | None) -> bool:
-    if a is None or b is None:
-        return a is b
-    return all(np.array_equal(x, y) for x, y in ((a.friction, b.friction), (a.body.mass, b.body.mass),
-                                                  (a.body.com, b.body.com), (a.body.inertia, b.body.inertia)))
