@@ -136,7 +136,7 @@ def test_servo_export_writes_the_component_schema_and_parameters(servo_export):
         prim = act.GetPrimAtPath(f"/arm/wresdyn_actuators/{name}")
         schemas = list(prim.GetMetadata("apiSchemas").GetAddedOrExplicitItems())
         joint = act.GetPrimAtPath(f"/arm/joints/{name}")
-        if i == 2:  # the PD wrist exports as before
+        if i == 2:  # the PD wrist keeps its PD drive
             assert schemas[0] == "NewtonPDControlAPI" and not joint.GetAttribute("wresdyn:servo:deadband")
             continue
         assert schemas[0] == "WresdynServoControlAPI" and "NewtonDCMotorClampingAPI" in schemas

@@ -204,7 +204,7 @@ class Adapter:
         train = [tr for tr in train if len(tr.q) > self.cfg.horizon]
         if not train:
             return None
-        holdout = _traj(x[hold])
+        holdout = TrajectoryBank([_traj(x[hold])], self.device, self.delay.to(self.device))
         excited = np.sqrt(np.mean(np.concatenate([tr.qd for tr in train]) ** 2, 0)) >= self.cfg.excited_min
         loss = self._steps(train, excited)
         cand = self.model.values() if np.isfinite(loss) else self.physics
@@ -251,23 +251,23 @@ class Adapter:
             loss = float(value.detach())
         return loss
 
-    def _open_loop(self, holdout, candidate: PhysicalParams) -> tuple[float, float, float]:
-        """Held-back open-loop error [rad] of the warm start, the current model and ``candidate``."""
+    def _open_loop(self, holdout: TrajectoryBank, candidate: PhysicalParams) -> tuple[float, float, float]:
+        """Held-back open-loop error [rad] of the warm start, the current model and ``candidate`` on ``holdout``
+        (a bank of the held-back samples)."""
         self.sim_val.set_physics(self.physics, worlds=slice(1, 2))
         self.sim_val.set_physics(candidate, worlds=slice(2, 3))
-        window = TrajectoryBank([holdout], self.device, self.delay.to(self.device)).whole().repeat(3)
+        window = holdout.whole().repeat(3)
         with torch.no_grad():
             run = rollout(self.sim_val, window)
         err = (run.q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
         return tuple(float(e) for e in err)
 
-    def _one_step(self, holdout) -> tuple[float, float]:
+    def _one_step(self, holdout: TrajectoryBank) -> tuple[float, float]:
         """One-step prediction error [rad] of the warm start and the current model on every
         :attr:`AdaptConfig.one_step_every`-th held-back sample, each step from its recorded state."""
         self.sim_one.set_physics(self.physics, worlds=slice(self.n_one, 2 * self.n_one))
-        bank = TrajectoryBank([holdout], self.device, self.delay.to(self.device))
         start = torch.arange(self.n_one, device=self.device) * self.cfg.one_step_every
-        window = bank.window(torch.zeros_like(start), start, 1).repeat(2)
+        window = holdout.window(torch.zeros_like(start), start, 1).repeat(2)
         with torch.no_grad():
             run = rollout(self.sim_one, window)
         err = (run.q[:, 1] - window.q[:, 1]).abs().mean(-1).cpu().numpy()
