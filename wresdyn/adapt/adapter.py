@@ -30,8 +30,10 @@ import torch
 
 from ..errors import WresdynError
 from ..learn.sysid import physics_window_loss
-from ..sim import Simulator, TrajectoryBank, rollout
+from ..learn.window_fit import squared_error
 from ..robot.physical import PhysicalParams
+from ..sim import Simulator, TrajectoryBank, rollout
+from ..sim.fused import fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
 
@@ -235,7 +237,13 @@ class Adapter:
         for _ in range(cfg.iterations):
             held = {f: getattr(model, f"u_{f}").detach().clone() for f in _JOINT_PARAMS}
             window = bank.sample(self.rng, cfg.windows, cfg.horizon)
-            value, _ = physics_window_loss(cfg, model, self.sim, window)
+            if self._fused(self.sim) and cfg.grad_truncation is None:
+                self.sim.set_physics(model())
+                q, qd = fused_rollout(self.sim, window)
+                value = (cfg.w_q * squared_error(q[:, 1:], window.q[:, 1:])
+                         + cfg.w_qd * squared_error(qd[:, 1:], window.qd[:, 1:]))  # physics_window_loss's
+            else:
+                value, _ = physics_window_loss(cfg, model, self.sim, window)
             value = value + cfg.w_prior * model.prior().to(value.device)
             if not torch.isfinite(value):
                 return float("nan")
@@ -258,8 +266,8 @@ class Adapter:
         self.sim_val.set_physics(candidate, worlds=slice(2, 3))
         window = holdout.whole().repeat(3)
         with torch.no_grad():
-            run = rollout(self.sim_val, window)
-        err = (run.q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
+            q = fused_rollout(self.sim_val, window)[0] if self._fused(self.sim_val) else rollout(self.sim_val, window).q
+        err = (q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
         return tuple(float(e) for e in err)
 
     def _one_step(self, holdout: TrajectoryBank) -> tuple[float, float]:
@@ -272,6 +280,11 @@ class Adapter:
             run = rollout(self.sim_one, window)
         err = (run.q[:, 1] - window.q[:, 1]).abs().mean(-1).cpu().numpy()
         return float(err[:self.n_one].mean()), float(err[self.n_one:].mean())
+
+    def _fused(self, sim: Simulator) -> bool:
+        """Whether ``sim`` replays PD-only windows in one launch (:func:`~wresdyn.sim.fused.fused_rollout`: the
+        replay solver at one substep, no servo drive's goal profile); else step by step, the same numbers."""
+        return sim.solver_kind == "replay" and sim.substeps == 1 and getattr(self.robot, "servo", None) is None
 
     # -------------------------------------------------------------------------------------------- publishing
     def publish(self, update: Update) -> Path | None:
