@@ -57,6 +57,14 @@ class AdaptConfig:
     """An update is accepted when its held-back error is below ``(1 - min_gain)`` times the current model's: a margin
     against updates that only fit the held-back second's noise (without it, 1.28x the fixed model's error on average
     without drift in the benchmark; with 0.05, 1.06x)."""
+    fallback: bool = True
+    """Each update also replays the warm start on the held-back part; where it is no worse there than the current
+    model, the model goes back to it (published as an update) unless the candidate beats it by ``min_gain``: without
+    drift, updates that only fit one held-back second's noise do not pile up."""
+    confirm: bool = True
+    """A candidate that wins on the held-back part becomes the model only if it wins again, by ``min_gain``, on the
+    next update's held-back part, which it was not fitted on (one update later; the training goes on from it
+    meanwhile): one held-back second alone picks noise-fitted updates about as often as real ones without drift."""
     one_step_every: int = 5
     """One-step prediction error on every this many samples of the held-back part."""
     grad_clip: float = 1.0
