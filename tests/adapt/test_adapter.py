@@ -81,7 +81,7 @@ def test_the_model_goes_back_to_the_warm_start_where_that_is_better(humanoid, st
     # wins, so the model goes back to it (published) unless the candidate beats the truth by the margin, which a few
     # small steps from the far model cannot
     truth = RealRobot(humanoid, REAL).physics()
-    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.001})
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.001, "fallback": True})
     adapter = Adapter(humanoid, truth, stream.rate_hz, cfg, publish=tmp_path)
     adapter.physics = PhysicalParams.nominal(humanoid)
     u = _run(adapter, stream)[0]

@@ -10,10 +10,13 @@ differentiable solver, in the physically consistent coordinates of :class:`~wres
 
 on the window without its latest :attr:`AdaptConfig.holdout` seconds. The prior pulls toward the warm start, and a
 joint the training part does not move (RMS velocity under :attr:`AdaptConfig.excited_min`) keeps its joint fields:
-what the recent data do not excite stays as the calibration left it. The update is accepted only if the whole
+what the recent data do not excite stays as the calibration left it. The candidate wins only if the whole
 held-back segment, replayed open loop from its first recorded state, is closer to the recording than with the current
-model; otherwise the coordinates go back to the current model's. Accepted updates are published as
-``physics.json``-compatible files with their robot time (:meth:`Adapter.publish`).
+model by :attr:`AdaptConfig.min_gain`; with :attr:`AdaptConfig.confirm` a winner becomes the model only if it wins
+again on the next update's held-back segment, which it was not fitted on; otherwise the coordinates go back to the
+current model's. With :attr:`AdaptConfig.fallback` the model returns to the warm start where that is no worse on the
+held-back segment. Accepted updates are published as ``physics.json``-compatible files with their robot time
+(:meth:`Adapter.publish`) and, with an export folder, rewrite the exported calibrated robot.
 
 A jump in time of more than 1.5 sample periods starts a new segment: windows never span one, and the held-back part
 is the end of the latest segment.
