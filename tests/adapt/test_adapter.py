@@ -204,7 +204,7 @@ def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_pat
     out = tmp_path / "out"
     code = main(["adapt", str(run), str(tmp_path / "data.npz"), "--out", str(out), "--window", "1.2",
                  "--holdout", "0.3", "--update-every", "0.4", "--iterations", "2", "--windows", "4", "--horizon", "16",
-                 "--lr", "0.02", "--track", "friction:*knee"])
+                 "--lr", "0.02", "--track", "friction:*knee", "--export", str(tmp_path / "calibrated")])
     printed = capsys.readouterr().out
     assert code == 0
     summary = json.loads((out / "updates.json").read_text())
@@ -214,3 +214,20 @@ def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_pat
     assert (out / "adapt.png").is_file()
     assert len(list((out / "physics").glob("physics_*.json"))) == summary["accepted"] + summary["reverted"]
     assert summary["accepted"] >= 1
+    published = json.loads((out / "physics" / "physics.json").read_text())
+    assert json.loads((tmp_path / "calibrated" / "export.json").read_text())["t"] == published["t"]
+    assert (tmp_path / "calibrated" / "robot.usda").is_file()
+
+
+def test_cli_export_of_a_robot_that_is_not_usd_is_one_line_and_writes_nothing(cartpole, tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    PhysicalParams.nominal(cartpole).save(run / "physics.json")
+    n = cartpole.n_dof
+    log = tmp_path / "log.txt"
+    _write_lines(log, np.column_stack([np.arange(10) / 500.0, np.zeros((10, 3 * n))]))
+    code = main(["adapt", str(run), str(log), "--robot", "newton:cartpole.urdf", "--out", str(tmp_path / "out"),
+                 "--export", str(tmp_path / "calibrated"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "USD" in err, err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "calibrated").exists()
