@@ -2,10 +2,15 @@
 
     python benchmarks/adapt_drift.py --out benchmarks/results/adapt_drift          # ~15 min on 2 loaded CPU cores
     python benchmarks/adapt_drift.py --quick --out /tmp/adapt_drift_quick           # a 40 s timeline, smoke test
+    python benchmarks/adapt_drift.py --splits validation --seed 1 --oracles DIR --out OUT   # the validation timeline
+    python benchmarks/adapt_drift.py --motion skill --splits heldout --oracles DIR --out OUT  # a skill as the motion
 
 The "real" robot is the shipped one (``data/mismatch_default.toml`` on the humanoid, MuJoCo C at 1 kHz, sensor noise),
 driven by the shipped excitation: the commands of ``data/dataset.npz`` (train, validation, held-out splits in turn,
-joined by 1 s raised-cosine blends), cycled for the whole run. Its MuJoCo model changes while it runs, through
+joined by 1 s raised-cosine blends), cycled for the whole run. ``--splits validation --seed 1`` is the validation
+timeline the adapter's defaults are chosen on (the validation trajectories' commands only, other sensor noise); the
+reported one is the default. ``--motion skill`` drives it with the stand skills' reference motions under PD instead
+(:func:`skill_commands`: kick, squat, wave, march; no tracking policy is trained here). Its MuJoCo model changes while it runs, through
 :meth:`wresdyn.data.real_robot.RealRobot.record`'s ``on_sample`` hook (default timeline, robot time):
 
 - 0-20 s: no drift;
@@ -54,10 +59,25 @@ def phases(total: float) -> dict:
     return {"ramp": (20 * s, 80 * s), "payload": 100 * s, "derate": 130 * s, "end": total}
 
 
-def commands(ds, seconds: float, rate: float, blend: float = 1.0) -> np.ndarray:
-    """The dataset's commands (train, validation, held-out) in turn, joined by raised-cosine blends, ``seconds``
-    long: (T, n) [rad]."""
-    trajs = [t.q_cmd for t in ds.trajectories if t.split != "ood"]
+def commands(ds, seconds: float, rate: float, blend: float = 1.0, splits=("train", "validation", "heldout")
+             ) -> np.ndarray:
+    """The dataset's commands of ``splits`` in turn, joined by raised-cosine blends, ``seconds`` long: (T, n)
+    [rad]."""
+    trajs = [t.q_cmd for t in ds.trajectories if t.split in splits]
+    return _cycle(trajs, seconds, rate, blend)
+
+
+def skill_commands(robot, seconds: float, rate: float, split: str, seed: int) -> np.ndarray:
+    """The stand skills' reference motions (:func:`wresdyn.skills.motions.make_motions`: kick, squat, wave and, in
+    the held-out split, march; 2 s each, every one from and back to the neutral stance) in turn, as the PD command:
+    the motion a tracking policy asks for, without the policy (none is trained here). (T, n) [rad]."""
+    from wresdyn.skills.motions import make_motions
+
+    motions = make_motions(robot, {split: 2}, duration=2.0, rate_hz=rate, seed=seed).split(split)
+    return _cycle([m.q for m in motions], seconds, rate, 0.2)
+
+
+def _cycle(trajs, seconds: float, rate: float, blend: float) -> np.ndarray:
     nb = int(blend * rate)
     w = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, nb + 1) / (nb + 1))
     out, n, i = [trajs[0]], len(trajs[0]), 1
@@ -173,6 +193,13 @@ def main() -> None:
     ap.add_argument("--oracles", default=None,
                     help="reuse the oracle_*.json of an earlier run's folder (same timeline and conditions)")
     ap.add_argument("--quick", action="store_true", help="a 40 s run, 40-iteration oracles on 2 trajectories")
+    ap.add_argument("--motion", choices=("excitation", "skill"), default="excitation",
+                    help="what the robot does: the shipped excitation's commands, or the stand skills' reference "
+                         "motions under PD")
+    ap.add_argument("--splits", default="train,validation,heldout",
+                    help="the splits the motion is drawn from (excitation: the dataset's; skill: one of train, "
+                         "validation, heldout); `validation` is the timeline settings are chosen on")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the sensor noise and of the skill motions' draw")
     args = ap.parse_args()
     import torch
 
@@ -198,14 +225,20 @@ def main() -> None:
     rate = ds.rate_hz
     calib = PhysicalParams.load(ROOT / "benchmarks" / "results" / "grey_box" / "soft_friction" / "physics.json", robot)
     mismatch = Mismatch.load(DEFAULT_MISMATCH)
-    over = {k: type(getattr(AdaptConfig(), k))(v) for k, v in (s.split("=") for s in args.set)}
+    over = {k: _value(getattr(AdaptConfig(), k), v) for k, v in (s.split("=") for s in args.set)}
     cfg = AdaptConfig(**over)
     times = phases(args.seconds)
     log(f"adapt_drift: {args.seconds:g} s at {rate:g} Hz, phases {times}, {cfg}")
 
     # the stream
     t0 = time.perf_counter()
-    q_cmd = commands(ds, args.seconds, rate)
+    splits = tuple(args.splits.split(","))
+    if args.motion == "skill":
+        if len(splits) != 1:
+            raise SystemExit("--motion skill takes one split")
+        q_cmd = skill_commands(robot, args.seconds, rate, splits[0], args.seed)
+    else:
+        q_cmd = commands(ds, args.seconds, rate, splits=splits)
     real = RealRobot(robot, mismatch, rate)
     drift = Drift(real, robot, times, rate)
     truth_at = {}
@@ -215,7 +248,7 @@ def main() -> None:
         if k % int(rate) == 0:
             truth_at[k // int(rate)] = real.physics()
 
-    q, qd, _ = real.record(q_cmd, np.random.default_rng(0), on_sample=hook)
+    q, qd, _ = real.record(q_cmd, np.random.default_rng(args.seed), on_sample=hook)
     t = np.arange(len(q)) / rate
     log(f"recorded {t[-1] + 1 / rate:.0f} s of the drifting robot in {time.perf_counter() - t0:.0f} s")
 
@@ -225,7 +258,8 @@ def main() -> None:
     for s0 in range(0, len(t), int(rate / 10)):
         s1 = min(s0 + int(rate / 10), len(t))
         for u in adapter.push(t[s0:s1], q[s0:s1], qd[s0:s1], q_cmd[s0:s1]):
-            log(f"t {u.t:7.2f} s  {'acc' if u.accepted else 'rej'}  held-back {u.open_loop:.5f} "
+            verdict = "acc" if u.accepted else "rev" if u.reverted else "rej"
+            log(f"t {u.t:7.2f} s  {verdict}  held-back {u.open_loop:.5f} "
                 f"(fixed {u.open_loop_start:.5f})  compute {u.compute:.2f} s")
         if s1 % int(rate) == 0:
             held[s1 // int(rate)] = adapter.physics
@@ -276,10 +310,18 @@ def main() -> None:
                     "update_compute_mean_s": float(comp.mean()), "update_compute_max_s": float(comp.max()),
                     "updates": len(adapter.updates), "accepted": int(sum(u.accepted for u in adapter.updates)),
                     "oracle_iterations": args.oracle_iterations, "oracle_train": args.oracle_train,
-                    "oracles_from": args.oracles})
+                    "oracles_from": args.oracles, "motion": args.motion, "splits": list(splits),
+                    "seed": args.seed, "reverted": int(sum(u.reverted for u in adapter.updates))})
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     plot(out / "adapt_drift.png", rows, times, held, truth_at, calib, robot)
     (out / "run.txt").write_text("\n".join(lines) + "\n")
+
+
+def _value(default, text: str):
+    """``text`` as the type of ``default`` (an AdaptConfig field's)."""
+    if isinstance(default, bool):
+        return {"true": True, "false": False}[text.lower()]
+    return type(default)(text)
 
 
 def report(rows, times, errs, secs, held, truth_at, oracles, truths, calib, robot, log) -> dict:

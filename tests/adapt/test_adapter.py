@@ -17,8 +17,9 @@ from wresdyn.sim.physics import PhysicalParams
 
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, torque_limit_scale=0.5)
 """The real robot of these tests: gains, friction, damping and saturation off the file's, no delay, no noise."""
-TINY = AdaptConfig(window=1.2, holdout=0.3, update_every=0.4, iterations=3, windows=4, horizon=16, one_step_every=10)
-"""A few updates on 1.6 s of stream."""
+TINY = AdaptConfig(window=1.2, holdout=0.3, update_every=0.4, iterations=3, windows=4, horizon=16, one_step_every=10,
+                   confirm=False)
+"""A few updates on 1.6 s of stream; each candidate is decided on its own held-back part."""
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +46,7 @@ def test_an_update_that_lowers_the_held_back_error_is_accepted_and_published(hum
     published = PhysicalParams.load(tmp_path / "physics.json", humanoid)
     assert published.friction.tolist() == adapter.physics.friction.tolist()
     assert json.loads((tmp_path / "physics.json").read_text())["t"] == pytest.approx(last.t)
-    assert len(list(tmp_path.glob("physics_*.json"))) == sum(u.accepted for u in updates)
+    assert len(list(tmp_path.glob("physics_*.json"))) == sum(u.accepted or u.reverted for u in updates)
 
 
 def test_an_update_that_raises_the_held_back_error_is_rejected(humanoid, stream, tmp_path):
@@ -59,6 +60,73 @@ def test_an_update_that_raises_the_held_back_error_is_rejected(humanoid, stream,
         assert u.open_loop_candidate > u.open_loop_before == u.open_loop == u.open_loop_start
     assert adapter.physics is truth
     assert not list(tmp_path.glob("physics*.json"))
+
+
+def test_with_confirmation_a_winner_becomes_the_model_one_update_later(humanoid, stream, tmp_path):
+    start = PhysicalParams.nominal(humanoid)
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "confirm": True, "update_every": 0.2})
+    adapter = Adapter(humanoid, start, stream.rate_hz, cfg, publish=tmp_path)
+    updates = _run(adapter, stream)
+    assert not updates[0].accepted and updates[0].pending  # the first winner waits
+    accepted = [i for i, u in enumerate(updates) if u.accepted]
+    assert accepted, [(u.pending, u.open_loop_candidate, u.open_loop_before) for u in updates]
+    for i in accepted:  # only the last update's winner is published, and only where it wins again
+        assert i > 0 and updates[i - 1].pending
+        assert updates[i].open_loop < (1 - cfg.min_gain) * updates[i].open_loop_before
+    assert len(list(tmp_path.glob("physics_*.json"))) == sum(u.accepted or u.reverted for u in updates)
+
+
+def test_the_model_goes_back_to_the_warm_start_where_that_is_better(humanoid, stream, tmp_path):
+    # the truth as the warm start, the current model set far from it: on the first held-back part the warm start
+    # wins, so the model goes back to it (published) unless the candidate beats the truth by the margin, which a few
+    # small steps from the far model cannot
+    truth = RealRobot(humanoid, REAL).physics()
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.001, "fallback": True})
+    adapter = Adapter(humanoid, truth, stream.rate_hz, cfg, publish=tmp_path)
+    adapter.physics = PhysicalParams.nominal(humanoid)
+    u = _run(adapter, stream)[0]
+    assert u.reverted and not u.accepted and adapter.physics is truth
+    assert u.open_loop == u.open_loop_start < u.open_loop_before
+    assert PhysicalParams.load(tmp_path / "physics.json", humanoid).kp.tolist() == truth.kp.tolist()
+    off = Adapter(humanoid, truth, stream.rate_hz, cfg.__class__(**{**cfg.__dict__, "fallback": False}))
+    off.physics = PhysicalParams.nominal(humanoid)
+    assert not _run(off, stream)[0].reverted and off.physics is not truth
+
+
+def test_each_update_rewrites_the_exported_robot(humanoid, stream, tmp_path):
+    from wresdyn.export.usd import write_export
+    from wresdyn.robot.description import load_robot
+
+    start = PhysicalParams.nominal(humanoid)
+    export = tmp_path / "calibrated"
+    adapter = Adapter(humanoid, start, stream.rate_hz, TINY.__class__(**{**TINY.__dict__, "lr": 0.02}),
+                      export=export)
+    assert json.loads((export / "export.json").read_text())["t"] is None  # the warm start, before any update
+    updates = _run(adapter, stream)
+    last = [u for u in updates if u.accepted or u.reverted][-1]
+    assert json.loads((export / "export.json").read_text())["t"] == pytest.approx(last.t)
+    want = adapter.physics
+    assert not np.allclose(want.friction, start.friction)  # the updates moved it
+    assert PhysicalParams.load(export / "physics.json", humanoid).friction.tolist() == want.friction.tolist()
+    cal = load_robot(export / "robot.usda")  # Newton's USD importer reads the layer the adapter rewrote
+    for f in ("kp", "kd", "armature", "damping", "friction", "effort"):
+        np.testing.assert_allclose(getattr(cal, f), getattr(want, f), rtol=1e-5, err_msg=f)
+    np.testing.assert_allclose(cal.body_mass, want.body_mass, rtol=1e-6)
+    np.testing.assert_allclose(cal.body_inertia, want.body_inertia, atol=1e-6 * np.abs(want.body_inertia).max())
+    # a write that fails half way (a file to copy in is missing) leaves the last export as it was, no temp folder
+    before = {p.name: p.read_bytes() for p in export.iterdir() if p.is_file()}
+    with pytest.raises(FileNotFoundError):
+        write_export(export, humanoid, start, stream.rate_hz, {}, files={"residual.pt2": tmp_path / "missing.pt"})
+    assert {p.name: p.read_bytes() for p in export.iterdir() if p.is_file()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibrated"]
+
+
+def test_an_export_needs_a_usd_robot(cartpole, tmp_path):
+    from wresdyn.export.usd import ExportError
+
+    with pytest.raises(ExportError, match="USD"):
+        Adapter(cartpole, PhysicalParams.nominal(cartpole), 500.0, TINY, export=tmp_path / "calibrated")
+    assert not (tmp_path / "calibrated").exists()
 
 
 def test_the_adapter_refuses_bad_samples(humanoid):
@@ -136,7 +204,7 @@ def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_pat
     out = tmp_path / "out"
     code = main(["adapt", str(run), str(tmp_path / "data.npz"), "--out", str(out), "--window", "1.2",
                  "--holdout", "0.3", "--update-every", "0.4", "--iterations", "2", "--windows", "4", "--horizon", "16",
-                 "--lr", "0.02", "--track", "friction:*knee"])
+                 "--lr", "0.02", "--track", "friction:*knee", "--export", str(tmp_path / "calibrated")])
     printed = capsys.readouterr().out
     assert code == 0
     summary = json.loads((out / "updates.json").read_text())
@@ -144,4 +212,22 @@ def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_pat
     assert summary["n_updates"] == len(summary["updates"]) == len(rows) - 1 >= 2
     assert "friction[left_knee]" in rows[0] and printed.count("friction[left_knee]") == summary["n_updates"]
     assert (out / "adapt.png").is_file()
-    assert len(list((out / "physics").glob("physics_*.json"))) == summary["accepted"] >= 1
+    assert len(list((out / "physics").glob("physics_*.json"))) == summary["accepted"] + summary["reverted"]
+    assert summary["accepted"] >= 1
+    published = json.loads((out / "physics" / "physics.json").read_text())
+    assert json.loads((tmp_path / "calibrated" / "export.json").read_text())["t"] == published["t"]
+    assert (tmp_path / "calibrated" / "robot.usda").is_file()
+
+
+def test_cli_export_of_a_robot_that_is_not_usd_is_one_line_and_writes_nothing(cartpole, tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    PhysicalParams.nominal(cartpole).save(run / "physics.json")
+    n = cartpole.n_dof
+    log = tmp_path / "log.txt"
+    _write_lines(log, np.column_stack([np.arange(10) / 500.0, np.zeros((10, 3 * n))]))
+    code = main(["adapt", str(run), str(log), "--robot", "newton:cartpole.urdf", "--out", str(tmp_path / "out"),
+                 "--export", str(tmp_path / "calibrated"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "USD" in err, err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "calibrated").exists()

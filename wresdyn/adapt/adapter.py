@@ -10,10 +10,13 @@ differentiable solver, in the physically consistent coordinates of :class:`~wres
 
 on the window without its latest :attr:`AdaptConfig.holdout` seconds. The prior pulls toward the warm start, and a
 joint the training part does not move (RMS velocity under :attr:`AdaptConfig.excited_min`) keeps its joint fields:
-what the recent data do not excite stays as the calibration left it. The update is accepted only if the whole
+what the recent data do not excite stays as the calibration left it. The candidate wins only if the whole
 held-back segment, replayed open loop from its first recorded state, is closer to the recording than with the current
-model; otherwise the coordinates go back to the current model's. Accepted updates are published as
-``physics.json``-compatible files with their robot time (:meth:`Adapter.publish`).
+model by :attr:`AdaptConfig.min_gain`; with :attr:`AdaptConfig.confirm` a winner becomes the model only if it wins
+again on the next update's held-back segment, which it was not fitted on; otherwise the coordinates go back to the
+current model's. With :attr:`AdaptConfig.fallback` the model returns to the warm start where that is no worse on the
+held-back segment. Accepted updates are published as ``physics.json``-compatible files with their robot time
+(:meth:`Adapter.publish`) and, with an export folder, rewrite the exported calibrated robot.
 
 A jump in time of more than 1.5 sample periods starts a new segment: windows never span one, and the held-back part
 is the end of the latest segment.
@@ -29,9 +32,12 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..export.usd import check_usd_robot, write_export
 from ..learn.sysid import physics_window_loss
-from ..sim import Simulator, TrajectoryBank, rollout
+from ..learn.window_fit import squared_error
 from ..robot.physical import PhysicalParams
+from ..sim import Simulator, TrajectoryBank, rollout
+from ..sim.fused import fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
 
@@ -52,7 +58,8 @@ class Update:
     t: float
     """Robot time of the update [s] (the last sample's)."""
     accepted: bool
-    """Whether the candidate lowered the held-back error and became the model."""
+    """Whether a candidate became the model: this update's, where it lowered the held-back error; with
+    :attr:`AdaptConfig.confirm`, the last update's, where it lowered it again here."""
     open_loop: float
     """Held-back open-loop error of the model after the decision, mean |q_sim − q| [rad]."""
     open_loop_before: float
@@ -73,6 +80,11 @@ class Update:
     """Wall-clock time of the update [s]."""
     physics: PhysicalParams = field(repr=False)
     """The model after the decision."""
+    reverted: bool = False
+    """Whether the model went back to the warm start (:attr:`AdaptConfig.fallback`)."""
+    pending: bool = False
+    """Whether the candidate won here and waits to be confirmed on the next held-back part
+    (:attr:`AdaptConfig.confirm`)."""
 
     def row(self) -> dict:
         """The scalar fields, for a CSV / JSON log."""
@@ -88,11 +100,16 @@ class Adapter:
         rate_hz: Sample rate of the stream [Hz].
         cfg: Settings.
         publish: Folder the accepted updates are written to (:meth:`publish`); ``None``: not written.
+        export: Export folder of the calibrated robot (:func:`wresdyn.export.usd.write_export`, as ``wresdyn
+            export --physics-only`` writes it), written with the warm start here and rewritten with each published
+            update; ``None``: none. Needs a robot loaded from USD.
     """
 
     def __init__(self, robot, start: PhysicalParams, rate_hz: float, cfg: AdaptConfig = AdaptConfig(),
-                 publish: str | Path | None = None) -> None:
+                 publish: str | Path | None = None, export: str | Path | None = None) -> None:
         start.check(robot)
+        if export is not None:
+            check_usd_robot(robot)
         self.robot, self.start, self.cfg, self.rate_hz = robot, start, cfg, float(rate_hz)
         self.dt = 1.0 / self.rate_hz
         if cfg.torch_threads is not None:
@@ -110,6 +127,8 @@ class Adapter:
         self.physics = start
         """The current model (the last accepted update, or the warm start)."""
         self._kept = {k: v.clone() for k, v in m.state_dict().items()}
+        self._start_state = {k: v.clone() for k, v in self._kept.items()}
+        self._pending = None  # (physics, coordinates) of the last update's winner, to be confirmed
         self.delay = torch.as_tensor(start.delay / self.dt, dtype=torch.float32)
         self.sim = Simulator(robot, cfg.windows, self.dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              param_grads=True)
@@ -117,7 +136,7 @@ class Adapter:
         self.n_holdout = int(round(cfg.holdout * self.rate_hz))
         self.n_one = max(1, (self.n_holdout - 1) // cfg.one_step_every)
         # param_grads: parameters are read live from the model arrays, so a new model does not recompile the solver
-        self.sim_val = Simulator(robot, 3, self.dt, solver=cfg.solver, device=cfg.device, param_grads=True)
+        self.sim_val = Simulator(robot, 4, self.dt, solver=cfg.solver, device=cfg.device, param_grads=True)
         self.sim_one = Simulator(robot, 2 * self.n_one, self.dt, solver=cfg.solver, device=cfg.device,
                                  param_grads=True)
         self.sim_one.set_physics(start, worlds=slice(0, self.n_one))
@@ -131,6 +150,9 @@ class Adapter:
         self.publish_dir = None if publish is None else Path(publish)
         if self.publish_dir is not None:
             self.publish_dir.mkdir(parents=True, exist_ok=True)
+        self.export_dir = None if export is None else Path(export)
+        if self.export_dir is not None:
+            self._export(start, {"t": None})
         self.updates: list[Update] = []
         self.compute = 0.0
         """Wall-clock time spent in updates so far [s]."""
@@ -208,20 +230,42 @@ class Adapter:
         excited = np.sqrt(np.mean(np.concatenate([tr.qd for tr in train]) ** 2, 0)) >= self.cfg.excited_min
         loss = self._steps(train, excited)
         cand = self.model.values() if np.isfinite(loss) else self.physics
-        ol = self._open_loop(holdout, cand)
-        accepted = bool(np.isfinite(loss) and ol[2] < (1.0 - self.cfg.min_gain) * ol[1])
-        if accepted:
-            self.physics = cand
-            self._kept = {k: v.clone() for k, v in self.model.state_dict().items()}
+        pending = self._pending
+        ol = self._open_loop(holdout, cand, None if pending is None else pending[0])
+        # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
+        # back to it unless something beats it): without drift, updates that only fit one held-back second's noise
+        # do not pile up
+        revert = self.cfg.fallback and self.physics is not self.start and ol[0] <= ol[1]
+        ref = ol[0] if revert else ol[1]
+        gain = 1.0 - self.cfg.min_gain
+        wins = bool(np.isfinite(loss) and ol[2] < gain * ref)
+        if self.cfg.confirm:  # publish the last update's winner if it wins again here, on data it was not fitted on
+            accepted = pending is not None and ol[3] < gain * ref
+            new = pending if accepted else None
+            after = ol[3] if accepted else ref
+            wins = wins and ol[2] < gain * after
         else:
+            accepted = wins
+            new = (cand, self.model.state_dict()) if accepted else None
+            after = ol[2] if accepted else ref
+        if new is not None:
+            self.physics = new[0]
+            self._kept = {k: v.clone() for k, v in new[1].items()}
+        elif revert:
+            self.physics = self.start
+            self._kept = {k: v.clone() for k, v in self._start_state.items()}
+        self._pending = (cand, {k: v.clone() for k, v in self.model.state_dict().items()}) if (
+            self.cfg.confirm and wins) else None
+        if self._pending is None:
             self.model.load_state_dict(self._kept)
         one = self._one_step(holdout)
-        u = Update(float(t[-1]), accepted, ol[2] if accepted else ol[1], ol[1], ol[2], ol[0], one[1], one[0],
-                   float(loss), int(excited.sum()), 0.0, self.physics)
+        u = Update(float(t[-1]), accepted, after, ol[1], ol[2], ol[0], one[1], one[0], float(loss),
+                   int(excited.sum()), 0.0, self.physics, reverted=revert and not accepted,
+                   pending=self._pending is not None)
         u.compute = time.perf_counter() - t0
         self.compute += u.compute
         self.updates.append(u)
-        if accepted:
+        if accepted or u.reverted:
             self.publish(u)
         return u
 
@@ -235,7 +279,13 @@ class Adapter:
         for _ in range(cfg.iterations):
             held = {f: getattr(model, f"u_{f}").detach().clone() for f in _JOINT_PARAMS}
             window = bank.sample(self.rng, cfg.windows, cfg.horizon)
-            value, _ = physics_window_loss(cfg, model, self.sim, window)
+            if self._fused(self.sim) and cfg.grad_truncation is None:
+                self.sim.set_physics(model())
+                q, qd = fused_rollout(self.sim, window)
+                value = (cfg.w_q * squared_error(q[:, 1:], window.q[:, 1:])
+                         + cfg.w_qd * squared_error(qd[:, 1:], window.qd[:, 1:]))  # physics_window_loss's
+            else:
+                value, _ = physics_window_loss(cfg, model, self.sim, window)
             value = value + cfg.w_prior * model.prior().to(value.device)
             if not torch.isfinite(value):
                 return float("nan")
@@ -251,15 +301,17 @@ class Adapter:
             loss = float(value.detach())
         return loss
 
-    def _open_loop(self, holdout: TrajectoryBank, candidate: PhysicalParams) -> tuple[float, float, float]:
-        """Held-back open-loop error [rad] of the warm start, the current model and ``candidate`` on ``holdout``
-        (a bank of the held-back samples)."""
+    def _open_loop(self, holdout: TrajectoryBank, candidate: PhysicalParams, pending: PhysicalParams | None
+                   ) -> tuple[float, float, float, float]:
+        """Held-back open-loop error [rad] of the warm start, the current model, ``candidate`` and ``pending`` (the
+        current model again where ``None``) on ``holdout`` (a bank of the held-back samples)."""
         self.sim_val.set_physics(self.physics, worlds=slice(1, 2))
         self.sim_val.set_physics(candidate, worlds=slice(2, 3))
-        window = holdout.whole().repeat(3)
+        self.sim_val.set_physics(self.physics if pending is None else pending, worlds=slice(3, 4))
+        window = holdout.whole().repeat(4)
         with torch.no_grad():
-            run = rollout(self.sim_val, window)
-        err = (run.q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
+            q = fused_rollout(self.sim_val, window)[0] if self._fused(self.sim_val) else rollout(self.sim_val, window).q
+        err = (q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
         return tuple(float(e) for e in err)
 
     def _one_step(self, holdout: TrajectoryBank) -> tuple[float, float]:
@@ -273,12 +325,19 @@ class Adapter:
         err = (run.q[:, 1] - window.q[:, 1]).abs().mean(-1).cpu().numpy()
         return float(err[:self.n_one].mean()), float(err[self.n_one:].mean())
 
+    def _fused(self, sim: Simulator) -> bool:
+        """Whether ``sim`` replays PD-only windows in one launch (:func:`~wresdyn.sim.fused.fused_rollout`: the
+        replay solver at one substep, no servo drive's goal profile); else step by step, the same numbers."""
+        return sim.solver_kind == "replay" and sim.substeps == 1 and getattr(self.robot, "servo", None) is None
+
     # -------------------------------------------------------------------------------------------- publishing
     def publish(self, update: Update) -> Path | None:
         """Write ``update``'s physics to the publish folder: ``physics_<t>.json`` (``t`` in ms) and ``physics.json``
         (the latest), each the :meth:`~wresdyn.robot.physical.PhysicalParams.save` format with ``t`` [s] and the
-        held-back error added (:meth:`~wresdyn.robot.physical.PhysicalParams.load` reads them). Returns the
-        timestamped file."""
+        held-back error added (:meth:`~wresdyn.robot.physical.PhysicalParams.load` reads them); and rewrite the
+        export folder, if any. Returns the timestamped file."""
+        if self.export_dir is not None:
+            self._export(update.physics, {"t": update.t, "open_loop": update.open_loop})
         if self.publish_dir is None:
             return None
         data = {**update.physics.to_json(), "t": update.t, "open_loop": update.open_loop}
@@ -289,6 +348,10 @@ class Adapter:
             tmp.write_text(text)
             tmp.replace(p)
         return path
+
+
+    def _export(self, physics: PhysicalParams, when: dict) -> None:
+        write_export(self.export_dir, self.robot, physics, self.rate_hz, {"source": "wresdyn adapt", **when})
 
 
 def _traj(x: np.ndarray):

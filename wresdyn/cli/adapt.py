@@ -8,7 +8,8 @@ its sliding window and keeps the update only if it lowers the open-loop error on
 update prints a line (robot time, accepted or not, the held-back open-loop and one-step errors of the adapted model
 and of the run's physics held fixed, the compute, the tracked parameters). OUT gets ``physics/`` (each accepted
 update, ``physics.json``-compatible with its time ``t`` [s], and ``physics.json``, the latest), ``updates.csv`` and
-``updates.json`` (every update, every adapted parameter), ``adapt.png`` and ``adapt.log``.
+``updates.json`` (every update, every adapted parameter), ``adapt.png`` and ``adapt.log``. ``--export DIR`` keeps
+the calibrated robot exported there (:func:`wresdyn.export.usd.write_export`), rewritten with each update.
 """
 
 from __future__ import annotations
@@ -33,6 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--track", type=comma_list(str), default=(),
                    help="parameters to print, FIELD:NAME comma list (fnmatch on joint/body names, e.g. "
                         "friction:*knee,body_mass:torso); default: the three that moved most")
+    p.add_argument("--export", default=None, metavar="DIR",
+                   help="keep the calibrated robot exported in DIR as `wresdyn export --physics-only` writes it "
+                        "(robot.usda, actuated.usda, physics.json): the warm start first, rewritten atomically with "
+                        "each published update (a USD robot only)")
     p.add_argument("--quiet", action="store_true", help="print nothing per update (OUT/adapt.log keeps every line)")
     add_config_flags(p, AdaptConfig(), title="online identification (wresdyn.adapt.config.AdaptConfig)")
 
@@ -90,6 +95,10 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{args.run}: no physics.json (a wresdyn identify or hybrid fit run folder)")
     robot, rate, blocks = _source(args)
     start = run_physics(args.run, robot)
+    if args.export is not None:
+        from ..export.usd import check_usd_robot
+
+        check_usd_robot(robot)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     from ..progress import Log
@@ -98,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     from ..adapt.adapter import Adapter
     from ..adapt.timeline import parameter_columns, plot_updates, tracked_names, write_updates
 
-    adapter = Adapter(robot, start, rate, cfg, publish=out / "physics")
+    adapter = Adapter(robot, start, rate, cfg, publish=out / "physics", export=args.export)
     names = tracked_names(start, cfg.fit, args.track)
     log(f"adapting {', '.join(cfg.fit)} of {args.run} on {args.log} at {rate:g} Hz: window {cfg.window:g} s, "
         f"held back {cfg.holdout:g} s, {cfg.iterations} Adam steps x {cfg.windows} windows x {cfg.horizon} every "
@@ -109,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
             for u in adapter.push(t, q, qd, q_cmd):
                 cols = parameter_columns(u.physics, cfg.fit)
                 shown = names if args.track else tracked_names(start, cfg.fit, latest=u.physics)
-                log(f"t {u.t:8.2f} s  {'accepted' if u.accepted else 'rejected'}  open-loop {u.open_loop:.5f} rad "
+                verdict = "accepted" if u.accepted else "reverted" if u.reverted else "rejected"
+                log(f"t {u.t:8.2f} s  {verdict}  open-loop {u.open_loop:.5f} rad "
                     f"(fixed {u.open_loop_start:.5f})  one-step {u.one_step:.6f} (fixed {u.one_step_start:.6f})  "
                     f"compute {u.compute:.2f} s  " + "  ".join(f"{n} {cols[n]:.4g}" for n in shown))
             streamed += len(t) / rate
@@ -122,11 +132,12 @@ def run(args: argparse.Namespace) -> int:
     rtf = streamed / adapter.compute if adapter.compute > 0 else float("inf")
     summary = {"run": str(args.run), "log": str(args.log), "rate_hz": rate, "config": dataclasses.asdict(cfg),
                "robot_time_s": streamed, "compute_s": adapter.compute, "real_time_factor": rtf,
-               "n_updates": len(ups), "accepted": sum(u.accepted for u in ups)}
+               "n_updates": len(ups), "accepted": sum(u.accepted for u in ups),
+               "reverted": sum(u.reverted for u in ups)}
     csv_path, _ = write_updates(out, ups, cfg.fit, summary)
     plot = plot_updates(out / "adapt.png", ups, start, names if args.track else
                         tracked_names(start, cfg.fit, latest=ups[-1].physics))
-    log(f"done: {len(ups)} updates, {summary['accepted']} accepted; {streamed:.1f} s of robot time in "
-        f"{adapter.compute:.1f} s of updates (real-time factor {rtf:.2f}); wrote {csv_path}, {plot}, "
-        f"{out / 'physics'}")
+    log(f"done: {len(ups)} updates, {summary['accepted']} accepted, {summary['reverted']} back to the warm start; "
+        f"{streamed:.1f} s of robot time in {adapter.compute:.1f} s of updates (real-time factor {rtf:.2f}); wrote {csv_path}, {plot}, "
+        f"{out / 'physics'}" + (f", {args.export}" if args.export else ""))
     return 0

@@ -60,7 +60,7 @@ from ..learn.runs import run_physics
 from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
 
-__all__ = ["ExportError", "export_run", "write_layers", "inertia_principal"]
+__all__ = ["ExportError", "check_usd_robot", "export_run", "write_export", "write_layers", "inertia_principal"]
 
 ACTUATOR_SCOPE = "wresdyn_actuators"
 """Child of the robot's default prim that holds the actuator prims."""
@@ -300,34 +300,81 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     if robot.source_sha256 != ds.robot_sha256:
         raise ExportError(f"{robot.source}: the robot file changed since the run's data were recorded (sha256 "
                           f"{robot.source_sha256[:12]} != {ds.robot_sha256[:12]}); the export would describe another robot")
-    if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
-        raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
-                          f"{Path(robot.source).suffix} to USD first (for MJCF: mujoco-usd-converter), then record "
-                          "or import the data and identify against the .usd file")
+    check_usd_robot(robot)
     if residual is not None and list(residual["joint_names"]) != list(robot.joint_names):
         raise ExportError(f"{run}: the residual's joints do not match {robot.source.name}'s")
     physics = run_physics(run, robot)
     if physics is None:  # a residual on the robot file's physics
         physics = PhysicalParams.nominal(robot)
+    files = {}
+    if residual is not None:
+        files["residual.pt2"] = run / "policy.pt"
+        if (run / "policy.onnx").is_file():
+            files["residual.onnx"] = run / "policy.onnx"
+    return write_export(out, robot, physics, ds.rate_hz, {"run": str(run), "dataset": str(data),
+                                                           "gains": ds.gains_config}, residual, files)
+
+
+def check_usd_robot(robot) -> None:
+    """Raise :class:`ExportError` unless ``robot`` was loaded from a USD file (the layers go over it)."""
+    if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
+        raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
+                          f"{Path(robot.source).suffix} to USD first (for MJCF: mujoco-usd-converter), then record "
+                          "or import the data and identify against the .usd file")
+
+
+def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, residual: dict | None = None,
+                 files: dict | None = None) -> Path:
+    """Write the export folder of ``physics`` on ``robot`` (module docstring) as ``out``, replacing what is there.
+
+    Everything is written into a temporary folder beside ``out`` and swapped into place by two renames (the old
+    folder aside, the new one in), then the old one is removed: a reader finds the old folder or the new one, never a
+    half-written one, and a failure leaves ``out`` as it was.
+
+    Args:
+        out: The export folder.
+        robot: The robot, loaded from a USD file (:func:`check_usd_robot`).
+        physics: :class:`~wresdyn.sim.physics.PhysicalParams` to author.
+        rate_hz: Actuator step rate [Hz] (the recording rate).
+        record: Where the physics came from, written into ``export.json`` with the robot file, its sha256, the rate
+            and the servo component.
+        residual: ``residual.json`` of the run, or ``None`` for none.
+        files: Files copied in, ``{name in out: source path}`` (the residual network).
+    """
+    check_usd_robot(robot)
+    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
-        write_layers(robot, physics, tmp, ds.rate_hz, residual)
+        write_layers(robot, physics, tmp, rate_hz, residual)
         physics.save(tmp / "physics.json")
         servo = _write_servo_component(robot, tmp)
+        for name, src in (files or {}).items():
+            shutil.copyfile(src, tmp / name)
         if residual is not None:
-            shutil.copyfile(run / "policy.pt", tmp / "residual.pt2")
-            if (run / "policy.onnx").is_file():
-                shutil.copyfile(run / "policy.onnx", tmp / "residual.onnx")
             (tmp / "residual.json").write_text(json.dumps(residual, indent=2))
         (tmp / "export.json").write_text(json.dumps({
-            "format": "wresdyn.export/1", "run": str(run), "dataset": str(data), "robot_file": str(robot.source),
-            "robot_sha256": robot.source_sha256, "rate_hz": ds.rate_hz, "residual": residual is not None,
-            "gains": ds.gains_config, "servo": servo}, indent=2))
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.replace(out)
+            "format": "wresdyn.export/1", **record, "robot_file": str(robot.source),
+            "robot_sha256": robot.source_sha256, "rate_hz": rate_hz, "residual": residual is not None,
+            "servo": servo}, indent=2))
+        _swap(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return out
+
+
+def _swap(tmp: Path, out: Path) -> None:
+    """Put the folder ``tmp`` in the place of ``out`` (absent or a folder); the old one is removed last."""
+    if not out.exists():
+        tmp.replace(out)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
+    old.rmdir()
+    out.replace(old)
+    try:
+        tmp.replace(out)
+    except BaseException:
+        old.replace(out)
+        raise
+    shutil.rmtree(old, ignore_errors=True)

@@ -1,0 +1,96 @@
+"""PD-only window rollouts in one solver launch: :meth:`SolverReplay.rollout` under a :class:`~wresdyn.sim.simulator.
+Simulator`, differentiable to the physical parameters.
+
+:func:`~wresdyn.sim.rollout.rollout` steps the simulator from Python, one launch (and, with gradients, one Warp tape)
+per sample period. Without a residual policy in the loop nothing needs the state between steps, so the replay
+solver can run every step of a window batch in one launch and, backwards, every step's adjoint in one plan: the same
+kernels, the same arithmetic (:func:`fused_rollout` matches :func:`~wresdyn.sim.rollout.rollout` to float32
+rounding), far fewer launches. Online identification (:mod:`wresdyn.adapt`) replays its windows this way.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from .bank import Window
+from .simulator import Simulator
+
+__all__ = ["fused_rollout"]
+
+
+def fused_rollout(sim: Simulator, window: Window) -> tuple[torch.Tensor, torch.Tensor]:
+    """Replay ``window`` open loop from its recorded start state, PD only, every step in one launch.
+
+    ``sim`` runs the replay solver, one sample period per step (``substeps = 1``), one world per window. Physical
+    parameters set with :meth:`~wresdyn.sim.simulator.Simulator.set_physics` as tensors that require grad (with
+    ``Simulator(requires_grad=True, param_grads=True)``) receive gradients, summed over worlds, as through
+    :meth:`~wresdyn.sim.simulator.Simulator.step_diff`; the start state and the targets are data (no gradient).
+
+    Returns:
+        ``(q, qd)``: joint positions [rad] and velocities [rad/s], each (B, L + 1, n): the start state, then the
+        state after each step. No divergence handling: a diverged world shows up as non-finite values.
+    """
+    if sim.solver_kind != "replay" or sim.substeps != 1:
+        raise ValueError(f"fused_rollout needs the replay solver at one substep (got {sim.solver_kind}, "
+                         f"{sim.substeps} substeps)")
+    if window.cmd.shape[0] != sim.n_worlds:
+        raise ValueError(f"window batch {window.cmd.shape[0]} != simulator worlds {sim.n_worlds}")
+    names = tuple(sim._physics) if torch.is_grad_enabled() else ()
+    q, qd = _Fused.apply(window.q[:, 0], window.qd[:, 0], window.target, sim, names,
+                         *(sim._physics[f] for f in names))
+    return q, qd
+
+
+def _layout(x: torch.Tensor, index: torch.Tensor, width: int) -> torch.Tensor:
+    """(B, L, n) actuated-joint values -> (L, B, width) time-major in Newton's per-world layout, zeros elsewhere."""
+    out = torch.zeros(x.shape[1], x.shape[0], width, dtype=torch.float32, device=x.device)
+    out[:, :, index] = x.transpose(0, 1).to(torch.float32)
+    return out
+
+
+class _Fused(torch.autograd.Function):
+    """(start state, PD targets, physical parameters) -> the window's (q, q̇), each (B, L + 1, n)."""
+
+    @staticmethod
+    def forward(ctx, q0, qd0, target, sim: Simulator, names: tuple, *physics):
+        import warp as wp
+
+        steps = target.shape[1]
+        grad = bool(names)
+        q = _layout(q0[:, None], sim.q_index, sim.nq)
+        qd = _layout(qd0[:, None], sim.qd_index, sim.nqd)
+        q = torch.cat([q, q.new_zeros(steps, *q.shape[1:])]).contiguous()
+        qd = torch.cat([qd, qd.new_zeros(steps, *qd.shape[1:])]).contiguous()
+        arrays = [wp.from_torch(a, requires_grad=grad) for a in
+                  (q, qd, _layout(target, sim.q_index, sim.nq).contiguous())]
+        tape = wp.Tape() if grad else None
+        with sim._tape_stream():
+            if grad:
+                with tape:
+                    sim.solver.rollout(*arrays, sim.dt)
+            else:
+                sim.solver.rollout(*arrays, sim.dt)
+        ctx.tape, ctx.sim, ctx.names, ctx.arrays = tape, sim, names, arrays
+        ctx.physics_meta = [(p.dtype, p.device) for p in physics]
+        ctx.shape = q0.shape
+        return (q.transpose(0, 1)[:, :, sim.q_index].clone(), qd.transpose(0, 1)[:, :, sim.qd_index].clone())
+
+    @staticmethod
+    def backward(ctx, g_q, g_qd):
+        import warp as wp
+
+        sim, tape, (q, qd, _) = ctx.sim, ctx.tape, ctx.arrays
+        for f in ctx.names:
+            sim._model_view(f, grad=True).zero_()
+        with sim._tape_stream():
+            tape.backward(grads={q: wp.from_torch(_layout(g_q, sim.q_index, sim.nq).contiguous()),
+                                 qd: wp.from_torch(_layout(g_qd, sim.qd_index, sim.nqd).contiguous())})
+        physics = []
+        for f, (dtype, device) in zip(ctx.names, ctx.physics_meta):  # summed over worlds: one robot
+            g = sim._model_view(f, grad=True)
+            g = g.sum(0) if f.startswith("body_") else g[:, sim.qd_index].sum(0)
+            physics.append(g.to(device, dtype))
+        with sim._tape_stream():
+            tape.zero()
+        ctx.tape = ctx.arrays = None
+        return (None, None, None, None, None, *physics)
