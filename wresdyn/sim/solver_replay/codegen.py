@@ -51,8 +51,10 @@ def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray
                      for k in range(tree.n_dof)]
     out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction else None for k in range(tree.n_dof)]
     if friction:
-        # != rather than >: a NaN friction runs the solve and shows in the state
-        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in out['fric'])} != S(0.0) or fric_grad[0] != 0")
+        # != rather than >: a NaN friction runs the solve and shows in the state. The flag is added, not or-ed: with
+        # `or` (a branch in the C++) Clang's build of the humanoid's rollout loop kept 3x as many values on the stack
+        # and ran 2-3x slower (benchmarks/results/compile/forward_spills.txt)
+        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in out['fric'])} + S(fric_grad[0]) != S(0.0)")
     return out
 
 
