@@ -2,7 +2,8 @@
 
 usage: adjoint_options.py DEVICE WORLDS TAG [OPT_LEVEL|-] [INLINE:0|1|-] [MIN_LEN|-] [REFERENCE.npz]
 
-Run in a fresh process with empty caches (WARP_CACHE_PATH, WRESDYN_KERNEL_DIR). Builds the humanoid in WORLDS worlds
+Run in a fresh process with empty caches (WARP_CACHE_PATH, WRESDYN_KERNEL_DIR), with PYTHONPATH set to the tree to
+measure (a script's own folder, not the current one, comes first on sys.path). Builds the humanoid in WORLDS worlds
 (model arrays carrying gradients, as identification has them; friction 0.3 N m on every DoF so that the adjoint
 differentiates the friction solve), compiles the forward module's rollout and the adjoint module's step kernel
 (forward + backward), then times a Tape over a 32-step rollout (forward + backward, median and best of 7; CPU: per CPU-second) and saves the
