@@ -245,8 +245,8 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     adjoint; its code is cut into functions with the given ``inline`` hint (see :func:`~.emit.outline`).
     ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`_friction`); 0 leaves the
     friction code out; the kernels skip the solve in a world without friction unless ``fric_grad[0]`` is non-zero
-    (a run-time branch, so the same module serves any friction values). Every physical parameter is read from the arrays: the source
-    depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
+    (a run-time branch, so the same module serves any friction values). Every physical parameter is read from the
+    arrays: the source depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
     kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
     """
     n = tree.n_dof
