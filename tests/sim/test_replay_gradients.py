@@ -184,6 +184,33 @@ def test_friction_gradient_sliding_and_stuck(sliding, tmp_path):
             check(stuck, [("joint_target_ke", (0,)), ("body_mass", (2,)), ("tq", (0, 0, 0))], grads)
 
 
+def test_frictionless_worlds_skip_the_solve_unless_friction_grad(tmp_path):
+    """At mu = 0 everywhere the solve returns v* exactly, so skipping it (``friction_grad=False``, what residual
+    learning runs) leaves the loss and every gradient but joint_friction's bit for bit as they are with the solve
+    (``friction_grad=True``, identification); joint_friction's is then 0. With the solve, the gradient at mu = 0 is
+    the one-sided difference towards mu > 0 (mu < 0 has no meaning), sliding joints' -sign(v) terms."""
+    robot = make_robot(tmp_path, friction=0.0, effort=1e3)
+    inputs = random_inputs(0, qd_scale=2.0, target_scale=0.2)
+    skip, solve = Problem(robot, *inputs, friction_grad=False), Problem(robot, *inputs, friction_grad=True)
+    assert skip.loss() == solve.loss()
+    g_skip, g_solve = skip.gradients(), solve.gradients()
+    for name, g in g_skip.items():
+        if name != "joint_friction":
+            assert np.array_equal(g, g_solve[name]), name
+    assert not g_skip["joint_friction"].any()
+    arr, base = solve.solver.parameters["joint_friction"], solve.loss()
+    for k in (0, 4, 5):
+        h = 1e-6  # one-sided: truncation error ~h * curvature
+        a = arr.numpy().copy()
+        a[k] = h
+        arr.assign(a)
+        fd = (solve.loss() - base) / h
+        a[k] = 0.0
+        arr.assign(a)
+        assert abs(g_solve["joint_friction"][k]) > 1e-4  # measured 4e-4, 0.018, 1.3e-3
+        assert g_solve["joint_friction"][k] == pytest.approx(fd, rel=1e-5), k  # measured 4e-8 relative
+
+
 def test_effort_limit_gradient_when_saturated(tmp_path):
     """Targets ~1 rad away with kp = 30 ask for ~30 N m against a 2 N m limit: the drive torque is the limit, so
     d loss / d effort is the finite difference (and kp, kd have no effect)."""

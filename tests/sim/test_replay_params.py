@@ -155,10 +155,10 @@ def test_float32_edits_are_live_and_never_recompile(robots):
     assert np.array_equal(step(reference), after_friction)
 
 
-def test_forward_friction_branch_matches_the_adjoint_modules_step(robots):
-    """The forward kernels run the friction solve only in worlds with friction (a run-time branch); the adjoint
-    module runs it everywhere. One launch with a frictionless world and a world with friction: both modules give
-    the same step, and the friction acts in its world."""
+def test_friction_branch_gives_the_same_step_in_both_modules(robots):
+    """The kernels run the friction solve only in worlds with friction (a run-time branch), or everywhere with
+    ``friction_grad``. One launch with a frictionless world and a world with friction: both modules, the branch
+    taken or forced, give the same step, and the friction acts in its world."""
     robot = robots["tri"]
     model = robot.build_model(2, "cpu")
     friction = np.zeros(model.joint_dof_count, np.float32)
@@ -175,5 +175,6 @@ def test_forward_friction_branch_matches_the_adjoint_modules_step(robots):
         return out.joint_qd.numpy().reshape(2, -1)
 
     a, b = step(forward), step(adjoint)
-    assert np.array_equal(a, b)  # where the branch skips the solve, the solve returns v* exactly (measured: 0)
+    adjoint.friction_grad = True
+    assert np.array_equal(a, b) and np.array_equal(a, step(adjoint))  # without friction the solve returns v* exactly
     assert np.abs(a[1] - a[0]).max() > 0.02  # the same start: world 1's friction alone moves it (measured 0.054 rad/s)

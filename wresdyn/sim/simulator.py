@@ -108,6 +108,8 @@ class Simulator:
                                        contact=contact)
         self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, ground=self.ground,
                                   contact=contact)
+        if self.solver_kind == "replay":
+            self.solver.friction_grad = False  # until set_physics hands it a friction that carries gradients
         self.device = _torch_device(device)
         self._cuda = self.device.type == "cuda"
         self.graph = self._cuda if graph is None else bool(graph) and self._cuda
@@ -178,6 +180,8 @@ class Simulator:
                                            "param_grads=True)")
                     self._physics[f] = v
         if self.solver_kind == "replay":
+            if worlds is None:  # the friction solve of a frictionless world is only differentiated for its gradient
+                self.solver.friction_grad = "friction" in self._physics
             return  # every parameter is read live from the arrays just written: nothing to recompile
         from newton import ModelFlags
 

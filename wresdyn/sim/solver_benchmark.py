@@ -149,7 +149,7 @@ class _Bench:
         wp, args, n = self.wp, self.args, self.n
         model = self.robot.build_model(w, args.device, requires_grad=backward)
         # gradients to states and controls, as residual learning takes them (Simulator(param_grads=False))
-        solver = SolverReplay(model, threads=args.threads)
+        solver = SolverReplay(model, threads=args.threads, friction_grad=False)
         t_len = args.horizon if backward else args.steps
         tr = solver.tree
         if tr.coords_per_world != n or tr.dofs_per_world != n:
@@ -216,7 +216,7 @@ def run_bench(args) -> int:
     def replay_solver(model):
         from .solver_replay import SolverReplay
 
-        return SolverReplay(model, threads=args.threads)
+        return SolverReplay(model, threads=args.threads, friction_grad=False)
 
     def featherstone(model):
         import newton

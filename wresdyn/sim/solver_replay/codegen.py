@@ -24,7 +24,7 @@ import itertools
 import numpy as np
 
 from .dynamics import dynamics, inertial_params, solve_ltdl
-from .emit import Emitter, indent, outline, unmarked
+from .emit import Emitter, branched, gate, indent, outline, unmarked
 from .tree import ReplayTree
 
 __all__ = ["generate_source"]
@@ -38,10 +38,11 @@ _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
 
-def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray | None = None,
-                 gate: bool = False) -> dict:
-    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) where ``friction``, the
-    servo arrays only where ``servo``; with ``gate`` also ``fric_on``, true where the world has friction."""
+def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray | None = None) -> dict:
+    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) and ``fric_on`` where
+    ``friction``, the servo arrays only where ``servo``. ``fric_on``: the world has friction, or the kernel
+    argument ``fric_grad[0]`` asks for the friction solve everywhere (an adjoint that differentiates a friction
+    of 0: its gradient is not 0)."""
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
@@ -49,9 +50,11 @@ def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") if servo[k] else None
                      for k in range(tree.n_dof)]
     out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction else None for k in range(tree.n_dof)]
-    if friction and gate:
-        # != rather than >: a NaN friction runs the solve and shows in the state
-        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in out['fric'])} != S(0.0)")
+    if friction:
+        # != rather than >: a NaN friction runs the solve and shows in the state. The flag is added, not or-ed: with
+        # `or` (a branch in the C++) Clang's build of the humanoid's rollout loop kept 3x as many values on the stack
+        # and ran 2-3x slower (benchmarks/results/compile/forward_spills.txt)
+        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in out['fric'])} + S(fric_grad[0]) != S(0.0)")
     return out
 
 
@@ -140,10 +143,10 @@ def _servo_drive(e: Emitter, ke, kd, eff, db, w0, q, qd, tq, tqd) -> tuple[str, 
 
 
 def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, jf, g,
-          sweeps: int, servo: np.ndarray | None = None, gate: str | None = None) -> tuple[list, list]:
-    """Emit one world step; returns the new (q, qd) symbols. DoFs where ``servo`` get the servo law. ``gate``: a
-    kernel variable, true in a world with friction; the friction solve then runs only where it holds (the same
-    result: without friction it returns ``v*`` exactly)."""
+          sweeps: int, servo: np.ndarray | None = None) -> tuple[list, list]:
+    """Emit one world step; returns the new (q, qd) symbols. DoFs where ``servo`` get the servo law. The friction
+    solve runs only where the kernel variable ``fric_on`` holds (:func:`_load_params`; the same result: without
+    friction it returns ``v*`` exactly), as a :func:`~.emit.gate` region."""
     n = tree.n_dof
     bias, m_diag, m_off = dynamics(e, tree, groups, q, qd, g)
     rhs, h_diag = [], []
@@ -175,14 +178,11 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
     qdd = solve_ltdl(e, tree, h_diag, m_off, rhs)
     e.mark("frictionless velocity")
     v = [e.let(f"{qd[k]} + dt * {e.sym(qdd[k])}") for k in range(n)]
-    if sweeps > 0 and gate is None:
-        v = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, qd)
-    elif sweeps > 0:
+    if sweeps > 0:
         v = [e.let(v[k], prefix="v_") for k in range(n)]
         start = len(e.lines)
         vf = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, qd)
-        block = unmarked(e.lines[start:]) + [f"{v[k]} = {vf[k]}" for k in range(n)]
-        e.lines[start:] = [f"if {gate}:", *("    " + line for line in block)]
+        e.lines[start:] = gate(e.lines[start:] + [f"{v[k]} = {vf[k]}" for k in range(n)], "fric_on")
     e.mark("semi-implicit Euler")
     return [e.let(f"{q[k]} + dt * {v[k]}") for k in range(n)], v
 
@@ -213,24 +213,21 @@ _TIME_MAJOR = {"q": "q[t, w, {}]", "qd": "qd[t, w, {}]", "tq": "target_q[t, w, {
 """Array accesses of the rollout kernel (time, world, coordinate)."""
 
 
-def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None = None, gate: bool = False
+def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None = None
                ) -> tuple[list[str], list[str], list[str], list[str]]:
-    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores). ``gate``:
-    run the friction solve only in worlds with friction (forward kernels; an adjoint needs it everywhere, as the
-    gradient to a friction of 0 is not 0)."""
+    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores)."""
     n = tree.n_dof
     co = [int(x) for x in tree.q_offset]
     do = [int(x) for x in tree.qd_offset]
     e = Emitter()
-    p = _load_params(e, tree, sweeps > 0, servo, gate)
+    p = _load_params(e, tree, sweeps > 0, servo)
     groups = inertial_params(e, tree)
     params, e.lines = unmarked(e.lines) + _GRAVITY, []
     q = [e.let(access["q"].format(co[k]), prefix="q_") for k in range(n)]
     qd, tq, tqd, jf = ([e.let(access[kind].format(do[k]), prefix=f"{kind}_") for k in range(n)]
                        for kind in ("qd", "tq", "tqd", "jf"))
     loads, e.lines = e.lines, []
-    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, servo,
-                    "fric_on" if gate else None)
+    qn, qdn = _step(e, tree, p, groups, q, qd, tq, tqd, jf, ["gx", "gy", "gz"], sweeps, servo)
     stores = [f"{access['q_out'].format(co[k])} = {qn[k]}" for k in range(n)]
     stores += [f"{access['qd_out'].format(do[k])} = {qdn[k]}" for k in range(n)]
     return params, loads, e.lines, stores
@@ -247,9 +244,9 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     ``M(q)`` and ``c(q, qd)`` of one world for the parity tests. With ``backward`` the step kernel gets an
     adjoint; its code is cut into functions with the given ``inline`` hint (see :func:`~.emit.outline`).
     ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`_friction`); 0 leaves the
-    friction code out; the forward kernels skip the solve in a world without friction (a run-time branch, so
-    the same module serves any friction values). Every physical parameter is read from the arrays: the source
-    depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
+    friction code out; the kernels skip the solve in a world without friction unless ``fric_grad[0]`` is non-zero
+    (a run-time branch, so the same module serves any friction values). Every physical parameter is read from the
+    arrays: the source depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
     kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
     """
     n = tree.n_dof
@@ -257,7 +254,7 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     param_args = _param_args(servo is not None)
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
 
-    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo, gate=not backward)
+    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
     if backward:
         external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
         funcs, compute = outline(compute, "step_part", inline, stores, external)
@@ -266,6 +263,7 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
 @wp.kernel(enable_backward={backward}, module="unique")
 def replay_step(
     world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, fric_m0: wp.array(dtype=S),
+    fric_grad: wp.array(dtype=wp.int32),
     {param_args}, gravity: wp.array(dtype=V3),
     joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
     target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),
@@ -275,15 +273,15 @@ def replay_step(
     bq = w * {tree.coords_per_world}
     bd = w * {tree.dofs_per_world}
     bb = w * {tree.bodies_per_world}
-{indent(params + loads + unmarked(compute) + stores, 1)}
+{indent(params + loads + branched(compute) + stores, 1)}
 ''')
 
-    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo, gate=True)
+    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)
     src.append(f'''
 @wp.kernel(enable_backward=False, module="unique")
 def replay_rollout(
     world_start: int, n_steps: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S,
-    fric_m0: wp.array(dtype=S), {param_args},
+    fric_m0: wp.array(dtype=S), fric_grad: wp.array(dtype=wp.int32), {param_args},
     gravity: wp.array(dtype=V3), target_q: wp.array3d(dtype=S), target_qd: wp.array3d(dtype=S),
     joint_f: wp.array3d(dtype=S),
     q: wp.array3d(dtype=S), qd: wp.array3d(dtype=S),
@@ -293,7 +291,7 @@ def replay_rollout(
     bb = w * {tree.bodies_per_world}
 {indent(params, 1)}
     for t in range(n_steps):
-{indent(loads + unmarked(compute) + stores, 2)}
+{indent(loads + branched(compute) + stores, 2)}
 ''')
 
     e = Emitter()

@@ -66,7 +66,9 @@ the per-DoF drive and joint arrays and ``body_mass/body_com/body_inertia`` (of t
 The generated code depends on the robot's structure (topology, joint frames and axes, which DoFs have servo
 drives), the friction solver settings and the variant (forward, or with an adjoint) only, never on a parameter's
 value: any masses, inertias, gains or friction, identified ones included, run on the module the robot file's
-values compiled. The forward kernels skip the friction solve in a world whose friction is 0 everywhere.
+values compiled. The kernels skip the friction solve in a world whose friction is 0 everywhere (its result there
+is ``v*`` exactly), the adjoint too unless :attr:`SolverReplay.friction_grad` asks for the gradient to a friction of
+0, which is not 0 (a sliding joint's ``-mu sign(v)``).
 
 Not supported: floating bases, contacts, mimic joints, ``joint_target_mode`` (drives act wherever
 ``ke`` or ``kd`` is non-zero), velocity limits. ``State.body_q`` is only refreshed with
@@ -142,6 +144,7 @@ class SolverReplay(SolverBase):
         friction_sweeps: int = FRICTION_SWEEPS,
         implicit_stiffness: bool = False,
         requires_grad: bool | None = None,
+        friction_grad: bool | None = None,
         update_body_q: bool = False,
         threads: int = 1,
         dtype=wp.float32,
@@ -160,6 +163,7 @@ class SolverReplay(SolverBase):
                 more stable for very stiff drives, but no longer MuJoCo ``implicitfast`` parity.
             requires_grad: Compile adjoint kernels (default: ``model.requires_grad``). The adjoint reaches the
                 parameter arrays whenever the model's arrays carry gradients (``model.requires_grad``).
+            friction_grad: Initial :attr:`friction_grad` (default: whether ``joint_friction`` carries gradients).
             update_body_q: Refresh ``state_out.body_q/body_qd`` with ``newton.eval_fk`` after each step.
             threads: CPU only: split the worlds over this many host threads (Warp runs a CPU kernel's
                 threads one after another; separate launches run concurrently).
@@ -187,7 +191,26 @@ class SolverReplay(SolverBase):
         self._plans: dict = {}
         self._zeros: dict = {}
         self._control0 = None
+        self._fric_grad = wp.zeros(1, dtype=wp.int32, device=model.device)
+        self._fric_grad_on = False
         self._build()
+        if friction_grad is None:
+            friction_grad = self.requires_grad and self.parameters["joint_friction"].requires_grad
+        self.friction_grad = friction_grad
+
+    @property
+    def friction_grad(self) -> bool:
+        """Run the friction solve also in worlds whose friction is 0 everywhere, so that the adjoint gives the
+        gradient to ``joint_friction`` there (without it, that gradient is 0 and every other one the same: the
+        solve returns ``v*`` exactly where there is no friction). Off, a frictionless robot's steps and their
+        adjoints skip the solve; a kernel argument array, so a change reaches recorded launches and CUDA graphs."""
+        return self._fric_grad_on
+
+    @friction_grad.setter
+    def friction_grad(self, on: bool) -> None:
+        if bool(on) != self._fric_grad_on:
+            self._fric_grad.fill_(1 if on else 0)
+            self._fric_grad_on = bool(on)
 
     # ------------------------------------------------------------------ set-up
     def _build(self) -> None:
@@ -254,13 +277,13 @@ class SolverReplay(SolverBase):
     # ------------------------------------------------------------------ launching
     def _leading_args(self, dt: float) -> list:
         """The kernels' first arguments: ``dt``, the friction law's ``fric_c``, ``fric_k``, ``fric_shift``
-        (:func:`.codegen._friction`), ``kp_implicit`` and the array ``fric_m0``."""
+        (:func:`.codegen._friction`), ``kp_implicit`` and the arrays ``fric_m0`` and ``fric_grad``."""
         k = self.friction_kappa
         if k is None:  # MuJoCo's soft frictionloss: c_i = d0 / (1 - d0) m0_i / H_ii, shift = 1 - b dt
             c, kdt, shift = _MJ_D0 / (1.0 - _MJ_D0), 0.0, 1.0 - 2.0 / (_MJ_DMAX * _MJ_TIMECONST) * dt
         else:  # a damper kappa H_ii on the new velocity (inf: hard Coulomb)
             c, kdt, shift = 0.0, k * dt, 0.0
-        return [float(dt), c, kdt, shift, 1.0 if self.implicit_stiffness else 0.0, self._m0]
+        return [float(dt), c, kdt, shift, 1.0 if self.implicit_stiffness else 0.0, self._m0, self._fric_grad]
 
     def _chunks(self) -> list[tuple[int, int]]:
         w = self.tree.world_count
