@@ -309,6 +309,9 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     physics = run_physics(run, robot)
     if physics is None:  # a residual on the robot file's physics
         physics = PhysicalParams.nominal(robot)
+    if physics.startup_torque.any():
+        raise ExportError(f"{run}: the servo startup torque ({physics.startup_torque.max():.3g} N*m) has no exported "
+                          "drive yet; identify without it to export")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
