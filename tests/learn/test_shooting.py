@@ -105,3 +105,24 @@ def test_shooting_config_checks_and_non_finite_error():
     assert isinstance(err, NonFiniteLoss) and "goal_accel" in str(err) and "\n" not in str(err)
     assert "--delay-grid" in str(_non_finite(7, ("delay",)))
     assert isinstance(_non_finite(7, ("kp",)), FloatingPointError)
+
+
+def test_identify_with_a_shooting_pool_runs_and_moves_the_free_states(problem):
+    """A few identification steps with chains from a pool: the free states of the drawn nodes move, the others stay."""
+    from wresdyn.learn.sysid import _IdentifyLearner
+
+    robot, _, _, bank, _, _, _, _ = problem
+    runs = recordings()
+    ds = type("D", (), {"split": lambda self, s: runs if s == "train" else [], "fit_weights": lambda self: np.ones(3),
+                        "excluded_joints": [], "rate_hz": 1.0 / DT})()
+    cfg = SysIdConfig(shooting=K, shooting_pool=3, windows=B, horizon_curriculum=(H,), iterations=4,
+                      fit=("kp", "damping"), shooting_lr=1e-2)
+    learner = _IdentifyLearner(robot, ds, cfg, None, np.random.default_rng(0), runs, DT, lambda *_: None, None)
+    before = learner.nodes.states.weight.detach().clone()
+    for it in range(4):
+        parts, _ = learner.step(it, H, cfg.lr)
+        assert np.isfinite(parts["loss"]) and parts["defect"] >= 0.0
+    moved = (learner.nodes.states.weight.detach() != before).any(-1)
+    pool = learner.pool[1]
+    used = {int(i) for k in range(1, K) for i in learner.nodes.index(pool[0], pool[1] + k * H)}
+    assert moved.any() and set(np.flatnonzero(moved.numpy()).tolist()) <= used

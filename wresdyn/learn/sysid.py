@@ -233,7 +233,7 @@ class _IdentifyLearner:
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
         self.run = None
-        self.nodes = None
+        self.nodes = self.pool = None
         if cfg.shooting > 1:  # multiple shooting: chains of windows side by side, free start states
             self.parts = (*self.parts, "defect")
             self.checkpoint_keys = (*self.checkpoint_keys, "nodes", "node_optim")
@@ -289,7 +289,7 @@ class _IdentifyLearner:
             window = self.bank.sample(self.rng, cfg.windows, h)
             loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights)
         else:
-            traj, first = draw_chains(self.bank, self.rng, cfg.windows, cfg.shooting, h, self.nodes.spacing)
+            traj, first = self._chains(h)
             loss, parts = chain_loss(cfg, model, self.chain_sim, self.bank, self.nodes, traj, first, h, self.weights)
             self.node_optim.zero_grad()
         loss = loss + cfg.w_prior * model.prior().to(loss.device)
@@ -305,6 +305,18 @@ class _IdentifyLearner:
         self.optim.step()
         model.project()
         return {"loss": float(loss.detach()), **parts}, None
+
+    def _chains(self, h: int):
+        """This iteration's chains of ``cfg.shooting`` windows of ``h`` steps: (trajectory, first sample), (B,) each,
+        fresh or from the pool of the window length (:attr:`SysIdConfig.shooting_pool`)."""
+        cfg, spacing = self.cfg, self.nodes.spacing
+        if not cfg.shooting_pool:
+            return draw_chains(self.bank, self.rng, cfg.windows, cfg.shooting, h, spacing)
+        if self.pool is None or self.pool[0] != h:
+            self.pool = (h, draw_chains(self.bank, np.random.default_rng([cfg.seed, h]), cfg.shooting_pool,
+                                        cfg.shooting, h, spacing))
+        pick = self.rng.integers(0, cfg.shooting_pool, cfg.windows)
+        return self.pool[1][0][pick], self.pool[1][1][pick]
 
     def score(self) -> float | None:
         return None if self.physics_score is None else self.physics_score(self.model.values())
