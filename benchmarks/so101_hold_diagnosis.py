@@ -7,7 +7,7 @@ model (``physics.json``) is replayed open loop over the whole run, and at each h
 - the offset from the command, real ``e_r = q_r - c`` and model ``e_m = q_m - c`` [rad], signed along the direction
   the command came from (``dir``: negative = short of the target) and in encoder ticks (2 pi / 4096 rad);
 - the static balance at the real end: the model's servo torque there at rest, ``tau_s = servo_torque(c, q_r, 0)``
-  (its kp, dead band b, effort U), against the gravity torque ``G(q_r)`` (Pinocchio, the robot file's links) and the
+  (its kp, dead band b, startup torque u0, effort U), against the gravity torque ``G(q_r)`` (Pinocchio, the robot file's links) and the
   model's dry friction f. The model can rest at the real end only where ``|tau_s - G| <= f``; the share of holds
   where it cannot, and the mean residual ``r = tau_s - G`` [N*m];
 - a least-squares split of ``r`` into ``a G + d dir + c0`` over the holds: what the missing torque follows (a: the
@@ -50,13 +50,13 @@ def main(path: str, run: str) -> None:
             goal = c[u - 1]
             g = pin.computeGeneralizedGravity(pin_model, pin_data, q_r.astype(np.float64))[:robot.n_dof]
             tau = servo_torque(goal, q_r, 0.0, physics.kp, physics.kd, physics.deadband, physics.effort,
-                               physics.noload_speed)
+                               physics.noload_speed, startup_torque=physics.startup_torque)
             rows.append((q_r - goal, qm[u - settle:u].mean(0) - goal, np.sign(c[t] - c[max(t - settle, 0)]), g, tau))
     e_r, e_m, d, g, tau = (np.array(x) for x in zip(*rows))
     r = tau - g
     print(f"{path}, run {run}: {len(e_r)} holds of >= 1 s on {len(val)} validation runs; offsets [rad] at each "
           f"hold's end (mean over its last {SETTLE_S:g} s), e = q - c, 'along' = e * dir (< 0: short of the target)")
-    print(f"{'joint':14s} {'kp':>6s} {'b':>7s} {'U':>5s} {'f':>6s} | {'|e_r|':>7s} {'ticks':>6s} {'along_r':>8s} "
+    print(f"{'joint':14s} {'kp':>6s} {'b':>7s} {'u0':>5s} {'U':>5s} {'f':>6s} | {'|e_r|':>7s} {'ticks':>6s} {'along_r':>8s} "
           f"{'|e_m|':>7s} {'along_m':>8s} {'|e_r-e_m|':>9s} | {'G':>6s} {'tau_s':>6s} {'r':>7s} {'|r|>f':>6s} "
           f"{'kp|e_r|/U':>9s} | {'a':>7s} {'d':>7s} {'c0':>7s} {'rms r':>6s} {'->':>6s}")
     for j in keep:
@@ -64,14 +64,15 @@ def main(path: str, run: str) -> None:
         a_mat = np.stack([g[:, j], d[:, j], ones], 1)
         coef = np.linalg.lstsq(a_mat, r[:, j], rcond=None)[0]
         rest = r[:, j] - a_mat @ coef
-        print(f"{robot.joint_names[j]:14s} {physics.kp[j]:6.2f} {physics.deadband[j]:7.4f} {physics.effort[j]:5.2f} "
+        print(f"{robot.joint_names[j]:14s} {physics.kp[j]:6.2f} {physics.deadband[j]:7.4f} "
+              f"{physics.startup_torque[j]:5.3f} {physics.effort[j]:5.2f} "
               f"{physics.friction[j]:6.3f} | {np.abs(e_r[:, j]).mean():7.4f} {np.abs(e_r[:, j]).mean() / TICK:6.1f} "
               f"{(e_r[:, j] * d[:, j]).mean():8.4f} {np.abs(e_m[:, j]).mean():7.4f} {(e_m[:, j] * d[:, j]).mean():8.4f} "
               f"{np.abs(e_r[:, j] - e_m[:, j]).mean():9.4f} | {g[:, j].mean():6.3f} {tau[:, j].mean():6.3f} "
               f"{r[:, j].mean():7.3f} {(np.abs(r[:, j]) > physics.friction[j]).mean():6.2f} "
               f"{(physics.kp[j] * np.abs(e_r[:, j]) / physics.effort[j]).mean():9.2f} | {coef[0]:7.3f} {coef[1]:7.3f} "
               f"{coef[2]:7.3f} {np.sqrt((r[:, j] ** 2).mean()):6.3f} {np.sqrt((rest ** 2).mean()):6.3f}")
-    print("columns: kp [N*m/rad], b dead band [rad], U effort [N*m], f dry friction [N*m] (the run's); G gravity, "
+    print("columns: kp [N*m/rad], b dead band [rad], u0 startup torque [N*m], U effort [N*m], f dry friction [N*m] (the run's); G gravity, "
           "tau_s the model's servo torque at the real end at rest, r = tau_s - G [N*m] (mean); |r|>f: share of holds "
           "the model cannot rest at; kp|e_r|/U: the P term at the real offset over the effort limit; r ~ a G + d dir + "
           "c0 [-, N*m, N*m], rms of r before and after the split")
