@@ -26,12 +26,12 @@ SERVO = {"drive": "servo", "deadband": 0.05, "noload_speed": 10.0, "goal_accel":
 (U / w0 = 2 N m s/rad) that matters against kp = 30."""
 
 
-def make_robot(tmp_path, effort=20.0, joints="*"):
+def make_robot(tmp_path, effort=20.0, joints="*", **servo):
     path = tmp_path / "tri.urdf"
     path.write_text(TRI_URDF)
     gains = {"joint": [{"match": "*", "kp": 30.0, "kd": 1.0, "armature": 0.01, "damping": 0.2, "friction": 0.3,
                         "effort": effort},
-                       {"match": joints, **SERVO}]}
+                       {"match": joints, **SERVO, **servo}]}
     return load_robot(path, gains=gains)
 
 
@@ -83,6 +83,49 @@ def test_one_step_matches_the_law(tmp_path):
         h = mass[0] + np.diag(np.full(N, arm + DT * (kd + eff / w0 + damp)))
         expected = qd0 + DT * np.linalg.solve(h, tau - bias[0] - damp * qd0)
         np.testing.assert_allclose(qd.numpy()[1, 0], expected, rtol=1e-10, atol=1e-12)
+
+
+STARTUP = 0.8
+"""Startup torque of the tests that set one [N m]: against kp e_b = 30 * 0.15 = 4.5 N m, a term that matters."""
+
+
+def test_startup_torque_one_step_matches_the_law(tmp_path):
+    """One float64 step (the set-up of :func:`test_one_step_matches_the_law`) with a startup torque, against the
+    numpy law: errors far outside the band (the full u0), half a tick outside it (half of u0) and inside (none)."""
+    from wresdyn.robot.servo import STARTUP_RAMP
+
+    robot = make_robot(tmp_path, joints="*", startup_torque=STARTUP)
+    assert robot.servo.startup_torque.tolist() == [STARTUP] * N
+    solver = SolverReplay(robot.build_model(1, "cpu"), dtype=wp.float64, friction_kappa=0.0)
+    q0, qd0 = np.array([0.1, -0.2, 0.02]), np.array([0.5, -0.3, 0.1])
+    kp, kd, db, eff, w0, damp, arm, u0 = (float(np.float32(x)) for x in (30.0, 1.0, 0.05, 20.0, 10.0, 0.2, 0.01,
+                                                                         STARTUP))
+    mass, bias = solver.dynamics_terms(q0, qd0)
+    edge = q0 + np.array([1.0, -1.0, 1.0]) * (db + 0.5 * STARTUP_RAMP)
+    for tq in (np.array([0.3, -0.5, 0.1]), edge, np.array([0.12, -0.21, 0.0])):
+        q = wp.array(np.stack([q0, np.zeros(N)])[:, None], dtype=wp.float64)
+        qd = wp.array(np.stack([qd0, np.zeros(N)])[:, None], dtype=wp.float64)
+        solver.rollout(q, qd, wp.array(tq[None, None], dtype=wp.float64), DT)
+        tau = servo_torque(tq, q0, qd0, kp, kd, db, eff, w0, startup_torque=u0)
+        assert (np.abs(tau) < eff).all()
+        h = mass[0] + np.diag(np.full(N, arm + DT * (kd + eff / w0 + damp)))
+        expected = qd0 + DT * np.linalg.solve(h, tau - bias[0] - damp * qd0)
+        np.testing.assert_allclose(qd.numpy()[1, 0], expected, rtol=1e-10, atol=1e-12)
+    # half a tick past the band: half the startup torque on top of kp e_b
+    np.testing.assert_allclose(servo_torque(edge, q0, 0.0, kp, 0.0, db, eff, 0.0, startup_torque=u0)
+                               - servo_torque(edge, q0, 0.0, kp, 0.0, db, eff, 0.0), [0.5 * u0, -0.5 * u0, 0.5 * u0],
+                               rtol=1e-6)
+
+
+def test_startup_torque_gradient(tmp_path):
+    """The startup torque's gradient against float64 central differences, on the servos (elbow a PD drive: not read)."""
+    robot = make_robot(tmp_path, joints="[ss]*", startup_torque=STARTUP)
+    problem = Problem(robot, *random_inputs(0, qd_scale=2.0, target_scale=0.2))
+    grads = problem.gradients()
+    entries = [("joint_servo_startup_torque", (k,)) for k in (0, 2, 3, 5)]
+    check(problem, entries + [("joint_servo_deadband", (0,)), ("tq", (0, 0, 0))], grads)
+    assert all(abs(grads[name][idx]) > 1e-6 for name, idx in entries)
+    assert grads["joint_servo_startup_torque"][[1, 4]].tolist() == [0.0, 0.0]
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +208,7 @@ def test_physics_model_gradients_reach_the_servo_fields(tmp_path):
     from wresdyn.sim.physics import PhysicsModel
 
     robot = make_robot(tmp_path, joints="*")
-    model = PhysicsModel(robot, fit=("kp", "deadband", "noload_speed", "goal_accel"), dt=DT)
+    model = PhysicsModel(robot, fit=("kp", "deadband", "noload_speed", "goal_accel", "startup_torque"), dt=DT)
     b, h, t_len = 2, 8, 16
     sim = Simulator(robot, b, DT, solver="replay", requires_grad=True, param_grads=True)
     rng = np.random.default_rng(0)
@@ -188,7 +231,7 @@ def test_physics_model_gradients_reach_the_servo_fields(tmp_path):
         return total
 
     params = {k: p for k, p in model.named_parameters() if p.requires_grad}
-    assert set(params) == {"u_kp", "u_deadband", "u_noload_speed", "u_goal_accel"}
+    assert set(params) == {"u_kp", "u_deadband", "u_noload_speed", "u_goal_accel", "u_startup_torque"}
     model.zero_grad()
     loss().backward()
     check_directional_gradients(loss, params, {k: p.grad.clone() for k, p in params.items()}, eps=1e-2)
@@ -202,7 +245,8 @@ measured 6e-5 and 2.4e-4. A servo commanded to the edge of its dead band is not 
 decides whether it moves (a 0.05 m command against the 0.05 m band gave 0.011 m)."""
 
 
-def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path):
+@pytest.mark.parametrize("startup", [0.0, STARTUP])
+def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path, startup):
     """The MuJoCo "real" robot's servo joints (elbow a PD drive): the recorded actuator torque is the law
     (:func:`servo_torque`) at the recorded state and profiled goal, and SolverReplay replaying its true parameters
     follows the recording (a command step, so the profile, the band and the torque-speed line all act)."""
@@ -210,7 +254,7 @@ def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path):
     from wresdyn.data.real_robot import RealRobot
     from wresdyn.sim import replay_trajectories
 
-    robot = make_robot(tmp_path, effort=5.0, joints="[ss]*")
+    robot = make_robot(tmp_path, effort=5.0, joints="[ss]*", startup_torque=startup)
     rate = 1.0 / DT
     real = RealRobot(robot, Mismatch(), rate)
     cmd = np.tile(np.array([0.1, -0.2, 0.05]), (500, 1))
@@ -219,13 +263,14 @@ def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path):
     q, qd, tau = real.record(cmd, settle=0.0)
     profile = GoalProfile(np.where(robot.servo.mask, robot.servo.goal_accel, 0.0), DT, cmd[0])
     goal = np.array([profile(c) for c in cmd])
-    law = servo_torque(goal, q, qd, 30.0, 1.0, 0.05, 5.0, 10.0)
+    law = servo_torque(goal, q, qd, 30.0, 1.0, 0.05, 5.0, 10.0, startup_torque=np.float32(startup))
     np.testing.assert_allclose(tau[:, [0, 2]], law[:, [0, 2]], rtol=1e-6, atol=1e-6)  # float32 model parameters
     assert np.abs(goal[:, 0] - cmd[:, 0]).max() > 0.05  # the profile acts
 
     truth = real.physics()
     np.testing.assert_allclose(truth.kp, 30.0, rtol=1e-6)
     assert truth.deadband.tolist() == [0.05, 0.0, 0.05]
+    np.testing.assert_allclose(truth.startup_torque, [startup, 0.0, startup], rtol=1e-6)
     traj = type("T", (), {"q": q, "qd": qd, "qdd": np.zeros_like(q), "q_cmd": cmd, "name": "step"})()
     rep = replay_trajectories(robot, [traj], rate, solver="replay", physics=truth)["residual"]
     err = np.abs(rep.q[0] - q).max(0)

@@ -29,8 +29,8 @@ from ..progress import bar
 from ..robot.description import Robot, RobotError
 from ..robot.ground import FloatingState, check_floating
 from ..robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco
-from ..robot.physical import PhysicalParams
-from ..robot.servo import GoalProfile
+from ..robot.physical import SERVO_FIELDS, PhysicalParams
+from ..robot.servo import STARTUP_RAMP, GoalProfile
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 from .mismatch import JOINT_KEYS, Mismatch, MismatchError
@@ -123,7 +123,8 @@ class RealRobot:
         s = servo.mask
         law = {"mask": s, "kp": m.actuator_gainprm[:n, 0].copy(), "kd": -m.actuator_biasprm[:n, 2].copy(),
                "effort": m.actuator_forcerange[:n, 1].copy(), "deadband": servo.deadband,
-               "noload_speed": servo.noload_speed, "goal_accel": servo.goal_accel}
+               "noload_speed": servo.noload_speed, "goal_accel": servo.goal_accel,
+               "startup_torque": servo.startup_torque}
         idx = np.flatnonzero(s)
         m.actuator_gainprm[idx, 0] = 1.0
         m.actuator_biasprm[idx, :3] = 0.0
@@ -139,10 +140,11 @@ class RealRobot:
         goal = profile(command)
         e = goal - d.qpos[:n]
         e_b = e - np.clip(e, -law["deadband"], law["deadband"])
-        raw = law["kp"] * e_b - law["kd"] * d.qvel[:n]
+        position = law["kp"] * e_b + law["startup_torque"] * np.clip(e_b / STARTUP_RAMP, -1.0, 1.0)
+        raw = position - law["kd"] * d.qvel[:n]
         free = np.abs(raw) < law["effort"]
         emf = np.divide(law["effort"], law["noload_speed"], out=np.zeros(n), where=law["noload_speed"] > 0)
-        ctrl = np.where(free, law["kp"] * e_b, np.sign(raw) * law["effort"])
+        ctrl = np.where(free, position, np.sign(raw) * law["effort"])
         s = law["mask"]
         m.actuator_biasprm[:n, 2] = np.where(s, -(free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
         return np.where(s, ctrl, command)
@@ -164,7 +166,7 @@ class RealRobot:
         if self._servo is not None:  # the motors' gains are the servo law's
             law = self._servo
             kp, kd = np.where(law["mask"], law["kp"], kp), np.where(law["mask"], law["kd"], kd)
-            servo = {f: np.array(law[f], dtype=np.float64) for f in ("deadband", "noload_speed", "goal_accel")}
+            servo = {f: np.array(law[f], dtype=np.float64) for f in SERVO_FIELDS}
         return PhysicalParams(list(r.joint_names), list(r.body_names), kp, kd, m.dof_armature[dof].copy(),
                               m.dof_damping[dof].copy(), m.dof_frictionloss[dof].copy(), effort,
                               np.full(n, self.n_delay * self.substep), m.body_mass[1:].copy(), m.body_ipos[1:].copy(),

@@ -30,22 +30,42 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..errors import WresdynError
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .runs import RunFolder
 from .selection import ValidationScore
+from .shooting import ShootingNodes, chain_loss, draw_chains
 from .unexcited_limits import limit_unexcited_efforts
 from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
 from .window_fit_config import SysIdConfig
 
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
-           "physics_window_loss"]
+           "physics_window_loss", "NonFiniteLoss"]
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where it runs and the L-BFGS refinement, which
 runs after the checkpointed Adam steps."""
+
+
+class NonFiniteLoss(WresdynError):
+    """The identification loss became non-finite where a command-path field (goal acceleration, delay) is fitted."""
+
+
+def _non_finite(it: int, fields) -> Exception:
+    """The error of a non-finite loss at iteration ``it``: with the goal acceleration or the delay among ``fields``,
+    a one-line :class:`NonFiniteLoss` naming them (the goal profile's pathwise gradient overflows over long runs, so
+    a step can land anywhere); otherwise the simulation diverged."""
+    path = [f for f in ("goal_accel", "delay") if f in fields]
+    if not path:
+        return FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")
+    how = {"delay": "the delay by --delay-grid", "goal_accel": "goal_accel on validation over a grid of values set "
+           "in the gains config"}
+    return NonFiniteLoss(f"identification: non-finite loss at iteration {it} while fitting {' and '.join(path)} (the "
+                         f"servo goal profile's gradient overflows over long runs): leave {' and '.join(path)} out of "
+                         f"--fit and choose {' and '.join(how[f] for f in path)}")
 
 
 class PhysicsScore(ValidationScore):
@@ -198,7 +218,8 @@ class _IdentifyLearner:
         self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
         model = self.model
         groups = [[model.u_kp, model.u_kd, model.u_armature, model.u_noload_speed, model.u_goal_accel],
-                  [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband],
+                  [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband,
+                   model.u_startup_torque],
                   [model.u_body_logdiag, model.u_body_off]]
         self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
                                        for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
@@ -212,6 +233,14 @@ class _IdentifyLearner:
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
         self.run = None
+        self.nodes = self.pool = None
+        if cfg.shooting > 1:  # multiple shooting: chains of windows side by side, free start states
+            self.parts = (*self.parts, "defect")
+            self.checkpoint_keys = (*self.checkpoint_keys, "nodes", "node_optim")
+            self.chain_sim = Simulator(robot, cfg.windows * cfg.shooting, dt, solver=cfg.solver, device=cfg.device,
+                                       requires_grad=True, param_grads=True)
+            self.nodes = ShootingNodes(self.bank, min(self.horizons))
+            self.node_optim = torch.optim.SparseAdam(self.nodes.parameters(), lr=cfg.shooting_lr)
 
     def begin(self, run: RunFolder) -> None:
         self.run = run
@@ -256,13 +285,20 @@ class _IdentifyLearner:
             self.bank.set_delay(delay)
         else:
             self.bank.set_command_path(delay, model.goal_accel_steps().float().to(self.sim.device))
-        window = self.bank.sample(self.rng, cfg.windows, h)
-        loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights)
+        if self.nodes is None:
+            window = self.bank.sample(self.rng, cfg.windows, h)
+            loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights)
+        else:
+            traj, first = self._chains(h)
+            loss, parts = chain_loss(cfg, model, self.chain_sim, self.bank, self.nodes, traj, first, h, self.weights)
+            self.node_optim.zero_grad()
         loss = loss + cfg.w_prior * model.prior().to(loss.device)
         if not torch.isfinite(loss):
-            raise FloatingPointError(f"identification: non-finite loss at iteration {it} (simulation diverged)")
+            raise _non_finite(it, cfg.fit)
         self.optim.zero_grad()
         loss.backward()
+        if self.nodes is not None:
+            self.node_optim.step()
         if it < self.effort_from and model.u_effort.grad is not None:
             model.u_effort.grad = None  # not yet part of the fit (Adam skips a parameter without gradient)
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
@@ -270,11 +306,25 @@ class _IdentifyLearner:
         model.project()
         return {"loss": float(loss.detach()), **parts}, None
 
+    def _chains(self, h: int):
+        """This iteration's chains of ``cfg.shooting`` windows of ``h`` steps: (trajectory, first sample), (B,) each,
+        fresh or from the pool of the window length (:attr:`SysIdConfig.shooting_pool`)."""
+        cfg, spacing = self.cfg, self.nodes.spacing
+        if not cfg.shooting_pool:
+            return draw_chains(self.bank, self.rng, cfg.windows, cfg.shooting, h, spacing)
+        if self.pool is None or self.pool[0] != h:
+            self.pool = (h, draw_chains(self.bank, np.random.default_rng([cfg.seed, h]), cfg.shooting_pool,
+                                        cfg.shooting, h, spacing))
+        pick = self.rng.integers(0, cfg.shooting_pool, cfg.windows)
+        return self.pool[1][0][pick], self.pool[1][1][pick]
+
     def score(self) -> float | None:
         return None if self.physics_score is None else self.physics_score(self.model.values())
 
     def state(self) -> dict:
-        return {"model": self.model.state_dict(), "optim": self.optim.state_dict()}
+        nodes = {} if self.nodes is None else {"nodes": self.nodes.state_dict(),
+                                               "node_optim": self.node_optim.state_dict()}
+        return {"model": self.model.state_dict(), "optim": self.optim.state_dict(), **nodes}
 
     def meta(self) -> dict:
         return {}
@@ -282,3 +332,6 @@ class _IdentifyLearner:
     def restore(self, data: dict) -> None:
         self.model.load_state_dict(data["model"])
         self.optim.load_state_dict(data["optim"])
+        if self.nodes is not None:
+            self.nodes.load_state_dict(data["nodes"])
+            self.node_optim.load_state_dict(data["node_optim"])

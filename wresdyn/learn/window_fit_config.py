@@ -118,6 +118,21 @@ class SysIdConfig:
     when the effort limit is fitted."""
     saturated_min: float = 0.01
     """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
+    shooting: int = 1
+    """Consecutive windows per training sample (multiple shooting with state continuity, :mod:`.shooting`): each of
+    the ``windows`` samples is a chain of this many windows of the curriculum's length from one run, simulated side by
+    side, the later ones from free start states stitched by the defect penalty ``w_defect``; 1 = independent windows
+    from their recorded start. Above 1 every horizon must be a multiple of the shortest (the nodes' spacing)."""
+    w_defect: float = 1.0
+    """Weight of the shooting defects (what a window's end misses the next one's free start by, with ``w_q`` and
+    ``w_qd``) against the data term; only with ``shooting`` > 1."""
+    shooting_lr: float = 1e-3
+    """Adam learning rate of the free start states [rad, rad/s per step]; only with ``shooting`` > 1."""
+    shooting_pool: int = 0
+    """With ``shooting`` > 1: draw this many chains once per window length (seeded by ``seed`` and the length) and
+    each iteration's ``windows`` among them, so that every free start state is visited many times and can move to
+    where the chain is continuous; 0 = fresh chains anywhere every iteration (on the SO-101's 1.2 M training samples
+    a node is then drawn about once in a run: the free states stay the recorded ones)."""
 
     def __post_init__(self) -> None:
         check_window_fit_config(self)
@@ -137,6 +152,14 @@ class SysIdConfig:
         check_number(self.refine, "refine", integer=True, ge=0)
         check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
         check_number(self.saturated_min, "saturated_min", gt=0, le=1)
+        check_number(self.shooting, "shooting", integer=True, ge=1)
+        check_number(self.w_defect, "w_defect", ge=0)
+        check_number(self.shooting_lr, "shooting_lr", gt=0)
+        check_number(self.shooting_pool, "shooting_pool", integer=True, ge=0)
+        spacing = min(self.horizon_curriculum or (64,))
+        if self.shooting > 1 and any(h % spacing for h in self.horizon_curriculum):
+            raise ValueError(f"shooting: every horizon of horizon_curriculum {list(self.horizon_curriculum)} must be a "
+                             f"multiple of the shortest ({spacing}), the shooting nodes' spacing")
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,15 @@ PD drive of eq. (1) by the servo law, in SI units, per joint (the same law in
 
     e    = q*_s - q                                   position error against the profiled goal [rad]
     e_b  = e - clamp(e, -b, b)                        dead band of half-width b [rad] (soft threshold)
-    u    = clamp(kp e_b + kd (qd* - qd), -U, U)       duty in torque units [N*m], U = effort (stall torque)
+    u    = clamp(kp e_b + u0 clamp(e_b / r, -1, 1)    duty in torque units [N*m], U = effort (stall torque),
+                 + kd (qd* - qd), -U, U)              u0 startup torque over a ramp of r = one encoder tick
     tau  = clamp(u - (U / w0) qd, -U, U)              DC motor torque-speed line, no-load speed w0 [rad/s]
 
 Inside the band the position loop is off (the joint rests where friction, gravity and its history leave it, so
-the hysteresis lives in the mechanical state) and the soft threshold keeps a gradient in ``b``. ``w0 = 0``
-leaves the torque-speed line out. Gear friction is the joint's ``friction`` (dry) and ``damping`` (viscous).
+the hysteresis lives in the mechanical state) and the soft threshold keeps a gradient in ``b``. Outside it the
+servo drives with at least ``u0`` (Feetech's "minimum startup force"), reached within one tick of the band's edge
+(a continuous ramp, so the law stays differentiable); ``u0 = 0`` leaves it out. ``w0 = 0`` leaves the torque-speed
+line out. Gear friction is the joint's ``friction`` (dry) and ``damping`` (viscous).
 
 The goal q*_s is the command after the servo's acceleration profile (:class:`GoalProfile`): the internal goal
 moves toward the command with at most ``a_max`` [rad/s²], braking in time to stop on it (``a_max = 0``: the
@@ -28,15 +31,17 @@ import numpy as np
 
 from ..errors import RobotError
 
-__all__ = ["SERVO_KEYS", "STS3215", "GoalProfile", "ServoDrives", "attach_servo", "profile_step", "read_servo",
-           "servo_torque"]
+__all__ = ["SERVO_KEYS", "STARTUP_RAMP", "STS3215", "GoalProfile", "ServoDrives", "attach_servo", "profile_step",
+           "read_servo", "servo_torque"]
 
-SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel")
+SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel", "startup_torque")
 """Keys of a gains config's ``[[joint]]`` table that set the drive law (the others are
 :func:`wresdyn.robot.description.apply_overrides`')."""
 
 _TICK = 2.0 * math.pi / 4096.0
 """One encoder tick of a 12-bit servo [rad]."""
+STARTUP_RAMP = _TICK
+"""Error beyond the dead band over which the startup torque ramps in [rad]: one tick, the firmware's resolution."""
 
 
 @dataclass(frozen=True)
@@ -82,13 +87,16 @@ class ServoDrives:
     """Motor no-load speed w0 [rad/s] (0: no torque-speed line), shape (n_dof,)."""
     goal_accel: np.ndarray
     """Goal acceleration limit a_max [rad/s²] (0: no profile), shape (n_dof,)."""
+    startup_torque: np.ndarray
+    """Least drive torque u0 outside the dead band [N*m] (0: none), shape (n_dof,)."""
 
 
 def read_servo(config: dict | None, joint_names, effort, where: str = "gains config") -> ServoDrives | None:
     """The servo drives a gains config selects (``drive = "servo"`` in ``[[joint]]`` tables, later ones winning),
     or ``None`` when it selects none.
 
-    ``deadband`` [rad], ``noload_speed`` [rad/s] and ``goal_accel`` [rad/s²] may be set in any entry; a servo
+    ``deadband`` [rad], ``noload_speed`` [rad/s], ``goal_accel`` [rad/s²] and ``startup_torque`` [N*m] may be set
+    in any entry; a servo
     joint not given one takes zero (no band, no torque-speed line, no profile). A servo needs a finite effort
     limit (its stall torque).
 
@@ -129,8 +137,8 @@ def read_servo(config: dict | None, joint_names, effort, where: str = "gains con
 def attach_servo(model, servo: ServoDrives, qd_index, n_worlds: int) -> None:
     """Give a finalized Newton model the servo arrays :class:`~wresdyn.sim.solver_replay.SolverReplay` reads, per
     DoF of every world (Newton's flat layout, zeros on the DoFs of other joints): ``joint_servo`` (int32, 1 on a
-    servo), ``joint_servo_deadband`` [rad] and ``joint_servo_noload_speed`` [rad/s] (float32, gradients as the
-    model's)."""
+    servo), ``joint_servo_deadband`` [rad], ``joint_servo_noload_speed`` [rad/s] and ``joint_servo_startup_torque``
+    [N*m] (float32, gradients as the model's)."""
     import warp as wp
 
     width = model.joint_dof_count // n_worlds
@@ -145,13 +153,15 @@ def attach_servo(model, servo: ServoDrives, qd_index, n_worlds: int) -> None:
     model.joint_servo = per_dof(servo.mask.astype(float), np.int32)
     model.joint_servo_deadband = per_dof(servo.deadband, np.float32)
     model.joint_servo_noload_speed = per_dof(servo.noload_speed, np.float32)
+    model.joint_servo_startup_torque = per_dof(servo.startup_torque, np.float32)
 
 
-def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0):
+def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0, startup_torque=0.0):
     """The servo law of the module docstring (numpy, any broadcastable shapes): the drive torque [N*m]."""
     e = q_goal - q
     e_b = e - np.clip(e, -deadband, deadband)
-    u = np.clip(kp * e_b + kd * (qd_goal - qd), -effort, effort)
+    u = np.clip(kp * e_b + startup_torque * np.clip(e_b / STARTUP_RAMP, -1.0, 1.0) + kd * (qd_goal - qd), -effort,
+                effort)
     emf = np.divide(effort, noload_speed, out=np.zeros(np.broadcast(effort, noload_speed).shape),
                     where=np.asarray(noload_speed) > 0)
     return np.clip(u - emf * qd, -effort, effort)

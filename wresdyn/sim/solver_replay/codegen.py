@@ -23,6 +23,7 @@ import itertools
 
 import numpy as np
 
+from ...robot.servo import STARTUP_RAMP
 from .dynamics import dynamics, inertial_params, solve_ltdl
 from .emit import Emitter, branched, gate, indent, outline, unmarked
 from .tree import ReplayTree
@@ -32,7 +33,7 @@ __all__ = ["generate_source"]
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
-_SERVO_PARAMS = ("sdb", "sw0")
+_SERVO_PARAMS = ("sdb", "sw0", "su0")
 """Per-DoF arrays the kernels of a robot with servo drives also read: dead band, no-load speed."""
 _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
@@ -120,17 +121,20 @@ def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: l
     return [e.let(f"{u} - {beta[i]} * {c}") for i, (u, c) in sorted(last.items())]
 
 
-def _servo_drive(e: Emitter, ke, kd, eff, db, w0, q, qd, tq, tqd) -> tuple[str, str, str]:
+def _servo_drive(e: Emitter, ke, kd, eff, db, w0, u0, q, qd, tq, tqd) -> tuple[str, str, str]:
     """The servo law of :mod:`wresdyn.robot.servo` for one DoF: (torque, its velocity derivative's magnitude
     ``d``, its position derivative's magnitude ``k``), ``d``/``k`` 0 where a clamp is saturated (and ``k`` inside
     the dead band)::
 
-        e_b = e - clamp(e, -b, b),  u = clamp(ke e_b + kd (qd* - qd), -U, U),  tau = clamp(u - (U / w0) qd, -U, U)
+        e_b = e - clamp(e, -b, b),  u = clamp(ke e_b + u0 clamp(e_b / r, -1, 1) + kd (qd* - qd), -U, U),
+        tau = clamp(u - (U / w0) qd, -U, U)
 
-    ``U`` the effort limit (here finite), ``w0 = 0``: no torque-speed line."""
+    ``U`` the effort limit (here finite), ``w0 = 0``: no torque-speed line, ``u0`` the startup torque over the ramp
+    ``r`` (:data:`~wresdyn.robot.servo.STARTUP_RAMP`)."""
     err = e.let(f"{tq} - {q}")
     err_b = e.let(f"{err} - wp.clamp({err}, -{db}, {db})")
-    raw = e.let(f"{ke} * {err_b} + {kd} * ({tqd} - {qd})")
+    ramp = e.let(f"{err_b} * S({1.0 / STARTUP_RAMP!r})")
+    raw = e.let(f"{ke} * {err_b} + {u0} * wp.clamp({ramp}, S(-1.0), S(1.0)) + {kd} * ({tqd} - {qd})")
     duty = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
     w0_safe = e.let(f"wp.where({w0} > S(0.0), {w0}, S(1.0))")  # no division by 0 in the branch not taken
     emf = e.let(f"wp.where({w0} > S(0.0), {eff} / {w0_safe}, S(0.0))")
@@ -139,7 +143,8 @@ def _servo_drive(e: Emitter, ke, kd, eff, db, w0, q, qd, tq, tqd) -> tuple[str, 
     free_u = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")
     free_t = e.let(f"wp.where(wp.abs({out}) < {eff}, S(1.0), S(0.0))")
     outside = e.let(f"wp.where(wp.abs({err}) > {db}, S(1.0), S(0.0))")
-    return tau, e.let(f"{free_t} * ({free_u} * {kd} + {emf})"), e.let(f"{free_t} * {free_u} * {outside} * {ke}")
+    stiff = e.let(f"{ke} + wp.where(wp.abs({ramp}) < S(1.0), {u0} * S({1.0 / STARTUP_RAMP!r}), S(0.0))")
+    return tau, e.let(f"{free_t} * ({free_u} * {kd} + {emf})"), e.let(f"{free_t} * {free_u} * {outside} * {stiff}")
 
 
 def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, jf, g,
@@ -155,7 +160,8 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
         ke, kd, arm, _, damp, eff, lo, hi, lke, lkd = (p[name][k] for name in _PARAMS)
         if servo is not None and servo[k]:
             eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")
-            pd, drive_d, drive_k = _servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], q[k], qd[k], tq[k], tqd[k])
+            pd, drive_d, drive_k = _servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], p["su0"][k], q[k], qd[k],
+                                                tq[k], tqd[k])
             free = None
         else:
             raw = e.let(f"{ke} * ({tq[k]} - {q[k]}) + {kd} * ({tqd[k]} - {qd[k]})")

@@ -25,10 +25,12 @@ differentiable by Warp's Tape. One step, with ``H`` the matrix the kernel factor
   same code as without servos), ``tau_pd`` is the servo law instead, in SI units::
 
       e_b = e - clamp(e, -b, b),  e = q* - q                        dead band b [rad] (soft threshold)
-      u   = clamp(ke e_b + kd (qd* - qd), -U, U)                    duty in torque units [N m], U = effort
+      u   = clamp(ke e_b + u0 clamp(e_b / r, -1, 1)                duty in torque units [N m], U = effort,
+                  + kd (qd* - qd), -U, U)                         u0 startup torque, ramp r one tick
       tau = clamp(u - (U / w0) qd, -U, U)                           DC motor line, no-load speed w0 [rad/s]
 
-  (``b = Model.joint_servo_deadband``, ``w0 = Model.joint_servo_noload_speed``, 0: no line; ``q*`` is the goal
+  (``b = Model.joint_servo_deadband``, ``u0 = Model.joint_servo_startup_torque``, ``w0 =
+  Model.joint_servo_noload_speed``, 0: no line; ``q*`` is the goal
   after the servo's acceleration profile, which the command path applies: :mod:`wresdyn.sim.bank`).
 - ``D``: velocity derivatives treated implicitly, as MuJoCo's ``implicitfast`` integrator does:
   drive ``kd`` while the drive is not saturated (a clamped force has no velocity derivative; a servo's
@@ -103,7 +105,7 @@ FRICTION_SWEEPS = 8
 _JOINT_PARAMS = ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_damping",
                  "joint_effort_limit", "joint_limit_lower", "joint_limit_upper", "joint_limit_ke", "joint_limit_kd")
 """Per-DoF model arrays the kernels read, in the order of their arguments."""
-_SERVO_PARAMS = ("joint_servo_deadband", "joint_servo_noload_speed")
+_SERVO_PARAMS = ("joint_servo_deadband", "joint_servo_noload_speed", "joint_servo_startup_torque")
 """Per-DoF model arrays the kernels of a model with servo drives also read."""
 _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 """Per-body model arrays the kernels read."""
