@@ -12,6 +12,8 @@ RATE = 500.0
 DURATION = 1.5
 """Six chain positions x one step pair of 0.23 s: the shortest probe that holds every leg joint's step."""
 CFG = SaturationProbe(steps=1)
+STRONG = SaturationProbe(steps=1, effort_fraction=(1.5, 2.0))
+"""Steps sized to 1.5-2x the file's limit: what saturates the nominal robot's drives."""
 
 
 @pytest.fixture(scope="module")
@@ -21,8 +23,8 @@ def ik(humanoid):
     return FootIK(humanoid)
 
 
-def _draw(humanoid, ik, seed):
-    return saturation_probe(humanoid, ik.chains, humanoid.q0, DURATION, RATE, np.random.default_rng(seed), CFG)
+def _draw(humanoid, ik, seed, cfg=CFG):
+    return saturation_probe(humanoid, ik.chains, humanoid.q0, DURATION, RATE, np.random.default_rng(seed), cfg)
 
 
 def test_probe_stays_in_limits_holds_the_rest_and_is_deterministic(humanoid, ik):
@@ -44,20 +46,34 @@ def test_probe_stays_in_limits_holds_the_rest_and_is_deterministic(humanoid, ik)
 
 
 def test_probe_demands_more_than_the_effort_limit_on_the_nominal_robot(humanoid, ik):
-    """On the nominal robot (the file's limits) the PD demand kp·(q_cmd − q) − kd·q̇ on the recorded states exceeds
-    the limit, and the drive delivers the limit, on every joint whose range allows the drawn step (``reach`` >=
-    1.5, the least ``effort_fraction`` draws: knees and hip pitch; the hip yaw, hip roll and ankle ranges are too
-    short). The knee moves during the 10 ms rise, so its demand stays below kp·δ: 1.27-1.68 x the limit over
+    """Steps sized above the file's limit: on the nominal robot (the file's limits) the PD demand
+    kp·(q_cmd − q) − kd·q̇ on the recorded states exceeds the limit, and the drive delivers the limit, on every joint
+    whose range allows the drawn step (``reach`` >= 1.5, the least ``effort_fraction`` draws: knees and hip pitch;
+    the hip yaw, hip roll and ankle ranges are too short). The knee moves during the 10 ms rise, so its demand stays below kp·δ: 1.27-1.68 x the limit over
     seeds 0-2, hip pitch 1.42-2.92."""
-    e = _draw(humanoid, ik, 0)
+    e = _draw(humanoid, ik, 0, STRONG)
     q, qd, tau = RealRobot(humanoid, Mismatch(), RATE).record(e.q_cmd)
     demand = np.abs(humanoid.kp * (e.q_cmd - q) - humanoid.kd * qd)
-    reached = [n for n, p in e.params["joints"].items() if p["reach"] >= CFG.effort_fraction[0]]
+    reached = [n for n, p in e.params["joints"].items() if p["reach"] >= STRONG.effort_fraction[0]]
     assert {"left_knee", "right_knee", "left_hip_pitch", "right_hip_pitch"} <= set(reached)
     for name in reached:
         j = humanoid.joint_names.index(name)
         assert demand[:, j].max() > humanoid.effort[j], name
         assert np.abs(tau[:, j]).max() > 0.99 * humanoid.effort[j], name
+
+
+def test_default_probe_saturates_the_derated_drives_of_the_uneven_robot(humanoid, ik):
+    """The default steps (0.6-0.9 of the file's limit) drive every leg joint but ankle roll into the limit of the
+    second benchmark mismatch's drives (0.2-0.3 of the file's); ankle roll's ±0.26 rad range is too short to ask
+    kp·δ of its 15 N·m."""
+    from wresdyn.paths import REPO
+
+    real = RealRobot(humanoid, Mismatch.load(REPO / "data" / "mismatch_uneven.toml"), RATE)
+    _, _, tau = real.record(_draw(humanoid, ik, 0).q_cmd, np.random.default_rng(0))
+    at_limit = np.abs(tau).max(axis=0) >= 0.99 * real.model.actuator_forcerange[:humanoid.n_dof, 1]
+    for j in ik.dofs:
+        name = humanoid.joint_names[j]
+        assert at_limit[j] == ("ankle_roll" not in name), name
 
 
 def test_collect_adds_probes_to_train_and_leaves_the_rest_unchanged(humanoid, cartpole):
