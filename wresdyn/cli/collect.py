@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ..choices import check_number
 from ..data.dataset import SPLITS  # numpy only: cheap
+from ..data.probe import SaturationProbe
 from ..data.signals import ExcitationConfig
 from ..errors import WresdynError
 from .config_flags import add_config_flags, build_config, given_fields
@@ -51,13 +52,19 @@ class CollectConfig:
     """Master seed (same seed, same data)."""
     excitation: ExcitationConfig = field(default_factory=ExcitationConfig)
     """The excitation's mode, frames and parameter ranges."""
+    probe_saturation: int = 0
+    """Saturation probe trajectories added to the training split (foot mode: each leg joint in turn steps far
+    enough that its drive saturates, so identification sees its effort limit; :mod:`wresdyn.data.probe`)."""
+    probe: SaturationProbe = field(default_factory=SaturationProbe)
+    """The saturation probe's step sizes and timing."""
 
     def __post_init__(self) -> None:
         check_number(self.rate, "rate", gt=0)
         counts = [self.train, self.validation, self.heldout, self.ood]
         for name, n in zip(SPLITS, counts):
             check_number(n, name, integer=True, ge=0)
-        if not any(counts):
+        check_number(self.probe_saturation, "probe_saturation", integer=True, ge=0)
+        if not any(counts) and not self.probe_saturation:
             raise WresdynError("train/validation/heldout/ood are all 0: nothing to record")
         check_number(self.duration, "duration", gt=0)
         if not self.duration * self.rate >= 2:
@@ -198,11 +205,12 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import collect
 
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
-    log(f"collecting {sum(cfg.counts.values())} trajectories of {cfg.duration:g} s at {cfg.rate:g} Hz on "
-         f"{robot.source.name} with mismatch {'none (nominal)' if mismatch.is_nominal() else args.mismatch}, "
-         f"seed {cfg.seed}")
+    probes = f" (with {cfg.probe_saturation} saturation probes)" if cfg.probe_saturation else ""
+    log(f"collecting {sum(cfg.counts.values()) + cfg.probe_saturation} trajectories{probes} of {cfg.duration:g} s at "
+        f"{cfg.rate:g} Hz on {robot.source.name} with mismatch "
+        f"{'none (nominal)' if mismatch.is_nominal() else args.mismatch}, seed {cfg.seed}")
     ds = collect(robot, mismatch, cfg.counts, cfg.duration, cfg.rate, cfg.seed, cfg.excitation,
-                 store_tau=not args.no_tau, progress=log)
+                 store_tau=not args.no_tau, progress=log, probe=cfg.probe_saturation, probe_config=cfg.probe)
     if not args.no_gap:
         ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, cfg.rate, "trajectories", log)
     out.mkdir(parents=True, exist_ok=True)

@@ -34,8 +34,9 @@ from ..robot.servo import STARTUP_RAMP, GoalProfile
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 from .mismatch import JOINT_KEYS, Mismatch, MismatchError
+from .probe import PROBE_FAMILY, SaturationProbe, saturation_probe
 
-__all__ = ["RealRobot", "SPAWN_KEYS", "collect"]
+__all__ = ["RealRobot", "SPAWN_KEYS", "PROBE_SPAWN_KEY", "collect"]
 
 
 class RealRobot:
@@ -323,10 +324,12 @@ SPAWN_KEYS = {"train": 0, "heldout": 1, "ood": 2, "validation": 3}
 """First spawn key of each split's seeds in :func:`collect`. Fixed per split, not its position in
 :data:`~wresdyn.data.dataset.SPLITS`: train, held-out and OOD keep their schema-1 keys, so a dataset recorded
 with a validation split has the same train, held-out and OOD arrays as one recorded without."""
+PROBE_SPAWN_KEY = 4
+"""First spawn key of the saturation probe trajectories' seeds in :func:`collect`."""
 
 
 def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: float = 4.0, rate_hz: float = 500.0,
-            seed: int = 0, excitation=None, store_tau: bool = True, progress=None):
+            seed: int = 0, excitation=None, store_tau: bool = True, progress=None, probe: int = 0, probe_config=None):
     """Draw excitations, execute them on the real robot and return the recorded :class:`~wresdyn.data.dataset.Dataset`.
 
     Trajectory i of a split draws from ``SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i))``, so it does not
@@ -347,6 +350,10 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
         store_tau: Keep the measured (diagnostic) torque in the trajectories.
         progress: Optional ``callable(str)`` receiving the plan's lines (foot IK: the workspace), a line per rejected
             draw and one line per recorded trajectory; a :class:`wresdyn.progress.Log` also draws a bar over them.
+        probe: Saturation probe trajectories (:mod:`wresdyn.data.probe`, foot mode only) added to the training
+            split after its other trajectories, named ``train_probe_000`` ...; trajectory i draws from spawn key
+            ``(PROBE_SPAWN_KEY, i)``, so the other trajectories are those recorded without probes.
+        probe_config: :class:`~wresdyn.data.probe.SaturationProbe` (default steps when ``None``).
     """
     import time
 
@@ -357,36 +364,45 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
     cfg = plan.cfg
     real = RealRobot(robot, mismatch, rate_hz)
     families = {split: plan.families(split) for split in SPLITS}
-    total, done = sum(counts.values()), 0
+    if probe and plan.mode != "foot":
+        raise RobotError(f"{robot.source}: the saturation probe steps the foot IK chains; it needs the foot excitation")
+    total, done = sum(counts.values()) + probe, 0
     trajs, params = [], {}
+    draws = [(split, i, SPAWN_KEYS[split], f"{split}_{i:03d}") for split in SPLITS for i in range(counts.get(split, 0))]
+    at = sum(1 for d in draws if d[0] == "train")
+    draws[at:at] = [("train", i, PROBE_SPAWN_KEY, f"train_probe_{i:03d}") for i in range(probe)]
     with bar(progress, total, "collect") as recorded:
-        for split in SPLITS:
-            for i in range(counts.get(split, 0)):
-                start = time.perf_counter()
-                seeds = np.random.SeedSequence(seed, spawn_key=(SPAWN_KEYS[split], i)).spawn(2)
-                rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+        for split, i, key, name in draws:
+            start = time.perf_counter()
+            seeds = np.random.SeedSequence(seed, spawn_key=(key, i)).spawn(2)
+            rng_exc, rng_noise = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+            if key == PROBE_SPAWN_KEY:
+                family = PROBE_FAMILY
+                exc = saturation_probe(robot, plan.ik.chains, plan.ws.home, duration, rate_hz, rng_exc, probe_config)
+            else:
                 family = families[split][i % len(families[split])]
                 exc = plan.generate(family, duration, rate_hz, rng_exc, progress)
-                q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
-                q, qd, tau = real.record(q_cmd, rng_noise)
-                q, qd = _f32(q), _f32(qd)
-                name = f"{split}_{i:03d}"
-                t = np.arange(len(q_cmd)) / rate_hz
-                tau = _f32(tau) if store_tau else None
-                trajs.append(Trajectory(name, split, t, q, qd, derive_qdd(qd, rate_hz), q_cmd, tau))
-                params[name] = exc.params
-                done += 1
-                if progress:
-                    progress(f"[{done:>{len(str(total))}}/{total}] {name:<14} {family:<9} "
-                             f"draws={exc.params['draws']:<2} {plan.describe(exc)}  "
-                             f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")
-                recorded.update(1)
+            q_cmd = _f32(_quantise(exc.q_cmd, COMMAND_RESOLUTION))
+            q, qd, tau = real.record(q_cmd, rng_noise)
+            q, qd = _f32(q), _f32(qd)
+            t = np.arange(len(q_cmd)) / rate_hz
+            tau = _f32(tau) if store_tau else None
+            trajs.append(Trajectory(name, split, t, q, qd, derive_qdd(qd, rate_hz), q_cmd, tau))
+            params[name] = exc.params
+            done += 1
+            if progress:
+                progress(f"[{done:>{len(str(total))}}/{total}] {name:<14} {family:<9} "
+                         f"draws={exc.params['draws']:<2} {plan.describe(exc)}  "
+                         f"|q - q_cmd| {np.abs(q - q_cmd).mean():.3f} rad  {time.perf_counter() - start:.1f} s")
+            recorded.update(1)
     meta = {"generator": "wresdyn collect", "duration_s": duration,
             "excitation": {k: v for k, v in dataclasses.asdict(cfg).items()},
             **plan.meta(),
             "real_robot": {"substep_s": real.substep, "delay_substeps": real.n_delay, "integrator": "implicitfast",
                            "settle_s": 0.5},
             "trajectory_params": params}
+    if probe:
+        meta["saturation_probe"] = {"trajectories": probe, **dataclasses.asdict(probe_config or SaturationProbe())}
     return Dataset(list(robot.joint_names), float(rate_hz), trajs, _display_path(robot.source), robot.source_sha256,
                    mismatch.to_dict(), int(seed), meta, robot.gains_record())
 
