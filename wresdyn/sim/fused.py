@@ -85,11 +85,7 @@ class _Fused(torch.autograd.Function):
         with sim._tape_stream():
             tape.backward(grads={q: wp.from_torch(_layout(g_q, sim.q_index, sim.nq).contiguous()),
                                  qd: wp.from_torch(_layout(g_qd, sim.qd_index, sim.nqd).contiguous())})
-        physics = []
-        for f, (dtype, device) in zip(ctx.names, ctx.physics_meta):  # summed over worlds: one robot
-            g = sim._model_view(f, grad=True)
-            g = g.sum(0) if f.startswith("body_") else g[:, sim.qd_index].sum(0)
-            physics.append(g.to(device, dtype))
+        physics = sim._physics_grads(ctx.names, ctx.physics_meta)
         with sim._tape_stream():
             tape.zero()
         ctx.tape = ctx.arrays = None

@@ -370,6 +370,16 @@ class Simulator:
         return bad
 
     # ------------------------------------------------------------------------------------------------ scatter
+    def _physics_grads(self, names, meta) -> list[torch.Tensor]:
+        """Gradients the tape left in the model's fields ``names``, summed over worlds (one robot), each as the
+        ``(dtype, device)`` of ``meta``."""
+        out = []
+        for f, (dtype, device) in zip(names, meta):
+            g = self._model_view(f, grad=True)
+            g = g.sum(0) if f.startswith("body_") else g[:, self.qd_index].sum(0)
+            out.append(g.to(device, dtype))
+        return out
+
     def _scatter(self, x: torch.Tensor, index, width: int) -> torch.Tensor:
         """Actuated-joint values (N, n) -> Newton's flat per-world layout (N * width,), zeros elsewhere."""
         if isinstance(index, slice) and index.start == 0 and index.stop == width == x.shape[-1]:
@@ -424,11 +434,7 @@ class _Step(torch.autograd.Function):
 
         out = (grad(states[0].joint_q, sim.q_index, sim.nq), grad(states[0].joint_qd, sim.qd_index, sim.nqd),
                grad(ctrl.joint_target_q, sim.q_index, sim.nq), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
-        physics = []
-        for f, (dtype, device) in zip(ctx.names, ctx.physics_meta):  # summed over worlds: one robot
-            g = sim._model_view(f, grad=True)
-            g = g.sum(0) if f.startswith("body_") else g[:, sim.qd_index].sum(0)
-            physics.append(g.to(device, dtype))
+        physics = sim._physics_grads(ctx.names, ctx.physics_meta)
         with sim._tape_stream():
             if ctx.names or sim.solver_kind != "replay" or getattr(sim.solver, "update_body_q", False):
                 tape.zero()
