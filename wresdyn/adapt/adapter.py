@@ -126,8 +126,8 @@ class Adapter:
                                       lr=cfg.lr)
         self.physics = start
         """The current model (the last accepted update, or the warm start)."""
-        self._kept = {k: v.clone() for k, v in m.state_dict().items()}
-        self._start_state = {k: v.clone() for k, v in self._kept.items()}
+        self._kept = _copy(m.state_dict())
+        self._start_state = _copy(self._kept)
         self._pending = None  # (physics, coordinates) of the last update's winner, to be confirmed
         self.delay = torch.as_tensor(start.delay / self.dt, dtype=torch.float32)
         self.sim = Simulator(robot, cfg.windows, self.dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
@@ -250,11 +250,11 @@ class Adapter:
             after = ol[2] if accepted else ref
         if new is not None:
             self.physics = new[0]
-            self._kept = {k: v.clone() for k, v in new[1].items()}
+            self._kept = _copy(new[1])
         elif revert:
             self.physics = self.start
-            self._kept = {k: v.clone() for k, v in self._start_state.items()}
-        self._pending = (cand, {k: v.clone() for k, v in self.model.state_dict().items()}) if (
+            self._kept = _copy(self._start_state)
+        self._pending = (cand, _copy(self.model.state_dict())) if (
             self.cfg.confirm and wins) else None
         if self._pending is None:
             self.model.load_state_dict(self._kept)
@@ -360,3 +360,8 @@ def _traj(x: np.ndarray):
     q = np.ascontiguousarray(x[:, 0])
     return SimpleNamespace(q=q, qd=np.ascontiguousarray(x[:, 1]), qdd=np.zeros_like(q),
                            q_cmd=np.ascontiguousarray(x[:, 2]))
+
+
+def _copy(state: dict) -> dict:
+    """A detached copy of a module's state dict (the coordinates an update may go back to)."""
+    return {k: v.clone() for k, v in state.items()}
