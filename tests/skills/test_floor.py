@@ -175,7 +175,10 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
         for r in res["real"][split].values():
             assert {"success", "falls", "failures", "mpjpe", "g_mpjpe", "orientation_error", "action_rate"} \
                 <= set(r["mean"])
-    assert "d_oracle: 1 PPO iterations x 3 worlds" in (out / "deploy.log").read_text()
+    log = (out / "deploy.log").read_text()
+    assert "d_oracle: 1 PPO iterations x 3 worlds" in log
+    # it starts once (a) is trained, before (b)
+    assert log.index("d_oracle: training on the real robot beside") < log.index("policy b_calibrated:")
     assert set(res["gap_closed_mpjpe"]) == set(res["gap_closed_g_mpjpe"]) == {"b_calibrated", "c_delta_action"}
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()

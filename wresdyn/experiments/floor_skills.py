@@ -110,22 +110,26 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     runs = {"calibrated": calibrated, "delta_action": delta}
     meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration, "floor": True}}
     wall = {}
-    # With PPO on a GPU the oracle's real robot (MuJoCo C on the host's cores) trains beside (b) and (c)
+    # With PPO on a GPU the oracle's real robot (MuJoCo C on the host's cores) trains beside (b) and (c): it starts
+    # as soon as (a), which it is fine-tuned from, is done.
     beside = (cfg.device != "cpu" if cfg.oracle_beside is None else cfg.oracle_beside) and "d_oracle" in policies[2:]
+    index = {name: i for i, name in enumerate(policies)}
     pool = None
     try:
-        for i, name in enumerate(policies):
+        for name in policies:
             if name == "d_oracle" and beside:
+                continue
+            wall[name] = _train_policy(index[name], name, floating, real, motions["train"], task, ppo, cfg, runs, meta,
+                                       out, log)
+            if name == "a_nominal" and beside:
                 import multiprocessing as mp
 
                 pool = mp.get_context("spawn").Pool(1)
-                oracle = pool.apply_async(_train_oracle, (str(robot.source), robot.gains, mismatch.to_dict(), rate, i,
-                                                          motions["train"], task, ppo, cfg, runs, meta, out))
-                log(f"[3/4] policy {name}: training on the real robot beside the others "
-                    f"({out / 'skills' / name / 'train.log'})")
-                continue
-            wall[name] = _train_policy(i, name, floating, real, motions["train"], task, ppo, cfg, runs, meta, out,
-                                       log)
+                oracle = pool.apply_async(_train_oracle, (str(robot.source), robot.gains, mismatch.to_dict(), rate,
+                                                          index["d_oracle"], motions["train"], task, ppo, cfg, runs,
+                                                          meta, out))
+                log(f"[3/4] policy d_oracle: training on the real robot beside the others "
+                    f"({out / 'skills' / 'd_oracle' / 'train.log'})")
         if pool is not None:
             wall["d_oracle"] = oracle.get()
             log(f"[3/4] policy d_oracle: {cfg.finetune} PPO iterations x {cfg.oracle_worlds} worlds on the "
