@@ -239,6 +239,9 @@ class Adapter:
         before = seg[:hold[0] + 1]  # the training part ends at the held-back part's start state
         det = self.detector
         track = det is not None and det.tracking(float(t[-1]))
+        s0 = hold[0] - self.n_holdout  # in the tracking mode, the effort grid picks on this second after the jump
+        select = TrajectoryBank([_traj(x[s0:hold[0] + 1])], self.device, self.delay.to(self.device)) if (
+            track and s0 >= 0 and seg[s0] == seg[hold[0]] and t[s0] >= det.since - 1e-9) else None
         train = self._train(x[:hold[0] + 1], before, t[:hold[0] + 1] >= det.since if track else None)
         if not train:
             return None
@@ -280,8 +283,8 @@ class Adapter:
         if self._pending is None:
             self.model.load_state_dict(self._kept)
         tried, set_ = 0, ""
-        if track and self.cfg.effort_grid and "effort" in self.cfg.fit:
-            tried, set_, err = self._effort_grid(holdout, joint_jump, after)
+        if select is not None and self.cfg.effort_grid and "effort" in self.cfg.fit:
+            tried, set_, err = self._effort_grid(select, holdout, joint_jump, after)
             if set_:
                 accepted, after = True, err
         one = self._one_step(holdout)
@@ -297,9 +300,8 @@ class Adapter:
         return u
 
     def _train(self, x: np.ndarray, seg: np.ndarray, after: np.ndarray | None) -> list:
-        """The training trajectories: each segment of the samples ``x`` (T, 3, n) (``seg`` (T,) their segments) longer
-        than a window; with ``after`` (T,) bool (the tracking mode), only the samples after the jump where they hold a
-        window, else all."""
+        """The segments (``seg`` (T,)) of the samples ``x`` (T, 3, n) longer than a window; with ``after`` (T,) bool,
+        those of the samples after the jump where they hold a window, else all."""
         if after is not None:
             picked = self._train(x, seg, None) if not after.any() else self._train(x[after], seg[after], None)
             return picked or self._train(x, seg, None)
@@ -355,18 +357,19 @@ class Adapter:
         err = (q[:, 1:] - window.q[:, 1:]).abs().mean(1).cpu().numpy()  # (4, n)
         return tuple(float(e) for e in err.mean(1)), err[1].astype(np.float64)
 
-    def _effort_grid(self, holdout: TrajectoryBank, joint_jump: np.ndarray | None, error: float
-                     ) -> tuple[int, str, float]:
+    def _effort_grid(self, select: TrajectoryBank, holdout: TrajectoryBank, joint_jump: np.ndarray | None,
+                     error: float) -> tuple[int, str, float]:
         """Replay the current model with lower effort limits (:func:`~wresdyn.adapt.detect.effort_candidates`) on
         the joints whose held-back error jumped most (at most :attr:`AdaptConfig.effort_joints`, each above
-        :attr:`AdaptConfig.detect_factor` times its median); the best becomes the model (its coordinates too) if its
-        held-back error beats ``error`` [rad], the model's, by :attr:`AdaptConfig.min_gain`. Returns (limits tried,
-        ``joint=limit`` of the one kept or ``""``, the model's held-back error after)."""
+        :attr:`AdaptConfig.detect_factor` times its median) on ``select`` (a second of the training part after the
+        jump); the best there, if it beats the model there by :attr:`AdaptConfig.min_gain`, becomes the model (its
+        coordinates too) if it beats it again on the held-back part, ``error`` [rad], which it was not picked on.
+        Returns (limits tried, ``joint=limit`` of the one kept or ``""``, the model's held-back error after)."""
         cfg = self.cfg
         if joint_jump is None:
             return 0, "", error
         order = [int(j) for j in np.argsort(-joint_jump) if joint_jump[j] > cfg.detect_factor][:cfg.effort_joints]
-        window = holdout.whole()
+        window = select.whole()
         p = self.physics
         demand = demanded_torque(p.kp, p.kd, *(a[0, :-1].cpu().numpy() for a in (window.q, window.qd)),
                                  window.target[0].cpu().numpy())
@@ -374,11 +377,17 @@ class Adapter:
         if not cands:
             return 0, "", error
         if self.sim_grid is None:
-            self.sim_grid = Simulator(self.robot, cfg.effort_joints * len(cfg.effort_grid), self.dt,
+            self.sim_grid = Simulator(self.robot, cfg.effort_joints * len(cfg.effort_grid) + 1, self.dt,
                                       solver=cfg.solver, device=cfg.device, param_grads=True)
-        models, err = replay_limits(self.sim_grid, window, p, cands, self._fused(self.sim_grid))
-        best = int(np.argmin(np.nan_to_num(err, nan=np.inf)))
-        if not err[best] < (1.0 - cfg.min_gain) * error:
+        # the model itself last (the joint's own limit): the reference on the selection second
+        models, err = replay_limits(self.sim_grid, window, p, [*cands, (cands[0][0], p.effort[cands[0][0]])],
+                                    self._fused(self.sim_grid))
+        best = int(np.argmin(np.nan_to_num(err[:-1], nan=np.inf)))
+        if not err[best] < (1.0 - cfg.min_gain) * err[-1]:
+            return len(cands), "", error
+        _, again = replay_limits(self.sim_val, holdout.whole(), p, [cands[best]], self._fused(self.sim_val))
+        self.sim_val.set_physics(self.start, worlds=slice(0, 1))  # world 0 replays the warm start
+        if not again[0] < (1.0 - cfg.min_gain) * error:
             return len(cands), "", error
         j, limit = cands[best]
         self.physics = models[best]
@@ -387,7 +396,7 @@ class Adapter:
             self.model.assign("effort", self.physics.effort)
         self._kept = _copy(self.model.state_dict())
         self._pending = None
-        return len(cands), f"{self.robot.joint_names[j]}={limit:.4g}", float(err[best])
+        return len(cands), f"{self.robot.joint_names[j]}={limit:.4g}", float(again[0])
 
     def _one_step(self, holdout: TrajectoryBank) -> tuple[float, float]:
         """One-step prediction error [rad] of the warm start and the current model on every
@@ -423,7 +432,6 @@ class Adapter:
             tmp.write_text(text)
             tmp.replace(p)
         return path
-
 
     def _export(self, physics: PhysicalParams, when: dict) -> None:
         write_export(self.export_dir, self.robot, physics, self.rate_hz, {"source": "wresdyn adapt", **when})
