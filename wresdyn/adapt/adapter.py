@@ -40,7 +40,7 @@ from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
-from .detect import ChangeDetector, demanded_torque, effort_candidates, replay_limits
+from .detect import ChangeDetector, search_effort
 
 __all__ = ["Adapter", "StreamError", "Update"]
 
@@ -359,44 +359,28 @@ class Adapter:
 
     def _effort_grid(self, select: TrajectoryBank, holdout: TrajectoryBank, joint_jump: np.ndarray | None,
                      error: float) -> tuple[int, str, float]:
-        """Replay the current model with lower effort limits (:func:`~wresdyn.adapt.detect.effort_candidates`) on
-        the joints whose held-back error jumped most (at most :attr:`AdaptConfig.effort_joints`, each above
-        :attr:`AdaptConfig.detect_factor` times its median) on ``select`` (a second of the training part after the
-        jump); the best there, if it beats the model there by :attr:`AdaptConfig.min_gain`, becomes the model (its
-        coordinates too) if it beats it again on the held-back part, ``error`` [rad], which it was not picked on.
-        Returns (limits tried, ``joint=limit`` of the one kept or ``""``, the model's held-back error after)."""
+        """The effort grid (:func:`~wresdyn.adapt.detect.search_effort`) picked on ``select`` (a second of the
+        training part after the jump), kept on ``holdout`` against ``error`` [rad], the model's mean there: the winner
+        becomes the model (its coordinates too). Returns (limits tried, ``joint=limit`` of the one kept or ``""``, the
+        model's held-back error after)."""
         cfg = self.cfg
         if joint_jump is None:
-            return 0, "", error
-        order = [int(j) for j in np.argsort(-joint_jump) if joint_jump[j] > cfg.detect_factor][:cfg.effort_joints]
-        window = select.whole()
-        p = self.physics
-        demand = demanded_torque(p.kp, p.kd, *(a[0, :-1].cpu().numpy() for a in (window.q, window.qd)),
-                                 window.target[0].cpu().numpy())
-        cands = effort_candidates(p, order, demand, cfg.effort_grid)
-        if not cands:
             return 0, "", error
         if self.sim_grid is None:
             self.sim_grid = Simulator(self.robot, cfg.effort_joints * len(cfg.effort_grid) + 1, self.dt,
                                       solver=cfg.solver, device=cfg.device, param_grads=True)
-        # the model itself last (the joint's own limit): the reference on the selection second
-        models, err = replay_limits(self.sim_grid, window, p, [*cands, (cands[0][0], p.effort[cands[0][0]])],
-                                    self._fused(self.sim_grid))
-        best = int(np.argmin(np.nan_to_num(err[:-1], nan=np.inf)))
-        if not err[best] < (1.0 - cfg.min_gain) * err[-1]:
-            return len(cands), "", error
-        _, again = replay_limits(self.sim_val, holdout.whole(), p, [cands[best]], self._fused(self.sim_val))
+        tried, won, after = search_effort(self.sim_grid, self.sim_val, select.whole(), holdout.whole(), self.physics,
+                                          joint_jump, cfg, error, self._fused(self.sim_grid))
         self.sim_val.set_physics(self.start, worlds=slice(0, 1))  # world 0 replays the warm start
-        if not again[0] < (1.0 - cfg.min_gain) * error:
-            return len(cands), "", error
-        j, limit = cands[best]
-        self.physics = models[best]
+        if won is None:
+            return tried, "", error
+        j, limit, self.physics = won
         self.model.load_state_dict(self._kept)
         with torch.no_grad():
             self.model.assign("effort", self.physics.effort)
         self._kept = _copy(self.model.state_dict())
         self._pending = None
-        return len(cands), f"{self.robot.joint_names[j]}={limit:.4g}", float(again[0])
+        return tried, f"{self.robot.joint_names[j]}={limit:.4g}", after
 
     def _one_step(self, holdout: TrajectoryBank) -> tuple[float, float]:
         """One-step prediction error [rad] of the warm start and the current model on every

@@ -21,7 +21,7 @@ import numpy as np
 from ..sim import rollout
 from ..sim.fused import fused_rollout
 
-__all__ = ["ChangeDetector", "demanded_torque", "effort_candidates", "replay_limits"]
+__all__ = ["ChangeDetector", "demanded_torque", "effort_candidates", "replay_limits", "search_effort"]
 
 
 class ChangeDetector:
@@ -96,8 +96,8 @@ def replay_limits(sim, window, physics, candidates, fused: bool) -> tuple[list, 
     """Replay ``physics`` with each (joint, limit [N·m]) of ``candidates`` open loop on ``window`` (one held-back
     segment, :class:`~wresdyn.sim.bank.Window` of B = 1), one world of ``sim`` each (``sim`` has at least as many
     worlds; the spare ones replay the last candidate again); ``fused``: in one launch
-    (:func:`~wresdyn.sim.fused.fused_rollout`). Returns the candidate models and their errors, mean |q_sim − q|
-    [rad], (len(candidates),)."""
+    (:func:`~wresdyn.sim.fused.fused_rollout`). Returns the candidate models and their errors per joint, mean
+    |q_sim − q| [rad], (len(candidates), n)."""
     import torch
 
     models = []
@@ -110,5 +110,38 @@ def replay_limits(sim, window, physics, candidates, fused: bool) -> tuple[list, 
     window = window.repeat(sim.n_worlds)
     with torch.no_grad():
         q = fused_rollout(sim, window)[0] if fused else rollout(sim, window).q
-    err = (q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()[:len(models)]
-    return models, err.astype(np.float64)
+    err = (q[:, 1:] - window.q[:, 1:]).abs().mean(1).cpu().numpy()[:len(models)]
+    return models, np.nan_to_num(err.astype(np.float64), nan=np.inf)  # a diverged replay never wins
+
+
+def search_effort(sim_grid, sim_val, select, holdout, physics, joint_jump: np.ndarray, cfg, error: float,
+                  fused: bool):
+    """The effort grid of the tracking mode: lower limits (:func:`effort_candidates`, ``cfg.effort_grid``) on the
+    joints whose held-back error jumped most (at most ``cfg.effort_joints``, each ``joint_jump`` above
+    ``cfg.detect_factor``), replayed on ``select`` (a :class:`~wresdyn.sim.bank.Window` of one segment after the jump;
+    ``sim_grid`` has a world for each and one more). The one that lowers its joint's error most there, by
+    ``cfg.min_gain`` at least, wins if on ``holdout`` (``sim_val``, two worlds or more), which it was not picked on,
+    it lowers that joint's error by ``cfg.min_gain`` again and the mean over joints, ``error`` [rad] with
+    ``physics``, not at all: the joint's error is what a limit explains; the mean guards the others.
+
+    Returns (limits tried, ``(joint, limit [N·m], the model with it)`` or ``None``, the held-back error after [rad]).
+    """
+    gain = 1.0 - cfg.min_gain
+    order = [int(j) for j in np.argsort(-joint_jump) if joint_jump[j] > cfg.detect_factor][:cfg.effort_joints]
+    p = physics
+    demand = demanded_torque(p.kp, p.kd, *(a[0, :-1].cpu().numpy() for a in (select.q, select.qd)),
+                             select.target[0].cpu().numpy())
+    cands = effort_candidates(p, order, demand, cfg.effort_grid)
+    if not cands:
+        return 0, None, error
+    # the model itself last (its own limit): the reference
+    models, err = replay_limits(sim_grid, select, p, [*cands, (cands[0][0], p.effort[cands[0][0]])], fused)
+    rel = np.array([err[k, j] / max(err[-1, j], 1e-12) for k, (j, _) in enumerate(cands)])
+    best = int(np.argmin(rel))
+    if not rel[best] < gain:
+        return len(cands), None, error
+    j, limit = cands[best]
+    _, again = replay_limits(sim_val, holdout, p, [cands[best], (j, p.effort[j])], fused)
+    if not (again[0, j] < gain * again[1, j] and again[0].mean() <= error):
+        return len(cands), None, error
+    return len(cands), (j, limit, models[best]), float(again[0].mean())
