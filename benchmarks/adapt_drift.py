@@ -372,6 +372,13 @@ def report(rows, times, errs, secs, held, truth_at, oracles, truths, calib, robo
         log(f"{name}: " + "  ".join(f"t={s}: truth {v['truth']:.3g} online {v['online']:.3g} fixed {v['fixed']:.3g}"
                                     for s, v in row.items() if isinstance(v, dict))
             + f"  oracle(derate) {row['oracle_derate']:.3g}")
+    moved = np.flatnonzero(~np.isclose(held[last].effort, calib.effort, rtol=1e-3))
+    out["effort_moved"] = {robot.joint_names[j]: {"truth": float(truth_at[last].effort[j]),
+                                                  "online": float(held[last].effort[j]),
+                                                  "fixed": float(calib.effort[j])} for j in moved}
+    log("effort limits the online model moved, at t=%d: " % last + ("  ".join(
+        f"{k}: truth {v['truth']:.3g} online {v['online']:.3g} fixed {v['fixed']:.3g}"
+        for k, v in out["effort_moved"].items()) or "none"))
     return out
 
 

@@ -239,9 +239,11 @@ class Adapter:
         before = seg[:hold[0] + 1]  # the training part ends at the held-back part's start state
         det = self.detector
         track = det is not None and det.tracking(float(t[-1]))
-        s0 = hold[0] - self.n_holdout  # in the tracking mode, the effort grid picks on this second after the jump
+        # after a joint's own held-back error jumped, the effort grid picks on the held-back part that showed it
+        s0, jumped = hold[0] - self.n_holdout, None if det is None else det.joint_ratios
         select = TrajectoryBank([_traj(x[s0:hold[0] + 1])], self.device, self.delay.to(self.device)) if (
-            track and s0 >= 0 and seg[s0] == seg[hold[0]] and t[s0] >= det.since - 1e-9) else None
+            jumped is not None and (jumped > self.cfg.detect_factor).any() and s0 >= 0
+            and seg[s0] == seg[hold[0]]) else None
         train = self._train(x[:hold[0] + 1], before, t[:hold[0] + 1] >= det.since if track else None)
         if not train:
             return None
@@ -251,9 +253,9 @@ class Adapter:
         cand = self.model.values() if np.isfinite(loss) else self.physics
         pending = self._pending
         ol, ol_joint = self._open_loop(holdout, cand, None if pending is None else pending[0])
-        jump, joint_jump = 0.0, None
+        jump = 0.0
         if det is not None:
-            _, jump, joint_jump = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
+            _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
             track = det.tracking(float(t[-1]))
         confirm = self.cfg.confirm and not track
         # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
@@ -284,7 +286,7 @@ class Adapter:
             self.model.load_state_dict(self._kept)
         tried, set_ = 0, ""
         if select is not None and self.cfg.effort_grid and "effort" in self.cfg.fit:
-            tried, set_, err = self._effort_grid(select, holdout, joint_jump, after)
+            tried, set_, err = self._effort_grid(select, holdout, jumped, after)
             if set_:
                 accepted, after = True, err
         one = self._one_step(holdout)

@@ -79,7 +79,8 @@ class AdaptConfig:
     """A change detector (:mod:`wresdyn.adapt.detect`): where the current model's held-back error jumps above
     ``detect_factor`` times the median of the last ``detect_history`` seconds' updates, the adapter tracks for
     ``track_for`` seconds: no confirmation, ``track_iterations`` steps at ``track_lr`` times the learning rate on the
-    data after the jump only, and lower effort limits tried (``effort_grid``); then back to the guarded mode."""
+    data after the jump only; then back to the guarded mode. Where one joint's own error jumps, lower effort limits
+    are tried for it (``effort_grid``)."""
     detect_factor: float = 2.0
     """A jump: the held-back error above this times the median of the recent ones (the motion alone moves it about
     2x from second to second without drift)."""
@@ -92,9 +93,11 @@ class AdaptConfig:
     track_lr: float = 2.0
     """Learning-rate factor in the tracking mode."""
     effort_grid: tuple[float, ...] = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
-    """In the tracking mode, lower effort limits tried, as factors of the model's, on a joint whose own held-back
-    error jumped (``detect_factor``) and whose drive asked there for more torque than the lower limit gives; the best
-    on the held-back part is kept if it beats the model by ``min_gain``. Empty: none tried."""
+    """With ``detect``, lower effort limits tried, as factors of the model's, on a joint whose own held-back error
+    jumped (``detect_factor`` times its median) and whose drive asked there for more torque than the lower limit
+    gives: the one that lowers that joint's error most on the held-back part that showed the jump, by ``min_gain``,
+    is kept if on the next held-back part it lowers it by ``min_gain`` again and the mean over joints not at all.
+    Empty: none tried."""
     effort_joints: int = 2
     """At most this many joints (those whose error jumped most) get the effort grid in one update."""
     one_step_every: int = 5

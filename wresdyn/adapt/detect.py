@@ -1,15 +1,16 @@
 """What the online identifier does after a change of the robot: a detector of a jump in the current model's held-back
-error (:class:`ChangeDetector`) that opens a tracking mode, and a grid of lower effort limits for a joint that may
-have started to saturate (:func:`effort_candidates`, :func:`demanded_torque`).
+error (:class:`ChangeDetector`) that opens a tracking mode, and a grid of lower effort limits for a joint whose own
+error jumped (:func:`search_effort`).
 
 A change shows as a jump of the current model's held-back open-loop error above its recent level; the motion alone
-makes that error vary from second to second (about 2x without drift on the drift benchmark), so the jump is measured
-against the median of the last :attr:`~wresdyn.adapt.config.AdaptConfig.detect_history` seconds of updates and must
-exceed :attr:`~wresdyn.adapt.config.AdaptConfig.detect_factor` times it. The same test per joint (each joint's own
-held-back error against its own median) flags the joints whose error jumped: where such a joint's PD drive asks, on
-the held-back samples, for more torque than a lower limit would give, the effort limit is a suspect. An effort limit
-above every torque the motion asks for has no gradient (the simulated drive never saturates), so, as offline
-identification's grid search, lower limits are tried by replay instead.
+makes that error vary from second to second (up to 1.5x its median without drift on the drift benchmark's validation
+timeline), so the jump is measured against the median of the last
+:attr:`~wresdyn.adapt.config.AdaptConfig.detect_history` seconds of updates and must exceed
+:attr:`~wresdyn.adapt.config.AdaptConfig.detect_factor` times it. The same test per joint (each joint's own held-back
+error against its own median) flags the joints whose error jumped: where such a joint's PD drive asks for more torque
+than a lower limit would give, the limit is a suspect. An effort limit above every torque the motion asks for has no
+gradient (the simulated drive never saturates), so, as offline identification's grid search, lower limits are tried
+by replay instead: picked on the held-back part that showed the jump, kept only if they win again on the next one.
 """
 
 from __future__ import annotations
@@ -43,6 +44,8 @@ class ChangeDetector:
         """Robot time the tracking mode ends [s]."""
         self.since = -np.inf
         """Robot time from which the window holds data after the last jump [s]."""
+        self.joint_ratios: np.ndarray | None = None
+        """Each joint's held-back error over its recent median at the last update, (n,) (``None`` before one)."""
 
     def ratios(self, error: float, joints: np.ndarray) -> tuple[float, np.ndarray]:
         """``error`` [rad] and ``joints`` (n,) [rad] over the medians of the earlier ones (0 while fewer than 3)."""
@@ -63,6 +66,7 @@ class ChangeDetector:
             self.since = t_holdout
         if jumped:
             self.until = t + self.track_for
+        self.joint_ratios = None if len(self.errors) < 3 else jratio
         self.errors.append(float(error))
         self.joints.append(np.asarray(joints, dtype=np.float64).copy())
         return bool(jumped), ratio, jratio
