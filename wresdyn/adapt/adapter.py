@@ -92,7 +92,8 @@ class Update:
     tracking: bool = False
     """Whether the update was decided in the tracking mode after a jump (no confirmation)."""
     effort_tried: int = 0
-    """Lower effort limits replayed on the held-back part (:attr:`AdaptConfig.effort_grid`)."""
+    """Lower effort limits replayed on the last update's held-back part, where a joint's own error jumped
+    (:attr:`AdaptConfig.effort_grid`)."""
     effort_set: str = ""
     """``joint=limit`` [N·m] where one of them won and became the model's; empty otherwise."""
 
@@ -356,14 +357,16 @@ class Adapter:
         window = holdout.whole().repeat(4)
         with torch.no_grad():
             q = fused_rollout(self.sim_val, window)[0] if self._fused(self.sim_val) else rollout(self.sim_val, window).q
-        err = (q[:, 1:] - window.q[:, 1:]).abs().mean(1).cpu().numpy()  # (4, n)
-        return tuple(float(e) for e in err.mean(1)), err[1].astype(np.float64)
+        err = (q[:, 1:] - window.q[:, 1:]).abs()
+        joint = err[1].mean(0).cpu().numpy().astype(np.float64)
+        return tuple(float(e) for e in err.mean((1, 2)).cpu().numpy()), joint
 
     def _effort_grid(self, select: TrajectoryBank, holdout: TrajectoryBank, joint_jump: np.ndarray | None,
                      error: float) -> tuple[int, str, float]:
-        """The effort grid (:func:`~wresdyn.adapt.detect.search_effort`) picked on ``select`` (a second of the
-        training part after the jump), kept on ``holdout`` against ``error`` [rad], the model's mean there: the winner
-        becomes the model (its coordinates too). Returns (limits tried, ``joint=limit`` of the one kept or ``""``, the
+        """The effort grid (:func:`~wresdyn.adapt.detect.search_effort`) for the joints of ``joint_jump`` (n,) above
+        the factor, picked on ``select`` (the last update's held-back part, where their errors jumped), kept on
+        ``holdout`` against ``error`` [rad], the model's mean there: the winner becomes the model (its coordinates
+        too). Returns (limits tried, ``joint=limit`` of the one kept or ``""``, the
         model's held-back error after)."""
         cfg = self.cfg
         if joint_jump is None:

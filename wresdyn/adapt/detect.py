@@ -53,6 +53,7 @@ class ChangeDetector:
             return 0.0, np.zeros_like(joints)
         med = float(np.median(self.errors))
         jmed = np.median(np.stack(self.joints), 0)
+        # 1e-12 rad: only a joint that never moved has a median this small; it keeps the division finite
         return error / max(med, 1e-12), joints / np.maximum(jmed, 1e-12)
 
     def observe(self, t: float, t_holdout: float, error: float, joints: np.ndarray) -> tuple[bool, float, np.ndarray]:
@@ -73,7 +74,7 @@ class ChangeDetector:
 
     def tracking(self, t: float) -> bool:
         """Whether robot time ``t`` [s] is within the tracking mode."""
-        return t <= self.until + 1e-9
+        return t <= self.until + 1e-9  # robot times are sums of sample periods: equal up to rounding
 
 
 def demanded_torque(kp: np.ndarray, kd: np.ndarray, q: np.ndarray, qd: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -122,8 +123,8 @@ def search_effort(sim_grid, sim_val, select, holdout, physics, joint_jump: np.nd
                   fused: bool):
     """The effort grid of the tracking mode: lower limits (:func:`effort_candidates`, ``cfg.effort_grid``) on the
     joints whose held-back error jumped most (at most ``cfg.effort_joints``, each ``joint_jump`` above
-    ``cfg.detect_factor``), replayed on ``select`` (a :class:`~wresdyn.sim.bank.Window` of one segment after the jump;
-    ``sim_grid`` has a world for each and one more). The one that lowers its joint's error most there, by
+    ``cfg.detect_factor``), replayed on ``select`` (a :class:`~wresdyn.sim.bank.Window` of B = 1, the held-back part
+    that showed the jump; ``sim_grid`` has a world for each and one more). The one that lowers its joint's error most there, by
     ``cfg.min_gain`` at least, wins if on ``holdout`` (``sim_val``, two worlds or more), which it was not picked on,
     it lowers that joint's error by ``cfg.min_gain`` again and the mean over joints, ``error`` [rad] with
     ``physics``, not at all: the joint's error is what a limit explains; the mean guards the others.
