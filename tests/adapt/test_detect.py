@@ -55,6 +55,11 @@ def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, re
     u = adapter.push(*next(iter(dataset_blocks(stream))))[0]
     assert u.tracking and u.jump > 100
     assert u.accepted and not u.pending and u.open_loop == u.open_loop_candidate < u.open_loop_before
+    # the tracking mode trains on the samples after the jump where they hold a window, else on all
+    x, seg = np.random.default_rng(0).normal(size=(300, 3, humanoid.n_dof)), np.zeros(300, dtype=np.int64)
+    after = adapter._train(x, seg, np.arange(300) >= 200)
+    assert len(after) == 1 and np.array_equal(after[0].q, x[200:, 0])
+    assert len(adapter._train(x, seg, np.arange(300) >= 295)[0].q) == 300  # 5 samples: no window, all of them
     plain = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)  # no history: guarded mode
     v = plain.push(*next(iter(dataset_blocks(stream))))[0]
     assert not v.tracking and not v.accepted and v.pending
