@@ -259,8 +259,10 @@ def main() -> None:
         s1 = min(s0 + int(rate / 10), len(t))
         for u in adapter.push(t[s0:s1], q[s0:s1], qd[s0:s1], q_cmd[s0:s1]):
             verdict = "acc" if u.accepted else "rev" if u.reverted else "rej"
+            mode = f"  track (jump {u.jump:.2f})" if u.tracking else ""
+            grid = f"  effort grid {u.effort_tried}: {u.effort_set or 'none kept'}" if u.effort_tried else ""
             log(f"t {u.t:7.2f} s  {verdict}  held-back {u.open_loop:.5f} "
-                f"(fixed {u.open_loop_start:.5f})  compute {u.compute:.2f} s")
+                f"(fixed {u.open_loop_start:.5f})  compute {u.compute:.2f} s{mode}{grid}")
         if s1 % int(rate) == 0:
             held[s1 // int(rate)] = adapter.physics
     robot_time = len(t) / rate
@@ -311,8 +313,11 @@ def main() -> None:
                     "updates": len(adapter.updates), "accepted": int(sum(u.accepted for u in adapter.updates)),
                     "oracle_iterations": args.oracle_iterations, "oracle_train": args.oracle_train,
                     "oracles_from": args.oracles, "motion": args.motion, "splits": list(splits),
-                    "seed": args.seed, "reverted": int(sum(u.reverted for u in adapter.updates))})
+                    "seed": args.seed, "reverted": int(sum(u.reverted for u in adapter.updates)),
+                    "tracking": [u.t for u in adapter.updates if u.tracking],
+                    "effort_set": {f"{u.t:g}": u.effort_set for u in adapter.updates if u.effort_set}})
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "updates.json").write_text(json.dumps([u.row() for u in adapter.updates]))
     plot(out / "adapt_drift.png", rows, times, held, truth_at, calib, robot)
     (out / "run.txt").write_text("\n".join(lines) + "\n")
 
@@ -321,6 +326,8 @@ def _value(default, text: str):
     """``text`` as the type of ``default`` (an AdaptConfig field's)."""
     if isinstance(default, bool):
         return {"true": True, "false": False}[text.lower()]
+    if isinstance(default, tuple):
+        return tuple(float(x) for x in text.split(",") if x)
     return type(default)(text)
 
 
@@ -365,6 +372,13 @@ def report(rows, times, errs, secs, held, truth_at, oracles, truths, calib, robo
         log(f"{name}: " + "  ".join(f"t={s}: truth {v['truth']:.3g} online {v['online']:.3g} fixed {v['fixed']:.3g}"
                                     for s, v in row.items() if isinstance(v, dict))
             + f"  oracle(derate) {row['oracle_derate']:.3g}")
+    moved = np.flatnonzero(~np.isclose(held[last].effort, calib.effort, rtol=1e-3))
+    out["effort_moved"] = {robot.joint_names[j]: {"truth": float(truth_at[last].effort[j]),
+                                                  "online": float(held[last].effort[j]),
+                                                  "fixed": float(calib.effort[j])} for j in moved}
+    log("effort limits the online model moved, at t=%d: " % last + ("  ".join(
+        f"{k}: truth {v['truth']:.3g} online {v['online']:.3g} fixed {v['fixed']:.3g}"
+        for k, v in out["effort_moved"].items()) or "none"))
     return out
 
 

@@ -40,6 +40,7 @@ from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
+from .detect import ChangeDetector, search_effort
 
 __all__ = ["Adapter", "StreamError", "Update"]
 
@@ -85,6 +86,16 @@ class Update:
     pending: bool = False
     """Whether the candidate won here and waits to be confirmed on the next held-back part
     (:attr:`AdaptConfig.confirm`)."""
+    jump: float = 0.0
+    """The model's held-back error before the update over the median of the recent ones (:attr:`AdaptConfig.detect`;
+    0 without it or while the history is short)."""
+    tracking: bool = False
+    """Whether the update was decided in the tracking mode after a jump (no confirmation)."""
+    effort_tried: int = 0
+    """Lower effort limits replayed on the last update's held-back part, where a joint's own error jumped
+    (:attr:`AdaptConfig.effort_grid`)."""
+    effort_set: str = ""
+    """``joint=limit`` [N·m] where one of them won and became the model's; empty otherwise."""
 
     def row(self) -> dict:
         """The scalar fields, for a CSV / JSON log."""
@@ -124,6 +135,11 @@ class Adapter:
         self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "lr": cfg.lr * f}
                                        for g, f in zip(groups, cfg.lr_scale) if any(p.requires_grad for p in g)],
                                       lr=cfg.lr)
+        self._lrs = [g["lr"] for g in self.optim.param_groups]
+        self.detector = ChangeDetector(cfg.detect_factor, round(cfg.detect_history / cfg.update_every),
+                                       cfg.track_for) if cfg.detect else None
+        """The change detector (:attr:`AdaptConfig.detect`), ``None`` without it."""
+        self.sim_grid = None  # the effort grid's replays, made on first use
         self.physics = start
         """The current model (the last accepted update, or the warm start)."""
         self._kept = _copy(m.state_dict())
@@ -222,16 +238,27 @@ class Adapter:
             return None
         hold = np.flatnonzero(latest)[-(self.n_holdout + 1):]
         before = seg[:hold[0] + 1]  # the training part ends at the held-back part's start state
-        train = [_traj(x[:hold[0] + 1][before == s]) for s in np.unique(before)]
-        train = [tr for tr in train if len(tr.q) > self.cfg.horizon]
+        det = self.detector
+        track = det is not None and det.tracking(float(t[-1]))
+        # after a joint's own held-back error jumped, the effort grid picks on the held-back part that showed it
+        s0, jumped = hold[0] - self.n_holdout, None if det is None else det.joint_ratios
+        select = TrajectoryBank([_traj(x[s0:hold[0] + 1])], self.device, self.delay.to(self.device)) if (
+            jumped is not None and (jumped > self.cfg.detect_factor).any() and s0 >= 0
+            and seg[s0] == seg[hold[0]]) else None
+        train = self._train(x[:hold[0] + 1], before, t[:hold[0] + 1] >= det.since if track else None)
         if not train:
             return None
         holdout = TrajectoryBank([_traj(x[hold])], self.device, self.delay.to(self.device))
         excited = np.sqrt(np.mean(np.concatenate([tr.qd for tr in train]) ** 2, 0)) >= self.cfg.excited_min
-        loss = self._steps(train, excited)
+        loss = self._steps(train, excited, track)
         cand = self.model.values() if np.isfinite(loss) else self.physics
         pending = self._pending
-        ol = self._open_loop(holdout, cand, None if pending is None else pending[0])
+        ol, ol_joint = self._open_loop(holdout, cand, None if pending is None else pending[0])
+        jump = 0.0
+        if det is not None:
+            _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
+            track = det.tracking(float(t[-1]))
+        confirm = self.cfg.confirm and not track
         # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
         # back to it unless something beats it): without drift, updates that only fit one held-back second's noise
         # do not pile up
@@ -239,7 +266,7 @@ class Adapter:
         ref = ol[0] if revert else ol[1]
         gain = 1.0 - self.cfg.min_gain
         wins = bool(np.isfinite(loss) and ol[2] < gain * ref)
-        if self.cfg.confirm:  # publish the last update's winner if it wins again here, on data it was not fitted on
+        if confirm:  # publish the last update's winner if it wins again here, on data it was not fitted on
             accepted = pending is not None and ol[3] < gain * ref
             new = pending if accepted else None
             after = ol[3] if accepted else ref
@@ -255,13 +282,19 @@ class Adapter:
             self.physics = self.start
             self._kept = _copy(self._start_state)
         self._pending = (cand, _copy(self.model.state_dict())) if (
-            self.cfg.confirm and wins) else None
+            confirm and wins) else None
         if self._pending is None:
             self.model.load_state_dict(self._kept)
+        tried, set_ = 0, ""
+        if select is not None and self.cfg.effort_grid and "effort" in self.cfg.fit:
+            tried, set_, err = self._effort_grid(select, holdout, jumped, after)
+            if set_:
+                accepted, after = True, err
         one = self._one_step(holdout)
         u = Update(float(t[-1]), accepted, after, ol[1], ol[2], ol[0], one[1], one[0], float(loss),
                    int(excited.sum()), 0.0, self.physics, reverted=revert and not accepted,
-                   pending=self._pending is not None)
+                   pending=self._pending is not None, jump=jump, tracking=track, effort_tried=tried,
+                   effort_set=set_)
         u.compute = time.perf_counter() - t0
         self.compute += u.compute
         self.updates.append(u)
@@ -269,14 +302,26 @@ class Adapter:
             self.publish(u)
         return u
 
-    def _steps(self, train, excited: np.ndarray) -> float:
-        """``cfg.iterations`` Adam steps on windows of ``train``; joints not ``excited`` keep their joint fields.
-        Returns the last loss (``nan`` if the simulation diverged)."""
+    def _train(self, x: np.ndarray, seg: np.ndarray, after: np.ndarray | None) -> list:
+        """The segments (``seg`` (T,)) of the samples ``x`` (T, 3, n) longer than a window; with ``after`` (T,) bool,
+        those of the samples after the jump where they hold a window, else all."""
+        if after is not None:
+            picked = self._train(x, seg, None) if not after.any() else self._train(x[after], seg[after], None)
+            return picked or self._train(x, seg, None)
+        train = [_traj(x[seg == s]) for s in np.unique(seg)]
+        return [tr for tr in train if len(tr.q) > self.cfg.horizon]
+
+    def _steps(self, train, excited: np.ndarray, track: bool = False) -> float:
+        """``cfg.iterations`` Adam steps on windows of ``train`` (in the tracking mode ``cfg.track_iterations`` at
+        ``cfg.track_lr`` times the rate); joints not ``excited`` keep their joint fields. Returns the last loss
+        (``nan`` if the simulation diverged)."""
         cfg, model = self.cfg, self.model
         bank = TrajectoryBank(train, self.device, self.delay.to(self.device))
         frozen = torch.as_tensor(~excited)
         loss = float("nan")
-        for _ in range(cfg.iterations):
+        for g, lr in zip(self.optim.param_groups, self._lrs):
+            g["lr"] = lr * (cfg.track_lr if track else 1.0)
+        for _ in range(cfg.track_iterations if track else cfg.iterations):
             held = {f: getattr(model, f"u_{f}").detach().clone() for f in _JOINT_PARAMS}
             window = bank.sample(self.rng, cfg.windows, cfg.horizon)
             if self._fused(self.sim) and cfg.grad_truncation is None:
@@ -302,17 +347,45 @@ class Adapter:
         return loss
 
     def _open_loop(self, holdout: TrajectoryBank, candidate: PhysicalParams, pending: PhysicalParams | None
-                   ) -> tuple[float, float, float, float]:
+                   ) -> tuple[tuple[float, float, float, float], np.ndarray]:
         """Held-back open-loop error [rad] of the warm start, the current model, ``candidate`` and ``pending`` (the
-        current model again where ``None``) on ``holdout`` (a bank of the held-back samples)."""
+        current model again where ``None``) on ``holdout`` (a bank of the held-back samples); and the current
+        model's per joint, (n,) [rad]."""
         self.sim_val.set_physics(self.physics, worlds=slice(1, 2))
         self.sim_val.set_physics(candidate, worlds=slice(2, 3))
         self.sim_val.set_physics(self.physics if pending is None else pending, worlds=slice(3, 4))
         window = holdout.whole().repeat(4)
         with torch.no_grad():
             q = fused_rollout(self.sim_val, window)[0] if self._fused(self.sim_val) else rollout(self.sim_val, window).q
-        err = (q[:, 1:] - window.q[:, 1:]).abs().mean((1, 2)).cpu().numpy()
-        return tuple(float(e) for e in err)
+        err = (q[:, 1:] - window.q[:, 1:]).abs()
+        joint = err[1].mean(0).cpu().numpy().astype(np.float64)
+        return tuple(float(e) for e in err.mean((1, 2)).cpu().numpy()), joint
+
+    def _effort_grid(self, select: TrajectoryBank, holdout: TrajectoryBank, joint_jump: np.ndarray | None,
+                     error: float) -> tuple[int, str, float]:
+        """The effort grid (:func:`~wresdyn.adapt.detect.search_effort`) for the joints of ``joint_jump`` (n,) above
+        the factor, picked on ``select`` (the last update's held-back part, where their errors jumped), kept on
+        ``holdout`` against ``error`` [rad], the model's mean there: the winner becomes the model (its coordinates
+        too). Returns (limits tried, ``joint=limit`` of the one kept or ``""``, the
+        model's held-back error after)."""
+        cfg = self.cfg
+        if joint_jump is None:
+            return 0, "", error
+        if self.sim_grid is None:
+            self.sim_grid = Simulator(self.robot, cfg.effort_joints * len(cfg.effort_grid) + 1, self.dt,
+                                      solver=cfg.solver, device=cfg.device, param_grads=True)
+        tried, won, after = search_effort(self.sim_grid, self.sim_val, select.whole(), holdout.whole(), self.physics,
+                                          joint_jump, cfg, error, self._fused(self.sim_grid))
+        self.sim_val.set_physics(self.start, worlds=slice(0, 1))  # world 0 replays the warm start
+        if won is None:
+            return tried, "", error
+        j, limit, self.physics = won
+        self.model.load_state_dict(self._kept)
+        with torch.no_grad():
+            self.model.assign("effort", self.physics.effort)
+        self._kept = _copy(self.model.state_dict())
+        self._pending = None
+        return tried, f"{self.robot.joint_names[j]}={limit:.4g}", after
 
     def _one_step(self, holdout: TrajectoryBank) -> tuple[float, float]:
         """One-step prediction error [rad] of the warm start and the current model on every
@@ -348,7 +421,6 @@ class Adapter:
             tmp.write_text(text)
             tmp.replace(p)
         return path
-
 
     def _export(self, physics: PhysicalParams, when: dict) -> None:
         write_export(self.export_dir, self.robot, physics, self.rate_hz, {"source": "wresdyn adapt", **when})

@@ -75,6 +75,34 @@ class AdaptConfig:
     On the validation timeline: without drift 1.000x the warm start at every second (no update kept) against up to
     1.32-1.41x without it; back within 1.5x the oracle 6, 5 and 0 s after the three changes against 5, 0 and
     0 s without it."""
+    detect: bool = True
+    """A change detector (:mod:`wresdyn.adapt.detect`): where the current model's held-back error jumps above
+    ``detect_factor`` times the median of the last ``detect_history`` seconds' updates, the adapter tracks for
+    ``track_for`` seconds: no confirmation, ``track_iterations`` steps at ``track_lr`` times the learning rate on the
+    data after the jump only; then back to the guarded mode. Where one joint's own error jumps, lower effort limits
+    are tried for it (``effort_grid``). On the drift benchmark's validation timeline (``benchmarks/adapt_drift.py
+    --splits validation --seed 1``), with the other defaults: back within 1.5x the oracle 0, 0 and 0 s after the three
+    changes against 6, 5 and 0 s without it, no update kept without drift either way."""
+    detect_factor: float = 1.75
+    """A jump: the held-back error above this times the median of the recent ones (without drift the motion alone
+    moved it to 1.49x at most on the validation timeline). Chosen there among 1.5, 1.75 and 2: 1.5 fired in the
+    ramp often enough to fit noise (recovery 5, 10, 0 s), 2 rarely (15, 14, 4 s); 1.75: 0, 0, 0 s."""
+    detect_history: float = 6.0
+    """Robot time whose updates' held-back errors the median is taken over [s]."""
+    track_for: float = 4.0
+    """Robot time the tracking mode lasts after the last jump [s]."""
+    track_iterations: int = 8
+    """Adam steps per update in the tracking mode."""
+    track_lr: float = 2.0
+    """Learning-rate factor in the tracking mode."""
+    effort_grid: tuple[float, ...] = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8)
+    """With ``detect``, lower effort limits tried, as factors of the model's, on a joint whose own held-back error
+    jumped (``detect_factor`` times its median) and whose drive asked there for more torque than the lower limit
+    gives: the one that lowers that joint's error most on the held-back part that showed the jump, by ``min_gain``,
+    is kept if on the next held-back part it lowers it by ``min_gain`` again and the mean over joints not at all.
+    Empty: none tried."""
+    effort_joints: int = 2
+    """At most this many joints (those whose error jumped most) get the effort grid in one update."""
     one_step_every: int = 5
     """One-step prediction error on every this many samples of the held-back part."""
     grad_clip: float = 1.0
@@ -93,12 +121,13 @@ class AdaptConfig:
     def __post_init__(self) -> None:
         check_choice(self.solver, SolverKind, "solver")
         check_device(self.device, "device")
-        for name in ("window", "holdout", "update_every", "lr", "grad_clip"):
+        for name in ("window", "holdout", "update_every", "lr", "grad_clip", "detect_factor", "detect_history",
+                     "track_for", "track_lr"):
             check_number(getattr(self, name), name, gt=0)
         for name in ("w_q", "w_qd", "w_prior", "excited_min"):
             check_number(getattr(self, name), name, ge=0)
         check_number(self.min_gain, "min_gain", ge=0, le=0.5)
-        for name in ("iterations", "windows", "horizon", "one_step_every"):
+        for name in ("iterations", "windows", "horizon", "one_step_every", "track_iterations", "effort_joints"):
             check_number(getattr(self, name), name, integer=True, ge=1)
         check_number(self.seed, "seed", integer=True, ge=0)
         for name in ("torch_threads", "grad_truncation"):
@@ -108,6 +137,8 @@ class AdaptConfig:
             raise ValueError(f"holdout = {self.holdout} s must be shorter than the window ({self.window} s)")
         for i, f in enumerate(self.lr_scale):
             check_number(f, f"lr_scale[{i}]", gt=0)
+        for i, f in enumerate(self.effort_grid):
+            check_number(f, f"effort_grid[{i}]", gt=0, le=1)
         bad = sorted(set(self.fit) - (set(FIT_FIELDS) - {"delay"}))
         if bad:
             raise ValueError(f"fit: field(s) {bad} cannot be adapted; choose from "

@@ -121,7 +121,9 @@ def run(args: argparse.Namespace) -> int:
                 verdict = "accepted" if u.accepted else "reverted" if u.reverted else "rejected"
                 log(f"t {u.t:8.2f} s  {verdict}  open-loop {u.open_loop:.5f} rad "
                     f"(fixed {u.open_loop_start:.5f})  one-step {u.one_step:.6f} (fixed {u.one_step_start:.6f})  "
-                    f"compute {u.compute:.2f} s  " + "  ".join(f"{n} {cols[n]:.4g}" for n in shown))
+                    f"compute {u.compute:.2f} s  " + "  ".join(f"{n} {cols[n]:.4g}" for n in shown)
+                    + (f"  tracking (jump {u.jump:.2f})" if u.tracking else "")
+                    + (f"  effort grid: {u.effort_set}" if u.effort_set else ""))
             streamed += len(t) / rate
     except WresdynError as e:
         raise UserError(str(e).splitlines()[0]) from None
