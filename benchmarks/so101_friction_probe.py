@@ -14,7 +14,8 @@ import numpy as np
 from so101_servo_holds import SETTLE_S, hold_ends
 
 PD_ONLY = {"validation": 0.0210, "heldout": 0.0251, "ood": 0.0219}
-"""Whole-run mean |dq| of the robot file's PD model on the SAGE splits [rad] (benchmarks/results/so101/so101_full.txt)."""
+"""Whole-run mean |dq| of the robot file's PD model on the SAGE splits [rad]
+(benchmarks/results/so101/so101_full.txt)."""
 KAPPAS = (None, 1e4, np.inf)
 """Friction laws probed: the soft default, the damper of rate 1e4 /s, hard Coulomb."""
 

@@ -192,8 +192,8 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
         mu = list(p["fric"])
         for k in range(n) if servo is not None else ():
             if servo[k]:  # static friction at rest (wresdyn.robot.servo.friction_bound), on the previous velocity
-                mu[k] = e.let(f"{mu[k]} + {p['sfs'][k]} * wp.max(S(1.0) - wp.abs({qd[k]}) * S({1.0 / STICTION_SPEED!r}),"
-                              f" S(0.0))")
+                ramp = f"wp.max(S(1.0) - wp.abs({qd[k]}) * S({1.0 / STICTION_SPEED!r}), S(0.0))"
+                mu[k] = e.let(f"{mu[k]} + {p['sfs'][k]} * {ramp}")
         vf = _friction(e, tree, h_diag, m_off, v, mu, p["m0"], sweeps, qd)
         e.lines[start:] = gate(e.lines[start:] + [f"{v[k]} = {vf[k]}" for k in range(n)], "fric_on")
     e.mark("semi-implicit Euler")
