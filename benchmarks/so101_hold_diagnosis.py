@@ -8,7 +8,8 @@ model (``physics.json``) is replayed open loop over the whole run, and at each h
   the command came from (``dir``: negative = short of the target) and in encoder ticks (2 pi / 4096 rad);
 - the static balance at the real end: the model's servo torque there at rest, ``tau_s = servo_torque(c, q_r, 0)``
   (its kp, dead band b, startup torque u0, effort U), against the gravity torque ``G(q_r)`` (Pinocchio, the robot file's links) and the
-  model's dry friction f. The model can rest at the real end only where ``|tau_s - G| <= f``; the share of holds
+  model's friction at rest, the dry friction f and the stiction s. The model can rest at the real end only where
+  ``|tau_s - G| <= f + s``; the share of holds
   where it cannot, and the mean residual ``r = tau_s - G`` [N*m];
 - a least-squares split of ``r`` into ``a G + d dir + c0`` over the holds: what the missing torque follows (a: the
   stiffness/gravity side, d: a direction-dependent term such as stiction or a dead band wider than the model's,
@@ -56,8 +57,9 @@ def main(path: str, run: str) -> None:
     r = tau - g
     print(f"{path}, run {run}: {len(e_r)} holds of >= 1 s on {len(val)} validation runs; offsets [rad] at each "
           f"hold's end (mean over its last {SETTLE_S:g} s), e = q - c, 'along' = e * dir (< 0: short of the target)")
-    print(f"{'joint':14s} {'kp':>6s} {'b':>7s} {'u0':>5s} {'U':>5s} {'f':>6s} | {'|e_r|':>7s} {'ticks':>6s} {'along_r':>8s} "
-          f"{'|e_m|':>7s} {'along_m':>8s} {'|e_r-e_m|':>9s} | {'G':>6s} {'tau_s':>6s} {'r':>7s} {'|r|>f':>6s} "
+    rest_bound = physics.friction + physics.stiction
+    print(f"{'joint':14s} {'kp':>6s} {'b':>7s} {'u0':>5s} {'U':>5s} {'f':>6s} {'s':>6s} | {'|e_r|':>7s} {'ticks':>6s} {'along_r':>8s} "
+          f"{'|e_m|':>7s} {'along_m':>8s} {'|e_r-e_m|':>9s} | {'G':>6s} {'tau_s':>6s} {'r':>7s} {'|r|>fs':>6s} "
           f"{'kp|e_r|/U':>9s} | {'a':>7s} {'d':>7s} {'c0':>7s} {'rms r':>6s} {'->':>6s}")
     for j in keep:
         ones = np.ones(len(r))
@@ -66,15 +68,15 @@ def main(path: str, run: str) -> None:
         rest = r[:, j] - a_mat @ coef
         print(f"{robot.joint_names[j]:14s} {physics.kp[j]:6.2f} {physics.deadband[j]:7.4f} "
               f"{physics.startup_torque[j]:5.3f} {physics.effort[j]:5.2f} "
-              f"{physics.friction[j]:6.3f} | {np.abs(e_r[:, j]).mean():7.4f} {np.abs(e_r[:, j]).mean() / TICK:6.1f} "
+              f"{physics.friction[j]:6.3f} {physics.stiction[j]:6.3f} | {np.abs(e_r[:, j]).mean():7.4f} {np.abs(e_r[:, j]).mean() / TICK:6.1f} "
               f"{(e_r[:, j] * d[:, j]).mean():8.4f} {np.abs(e_m[:, j]).mean():7.4f} {(e_m[:, j] * d[:, j]).mean():8.4f} "
               f"{np.abs(e_r[:, j] - e_m[:, j]).mean():9.4f} | {g[:, j].mean():6.3f} {tau[:, j].mean():6.3f} "
-              f"{r[:, j].mean():7.3f} {(np.abs(r[:, j]) > physics.friction[j]).mean():6.2f} "
+              f"{r[:, j].mean():7.3f} {(np.abs(r[:, j]) > rest_bound[j]).mean():6.2f} "
               f"{(physics.kp[j] * np.abs(e_r[:, j]) / physics.effort[j]).mean():9.2f} | {coef[0]:7.3f} {coef[1]:7.3f} "
               f"{coef[2]:7.3f} {np.sqrt((r[:, j] ** 2).mean()):6.3f} {np.sqrt((rest ** 2).mean()):6.3f}")
-    print("columns: kp [N*m/rad], b dead band [rad], u0 startup torque [N*m], U effort [N*m], f dry friction [N*m] (the run's); G gravity, "
-          "tau_s the model's servo torque at the real end at rest, r = tau_s - G [N*m] (mean); |r|>f: share of holds "
-          "the model cannot rest at; kp|e_r|/U: the P term at the real offset over the effort limit; r ~ a G + d dir + "
+    print("columns: kp [N*m/rad], b dead band [rad], u0 startup torque [N*m], U effort [N*m], f dry friction, "
+          "s stiction [N*m] (the run's); G gravity, tau_s the model's servo torque at the real end at rest, "
+          "r = tau_s - G [N*m] (mean); |r|>fs: share of holds the model cannot rest at (|r| > f + s); kp|e_r|/U: the P term at the real offset over the effort limit; r ~ a G + d dir + "
           "c0 [-, N*m, N*m], rms of r before and after the split")
     print("by direction and gravity side, per joint: mean r [N*m] (holds)")
     for j in keep:

@@ -270,3 +270,22 @@ def test_a_servo_robot_from_mjcf_names_the_conversion_step(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "mujoco-usd-converter" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("field", ["startup_torque", "stiction"])
+def test_export_refuses_the_servo_terms_without_an_exported_drive(servo_export, tmp_path, capsys, field):
+    """A run whose servo law has a startup torque or stiction: one line naming the term, exit non-zero, nothing
+    written."""
+    import shutil
+
+    robot, _, run, _, _ = servo_export
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    p = _servo_physics(robot)
+    getattr(p, field)[0] = 0.1
+    p.save(copy / "physics.json")
+    capsys.readouterr()
+    assert main(["export", str(copy), "--out", str(tmp_path / "calibrated")]) != 0
+    err = capsys.readouterr().err
+    assert f"servo {field.replace('_', ' ')}" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "calibrated").exists()

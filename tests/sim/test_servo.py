@@ -128,6 +128,77 @@ def test_startup_torque_gradient(tmp_path):
     assert grads["joint_servo_startup_torque"][[1, 4]].tolist() == [0.0, 0.0]
 
 
+STICTION = 1.0
+"""Stiction of the tests that set one [N m], against the dry friction of 0.3: the bound at rest 1.3 N m."""
+
+
+def test_stiction_one_step_is_the_friction_bound_of_the_law(tmp_path):
+    """One float64 step with the soft dry friction: with stiction, below the stiction speed, the step of a robot
+    whose dry friction is the law's bound (:func:`friction_bound` at the velocity before the step) without it;
+    above that speed on every joint, the step without stiction, bit for bit."""
+    from wresdyn.robot.servo import STICTION_SPEED, friction_bound
+
+    robot = make_robot(tmp_path, joints="*", stiction=STICTION)
+    assert robot.servo.stiction.tolist() == [STICTION] * N
+    q0, tq = np.array([0.1, -0.2, 0.02]), np.array([0.3, -0.5, 0.1])
+    fric, fs = float(np.float32(0.3)), float(np.float32(STICTION))
+
+    def step(solver, qd0):
+        q = wp.array(np.stack([q0, np.zeros(N)])[:, None], dtype=wp.float64)
+        qd = wp.array(np.stack([qd0, np.zeros(N)])[:, None], dtype=wp.float64)
+        solver.rollout(q, qd, wp.array(tq[None, None], dtype=wp.float64), DT)
+        return qd.numpy()[1, 0]
+
+    with_fs = SolverReplay(robot.build_model(1, "cpu"), dtype=wp.float64)
+    plain = SolverReplay(make_robot(tmp_path, joints="*").build_model(1, "cpu"), dtype=wp.float64)
+    slow = np.array([0.2, -0.5, 0.9]) * STICTION_SPEED
+    bound = friction_bound(slow, fric, fs)
+    np.testing.assert_allclose(bound, fric + fs * np.array([0.8, 0.5, 0.1]), rtol=1e-12)
+    plain.parameters["joint_friction"].assign(bound)
+    np.testing.assert_allclose(step(with_fs, slow), step(plain, slow), rtol=1e-12, atol=1e-14)
+    plain.parameters["joint_friction"].assign(np.full(N, fric))
+    fast = np.array([1.0, -1.5, 2.0]) * STICTION_SPEED
+    np.testing.assert_array_equal(step(with_fs, fast), step(plain, fast))
+    assert not np.allclose(step(with_fs, slow), step(plain, slow), rtol=1e-6)  # the stiction acts
+
+
+def test_stiction_holds_a_joint_at_rest(tmp_path):
+    """Hard Coulomb friction, the joints at rest inside their dead band (no servo torque) under gravity (2.2 N m on
+    the shoulder, 3.0 N on the slide): a static friction of 4.3 holds them exactly, the sliding friction of 0.3
+    alone does not."""
+    q0, tq = np.array([0.6, -0.2, 0.05]), np.array([0.6, -0.2, 0.05])
+
+    def step(robot):
+        solver = SolverReplay(robot.build_model(1, "cpu"), dtype=wp.float64, friction_kappa=np.inf)
+        _, bias = solver.dynamics_terms(q0, np.zeros(N))
+        q = wp.array(np.stack([q0, np.zeros(N)])[:, None], dtype=wp.float64)
+        qd = wp.zeros((2, 1, N), dtype=wp.float64)
+        solver.rollout(q, qd, wp.array(tq[None, None], dtype=wp.float64), DT)
+        return qd.numpy()[1, 0], np.abs(bias[0])
+
+    v, gravity = step(make_robot(tmp_path, joints="*", stiction=4.0))
+    assert (gravity[[0, 2]] > 2.0).all() and (gravity < 4.3 - 1.0).all(), gravity
+    assert v.tolist() == [0.0] * N
+    v, _ = step(make_robot(tmp_path, joints="*"))
+    assert (np.abs(v[[0, 2]]) > 1e-3).all(), v
+
+
+def test_stiction_gradient(tmp_path):
+    """The stiction's gradient against float64 central differences, on the servos (elbow a PD drive: not read):
+    joints starting near rest, so the bound rises above the friction on the first steps, where it slides."""
+    from wresdyn.robot.servo import STICTION_SPEED
+
+    robot = make_robot(tmp_path, joints="[ss]*", stiction=STICTION)
+    q0, _, targets, jf = random_inputs(0, qd_scale=0.0, target_scale=0.2)
+    qd0 = np.array([[0.3, 0.0, -0.5], [-0.6, 0.0, 0.2]]) * STICTION_SPEED
+    problem = Problem(robot, q0, qd0, targets, 5.0 * jf)
+    grads = problem.gradients()
+    entries = [("joint_servo_stiction", (k,)) for k in (0, 2, 3, 5)]
+    check(problem, entries + [("joint_friction", (0,)), ("qd0", (0, 0)), ("tq", (0, 0, 0))], grads)
+    assert all(abs(grads[name][idx]) > 1e-6 for name, idx in entries)
+    assert grads["joint_servo_stiction"][[1, 4]].tolist() == [0.0, 0.0]
+
+
 @pytest.fixture(scope="module")
 def servo_problem(tmp_path_factory):
     """Two of three joints servos (elbow a PD drive): sliding friction, unsaturated drives, targets 0.2 rad off so
@@ -200,15 +271,19 @@ def test_physics_file_round_trip(tmp_path):
     assert not PhysicalParams.load(tmp_path / "old.json", robot).deadband.any()
 
 
-def test_physics_model_gradients_reach_the_servo_fields(tmp_path):
-    """The fit's path: PhysicsModel coordinates of kp and the three servo fields -> the model arrays and the bank's
+@pytest.mark.parametrize("fit, stiction, qd_start", [
+    (("kp", "deadband", "noload_speed", "goal_accel", "startup_torque"), 0.0, 0.5),
+    (("friction", "stiction"), STICTION, 0.02)])
+def test_physics_model_gradients_reach_the_servo_fields(tmp_path, fit, stiction, qd_start):
+    """The fit's path: PhysicsModel coordinates of kp and the servo fields -> the model arrays and the bank's
     goal profile (torch) -> :meth:`Simulator.step_diff` (float32); directional derivatives against central differences
-    with the tolerance of ``test_physics.py``'s check (float32 steps)."""
+    with the tolerance of ``test_physics.py``'s check (float32 steps). The stiction's from joints starting below the
+    stiction speed (``qd_start`` [rad/s or m/s] on every joint), where it acts."""
     from wresdyn.sim import Simulator, TrajectoryBank
     from wresdyn.sim.physics import PhysicsModel
 
-    robot = make_robot(tmp_path, joints="*")
-    model = PhysicsModel(robot, fit=("kp", "deadband", "noload_speed", "goal_accel", "startup_torque"), dt=DT)
+    robot = make_robot(tmp_path, joints="*", stiction=stiction)
+    model = PhysicsModel(robot, fit=fit, dt=DT)
     b, h, t_len = 2, 8, 16
     sim = Simulator(robot, b, DT, solver="replay", requires_grad=True, param_grads=True)
     rng = np.random.default_rng(0)
@@ -224,14 +299,14 @@ def test_physics_model_gradients_reach_the_servo_fields(tmp_path):
         bank = TrajectoryBank(traj, sim.device, 0.0, model.goal_accel_steps().float())
         w = bank.window(torch.arange(b), torch.full((b,), 5), h)
         sim.set_physics(model())
-        q, qd, total = w.q[:, 0], w.qd[:, 0] + 0.5, 0.0
+        q, qd, total = w.q[:, 0], w.qd[:, 0] + qd_start, 0.0
         for k in range(h):
             q, qd = sim.step_diff(k, q, qd, w.target[:, k])
             total = total + ((q - q_ref[:, k]) ** 2).sum() + 0.01 * (qd ** 2).sum()
         return total
 
     params = {k: p for k, p in model.named_parameters() if p.requires_grad}
-    assert set(params) == {"u_kp", "u_deadband", "u_noload_speed", "u_goal_accel", "u_startup_torque"}
+    assert set(params) == {f"u_{f}" for f in fit}
     model.zero_grad()
     loss().backward()
     check_directional_gradients(loss, params, {k: p.grad.clone() for k, p in params.items()}, eps=1e-2)
@@ -245,8 +320,13 @@ measured 6e-5 and 2.4e-4. A servo commanded to the edge of its dead band is not 
 decides whether it moves (a 0.05 m command against the 0.05 m band gave 0.011 m)."""
 
 
-@pytest.mark.parametrize("startup", [0.0, STARTUP])
-def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path, startup):
+PARITY_TOL_STICTION = 4e-4
+"""The servo joints' :data:`PARITY_TOL` with stiction [rad or m], measured 3.0e-4: where a joint breaks away, its
+bound falls with its speed, which amplifies the two simulators' friction differences over the following steps."""
+
+
+@pytest.mark.parametrize("startup, stiction", [(0.0, 0.0), (STARTUP, 0.0), (0.0, STICTION)])
+def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path, startup, stiction):
     """The MuJoCo "real" robot's servo joints (elbow a PD drive): the recorded actuator torque is the law
     (:func:`servo_torque`) at the recorded state and profiled goal, and SolverReplay replaying its true parameters
     follows the recording (a command step, so the profile, the band and the torque-speed line all act)."""
@@ -254,7 +334,7 @@ def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path, startu
     from wresdyn.data.real_robot import RealRobot
     from wresdyn.sim import replay_trajectories
 
-    robot = make_robot(tmp_path, effort=5.0, joints="[ss]*", startup_torque=startup)
+    robot = make_robot(tmp_path, effort=5.0, joints="[ss]*", startup_torque=startup, stiction=stiction)
     rate = 1.0 / DT
     real = RealRobot(robot, Mismatch(), rate)
     cmd = np.tile(np.array([0.1, -0.2, 0.05]), (500, 1))
@@ -271,8 +351,15 @@ def test_mujoco_servo_robot_runs_the_law_and_matches_the_replay(tmp_path, startu
     np.testing.assert_allclose(truth.kp, 30.0, rtol=1e-6)
     assert truth.deadband.tolist() == [0.05, 0.0, 0.05]
     np.testing.assert_allclose(truth.startup_torque, [startup, 0.0, startup], rtol=1e-6)
+    np.testing.assert_allclose(truth.stiction, [stiction, 0.0, stiction], rtol=1e-6)
+    np.testing.assert_allclose(truth.friction, 0.3, rtol=1e-6)  # the sliding friction, not a step's bound
     traj = type("T", (), {"q": q, "qd": qd, "qdd": np.zeros_like(q), "q_cmd": cmd, "name": "step"})()
     rep = replay_trajectories(robot, [traj], rate, solver="replay", physics=truth)["residual"]
     err = np.abs(rep.q[0] - q).max(0)
-    assert err[[0, 2]].max() < PARITY_TOL[0] and err[1] < PARITY_TOL[1], err
+    assert err[[0, 2]].max() < (PARITY_TOL_STICTION if stiction else PARITY_TOL[0]) and err[1] < PARITY_TOL[1], err
+    if stiction:  # ... where the replay without the stiction is 40-400x further off
+        plain = truth.copy()
+        plain.stiction[:] = 0.0
+        off = np.abs(replay_trajectories(robot, [traj], rate, solver="replay", physics=plain)["residual"].q[0] - q)
+        assert off.max(0)[[0, 2]].min() > 0.005, off.max(0)  # measured 0.0115, 0.119
     assert np.abs(q - q[0]).max() > 0.3  # the joints moved

@@ -30,7 +30,7 @@ from ..robot.description import Robot, RobotError
 from ..robot.ground import FloatingState, check_floating
 from ..robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco
 from ..robot.physical import SERVO_FIELDS, PhysicalParams
-from ..robot.servo import STARTUP_RAMP, GoalProfile
+from ..robot.servo import STARTUP_RAMP, GoalProfile, friction_bound
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 from .mismatch import JOINT_KEYS, Mismatch, MismatchError
@@ -114,7 +114,7 @@ class RealRobot:
     def _servo_motors(self) -> dict | None:
         """Turn the (perturbed) position actuators of servo joints (:attr:`Robot.servo`) into affine actuators
         (force = ctrl + bias_v qd, within the force range) whose ctrl and ``bias_v`` :meth:`_servo_ctrl` sets each
-        physics step; returns the servo law's parameters, or None for a robot without servos (its actuators stay
+        physics step (and, on joints with stiction, the ``frictionloss``); returns the servo law's parameters, or None for a robot without servos (its actuators stay
         untouched)."""
         servo, m, n = self.robot.servo, self.model, self.robot.n_dof
         if servo is None:
@@ -125,7 +125,8 @@ class RealRobot:
         law = {"mask": s, "kp": m.actuator_gainprm[:n, 0].copy(), "kd": -m.actuator_biasprm[:n, 2].copy(),
                "effort": m.actuator_forcerange[:n, 1].copy(), "deadband": servo.deadband,
                "noload_speed": servo.noload_speed, "goal_accel": servo.goal_accel,
-               "startup_torque": servo.startup_torque}
+               "startup_torque": servo.startup_torque, "stiction": servo.stiction,
+               "friction": m.dof_frictionloss[:n].copy()}
         idx = np.flatnonzero(s)
         m.actuator_gainprm[idx, 0] = 1.0
         m.actuator_biasprm[idx, :3] = 0.0
@@ -148,6 +149,9 @@ class RealRobot:
         ctrl = np.where(free, position, np.sign(raw) * law["effort"])
         s = law["mask"]
         m.actuator_biasprm[:n, 2] = np.where(s, -(free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
+        if law["stiction"].any():  # the static friction on the velocity before the step, as SolverReplay's
+            m.dof_frictionloss[:n] = np.where(s, friction_bound(d.qvel[:n], law["friction"], law["stiction"]),
+                                              m.dof_frictionloss[:n])
         return np.where(s, ctrl, command)
 
     def physics(self):
@@ -163,13 +167,16 @@ class RealRobot:
         inertia = rot @ (m.body_inertia[1:, :, None] * np.eye(3)) @ rot.transpose(0, 2, 1)
         effort = np.where(np.isfinite(r.effort), m.actuator_forcerange[:n, 1], np.inf)
         kp, kd = m.actuator_gainprm[:n, 0].copy(), -m.actuator_biasprm[:n, 2].copy()
+        friction = m.dof_frictionloss[dof].copy()
         servo = {}
         if self._servo is not None:  # the motors' gains are the servo law's
             law = self._servo
             kp, kd = np.where(law["mask"], law["kp"], kp), np.where(law["mask"], law["kd"], kd)
             servo = {f: np.array(law[f], dtype=np.float64) for f in SERVO_FIELDS}
+            if law["stiction"].any():  # the sliding friction, not the last step's bound
+                friction = np.where(law["mask"], law["friction"], friction)
         return PhysicalParams(list(r.joint_names), list(r.body_names), kp, kd, m.dof_armature[dof].copy(),
-                              m.dof_damping[dof].copy(), m.dof_frictionloss[dof].copy(), effort,
+                              m.dof_damping[dof].copy(), friction, effort,
                               np.full(n, self.n_delay * self.substep), m.body_mass[1:].copy(), m.body_ipos[1:].copy(),
                               inertia, **servo)
 

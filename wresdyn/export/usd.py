@@ -343,6 +343,9 @@ def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, 
     """
     check_usd_robot(robot)
     out = Path(out)
+    if physics.stiction.any():
+        raise ExportError(f"{robot.source.name}: the servo stiction ({physics.stiction.max():.3g} N*m) has no exported "
+                          "drive yet; identify without it to export")
     if physics.startup_torque.any():
         raise ExportError(f"{robot.source.name}: the servo startup torque ({physics.startup_torque.max():.3g} N*m) has "
                           "no exported drive yet; identify without it to export")

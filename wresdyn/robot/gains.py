@@ -53,7 +53,7 @@ def apply_overrides(builder, gains: str | Path | dict, source: Path | None = Non
         armature = 0.01        # reflected rotor inertia [kg*m^2]
 
     Keys: ``kp kd effort armature friction damping lower upper``, and the servo drive's ``drive deadband
-    noload_speed goal_accel startup_torque`` (read by :func:`wresdyn.robot.servo.read_servo`, not here). A pattern
+    noload_speed goal_accel startup_torque stiction`` (read by :func:`wresdyn.robot.servo.read_servo`, not here). A pattern
     that matches no joint is an error, so typos do not pass silently. An effort limit set here is taken as stated, even
     a huge one (see :meth:`~wresdyn.robot.description.Robot.check_effort`). Returns the DoF indices whose effort limit
     the config set.

@@ -21,7 +21,7 @@ __all__ = ["JOINT_FIELDS", "SERVO_FIELDS", "BODY_FIELDS", "PhysicalParams", "Phy
 
 JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
 """Per-joint fields of :class:`PhysicalParams`, each (n_dof,)."""
-SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel", "startup_torque")
+SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel", "startup_torque", "stiction")
 """Per-joint fields of the servo drive law (:mod:`wresdyn.robot.servo`), each (n_dof,); read only on joints whose
 drive is a servo, 0 elsewhere. Files written before they existed load with zeros."""
 BODY_FIELDS = ("body_mass", "body_com", "body_inertia")
@@ -58,6 +58,8 @@ class PhysicalParams:
     """Servo goal acceleration limit [rad/s²] (0: no goal profile)."""
     startup_torque: np.ndarray | None = None
     """Servo's least drive torque outside its dead band [N·m] (0: none)."""
+    stiction: np.ndarray | None = None
+    """Servo joint's static friction above ``friction`` at rest [N·m] (0: none)."""
 
     def __post_init__(self) -> None:
         for f in SERVO_FIELDS:

@@ -14,7 +14,13 @@ Inside the band the position loop is off (the joint rests where friction, gravit
 the hysteresis lives in the mechanical state) and the soft threshold keeps a gradient in ``b``. Outside it the
 servo drives with at least ``u0`` (Feetech's "minimum startup force"), reached within one tick of the band's edge
 (a continuous ramp, so the law stays differentiable); ``u0 = 0`` leaves it out. ``w0 = 0`` leaves the torque-speed
-line out. Gear friction is the joint's ``friction`` (dry) and ``damping`` (viscous).
+line out. Gear friction is the joint's ``friction`` (dry) and ``damping`` (viscous), with a static friction above
+the dry one while the joint rests (a Stribeck curve, linear in the speed, over the joint's previous velocity)::
+
+    mu(qd) = friction + stiction max(1 - |qd| / v_s, 0)   the dry friction's bound [N*m], v_s = STICTION_SPEED
+
+so a joint at rest breaks away at ``friction + stiction`` and slides against ``friction`` once it moves faster than
+``v_s``; ``stiction = 0`` leaves it out.
 
 The goal q*_s is the command after the servo's acceleration profile (:class:`GoalProfile`): the internal goal
 moves toward the command with at most ``a_max`` [rad/s²], braking in time to stop on it (``a_max = 0``: the
@@ -31,10 +37,10 @@ import numpy as np
 
 from ..errors import RobotError
 
-__all__ = ["SERVO_KEYS", "STARTUP_RAMP", "STS3215", "GoalProfile", "ServoDrives", "attach_servo", "profile_step",
-           "read_servo", "servo_torque"]
+__all__ = ["SERVO_KEYS", "STARTUP_RAMP", "STICTION_SPEED", "STS3215", "GoalProfile", "ServoDrives", "attach_servo",
+           "friction_bound", "profile_step", "read_servo", "servo_torque"]
 
-SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel", "startup_torque")
+SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel", "startup_torque", "stiction")
 """Keys of a gains config's ``[[joint]]`` table that set the drive law (the others are
 :func:`wresdyn.robot.description.apply_overrides`')."""
 
@@ -42,6 +48,10 @@ _TICK = 2.0 * math.pi / 4096.0
 """One encoder tick of a 12-bit servo [rad]."""
 STARTUP_RAMP = _TICK
 """Error beyond the dead band over which the startup torque ramps in [rad]: one tick, the firmware's resolution."""
+STICTION_SPEED = 0.05
+"""Speed below which the static friction sets in [rad/s], linearly to its full value at rest: above the creep of
+the replay's soft dry friction under a load below its bound (``tau R / b``: 0.007-0.011 rad/s for 0.3 N*m on the
+SO-101's joints), below the arm's moves (0.3-3 rad/s)."""
 
 
 @dataclass(frozen=True)
@@ -89,14 +99,16 @@ class ServoDrives:
     """Goal acceleration limit a_max [rad/s²] (0: no profile), shape (n_dof,)."""
     startup_torque: np.ndarray
     """Least drive torque u0 outside the dead band [N*m] (0: none), shape (n_dof,)."""
+    stiction: np.ndarray
+    """Static friction above the dry friction at rest [N*m] (0: none), shape (n_dof,)."""
 
 
 def read_servo(config: dict | None, joint_names, effort, where: str = "gains config") -> ServoDrives | None:
     """The servo drives a gains config selects (``drive = "servo"`` in ``[[joint]]`` tables, later ones winning),
     or ``None`` when it selects none.
 
-    ``deadband`` [rad], ``noload_speed`` [rad/s], ``goal_accel`` [rad/s²] and ``startup_torque`` [N*m] may be set
-    in any entry; a servo
+    ``deadband`` [rad], ``noload_speed`` [rad/s], ``goal_accel`` [rad/s²], ``startup_torque`` and ``stiction``
+    [N*m] may be set in any entry; a servo
     joint not given one takes zero (no band, no torque-speed line, no profile). A servo needs a finite effort
     limit (its stall torque).
 
@@ -137,8 +149,8 @@ def read_servo(config: dict | None, joint_names, effort, where: str = "gains con
 def attach_servo(model, servo: ServoDrives, qd_index, n_worlds: int) -> None:
     """Give a finalized Newton model the servo arrays :class:`~wresdyn.sim.solver_replay.SolverReplay` reads, per
     DoF of every world (Newton's flat layout, zeros on the DoFs of other joints): ``joint_servo`` (int32, 1 on a
-    servo), ``joint_servo_deadband`` [rad], ``joint_servo_noload_speed`` [rad/s] and ``joint_servo_startup_torque``
-    [N*m] (float32, gradients as the model's)."""
+    servo), ``joint_servo_deadband`` [rad], ``joint_servo_noload_speed`` [rad/s], ``joint_servo_startup_torque`` and
+    ``joint_servo_stiction`` [N*m] (float32, gradients as the model's)."""
     import warp as wp
 
     width = model.joint_dof_count // n_worlds
@@ -154,6 +166,7 @@ def attach_servo(model, servo: ServoDrives, qd_index, n_worlds: int) -> None:
     model.joint_servo_deadband = per_dof(servo.deadband, np.float32)
     model.joint_servo_noload_speed = per_dof(servo.noload_speed, np.float32)
     model.joint_servo_startup_torque = per_dof(servo.startup_torque, np.float32)
+    model.joint_servo_stiction = per_dof(servo.stiction, np.float32)
 
 
 def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0, startup_torque=0.0):
@@ -165,6 +178,12 @@ def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=
     emf = np.divide(effort, noload_speed, out=np.zeros(np.broadcast(effort, noload_speed).shape),
                     where=np.asarray(noload_speed) > 0)
     return np.clip(u - emf * qd, -effort, effort)
+
+
+def friction_bound(qd, friction, stiction):
+    """The dry friction's bound of the module docstring (numpy, broadcastable) at the previous velocity ``qd``
+    [rad/s]: ``friction + stiction max(1 - |qd| / v_s, 0)`` [N*m]."""
+    return friction + stiction * np.maximum(1.0 - np.abs(qd) / STICTION_SPEED, 0.0)
 
 
 def profile_step(xp, goal, pos, vel, accel):

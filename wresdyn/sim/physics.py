@@ -16,6 +16,7 @@ field                     shape, unit                model array (per world)
 ``noload_speed``          (n,) rad/s                 ``joint_servo_noload_speed`` (servo joints: motor w0)
 ``goal_accel``            (n,) rad/s²                the command path (servo joints: goal profile a_max)
 ``startup_torque``        (n,) N·m                   ``joint_servo_startup_torque`` (servo joints: least drive u0)
+``stiction``              (n,) N·m                   ``joint_servo_stiction`` (servo joints: static friction above dry)
 ``body_mass``             (nb,) kg                   ``body_mass``
 ``body_com``              (nb, 3) m, body frame      ``body_com``
 ``body_inertia``          (nb, 3, 3) kg·m², at com   ``body_inertia``
@@ -29,7 +30,7 @@ On a servo joint (:mod:`wresdyn.robot.servo`) ``kp``, ``kd`` are the servo's pos
 
 - gains, armature, mass, no-load speed, goal acceleration: ``nominal · exp(u)`` (positive, scale-free steps; a
   nominal 0 stays 0: no torque-speed line, no profile);
-- damping, friction, effort, delay, dead band and startup torque: ``reference · u`` with ``u`` projected onto
+- damping, friction, effort, delay, dead band, startup torque and stiction: ``reference · u`` with ``u`` projected onto
   ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
 - each link's mass, centre of mass and inertia through the log-Cholesky factor of its 4×4 pseudo-inertia
   ``J = [[Σ, h], [hᵀ, m]] = U Uᵀ`` (Rucker & Wensing 2022), ``Σ = ∫ r rᵀ dm`` about the body origin and
@@ -52,7 +53,7 @@ MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "j
                 "body_mass": "body_mass", "body_com": "body_com", "body_inertia": "body_inertia"}
 """Newton model array of each field (``delay`` is the command path's, not the model's)."""
 SERVO_ARRAYS = {"deadband": "joint_servo_deadband", "noload_speed": "joint_servo_noload_speed",
-                "startup_torque": "joint_servo_startup_torque"}
+                "startup_torque": "joint_servo_startup_torque", "stiction": "joint_servo_stiction"}
 """Model array of each servo field, present on models of robots with servo joints
 (:func:`wresdyn.robot.servo.attach_servo`; ``goal_accel`` is the command path's)."""
 DEADBAND_REF = 0.01
@@ -157,11 +158,16 @@ class PhysicsModel(torch.nn.Module):
         self.register_buffer("ref_startup_torque", torch.as_tensor(self.ref["startup_torque"], **f64))
         self.register_parameter("u_startup_torque", torch.nn.Parameter(
             torch.as_tensor(start.startup_torque / self.ref["startup_torque"], **f64), "startup_torque" in self.fit))
+        self.ref["stiction"] = 0.05 * eff_ref  # the friction's reference: the two add up at rest
+        self.register_buffer("ref_stiction", torch.as_tensor(self.ref["stiction"], **f64))
+        self.register_parameter("u_stiction", torch.nn.Parameter(
+            torch.as_tensor(start.stiction / self.ref["stiction"], **f64), "stiction" in self.fit))
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
-        """As torch's; a state saved before the startup torque existed takes this module's (the start's)."""
+        """As torch's; a state saved before the startup torque or the stiction existed takes this module's (the
+        start's)."""
         state_dict = dict(state_dict)
-        for k in ("u_startup_torque", "ref_startup_torque"):
+        for k in ("u_startup_torque", "ref_startup_torque", "u_stiction", "ref_stiction"):
             state_dict.setdefault(k, getattr(self, k).detach().clone())
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 

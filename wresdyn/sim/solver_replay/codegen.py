@@ -23,7 +23,7 @@ import itertools
 
 import numpy as np
 
-from ...robot.servo import STARTUP_RAMP
+from ...robot.servo import STARTUP_RAMP, STICTION_SPEED
 from .dynamics import dynamics, inertial_params, solve_ltdl
 from .emit import Emitter, branched, gate, indent, outline, unmarked
 from .tree import ReplayTree
@@ -33,8 +33,9 @@ __all__ = ["generate_source"]
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
-_SERVO_PARAMS = ("sdb", "sw0", "su0")
-"""Per-DoF arrays the kernels of a robot with servo drives also read: dead band, no-load speed."""
+_SERVO_PARAMS = ("sdb", "sw0", "su0", "sfs")
+"""Per-DoF arrays the kernels of a robot with servo drives also read: dead band, no-load speed, startup torque,
+stiction."""
 _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
@@ -55,7 +56,8 @@ def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray
         # != rather than >: a NaN friction runs the solve and shows in the state. The flag is added, not or-ed: with
         # `or` (a branch in the C++) Clang's build of the humanoid's rollout loop kept 3x as many values on the stack
         # and ran 2-3x slower (benchmarks/results/compile/forward_spills.txt)
-        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in out['fric'])} + S(fric_grad[0]) != S(0.0)")
+        dry = out["fric"] + [x for x in out.get("sfs", ()) if x is not None]  # a servo's stiction needs the solve too
+        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)")
     return out
 
 
@@ -187,7 +189,12 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
     if sweeps > 0:
         v = [e.let(v[k], prefix="v_") for k in range(n)]
         start = len(e.lines)
-        vf = _friction(e, tree, h_diag, m_off, v, p["fric"], p["m0"], sweeps, qd)
+        mu = list(p["fric"])
+        for k in range(n) if servo is not None else ():
+            if servo[k]:  # static friction at rest (wresdyn.robot.servo.friction_bound), on the previous velocity
+                ramp = f"wp.max(S(1.0) - wp.abs({qd[k]}) * S({1.0 / STICTION_SPEED!r}), S(0.0))"
+                mu[k] = e.let(f"{mu[k]} + {p['sfs'][k]} * {ramp}")
+        vf = _friction(e, tree, h_diag, m_off, v, mu, p["m0"], sweeps, qd)
         e.lines[start:] = gate(e.lines[start:] + [f"{v[k]} = {vf[k]}" for k in range(n)], "fric_on")
     e.mark("semi-implicit Euler")
     return [e.let(f"{q[k]} + dt * {v[k]}") for k in range(n)], v
