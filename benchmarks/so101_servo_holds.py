@@ -104,10 +104,10 @@ def repeats(ds, split: str, keep, rate_hz: float, min_lag_s: float = 2.0, histor
 
 
 def model_holds(path: str, ds, robot, runs, hold_s: float = 1.0) -> None:
-    """Each model replayed open loop on the validation runs (``wresdyn.sim.rollout.replay_trajectories``, as
-    ``wresdyn identify --eval`` does, under the run's own dry-friction law): per fitted joint, mean |q_model − q_real| at the end of the command holds,
-    against the arm's repeatability, and the ratio. ``runs``: run folders (their identified physics, and residual
-    if any); the robot file's PD model (no gains config) is the reference row."""
+    """Each model replayed open loop on the validation runs (``wresdyn.sim.rollout.replay_trajectories``, as ``wresdyn
+    identify --eval`` does, under the run's own dry-friction law): per fitted joint, mean |q_model − q_real| at the end
+    of the command holds, against the arm's repeatability, and the ratio. ``runs``: run folders (their identified
+    physics, and residual if any); the robot file's PD model (no gains config) is the reference row."""
     from wresdyn.data.loading import dataset_robot
     from wresdyn.evaluation.evaluate_run import load_run_model, run_friction_kappa
     from wresdyn.sim.rollout import replay_trajectories

@@ -69,7 +69,8 @@ def config_from_args(args: argparse.Namespace) -> GradFitConfig:
 
 def identify_config_from_args(args: argparse.Namespace, cfg: GradFitConfig) -> SysIdConfig:
     """The hybrid's identification: :class:`~wresdyn.learn.window_fit_config.SysIdConfig` with the ``--identify.*``
-    flags given, on the fit's device, seed, solver and friction law (and ``--windows`` unless ``--identify.windows`` is given)."""
+    flags given, on the fit's device, seed, solver and friction law (and ``--windows`` unless ``--identify.windows``
+    is given)."""
     given = {name: getattr(cfg, name) for name in IDENTIFY_SHARED} | given_fields(args, "identify.")
     if "windows" in given_fields(args):
         given.setdefault("windows", cfg.windows)
