@@ -123,3 +123,15 @@ def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(record
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "friction_kappa = 10000.0, now null" in err, err
+
+
+def test_train_flag_reaches_the_replay_environment(humanoid, recorded):
+    from wresdyn.cli import build_parser
+    from wresdyn.cli.train import config_from_args
+    from wresdyn.learn.replay_env import ReplayEnv
+
+    parser, _ = build_parser()
+    cfg = config_from_args(parser.parse_args(["train", "d.npz", "--friction-kappa", "inf"]))
+    assert cfg.env.friction_kappa == float("inf")
+    env = ReplayEnv(humanoid, recorded.split("train"), recorded.rate_hz, 2, cfg.env)
+    assert isinstance(env.sim.solver, SolverReplay) and env.sim.solver.friction_kappa == float("inf")
