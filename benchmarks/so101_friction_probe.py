@@ -23,7 +23,6 @@ KAPPAS = (None, 1e4, np.inf)
 def main(path: str, run: str) -> None:
     import torch
 
-    import wresdyn.sim.solver_replay as solver_replay
     from wresdyn.data.loading import load_data
     from wresdyn.evaluation.evaluate_run import load_run_model
     from wresdyn.sim.rollout import replay_trajectories
@@ -34,29 +33,22 @@ def main(path: str, run: str) -> None:
     keep = np.flatnonzero(ds.fit_weights() > 0)
     splits = {k: list(ds.split(k)) for k in PD_ONLY}
     policy, meta, physics, solver, substeps = load_run_model(run, robot, rate)
-    default = solver_replay.SolverReplay
     print(f"{path}, run {run}: mean |q_model - q_real| over joints {keep.tolist()} [rad], whole runs of each split "
           f"(x: the robot file's PD model's {PD_ONLY} over it) and the validation holds' ends")
-    try:
-        for kappa in KAPPAS:
-            # the simulator builds its solver from this name (wresdyn.sim.solvers)
-            solver_replay.SolverReplay = default if kappa is None else (
-                lambda model, k=kappa, **kw: default(model, friction_kappa=k, **kw))
-            whole, ends = {}, []
-            for split, trs in splits.items():
-                qs = replay_trajectories(robot, trs, rate, policy, kind=meta["kind"], solver=solver,
-                                         substeps=substeps, physics=physics)["residual"].q
-                whole[split] = np.concatenate([np.abs(m - tr.q)[:, keep] for m, tr in zip(qs, trs)]).mean()
-                if split == "validation":
-                    ends = [np.abs(m[u - settle:u].mean(0) - tr.q[u - settle:u].mean(0))[keep]
-                            for m, tr in zip(qs, trs) for _, u in hold_ends(tr.q_cmd, rate)]
-            per = np.mean(ends, 0)
-            name = "soft (default)" if kappa is None else f"kappa {kappa:g}"
-            print(f"{name:16s} " + "  ".join(f"{k} {v:.4f} ({PD_ONLY[k] / v:.2f}x)" for k, v in whole.items())
-                  + f"  | {len(ends)} hold ends {per.mean():.4f}  per joint " + " ".join(f"{x:.4f}" for x in per),
-                  flush=True)
-    finally:
-        solver_replay.SolverReplay = default
+    for kappa in KAPPAS:
+        whole, ends = {}, []
+        for split, trs in splits.items():
+            qs = replay_trajectories(robot, trs, rate, policy, kind=meta["kind"], solver=solver, substeps=substeps,
+                                     physics=physics, friction_kappa=kappa)["residual"].q
+            whole[split] = np.concatenate([np.abs(m - tr.q)[:, keep] for m, tr in zip(qs, trs)]).mean()
+            if split == "validation":
+                ends = [np.abs(m[u - settle:u].mean(0) - tr.q[u - settle:u].mean(0))[keep]
+                        for m, tr in zip(qs, trs) for _, u in hold_ends(tr.q_cmd, rate)]
+        per = np.mean(ends, 0)
+        name = "soft (default)" if kappa is None else f"kappa {kappa:g}"
+        print(f"{name:16s} " + "  ".join(f"{k} {v:.4f} ({PD_ONLY[k] / v:.2f}x)" for k, v in whole.items())
+              + f"  | {len(ends)} hold ends {per.mean():.4f}  per joint " + " ".join(f"{x:.4f}" for x in per),
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ def main(path: str, run: str) -> None:
     import pinocchio as pin
 
     from wresdyn.data.loading import load_data
-    from wresdyn.evaluation.evaluate_run import load_run_model
+    from wresdyn.evaluation.evaluate_run import load_run_model, run_friction_kappa
     from wresdyn.robot.pinocchio_model import build_pinocchio
     from wresdyn.robot.servo import servo_torque
     from wresdyn.sim.rollout import replay_trajectories
@@ -40,7 +40,7 @@ def main(path: str, run: str) -> None:
     val = list(ds.split("validation"))
     policy, meta, physics, solver, substeps = load_run_model(run, robot, rate)
     model_q = replay_trajectories(robot, val, rate, policy, kind=meta["kind"], solver=solver, substeps=substeps,
-                                  physics=physics)["residual"].q
+                                  physics=physics, friction_kappa=run_friction_kappa(run))["residual"].q
     pin_model = build_pinocchio(robot)
     pin_data = pin_model.createData()
     rows = []  # per hold: e_r, e_m, dir, G, tau_s (each (n,))

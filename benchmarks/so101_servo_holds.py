@@ -104,12 +104,12 @@ def repeats(ds, split: str, keep, rate_hz: float, min_lag_s: float = 2.0, histor
 
 
 def model_holds(path: str, ds, robot, runs, hold_s: float = 1.0) -> None:
-    """Each model replayed open loop on the validation runs (``wresdyn.sim.rollout.replay_trajectories``, as
-    ``wresdyn identify --eval`` does): per fitted joint, mean |q_model − q_real| at the end of the command holds,
-    against the arm's repeatability, and the ratio. ``runs``: run folders (their identified physics, and residual
-    if any); the robot file's PD model (no gains config) is the reference row."""
+    """Each model replayed open loop on the validation runs (``wresdyn.sim.rollout.replay_trajectories``, as ``wresdyn
+    identify --eval`` does, under the run's own dry-friction law): per fitted joint, mean |q_model − q_real| at the end
+    of the command holds, against the arm's repeatability, and the ratio. ``runs``: run folders (their identified
+    physics, and residual if any); the robot file's PD model (no gains config) is the reference row."""
     from wresdyn.data.loading import dataset_robot
-    from wresdyn.evaluation.evaluate_run import load_run_model
+    from wresdyn.evaluation.evaluate_run import load_run_model, run_friction_kappa
     from wresdyn.sim.rollout import replay_trajectories
 
     keep = np.flatnonzero(ds.fit_weights() > 0)
@@ -143,7 +143,7 @@ def model_holds(path: str, ds, robot, runs, hold_s: float = 1.0) -> None:
         def replay(run=run):
             policy, meta, physics, solver, substeps = load_run_model(run, robot, rate)
             return replay_trajectories(robot, val, rate, policy, kind=meta["kind"], solver=solver, substeps=substeps,
-                                       physics=physics)["residual"]
+                                       physics=physics, friction_kappa=run_friction_kappa(run))["residual"]
         models.append((str(run), replay))
     for label, replay in models:
         replayed = replay()

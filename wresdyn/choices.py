@@ -16,7 +16,7 @@ from typing import Literal, get_args
 from .errors import WresdynError
 
 __all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "FitModel", "Learner", "ExcitationMode", "choices",
-           "check_choice", "check_number", "check_device"]
+           "check_choice", "check_number", "check_friction_kappa", "check_device"]
 
 ResidualKind = Literal["torque", "delta_action"]
 """Joint torque added to τ_pd (the paper, eq. 1) or offset added to the PD target (ASAP)."""
@@ -61,6 +61,19 @@ def check_number(value, name: str, *, integer: bool = False, gt: float | None = 
                                (le, lambda b: value > b, "<=")):
         if bound is not None and fails(bound):
             raise WresdynError(f"{name} = {value!r} must be {word} {bound:g}")
+    return value
+
+
+def check_friction_kappa(value, name: str, solver: str = "auto"):
+    """``value`` if it is ``None`` (the replay solver's soft dry friction) or a damper-law rate [1/s] > 0
+    (``inf``: hard Coulomb friction) with a ``solver`` that can be the replay solver, else a one-line
+    :class:`WresdynError` naming ``name``."""
+    if value is None:
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        raise WresdynError(f"{name} = {value!r} must be a rate > 0 [1/s] (inf: hard Coulomb) or none (the soft law)")
+    if solver not in ("auto", "replay"):
+        raise WresdynError(f"{name} = {value!r} is a law of the replay solver; solver {solver!r} has its own friction")
     return value
 
 

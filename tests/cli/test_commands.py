@@ -58,7 +58,7 @@ CONFIG_FLAGS = {
     "identify": [(SysIdConfig(), "", ())],
     "adapt": [(AdaptConfig(), "", ())],
     "fit": [(replace(GradFitConfig(), iterations=HYBRID_ITERATIONS), "", ("model",)),
-            (SysIdConfig(), "identify.", ("device", "seed", "solver"))],
+            (SysIdConfig(), "identify.", ("device", "seed", "solver", "friction_kappa"))],
     "train": [(default_config(), "", ())],
     "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig))),
                (SkillConfig(), "task.", ()),

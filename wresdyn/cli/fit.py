@@ -25,7 +25,7 @@ FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "
                "horizon_curriculum": ("--curriculum",)}
 """The short spellings of the gradient fit's flags, as in earlier releases."""
 
-IDENTIFY_SHARED = ("device", "seed", "solver")
+IDENTIFY_SHARED = ("device", "seed", "solver", "friction_kappa")
 """Fields of the hybrid's identification (``--identify.*``) that are the fit's own: both stages run alike."""
 
 
@@ -53,7 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      aliases={"iterations": ("--identify-iterations",), "gain_grid": ("--gain-grid",),
                               "refine": ("--refine",)},
                      title="the hybrid's identification (wresdyn.learn.window_fit_config.SysIdConfig, as `wresdyn "
-                           "identify`; device, seed and solver are the fit's, --windows too unless "
+                           "identify`; device, seed, solver and friction law are the fit's, --windows too unless "
                            "--identify.windows is given)")
 
 
@@ -69,7 +69,8 @@ def config_from_args(args: argparse.Namespace) -> GradFitConfig:
 
 def identify_config_from_args(args: argparse.Namespace, cfg: GradFitConfig) -> SysIdConfig:
     """The hybrid's identification: :class:`~wresdyn.learn.window_fit_config.SysIdConfig` with the ``--identify.*``
-    flags given, on the fit's device, seed and solver (and ``--windows`` unless ``--identify.windows`` is given)."""
+    flags given, on the fit's device, seed, solver and friction law (and ``--windows`` unless ``--identify.windows``
+    is given)."""
     given = {name: getattr(cfg, name) for name in IDENTIFY_SHARED} | given_fields(args, "identify.")
     if "windows" in given_fields(args):
         given.setdefault("windows", cfg.windows)

@@ -16,7 +16,8 @@ from .config_flags import add_config_flags, build_config, given_fields, parse_as
 TRAIN_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
                  "ppo.iterations": ("--iterations",), "ppo.num_envs": ("--num-envs",),
                  "ppo.num_steps_per_env": ("--steps-per-env",), "env.horizon": ("--horizon",),
-                 "env.obs_noise": ("--obs-noise",), "env.solver": ("--solver",), "ppo.device": ("--device",),
+                 "env.obs_noise": ("--obs-noise",), "env.solver": ("--solver",),
+                 "env.friction_kappa": ("--friction-kappa",), "ppo.device": ("--device",),
                  "ppo.seed": ("--seed",), "ppo.save_interval": ("--save-interval",), "env.physics": ("--physics",)}
 """The short spellings of the run configuration's common flags, as in earlier releases."""
 

@@ -9,7 +9,7 @@ from ..sim.warmup import compile_kernels
 from .open_loop import evaluate_split, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves
 
-__all__ = ["evaluate_run", "load_run_model"]
+__all__ = ["evaluate_run", "load_run_model", "run_friction_kappa"]
 
 
 def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
@@ -17,7 +17,8 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
     per-split summaries. A run with ``physics.json`` (``wresdyn identify``, or a residual fitted on top of
     identified physics) replays its model with those parameters; a run with no residual evaluates the
-    calibrated model under PD alone."""
+    calibrated model under PD alone. Every replay runs under the run's own dry-friction law
+    (:func:`run_friction_kappa`)."""
     import json
     from pathlib import Path
 
@@ -26,6 +27,7 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     torch.set_num_threads(1)
     run_dir = Path(run)
     policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
+    kappa = run_friction_kappa(run_dir)
     out_dir = Path(out) if out else run_dir / "eval"
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
@@ -39,16 +41,17 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
             print(f"{split}: no trajectories, skipped")
             continue
         summary, runs = evaluate_split(robot, trajs, ds.rate_hz, policy, meta["kind"], solver, substeps, device,
-                                       physics=physics, weights=weights)
+                                       physics=physics, weights=weights, friction_kappa=kappa)
         results[split] = summary
         plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
                   title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)
         print(summary_line(split, summary), flush=True)
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
     plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
+    law = {} if kappa is None else {"friction_kappa": kappa}  # the soft default's reports stay as they were
     write_report(out_dir, robot, results, {"run": str(run_dir), "residual": meta["kind"], "arch": meta["arch"],
                                            "physics": "physics.json" if physics is not None else "robot file",
-                                           "solver": solver, "dataset": data_label, "robot": str(robot.source)})
+                                           "solver": solver, **law, "dataset": data_label, "robot": str(robot.source)})
     print(f"wrote {out_dir / 'metrics.json'} and {out_dir / 'report.md'}")
     return results
 
@@ -82,3 +85,15 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
     if abs(meta["rate_hz"] - rate_hz) > 1e-9:
         raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {rate_hz:g} Hz")
     return policy, meta, physics, solver, substeps
+
+
+def run_friction_kappa(run_dir) -> float | None:
+    """The replay solver's dry-friction law a run was trained with (``friction_kappa`` of its ``config.json``:
+    ``None``, the soft default, for a run that records none)."""
+    import json
+    from pathlib import Path
+
+    config = json.loads((Path(run_dir) / "config.json").read_text())
+    if "config" not in config:  # identified physics alone
+        return config.get("friction_kappa")
+    return config_from_dict(config["config"]).env.friction_kappa

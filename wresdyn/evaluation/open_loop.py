@@ -92,12 +92,13 @@ def metrics(trajectories, replays, weights=None) -> Metrics:
 
 
 def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str | None = None, solver: str = "auto",
-                   substeps: int = 1, device: str | None = "cpu", delay: float = 0.0, physics=None, weights=None
-                   ) -> tuple[dict, dict]:
+                   substeps: int = 1, device: str | None = "cpu", delay: float = 0.0, physics=None, weights=None,
+                   friction_kappa: float | None = None) -> tuple[dict, dict]:
     """PD-only and PD + residual metrics for one split (``physics``: the model's physical parameters, see
     :func:`~wresdyn.sim.rollout.replay_trajectories`; "PD + residual" is then the calibrated model with its
     residual, or alone without a policy). ``weights`` (n_dof,): per-joint weights, joints with 0 are left out of
     the metrics (pass :meth:`~wresdyn.data.dataset.Dataset.fit_weights`); ``None``: every joint counts.
+    ``friction_kappa``: the replay solver's dry-friction law (:class:`~wresdyn.sim.Simulator`), of both replays.
 
     Returns:
         ``(summary, replays)``: summary ``{"pd_only": Metrics-dict, "pd_residual": Metrics-dict | None,
@@ -109,7 +110,8 @@ def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str |
         raise ValueError("no trajectories to evaluate")
     excluded = excluded_names(robot.joint_names, weights)  # checks the weights before the replay
     runs = replay_trajectories(robot, trajectories, rate_hz, policy, kind=kind, solver=solver, substeps=substeps,
-                               device=device, with_baseline=True, delay=delay, physics=physics)
+                               device=device, with_baseline=True, delay=delay, physics=physics,
+                               friction_kappa=friction_kappa)
     pd = metrics(trajectories, runs["pd"], weights)
     res = metrics(trajectories, runs["residual"], weights) if "residual" in runs else None
     summary = {

@@ -24,7 +24,7 @@ from ..data.loading import load_data
 from ..errors import WresdynError
 from ..robot.description import load_robot
 from .animation import RobotRow, sample_frames
-from .evaluate_run import load_run_model
+from .evaluate_run import load_run_model, run_friction_kappa
 from .open_loop import evaluate_split
 
 __all__ = ["ViewerConfig", "Scene", "run_scene", "animation_scene", "load_scene", "serve"]
@@ -96,7 +96,7 @@ def run_scene(run, split: str = "heldout", index: int = 0, data: str | None = No
     traj = trajs[index]
     policy, meta, physics, solver, substeps = load_run_model(run, robot, ds.rate_hz)
     summary, runs = evaluate_split(robot, [traj], ds.rate_hz, policy, meta["kind"], solver, substeps, device,
-                                   physics=physics, weights=ds.fit_weights())
+                                   physics=physics, weights=ds.fit_weights(), friction_kappa=run_friction_kappa(run))
     rollouts = {"real": traj.q, "PD only": runs["pd"].q[0]}
     title = f"{split} {traj.name} ({run.name}): mean |dq| to the real robot, PD only " \
             f"{summary['pd_only']['mean_abs_dq']:.4f} rad"

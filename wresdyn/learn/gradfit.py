@@ -135,7 +135,8 @@ class _FitLearner:
         self.n_obs = 4 * robot.n_dof
         self.policy = self.module = build_policy(robot, cfg.residual, *obs_stats(train), cfg.model).to(cfg.device)
         self.horizons = cfg.horizon_curriculum or (cfg.horizon,)
-        self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True)
+        self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
+                             friction_kappa=cfg.friction_kappa)
         self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
         self.optim = torch.optim.Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred)
         self.map_location = cfg.device
@@ -146,7 +147,8 @@ class _FitLearner:
         self.bank = TrajectoryBank(train, self.sim.device, delay, servo_goal_accel(robot, physics, dt, self.sim.device))
         validation = dataset.split("validation")
         self._score = ValidationScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device, physics=physics,
-                                      weights=dataset.fit_weights()) if validation else None
+                                      weights=dataset.fit_weights(), friction_kappa=cfg.friction_kappa
+                                      ) if validation else None
         weights = joint_weights(dataset, self.sim.device)
         self.obs_noise = cfg.obs_noise if cfg.model == "network" else 0.0  # the physical model has no normaliser
         self.noise_gen = torch.Generator(device=cfg.device)
@@ -288,7 +290,8 @@ def run_record(cfg: GradFitConfig) -> dict:
     if cfg.model == "parametric":
         residual["arch"] = "mlp"  # no network; keeps the PPO config layout valid
     return {"learner": "parametric" if cfg.model == "parametric" else "gradient",
-            "config": {"env": {"solver": cfg.solver, "substeps": 1}, "residual": residual}}
+            "config": {"env": {"solver": cfg.solver, "substeps": 1, "friction_kappa": cfg.friction_kappa},
+                       "residual": residual}}
 
 
 def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: str | Path | None = None,

@@ -39,7 +39,8 @@ class HybridFit:
 def save_identify_config(out: str | Path, cfg, rate_hz: float, data_path=None) -> None:
     """``config.json`` of an identification run (read by ``wresdyn eval``)."""
     Path(out, "config.json").write_text(json.dumps({"learner": "identify", "rate_hz": rate_hz, "solver": cfg.solver,
-                                                     "sysid": asdict(cfg), "data_path": str(data_path)}, indent=2))
+                                                     "friction_kappa": cfg.friction_kappa, "sysid": asdict(cfg),
+                                                     "data_path": str(data_path)}, indent=2))
 
 
 def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=None,

@@ -210,7 +210,8 @@ def _validation_score(dataset, robot, cfg: TrainConfig, session: _Session) -> Va
     if not validation:
         return None
     return ValidationScore(robot, validation, dataset.rate_hz, cfg.env.solver, session.ranks.device(cfg.ppo.device),
-                           physics=session.env.physics, weights=dataset.fit_weights())
+                           physics=session.env.physics, weights=dataset.fit_weights(),
+                           friction_kappa=cfg.env.friction_kappa)
 
 
 def _learn_and_select(session: _Session, cfg: TrainConfig, score, best: BestOnValidation, start: int,

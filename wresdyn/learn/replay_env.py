@@ -57,7 +57,8 @@ class ReplayEnv(VecEnv):
                  weights=None, physics=None) -> None:
         self.robot, self.env_cfg, self.residual_cfg, self.reward_cfg = robot, cfg, residual, rewards
         self.dt = 1.0 / rate_hz
-        self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device)
+        self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device,
+                             friction_kappa=cfg.friction_kappa)
         self.limits = DivergenceLimits(cfg.max_qd, cfg.limit_margin, cfg.max_error)
         self.device = self.sim.device
         self.num_envs, self.num_actions = num_envs, robot.n_dof

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-from ..choices import SolverKind, check_choice, check_number
+from ..choices import SolverKind, check_choice, check_friction_kappa, check_number
 from ..errors import WresdynError
 
 __all__ = ["ReplayEnvConfig", "RewardConfig"]
@@ -23,6 +23,10 @@ class ReplayEnvConfig:
     """Newton solver kind (:data:`wresdyn.sim.SOLVERS`); "auto" takes :class:`wresdyn.sim.solver_replay.SolverReplay`
     for a fixed base: 100-200k env-steps/s with 256 worlds on 2 busy CPU cores against ~1k for
     ``SolverFeatherstone``, with the same PD-only gap on the shipped benchmark (0.0801 vs 0.0798 rad held-out)."""
+    friction_kappa: float | None = None
+    """Dry-friction law of the replay solver: ``None`` = the soft default (MuJoCo's ``frictionloss``, which creeps at
+    τ / (948 m0) below its bound), a number = the damper law of that rate kappa [1/s] (creep τ / (kappa H_ii); ``inf``:
+    hard Coulomb friction, exact sticking); see :class:`wresdyn.sim.solver_replay.SolverReplay`. Replay solver only."""
     max_qd: float = 100.0
     """Runaway joint speed [rad/s]: a world past it is reset."""
     limit_margin: float = 0.5
@@ -45,6 +49,7 @@ class ReplayEnvConfig:
 
     def __post_init__(self) -> None:
         check_choice(self.solver, SolverKind, "env.solver")
+        check_friction_kappa(self.friction_kappa, "env.friction_kappa", self.solver)
         check_number(self.horizon, "env.horizon", integer=True, ge=1)
         check_number(self.substeps, "env.substeps", integer=True, ge=1)
         check_number(self.obs_noise, "env.obs_noise", ge=0)

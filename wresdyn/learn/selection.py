@@ -25,7 +25,8 @@ class ValidationScore:
         robot: The robot (simulator side).
         trajectories: Validation trajectories.
         rate_hz: Their sample rate [Hz].
-        solver, device: Simulation settings (as the learner's).
+        solver, device, friction_kappa: Simulation settings (as the learner's; ``friction_kappa``: the replay
+            solver's dry-friction law, :class:`~wresdyn.sim.Simulator`).
         delay: Command-path delay of the simulator [steps].
         physics: Physical parameters of the model (the hybrid's identified physics, with its delay), or ``None``.
         weights: Per-joint weights (n_dof,): joints with 0 (excluded from fitting) are left out of the score;
@@ -33,7 +34,7 @@ class ValidationScore:
     """
 
     def __init__(self, robot, trajectories, rate_hz: float, solver: str = "auto", device: str = "cpu",
-                 delay=0.0, physics=None, weights=None) -> None:
+                 delay=0.0, physics=None, weights=None, friction_kappa: float | None = None) -> None:
 
         self.robot, self.trajectories, self.rate_hz, self.delay = robot, list(trajectories), float(rate_hz), delay
         self.physics = physics
@@ -41,7 +42,8 @@ class ValidationScore:
         """Joints the score averages over, bool (n_dof,)."""
         if not self.trajectories:
             raise ValueError("no validation trajectories")
-        self.sim = Simulator(robot, len(self.trajectories), 1.0 / self.rate_hz, solver=solver, device=device)
+        self.sim = Simulator(robot, len(self.trajectories), 1.0 / self.rate_hz, solver=solver, device=device,
+                             friction_kappa=friction_kappa)
         self.last_diverged = 0
         """Validation replays that diverged in the last call."""
 

@@ -116,7 +116,7 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     model = PhysicsModel(robot, start, fit=fields, dt=dt)
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                    param_grads=True)
+                    param_grads=True, friction_kappa=cfg.friction_kappa)
     delay = torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device)
     bank.set_command_path(delay, servo_goal_accel(robot, start, dt, sim.device))
     traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
@@ -201,7 +201,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
 def run_record(cfg: SysIdConfig, dataset) -> dict:
     """What ``config.json`` of an identification run holds beside the config itself (under ``sysid``), for
     ``wresdyn eval``."""
-    return {"learner": "identify", "rate_hz": dataset.rate_hz, "solver": cfg.solver}
+    return {"learner": "identify", "rate_hz": dataset.rate_hz, "solver": cfg.solver,
+            "friction_kappa": cfg.friction_kappa}
 
 
 class _IdentifyLearner:
@@ -226,9 +227,10 @@ class _IdentifyLearner:
         self.effort_from = int(round(cfg.effort_after * cfg.iterations)) if "effort" in cfg.fit else cfg.iterations
         validation = dataset.split("validation")
         self.physics_score = PhysicsScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device,
-                                          weights=dataset.fit_weights()) if validation else None
+                                          weights=dataset.fit_weights(), friction_kappa=cfg.friction_kappa
+                                          ) if validation else None
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                             param_grads=True)
+                             param_grads=True, friction_kappa=cfg.friction_kappa)
         self.bank = TrajectoryBank(train, self.sim.device)
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
@@ -238,7 +240,7 @@ class _IdentifyLearner:
             self.parts = (*self.parts, "defect")
             self.checkpoint_keys = (*self.checkpoint_keys, "nodes", "node_optim")
             self.chain_sim = Simulator(robot, cfg.windows * cfg.shooting, dt, solver=cfg.solver, device=cfg.device,
-                                       requires_grad=True, param_grads=True)
+                                       requires_grad=True, param_grads=True, friction_kappa=cfg.friction_kappa)
             self.nodes = ShootingNodes(self.bank, min(self.horizons))
             self.node_optim = torch.optim.SparseAdam(self.nodes.parameters(), lr=cfg.shooting_lr)
 

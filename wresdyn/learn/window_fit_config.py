@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..choices import ModelKind, SolverKind, check_choice, check_device, check_number
+from ..choices import ModelKind, SolverKind, check_choice, check_device, check_friction_kappa, check_number
 from ..robot.physical import JOINT_FIELDS, SERVO_FIELDS
 from .residual_config import ResidualConfig
 
@@ -19,6 +19,7 @@ def check_window_fit_config(cfg) -> None:
     """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
     :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
     check_choice(cfg.solver, SolverKind, "solver")
+    check_friction_kappa(cfg.friction_kappa, "friction_kappa", cfg.solver)
     check_device(cfg.device, "device")
     for name in ("iterations", "windows"):
         check_number(getattr(cfg, name), name, integer=True, ge=1)
@@ -97,6 +98,10 @@ class SysIdConfig:
     """Global gradient-norm clip."""
     solver: SolverKind = "auto"
     """Newton solver; must be differentiable (SolverReplay)."""
+    friction_kappa: float | None = None
+    """Dry-friction law of the replay solver: ``None`` = the soft default (MuJoCo's ``frictionloss``, which creeps at
+    τ / (948 m0) below its bound), a number = the damper law of that rate kappa [1/s] (creep τ / (kappa H_ii); ``inf``:
+    hard Coulomb friction, exact sticking); see :class:`wresdyn.sim.solver_replay.SolverReplay`. Replay solver only."""
     device: str = "cpu"
     """Warp / torch device."""
     torch_threads: int | None = 1
@@ -209,6 +214,10 @@ class GradFitConfig:
     model."""
     solver: SolverKind = "auto"
     """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
+    friction_kappa: float | None = None
+    """Dry-friction law of the replay solver: ``None`` = the soft default (MuJoCo's ``frictionloss``, which creeps at
+    τ / (948 m0) below its bound), a number = the damper law of that rate kappa [1/s] (creep τ / (kappa H_ii); ``inf``:
+    hard Coulomb friction, exact sticking); see :class:`wresdyn.sim.solver_replay.SolverReplay`. Replay solver only."""
     device: str = "cpu"
     """Warp / torch device."""
     torch_threads: int | None = 1

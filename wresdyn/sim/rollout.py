@@ -198,7 +198,8 @@ class Replays:
 
 def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kind: str | None = None,
                         solver: str = "auto", substeps: int = 1, device: str | None = "cpu", with_baseline: bool = False,
-                        delay=0.0, sim: Simulator | None = None, physics=None) -> dict[str, Replays]:
+                        delay=0.0, sim: Simulator | None = None, physics=None, friction_kappa: float | None = None
+                        ) -> dict[str, Replays]:
     """Replay every trajectory open loop from its first recorded state, PD only and/or with ``policy``.
 
     Args:
@@ -207,7 +208,8 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
         rate_hz: Sample rate of the recordings [Hz]; command k is held for one sample period.
         policy: Residual ``policy(obs) -> residual`` or ``None`` for PD only.
         kind: ``"torque"`` or ``"delta_action"``; default the policy's.
-        solver, substeps, device: Simulation settings.
+        solver, substeps, device, friction_kappa: Simulation settings (``friction_kappa``: the replay solver's dry
+            friction law, :class:`~wresdyn.sim.Simulator`), for a new simulator.
         with_baseline: Also run PD only, in extra worlds of the same batch.
         delay: Command-path delay of the simulator [steps] (see :mod:`wresdyn.sim.bank`).
         sim: A simulator to reuse (its world count must match), e.g. for repeated validation.
@@ -225,7 +227,8 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
     groups = (["pd"] if with_baseline or not model else []) + (["residual"] if model else [])
     w = len(trajectories)
     if sim is None or sim.n_worlds != w * len(groups):
-        sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device)
+        sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device,
+                        friction_kappa=friction_kappa)
     pw = slice(groups.index("residual") * w, (groups.index("residual") + 1) * w) if len(groups) == 2 else None
     if physics is None:
         accel = servo_goal_accel(robot, None, 1.0 / rate_hz, sim.device)

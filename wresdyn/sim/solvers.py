@@ -33,6 +33,7 @@ import warnings
 import numpy as np
 
 from ..choices import SolverKind, check_choice, choices
+from ..errors import WresdynError
 from ..robot.contact import ContactSettings
 from ..robot.description import Robot
 from ..robot.pinocchio_model import build_pinocchio
@@ -87,8 +88,12 @@ def resolve_solver(robot: Robot, dt: float, kind: str = "auto", ground: bool = F
     return "mujoco"
 
 
-def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: bool = False, contact=None):
+def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: bool = False, contact=None,
+                friction_kappa: float | None = None):
     """Create the Newton solver for replay. See the module docstring for the choice.
+
+    ``friction_kappa``: the replay solver's dry-friction law (``SolverReplay(friction_kappa=)``): ``None``, the soft
+    default, or the rate [1/s] of its damper law; any other solver with a rate is a one-line :class:`WresdynError`.
 
     ``ground``: the model has a floor (``Robot.build_model(ground=True)``): SolverMuJoCo with contacts on and the
     solver options of ``contact`` (:class:`~wresdyn.robot.ground.ContactSettings`, default ``ContactSettings()``),
@@ -97,10 +102,12 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: b
     import newton
 
     kind = resolve_solver(robot, dt, kind, ground)
+    if friction_kappa is not None and kind != "replay":
+        raise WresdynError(f"{robot.source.name}: friction_kappa is a law of the replay solver, not of {kind}")
     if kind == "replay":
         from .solver_replay import SolverReplay
 
-        return SolverReplay(model)
+        return SolverReplay(model, friction_kappa=friction_kappa)
     if kind == "featherstone":
         return newton.solvers.SolverFeatherstone(model)
     # Newton's MuJoCo C backend holds one world; several run on mujoco_warp, on the CPU too (Warp's CPU device)
