@@ -33,6 +33,17 @@ def test_check_resume_allows_only_the_listed_fields():
                               "or choose another folder")
 
 
+def test_a_field_added_since_the_run_resumes_at_its_none_default_only():
+    """A run folder written before a config field existed resumes while the field is at its ``None`` default (the
+    behaviour from before it); any other value is refused, naming the field."""
+    old = {"env": {"solver": "auto"}, "iterations": 10}
+    check_resume("runs/x", old, {"env": {"solver": "auto", "friction_kappa": None}, "iterations": 10})
+    with pytest.raises(RunError, match="env.friction_kappa = <missing>, now 10000.0"):
+        check_resume("runs/x", old, {"env": {"solver": "auto", "friction_kappa": 1e4}, "iterations": 10})
+    with pytest.raises(RunError, match="iterations = 10, now 20"):
+        check_resume("runs/x", old, {"env": {"solver": "auto", "friction_kappa": None}, "iterations": 20})
+
+
 def test_a_run_folder_written_with_0_for_unset_resumes_and_reads_back_as_none():
     """select_every, grad_truncation and torch_threads say "use another value" with None; folders written before saved
     0 for it: they resume with the config that means the same, and another value is still refused."""

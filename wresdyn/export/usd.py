@@ -56,6 +56,7 @@ import numpy as np
 from ..data.dataset import load_dataset
 from ..data.loading import dataset_robot
 from ..errors import WresdynError
+from ..evaluation.evaluate_run import run_friction_kappa
 from ..learn.runs import run_physics
 from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
@@ -292,6 +293,11 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     if residual is not None and residual.get("kind") != "torque":
         raise ExportError(f"{run}: a {residual.get('kind')} residual cannot be exported yet (only torque residuals "
                           "act outside the delayed command path)")
+    kappa = run_friction_kappa(run)
+    if kappa is not None:
+        raise ExportError(f"{run}: the run was identified under the replay's damper friction law (friction_kappa = "
+                          f"{kappa:g} /s), which Newton's joints do not model; identify without --friction-kappa to "
+                          "export")
     data = data or json.loads(cfg_path.read_text()).get("data_path")
     if not data:
         raise ExportError(f"{run}: the run does not record its dataset; pass --data")

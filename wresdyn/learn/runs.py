@@ -121,6 +121,17 @@ def read_unset(config):
     return config
 
 
+def _added_unset(old, new):
+    """``old`` with the keys that only ``new`` has where ``new`` holds ``None``, at any depth: a config field added
+    after the run was written, at its ``None`` default (which keeps the behaviour from before the field), is not a
+    change, so such runs resume."""
+    if not (isinstance(old, dict) and isinstance(new, dict)):
+        return old
+    out = {k: _added_unset(v, new.get(k)) for k, v in old.items()}
+    out.update({k: None for k, v in new.items() if k not in old and v is None})
+    return out
+
+
 def check_resume(run_dir, old: dict, new: dict, may_change=(), what: str = "configuration") -> None:
     """Raise :class:`RunError` naming the fields if ``new`` differs from the saved ``old`` outside ``may_change``.
 
@@ -137,7 +148,7 @@ def check_resume(run_dir, old: dict, new: dict, may_change=(), what: str = "conf
         return any(p == k or p.startswith(k + ".") or p.startswith(k + "[") for k in keep)
 
     old, new = read_unset(old), read_unset(new)
-    changed = [p for p in config_diff(old, new) if not allowed(p)]
+    changed = [p for p in config_diff(_added_unset(old, new), new) if not allowed(p)]
     if not changed:
         return
     # only the refused fields are described: the allowed ones changing is the normal case
