@@ -123,6 +123,11 @@ def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(record
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "friction_kappa = 10000.0, now null" in err, err
+    # Newton's joints have no damper friction law: export refuses the run in one line and writes nothing
+    assert main(["export", str(run), "--out", str(tmp_path / "exp")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "friction_kappa = 10000 /s" in err, err
+    assert not (tmp_path / "exp").exists()
 
 
 def test_train_flag_reaches_the_replay_environment(humanoid, recorded):
@@ -135,8 +140,3 @@ def test_train_flag_reaches_the_replay_environment(humanoid, recorded):
     assert cfg.env.friction_kappa == float("inf")
     env = ReplayEnv(humanoid, recorded.split("train"), recorded.rate_hz, 2, cfg.env)
     assert isinstance(env.sim.solver, SolverReplay) and env.sim.solver.friction_kappa == float("inf")
-    # Newton's joints have no damper friction law: export refuses the run in one line and writes nothing
-    assert main(["export", str(run), "--out", str(tmp_path / "exp")]) != 0
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "friction_kappa = 10000 /s" in err, err
-    assert not (tmp_path / "exp").exists()
