@@ -99,9 +99,8 @@ class SysIdConfig:
     solver: SolverKind = "auto"
     """Newton solver; must be differentiable (SolverReplay)."""
     friction_kappa: float | None = None
-    """Dry-friction law of the replay solver: ``None`` = the soft default (MuJoCo's ``frictionloss``, which creeps at
-    τ / (948 m0) below its bound), a number = the damper law of that rate kappa [1/s] (creep τ / (kappa H_ii); ``inf``:
-    hard Coulomb friction, exact sticking); see :class:`wresdyn.sim.solver_replay.SolverReplay`. Replay solver only."""
+    """Dry-friction law of the replay solver, ``None`` (the soft default) or a damper-law rate [1/s]: as
+    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.learn.replay_env_config`)."""
     device: str = "cpu"
     """Warp / torch device."""
     torch_threads: int | None = 1
@@ -215,9 +214,8 @@ class GradFitConfig:
     solver: SolverKind = "auto"
     """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
     friction_kappa: float | None = None
-    """Dry-friction law of the replay solver: ``None`` = the soft default (MuJoCo's ``frictionloss``, which creeps at
-    τ / (948 m0) below its bound), a number = the damper law of that rate kappa [1/s] (creep τ / (kappa H_ii); ``inf``:
-    hard Coulomb friction, exact sticking); see :class:`wresdyn.sim.solver_replay.SolverReplay`. Replay solver only."""
+    """Dry-friction law of the replay solver, ``None`` (the soft default) or a damper-law rate [1/s]: as
+    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.learn.replay_env_config`)."""
     device: str = "cpu"
     """Warp / torch device."""
     torch_threads: int | None = 1
