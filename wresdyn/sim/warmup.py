@@ -4,8 +4,8 @@ Warp compiles a module the first time one of its kernels launches; :class:`~wres
 generates its kernels per robot, so the first ``collect``, ``fit``, ``train``, ``identify`` or ``eval`` of a new
 robot can spend minutes in the compiler (the CPU adjoint of a large robot most of all) before its first step, with
 nothing on the terminal. :func:`compile_kernels` builds a one-world :class:`~wresdyn.sim.Simulator` with the
-settings the command is about to use and takes one step per module, between a line that says what is compiled and
-one that says how long each part took. Warp caches the compiled modules on disk (``wp.config.kernel_cache_dir``), so
+settings the command is about to use, compiles their step modules side by side (Warp's thread pool) and takes one
+step per module, between a line that says what is compiled and one that says how long it took. Warp caches the compiled modules on disk (``wp.config.kernel_cache_dir``), so
 later runs only load them (well under a second on the SO-101); the command's own simulators then reuse the loaded
 modules.
 
@@ -43,6 +43,18 @@ object's id)."""
 def _done(robot, solver, device, module) -> bool:
     ref = _DONE.get((id(robot), solver, str(device), module))
     return ref is not None and ref() is robot
+
+
+def _step_modules(sims) -> list:
+    """The Warp modules of the replay step kernels these simulators launch (none for other solvers): what the
+    warm-up step would compile; the fused rollout and the dynamics-terms kernels are their own modules, compiled
+    when first used."""
+    mods = []
+    for sim in sims:
+        step = getattr(getattr(sim.solver, "kernels", None), "replay_step", None)
+        if step is not None and step.module not in mods:
+            mods.append(step.module)
+    return mods
 
 
 def _home(path: str) -> str:
@@ -85,18 +97,29 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     name = Path(str(robot.source)).name
     say(f"compiling Warp kernels for {name} ({robot.n_dof} joints; {', '.join(todo.values())}): on a robot's first "
         f"run only, minutes for a large one, then loaded from {cache} ...")
-    parts = []
     t0 = time.perf_counter()
+    sims = {}
+    for module, v in todo.items():
+        requires_grad, param_grads = VARIANTS[v]
+        sims[module] = Simulator(robot, 1, 1.0 / rate_hz, solver=solver, device=device, requires_grad=requires_grad,
+                                 param_grads=param_grads)
+    built = time.perf_counter()
+    # The modules are independent: Warp compiles them in parallel threads (NVRTC or Clang release the GIL), so a
+    # first run waits for the largest one (the adjoint) instead of the sum.
+    mods = _step_modules(sims.values())
+    if len(mods) > 1:
+        wp.force_load(device=sims[next(iter(sims))].model.device, modules=mods, max_workers=len(mods))
+    parts = []
     for module, v in todo.items():
         t1 = time.perf_counter()
-        requires_grad, param_grads = VARIANTS[v]
-        sim = Simulator(robot, 1, 1.0 / rate_hz, solver=solver, device=device, requires_grad=requires_grad,
-                        param_grads=param_grads)
         with torch.no_grad():
-            sim.step(sim.q)  # hold the start pose for one step: the first launch loads (or compiles) the module
+            sims[module].step(sims[module].q)  # hold the start pose for one step: the first launch loads the module
         _DONE[(id(robot), solver, str(device), module)] = weakref.ref(robot)
         shared = [u for u in VARIANTS if MODULES[u] == module and u != v and u in variants]
-        parts.append(f"{v}{'' if not shared else ' = ' + ' = '.join(shared)} {time.perf_counter() - t1:.1f} s")
+        parts.append(f"{v}{'' if not shared else ' = ' + ' = '.join(shared)}"
+                     + (f" {time.perf_counter() - t1:.1f} s" if len(mods) <= 1 else ""))
+    if len(mods) > 1:
+        parts = [f"{' and '.join(parts)} in parallel {time.perf_counter() - built:.1f} s"]
     seconds = time.perf_counter() - t0
     say(f"... done in {seconds:.1f} s ({', '.join(parts)})")
     return seconds
