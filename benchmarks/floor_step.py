@@ -3,13 +3,16 @@ plant it trained on and on the "real" robot, with how its base drifts, over the 
 families that stand on one foot (stepping in place, kick).
 
     python benchmarks/floor_step.py RUN --data DATASET --calibrated CAL --delta DELTA [--families step,kick]
+        [--series]
 
 RUN is the deploy folder (``results.json``, ``skills/*/policy.pt``); CAL and DELTA the corrections it trained (b) and
 (c) on. Per policy and plant, per motion: success, failure cause and policy step; then, on the stance foot (a sole
 the reference keeps planted), its slide over the floor while planted [mm], the landing error of each sole set down
 again (its distance from the reference's place, in the world [mm]), and at the failure (or the end) the base's
 distance from its reference [m], its height error [m], tilt and yaw [deg]. A slide of millimetres with a base far
-off means the robot toppled over its stance foot rather than walking off.
+off means the robot toppled over its stance foot rather than walking off. ``--series`` adds, for the first motion of
+each family, every 0.5 s: the base's offset from its reference (x, y) [m], tilt and yaw [deg], and each sole's
+distance from its reference place [mm] (``*``: the reference plants it).
 """
 
 from __future__ import annotations
@@ -57,6 +60,22 @@ def drift_rows(dep, per) -> list[str]:
     return rows
 
 
+def series_rows(dep, i: int, every: int = 25) -> list[str]:
+    """Motion ``i`` of a deployment every ``every`` policy steps: see the module docstring."""
+    rows = []
+    for k in range(0, dep.base.shape[1], every):
+        if not np.isfinite(dep.base[i, k, 0]):
+            break
+        yaw, tilt = _yaw_tilt(dep.base[i, k, 3:])
+        off = dep.base[i, k, :2] - dep.base_ref[i, k, :2]
+        feet = np.linalg.norm(dep.bodies[i, k, dep.feet, :2] - dep.bodies_ref[i, k, dep.feet, :2], axis=-1)
+        mark = ["*" if p else " " for p in dep.planted[i, k]]
+        rows.append(f"    t {k * dep.policy_dt:4.1f} s: base off x {off[0]:+.3f} y {off[1]:+.3f} m, tilt "
+                    f"{np.degrees(tilt):4.1f} yaw {np.degrees(yaw):+5.1f} deg; soles off "
+                    f"L {1e3 * feet[0]:4.0f}{mark[0]} R {1e3 * feet[1]:4.0f}{mark[1]} mm")
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("run")
@@ -64,6 +83,7 @@ def main() -> None:
     p.add_argument("--calibrated", required=True, help="the calibrated robot (b) trained in")
     p.add_argument("--delta", required=True, help="the delta action (c) trained with")
     p.add_argument("--families", default="step,kick")
+    p.add_argument("--series", action="store_true", help="the first motion of each family every 0.5 s")
     args = p.parse_args()
 
     import torch
@@ -96,6 +116,10 @@ def main() -> None:
             ok = sum(r["success"] for r in per)
             print(f"{name} on the {s} plant ({label}): {ok}/{len(per)} succeed", flush=True)
             print("\n".join(drift_rows(dep, per)), flush=True)
+            if args.series:
+                for fam in fams:
+                    i = next(j for j, m in enumerate(motions) if m.family == fam)
+                    print(f"  {motions[i].name}:\n" + "\n".join(series_rows(dep, i)), flush=True)
 
 
 if __name__ == "__main__":
