@@ -3,7 +3,7 @@ plant it trained on and on the "real" robot, with how its base drifts, over the 
 families that stand on one foot (stepping in place, kick).
 
     python benchmarks/floor_step.py RUN --data DATASET --calibrated CAL --delta DELTA [--families step,kick]
-        [--series]
+        [--series] [--combo N]
 
 RUN is the deploy folder (``results.json``, ``skills/*/policy.pt``); CAL and DELTA the corrections it trained (b) and
 (c) on. Per policy and plant, per motion: success, failure cause and policy step; then, on the stance foot (a sole
@@ -12,7 +12,8 @@ again (its distance from the reference's place, in the world [mm]), and at the f
 distance from its reference [m], its height error [m], tilt and yaw [deg]. A slide of millimetres with a base far
 off means the robot toppled over its stance foot rather than walking off. ``--series`` adds, for the first motion of
 each family, every 0.5 s: the base's offset from its reference (x, y) [m], tilt and yaw [deg], and each sole's
-distance from its reference place [mm] (``*``: the reference plants it).
+distance from its reference place [mm] (``*``: the reference plants it). ``--combo N`` plays N motions of the
+``combo`` family drawn from the validation stream instead (no held-out motion).
 """
 
 from __future__ import annotations
@@ -84,12 +85,15 @@ def main() -> None:
     p.add_argument("--delta", required=True, help="the delta action (c) trained with")
     p.add_argument("--families", default="step,kick")
     p.add_argument("--series", action="store_true", help="the first motion of each family every 0.5 s")
+    p.add_argument("--combo", type=int, default=0, help="N combo motions of the validation stream instead")
     args = p.parse_args()
 
     import torch
 
     from floor_run import held_out
+    from wresdyn.robot.description import load_robot
     from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
+    from wresdyn.skills.floor_motions import make_floor_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
     from wresdyn.skills.skill_ppo import load_skill
 
@@ -98,9 +102,17 @@ def main() -> None:
     res, task, floating, motions, real = held_out(run, args.data)
     fams = args.families.split(",")
     motions = [m for m in motions if m.family in fams]
+    if args.combo:
+        stand = load_robot(floating.source, gains=floating.gains)
+        motions = make_floor_motions(stand, floating, {"train": 0, "validation": args.combo}, res["config"]["duration"],
+                                     real.rate_hz, res["config"]["seed"], families=(), extra=("combo",))["validation"]
+        fams = ["combo"]
     runs = {"calibrated": args.calibrated, "delta_action": args.delta}
     seed = res["config"]["seed"] + 100
-    print(f"{run}: {len(motions)} held-out motions ({', '.join(fams)}), {task.decimation} samples per policy step")
+    print(f"{run}: {len(motions)} {'validation' if args.combo else 'held-out'} motions ({', '.join(fams)}), "
+          f"{task.decimation} samples per policy step")
+    if args.combo:
+        print("plans: " + "; ".join(f"{m.name} {' '.join(m.params['plan'])}" for m in motions), flush=True)
     for name in ("reference", *res["policies"]):
         policy = None if name == "reference" else load_skill(run / "skills" / name)
         setting = SETTING.get(name, "nominal")
