@@ -44,8 +44,9 @@ FLOOR_HELD_OUT_FAMILIES = ("step",)
 FLOOR_EXTRA_FAMILIES = ("combo",)
 """Families a benchmark may add to the training (and validation) motions; never held out."""
 COMBO_TRANSFER_S = (0.4, 1.0)
-"""Range of a combo motion's weight transfers [s]: over a sole's width of the way, the slowest keep the zero-moment
-point inside the soles, the fastest put it some 0.4 m outside them (stepping in place asks for 0.3 m)."""
+"""Range of a combo motion's weight transfers [s]: the slowest ask of the floor what the weight shifts and kicks do
+(the zero-moment point up to about 0.1 m outside the soles), the fastest across the stance some 0.5 m (stepping in
+place asks for 0.3 m)."""
 PLANTED_TOL = 0.002
 """A sole less than this above the lowest sole is planted [m]."""
 
