@@ -93,3 +93,13 @@ def test_a_fast_weight_transfer_needs_the_floor_to_pull(floating, motions):
     stance = np.where(step.planted[single, 0], step.tau[single, knee[0]], step.tau[single, knee[1]])
     # against each knee's share at rest, before the motion starts (measured 17.1 against 11.4 N*m)
     assert np.median(np.abs(stance)) > 1.3 * np.abs(step.tau[0, knee]).mean()
+
+
+def test_the_benchmark_takes_only_extra_families_that_are_never_held_out():
+    from wresdyn.errors import WresdynError
+    from wresdyn.experiments.deploy_config import FloorDeployConfig
+
+    assert FloorDeployConfig().extra_families == ()  # the benchmark's motions unchanged by default
+    assert FloorDeployConfig(extra_families=("combo",)).extra_families == ("combo",)
+    with pytest.raises(WresdynError, match="extra_families"):
+        FloorDeployConfig(extra_families=("step",))  # the held-out family cannot be trained on
