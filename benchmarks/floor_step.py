@@ -3,7 +3,7 @@ plant it trained on and on the "real" robot, with how its base drifts, over the 
 families that stand on one foot (stepping in place, kick).
 
     python benchmarks/floor_step.py RUN --data DATASET --calibrated CAL --delta DELTA [--families step,kick]
-        [--series] [--combo N]
+        [--series] [--combo N] [--slow D]
 
 RUN is the deploy folder (``results.json``, ``skills/*/policy.pt``); CAL and DELTA the corrections it trained (b) and
 (c) on. Per policy and plant, per motion: success, failure cause and policy step; then, on the stance foot (a sole
@@ -13,7 +13,9 @@ distance from its reference [m], its height error [m], tilt and yaw [deg]. A sli
 off means the robot toppled over its stance foot rather than walking off. ``--series`` adds, for the first motion of
 each family, every 0.5 s: the base's offset from its reference (x, y) [m], tilt and yaw [deg], and each sole's
 distance from its reference place [mm] (``*``: the reference plants it). ``--combo N`` plays N motions of the
-``combo`` family drawn from the validation stream instead (no held-out motion).
+``combo`` family drawn from the validation stream instead (no held-out motion); ``--slow D`` plays 4 stepping
+motions of D seconds instead (another seed's draws, not the held-out ones: the same keyframes, every transfer slower
+by D / the run's duration), with their zero-moment point's smallest margin in the planted soles.
 """
 
 from __future__ import annotations
@@ -86,6 +88,7 @@ def main() -> None:
     p.add_argument("--families", default="step,kick")
     p.add_argument("--series", action="store_true", help="the first motion of each family every 0.5 s")
     p.add_argument("--combo", type=int, default=0, help="N combo motions of the validation stream instead")
+    p.add_argument("--slow", type=float, default=0.0, help="4 stepping motions of this length [s] instead")
     args = p.parse_args()
 
     import torch
@@ -107,9 +110,22 @@ def main() -> None:
         motions = make_floor_motions(stand, floating, {"train": 0, "validation": args.combo}, res["config"]["duration"],
                                      real.rate_hz, res["config"]["seed"], families=(), extra=("combo",))["validation"]
         fams = ["combo"]
+    if args.slow:
+        from wresdyn.skills.floor_feasibility import floor_feasibility
+
+        stand = load_robot(floating.source, gains=floating.gains)
+        motions = make_floor_motions(stand, floating, {"heldout": 4}, args.slow, real.rate_hz,
+                                     res["config"]["seed"] + 1000, families=())["heldout"]
+        for m in motions:
+            m.name = m.name.replace("heldout", "slow")
+            margin = floor_feasibility(floating, m, real.rate_hz, every=5, skip=0.01).margin
+            print(f"{m.name}: {args.slow:g} s, ZMP margin min {1e3 * margin.min():+.0f} mm, outside the soles on "
+                  f"{100 * (margin < 0).mean():.1f} % of the samples", flush=True)
+        fams = ["step"]
     runs = {"calibrated": args.calibrated, "delta_action": args.delta}
     seed = res["config"]["seed"] + 100
-    print(f"{run}: {len(motions)} {'validation' if args.combo else 'held-out'} motions ({', '.join(fams)}), "
+    kind = "validation" if args.combo else "slowed" if args.slow else "held-out"
+    print(f"{run}: {len(motions)} {kind} motions ({', '.join(fams)}), "
           f"{task.decimation} samples per policy step")
     if args.combo:
         print("plans: " + "; ".join(f"{m.name} {' '.join(m.params['plan'])}" for m in motions), flush=True)
