@@ -1,6 +1,6 @@
 """Several seeds of the floor benchmark side by side: held-out and validation success, MPJPE and g-MPJPE per
-policy and seed, their mean, and the gap closed on g-MPJPE and MPJPE, from each run's ``results.json``
-(``wresdyn deploy --floor``).
+policy and seed, their mean, success per motion family, and the gap closed on g-MPJPE and MPJPE, from each run's
+``results.json`` (``wresdyn deploy --floor``).
 
     python benchmarks/floor_seeds_summary.py RUN0/results.json RUN1/results.json ...
 """
@@ -30,17 +30,18 @@ def main(paths: list[str]) -> None:
                   f"{sum(x['falls'] for x in m)} | {1e3 * np.mean([x['mpjpe'] for x in m]):.1f} "
                   f"(±{1e3 * np.std([x['mpjpe'] for x in m]):.1f}) | {1e3 * np.mean([x['g_mpjpe'] for x in m]):.0f} "
                   f"(±{1e3 * np.std([x['g_mpjpe'] for x in m]):.0f}) |")
-    print("\n## held-out success per motion family (sum over seeds)\n")
-    fams = sorted({m["motion"].rsplit("_", 1)[0] for m in runs[0]["real"]["heldout"]["reference"]["motions"]})
-    print("| policy | " + " | ".join(f.removeprefix("heldout_") for f in fams) + " |")
-    print("|---|" + "---|" * len(fams))
-    for p in policies:
-        cells = []
-        for f in fams:
-            hits = [m["success"] for r in runs for m in r["real"]["heldout"][p]["motions"]
-                    if m["motion"].rsplit("_", 1)[0] == f]
-            cells.append(f"{round(sum(hits))}/{len(hits)}")
-        print(f"| {p} | " + " | ".join(cells) + " |")
+    for split in ("heldout", "validation"):  # validation: where a choice is made
+        print(f"\n## {'held-out' if split == 'heldout' else split} success per motion family (sum over seeds)\n")
+        fams = sorted({m["motion"].rsplit("_", 1)[0] for m in runs[0]["real"][split]["reference"]["motions"]})
+        print("| policy | " + " | ".join(f.removeprefix(f"{split}_") for f in fams) + " |")
+        print("|---|" + "---|" * len(fams))
+        for p in policies:
+            cells = []
+            for f in fams:
+                hits = [m["success"] for r in runs for m in r["real"][split][p]["motions"]
+                        if m["motion"].rsplit("_", 1)[0] == f]
+                cells.append(f"{round(sum(hits))}/{len(hits)}")
+            print(f"| {p} | " + " | ".join(cells) + " |")
     print("\n## gap closed (a − x) / (a − d) on held-out motions, per seed\n")
     for key in ("gap_closed_g_mpjpe", "gap_closed_mpjpe"):
         for p in runs[0][key]:

@@ -5,8 +5,9 @@ without importing torch or Warp."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
-from ..choices import check_device, check_number
+from ..choices import check_choice, check_device, check_number
 
 __all__ = ["DeployConfig", "FloorDeployConfig"]
 
@@ -95,12 +96,21 @@ class FloorDeployConfig(_BenchmarkSizes):
     oracle_beside: bool | None = None
     """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU, where the
     oracle's real robot steps on otherwise idle host cores)."""
+    extra_families: tuple[Literal["combo"], ...] = ()
+    """Motion families the policies also train on, ``train_per_family`` each (validation draws them too, the held-out
+    motions never): ``combo``, compositions of the weight shifts' and kicks' keyframes with transfers slow and too
+    fast to follow (:mod:`wresdyn.skills.floor_motions`)."""
     seed: int = 0
     """Seed of the motions and of PPO."""
     device: str = "cpu"
     """Device of PPO and the simulated plants (the real robot always steps on the CPU)."""
 
     _prefix = "floor"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for f in self.extra_families:
+            check_choice(f, Literal["combo"], "floor.extra_families")
 
     @classmethod
     def full(cls, **kw) -> "FloorDeployConfig":

@@ -97,7 +97,7 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     floating = load_robot(robot.source, gains=robot.gains, base="floating")
     rate = float(dataset.rate_hz)
-    motions = make_floor_motions(robot, floating, counts, cfg.duration, rate, cfg.seed)
+    motions = make_floor_motions(robot, floating, counts, cfg.duration, rate, cfg.seed, extra=cfg.extra_families)
     log("[1/4] floor motions: " + ", ".join(f"{s} {len(motions[s])}" for s in counts)
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
     t0 = time.perf_counter()
@@ -109,6 +109,8 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     imu = (task.gyro_noise, task.gravity_noise)
     runs = {"calibrated": calibrated, "delta_action": delta}
     meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration, "floor": True}}
+    if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
+        meta["motions"]["extra"] = list(cfg.extra_families)
     wall = {}
     # With PPO on a GPU the oracle's real robot (MuJoCo C on the host's cores) trains beside (b) and (c): it starts
     # as soon as (a), which it is fine-tuned from, is done.

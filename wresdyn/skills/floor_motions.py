@@ -13,7 +13,12 @@ included) is above the stance sole, so a quasi-static reference can stand on one
 - ``kick``: weight onto one foot, the other sole pulled back and up, thrust forward and returned, weight back;
 - ``wave``: one arm raised sideways waves while the legs hold the stance;
 - ``step`` (held out from training by default): stepping in place, weight over one foot, the other lifted and
-  set down, then the other side.
+  set down, then the other side;
+- ``combo`` (an optional training family, :data:`FLOOR_EXTRA_FAMILIES`): compositions of the weight shifts' and
+  kicks' keyframes, as many as fit the motion (up to three) in a random order with random durations: single-leg
+  support on either foot, the weight carried straight across from one foot to the other, transfers slow enough to
+  follow and too fast for any robot to follow (the floor would have to pull), where a policy must give up tracking
+  to keep its balance. The lifted foot only ever kicks (back, then forward); it is never just lifted and set down.
 """
 
 from __future__ import annotations
@@ -28,14 +33,20 @@ from ..robot.ground import standing_state
 from ..robot.pinocchio_model import build_pinocchio
 from .motions import _arm_keys, _keyframes, _leg_keys, stance
 
-__all__ = ["FLOOR_FAMILIES", "FLOOR_TRAIN_FAMILIES", "FLOOR_HELD_OUT_FAMILIES", "FloorMotion", "make_floor_motions",
-           "PLANTED_TOL"]
+__all__ = ["FLOOR_FAMILIES", "FLOOR_TRAIN_FAMILIES", "FLOOR_HELD_OUT_FAMILIES", "FLOOR_EXTRA_FAMILIES", "FloorMotion",
+           "make_floor_motions", "PLANTED_TOL"]
 
-FLOOR_FAMILIES = ("squat", "weight_shift", "kick", "wave", "step")
+FLOOR_FAMILIES = ("squat", "weight_shift", "kick", "wave", "step", "combo")
 FLOOR_TRAIN_FAMILIES = ("squat", "weight_shift", "kick", "wave")
 """Families the floor skills train on (other draws of them are the validation and held-out motions)."""
 FLOOR_HELD_OUT_FAMILIES = ("step",)
 """The family no floor skill trains on."""
+FLOOR_EXTRA_FAMILIES = ("combo",)
+"""Families a benchmark may add to the training (and validation) motions; never held out."""
+COMBO_TRANSFER_S = (0.4, 1.0)
+"""Range of a combo motion's weight transfers [s]: the slowest ask of the floor what the weight shifts and kicks do
+(the zero-moment point up to about 0.1 m outside the soles), the fastest across the stance some 0.5 m (stepping in
+place asks for 0.3 m)."""
 PLANTED_TOL = 0.002
 """A sole less than this above the lowest sole is planted [m]."""
 
@@ -124,7 +135,39 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
             times += [t0 + 0.3 * seg, t0 + 0.5 * seg, t0 + 0.7 * seg, t0 + 0.85 * seg]
             keys += [w, k, w, w]
         return times + [0.97 * duration, duration], keys + [home, home], {"lift_m": lift, "first_foot": first}
+    if family == "combo":
+        return _combo_keys(rng, home, duration, over, up, fwd)
     raise ValueError(family)
+
+
+def _combo_keys(rng, home, duration: float, over, up, fwd):
+    """Keyframes of a ``combo`` motion: see the module docstring. Events are drawn until the next would leave no
+    time to return (at least one); the plan is then played faster where it overruns the motion."""
+    times, keys, plan = [0.0], [home], []
+    t = rng.uniform(0.05, 0.15) * duration
+    for _ in range(3):
+        kind, f = ("shift", "kick", "kick")[int(rng.integers(3))], int(rng.integers(2))
+        if kind == "shift":  # weight over sole f, a weight shift's fraction of the way, held there
+            gaps, event = rng.uniform(*COMBO_TRANSFER_S, size=1), [over(f, rng.uniform(0.5, 1.0))]
+            gaps, event = np.append(gaps, rng.uniform(0.05, 0.4)), event + event
+        else:  # weight over the other sole, sole f kicks back, forward and is set down
+            w = over(1 - f)
+            back, out_x, out_z = rng.uniform(0.02, 0.05), rng.uniform(0.06, 0.12), rng.uniform(0.04, 0.08)
+            k1, k2 = w.copy(), w.copy()
+            k1[f] += -back * fwd + 0.6 * out_z * up
+            k2[f] += out_x * fwd + out_z * up
+            gaps = np.concatenate([rng.uniform(*COMBO_TRANSFER_S, size=1), rng.uniform(0.2, 0.35, size=3)])
+            event = [w, k1, k2, w]
+        if plan and t + gaps.sum() + COMBO_TRANSFER_S[0] > duration:
+            break
+        times += list(t + np.cumsum(gaps))
+        keys += event
+        t = times[-1]
+        plan.append(f"{kind}{f}")
+    t += rng.uniform(*COMBO_TRANSFER_S)
+    times, keys = times + [t], keys + [home]
+    scale = min(1.0, 0.95 * duration / t)
+    return [x * scale for x in times] + [duration], keys + [home], {"plan": plan, "time_scale": scale}
 
 
 def _place(robot: Robot, floating: Robot, feet: np.ndarray, q: np.ndarray):
@@ -173,9 +216,10 @@ def make_floor_motion(robot: Robot, floating: Robot, ik: FootIK, family: str, du
 
 def make_floor_motions(robot: Robot, floating: Robot, counts: dict[str, int], duration: float = 4.0,
                        rate_hz: float = 500.0, seed: int = 0, families=FLOOR_TRAIN_FAMILIES,
-                       held_out=FLOOR_HELD_OUT_FAMILIES) -> dict[str, list[FloorMotion]]:
+                       held_out=FLOOR_HELD_OUT_FAMILIES, extra=()) -> dict[str, list[FloorMotion]]:
     """Draw the floor motion set: ``counts`` maps a split to motions per family (``families`` for every split,
-    ``held_out`` families in ``heldout`` only); each split draws from its own stream.
+    ``held_out`` families in ``heldout`` only, ``extra`` families in every other split, drawn after the others so
+    that those are the same with or without them); each split draws from its own stream.
 
     Args:
         robot: The robot on its stand (fixed base, sole frames ``left_sole``/``right_sole``): the IK's frame.
@@ -191,7 +235,7 @@ def make_floor_motions(robot: Robot, floating: Robot, counts: dict[str, int], du
     for s, (split, per) in enumerate(counts.items()):
         rng = np.random.default_rng([seed, s, 7])
         first = int(np.random.default_rng([seed, s, 1]).integers(2))
-        fams = tuple(families) + (tuple(held_out) if split == "heldout" else ())
+        fams = tuple(families) + (tuple(held_out) if split == "heldout" else tuple(extra))
         out[split] = [make_floor_motion(robot, floating, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}", shift,
                                         side=("left", "right")[(first + i) % 2] if f == "wave" else None)
                       for f in fams for i in range(per)]

@@ -89,6 +89,7 @@ def write_floor_report(out, floating, results: dict, rollouts: dict, motions, po
         anim = (f"\n`deployed_heldout.usda`: held-out motion `{motions[i].name}` on the real robot's floor, side by side "
                 f"along +y: {', '.join(traj)} (a failed rollout holds its last pose).\n")
     cfg, task = results["config"], results["task"]
+    extra = "".join(f", {f} (training and validation only)" for f in cfg.get("extra_families", ()))
     text = f"""# Zero-shot skills on the floor, on the "real" robot
 
 Robot `{floating.source.name}` with a free base on a floor; the "real" robot is the MuJoCo C model with the dataset's
@@ -97,7 +98,7 @@ mismatch (physics, {1e3 * results['mismatch']['delay']:g} ms delay, torque limit
 dataset, with no floor data. Skills: motion-tracking policies (PPO, rsl-rl, asymmetric actor-critic: the actor sees
 joint states, the IMU, the reference and its last action) at {policy_rate_hz:g} Hz. Motions per family: train
 {cfg['train_per_family']}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (squat,
-weight shift, kick, wave; the held-out set adds stepping in place, a family no policy trained on),
+weight shift, kick, wave{extra}; the held-out set adds stepping in place, a family no policy trained on),
 {cfg['duration']:g} s each. (a): {cfg['iterations']} PPO iterations × {cfg['envs']} worlds in the nominal simulator;
 (b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations ((d) on {cfg['oracle_envs'] or cfg['envs']} worlds). Every
 policy is its last iterate; nothing was selected on the real robot or on held-out motions.
