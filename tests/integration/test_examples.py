@@ -1,4 +1,5 @@
-"""Every example runs end to end (small sizes), so examples never rot."""
+"""Every example imports and parses its flags here; the runs end to end (small sizes) that another test already
+covers through the same code path are opt-in (``--run-slow``), so examples never rot and the suite stays short."""
 
 import json
 import re
@@ -21,6 +22,21 @@ def _draws(png, rgb, pixels: int = 50) -> bool:
     """Whether the picture has at least ``pixels`` pixels of colour ``rgb`` (0-255): a line of it is drawn."""
     img = np.asarray(Image.open(png).convert("RGB")).astype(int)
     return int((np.abs(img - rgb).sum(axis=-1) < 30).sum()) >= pixels
+
+
+@pytest.mark.parametrize("example", sorted(p.name for p in (ROOT / "examples").glob("*.py") if p.name != "quickstart.py"))
+def test_every_example_imports_and_answers_help(example, monkeypatch, capsys):
+    """Loaded as a module (not run), its ``main`` prints the usage for ``--help``: imports, names it calls at import
+    time and its flags are checked without the run. The quickstart has no flags; the docs test runs it."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"example_{example[:-3]}", ROOT / "examples" / example)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    monkeypatch.setattr(sys, "argv", [example, "--help"])
+    with pytest.raises(SystemExit) as done:
+        mod.main()
+    assert done.value.code == 0 and "usage:" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
@@ -46,6 +62,7 @@ def test_load_custom_robot_without_gains_says_how_to_supply_them():
     assert "no PD gains" in res.stderr and "--gains" in res.stderr and "nan" not in res.stdout.lower()
 
 
+@pytest.mark.slow  # the ablation it drives runs end to end in tests/experiments/test_ablation.py
 def test_ppo_vs_gradient_prints_the_table_of_its_runs(tmp_path):
     out = tmp_path / "run"
     res = _run("examples/ppo_vs_gradient.py", "--test", "--out", out)

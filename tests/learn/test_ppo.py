@@ -275,6 +275,7 @@ def test_export_loads_back_with_the_same_outputs(tmp_path, which):
         np.testing.assert_allclose(out[0], e.numpy(), atol=1e-5)
 
 
+@pytest.mark.slow  # the same example runs in tests/integration/test_examples.py, which checks its report too
 def test_example_smoke_run(tmp_path):
     import subprocess
     import sys

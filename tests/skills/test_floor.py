@@ -199,6 +199,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
 
 
+@pytest.mark.slow  # its code path is the floor deploy end to end above; examples' imports and flags: test_examples
 def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
     import subprocess
     import sys

@@ -224,6 +224,7 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     assert (out / "deploy.log").read_text().count("wresdyn deploy: skills on the stand") == 3
 
 
+@pytest.mark.slow  # its code path is test_wresdyn_deploy_end_to_end_and_resume's; examples' imports and flags: test_examples
 def test_skill_zero_shot_example_runs(tmp_path, humanoid, data):
     import subprocess
     import sys
