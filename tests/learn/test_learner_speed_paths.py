@@ -1,5 +1,5 @@
 """The learners' speed paths at tiny sizes: PPO across processes (torchrun, rsl-rl's multi-GPU PPO, here over gloo on
-the CPU), stopping at a validation target (time to fidelity), ablation cells spread over GPUs, and (CUDA only) the
+the CPU: the residual and the floor skills), stopping at a validation target (time to fidelity), ablation cells spread over GPUs, and (CUDA only) the
 graph-replayed environment step and gradient-fit iteration against the eager ones."""
 
 import dataclasses
@@ -66,6 +66,57 @@ def test_torchrun_refuses_worlds_that_do_not_split(tmp_path):
     assert res.returncode != 0
     assert any("does not split over 2 processes" in ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn"))
     assert not (tmp_path / "odd").exists()
+
+
+SKILL_SCRIPT = """
+import sys
+from pathlib import Path
+
+import torch
+
+from wresdyn.learn.ppo_runner import Ranks
+from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
+from wresdyn.skills.floor_motions import make_floor_motions
+from wresdyn.skills.plants import SimPlant
+from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, train_skill
+
+torch.set_num_threads(1)
+out, iterations, envs = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+robot = load_robot(DEFAULT_ROBOT)
+floating = load_robot(robot.source, base="floating")
+motions = make_floor_motions(robot, floating, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3)
+cfg = SkillPPOConfig(num_envs=envs, iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
+                     num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
+n, device = rank_share(cfg.num_envs, cfg.device)
+env = FloorTrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"], FloorTaskConfig(decimation=5),
+                       seed=Ranks.from_env().rank, device=device)
+s = train_skill(env, cfg, out, log=lambda *_: None)
+print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
+"""
+
+
+def test_torchrun_trains_a_floor_skill_on_two_processes_and_resumes(tmp_path):
+    """The floor benchmark's skill PPO data-parallel as the residual's: each process its share of the worlds, rank 0
+    writes the run, every rank resumes from the same checkpoint."""
+    script = tmp_path / "skill.py"
+    script.write_text(SKILL_SCRIPT)
+    run = tmp_path / "skill"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script), str(run)]
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.getcwd())
+    res = subprocess.run([*cmd, "2", "4"], capture_output=True, text=True, env=env, timeout=600)
+    assert res.returncode == 0, _failure(res)
+    assert "Synchronizing parameters for rank 1" in res.stdout
+    # both ranks ran 2 iterations of 2 worlds x 4 steps, and count both ranks' env-steps
+    assert res.stdout.count("SUMMARY 2 32 2") == 2, res.stdout[-2000:]
+    s = json.loads((run / "train_summary.json").read_text())
+    assert s["processes"] == 2 and s["collect_s_per_iteration"] > 0 and s["learn_s_per_iteration"] > 0
+    assert sorted(p.name for p in run.glob("model_*.pt")) == ["model_0.pt", "model_1.pt"]
+    assert (run / "policy.pt").is_file()
+    (run / "model_1.pt").unlink()  # killed after iteration 0: every rank resumes from model_0.pt
+    res = subprocess.run([*cmd, "3", "4"], capture_output=True, text=True, env=env, timeout=600)
+    assert res.returncode == 0, _failure(res)
+    assert res.stdout.count("SUMMARY 2 32 2") == 2 and (run / "model_2.pt").is_file()
 
 
 def test_learners_stop_at_the_validation_target(robot, data, tmp_path):
