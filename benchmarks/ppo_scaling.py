@@ -159,7 +159,6 @@ def _throughput(ranks, robot, data, case: str, device: str, warmup: int, iterati
     gc.collect()
     if torch.cuda.is_available():
         torch.cuda.empty_cache()
-    ranks.close()  # each case's runner starts the process group of its own
     return row
 
 
@@ -177,6 +176,8 @@ def _time_to_target(ranks, robot, data, args) -> dict:
     out = Path(args.out) / f"ttf_{ranks.world}x{args.envs // ranks.world}{'_one_sync' if args.one_sync else ''}"
     s = train(data, robot, cfg, out, resume=False, stop_below=target, log=lambda *_: None)
     curve = s["validation_curve"]
+    if not ranks.main:  # rank 0 alone scores on validation
+        return {"case": "ttf", "processes": ranks.world}
     hit = next((r for r in curve if r["validation"] <= target), None)
     return {"case": f"ttf residual:{args.envs}" + ("+one_sync" if args.one_sync else ""), "processes": ranks.world,
             "envs": args.envs, "pd_only": pd_only, "target": target, "ratio": args.ttf,
@@ -249,11 +250,9 @@ def main() -> None:
     robot = load_robot(DEFAULT_ROBOT)
     data = load_dataset(args.data, robot=robot)
     rows, motions_cache = [], {}
-    if args.ttf is not None:
-        if not args.out:
-            raise SystemExit("ppo_scaling.py: --ttf needs --out")
-        rows.append(_time_to_target(ranks, robot, data, args))
-    for case in args.cases:
+    if args.ttf is not None and not args.out:
+        raise SystemExit("ppo_scaling.py: --ttf needs --out")
+    for case in args.cases:  # every case's runner joins the process group of the first
         it = args.skill_iterations if case.startswith("skill") else args.iterations
         row = _throughput(ranks, robot, data, case, args.device, args.warmup, it, motions_cache, args.skill_motions)
         rows.append(row)
@@ -261,6 +260,9 @@ def main() -> None:
             print(f"{case} x {ranks.world} process(es): {row['s_per_iteration']:.4f} s/it (collect {row['collect_s']:.4f}"
                   f" + learn {row['learn_s']:.4f}), {row['training_steps_per_s'] / 1e3:.1f}k training env-steps/s; "
                   f"built in {row['build_s']:.0f} s, warm-up {row['warmup_s']:.0f} s", flush=True)
+    if args.ttf is not None:  # last: a finished run tears the process group down
+        rows.append(_time_to_target(ranks, robot, data, args))
+    ranks.close()
     if ranks.main:
         name = torch.cuda.get_device_name(0) if args.device.startswith("cuda") else "cpu"
         for r in rows:

@@ -86,3 +86,17 @@ def test_a_one_sync_run_checkpoints_as_rsl_rl_and_resumes_with_its_update(robot,
                                                                             one_sync_update=False)), run)
     assert s["iterations_this_session"] == 1
     assert json.loads((run / "config.json").read_text())["config"]["ppo"]["one_sync_update"] is False
+
+
+def test_rsl_rls_options_reach_its_runner_config():
+    from wresdyn.errors import WresdynError
+
+    cfg = set_fields(tiny(), {"ppo.mixed_precision": True, "ppo.compile_mode": "default", "ppo.one_sync_update": True})
+    rcfg = runner_cfg(cfg)
+    assert rcfg["algorithm"]["use_mixed_precision"] is True and rcfg["torch_compile_mode"] == "default"
+    assert rcfg["algorithm"]["class_name"] == "wresdyn.learn.ppo_update:OneSyncPPO"
+    plain = runner_cfg(tiny())  # the defaults: rsl-rl's PPO as before
+    assert plain["algorithm"]["class_name"] == "PPO" and plain["torch_compile_mode"] is None
+    assert plain["algorithm"]["use_mixed_precision"] is False
+    with pytest.raises(WresdynError, match="compile_mode"):
+        set_fields(tiny(), {"ppo.compile_mode": "reduce-overhead"})

@@ -92,12 +92,19 @@ class Runner(OnPolicyRunner):
 
     def _configure_multi_gpu(self) -> None:
         """rsl-rl's multi-GPU set-up (NCCL, one GPU per process); CPU processes under torchrun (tests, CPU nodes)
-        get the same data-parallel PPO over gloo, NCCL being GPU-only."""
+        get the same data-parallel PPO over gloo, NCCL being GPU-only. A later runner of the same process (the
+        next skill of a benchmark) joins the process group the first one started: a default group started again
+        after ``destroy_process_group`` reuses the first one's rendezvous keys and waits on its closed ports."""
         import torch
 
         r = Ranks.from_env()
-        if str(self.device).startswith("cuda") or r.world <= 1:
+        cuda = str(self.device).startswith("cuda")
+        if r.world <= 1 or (cuda and not torch.distributed.is_initialized()):
             return super()._configure_multi_gpu()
+        if cuda:
+            if self.device != f"cuda:{r.local_rank}":
+                raise RunError(f"device {self.device} is not this process's cuda:{r.local_rank} (LOCAL_RANK)")
+            torch.cuda.set_device(r.local_rank)
         self.gpu_world_size, self.is_distributed = r.world, True
         self.gpu_local_rank, self.gpu_global_rank = r.local_rank, r.rank
         self.cfg["multi_gpu"] = {"global_rank": r.rank, "local_rank": r.local_rank, "world_size": r.world}

@@ -83,7 +83,8 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
             named after the run folder (the policy).
 
     Under torchrun ``env`` holds this process's share of ``cfg.num_envs`` worlds on its device (:func:`rank_share`);
-    the summary's counts are those of rank 0's worlds, its env-steps those of every process.
+    the summary's counts are those of rank 0's worlds, its env-steps those of every process. The process group stays
+    up for the next skill of the process; ``Ranks.from_env().close()`` ends it once the last is trained.
 
     Returns:
         The summary written to ``train_summary.json``.
@@ -140,7 +141,6 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         save_program(actor.as_jit().cpu().eval(), (obs,), ({0: torch.export.Dim("batch", min=1)},),
                      run_dir / "policy.pt", {"kind": "skill"})
         run.write_summary(summary)
-    ranks.close()  # every rank, once rank 0 has written: the next skill's runner starts a process group of its own
     return summary
 
 
