@@ -170,16 +170,19 @@ def _time_to_target(ranks, robot, data, args) -> dict:
     pd_only = ValidationScore(robot, data.split("validation"), data.rate_hz, device=ranks.device(args.device),
                               weights=data.fit_weights())()
     target = pd_only / args.ttf
+    opts = "+".join(o for o in (["one_sync"] if args.one_sync else []) + args.ttf_options.split("+") if o)
+    case = f"residual:{args.envs}" + (f"+{opts}" if opts else "")
+    fields = {f"ppo.{k}": v for k, v in _parse_case(case)[2].items()}
     cfg = set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
                                         "ppo.iterations": args.max_iterations, "ppo.select_every": args.check,
-                                        "ppo.save_interval": 10**6, "ppo.one_sync_update": args.one_sync})
-    out = Path(args.out) / f"ttf_{ranks.world}x{args.envs // ranks.world}{'_one_sync' if args.one_sync else ''}"
+                                        "ppo.save_interval": 10**6, **fields})
+    out = Path(args.out) / f"ttf_{ranks.world}x{args.envs // ranks.world}_{opts or 'rsl_rl'}"
     s = train(data, robot, cfg, out, resume=False, stop_below=target, log=lambda *_: None)
     curve = s["validation_curve"]
     if not ranks.main:  # rank 0 alone scores on validation
         return {"case": "ttf", "processes": ranks.world}
     hit = next((r for r in curve if r["validation"] <= target), None)
-    return {"case": f"ttf residual:{args.envs}" + ("+one_sync" if args.one_sync else ""), "processes": ranks.world,
+    return {"case": f"ttf {case}", "processes": ranks.world,
             "envs": args.envs, "pd_only": pd_only, "target": target, "ratio": args.ttf,
             "reached_at_iteration": hit["iteration"] if hit else None, "wall_s": hit["wall_s"] if hit else None,
             "iterations_run": s["iterations_this_session"], "best_validation": min(r["validation"] for r in curve),
@@ -228,6 +231,7 @@ def main() -> None:
     p.add_argument("--ttf", type=float, default=None, help="time to PD-only validation error / TTF instead")
     p.add_argument("--envs", type=int, default=4096, help="--ttf: worlds of all processes")
     p.add_argument("--one-sync", action="store_true", help="--ttf: with ppo.one_sync_update")
+    p.add_argument("--ttf-options", default="", help="--ttf: a case's options, e.g. one_sync+mb2")
     p.add_argument("--check", type=int, default=25, help="--ttf: validation every this many iterations")
     p.add_argument("--max-iterations", type=int, default=400, help="--ttf: iterations at most")
     p.add_argument("--out", default=None, help="--ttf: folder of the runs")
@@ -254,7 +258,13 @@ def main() -> None:
         raise SystemExit("ppo_scaling.py: --ttf needs --out")
     for case in args.cases:  # every case's runner joins the process group of the first
         it = args.skill_iterations if case.startswith("skill") else args.iterations
-        row = _throughput(ranks, robot, data, case, args.device, args.warmup, it, motions_cache, args.skill_motions)
+        try:
+            row = _throughput(ranks, robot, data, case, args.device, args.warmup, it, motions_cache, args.skill_motions)
+        except Exception as e:  # one process: the other cases still run (across processes a rank left alone hangs)
+            if ranks.world > 1:
+                raise
+            print(f"{case}: FAILED {type(e).__name__}: {str(e)[:300]}", flush=True)
+            continue
         rows.append(row)
         if ranks.main:
             print(f"{case} x {ranks.world} process(es): {row['s_per_iteration']:.4f} s/it (collect {row['collect_s']:.4f}"

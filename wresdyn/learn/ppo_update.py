@@ -7,10 +7,11 @@ the log. With 5 epochs x 4 mini-batches that is ~100 waits per iteration, each o
 host launches the next kernels, and across processes each wait meets the other ranks' collectives in lock-step.
 
 :class:`OneSyncPPO` computes the same update with the learning rate kept on the device: the KL test is a ``torch.where``
-of the same rule (Schulman et al. 2017's adaptive KL penalty as rsl-rl runs it: divide by 1.5 above twice the target,
-multiply by 1.5 below half of it, within [1e-5, 1e-2]), Adam takes the rate as a tensor, and across processes every
-rank applies the rule to the same all-reduced KL (packed with the gradients into one all-reduce per mini-batch)
-instead of receiving it from rank 0. The losses and the final rate are read back once, at the end.
+of rsl-rl's adaptive schedule (divide the rate by 1.5 where the mini-batch's KL exceeds twice the target, multiply it
+by 1.5 below half of it, within [1e-5, 1e-2]), Adam takes the rate as a tensor, and across processes every rank
+applies the rule to the same all-reduced KL (packed with the gradients into one all-reduce per mini-batch) instead of
+receiving it from rank 0. The losses and the final rate are read back once, at the end, where rsl-rl's observation
+normalisers (run unchanged) also wait on the device to upload their sample counts.
 
 Only the plain case takes this path (a feed-forward actor and critic, no RND, no symmetry); anything else runs
 rsl-rl's own update. Checkpoints are rsl-rl's: the learning rate is saved as a number.
@@ -43,8 +44,12 @@ class OneSyncPPO(PPO):
 
     def _device_lr(self) -> torch.Tensor:
         """The learning rate as a 0-d float64 tensor on the device, set in every parameter group (on CUDA Adam then
-        runs ``capturable``: its step counts live on the device too, as a tensor rate needs)."""
-        lr = torch.tensor(float(self.learning_rate), dtype=torch.float64, device=self.device)
+        runs ``capturable``: its step counts live on the device too, as a tensor rate needs). The tensor is kept
+        and filled in place: a tensor made from a number would wait on the device to upload it."""
+        lr = getattr(self, "_lr", None)
+        if lr is None:
+            lr = self._lr = torch.zeros((), dtype=torch.float64, device=self.device)
+        lr.fill_(float(self.learning_rate))
         cuda = torch.device(self.device).type == "cuda"
         for group in self.optimizer.param_groups:
             group["lr"] = lr
