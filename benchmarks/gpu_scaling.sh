@@ -9,7 +9,8 @@
 # Environment: N (residual worlds per GPU, 4096), SN (skill worlds per GPU, 4096: the floor benchmark's full size),
 # ITERS (timed residual iterations per case, 20), SKILL_ITERS (8), TTF (target: PD-only validation error / TTF,
 # 2.0; 0 skips it), TTF_MAX (iterations at most, 300), TTF_CHECK (validation every, 25), TTF_ONE_SYNC (1: the
-# one-sync update; 0: rsl-rl's), OPTIONS (1: rsl-rl's options' throughput on one GPU; 0 skips it), PROFILE (1: the update's
+# one-sync update; 0: rsl-rl's), TTF_MORE (more time-to-target runs on one GPU, each a case's options or rsl_rl:
+# "rsl_rl one_sync+mb2"; none by default), OPTIONS (1: rsl-rl's options' throughput on one GPU; 0 skips it), PROFILE (1: the update's
 # profile at the end; 0 skips it), PYTHON (python3), DEVICE (cuda; cpu runs every step at tiny sizes over gloo, the
 # check before a GPU run: DEVICE=cpu N=16 SN=8 ITERS=2 SKILL_ITERS=1 TTF_MAX=4 TTF_CHECK=2 EXTRA="--warmup 1
 # --skill-motions 1" bash benchmarks/gpu_scaling.sh OUT), EXTRA (more arguments of ppo_scaling.py).
@@ -38,10 +39,11 @@ step() {  # step NAME COMMAND...: its output in OUT/NAME.txt, its wall-clock on 
 }
 { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || echo "no nvidia-smi"
   $py -c "import torch, warp, rsl_rl; print('torch', torch.__version__, 'warp', warp.__version__)"
-  git log -1 --format='commit %h %s' || true; } > "$out/machine.txt" 2>&1
+  git log -1 --format='commit %h %s' && git diff --quiet HEAD -- wresdyn benchmarks || echo "(with uncommitted changes)"
+} > "$out/machine.txt" 2>&1
 cat "$out/machine.txt"
 # 0. compile and cache every kernel once (the replay solver, MuJoCo-Warp on the floor, CUDA graphs)
-step warmup run 1 ppo_scaling.py --cases residual:256 skill:256 --iterations 1 --skill-iterations 1 $extra
+step warmup run 1 ppo_scaling.py --cases "residual:$n" "skill:$sn" --iterations 1 --skill-iterations 1 $extra
 # 1. one GPU: N and 2N worlds
 step one_gpu run 1 ppo_scaling.py $its $extra --json "$out/one_gpu.json" --cases \
   "residual:$n" "residual:$((2 * n))" "residual:$n+one_sync" "residual:$((2 * n))+one_sync" \
@@ -57,6 +59,11 @@ if [[ $ttf != 0 ]]; then
   [[ ${TTF_ONE_SYNC:-1} != 0 ]] && targs+=(--one-sync)
   step ttf_one_gpu run 1 ppo_scaling.py "${targs[@]}" --envs "$n" --json "$out/ttf_one_gpu.json"
   step ttf_two_gpus run 2 ppo_scaling.py "${targs[@]}" --envs "$((2 * n))" --json "$out/ttf_two_gpus.json"
+  for opts in ${TTF_MORE:-}; do  # more updates on one GPU, e.g. TTF_MORE="rsl_rl one_sync+mb2"
+    step "ttf_one_gpu_${opts//+/-}" run 1 ppo_scaling.py --ttf "$ttf" --max-iterations "${TTF_MAX:-300}" \
+      --check "${TTF_CHECK:-25}" --out "$out/ttf" --envs "$n" --ttf-options "${opts/rsl_rl/}" \
+      --json "$out/ttf_one_gpu_${opts//+/-}.json"
+  done
   $py benchmarks/ppo_scaling.py --table "$out"/ttf_*.json | tee -a "$out/table.txt"
 fi
 # 4. what rsl-rl offers, one GPU at N worlds: mixed precision, torch.compile, fewer mini-batches (their effect on
