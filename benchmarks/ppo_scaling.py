@@ -190,6 +190,14 @@ def _time_to_target(ranks, robot, data, args) -> dict:
             "curve": [(r["iteration"], round(r["validation"], 5), round(r.get("wall_s", 0.0), 2)) for r in curve]}
 
 
+def _rate(x: float) -> str:
+    """env-steps/s, 3 significant figures: ``1.09M``, ``668k``, ``412``."""
+    for unit, scale in (("M", 1e6), ("k", 1e3)):
+        if x >= scale:
+            return f"{x / scale:.3g}{unit}"
+    return f"{x:.3g}"
+
+
 def table(paths) -> None:
     """Print the rows of the JSON files ``paths`` with each several-process row's scaling efficiency."""
     rows = [r for p in paths for r in json.loads(Path(p).read_text())["rows"]]
@@ -205,7 +213,7 @@ def table(paths) -> None:
         eff = (f"{100 * r['training_steps_per_s'] / (r['processes'] * one['training_steps_per_s']):.0f} %"
                if one is not None and r["processes"] > 1 else "")
         print(f"| {r['case']} | {r['processes']} | {r['envs_per_process']} | {r['s_per_iteration']:.4f} | "
-              f"{r['collect_s']:.4f} / {r['learn_s']:.4f} | {r['training_steps_per_s'] / 1e3:.1f}k | {eff} |")
+              f"{r['collect_s']:.4f} / {r['learn_s']:.4f} | {_rate(r['training_steps_per_s'])} | {eff} |")
     ttf = [r for r in rows if r["case"].startswith("ttf")]
     if ttf:
         print("\n| time to target | processes | target [rad] | reached at iteration | training wall-clock [s] | "
@@ -215,7 +223,7 @@ def table(paths) -> None:
             wall = f"{r['wall_s']:.1f}" if r["wall_s"] is not None else f"not reached in {r['iterations_run']}"
             print(f"| {r['case']} | {r['processes']} | {r['target']:.4f} (PD-only / {r['ratio']:g}) | "
                   f"{r['reached_at_iteration']} | {wall} | {r['best_validation']:.4f} | "
-                  f"{r['training_steps_per_s'] / 1e3:.1f}k |")
+                  f"{_rate(r['training_steps_per_s'])} |")
 
 
 def main() -> None:
@@ -268,7 +276,7 @@ def main() -> None:
         rows.append(row)
         if ranks.main:
             print(f"{case} x {ranks.world} process(es): {row['s_per_iteration']:.4f} s/it (collect {row['collect_s']:.4f}"
-                  f" + learn {row['learn_s']:.4f}), {row['training_steps_per_s'] / 1e3:.1f}k training env-steps/s; "
+                  f" + learn {row['learn_s']:.4f}), {_rate(row['training_steps_per_s'])} training env-steps/s; "
                   f"built in {row['build_s']:.0f} s, warm-up {row['warmup_s']:.0f} s", flush=True)
     if args.ttf is not None:  # last: a finished run tears the process group down
         rows.append(_time_to_target(ranks, robot, data, args))

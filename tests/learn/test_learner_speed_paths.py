@@ -76,7 +76,8 @@ def test_torchrun_one_sync_update_trains_as_rsl_rls(tmp_path):
         for name, t in a[key].items():
             torch.testing.assert_close(b[key][name], t, rtol=1e-4, atol=1e-5, msg=f"{key} {name}")
     lr = [w["optimizer_state_dict"]["param_groups"][0]["lr"] for w in (a, b)]
-    assert lr[1] == pytest.approx(lr[0], rel=1e-9) and lr[0] != 1e-3  # the rate moved, the same way on both
+    # the rate moved, the same way on both; rsl-rl broadcasts it as a float32 tensor, so its rate is rounded to float32
+    assert lr[1] == pytest.approx(lr[0], rel=1e-6) and lr[0] != 1e-3
 
 
 def test_torchrun_refuses_worlds_that_do_not_split(tmp_path):
@@ -107,12 +108,11 @@ motions = make_floor_motions(robot, floating, {"train": 1}, duration=1.0, rate_h
 cfg = SkillPPOConfig(num_envs=envs, iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
                      num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
 n, device = rank_share(cfg.num_envs, cfg.device)
-env = FloorTrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"], FloorTaskConfig(decimation=5),
-                       seed=Ranks.from_env().rank, device=device)
-s = train_skill(env, cfg, out, log=lambda *_: None)
-print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
-s = train_skill(env, cfg, out.with_name(out.name + "_second"), log=lambda *_: None)  # the same process group
-print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
+for run in (out, out.with_name(out.name + "_second")):  # the second skill joins the first one's process group
+    env = FloorTrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
+                           FloorTaskConfig(decimation=5), seed=Ranks.from_env().rank, device=device)
+    s = train_skill(env, cfg, run, log=lambda *_: None)
+    print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
 Ranks.from_env().close()
 """
 
