@@ -203,9 +203,10 @@ def table(paths) -> None:
     rows = [r for p in paths for r in json.loads(Path(p).read_text())["rows"]]
     base = {(r["learner"], r["options"], r["envs_per_process"]): r for r in rows
             if r.get("processes") == 1 and "learner" in r}
-    print("| case | processes | worlds per process | s / iteration | collect / learn [s] | training env-steps/s | "
-          "efficiency |")
-    print("|---|---|---|---|---|---|---|")
+    if base or any("learner" in r for r in rows):
+        print("| case | processes | worlds per process | s / iteration | collect / learn [s] | training env-steps/s | "
+              "efficiency |")
+        print("|---|---|---|---|---|---|---|")
     for r in rows:
         if "learner" not in r:
             continue
@@ -216,7 +217,9 @@ def table(paths) -> None:
               f"{r['collect_s']:.4f} / {r['learn_s']:.4f} | {_rate(r['training_steps_per_s'])} | {eff} |")
     ttf = [r for r in rows if r["case"].startswith("ttf")]
     if ttf:
-        print("\n| time to target | processes | target [rad] | reached at iteration | training wall-clock [s] | "
+        if any("learner" in r for r in rows):
+            print()
+        print("| time to target | processes | target [rad] | reached at iteration | training wall-clock [s] | "
               "best validation | training env-steps/s |")
         print("|---|---|---|---|---|---|---|")
         for r in ttf:

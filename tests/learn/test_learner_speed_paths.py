@@ -139,7 +139,8 @@ def test_torchrun_trains_a_floor_skill_on_two_processes_and_resumes(tmp_path):
     (run / "model_1.pt").unlink()  # killed after iteration 0: every rank resumes from model_0.pt
     res = subprocess.run([*cmd, "3", "4"], capture_output=True, text=True, env=env, timeout=600)
     assert res.returncode == 0, _failure(res)
-    assert res.stdout.count("SUMMARY 2 32 2") == 4 and (run / "model_2.pt").is_file()
+    assert res.stdout.count("SUMMARY 2 32 2") == 2 and (run / "model_2.pt").is_file()
+    assert res.stdout.count("SUMMARY 2 16 1") == 2  # the finished second skill goes on from its model_1.pt
 
 
 def test_learners_stop_at_the_validation_target(robot, data, tmp_path):
