@@ -12,7 +12,8 @@
 # update too; 0 by default), TTF (target: PD-only validation error / TTF, 2.0; 0 skips it), TTF_MAX (iterations at
 # most, 300), TTF_CHECK (validation every, 25), TTF_ONE_SYNC (1: the one-sync update, the default; 0: rsl-rl's),
 # TTF_MORE (more time-to-target runs on one GPU, each a case's options or rsl_rl: "rsl_rl one_sync+mb2"; none by
-# default), OPTIONS (1: rsl-rl's options' throughput on one GPU, COMPILE=1 with torch.compile; 0 by default), PROFILE
+# default), MAIN (0 skips steps 1 and 2: a second call for the optional steps, TTF=0 MAIN=0 OPTIONS=1 PROFILE=1),
+# OPTIONS (1: rsl-rl's options' throughput on one GPU, COMPILE=1 with torch.compile; 0 by default), PROFILE
 # (1: the update's profile on two GPUs, 2: and on one; 0 by default), PYTHON (python3), DEVICE (cuda; cpu runs every
 # step at tiny sizes over gloo, the check before a GPU run: DEVICE=cpu N=16 SN=8 ITERS=2 SKILL_ITERS=1 TTF_MAX=4
 # TTF_CHECK=2 SKILL_ONE_SYNC=1 TTF_MORE=rsl_rl OPTIONS=1 COMPILE=1 PROFILE=2 EXTRA="--warmup 1 --skill-motions 1"
@@ -49,13 +50,15 @@ cat "$out/machine.txt"
 skill1=("skill:$sn" "skill:$((2 * sn))")
 skill2=("skill:$((2 * sn))")
 if [[ ${SKILL_ONE_SYNC:-0} != 0 ]]; then skill1+=("skill:$sn+one_sync"); skill2+=("skill:$((2 * sn))+one_sync"); fi
-# 1. one GPU: N and 2N worlds
-step one_gpu run 1 ppo_scaling.py $its $extra --json "$out/one_gpu.json" --cases \
-  "residual:$n" "residual:$((2 * n))" "residual:$n+one_sync" "${skill1[@]}"
-# 2. two GPUs: N per GPU
-step two_gpus run 2 ppo_scaling.py $its $extra --json "$out/two_gpus.json" --cases \
-  "residual:$((2 * n))" "residual:$((2 * n))+one_sync" "${skill2[@]}"
-$py benchmarks/ppo_scaling.py --table "$out/one_gpu.json" "$out/two_gpus.json" | tee "$out/table.txt"
+if [[ ${MAIN:-1} != 0 ]]; then
+  # 1. one GPU: N and 2N worlds
+  step one_gpu run 1 ppo_scaling.py $its $extra --json "$out/one_gpu.json" --cases \
+    "residual:$n" "residual:$((2 * n))" "residual:$n+one_sync" "${skill1[@]}"
+  # 2. two GPUs: N per GPU
+  step two_gpus run 2 ppo_scaling.py $its $extra --json "$out/two_gpus.json" --cases \
+    "residual:$((2 * n))" "residual:$((2 * n))+one_sync" "${skill2[@]}"
+  $py benchmarks/ppo_scaling.py --table "$out/one_gpu.json" "$out/two_gpus.json" | tee -a "$out/table.txt"
+fi
 # 3. time to the same validation target, 1 GPU (N worlds) and 2 GPUs (N per GPU)
 ttf=${TTF:-2.0}
 if [[ $ttf != 0 ]]; then
@@ -76,7 +79,8 @@ if [[ ${OPTIONS:-0} != 0 ]]; then
   cases=("residual:$n+bf16" "residual:$n+mb2" "residual:$n+one_sync+mb2")
   [[ ${COMPILE:-0} != 0 ]] && cases+=("residual:$n+compile" "residual:$n+one_sync+compile")
   step options run 1 ppo_scaling.py $its $extra --json "$out/options.json" --cases "${cases[@]}"
-  $py benchmarks/ppo_scaling.py --table "$out/one_gpu.json" "$out/options.json" | tee -a "$out/table.txt"
+  $py benchmarks/ppo_scaling.py --table $(ls "$out/one_gpu.json" 2>/dev/null) "$out/options.json" \
+    | tee -a "$out/table.txt"
 fi
 # 5. where the update's time goes: rsl-rl's update and the one-sync update, two GPUs (PROFILE=2: and one)
 if [[ ${PROFILE:-0} != 0 ]]; then

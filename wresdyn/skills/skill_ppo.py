@@ -53,9 +53,13 @@ def runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
 
 def rank_share(num_envs: int, device: str) -> tuple[int, str]:
     """This process's worlds and device for a skill of ``num_envs`` worlds on ``device``: all of them in one process,
-    ``num_envs / WORLD_SIZE`` on ``cuda:<LOCAL_RANK>`` (or the CPU) under torchrun."""
+    ``num_envs / WORLD_SIZE`` on ``cuda:<LOCAL_RANK>`` (or the CPU) under torchrun, which becomes the process's current
+    CUDA device before its worlds are built (as rsl-rl's runner sets it later)."""
     ranks = Ranks.from_env()
-    return ranks.num_envs(num_envs), ranks.device(device)
+    here = ranks.device(device)
+    if ranks.world > 1 and here.startswith("cuda"):
+        torch.cuda.set_device(here)
+    return ranks.num_envs(num_envs), here
 
 
 def _set_std(actor, std: float) -> None:
