@@ -1,5 +1,5 @@
 """The learners' speed paths at tiny sizes: PPO across processes (torchrun, rsl-rl's multi-GPU PPO, here over gloo on
-the CPU), stopping at a validation target (time to fidelity), ablation cells spread over GPUs, and (CUDA only) the
+the CPU: the residual and the floor skills), stopping at a validation target (time to fidelity), ablation cells spread over GPUs, and (CUDA only) the
 graph-replayed environment step and gradient-fit iteration against the eager ones."""
 
 import dataclasses
@@ -61,11 +61,86 @@ def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(t
     assert refusals and (run / "config.json").read_text() == saved and not (run / "model_3.pt").exists()
 
 
+def test_torchrun_one_sync_update_trains_as_rsl_rls(tmp_path):
+    """Across two processes the one-sync update (gradients and KL in one all-reduce, the learning rate adapted on
+    every rank) ends where rsl-rl's (KL all-reduced, rate broadcast from rank 0) does, up to float rounding."""
+    weights = {}
+    for one_sync in (False, True):
+        run = tmp_path / f"one_sync_{one_sync}"
+        res = _torchrun("--out", str(run), "--iterations", "2", "--set", f"ppo.one_sync_update={one_sync}",
+                        "--set", "ppo.desired_kl=0.001")
+        assert res.returncode == 0, _failure(res)
+        weights[one_sync] = torch.load(run / "model_1.pt", weights_only=True)
+    a, b = weights[False], weights[True]
+    for key in ("actor_state_dict", "critic_state_dict"):
+        for name, t in a[key].items():
+            torch.testing.assert_close(b[key][name], t, rtol=1e-4, atol=1e-5, msg=f"{key} {name}")
+    lr = [w["optimizer_state_dict"]["param_groups"][0]["lr"] for w in (a, b)]
+    # the rate moved, the same way on both; rsl-rl broadcasts it as a float32 tensor, so its rate is rounded to float32
+    assert lr[1] == pytest.approx(lr[0], rel=1e-6) and lr[0] != 1e-3
+
+
 def test_torchrun_refuses_worlds_that_do_not_split(tmp_path):
     res = _torchrun("--out", str(tmp_path / "odd"), "--iterations", "1", "--num-envs", "15")
     assert res.returncode != 0
     assert any("does not split over 2 processes" in ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn"))
     assert not (tmp_path / "odd").exists()
+
+
+SKILL_SCRIPT = """
+import sys
+from pathlib import Path
+
+import torch
+
+from wresdyn.learn.ppo_runner import Ranks
+from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
+from wresdyn.skills.floor_motions import make_floor_motions
+from wresdyn.skills.plants import SimPlant
+from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, train_skill
+
+torch.set_num_threads(1)
+out, iterations, envs = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+robot = load_robot(DEFAULT_ROBOT)
+floating = load_robot(robot.source, base="floating")
+motions = make_floor_motions(robot, floating, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3)
+cfg = SkillPPOConfig(num_envs=envs, iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
+                     num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
+n, device = rank_share(cfg.num_envs, cfg.device)
+for run in (out, out.with_name(out.name + "_second")):  # the second skill joins the first one's process group
+    env = FloorTrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
+                           FloorTaskConfig(decimation=5), seed=Ranks.from_env().rank, device=device)
+    s = train_skill(env, cfg, run, log=lambda *_: None)
+    print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
+Ranks.from_env().close()
+"""
+
+
+def test_torchrun_trains_a_floor_skill_on_two_processes_and_resumes(tmp_path):
+    """The floor benchmark's skill PPO data-parallel as the residual's: each process its share of the worlds, rank 0
+    writes the run, every rank resumes from the same checkpoint, and a second skill of the same processes joins their
+    process group."""
+    script = tmp_path / "skill.py"
+    script.write_text(SKILL_SCRIPT)
+    run = tmp_path / "skill"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script), str(run)]
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.getcwd())
+    res = subprocess.run([*cmd, "2", "4"], capture_output=True, text=True, env=env, timeout=600)
+    assert res.returncode == 0, _failure(res)
+    assert "Synchronizing parameters for rank 1" in res.stdout
+    # both ranks ran 2 iterations of 2 worlds x 4 steps, and count both ranks' env-steps; then a second skill
+    assert res.stdout.count("SUMMARY 2 32 2") == 4, res.stdout[-2000:]
+    assert (tmp_path / "skill_second" / "policy.pt").is_file()
+    s = json.loads((run / "train_summary.json").read_text())
+    assert s["processes"] == 2 and s["collect_s_per_iteration"] > 0 and s["learn_s_per_iteration"] > 0
+    assert sorted(p.name for p in run.glob("model_*.pt")) == ["model_0.pt", "model_1.pt"]
+    assert (run / "policy.pt").is_file()
+    (run / "model_1.pt").unlink()  # killed after iteration 0: every rank resumes from model_0.pt
+    res = subprocess.run([*cmd, "3", "4"], capture_output=True, text=True, env=env, timeout=600)
+    assert res.returncode == 0, _failure(res)
+    assert res.stdout.count("SUMMARY 2 32 2") == 2 and (run / "model_2.pt").is_file()
+    assert res.stdout.count("SUMMARY 2 16 1") == 2  # the finished second skill goes on from its model_1.pt
 
 
 def test_learners_stop_at_the_validation_target(robot, data, tmp_path):

@@ -147,7 +147,8 @@ def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
         run_name=run_name, num_learning_epochs=p.num_learning_epochs, num_mini_batches=p.num_mini_batches,
         clip_param=p.clip_param, gamma=p.gamma, lam=p.lam, value_loss_coef=p.value_loss_coef,
         entropy_coef=p.entropy_coef, learning_rate=p.learning_rate, max_grad_norm=p.max_grad_norm,
-        desired_kl=p.desired_kl)
+        desired_kl=p.desired_kl, use_mixed_precision=p.mixed_precision, one_sync_update=p.one_sync_update,
+        compile_mode=p.compile_mode)
 
 
 def _run_record(dataset, robot, cfg: TrainConfig, ranks: Ranks, data_path) -> dict:

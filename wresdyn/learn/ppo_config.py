@@ -16,8 +16,12 @@ from .replay_env_config import ReplayEnvConfig, RewardConfig
 from .residual_config import ResidualConfig
 from .runs import read_unset
 
-__all__ = ["PPOConfig", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config", "config_from_dict",
+__all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config", "config_from_dict",
            "parse_overrides", "apply_overrides", "set_fields", "set_field"]
+
+
+COMPILE_MODES = ("", "default", "max-autotune-no-cudagraphs")
+"""``PPOConfig.compile_mode`` values: off, or the ``torch.compile`` modes rsl-rl accepts."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,15 @@ class PPOConfig:
     """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.learn.replay_env.ReplayEnv`); the
     runner's per-step NaN check (a host sync) is then off: the environment keeps non-finite states out of what it
     returns (diverged worlds are reset and counted)."""
+    one_sync_update: bool = False
+    """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.learn.ppo_update.OneSyncPPO`:
+    the adaptive learning rate on the device, gradients and KL in one all-reduce per mini-batch across processes)
+    instead of rsl-rl's ~5 per mini-batch; the same update up to rounding."""
+    mixed_precision: bool = False
+    """rsl-rl's mixed precision: the update's forward passes and losses under bfloat16 autocast."""
+    compile_mode: str = ""
+    """rsl-rl's ``torch.compile`` of the actor and critic: ``""`` (off), ``"default"`` or
+    ``"max-autotune-no-cudagraphs"`` (rsl-rl refuses the CUDA-graph modes)."""
 
     def __post_init__(self) -> None:
         for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
@@ -87,10 +100,14 @@ class PPOConfig:
             if getattr(self, name) is not None:
                 check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
         check_device(self.device, "ppo.device")
+        if self.compile_mode not in COMPILE_MODES:
+            raise WresdynError(f"ppo.compile_mode = {self.compile_mode!r}; choose from {COMPILE_MODES}")
 
 
-RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph")
-""":class:`PPOConfig` fields a resumed run may change: how long, where and how it runs, not what it learns."""
+RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph", "one_sync_update",
+                     "mixed_precision", "compile_mode")
+""":class:`PPOConfig` fields a resumed run may change: how long, where and how it runs (the arithmetic of the
+update included, as a change of device changes it), not what it learns."""
 
 DATASET_IDENTITY = ("train", "joint_names", "rate_hz")
 """What of the data in ``config.json`` a resumed run must share: the training trajectories (by name), the joints

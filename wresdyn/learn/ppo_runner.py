@@ -92,12 +92,19 @@ class Runner(OnPolicyRunner):
 
     def _configure_multi_gpu(self) -> None:
         """rsl-rl's multi-GPU set-up (NCCL, one GPU per process); CPU processes under torchrun (tests, CPU nodes)
-        get the same data-parallel PPO over gloo, NCCL being GPU-only."""
+        get the same data-parallel PPO over gloo, NCCL being GPU-only. A later runner of the same process (the
+        next skill of a benchmark) joins the process group the first one started: a default group started again
+        after ``destroy_process_group`` reuses the first one's rendezvous keys and waits on its closed ports."""
         import torch
 
         r = Ranks.from_env()
-        if str(self.device).startswith("cuda") or r.world <= 1:
+        cuda = str(self.device).startswith("cuda")
+        if r.world <= 1 or (cuda and not torch.distributed.is_initialized()):
             return super()._configure_multi_gpu()
+        if cuda:
+            if self.device != f"cuda:{r.local_rank}":
+                raise RunError(f"device {self.device} is not this process's cuda:{r.local_rank} (LOCAL_RANK)")
+            torch.cuda.set_device(r.local_rank)
         self.gpu_world_size, self.is_distributed = r.world, True
         self.gpu_local_rank, self.gpu_global_rank = r.local_rank, r.rank
         self.cfg["multi_gpu"] = {"global_rank": r.rank, "local_rank": r.local_rank, "world_size": r.world}
@@ -130,17 +137,22 @@ class Runner(OnPolicyRunner):
 
 
 def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, critic: dict,
-                   critic_groups=("critic",), run_name: str = "", **algorithm) -> dict:
+                   critic_groups=("critic",), run_name: str = "", one_sync_update: bool = False,
+                   compile_mode: str = "", **algorithm) -> dict:
     """The rsl-rl ``OnPolicyRunner`` configuration dict: PPO with the adaptive learning rate, its settings
     ``algorithm`` (``num_learning_epochs``, ``num_mini_batches``, ``clip_param``, ``gamma``, ``lam``,
-    ``value_loss_coef``, ``entropy_coef``, ``learning_rate``, ``max_grad_norm``, ``desired_kl``), the ``actor`` and
-    ``critic`` model configs, tensorboard logging. The actor sees the observation group ``policy``, the critic
-    ``critic_groups`` (more than the actor's: an asymmetric actor-critic)."""
+    ``value_loss_coef``, ``entropy_coef``, ``learning_rate``, ``max_grad_norm``, ``desired_kl``,
+    ``use_mixed_precision``), the ``actor`` and ``critic`` model configs, tensorboard logging. The actor sees the
+    observation group ``policy``, the critic ``critic_groups`` (more than the actor's: an asymmetric actor-critic).
+    ``one_sync_update``: the update of :class:`~wresdyn.learn.ppo_update.OneSyncPPO` instead of rsl-rl's own;
+    ``compile_mode``: rsl-rl's ``torch.compile`` of the actor and critic (``""``: none)."""
+    ppo = "wresdyn.learn.ppo_update:OneSyncPPO" if one_sync_update else "PPO"
     return {
         "num_steps_per_env": num_steps_per_env,
         "save_interval": save_interval,
         "obs_groups": {"actor": ["policy"], "critic": list(critic_groups)},
-        "algorithm": {"class_name": "PPO", **algorithm, "schedule": "adaptive"},
+        "algorithm": {"class_name": ppo, **algorithm, "schedule": "adaptive"},
+        "torch_compile_mode": compile_mode or None,
         "actor": actor,
         "critic": critic,
         "logger": "tensorboard",

@@ -144,6 +144,9 @@ class SkillPPOConfig:
     torch_threads: int | None = 2
     """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine; ``None``: torch's
     default)."""
+    one_sync_update: bool = False
+    """The PPO update with one host synchronisation per iteration (:class:`~wresdyn.learn.ppo_update.OneSyncPPO`)
+    instead of rsl-rl's several per mini-batch; the same update up to rounding."""
 
     def __post_init__(self) -> None:
         for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",

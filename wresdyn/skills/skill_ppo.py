@@ -7,6 +7,10 @@ deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``tra
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
 changed (the folder is a :class:`wresdyn.learn.runs.RunnerFolder`). The rsl-rl glue (runner, checkpoints, progress)
 is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
+
+Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.learn.ppo.train`): each process
+steps its share of the worlds on its own device (:func:`rank_share`), seeded ``seed + RANK``, rsl-rl averages the
+gradients, rank 0 alone writes the run folder, and every rank resumes from the same checkpoint.
 """
 
 from __future__ import annotations
@@ -19,19 +23,19 @@ import numpy as np
 import torch
 
 from ..learn.network_file import load_program, save_program
-from ..learn.ppo_runner import (latest_checkpoint, learn, make_runner, on_iteration, resume_runner, rsl_runner_cfg,
-                                seed_processes)
-from ..learn.runs import RunnerFolder
+from ..learn.ppo_runner import (Ranks, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
+                                rsl_runner_cfg, seed_processes)
+from ..learn.runs import RunError, RunnerFolder
 from ..progress import bar
 from .skill_config import SkillPPOConfig
 
-__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "RESUME_MAY_CHANGE"]
+__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "rank_share", "runner_cfg", "RESUME_MAY_CHANGE"]
 
-RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads")
+RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads", "ppo.one_sync_update")
 """What a resumed skill run may change: a run may be extended, or moved to another device or machine."""
 
 
-def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
+def runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
     """rsl-rl's runner config; ``critic_groups``: the observation groups the critic sees (the actor sees
     ``policy``; more groups make an asymmetric actor-critic)."""
     dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "log"}
@@ -43,7 +47,19 @@ def _runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
         num_steps_per_env=cfg.num_steps_per_env, save_interval=cfg.save_interval, actor=actor, critic=critic,
         critic_groups=critic_groups, num_learning_epochs=cfg.num_learning_epochs, num_mini_batches=cfg.num_mini_batches,
         clip_param=0.2, gamma=cfg.gamma, lam=cfg.lam, value_loss_coef=1.0, entropy_coef=cfg.entropy_coef,
-        learning_rate=cfg.learning_rate, max_grad_norm=1.0, desired_kl=cfg.desired_kl)
+        learning_rate=cfg.learning_rate, max_grad_norm=1.0, desired_kl=cfg.desired_kl,
+        one_sync_update=cfg.one_sync_update)
+
+
+def rank_share(num_envs: int, device: str) -> tuple[int, str]:
+    """This process's worlds and device for a skill of ``num_envs`` worlds on ``device``: all of them in one process,
+    ``num_envs / WORLD_SIZE`` on ``cuda:<LOCAL_RANK>`` (or the CPU) under torchrun, which becomes the process's current
+    CUDA device before its worlds are built (as rsl-rl's runner sets it later)."""
+    ranks = Ranks.from_env()
+    here = ranks.device(device)
+    if ranks.world > 1 and here.startswith("cuda"):
+        torch.cuda.set_device(here)
+    return ranks.num_envs(num_envs), here
 
 
 def _set_std(actor, std: float) -> None:
@@ -70,41 +86,65 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         log: Printer of the run's lines; a :class:`wresdyn.progress.Log` also draws a bar over the iterations,
             named after the run folder (the policy).
 
+    Under torchrun ``env`` holds this process's share of ``cfg.num_envs`` worlds on its device (:func:`rank_share`);
+    the summary's counts are those of rank 0's worlds, its env-steps those of every process. The process group stays
+    up for the next skill of the process; ``Ranks.from_env().close()`` ends it once the last is trained.
+
     Returns:
         The summary written to ``train_summary.json``.
     """
-    run_dir = Path(run_dir)
+    run_dir, ranks = Path(run_dir), Ranks.from_env()
+    if ranks.world > 1 and env.num_envs != ranks.num_envs(cfg.num_envs):
+        raise RunError(f"the environment has {env.num_envs} worlds; under torchrun each of the {ranks.world} "
+                       f"processes trains its share of ppo.num_envs = {cfg.num_envs} (rank_share)")
     record = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
               **(meta or {})}
     run = RunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO")
     ckpt = latest_checkpoint(run_dir)
     run.check(ckpt)
-    seed_processes(cfg.seed, cfg.torch_threads)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    runner = make_runner(env, _runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), run_dir)
+    seed_processes(cfg.seed + ranks.rank, cfg.torch_threads)
+    if ranks.main:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    runner = make_runner(env, runner_cfg(cfg, getattr(env, "critic_groups", ("policy",))), run_dir, ranks.main)
+    log_file = run_dir / "train.log" if ranks.main else None
     start = 0
     if ckpt is not None:
         start = resume_runner(runner, ckpt, run_dir, log)
     elif init is not None:
         _start_from(runner, init, cfg.restart_std)
-    run.write_config()
+    if ranks.main:
+        run.write_config()
     todo = max(cfg.iterations - start, 0)
     t0 = time.perf_counter()
+    phases = {"collect": 0.0, "learn": 0.0}
+
+    def timed(kw):
+        phases["collect"] += kw.get("collect_time", 0.0)
+        phases["learn"] += kw.get("learn_time", 0.0)
+
     if todo:
         with bar(log, cfg.iterations, run_dir.name, start) as progress:
-            on_iteration(runner, progress)
-            learn(runner, start, todo, run_dir / "train.log")  # rsl-rl's per-iteration table goes to train.log
-        runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
+            on_iteration(runner, progress, timed)
+            learn(runner, start, todo, log_file)  # rsl-rl's per-iteration table goes to train.log
+        if ranks.main:
+            runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
     wall = time.perf_counter() - t0
-    actor = runner.alg.get_policy()
-    obs = torch.zeros(2, actor.obs_dim)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
-    save_program(actor.as_jit().cpu().eval(), (obs,), ({0: torch.export.Dim("batch", min=1)},),
-                 run_dir / "policy.pt", {"kind": "skill"})
+    steps = env.steps_total * ranks.world
+    it_time = phases["collect"] + phases["learn"]
     summary = {"iterations": cfg.iterations, "iterations_this_session": todo, "wall_s_this_session": wall,
-               "env_steps_this_session": env.steps_total, "failed_episodes": env.failed_total,
+               "env_steps_this_session": steps, "failed_episodes": env.failed_total,
                "diverged": env.diverged_total, "episodes": env.episodes_total,
-               "env_steps_per_s": env.steps_total / env.step_seconds if env.step_seconds else None}
-    run.write_summary(summary)
+               "env_steps_per_s": steps / env.step_seconds if env.step_seconds else None,
+               "training_steps_per_s": steps / it_time if it_time else None,
+               "collect_s_per_iteration": phases["collect"] / todo if todo else None,
+               "learn_s_per_iteration": phases["learn"] / todo if todo else None,
+               "processes": ranks.world, "device": str(env.device)}
+    if ranks.main:
+        actor = runner.alg.get_policy()
+        obs = torch.zeros(2, actor.obs_dim)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
+        save_program(actor.as_jit().cpu().eval(), (obs,), ({0: torch.export.Dim("batch", min=1)},),
+                     run_dir / "policy.pt", {"kind": "skill"})
+        run.write_summary(summary)
     return summary
 
 
