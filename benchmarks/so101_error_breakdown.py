@@ -4,9 +4,11 @@ The run's model (``physics.json``, its friction law) is replayed open loop over 
 run from its first recorded state, as ``wresdyn identify --eval`` does. Per run: mean |q_model - q_real| [rad] over
 the fitted joints and per joint, and the share of the run's summed error on samples where the real joint moves
 (|qd| > 0.1 rad/s, the ``moving`` column of ``identification.md``) against where it rests; per split the same pooled
-over its runs (the split's mean |dq| of ``eval/metrics.json``).
+over its runs (the split's mean |dq| of ``eval/metrics.json``). ``--set FIELD=VALUE`` (repeatable) replays the model
+with a per-joint field of ``physics.json`` set to VALUE on every joint instead, no refit: a probe of what a term does
+where the error is, not a model to choose (that is validation's).
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/so101_error_breakdown.py DATA/dataset.npz --run RUN
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/so101_error_breakdown.py DATA/dataset.npz --run RUN [--set effort=1.91]
 """
 
 import numpy as np
@@ -15,7 +17,7 @@ MOVING = 0.1
 """Speed above which a real joint counts as moving [rad/s]."""
 
 
-def main(path: str, run: str) -> None:
+def main(path: str, run: str, overrides: dict[str, float]) -> None:
     import torch
 
     from wresdyn.data.loading import load_data
@@ -27,8 +29,11 @@ def main(path: str, run: str) -> None:
     rate = ds.rate_hz
     keep = np.flatnonzero(ds.fit_weights() > 0)
     policy, meta, physics, solver, substeps = load_run_model(run, robot, rate)
+    for field, value in overrides.items():
+        getattr(physics, field)[:] = value
     names = [robot.joint_names[j] for j in keep]
-    print(f"{path}, run {run} (friction_kappa {run_friction_kappa(run)}): mean |q_model - q_real| [rad] per run over "
+    print(f"{path}, run {run} (friction_kappa {run_friction_kappa(run)}"
+          f"{''.join(f', {k} = {v:g}' for k, v in overrides.items())}): mean |q_model - q_real| [rad] per run over "
           f"the fitted joints and per joint; 'moving': share of the summed error where the real joint moves "
           f"(|qd| > {MOVING:g} rad/s), 'samples': share of samples moving")
     print(f"{'split':10s} {'run':28s} {'s':>6s} {'mean':>7s} " + " ".join(f"{n[:12]:>12s}" for n in names)
@@ -57,5 +62,7 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", help="dataset of real runs (.npz)")
     parser.add_argument("--run", required=True, help="identify run folder (its physics.json)")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="replay with a per-joint physics field set to VALUE on every joint (no refit)")
     args = parser.parse_args()
-    main(args.dataset, args.run)
+    main(args.dataset, args.run, {k: float(v) for k, v in (s.split("=", 1) for s in args.set)})
