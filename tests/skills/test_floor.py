@@ -21,13 +21,6 @@ RATE = 500.0
 
 
 @pytest.fixture(scope="module")
-def floating(humanoid):
-    from wresdyn.robot.description import load_robot
-
-    return load_robot(humanoid.source, base="floating")
-
-
-@pytest.fixture(scope="module")
 def motions(humanoid, floating):
     return make_floor_motions(humanoid, floating, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0,
                               rate_hz=RATE, seed=3)
