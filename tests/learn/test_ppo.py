@@ -33,7 +33,11 @@ def test_overrides_set_any_field_and_refuse_bad_ones(tmp_path):
     assert (cfg.ppo.desired_kl, cfg.residual.hidden_dims, cfg.env.horizon) == (0.05, (128, 64), 500)
     assert cfg.residual.obs_normalization is False and cfg.rewards.joint_pos_bonus == 0.0
     assert cfg.ppo.gamma == default_config().ppo.gamma  # nothing else moved
+    # an optional field at its None default parses as its annotation's other type
+    assert default_config().ppo.select_every is None
+    assert apply_overrides(default_config(), ["ppo.select_every=50"]).ppo.select_every == 50
     for bad, msg in (("ppo.nope=1", "no field 'nope'"), ("net.x=1", "unknown section"), ("ppo.num_envs=1.5", "not a int"),
+                     ("ppo.select_every=ten", "not a int"),
                      ("ppo.gamma", "SECTION.FIELD=VALUE")):
         with pytest.raises(ValueError, match=msg):
             apply_overrides(default_config(), [bad])

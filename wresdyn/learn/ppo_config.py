@@ -187,8 +187,18 @@ def parse_overrides(cfg: TrainConfig, items) -> dict:
         names = [f.name for f in fields(sections[section])]
         if name not in names:
             raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
-        out[f"{section}.{name}"] = _parse_like(getattr(sections[section], name), text.strip(), item)
+        current = getattr(sections[section], name)
+        if current is None:  # an optional field at its None default: parse as its annotation's other type
+            current = _optional_example(type(sections[section]), name)
+        out[f"{section}.{name}"] = _parse_like(current, text.strip(), item)
     return out
+
+
+def _optional_example(cls, name: str):
+    """A value of the non-None type of field ``name`` of dataclass ``cls`` (annotated ``X | None``), to parse as."""
+    hint = next(f.type for f in fields(cls) if f.name == name)
+    kinds = {"int": 0, "float": 0.0, "str": "", "bool": False}
+    return kinds.get(str(hint).replace(" ", "").replace("|None", "").replace("None|", ""), "")
 
 
 def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
