@@ -75,6 +75,14 @@ def humanoid():
     return load_robot(DEFAULT_ROBOT)
 
 
+@pytest.fixture(scope="module")
+def floating(humanoid):
+    """The humanoid with a floating base (the floor plants' robot)."""
+    from wresdyn.robot.description import load_robot
+
+    return load_robot(humanoid.source, base="floating")
+
+
 @pytest.fixture(scope="session")
 def robot(humanoid):
     """The robot of the learner tests (replay env, PPO, evaluation): the project humanoid."""

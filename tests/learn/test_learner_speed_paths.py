@@ -61,6 +61,7 @@ def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(t
     assert refusals and (run / "config.json").read_text() == saved and not (run / "model_3.pt").exists()
 
 
+@pytest.mark.slow  # an option off by default; tests/learn/test_ppo_update.py checks it against rsl-rl's update in one process
 def test_torchrun_one_sync_update_trains_as_rsl_rls(tmp_path):
     """Across two processes the one-sync update (gradients and KL in one all-reduce, the learning rate adapted on
     every rank) ends where rsl-rl's (KL all-reduced, rate broadcast from rank 0) does, up to float rounding."""
