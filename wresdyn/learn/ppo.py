@@ -229,12 +229,8 @@ def _learn_and_select(session: _Session, cfg: TrainConfig, score, best: BestOnVa
         log(f"validation at the start: {value:.4f} rad")
         best.record(0, value, score.last_diverged, session.runner.alg.get_policy())
 
-    def timed(kw):
-        session.phases["collect"] += kw.get("collect_time", 0.0)
-        session.phases["learn"] += kw.get("learn_time", 0.0)
-
     progress = bar(log, cfg.ppo.iterations, "train", start)
-    on_iteration(session.runner, progress, timed)
+    on_iteration(session.runner, progress, phases=session.phases)
     t0, eval_s, done, reached = time.perf_counter(), 0.0, start, None
     with progress:
         while done < cfg.ppo.iterations and reached is None:

@@ -196,9 +196,9 @@ def parse_overrides(cfg: TrainConfig, items) -> dict:
 
 def _optional_example(cls, name: str):
     """A value of the non-None type of field ``name`` of dataclass ``cls`` (annotated ``X | None``), to parse as."""
-    hint = next(f.type for f in fields(cls) if f.name == name)
-    kinds = {"int": 0, "float": 0.0, "str": "", "bool": False}
-    return kinds.get(str(hint).replace(" ", "").replace("|None", "").replace("None|", ""), "")
+    hint = next(str(f.type) for f in fields(cls) if f.name == name)  # a string: the module postpones annotations
+    kind = next(t.strip() for t in hint.split("|") if t.strip() != "None")
+    return {"int": 0, "float": 0.0, "bool": False}.get(kind, "")
 
 
 def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:

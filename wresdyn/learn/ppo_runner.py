@@ -197,9 +197,10 @@ def learn(runner: Runner, start: int, n: int, log_file: Path | None) -> None:
         runner.learn(n)
 
 
-def on_iteration(runner, progress, each=None) -> None:
+def on_iteration(runner, progress, each=None, phases: dict | None = None) -> None:
     """Advance ``progress`` (a :func:`wresdyn.progress.bar`) by one after each PPO iteration of ``runner``, noting
-    the mean episode reward, and call ``each(kw)`` with what rsl-rl logs of it (``collect_time``, ``learn_time``, ...).
+    the mean episode reward, add rsl-rl's ``collect_time`` and ``learn_time`` of it [s] into ``phases["collect"]`` and
+    ``phases["learn"]``, and call ``each(kw)`` with what rsl-rl logs of it.
 
     rsl-rl's ``OnPolicyRunner.learn`` reports an iteration only through ``runner.logger.log``, so the hook wraps it.
     """
@@ -209,6 +210,9 @@ def on_iteration(runner, progress, each=None) -> None:
         out = log_iteration(*a, **kw)
         rewards = getattr(runner.logger, "rewbuffer", None)  # the episodes finished in the last 100 resets
         progress.update(1, f"reward {float(np.mean(rewards)):.3g}" if rewards else None)
+        if phases is not None:
+            phases["collect"] += kw.get("collect_time", 0.0)
+            phases["learn"] += kw.get("learn_time", 0.0)
         if each is not None:
             each(kw)
         return out

@@ -116,15 +116,11 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         run.write_config()
     todo = max(cfg.iterations - start, 0)
     t0 = time.perf_counter()
-    phases = {"collect": 0.0, "learn": 0.0}
-
-    def timed(kw):
-        phases["collect"] += kw.get("collect_time", 0.0)
-        phases["learn"] += kw.get("learn_time", 0.0)
+    phases = {"collect": 0.0, "learn": 0.0}  # rsl-rl's seconds of each, summed over this session's iterations
 
     if todo:
         with bar(log, cfg.iterations, run_dir.name, start) as progress:
-            on_iteration(runner, progress, timed)
+            on_iteration(runner, progress, phases=phases)
             learn(runner, start, todo, log_file)  # rsl-rl's per-iteration table goes to train.log
         if ranks.main:
             runner.save(str(run_dir / f"model_{cfg.iterations - 1}.pt"))
