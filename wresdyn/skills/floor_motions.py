@@ -106,6 +106,15 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
     def over(f, frac=1.0):
         return home + frac * shift[f] * side
 
+    def kick(f):
+        """Sole f's kick from the other sole: (weight over it, back key, forward key, forward [m], up [m])."""
+        back, out_x, out_z = rng.uniform(0.02, 0.05), rng.uniform(0.06, 0.12), rng.uniform(0.04, 0.08)
+        w = over(1 - f)
+        k1, k2 = w.copy(), w.copy()
+        k1[f] += -back * fwd + 0.6 * out_z * up
+        k2[f] += out_x * fwd + out_z * up
+        return w, k1, k2, out_x, out_z
+
     if family == "weight_shift":
         first = int(rng.integers(2))
         frac = rng.uniform(0.5, 0.9, size=2)
@@ -114,11 +123,7 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
         return [0.0, t[0], t[1], t[2], duration], keys, {"first_foot": first, "fraction": frac.tolist()}
     if family == "kick":
         f = int(rng.integers(2))  # the kicking foot; the other carries the weight
-        back, out_x, out_z = rng.uniform(0.02, 0.05), rng.uniform(0.06, 0.12), rng.uniform(0.04, 0.08)
-        w = over(1 - f)
-        k1, k2 = w.copy(), w.copy()
-        k1[f] += -back * fwd + 0.6 * out_z * up
-        k2[f] += out_x * fwd + out_z * up
+        w, k1, k2, out_x, out_z = kick(f)
         times = np.array([0.0, 0.2, 0.3, 0.45, 0.6, 0.72, 0.85, 1.0]) * duration
         return list(times), [home, w, w, k1, k2, w, home, home], {"foot": f, "forward_m": out_x, "up_m": out_z}
     if family == "step":
@@ -136,11 +141,11 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
             keys += [w, k, w, w]
         return times + [0.97 * duration, duration], keys + [home, home], {"lift_m": lift, "first_foot": first}
     if family == "combo":
-        return _combo_keys(rng, home, duration, over, up, fwd)
+        return _combo_keys(rng, home, duration, over, kick)
     raise ValueError(family)
 
 
-def _combo_keys(rng, home, duration: float, over, up, fwd):
+def _combo_keys(rng, home, duration: float, over, kick):
     """Keyframes of a ``combo`` motion: see the module docstring. Events are drawn until the next would leave no
     time to return (at least one); the plan is then played faster where it overruns the motion."""
     times, keys, plan = [0.0], [home], []
@@ -151,11 +156,7 @@ def _combo_keys(rng, home, duration: float, over, up, fwd):
             gaps, event = rng.uniform(*COMBO_TRANSFER_S, size=1), [over(f, rng.uniform(0.5, 1.0))]
             gaps, event = np.append(gaps, rng.uniform(0.05, 0.4)), event + event
         else:  # weight over the other sole, sole f kicks back, forward and is set down
-            w = over(1 - f)
-            back, out_x, out_z = rng.uniform(0.02, 0.05), rng.uniform(0.06, 0.12), rng.uniform(0.04, 0.08)
-            k1, k2 = w.copy(), w.copy()
-            k1[f] += -back * fwd + 0.6 * out_z * up
-            k2[f] += out_x * fwd + out_z * up
+            w, k1, k2, _, _ = kick(f)
             gaps = np.concatenate([rng.uniform(*COMBO_TRANSFER_S, size=1), rng.uniform(0.2, 0.35, size=3)])
             event = [w, k1, k2, w]
         if plan and t + gaps.sum() + COMBO_TRANSFER_S[0] > duration:
