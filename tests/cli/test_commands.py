@@ -247,7 +247,12 @@ def test_a_malformed_flag_is_one_line_and_exit_2(argv, message, capsys):
     (["train", "none.npz", "--set", "ppo.gama=0.9"],
      "wresdyn train: error: --set 'ppo.gama=0.9': no field 'ppo.gama' (sections: env, ppo, residual, rewards)"),
     (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_envs = 0 must be >= 1"),
-    (["deploy", "--oracle-beside"], "wresdyn deploy: error: --oracle-beside trains the floor's oracle; it needs --floor"),
+    (["deploy", "--oracle-beside"], "wresdyn deploy: error: --oracle-beside sets the benchmark on the floor; it needs "
+                                    "--floor"),
+    (["deploy", "--beside-devices", "cuda:1"],
+     "wresdyn deploy: error: --beside-devices sets the benchmark on the floor; it needs --floor"),
+    (["deploy", "--floor", "--beside-devices", "cuda:1,gpu2"],
+     "wresdyn deploy: error: floor.beside_devices = 'gpu2' is not a device: cpu, cuda or cuda:N"),
     (["deploy", "--task.w-fall", "3"],
      "wresdyn deploy: error: --task.w-fall sets the task on the floor; it needs --floor"),
     (["deploy", "--floor", "--task.fail-error", "1"],

@@ -160,8 +160,8 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--motions", "1",
             "--heldout", "1", "--duration", "1.0"]
-    # the oracle in a process of its own beside (b) and (c), as on a GPU
-    assert main(args + ["--oracle-beside"]) == 0
+    # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
+    assert main(args + ["--oracle-beside", "--beside-devices", "cpu"]) == 0
     res = json.loads((out / "results.json").read_text())
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
@@ -172,6 +172,9 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert "d_oracle: 1 PPO iterations x 3 worlds" in log
     # it starts once (a) is trained, before (b)
     assert log.index("d_oracle: training on the real robot beside") < log.index("policy b_calibrated:")
+    assert log.index("c_delta_action: training on cpu beside") < log.index("policy b_calibrated:")
+    assert "c_delta_action: 1 PPO iterations x 4 worlds on the floor of the delta_action simulator" in log
+    assert (out / "skills" / "c_delta_action" / "train.log").is_file()
     assert set(res["gap_closed_mpjpe"]) == set(res["gap_closed_g_mpjpe"]) == {"b_calibrated", "c_delta_action"}
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()

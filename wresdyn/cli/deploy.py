@@ -76,8 +76,10 @@ def config_from_args(args: argparse.Namespace) -> DeployConfig | FloorDeployConf
     from . import UserError
 
     given = given_fields(args)
-    if "oracle_beside" in given and not args.floor:
-        raise UserError("--oracle-beside trains the floor's oracle; it needs --floor")
+    stand = {f.name for f in fields(DeployConfig)}
+    for name in (f.name for f in fields(FloorDeployConfig) if f.name not in stand and f.name in given):
+        if not args.floor:
+            raise UserError(f"--{name.replace('_', '-')} sets the benchmark on the floor; it needs --floor")
     cls = FloorDeployConfig if args.floor else DeployConfig
     return build_config(cls.full() if args.full else cls(), given)
 

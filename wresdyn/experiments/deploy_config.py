@@ -100,6 +100,10 @@ class FloorDeployConfig(_BenchmarkSizes):
     """Motion families the policies also train on, ``train_per_family`` each (validation draws them too, the held-out
     motions never): ``combo``, compositions of the weight shifts' and kicks' keyframes with transfers slow and too
     fast to follow (:mod:`wresdyn.skills.floor_motions`)."""
+    beside_devices: tuple[str, ...] = ()
+    """More devices of the host (``cuda:1,cuda:2``): each simulated fine-tuning after (b) trains in a process of its
+    own on the next one, beside (b) on ``device``, so that (b) and (c) take one fine-tuning's wall-clock. Empty:
+    one after the other on ``device``."""
     seed: int = 0
     """Seed of the motions and of PPO."""
     device: str = "cpu"
@@ -111,6 +115,8 @@ class FloorDeployConfig(_BenchmarkSizes):
         super().__post_init__()
         for f in self.extra_families:
             check_choice(f, Literal["combo"], "floor.extra_families")
+        for d in self.beside_devices:
+            check_device(d, "floor.beside_devices")
 
     @classmethod
     def full(cls, **kw) -> "FloorDeployConfig":

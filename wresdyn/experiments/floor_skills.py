@@ -62,16 +62,18 @@ def _train_policy(i: int, name: str, floating, real, motions, task, ppo, cfg: Fl
     return wall
 
 
-def _train_oracle(source: str, gains, mismatch: dict, rate: float, i: int, motions, task, ppo, cfg, runs, meta,
-                  out: Path) -> float:
-    """:func:`_train_policy` of the oracle in a process of its own (its lines go to its ``train.log`` only)."""
+def _train_beside(source: str, gains, mismatch: dict, rate: float, i: int, name: str, device: str, motions, task,
+                  ppo, cfg, runs, meta, out: Path) -> float:
+    """:func:`_train_policy` in a process of its own, its PPO and simulated plant on ``device`` (its lines go to its
+    ``train.log`` only)."""
     import torch
 
     if ppo.torch_threads is not None:
         torch.set_num_threads(ppo.torch_threads)
     floating = load_robot(source, gains=gains, base="floating")
     real = RealRobot(floating, Mismatch.from_dict(mismatch, "the benchmark's mismatch"), rate)
-    return _train_policy(i, "d_oracle", floating, real, motions, task, ppo, cfg, runs, meta, out, lambda s: None)
+    return _train_policy(i, name, floating, real, motions, task, replace(ppo, device=device),
+                         replace(cfg, device=device), runs, meta, out, lambda s: None)
 
 
 def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeployConfig(), *, data_path=None,
@@ -112,30 +114,39 @@ def run_floor_benchmark(robot, dataset, out, cfg: FloorDeployConfig = FloorDeplo
     if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
         meta["motions"]["extra"] = list(cfg.extra_families)
     wall = {}
-    # With PPO on a GPU the oracle's real robot (MuJoCo C on the host's cores) trains beside (b) and (c): it starts
-    # as soon as (a), which it is fine-tuned from, is done.
-    beside = (cfg.device != "cpu" if cfg.oracle_beside is None else cfg.oracle_beside) and "d_oracle" in policies[2:]
+    # With PPO on a GPU the oracle's real robot (MuJoCo C on the host's cores) trains beside (b) and (c), and with
+    # more GPUs the simulated fine-tunings after (b) each on one of them: all start as soon as (a), which they are
+    # fine-tuned from, is done.
+    oracle_beside = cfg.device != "cpu" if cfg.oracle_beside is None else cfg.oracle_beside
+    beside = {"d_oracle": cfg.device} if oracle_beside and "d_oracle" in policies[2:] else {}
+    simulated = [p for p in policies[2:] if POLICIES[p] != "real"]
+    beside.update(zip(simulated, cfg.beside_devices))
     index = {name: i for i, name in enumerate(policies)}
-    pool = None
+    pool, jobs = None, {}
     try:
         for name in policies:
-            if name == "d_oracle" and beside:
+            if name in beside:
                 continue
             wall[name] = _train_policy(index[name], name, floating, real, motions["train"], task, ppo, cfg, runs, meta,
                                        out, log)
             if name == "a_nominal" and beside:
                 import multiprocessing as mp
 
-                pool = mp.get_context("spawn").Pool(1)
-                oracle = pool.apply_async(_train_oracle, (str(robot.source), robot.gains, mismatch.to_dict(), rate,
-                                                          index["d_oracle"], motions["train"], task, ppo, cfg, runs,
-                                                          meta, out))
-                log(f"[3/4] policy d_oracle: training on the real robot beside the others "
-                    f"({out / 'skills' / 'd_oracle' / 'train.log'})")
-        if pool is not None:
-            wall["d_oracle"] = oracle.get()
-            log(f"[3/4] policy d_oracle: {cfg.finetune} PPO iterations x {cfg.oracle_worlds} worlds on the "
-                f"floor of the real robot ({wall['d_oracle']:.0f} s, beside the others)")
+                pool = mp.get_context("spawn").Pool(len(beside))
+                for other, device in beside.items():
+                    jobs[other] = pool.apply_async(_train_beside, (
+                        str(robot.source), robot.gains, mismatch.to_dict(), rate, index[other], other, device,
+                        motions["train"], task, ppo, cfg, runs, meta, out))
+                    where = "on the real robot" if other == "d_oracle" else f"on {device}"
+                    log(f"[3/4] policy {other}: training {where} beside the others "
+                        f"({out / 'skills' / other / 'train.log'})")
+        for other, job in jobs.items():
+            wall[other] = job.get()
+            setting = POLICIES[other]
+            envs, plant = (cfg.oracle_worlds, "real robot") if setting == "real" else (cfg.envs, f"{setting} simulator")
+            where = "" if setting == "real" else f" on {beside[other]}"
+            log(f"[3/4] policy {other}: {cfg.finetune} PPO iterations x {envs} worlds on the floor of the {plant} "
+                f"({wall[other]:.0f} s{where}, beside the others)")
     finally:
         if pool is not None:
             pool.terminate()
