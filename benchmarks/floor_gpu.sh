@@ -3,8 +3,8 @@
 # the CPU and carried (the CPU run of benchmarks/floor.sh writes them into OUT/default/{calibrated,delta_action}):
 #   bash benchmarks/floor_gpu.sh RUN CALIBRATED DELTA [more deploy flags]
 # On a host of several GPUs, CUDA_VISIBLE_DEVICES=0,1 and `--beside-devices cuda:1` fine-tune (c) on the second
-# beside (b) on the first. Resumable: rerun the same command to go on from the last checkpoints. Writes RUN/report.md, RUN/results.json
-# and appends the output to RUN.log.
+# beside (b) on the first. Resumable: rerun the same command to go on from the last checkpoints. Writes
+# RUN/report.md, RUN/results.json and appends the output to RUN.log.
 set -euo pipefail
 RUN=${1:?usage: bash benchmarks/floor_gpu.sh RUN CALIBRATED DELTA [flags]}
 CAL=${2:?calibrated run}
