@@ -4,6 +4,7 @@ counted under ``torch.profiler``.
 
     python benchmarks/profile_identify.py --device cuda:0
     python benchmarks/profile_identify.py --device cpu      # the same parts on the CPU
+    python benchmarks/profile_identify.py --device cuda:0 --fused   # SysIdConfig.fused: each batch in one launch
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF), :class:`SysIdConfig`'s
 defaults (32 windows; ``--horizon`` steps, default 64, the curriculum's mean length), built as
@@ -35,18 +36,20 @@ def main() -> None:
     from wresdyn.learn.window_fit import squared_error, start_window_fit
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
     from wresdyn.sim import rollout
+    from wresdyn.sim.fused import fused_rollout
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default="cuda:0")
     p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
     p.add_argument("--horizon", type=int, default=64)
     p.add_argument("--repeat", type=int, default=10, help="iterations timed")
+    p.add_argument("--fused", action="store_true", help="SysIdConfig.fused: the windows replayed in one launch")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     wp.config.quiet = True
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
-    cfg = SysIdConfig(device=args.device, torch_threads=1)
+    cfg = SysIdConfig(device=args.device, torch_threads=1, fused=args.fused)
     rng, train, dt = start_window_fit(cfg, dataset)
     learner = _IdentifyLearner(robot, dataset, cfg, None, rng, train, dt, lambda s: None, None)
     cuda = learner.sim.device.type == "cuda"
@@ -84,9 +87,10 @@ def main() -> None:
         learner.bank.set_delay(model.delay_steps().float().to(sim.device))
         window = timed("draw the windows", lambda: learner.bank.sample(rng, cfg.windows, h))
         timed("parameters into the simulator", lambda: sim.set_physics(model()))
-        run = timed("rollout (forward, tape)", lambda: rollout(sim, window, grad=True))
-        loss = timed("loss", lambda: cfg.w_q * squared_error(run.q[:, 1:], window.q[:, 1:], learner.weights)
-                     + cfg.w_qd * squared_error(run.qd[:, 1:], window.qd[:, 1:], learner.weights)
+        q, qd = timed("rollout (forward, tape)", lambda: fused_rollout(sim, window) if cfg.fused else
+                      (lambda r: (r.q, r.qd))(rollout(sim, window, grad=True)))
+        loss = timed("loss", lambda: cfg.w_q * squared_error(q[:, 1:], window.q[:, 1:], learner.weights)
+                     + cfg.w_qd * squared_error(qd[:, 1:], window.qd[:, 1:], learner.weights)
                      + cfg.w_prior * model.prior().to(sim.device))
         learner.optim.zero_grad()
         timed("backward (adjoint)", lambda: loss.backward())
@@ -114,7 +118,8 @@ def main() -> None:
                 syncs[e.name] += 1
         kernels = {"count": count, "gpu_ms": 1e3 * busy}
     name = torch.cuda.get_device_name(sim.device) if cuda else "CPU"
-    print(f"{name} ({args.device}); humanoid {robot.n_dof} DoF; {cfg.windows} windows x {h} steps, "
+    print(f"{name} ({args.device}); {'fused' if cfg.fused else 'stepped'} replay; humanoid {robot.n_dof} DoF; "
+          f"{cfg.windows} windows x {h} steps, "
           f"{args.repeat} iterations per figure")
     print(f"iteration: {1e3 * whole:.1f} ms")
     print("| part (synchronised) | ms / iteration | share of the parts |")
@@ -128,7 +133,7 @@ def main() -> None:
               f"{kernels['gpu_ms']:.2f} ms = {100 * kernels['gpu_ms'] / (1e3 * whole):.0f} % of the iteration; "
               f"host synchronisations: {dict(syncs) or 'none seen'}")
     if args.json:
-        Path(args.json).write_text(json.dumps({"device": name, "windows": cfg.windows, "horizon": h,
+        Path(args.json).write_text(json.dumps({"device": name, "fused": cfg.fused, "windows": cfg.windows, "horizon": h,
                                                "iteration_ms": 1e3 * whole,
                                                "parts_ms": {k: 1e3 * v for k, v in parts.items()},
                                                "kernels": kernels, "syncs": syncs}, indent=1))

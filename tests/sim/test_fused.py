@@ -42,6 +42,32 @@ def test_fused_rollout_matches_the_step_by_step_replay(humanoid, data):
     assert torch.equal(q_nograd, q_step)
 
 
+def test_fused_rollout_passes_the_targets_gradient_to_an_identified_delay(humanoid, data):
+    dt = 1.0 / data.rate_hz
+    start = PhysicalParams.nominal(humanoid)
+    start.delay = np.full(humanoid.n_dof, 2.5 * dt)
+    model = PhysicsModel(humanoid, start, fit=("kp", "damping", "delay"), dt=dt)
+    bank = TrajectoryBank(data.split("train"), "cpu", 0.0)
+    traj, first = bank.draw(np.random.default_rng(1), 3, 24)
+    sim = Simulator(humanoid, 3, dt, requires_grad=True, param_grads=True)
+    grads, states = {}, {}
+    for fused in (False, True):
+        model.zero_grad()
+        bank.set_delay(model.delay_steps().float())  # the targets now depend on the delay
+        window = bank.window(traj, first, 24)
+        assert window.target.requires_grad
+        sim.set_physics(model())
+        q, qd = fused_rollout(sim, window) if fused else (lambda r: (r.q, r.qd))(rollout(sim, window, grad=True))
+        ((q[:, 1:] - window.q[:, 1:]) ** 2).mean().backward()
+        states[fused] = q.detach()
+        grads[fused] = {n: p.grad.clone() for n, p in model.named_parameters() if p.grad is not None}
+    assert torch.equal(states[False], states[True])
+    assert {"u_kp", "u_damping", "u_delay"} <= set(grads[False]) and set(grads[False]) == set(grads[True])
+    assert float(grads[True]["u_delay"].abs().max()) > 0.0
+    for name, g in grads[False].items():
+        assert float((g - grads[True][name]).norm()) <= 1e-5 * float(g.norm()) + 1e-12, name
+
+
 def test_fused_rollout_refuses_what_it_cannot_replay(humanoid):
     sim = Simulator(humanoid, 2, 0.002, substeps=2)
     bank = TrajectoryBank([_still(humanoid)], "cpu", 0.0)

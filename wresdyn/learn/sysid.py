@@ -33,6 +33,7 @@ import torch
 from ..errors import WresdynError
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
+from ..sim.fused import fused_rollout
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .runs import RunFolder
@@ -45,9 +46,9 @@ from .window_fit_config import SysIdConfig
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows")
-""":class:`SysIdConfig` fields a resumed identification may change: where it runs and the L-BFGS refinement, which
-runs after the checkpointed Adam steps."""
+RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows", "fused")
+""":class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
+states are the stepped replay's) and the L-BFGS refinement, which runs after the checkpointed Adam steps."""
 
 
 class NonFiniteLoss(WresdynError):
@@ -93,13 +94,18 @@ def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validatio
     return shared
 
 
-def physics_window_loss(cfg, model, sim, window, weights=None):
+def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = False):
     """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
-    per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
+    per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps.
+    ``fused``: the windows replayed in one launch (:func:`~wresdyn.sim.fused.fused_rollout`), the same states."""
     sim.set_physics(model())
-    run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation or 0)
-    pos = squared_error(run.q[:, 1:], window.q[:, 1:], weights)
-    vel = squared_error(run.qd[:, 1:], window.qd[:, 1:], weights)
+    if fused:
+        q, qd = fused_rollout(sim, window)
+    else:
+        run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation or 0)
+        q, qd = run.q, run.qd
+    pos = squared_error(q[:, 1:], window.q[:, 1:], weights)
+    vel = squared_error(qd[:, 1:], window.qd[:, 1:], weights)
     return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
 
 
@@ -231,6 +237,10 @@ class _IdentifyLearner:
                                           ) if validation else None
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              param_grads=True, friction_kappa=cfg.friction_kappa)
+        if cfg.fused and (self.sim.solver_kind != "replay" or getattr(robot, "servo", None) is not None):
+            raise ValueError("fused replays PD drives with the replay solver; this identification has "
+                             + ("servo drives" if getattr(robot, "servo", None) is not None
+                                else f"the {self.sim.solver_kind} solver") + ": set fused to false")
         self.bank = TrajectoryBank(train, self.sim.device)
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
@@ -289,7 +299,7 @@ class _IdentifyLearner:
             self.bank.set_command_path(delay, model.goal_accel_steps().float().to(self.sim.device))
         if self.nodes is None:
             window = self.bank.sample(self.rng, cfg.windows, h)
-            loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights)
+            loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights, fused=cfg.fused)
         else:
             traj, first = self._chains(h)
             loss, parts = chain_loss(cfg, model, self.chain_sim, self.bank, self.nodes, traj, first, h, self.weights)

@@ -24,7 +24,8 @@ def fused_rollout(sim: Simulator, window: Window) -> tuple[torch.Tensor, torch.T
     ``sim`` runs the replay solver, one sample period per step (``substeps = 1``), one world per window. Physical
     parameters set with :meth:`~wresdyn.sim.simulator.Simulator.set_physics` as tensors that require grad (with
     ``Simulator(requires_grad=True, param_grads=True)``) receive gradients, summed over worlds, as through
-    :meth:`~wresdyn.sim.simulator.Simulator.step_diff`; the start state and the targets are data (no gradient).
+    :meth:`~wresdyn.sim.simulator.Simulator.step_diff`, and so do targets that require grad (a delay being
+    identified shifts them); the start state is data (no gradient).
 
     Returns:
         ``(q, qd)``: joint positions [rad] and velocities [rad/s], each (B, L + 1, n): the start state, then the
@@ -56,13 +57,14 @@ class _Fused(torch.autograd.Function):
         import warp as wp
 
         steps = target.shape[1]
-        grad = bool(names)
+        grad_target = ctx.needs_input_grad[2]
+        grad = bool(names) or grad_target
         q = _layout(q0[:, None], sim.q_index, sim.nq)
         qd = _layout(qd0[:, None], sim.qd_index, sim.nqd)
         q = torch.cat([q, q.new_zeros(steps, *q.shape[1:])]).contiguous()
         qd = torch.cat([qd, qd.new_zeros(steps, *qd.shape[1:])]).contiguous()
-        arrays = [wp.from_torch(a, requires_grad=grad) for a in
-                  (q, qd, _layout(target, sim.q_index, sim.nq).contiguous())]
+        arrays = [wp.from_torch(a, requires_grad=grad) for a in (q, qd)]
+        arrays.append(wp.from_torch(_layout(target, sim.q_index, sim.nq).contiguous(), requires_grad=grad_target))
         tape = wp.Tape() if grad else None
         with sim._tape_stream():
             if grad:
@@ -72,21 +74,25 @@ class _Fused(torch.autograd.Function):
                 sim.solver.rollout(*arrays, sim.dt)
         ctx.tape, ctx.sim, ctx.names, ctx.arrays = tape, sim, names, arrays
         ctx.physics_meta = [(p.dtype, p.device) for p in physics]
-        ctx.shape = q0.shape
+        ctx.shape, ctx.target_dtype = q0.shape, (target.dtype if grad_target else None)
         return (q.transpose(0, 1)[:, :, sim.q_index].clone(), qd.transpose(0, 1)[:, :, sim.qd_index].clone())
 
     @staticmethod
     def backward(ctx, g_q, g_qd):
         import warp as wp
 
-        sim, tape, (q, qd, _) = ctx.sim, ctx.tape, ctx.arrays
+        sim, tape, (q, qd, target) = ctx.sim, ctx.tape, ctx.arrays
         for f in ctx.names:
             sim._model_view(f, grad=True).zero_()
         with sim._tape_stream():
             tape.backward(grads={q: wp.from_torch(_layout(g_q, sim.q_index, sim.nq).contiguous()),
                                  qd: wp.from_torch(_layout(g_qd, sim.qd_index, sim.nqd).contiguous())})
         physics = sim._physics_grads(ctx.names, ctx.physics_meta)
+        g_target = None
+        if ctx.target_dtype is not None:  # (T, B, width) in Newton's layout -> (B, T, n)
+            # a copy: the tape's zeroing below would clear a view of its gradient array
+            g_target = wp.to_torch(target.grad)[:, :, sim.q_index].transpose(0, 1).to(ctx.target_dtype, copy=True)
         with sim._tape_stream():
             tape.zero()
         ctx.tape = ctx.arrays = None
-        return (None, None, None, None, None, *physics)
+        return (None, None, g_target, None, None, *physics)
