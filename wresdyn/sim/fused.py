@@ -49,6 +49,28 @@ def _layout(x: torch.Tensor, index: torch.Tensor, width: int) -> torch.Tensor:
     return out
 
 
+def _buffers(sim: Simulator, steps: int, grad: bool, grad_target: bool) -> tuple:
+    """Warp arrays (q, q̇, target) for a batch of ``steps``, time-major in Newton's layout: a free set of an earlier
+    rollout of the same shape, or new ones. The solver keys its launch plans by the arrays' addresses, so reusing
+    them spares rebuilding a plan of ``steps`` launches (forward and adjoint) at every call."""
+    import warp as wp
+
+    key = (steps, grad, grad_target)
+    free = sim.__dict__.setdefault("_fused_free", {}).get(key)
+    if free:
+        return free.pop()
+    w, dev = sim.n_worlds, sim.model.device
+    return (wp.zeros((steps + 1, w, sim.nq), dtype=wp.float32, device=dev, requires_grad=grad),
+            wp.zeros((steps + 1, w, sim.nqd), dtype=wp.float32, device=dev, requires_grad=grad),
+            wp.zeros((steps, w, sim.nq), dtype=wp.float32, device=dev, requires_grad=grad_target))
+
+
+def _release(sim: Simulator, arrays: tuple, grad: bool, grad_target: bool) -> None:
+    """Give ``arrays`` back for the next rollout of their shape (once nothing reads them any more: after the forward
+    without gradients, after the backward with; their gradients are zero then)."""
+    sim._fused_free.setdefault((arrays[2].shape[0], grad, grad_target), []).append(arrays)
+
+
 class _Fused(torch.autograd.Function):
     """(start state, PD targets, physical parameters) -> the window's (q, q̇), each (B, L + 1, n)."""
 
@@ -59,12 +81,11 @@ class _Fused(torch.autograd.Function):
         steps = target.shape[1]
         grad_target = ctx.needs_input_grad[2]
         grad = bool(names) or grad_target
-        q = _layout(q0[:, None], sim.q_index, sim.nq)
-        qd = _layout(qd0[:, None], sim.qd_index, sim.nqd)
-        q = torch.cat([q, q.new_zeros(steps, *q.shape[1:])]).contiguous()
-        qd = torch.cat([qd, qd.new_zeros(steps, *qd.shape[1:])]).contiguous()
-        arrays = [wp.from_torch(a, requires_grad=grad) for a in (q, qd)]
-        arrays.append(wp.from_torch(_layout(target, sim.q_index, sim.nq).contiguous(), requires_grad=grad_target))
+        arrays = _buffers(sim, steps, grad, grad_target)
+        q, qd, tgt = (wp.to_torch(a, requires_grad=False) for a in arrays)
+        q[0] = _layout(q0[:, None], sim.q_index, sim.nq)[0]  # rows 1.. are the rollout's to write
+        qd[0] = _layout(qd0[:, None], sim.qd_index, sim.nqd)[0]
+        tgt.copy_(_layout(target, sim.q_index, sim.nq))
         tape = wp.Tape() if grad else None
         with sim._tape_stream():
             if grad:
@@ -75,7 +96,11 @@ class _Fused(torch.autograd.Function):
         ctx.tape, ctx.sim, ctx.names, ctx.arrays = tape, sim, names, arrays
         ctx.physics_meta = [(p.dtype, p.device) for p in physics]
         ctx.shape, ctx.target_dtype = q0.shape, (target.dtype if grad_target else None)
-        return (q.transpose(0, 1)[:, :, sim.q_index].clone(), qd.transpose(0, 1)[:, :, sim.qd_index].clone())
+        out = (q.transpose(0, 1)[:, :, sim.q_index].clone(), qd.transpose(0, 1)[:, :, sim.qd_index].clone())
+        if not grad:
+            _release(sim, arrays, grad, grad_target)
+            ctx.arrays = None
+        return out
 
     @staticmethod
     def backward(ctx, g_q, g_qd):
@@ -94,5 +119,6 @@ class _Fused(torch.autograd.Function):
             g_target = wp.to_torch(target.grad)[:, :, sim.q_index].transpose(0, 1).to(ctx.target_dtype, copy=True)
         with sim._tape_stream():
             tape.zero()
+        _release(sim, ctx.arrays, True, ctx.target_dtype is not None)
         ctx.tape = ctx.arrays = None
         return (None, None, g_target, None, None, *physics)
