@@ -14,7 +14,8 @@ but the gradient goes to the parameters: the Warp tape of every step returns ``â
 
 A saturating drive has no gradient while the simulated drive does not saturate, so the effort limit starts
 from a coarse search: the training loss of a few windows at a geometric grid of fractions of the robot file's
-limit (forward only, :mod:`.grid_search`); the gradient refines from the best. Model selection on the validation
+limit (forward only, :mod:`.grid_search`); the gradient refines from the best. ``SysIdConfig.effort_floor`` bounds
+both from below (a servo's data-sheet stall torque as the least torque bound). Model selection on the validation
 split, as for every learner: every ``select_every`` iterations the current parameters replay the validation
 trajectories and the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
 each step validated the same way. Held-out and OOD data are never read. The Adam loop is the gradient fit's
@@ -216,7 +217,7 @@ class _IdentifyLearner:
     def __init__(self, robot, dataset, cfg: SysIdConfig, start, rng, train, dt: float, log, on_search) -> None:
         self.robot, self.cfg, self.rng, self.train, self.dt, self.log = robot, cfg, rng, train, dt, log
         self.on_search = on_search
-        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
+        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt, effort_floor=cfg.effort_floor)
         model = self.model
         groups = [[model.u_kp, model.u_kd, model.u_armature, model.u_noload_speed, model.u_goal_accel],
                   [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband,
@@ -271,7 +272,9 @@ class _IdentifyLearner:
             file_effort = np.asarray(self.robot.effort, dtype=np.float64)
             if "delay" in cfg.fit:
                 searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(n, g * dt)))
-            searched.append(self._search("effort", cfg.effort_grid,
+            grid = cfg.effort_grid if cfg.effort_floor is None else \
+                tuple(dict.fromkeys(max(g, cfg.effort_floor) for g in cfg.effort_grid))  # raised to the floor, once
+            searched.append(self._search("effort", grid,
                                          lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf)))
         for choice in searched:
             if choice is not None and self.on_search:
