@@ -1,6 +1,7 @@
 """The identification's floor on the effort limit (``SysIdConfig.effort_floor``): the effort search's grid is raised to
 it, every step is projected above it, the default keeps the coordinate's own floor, and a bad value is a one-line
-error."""
+error. The file's limits as a candidate of the selection (``SysIdConfig.effort_reset``): kept where validation
+is better."""
 
 import dataclasses
 
@@ -10,8 +11,8 @@ import torch
 
 from wresdyn.cli import main
 from wresdyn.data.mismatch import Mismatch
-from wresdyn.learn.sysid import SysIdConfig, identify
-from wresdyn.sim.physics import PhysicsModel
+from wresdyn.learn.sysid import PhysicsScore, SysIdConfig, identify
+from wresdyn.sim.physics import PhysicalParams, PhysicsModel
 
 FLOOR = 0.8
 """Fraction of the file's effort limit the bounded runs keep."""
@@ -55,6 +56,29 @@ def test_project_keeps_the_floor_and_the_default_keeps_its_own(humanoid):
     assert np.array_equal(projected(0.0), np.maximum(u, 0.05))  # below the coordinate's own floor: that one
 
 
+@pytest.fixture(scope="module")
+def with_validation(humanoid, record):
+    return record(humanoid, Mismatch(torque_limit_scale=0.5), {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.3)
+
+
+def test_effort_reset_keeps_the_files_limits_only_where_validation_is_better(humanoid, with_validation):
+    data = with_validation
+    score = PhysicsScore(humanoid, data.split("validation"), data.rate_hz, weights=data.fit_weights())
+    file = np.asarray(humanoid.effort)
+    cfg = dataclasses.replace(LOW, effort_grid=(), select_every=2)
+    for frac in (0.05, 0.6):  # every candidate far below the truth (0.5 of the file's), then near it
+        start = dataclasses.replace(PhysicalParams.nominal(humanoid), effort=frac * file)
+        selected, _ = identify(humanoid, data, cfg, log=lambda *_: None, start=start)
+        lines = []
+        reset, _ = identify(humanoid, data, dataclasses.replace(cfg, effort_reset=True), log=lines.append, start=start)
+        (line,) = [x for x in lines if x.startswith("effort limits at the file's")]
+        before, at_file = score(selected), score(dataclasses.replace(selected, effort=file.copy()))
+        assert score(reset) == pytest.approx(min(before, at_file), rel=1e-9)
+        kept = at_file < before
+        assert line.endswith("not kept") != kept
+        assert np.array_equal(reset.effort, file if kept else selected.effort)
+
+
 def test_a_bad_floor_is_refused_in_one_line(tmp_path, capsys):
     for value in ("1.5", "-0.1"):
         assert main(["identify", str(tmp_path / "none.npz"), "--effort-floor", value]) == 2
@@ -62,3 +86,5 @@ def test_a_bad_floor_is_refused_in_one_line(tmp_path, capsys):
         assert "effort_floor" in err and len(err.strip().splitlines()) == 1
     with pytest.raises(ValueError, match="effort_floor"):
         SysIdConfig(fit=("kp", "friction"), effort_floor=1.0)
+    with pytest.raises(ValueError, match="effort_reset"):
+        SysIdConfig(fit=("kp", "friction"), effort_reset=True)

@@ -94,6 +94,21 @@ def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validatio
     return shared
 
 
+def _effort_reset(robot, params, score, validation, fitted, log):
+    """The selected parameters with the fitted joints' effort limits put back at the robot file's, if that is better
+    on validation (:attr:`SysIdConfig.effort_reset`); returns (parameters, their validation)."""
+    file = np.asarray(robot.effort, dtype=np.float64)
+    reset = params.copy()
+    reset.effort = np.where(fitted & np.isfinite(file), file, params.effort)
+    if score is None or np.array_equal(reset.effort, params.effort):
+        return params, validation
+    v = score(reset)
+    kept = v < validation
+    log(f"effort limits at the file's: validation {v:.4f} rad against {validation:.4f} rad, "
+        + ("kept" if kept else "not kept"))
+    return (reset, v) if kept else (params, validation)
+
+
 def physics_window_loss(cfg, model, sim, window, weights=None):
     """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
     per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps."""
@@ -190,8 +205,14 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     if cfg.share_effort_ratio and "effort" in cfg.fit:
         params = _share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score, run.best.value,
                                      log)
+    validation = run.best.value
+    if cfg.effort_reset and "effort" in cfg.fit:
+        if learner.physics_score is not None and not np.array_equal(params.effort, learner.model.values().effort):
+            validation = learner.physics_score(params)  # the shared ratio's, kept above
+        params, validation = _effort_reset(robot, params, learner.physics_score, validation,
+                                           dataset.fit_weights() > 0, log)
     if cfg.refine:
-        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, run.best.value, learner.weights,
+        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
                          curve, log)
     if run.path is not None:
         params.save(run.path / "physics.json")

@@ -125,6 +125,11 @@ class SysIdConfig:
     the saturating joints share, bounded below by the torque the data demands
     (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
     when the effort limit is fitted."""
+    effort_reset: bool = False
+    """After the selection (and ``share_effort_ratio``), the selected parameters with every fitted effort limit put
+    back at the robot file's are replayed on validation and kept if better: a candidate of the selection, for a file
+    whose limit is a measured figure (a servo's data-sheet stall torque) that training windows trade against the other
+    fields. Only when the effort limit is fitted and there is a validation split."""
     saturated_min: float = 0.01
     """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
     shooting: int = 1
@@ -159,6 +164,8 @@ class SysIdConfig:
             check_number(self.effort_floor, "effort_floor", ge=0, le=1)
             if "effort" not in self.fit:
                 raise ValueError("effort_floor bounds the effort limit, which is not among the fitted fields (fit)")
+        if self.effort_reset and "effort" not in self.fit:
+            raise ValueError("effort_reset puts the effort limit back, which is not among the fitted fields (fit)")
         check_number(self.effort_after, "effort_after", ge=0)
         for i, f in enumerate(self.lr_scale):
             check_number(f, f"lr_scale[{i}]", gt=0)
