@@ -14,7 +14,8 @@ but the gradient goes to the parameters: the Warp tape of every step returns ``â
 
 A saturating drive has no gradient while the simulated drive does not saturate, so the effort limit starts
 from a coarse search: the training loss of a few windows at a geometric grid of fractions of the robot file's
-limit (forward only, :mod:`.grid_search`); the gradient refines from the best. Model selection on the validation
+limit (forward only, :mod:`.grid_search`); the gradient refines from the best. ``SysIdConfig.effort_floor`` bounds
+both from below (a servo's data-sheet stall torque as the least torque bound). Model selection on the validation
 split, as for every learner: every ``select_every`` iterations the current parameters replay the validation
 trajectories and the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
 each step validated the same way. Held-out and OOD data are never read. The Adam loop is the gradient fit's
@@ -92,6 +93,21 @@ def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validatio
         return params
     log(f"  validation {v:.4f} rad (was {validation:.4f} rad)")
     return shared
+
+
+def _effort_reset(robot, params, score, validation, fitted, log):
+    """The selected parameters with the fitted joints' effort limits put back at the robot file's, if that is better
+    on validation (:attr:`SysIdConfig.effort_reset`); returns (parameters, their validation)."""
+    file = np.asarray(robot.effort, dtype=np.float64)
+    reset = params.copy()
+    reset.effort = np.where(fitted & np.isfinite(file), file, params.effort)
+    if score is None or np.array_equal(reset.effort, params.effort):
+        return params, validation
+    v = score(reset)
+    kept = v < validation
+    log(f"effort limits at the file's: validation {v:.4f} rad against {validation:.4f} rad, "
+        + ("kept" if kept else "not kept"))
+    return (reset, v) if kept else (params, validation)
 
 
 def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = False):
@@ -195,8 +211,14 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     if cfg.share_effort_ratio and "effort" in cfg.fit:
         params = _share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score, run.best.value,
                                      log)
+    validation = run.best.value
+    if cfg.effort_reset and "effort" in cfg.fit:
+        if learner.physics_score is not None and not np.array_equal(params.effort, learner.model.values().effort):
+            validation = learner.physics_score(params)  # the shared ratio's, kept above
+        params, validation = _effort_reset(robot, params, learner.physics_score, validation,
+                                           dataset.fit_weights() > 0, log)
     if cfg.refine:
-        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, run.best.value, learner.weights,
+        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
                          curve, log)
     if run.path is not None:
         params.save(run.path / "physics.json")
@@ -222,7 +244,7 @@ class _IdentifyLearner:
     def __init__(self, robot, dataset, cfg: SysIdConfig, start, rng, train, dt: float, log, on_search) -> None:
         self.robot, self.cfg, self.rng, self.train, self.dt, self.log = robot, cfg, rng, train, dt, log
         self.on_search = on_search
-        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt)
+        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt, effort_floor=cfg.effort_floor)
         model = self.model
         groups = [[model.u_kp, model.u_kd, model.u_armature, model.u_noload_speed, model.u_goal_accel],
                   [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband,
@@ -281,7 +303,9 @@ class _IdentifyLearner:
             file_effort = np.asarray(self.robot.effort, dtype=np.float64)
             if "delay" in cfg.fit:
                 searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(n, g * dt)))
-            searched.append(self._search("effort", cfg.effort_grid,
+            grid = cfg.effort_grid if cfg.effort_floor is None else \
+                tuple(dict.fromkeys(max(g, cfg.effort_floor) for g in cfg.effort_grid))  # raised to the floor, once
+            searched.append(self._search("effort", grid,
                                          lambda g: np.where(np.isfinite(file_effort), g * file_effort, np.inf)))
         for choice in searched:
             if choice is not None and self.on_search:

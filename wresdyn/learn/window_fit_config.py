@@ -92,6 +92,11 @@ class SysIdConfig:
     Off by default. Where the file's kp is so stiff that the drive saturates on every move (the SO-101's servo
     model: kp 998 N·m/rad against 3.35 N·m), the loss barely depends on kp and Adam cannot walk down to a soft
     servo's: ``benchmarks/so101_real.sh`` uses it."""
+    effort_floor: float | None = None
+    """Least effort limit the fit may reach, as a fraction of the robot file's (gains config's) limit, 0-1: the grid
+    of ``effort_grid`` is raised to it and every step projected above it; ``None`` = down to 0.05 of it. Where the
+    file's limit is a servo's data-sheet stall torque, 1 keeps the fit from lowering the torque bound to flatten the
+    motor's torque-speed line, which shares it (:mod:`wresdyn.robot.servo`). Only when the effort limit is fitted."""
     effort_after: float = 0.4
     """Fraction of the iterations after which the effort limit joins the fit. Before, the drives keep the
     file's limits: a low limit started from the file's other values mimics the friction and delay not yet
@@ -125,6 +130,11 @@ class SysIdConfig:
     the saturating joints share, bounded below by the torque the data demands
     (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
     when the effort limit is fitted."""
+    effort_reset: bool = False
+    """After the selection (and ``share_effort_ratio``), the selected parameters with every fitted effort limit put
+    back at the robot file's are replayed on validation and kept if better: a candidate of the selection, for a file
+    whose limit is a measured figure (a servo's data-sheet stall torque) that training windows trade against the other
+    fields. Only when the effort limit is fitted and there is a validation split."""
     saturated_min: float = 0.01
     """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
     shooting: int = 1
@@ -155,6 +165,12 @@ class SysIdConfig:
             check_number(f, f"gain_grid[{i}]", gt=0)
         if self.gain_grid and "kp" not in self.fit:
             raise ValueError("gain_grid searches kp, which is not among the fitted fields (fit)")
+        if self.effort_floor is not None:
+            check_number(self.effort_floor, "effort_floor", ge=0, le=1)
+            if "effort" not in self.fit:
+                raise ValueError("effort_floor bounds the effort limit, which is not among the fitted fields (fit)")
+        if self.effort_reset and "effort" not in self.fit:
+            raise ValueError("effort_reset puts the effort limit back, which is not among the fitted fields (fit)")
         check_number(self.effort_after, "effort_after", ge=0)
         for i, f in enumerate(self.lr_scale):
             check_number(f, f"lr_scale[{i}]", gt=0)

@@ -106,9 +106,12 @@ class PhysicsModel(torch.nn.Module):
         fit: Fields to fit (default all of :data:`JOINT_FIELDS` and ``"bodies"``; :data:`SERVO_FIELDS` only when
             named); the others stay at ``start``.
         dt: Sample period [s]; the delay's unit.
+        effort_floor: Least effort limit :meth:`project` keeps, as a fraction of the robot's finite limits
+            (``None``: 0.05 of them).
     """
 
-    def __init__(self, robot, start: PhysicalParams | None = None, fit=None, dt: float = 0.002) -> None:
+    def __init__(self, robot, start: PhysicalParams | None = None, fit=None, dt: float = 0.002,
+                 effort_floor: float | None = None) -> None:
         super().__init__()
         start = start or PhysicalParams.nominal(robot)
         start.check(robot)
@@ -122,6 +125,9 @@ class PhysicsModel(torch.nn.Module):
         self.ref = {"damping": kd, "friction": 0.05 * eff_ref, "effort": eff_ref, "delay": np.full(n, self.dt)}
         for f, r in self.ref.items():
             self.register_buffer(f"ref_{f}", torch.as_tensor(r, **f64))
+        # not a buffer: a setting of the fit, not a fitted state (checkpoints keep their keys)
+        self.effort_floor = None if effort_floor is None else torch.as_tensor(
+            np.where(np.isfinite(eff), max(float(effort_floor), 0.05), 0.05), **f64)
         for f in ("kp", "kd", "armature"):
             self.register_buffer(f"start_{f}", torch.as_tensor(getattr(start, f), **f64))
             self.register_parameter(f"u_{f}", torch.nn.Parameter(torch.zeros(n, **f64), f in self.fit))
@@ -188,10 +194,15 @@ class PhysicsModel(torch.nn.Module):
 
     @torch.no_grad()
     def project(self) -> None:
-        """Keep the linear fields' coordinates >= 0 (call after each optimiser step); the effort limit and
-        the delay get small positive floors (a drive with no torque, a negative delay are not physical)."""
+        """Keep the linear fields' coordinates >= 0 (call after each optimiser step); the effort limit gets a
+        positive floor (a drive with no torque is not physical), 0.05 of the robot's limit or the ``effort_floor``
+        asked for."""
         for f in self.ref:
-            getattr(self, f"u_{f}").clamp_(min=0.05 if f == "effort" else 0.0)
+            u = getattr(self, f"u_{f}")
+            if f == "effort" and self.effort_floor is not None:
+                u.copy_(torch.maximum(u, self.effort_floor.to(u.device)))
+            else:
+                u.clamp_(min=0.05 if f == "effort" else 0.0)
 
     @torch.no_grad()
     def assign(self, field: str, value, keep=None) -> None:
