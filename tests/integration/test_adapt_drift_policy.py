@@ -74,7 +74,8 @@ def test_policy_stream_is_the_robot_log_and_the_adapter_consumes_it(humanoid, sh
     assert np.abs(blocks[:, 0] - ref_q[task.decimation::task.decimation]).max() <= reach + 1e-6
     # the robot follows it: sensed position near the command, the policy's tracking error small and finite
     assert np.abs(run.q - run.q_cmd).mean() < 0.05, np.abs(run.q - run.q_cmd).mean()
-    assert run.tracking.shape == (samples // task.decimation,) and run.tracking.max() < 0.2
+    assert run.tracking.shape == run.worst.shape == (samples // task.decimation,) and run.tracking.max() < 0.2
+    assert (run.worst >= run.tracking).all() and run.fail_error == task.fail_error
     # the drift reached the plant's model: the leg friction doubled by the end of the ramp
     np.testing.assert_allclose(real.model.dof_frictionloss[:12], 2.0 * friction0[:12])
     cfg = AdaptConfig(window=1.2, holdout=0.3, update_every=0.5, iterations=2, windows=4, horizon=16,
