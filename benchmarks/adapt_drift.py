@@ -86,15 +86,21 @@ def skill_commands(robot, seconds: float, rate: float, split: str, seed: int) ->
     return _cycle([m.q for m in skill_motions(robot, rate, split, seed)], seconds, rate, 0.2)
 
 
-def skill_reference(robot, samples: int, rate: float, split: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def skill_reference(robot, samples: int, rate: float, split: str, seed: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`skill_motions` in turn as one reference for a tracking policy, ``samples`` long: joint positions [rad]
-    (samples, n) (:func:`skill_commands`' command) and the soles [m] (samples, n_feet, 3) (blended linearly between
-    motions)."""
+    (samples, n) (:func:`skill_commands`' command), the soles [m] (samples, n_feet, 3) (blended linearly between
+    motions) and the name of the motion each sample belongs to (samples,) (``blend`` between two)."""
     motions = skill_motions(robot, rate, split, seed)
     seconds = samples / rate + 1.0
     q = _cycle([m.q for m in motions], seconds, rate, 0.2)[:samples]
     feet = _cycle([m.feet.reshape(len(m.feet), -1) for m in motions], seconds, rate, 0.2)[:samples]
-    return q, feet.reshape(samples, *motions[0].feet.shape[1:])
+    names, i = [], 0
+    while len(names) < samples:  # _cycle's order: the first motion, then a blend and the next, in turn
+        m = motions[i % len(motions)]
+        names += ([] if i == 0 else ["blend"] * int(0.2 * rate)) + [m.name] * len(m.q)
+        i += 1
+    return q, feet.reshape(samples, *motions[0].feet.shape[1:]), np.array(names[:samples])
 
 
 def _cycle(trajs, seconds: float, rate: float, blend: float) -> np.ndarray:
@@ -272,7 +278,8 @@ def main() -> None:
     if args.motion == "policy":
         from adapt_drift_policy import policy_stream, policy_tracking
 
-        ref_q, ref_feet = skill_reference(robot, int(round(args.seconds * rate)) + 1, rate, splits[0], args.seed)
+        ref_q, ref_feet, ref_names = skill_reference(robot, int(round(args.seconds * rate)) + 1, rate, splits[0],
+                                                     args.seed)
         run = policy_stream(args.policy, real, hook, ref_q, ref_feet, rate, args.seed)
         q, qd, q_cmd = run.q, run.qd, run.q_cmd
     else:
@@ -335,7 +342,8 @@ def main() -> None:
             f"{r['t']},{r['phase']},{r['fixed']:.6f},{r['online']:.6f},{r['oracle']:.6f}\n" for r in rows))
     summary = report(rows, times, errs, secs, held, truth_at, oracles, truths, calib, robot, log)
     if run is not None:
-        summary["policy"] = policy_tracking(run, phase, out / "tracking.csv", log)
+        summary["policy"] = policy_tracking(run, phase, out / "tracking.csv", log, robot.joint_names,
+                                            ref_names[np.round(run.step_t * rate).astype(int)])
         summary["policy"]["run"] = str(args.policy)
     if args.oracles:  # the oracles' sizes are the earlier run's
         earlier = json.loads((Path(args.oracles) / "summary.json").read_text())

@@ -35,6 +35,8 @@ class PolicyRun:
     """The policy's tracking error: mean over joints of |q_true - q_ref| at the end of each policy step [rad] (K,)."""
     step_t: np.ndarray
     """Robot time at the end of each policy step [s] (K,)."""
+    joint_error: np.ndarray
+    """Each joint's |q_true - q_ref| at the end of each policy step [rad] (K, n)."""
     worst: np.ndarray
     """The largest joint's |q_true - q_ref| at the end of each policy step [rad] (K,)."""
     fail_error: float
@@ -115,12 +117,13 @@ def policy_stream(skill_dir, real, hook, ref_q: np.ndarray, ref_feet: np.ndarray
     err = np.abs(dep.q[0, 1:] - dep.q_ref[0, 1:])
     cat = np.concatenate
     return PolicyRun(cat(plant.q), cat(plant.qd), cat(plant.cmd), err.mean(-1),
-                     np.arange(1, len(err) + 1) * task.decimation / rate, err.max(-1), task.fail_error)
+                     np.arange(1, len(err) + 1) * task.decimation / rate, err, err.max(-1), task.fail_error)
 
 
-def policy_tracking(run, phase, path, log) -> dict:
+def policy_tracking(run, phase, path, log, joint_names, motions) -> dict:
     """The policy's own tracking error (mean |q_true - q_ref| over joints and policy steps [rad]) per second
-    (written to ``path``) and per phase."""
+    (written to ``path``) and per phase, and where a joint crossed the task's failure rule: per joint (of
+    ``joint_names``) and per motion (``motions``: the reference motion of each policy step's end, (K,))."""
     sec = np.floor(run.step_t - 1e-9).astype(int)  # a step ending at t lies in the second before t
     per = {int(s): float(run.tracking[sec == s].mean()) for s in np.unique(sec)}
     with open(path, "w") as f:
@@ -136,6 +139,11 @@ def policy_tracking(run, phase, path, log) -> dict:
     log(f"a joint more than {run.fail_error:g} rad from its reference (the task's failure rule) in "
         f"{int(over.sum())} policy steps, in the seconds {fails or 'none'}; worst per phase: " + "  ".join(
             f"{ph} {run.worst[[phase(s) == ph for s in sec]].max():.3f}" for ph in out))
+    by_joint = {joint_names[j]: int(c) for j, c in enumerate((run.joint_error > run.fail_error).sum(0)) if c}
+    names, counts = np.unique(motions[over], return_counts=True)
+    by_motion = {str(m): int(c) for m, c in zip(names, counts)}
+    log(f"  by joint: {by_joint}; by motion: {by_motion}")
     return {"mpjpe_phases": out, "fail_error": run.fail_error, "failure_steps": int(over.sum()),
+            "failure_joint_steps": by_joint, "failure_motion_steps": by_motion,
             "failure_seconds": fails,
             "worst_phases": {ph: float(run.worst[[phase(s) == ph for s in sec]].max()) for ph in out}}
