@@ -4,14 +4,19 @@
     python benchmarks/adapt_drift.py --quick --out /tmp/adapt_drift_quick           # a 40 s timeline, smoke test
     python benchmarks/adapt_drift.py --splits validation --seed 1 --oracles DIR --out OUT   # the validation timeline
     python benchmarks/adapt_drift.py --motion skill --splits heldout --oracles DIR --out OUT  # a skill as the motion
+    python benchmarks/adapt_drift.py --motion policy --policy RUN/skills/b_calibrated --splits heldout --oracles DIR \
+        --out OUT                                                          # a deployed skill closed loop
 
 The "real" robot is the shipped one (``data/mismatch_default.toml`` on the humanoid, MuJoCo C at 1 kHz, sensor noise),
 driven by the shipped excitation: the commands of ``data/dataset.npz`` (train, validation, held-out splits in turn,
 joined by 1 s raised-cosine blends), cycled for the whole run. ``--splits validation --seed 1`` is the validation
 timeline the adapter's defaults are chosen on (the validation trajectories' commands only, other sensor noise); the
 reported one is the default. ``--motion skill`` drives it with the stand skills' reference motions under PD instead
-(:func:`skill_commands`: kick, squat, wave, march; no tracking policy is trained here). Its MuJoCo model changes while it runs, through
-:meth:`wresdyn.data.real_robot.RealRobot.record`'s ``on_sample`` hook (default timeline, robot time):
+(:func:`skill_commands`: kick, squat, wave, march); ``--motion policy`` with a tracking policy trained by ``wresdyn
+deploy`` closed loop over the same motions (``adapt_drift_policy.py``: the stream is the robot's log, the command the
+PD target the policy wrote). Its MuJoCo model changes while it runs, through
+:meth:`wresdyn.data.real_robot.RealRobot.record`'s ``on_sample`` hook (default timeline, robot time; under the policy,
+before every policy step):
 
 - 0-20 s: no drift;
 - 20-80 s: the dry friction of the twelve leg drives rises linearly to twice its value (then stays);
@@ -67,14 +72,35 @@ def commands(ds, seconds: float, rate: float, blend: float = 1.0, splits=("train
     return _cycle(trajs, seconds, rate, blend)
 
 
-def skill_commands(robot, seconds: float, rate: float, split: str, seed: int) -> np.ndarray:
-    """The stand skills' reference motions (:func:`wresdyn.skills.motions.make_motions`: kick, squat, wave and, in
-    the held-out split, march; 2 s each, every one from and back to the neutral stance) in turn, as the PD command:
-    the motion a tracking policy asks for, without the policy (none is trained here). (T, n) [rad]."""
+def skill_motions(robot, rate: float, split: str, seed: int) -> list:
+    """The stand skills' reference motions of ``split`` (:func:`wresdyn.skills.motions.make_motions`: kick, squat,
+    wave and, in the held-out split, march; two of each, 2 s each, every one from and back to the neutral stance)."""
     from wresdyn.skills.motions import make_motions
 
-    motions = make_motions(robot, {split: 2}, duration=2.0, rate_hz=rate, seed=seed).split(split)
-    return _cycle([m.q for m in motions], seconds, rate, 0.2)
+    return make_motions(robot, {split: 2}, duration=2.0, rate_hz=rate, seed=seed).split(split)
+
+
+def skill_commands(robot, seconds: float, rate: float, split: str, seed: int) -> np.ndarray:
+    """:func:`skill_motions` in turn, as the PD command: the motion a tracking policy asks for, without the policy.
+    (T, n) [rad]."""
+    return _cycle([m.q for m in skill_motions(robot, rate, split, seed)], seconds, rate, 0.2)
+
+
+def skill_reference(robot, samples: int, rate: float, split: str, seed: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`skill_motions` in turn as one reference for a tracking policy, ``samples`` long: joint positions [rad]
+    (samples, n) (:func:`skill_commands`' command), the soles [m] (samples, n_feet, 3) (blended linearly between
+    motions) and the name of the motion each sample belongs to (samples,) (``blend`` between two)."""
+    motions = skill_motions(robot, rate, split, seed)
+    seconds = samples / rate + 1.0
+    q = _cycle([m.q for m in motions], seconds, rate, 0.2)[:samples]
+    feet = _cycle([m.feet.reshape(len(m.feet), -1) for m in motions], seconds, rate, 0.2)[:samples]
+    names, i = [], 0
+    while len(names) < samples:  # _cycle's order: the first motion, then a blend and the next, in turn
+        m = motions[i % len(motions)]
+        names += ([] if i == 0 else ["blend"] * int(0.2 * rate)) + [m.name] * len(m.q)
+        i += 1
+    return q, feet.reshape(samples, *motions[0].feet.shape[1:]), np.array(names[:samples])
 
 
 def _cycle(trajs, seconds: float, rate: float, blend: float) -> np.ndarray:
@@ -193,9 +219,11 @@ def main() -> None:
     ap.add_argument("--oracles", default=None,
                     help="reuse the oracle_*.json of an earlier run's folder (same timeline and conditions)")
     ap.add_argument("--quick", action="store_true", help="a 40 s run, 40-iteration oracles on 2 trajectories")
-    ap.add_argument("--motion", choices=("excitation", "skill"), default="excitation",
-                    help="what the robot does: the shipped excitation's commands, or the stand skills' reference "
-                         "motions under PD")
+    ap.add_argument("--motion", choices=("excitation", "skill", "policy"), default="excitation",
+                    help="what the robot does: the shipped excitation's commands, the stand skills' reference "
+                         "motions under PD, or a tracking policy (--policy) closed loop over those motions")
+    ap.add_argument("--policy", default=None, metavar="SKILL_RUN",
+                    help="the skill of --motion policy: a `wresdyn deploy` folder's skills/<name> (policy.pt)")
     ap.add_argument("--splits", default="train,validation,heldout",
                     help="the splits the motion is drawn from (excitation: the dataset's; skill: one of train, "
                          "validation, heldout); `validation` is the timeline settings are chosen on")
@@ -233,12 +261,10 @@ def main() -> None:
     # the stream
     t0 = time.perf_counter()
     splits = tuple(args.splits.split(","))
-    if args.motion == "skill":
-        if len(splits) != 1:
-            raise SystemExit("--motion skill takes one split")
-        q_cmd = skill_commands(robot, args.seconds, rate, splits[0], args.seed)
-    else:
-        q_cmd = commands(ds, args.seconds, rate, splits=splits)
+    if args.motion != "excitation" and len(splits) != 1:
+        raise SystemExit(f"--motion {args.motion} takes one split")
+    if args.motion == "policy" and not args.policy:
+        raise SystemExit("--motion policy needs --policy SKILL_RUN (a `wresdyn deploy` folder's skills/<name>)")
     real = RealRobot(robot, mismatch, rate)
     drift = Drift(real, robot, times, rate)
     truth_at = {}
@@ -248,7 +274,18 @@ def main() -> None:
         if k % int(rate) == 0:
             truth_at[k // int(rate)] = real.physics()
 
-    q, qd, _ = real.record(q_cmd, np.random.default_rng(args.seed), on_sample=hook)
+    run = None
+    if args.motion == "policy":
+        from adapt_drift_policy import policy_stream, policy_tracking
+
+        ref_q, ref_feet, ref_names = skill_reference(robot, int(round(args.seconds * rate)) + 1, rate, splits[0],
+                                                     args.seed)
+        run = policy_stream(args.policy, real, hook, ref_q, ref_feet, rate, args.seed)
+        q, qd, q_cmd = run.q, run.qd, run.q_cmd
+    else:
+        q_cmd = (skill_commands(robot, args.seconds, rate, splits[0], args.seed) if args.motion == "skill" else
+                 commands(ds, args.seconds, rate, splits=splits))
+        q, qd, _ = real.record(q_cmd, np.random.default_rng(args.seed), on_sample=hook)
     t = np.arange(len(q)) / rate
     log(f"recorded {t[-1] + 1 / rate:.0f} s of the drifting robot in {time.perf_counter() - t0:.0f} s")
 
@@ -304,6 +341,10 @@ def main() -> None:
         f.write("t,phase,fixed,online,oracle\n" + "".join(
             f"{r['t']},{r['phase']},{r['fixed']:.6f},{r['online']:.6f},{r['oracle']:.6f}\n" for r in rows))
     summary = report(rows, times, errs, secs, held, truth_at, oracles, truths, calib, robot, log)
+    if run is not None:
+        summary["policy"] = policy_tracking(run, phase, out / "tracking.csv", log, robot.joint_names,
+                                            ref_names[np.round(run.step_t * rate).astype(int)])
+        summary["policy"]["run"] = str(args.policy)
     if args.oracles:  # the oracles' sizes are the earlier run's
         earlier = json.loads((Path(args.oracles) / "summary.json").read_text())
         args.oracle_iterations, args.oracle_train = earlier["oracle_iterations"], earlier["oracle_train"]

@@ -75,6 +75,8 @@ def test_real_plant_steps_exactly_as_the_real_robot_records(humanoid, motions, q
         np.testing.assert_allclose(plant.q_true[1], q_rec[k * dec], atol=1e-12, err_msg=f"step {k}")
         _, _, bad = plant.step(torch.as_tensor(np.repeat(cmd[k:k + 1], 2, 0)))
         assert not bad.any()
+        # every sample of the step, as the recording holds them (the first: the state the step started from)
+        np.testing.assert_allclose(plant.q_samples[1], q_rec[k * dec:(k + 1) * dec], atol=1e-12, err_msg=f"step {k}")
     assert np.abs(plant.tau).max() > 0.1
     limit = quiet_real.model.actuator_forcerange[:humanoid.n_dof, 1]
     assert (np.abs(plant.tau) <= limit + 1e-9).all()  # saturated like the real drives

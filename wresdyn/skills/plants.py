@@ -177,10 +177,12 @@ class RealPlant:
     The command passes the real robot's delay line (its FIFO at the physics substep) and torque limits exactly as in
     :meth:`~wresdyn.data.real_robot.RealRobot.record`; :meth:`step` returns the sensed joint state (the mismatch's
     noise and quantisation, drawn from ``seed``), :attr:`q_true`/:attr:`qd_true` the true one and :attr:`tau` the
-    drive torque at every physics substep of the last step [N*m] (N, S, n). On the floor :attr:`base_pose` /
-    :attr:`base_twist` are the true base state and :meth:`imu` what its IMU reports (with ``imu_noise``). Each
-    step's rollout starts with a cold constraint-solver warm start (its friction solution converges within the
-    solver's iterations).
+    drive torque at every physics substep of the last step [N*m] (N, S, n), :attr:`q_samples`/:attr:`qd_samples` the
+    true state at every recording period of it. Each step reads ``real.model`` as it is then: a caller may change its
+    fields between steps (a robot that drifts; :attr:`tau` keeps the gains and limits read at construction). On the
+    floor :attr:`base_pose` / :attr:`base_twist` are the true base state and :meth:`imu` what its IMU reports (with
+    ``imu_noise``). Each step's rollout starts with a cold constraint-solver warm start (its friction solution
+    converges within the solver's iterations).
 
     Args:
         imu_noise: Standard deviations of the IMU's white noise: angular velocity [rad/s] and the measured gravity
@@ -223,6 +225,11 @@ class RealPlant:
         self.q_true = np.zeros((self.n_worlds, n))
         self.qd_true = np.zeros((self.n_worlds, n))
         self.tau = np.zeros((self.n_worlds, self.n_sub, n))
+        self.q_samples = np.zeros((self.n_worlds, self.decimation, n))
+        """True joint positions [rad] at the start of every recording period of the last step (N, decimation, n),
+        the first the state the step started from: what a log at the recording rate holds, before the sensors."""
+        self.qd_samples = np.zeros_like(self.q_samples)
+        """True joint velocities [rad/s] at the same instants (N, decimation, n)."""
 
     def reset(self, ids, q, qd) -> None:
         """Place worlds ``ids`` at ``q``, ``qd`` [rad, rad/s] (k, n); the delay line holds ``q``."""
@@ -296,6 +303,7 @@ class RealPlant:
         qs, qds = prev[..., self._iq:self._iq + n], prev[..., self._iv:self._iv + n]
         tau = self.kp * (ctrl - qs) - self.kd * qds
         self.tau = np.where(self.limited, np.clip(tau, self.lim[:, 0], self.lim[:, 1]), tau)
+        self.q_samples, self.qd_samples = qs[:, ::self.real.n_sub], qds[:, ::self.real.n_sub]
         new = states[:, -1]
         bad = ~np.isfinite(new).all(-1)
         self.state = np.where(bad[:, None], self.state, new)
