@@ -2,8 +2,8 @@
 # The real-hardware benchmark (issue 13): the full SAGE SO-101 set (40 runs, ../shared/real/so101/), whole runs
 # (each its own motion family) held out, PD-only vs the hybrid and identification, each started from a kp search
 # (--gain-grid) and from the file's kp, the residual alone and identification with a delay search; then the
-# baselines (LeRobot's MuJoCo model, a BAM-style drive) replayed in MuJoCo on the same runs.
-# Raw output: benchmarks/results/so101/.
+# baselines (LeRobot's MuJoCo model, a BAM-style drive) replayed in MuJoCo on the same runs; then the servo model.
+# Raw output: benchmarks/results/so101/ and benchmarks/results/so101_servo/.
 #   bash benchmarks/so101_real.sh SO101_TARBALL_DIR OUT_DIR
 set -euo pipefail
 src=${1:?usage: so101_real.sh DIR_WITH_so101-sage-logs.tar.xz OUT_DIR}
@@ -22,3 +22,7 @@ $w fit "$out/data/dataset.npz" --out "$out/hybrid" --eval
 $w fit "$out/data/dataset.npz" --model network --out "$out/network" --eval
 $w identify "$out/data/dataset.npz" --delay-grid 0,10,25,40,55,70 --out "$out/identify_delay" --eval
 $py benchmarks/so101_baselines.py "$out/data/dataset.npz" --json "$out/baselines.json" | tee "$out/baselines.txt"
+# Servo drives (SERVO=0 skips them): benchmarks/so101_servo_real.sh on the same logs
+if [[ ${SERVO:-1} != 0 ]]; then
+  bash benchmarks/so101_servo_real.sh "$src" "$out"
+fi
