@@ -136,14 +136,14 @@ def policy_tracking(run, phase, path, log, joint_names, motions) -> dict:
     log("policy tracking error (mean |q - q_ref| [rad]): " + "  ".join(f"{k} {v:.5f}" for k, v in out.items()))
     over = run.worst > run.fail_error
     fails = sorted({int(s) for s in sec[over]})
+    worst = {ph: float(run.worst[[phase(s) == ph for s in sec]].max()) for ph in out}
     log(f"a joint more than {run.fail_error:g} rad from its reference (the task's failure rule) in "
         f"{int(over.sum())} policy steps, in the seconds {fails or 'none'}; worst per phase: " + "  ".join(
-            f"{ph} {run.worst[[phase(s) == ph for s in sec]].max():.3f}" for ph in out))
+            f"{ph} {v:.3f}" for ph, v in worst.items()))
     by_joint = {joint_names[j]: int(c) for j, c in enumerate((run.joint_error > run.fail_error).sum(0)) if c}
     names, counts = np.unique(motions[over], return_counts=True)
     by_motion = {str(m): int(c) for m, c in zip(names, counts)}
     log(f"  by joint: {by_joint}; by motion: {by_motion}")
     return {"mpjpe_phases": out, "fail_error": run.fail_error, "failure_steps": int(over.sum()),
             "failure_joint_steps": by_joint, "failure_motion_steps": by_motion,
-            "failure_seconds": fails,
-            "worst_phases": {ph: float(run.worst[[phase(s) == ph for s in sec]].max()) for ph in out}}
+            "failure_seconds": fails, "worst_phases": worst}

@@ -34,10 +34,9 @@ import torch
 from ..errors import WresdynError
 from ..export.usd import check_usd_robot, write_export
 from ..learn.sysid import physics_window_loss
-from ..learn.window_fit import squared_error
 from ..robot.physical import PhysicalParams
 from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.fused import fused_rollout
+from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
 from .detect import ChangeDetector, search_effort
@@ -324,13 +323,8 @@ class Adapter:
         for _ in range(cfg.track_iterations if track else cfg.iterations):
             held = {f: getattr(model, f"u_{f}").detach().clone() for f in _JOINT_PARAMS}
             window = bank.sample(self.rng, cfg.windows, cfg.horizon)
-            if self._fused(self.sim) and cfg.grad_truncation is None:
-                self.sim.set_physics(model())
-                q, qd = fused_rollout(self.sim, window)
-                value = (cfg.w_q * squared_error(q[:, 1:], window.q[:, 1:])
-                         + cfg.w_qd * squared_error(qd[:, 1:], window.qd[:, 1:]))  # physics_window_loss's
-            else:
-                value, _ = physics_window_loss(cfg, model, self.sim, window)
+            value, _ = physics_window_loss(cfg, model, self.sim, window,
+                                           fused=can_fuse(self.sim) and cfg.grad_truncation is None)
             value = value + cfg.w_prior * model.prior().to(value.device)
             if not torch.isfinite(value):
                 return float("nan")
@@ -356,7 +350,7 @@ class Adapter:
         self.sim_val.set_physics(self.physics if pending is None else pending, worlds=slice(3, 4))
         window = holdout.whole().repeat(4)
         with torch.no_grad():
-            q = fused_rollout(self.sim_val, window)[0] if self._fused(self.sim_val) else rollout(self.sim_val, window).q
+            q = fused_rollout(self.sim_val, window)[0] if can_fuse(self.sim_val) else rollout(self.sim_val, window).q
         err = (q[:, 1:] - window.q[:, 1:]).abs()
         joint = err[1].mean(0).cpu().numpy().astype(np.float64)
         return tuple(float(e) for e in err.mean((1, 2)).cpu().numpy()), joint
@@ -375,7 +369,7 @@ class Adapter:
             self.sim_grid = Simulator(self.robot, cfg.effort_joints * len(cfg.effort_grid) + 1, self.dt,
                                       solver=cfg.solver, device=cfg.device, param_grads=True)
         tried, won, after = search_effort(self.sim_grid, self.sim_val, select.whole(), holdout.whole(), self.physics,
-                                          joint_jump, cfg, error, self._fused(self.sim_grid))
+                                          joint_jump, cfg, error, can_fuse(self.sim_grid))
         self.sim_val.set_physics(self.start, worlds=slice(0, 1))  # world 0 replays the warm start
         if won is None:
             return tried, "", error
@@ -397,11 +391,6 @@ class Adapter:
             run = rollout(self.sim_one, window)
         err = (run.q[:, 1] - window.q[:, 1]).abs().mean(-1).cpu().numpy()
         return float(err[:self.n_one].mean()), float(err[self.n_one:].mean())
-
-    def _fused(self, sim: Simulator) -> bool:
-        """Whether ``sim`` replays PD-only windows in one launch (:func:`~wresdyn.sim.fused.fused_rollout`: the
-        replay solver at one substep, no servo drive's goal profile); else step by step, the same numbers."""
-        return sim.solver_kind == "replay" and sim.substeps == 1 and getattr(self.robot, "servo", None) is None
 
     # -------------------------------------------------------------------------------------------- publishing
     def publish(self, update: Update) -> Path | None:

@@ -16,8 +16,8 @@ from .replay_env_config import ReplayEnvConfig, RewardConfig
 from .residual_config import ResidualConfig
 from .runs import read_unset
 
-__all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config", "config_from_dict",
-           "parse_overrides", "apply_overrides", "set_fields", "set_field"]
+__all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config",
+           "config_from_dict", "parse_overrides", "apply_overrides", "set_fields", "set_field"]
 
 
 COMPILE_MODES = ("", "default", "max-autotune-no-cudagraphs")

@@ -34,7 +34,7 @@ import torch
 from ..errors import WresdynError
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
-from ..sim.fused import fused_rollout
+from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .runs import RunFolder
@@ -81,18 +81,19 @@ class PhysicsScore(ValidationScore):
 
 def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log):
     """The selected parameters with the effort limits the training data never reaches set from the saturating
-    joints' ratio (:mod:`.unexcited_limits`), unless that is worse on validation."""
+    joints' ratio (:mod:`.unexcited_limits`), unless that is worse on validation; returns (parameters, their
+    validation, or ``None`` where nothing was replayed)."""
     shared, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=dataset.fit_weights() > 0,
                                             saturated_min=cfg.saturated_min)
     log(found.describe())
     if not found.changed or score is None:
-        return shared
+        return shared, None
     v = score(shared)
     if v > validation:
         log(f"  not kept: validation {v:.4f} rad against {validation:.4f} rad")
-        return params
+        return params, None
     log(f"  validation {v:.4f} rad (was {validation:.4f} rad)")
-    return shared
+    return shared, v
 
 
 def _effort_reset(robot, params, score, validation, fitted, log):
@@ -208,15 +209,13 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     run = RunFolder(out, dataclasses.asdict(cfg), RESUME_MAY_CHANGE, key="sysid", record=run_record(cfg, dataset))
     curve = run_window_fit(cfg, learner, run, rng, log)
     params = learner.model.values()
+    validation, shared = run.best.value, None
     if cfg.share_effort_ratio and "effort" in cfg.fit:
-        params = _share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score, run.best.value,
-                                     log)
-    validation = run.best.value
+        params, shared = _share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score,
+                                             validation, log)
     if cfg.effort_reset and "effort" in cfg.fit:
-        if learner.physics_score is not None and not np.array_equal(params.effort, learner.model.values().effort):
-            validation = learner.physics_score(params)  # the shared ratio's, kept above
-        params, validation = _effort_reset(robot, params, learner.physics_score, validation,
-                                           dataset.fit_weights() > 0, log)
+        params, validation = _effort_reset(robot, params, learner.physics_score,
+                                           validation if shared is None else shared, dataset.fit_weights() > 0, log)
     if cfg.refine:
         params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
                          curve, log)
@@ -259,10 +258,9 @@ class _IdentifyLearner:
                                           ) if validation else None
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              param_grads=True, friction_kappa=cfg.friction_kappa)
-        if cfg.fused and (self.sim.solver_kind != "replay" or getattr(robot, "servo", None) is not None):
-            raise ValueError("fused replays PD drives with the replay solver; this identification has "
-                             + ("servo drives" if getattr(robot, "servo", None) is not None
-                                else f"the {self.sim.solver_kind} solver") + ": set fused to false")
+        if cfg.fused and not can_fuse(self.sim):
+            raise ValueError("fused replays PD drives with the replay solver at one substep; this identification's "
+                             "robot or solver is not that: set fused to false")
         self.bank = TrajectoryBank(train, self.sim.device)
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)

@@ -15,7 +15,13 @@ import torch
 from .bank import Window
 from .simulator import Simulator
 
-__all__ = ["fused_rollout"]
+__all__ = ["can_fuse", "fused_rollout"]
+
+
+def can_fuse(sim: Simulator) -> bool:
+    """Whether ``sim`` can replay PD-only windows in one launch: the replay solver at one substep, and no servo drive
+    (whose goal profile and dead band carry state the fused launch does not)."""
+    return sim.solver_kind == "replay" and sim.substeps == 1 and getattr(sim.robot, "servo", None) is None
 
 
 def fused_rollout(sim: Simulator, window: Window) -> tuple[torch.Tensor, torch.Tensor]:
