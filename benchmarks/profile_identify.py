@@ -2,9 +2,10 @@
 timed whole, then by part with the device synchronised around each, and its kernels and host synchronisations
 counted under ``torch.profiler``.
 
-    python benchmarks/profile_identify.py --device cuda:0
-    python benchmarks/profile_identify.py --device cpu      # the same parts on the CPU
-    python benchmarks/profile_identify.py --device cuda:0 --fused   # SysIdConfig.fused: each batch in one launch
+    python benchmarks/profile_identify.py --device cuda:0           # step by step (SysIdConfig.fused=False)
+    python benchmarks/profile_identify.py --device cpu              # the same parts on the CPU
+    python benchmarks/profile_identify.py --device cuda:0 --fused   # each batch in one launch (the default's choice
+                                                                    # for the humanoid)
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF), :class:`SysIdConfig`'s
 defaults (32 windows; ``--horizon`` steps, default 64, the curriculum's mean length), built as

@@ -188,8 +188,12 @@ def test_identify_refuses_a_malformed_gain_grid(tmp_path, capsys):
 
 def test_fused_identification_follows_the_stepped_one(humanoid, recorded):
     cfg = dataclasses.replace(SMALL, iterations=20, select_every=10)
-    stepped, c_step = identify(humanoid, recorded, cfg, log=lambda *_: None)
+    stepped, c_step = identify(humanoid, recorded, dataclasses.replace(cfg, fused=False), log=lambda *_: None)
     fused, c_fused = identify(humanoid, recorded, dataclasses.replace(cfg, fused=True), log=lambda *_: None)
+    # the default (fused=None) fuses where it can, as here (the replay solver, PD drives, whole windows)
+    _, c_default = identify(humanoid, recorded, cfg, log=lambda *_: None)
+    strip = lambda curve: [{k: v for k, v in c.items() if k != "wall"} for c in curve]  # noqa: E731
+    assert cfg.fused is None and strip(c_default) == strip(c_fused)
     losses = [(a["loss"], b["loss"]) for a, b in zip(c_step, c_fused) if "loss" in a]
     assert len(losses) == 20
     # the same states; the adjoints sum over worlds in another order (float32 rounding), which Adam carries on:
@@ -203,3 +207,4 @@ def test_fused_identification_follows_the_stepped_one(humanoid, recorded):
         assert np.allclose(x, y, rtol=rtol, atol=1e-12), field
     with pytest.raises(ValueError, match="fused replays whole windows"):
         dataclasses.replace(cfg, fused=True, grad_truncation=8)
+    dataclasses.replace(cfg, grad_truncation=8, shooting=1)  # the default steps there instead

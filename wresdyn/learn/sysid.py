@@ -258,9 +258,11 @@ class _IdentifyLearner:
                                           ) if validation else None
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              param_grads=True, friction_kappa=cfg.friction_kappa)
-        if cfg.fused and not can_fuse(self.sim):
+        fusable = can_fuse(self.sim) and cfg.grad_truncation is None and cfg.shooting == 1
+        if cfg.fused is True and not fusable:
             raise ValueError("fused replays PD drives with the replay solver at one substep; this identification's "
                              "robot or solver is not that: set fused to false")
+        self.fused = fusable if cfg.fused is None else cfg.fused
         self.bank = TrajectoryBank(train, self.sim.device)
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
@@ -321,7 +323,7 @@ class _IdentifyLearner:
             self.bank.set_command_path(delay, model.goal_accel_steps().float().to(self.sim.device))
         if self.nodes is None:
             window = self.bank.sample(self.rng, cfg.windows, h)
-            loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights, fused=cfg.fused)
+            loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights, fused=self.fused)
         else:
             traj, first = self._chains(h)
             loss, parts = chain_loss(cfg, model, self.chain_sim, self.bank, self.nodes, traj, first, h, self.weights)

@@ -62,11 +62,14 @@ class SysIdConfig:
     grad_truncation: int | None = None
     """Detach the state every this many steps; ``None`` = full backpropagation (the parameters are few and the
     identified model is stable, unlike a residual network early in training)."""
-    fused: bool = False
+    fused: bool | None = None
     """Replay each batch of training windows in one solver launch and its adjoint in one plan
     (:func:`wresdyn.sim.fused.fused_rollout`) instead of step by step: the same states, gradients equal to float32
-    rounding, far fewer launches and host synchronisations. Needs the replay solver, PD drives (no servo), no
-    ``grad_truncation`` and independent windows (``shooting`` 1); the grid searches and the refinement still step."""
+    rounding, far fewer launches and host synchronisations (2.7x per iteration on an H100, 2.3x over a whole
+    identification on 2 CPU cores, the same selection). It needs the replay solver at one substep, PD drives (no
+    servo), no ``grad_truncation`` and independent windows (``shooting`` 1); ``None`` fuses where those hold and steps
+    elsewhere, ``True`` refuses a setting that cannot fuse, ``False`` always steps. The grid searches and the refinement
+    step either way."""
     lr: float = 0.01
     """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel` (log scales and
     reference units, all O(0.1-1))."""
@@ -178,7 +181,7 @@ class SysIdConfig:
         check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
         check_number(self.saturated_min, "saturated_min", gt=0, le=1)
         check_number(self.shooting, "shooting", integer=True, ge=1)
-        if self.fused and (self.grad_truncation is not None or self.shooting > 1):
+        if self.fused is True and (self.grad_truncation is not None or self.shooting > 1):
             raise ValueError("fused replays whole windows without truncation or shooting: set grad_truncation to "
                              "none and shooting to 1, or fused to false")
         check_number(self.w_defect, "w_defect", ge=0)
