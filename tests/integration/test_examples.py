@@ -67,8 +67,8 @@ def test_every_example_imports_and_answers_help(example, monkeypatch, capsys):
     ],
 )
 def test_load_custom_robot(robot, gains, monkeypatch, capsys):
-    code, out, err = _run_main("load_custom_robot.py", robot, *(["--gains", gains] if gains else []), "--seconds", "0.5",
-                               monkeypatch=monkeypatch, capsys=capsys)
+    flags = (["--gains", gains] if gains else []) + ["--seconds", "0.5"]
+    code, out, err = _run_main("load_custom_robot.py", robot, *flags, monkeypatch=monkeypatch, capsys=capsys)
     assert code == 0, err
     assert "kp" in out and "armature" in out
     line = [ln for ln in out.splitlines() if ln.startswith("Newton")][-1]
