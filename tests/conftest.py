@@ -6,8 +6,15 @@ sole sites (quadruped, cartpole) by :meth:`~wresdyn.data.real_robot.RealRobot.re
 check command :func:`wresdyn.sim.parity.multisine_command`.
 """
 
+import os
+
 import numpy as np
 import pytest
+
+# The suite's parallelism is its worker processes, one per core (scripts/test.sh), so a test and every command it
+# starts compute on one thread: a second one waits on a core the other worker holds (torch's threads spin while they
+# wait), which made the deploy test 1.6x slower beside one busy core and 4x slower beside another deploy test.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 QUADRUPED_GAINS = {"joint": [{"match": "*", "kp": 80.0, "kd": 2.0, "armature": 0.02}]}
 """Gains for newton's quadruped.urdf, which has none (same as examples/gains/quadruped.toml, inline)."""
@@ -66,6 +73,15 @@ def pytest_collection_modifyitems(config, items):
         for item in items:
             if marker in item.keywords:
                 item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """Each test starts on one torch thread (as above): a learner that pins more (the skills' PPO pins 2 unless told)
+    would otherwise keep them for the worker's later tests."""
+    import torch
+
+    torch.set_num_threads(1)
 
 
 @pytest.fixture(scope="session")

@@ -159,7 +159,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     out = tmp_path / "floor"
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--motions", "1",
-            "--heldout", "1", "--duration", "1.0"]
+            "--heldout", "1", "--duration", "1.0", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
     # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
     assert main(args + ["--oracle-beside", "--beside-devices", "cpu"]) == 0
     res = json.loads((out / "results.json").read_text())

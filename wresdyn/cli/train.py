@@ -58,6 +58,10 @@ def run(args: argparse.Namespace) -> int:
     from . import UserError
 
     cfg = config_from_args(args)
+    try:  # worlds that do not split over torchrun's processes: refused on every rank before the data and kernels load
+        Ranks.from_env().num_envs(cfg.ppo.num_envs)
+    except RunError as e:
+        raise UserError(str(e)) from None
     from ..data.loading import load_data
 
     ds, robot = load_data(args.data, args.robot, args.gains)

@@ -35,6 +35,7 @@ from ..learn.window_fit_config import HYBRID_ITERATIONS
 from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
 from ..robot.description import load_robot
 from ..sim.parity import pd_agreement
+from ..skills.skill_config import SkillPPOConfig
 from .stand_skills import DeployConfig, run_benchmark
 
 __all__ = ["run_demo"]
@@ -81,11 +82,13 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
     tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=ppo_iterations))
     dcfg = DeployConfig(train_per_family=3, heldout_per_family=1, iterations=skill_iterations,
                         finetune=skill_iterations)
+    skill_ppo = SkillPPOConfig()
     if quick:
         gcfg = dataclasses.replace(gcfg, iterations=4, windows=4, horizon_curriculum=(2, 4))
         scfg = dataclasses.replace(scfg, iterations=4, windows=4)
         tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=2, num_envs=8, num_steps_per_env=8))
         dcfg = dataclasses.replace(dcfg, train_per_family=1, iterations=2, finetune=1, envs=8)
+        skill_ppo = dataclasses.replace(skill_ppo, torch_threads=1)  # tiny networks: a second thread only waits
     print(f"[3/5] the calibrated robot: gradient fit through the simulation ({scfg.iterations} identification + "
           f"{gcfg.iterations} residual iterations, `wresdyn fit`) ...", flush=True)
     fit_dir = out / "fit"
@@ -104,7 +107,7 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
     print(f"      the calibrated robot for Newton: {exported}/actuated.usda (`wresdyn export`)", flush=True)
     print("[5/5] skills deployed zero-shot on the real robot (`wresdyn deploy`, small)", flush=True)
     deploy = run_benchmark(robot, data, out / "deploy", dcfg, data_path=data_path, calibrated=fit_dir,
-                           policies=("a_nominal", "b_calibrated", "d_oracle"), log=log)
+                           ppo=skill_ppo, policies=("a_nominal", "b_calibrated", "d_oracle"), log=log)
     rows = ["| learner | training [s] | held-out mean abs dq [rad] | x | OOD mean abs dq [rad] | x |", "|---|---|---|---|---|---|"]
     walls = {"calibrated (gradient fit)": (curve[-1]["wall"] if curve else 0.0) + id_wall,
              "residual by PPO": summary["wall_s_this_session"]}

@@ -122,8 +122,17 @@ def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fri
     as one function compiled for two minutes (16 s outlined); NVRTC is the other way round (over ten
     minutes outlined at full optimisation, 45 s force-inlined), so CUDA inlines.
     """
-    return load_module(generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
-                                       servo=servo))
+    servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
+    key = (tree.digest(), scalar, bool(backward), bool(cuda), int(friction_sweeps),
+           None if servo is None else servo.tobytes())
+    if key not in _SOURCES:  # a robot's solvers are built many times a process; its source depends on the key only
+        _SOURCES[key] = generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
+                                        servo=servo)
+    return load_module(_SOURCES[key])
+
+
+_SOURCES: dict[tuple, str] = {}
+"""Generated kernel sources of this process by (tree digest, scalar, backward, cuda, friction sweeps, servo DoFs)."""
 
 
 class SolverReplay(SolverBase):
