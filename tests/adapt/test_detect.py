@@ -33,6 +33,18 @@ def test_the_detector_fires_on_a_jump_above_the_recent_median_and_tracks_for_a_w
     assert det.since == 9.0 and det.tracking(13.9)
 
 
+def test_with_confirm_two_jumps_in_a_row_open_the_tracking_mode_from_the_first():
+    det = ChangeDetector(factor=2.0, history=10, track_for=3.0, confirm=2)
+    for k in range(4):  # the median stays 1e-3 rad below: at most three of the seven errors below are jumps
+        det.observe(float(k), k - 1.0, 1e-3, np.full(3, 1e-3))
+    jumped, ratio, _ = det.observe(4.0, 3.0, 3e-3, np.full(3, 3e-3))  # one swing of the motion: not yet
+    assert not jumped and ratio > 2.0 and not det.tracking(4.0)
+    det.observe(5.0, 4.0, 1e-3, np.full(3, 1e-3))  # back down: the streak ends
+    assert det.observe(6.0, 5.0, 3e-3, np.full(3, 3e-3))[0] is False
+    jumped, *_ = det.observe(7.0, 6.0, 3e-3, np.full(3, 3e-3))  # the second in a row: the data after the first
+    assert jumped and det.tracking(7.0) and det.since == 5.0
+
+
 def test_the_effort_grid_tries_only_limits_below_the_demanded_torque():
     t = np.linspace(0, 1, 50)[:, None]
     q, qd, target = np.zeros((50, 2)), np.zeros((50, 2)), np.hstack([0.1 * t, 0.5 * t])

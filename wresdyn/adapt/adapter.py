@@ -136,7 +136,7 @@ class Adapter:
                                       lr=cfg.lr)
         self._lrs = [g["lr"] for g in self.optim.param_groups]
         self.detector = ChangeDetector(cfg.detect_factor, round(cfg.detect_history / cfg.update_every),
-                                       cfg.track_for) if cfg.detect else None
+                                       cfg.track_for, cfg.detect_confirm) if cfg.detect else None
         """The change detector (:attr:`AdaptConfig.detect`), ``None`` without it."""
         self.sim_grid = None  # the effort grid's replays, made on first use
         self.physics = start

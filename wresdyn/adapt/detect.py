@@ -32,10 +32,16 @@ class ChangeDetector:
         factor: A jump is an error above ``factor`` times the median of the recent ones.
         history: How many earlier updates the median is taken over (at least 3 are needed before anything fires).
         track_for: Robot time the tracking mode lasts after a jump [s].
+        confirm: Consecutive updates whose error must jump before the tracking mode opens (1: the first jump opens
+            it); a change persists, a swing of the motion often lasts one held-back part.
     """
 
-    def __init__(self, factor: float, history: int, track_for: float) -> None:
-        self.factor, self.track_for = float(factor), float(track_for)
+    def __init__(self, factor: float, history: int, track_for: float, confirm: int = 1) -> None:
+        self.factor, self.track_for, self.confirm = float(factor), float(track_for), max(1, int(confirm))
+        self.streak = 0
+        """Consecutive updates, up to the last, whose error jumped."""
+        self.streak_from = -np.inf
+        """Robot time the held-back part of the streak's first jump starts [s]."""
         self.errors: deque[float] = deque(maxlen=max(3, int(history)))
         """Held-back error of the model before each recent update [rad]."""
         self.joints: deque[np.ndarray] = deque(maxlen=max(3, int(history)))
@@ -59,12 +65,16 @@ class ChangeDetector:
     def observe(self, t: float, t_holdout: float, error: float, joints: np.ndarray) -> tuple[bool, float, np.ndarray]:
         """Take the current model's held-back error of the update at robot time ``t`` [s] (its held-back part starts
         at ``t_holdout``): ``error`` [rad] overall and ``joints`` (n,) [rad] per joint. Returns (whether it jumped,
-        the ratio to the median, the per-joint ratios). A jump outside the tracking mode opens it and marks
-        ``t_holdout`` as the start of the data after the change."""
+        the ratio to the median, the per-joint ratios). A jump (the ``confirm``-th in a row) outside the tracking
+        mode opens it and marks the held-back start of the streak's first jump as the start of the data after the
+        change."""
         ratio, jratio = self.ratios(error, joints)
-        jumped = ratio > self.factor
+        self.streak = self.streak + 1 if ratio > self.factor else 0
+        if self.streak == 1:
+            self.streak_from = t_holdout
+        jumped = self.streak >= self.confirm
         if jumped and not self.tracking(t):
-            self.since = t_holdout
+            self.since = self.streak_from
         if jumped:
             self.until = t + self.track_for
         self.joint_ratios = None if len(self.errors) < 3 else jratio
