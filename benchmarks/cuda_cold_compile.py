@@ -4,7 +4,7 @@ between its front end and ptxas for the adjoint step; optionally a code-generati
 identification's iteration time with it.
 
     CUDA_CACHE_DISABLE=1 python benchmarks/cuda_cold_compile.py [--inline 1|0|none] [--min-len N] [--opt-level N]
-        [--split] [--identify] [--device cuda:0]
+        [--split] [--identify] [--cache DIR] [--device cuda:0]
 
 Every run makes its own empty Warp and generated-kernel caches (deleted at the end), so run it once per choice, each
 in a new process. ``--inline``/``--min-len``: the outlined chunks' ``@wp.func`` hint and size (the solver's CUDA
@@ -13,6 +13,8 @@ module option of the adjoint module (NVRTC's ``-O``; Warp's CUDA default is 3). 
 compile, compile the adjoint step again ahead of time for this GPU's architecture to PTX (NVRTC's front end) and to
 CUBIN (front end and ptxas), each into an empty folder, so cubin minus PTX is ptxas. ``--identify``: then run
 ``benchmarks/profile_identify.py --fused`` on the same device (the iteration's milliseconds with these modules).
+``--cache DIR``: use this Warp kernel cache instead of an empty one, and keep it (e.g. one that
+``benchmarks/prefill_cuda_cache.py`` filled on another machine: then ``compile_kernels`` should only load).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ def main() -> None:
     p.add_argument("--opt-level", type=int, default=None, help="optimization_level of the adjoint module")
     p.add_argument("--split", action="store_true", help="also time NVRTC to PTX and to CUBIN for the adjoint step")
     p.add_argument("--identify", action="store_true", help="then time a fused identification iteration")
+    p.add_argument("--cache", default=None, help="a Warp kernel cache to use (and keep) instead of an empty one")
     args = p.parse_args()
     if args.min_len is not None and args.min_len < 1:
         sys.exit("--min-len must be >= 1")
@@ -52,7 +55,7 @@ def main() -> None:
 def run(args, scratch: Path) -> None:
     import warp as wp
 
-    wp.config.kernel_cache_dir = str(scratch / "warp")
+    wp.config.kernel_cache_dir = args.cache or str(scratch / "warp")
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
     from wresdyn.sim.solver_replay import codegen
     from wresdyn.sim.solver_replay import solver as solver_mod
