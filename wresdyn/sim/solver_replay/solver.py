@@ -119,8 +119,10 @@ def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fri
     """Generate and load (:func:`~.cache.load_module`) the kernel module for ``tree``.
 
     The step kernel's adjoint is outlined into non-inlined functions for Clang (CPU), where the whole step
-    as one function compiled for two minutes (16 s outlined); NVRTC is the other way round (over ten
-    minutes outlined at full optimisation, 45 s force-inlined), so CUDA inlines.
+    as one function compiled for two minutes (16 s outlined); NVRTC is the other way round: the humanoid's
+    adjoint compiles for sm_90 in 76 CPU-seconds force-inlined (as without a hint: NVRTC then inlines the
+    chunks itself), while out-of-line chunks keep its front end busy past 760 CPU-seconds
+    (``benchmarks/results/compile/cuda_probe_cpu.txt``), so CUDA inlines.
     """
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
     key = (tree.digest(), scalar, bool(backward), bool(cuda), int(friction_sweeps),
