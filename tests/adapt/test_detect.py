@@ -39,10 +39,12 @@ def test_with_confirm_two_jumps_in_a_row_open_the_tracking_mode_from_the_first()
         det.observe(float(k), k - 1.0, 1e-3, np.full(3, 1e-3))
     jumped, ratio, _ = det.observe(4.0, 3.0, 3e-3, np.full(3, 3e-3))  # one swing of the motion: not yet
     assert not jumped and ratio > 2.0 and not det.tracking(4.0)
+    assert not det.joint_ratios.any()  # nor for the effort grid
     det.observe(5.0, 4.0, 1e-3, np.full(3, 1e-3))  # back down: the streak ends
     assert det.observe(6.0, 5.0, 3e-3, np.full(3, 3e-3))[0] is False
     jumped, *_ = det.observe(7.0, 6.0, 3e-3, np.full(3, 3e-3))  # the second in a row: the data after the first
     assert jumped and det.tracking(7.0) and det.since == 5.0
+    assert (det.joint_ratios > 2.0).all()
 
 
 def test_the_effort_grid_tries_only_limits_below_the_demanded_torque():

@@ -42,6 +42,8 @@ class ChangeDetector:
         """Consecutive updates, up to the last, whose error jumped."""
         self.streak_from = -np.inf
         """Robot time the held-back part of the streak's first jump starts [s]."""
+        self.joint_streak: np.ndarray | int = 0
+        """Consecutive updates, up to the last, whose error jumped, per joint ((n,) after the first comparison)."""
         self.errors: deque[float] = deque(maxlen=max(3, int(history)))
         """Held-back error of the model before each recent update [rad]."""
         self.joints: deque[np.ndarray] = deque(maxlen=max(3, int(history)))
@@ -51,7 +53,8 @@ class ChangeDetector:
         self.since = -np.inf
         """Robot time from which the window holds data after the last jump [s]."""
         self.joint_ratios: np.ndarray | None = None
-        """Each joint's held-back error over its recent median at the last update, (n,) (``None`` before one)."""
+        """Each joint's held-back error over its recent median at the last update, (n,) (``None`` before one); 0
+        where the joint's jump is not yet the ``confirm``-th in a row."""
 
     def ratios(self, error: float, joints: np.ndarray) -> tuple[float, np.ndarray]:
         """``error`` [rad] and ``joints`` (n,) [rad] over the medians of the earlier ones (0 while fewer than 3)."""
@@ -77,7 +80,11 @@ class ChangeDetector:
             self.since = self.streak_from
         if jumped:
             self.until = t + self.track_for
-        self.joint_ratios = None if len(self.errors) < 3 else jratio
+        if len(self.errors) < 3:
+            self.joint_ratios = None
+        else:  # a joint's own jump counts for the effort grid once it too is the confirm-th in a row
+            self.joint_streak = np.where(jratio > self.factor, self.joint_streak + 1, 0)
+            self.joint_ratios = jratio if self.confirm == 1 else np.where(self.joint_streak >= self.confirm, jratio, 0.0)
         self.errors.append(float(error))
         self.joints.append(np.asarray(joints, dtype=np.float64).copy())
         return bool(jumped), ratio, jratio
