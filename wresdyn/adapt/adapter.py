@@ -39,7 +39,7 @@ from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
-from .detect import ChangeDetector, replay_limits, search_effort
+from .detect import ChangeDetector, search_effort
 
 __all__ = ["Adapter", "StreamError", "Update"]
 
@@ -286,11 +286,7 @@ class Adapter:
             self.model.load_state_dict(self._kept)
         tried, set_ = 0, ""
         if select is not None and self.cfg.effort_grid and "effort" in self.cfg.fit:
-            recent = None
-            if self.cfg.effort_check:  # the training part of the current segment, up to the held-back start
-                idx = np.flatnonzero(seg[:hold[0] + 1] == seg[hold[0]])
-                recent = TrajectoryBank([_traj(x[idx])], self.device, self.delay.to(self.device))
-            tried, set_, err = self._effort_grid(select, holdout, jumped, after, recent)
+            tried, set_, err = self._effort_grid(select, holdout, jumped, after)
             if set_:
                 accepted, after = True, err
         one = self._one_step(holdout)
@@ -360,7 +356,7 @@ class Adapter:
         return tuple(float(e) for e in err.mean((1, 2)).cpu().numpy()), joint
 
     def _effort_grid(self, select: TrajectoryBank, holdout: TrajectoryBank, joint_jump: np.ndarray | None,
-                     error: float, recent: TrajectoryBank | None = None) -> tuple[int, str, float]:
+                     error: float) -> tuple[int, str, float]:
         """The effort grid (:func:`~wresdyn.adapt.detect.search_effort`) for the joints of ``joint_jump`` (n,) above
         the factor, picked on ``select`` (the last update's held-back part, where their errors jumped), kept on
         ``holdout`` against ``error`` [rad], the model's mean there: the winner becomes the model (its coordinates
@@ -374,12 +370,6 @@ class Adapter:
                                       solver=cfg.solver, device=cfg.device, param_grads=True)
         tried, won, after = search_effort(self.sim_grid, self.sim_val, select.whole(), holdout.whole(), self.physics,
                                           joint_jump, cfg, error, can_fuse(self.sim_grid))
-        if won is not None and recent is not None:  # a limit the recent seconds contradict is noise's pick
-            j = won[0]
-            cands = [(j, won[1]), (j, self.physics.effort[j])]
-            _, err = replay_limits(self.sim_val, recent.whole(), self.physics, cands, can_fuse(self.sim_val))
-            if not err[0, j] <= err[1, j]:
-                won = None
         self.sim_val.set_physics(self.start, worlds=slice(0, 1))  # world 0 replays the warm start
         if won is None:
             return tried, "", error

@@ -108,10 +108,6 @@ class AdaptConfig:
     gives: the one that lowers that joint's error most on the held-back part that showed the jump, by ``min_gain``,
     is kept if on the next held-back part it lowers it by ``min_gain`` again and the mean over joints not at all.
     Empty: none tried."""
-    effort_check: bool = False
-    """A lower limit the effort grid would keep must also replay its joint no worse than the model's own limit over
-    the window's training part (the current segment up to the held-back start): one held-back second picked it, the
-    recent seconds must not contradict it."""
     effort_joints: int = 2
     """At most this many joints (those whose error jumped most) get the effort grid in one update."""
     one_step_every: int = 5
