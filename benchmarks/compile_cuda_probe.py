@@ -36,15 +36,34 @@ def main() -> None:
                    help="Warp's optimization_level module option for the module (default: Warp's, -O3 on CUDA)")
     p.add_argument("--arch", type=int, default=90)
     p.add_argument("--keep", default=None, help="copy the PTX or cubin here (e.g. to time ptxas on it alone)")
-    args = p.parse_args()
+    in_scratch("cuda_probe_", run, p.parse_args())
+
+
+def in_scratch(prefix: str, run, args) -> None:
+    """``run(args, scratch)`` with a fresh scratch folder that holds the generated-kernel cache (and whatever ``run``
+    puts there), deleted afterwards; ``args.min_len`` checked first."""
     if args.min_len is not None and args.min_len < 1:
         sys.exit("--min-len must be >= 1")
-    scratch = Path(tempfile.mkdtemp(prefix="cuda_probe_"))
+    scratch = Path(tempfile.mkdtemp(prefix=prefix))
     os.environ["WRESDYN_KERNEL_DIR"] = str(scratch / "src")
     try:
         run(args, scratch)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+
+
+def with_opt_level(src: str, opt: int | None) -> str:
+    """Generated source ``src`` with Warp's ``optimization_level`` module option ``opt`` on its adjoint module's
+    kernels (``None``: unchanged)."""
+    if opt is None:
+        return src
+    head = '@wp.kernel(enable_backward=True, module="unique"'
+    return src.replace(head, head + f', module_options={{"optimization_level": {opt}}}')
+
+
+def load_average() -> str:
+    """The 1, 5 and 15 minute load averages (the cores are shared: every timing prints them)."""
+    return " ".join(open("/proc/loadavg").read().split()[:3])
 
 
 def run(args, scratch: Path) -> None:
@@ -64,16 +83,14 @@ def run(args, scratch: Path) -> None:
     wp.init()
     tree = tree_from_model(load_robot(DEFAULT_ROBOT).build_model(1, "cpu"))
     src = codegen.generate_source(tree, "float32", True, inline=inline, friction_sweeps=FRICTION_SWEEPS)
-    if args.opt_level is not None:
-        head = '@wp.kernel(enable_backward=True, module="unique"'
-        src = src.replace(head, head + f', module_options={{"optimization_level": {args.opt_level}}}')
+    src = with_opt_level(src, args.opt_level)
     module = load_module(src).replay_step.module
     chunks = src.split("def replay_step(")[0].count("@wp.func")
-    load0 = open("/proc/loadavg").read().split()[:3]
+    load0 = load_average()
     t0, c0 = time.perf_counter(), time.process_time()
     paths = wp.compile_aot_module(module, arch=args.arch, module_dir=str(scratch / "aot"), use_ptx=args.output == "ptx")
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    load1 = open("/proc/loadavg").read().split()[:3]
+    load1 = load_average()
     out = Path(paths[-1])
     if args.keep:
         shutil.copyfile(out, args.keep)
@@ -85,7 +102,7 @@ def run(args, scratch: Path) -> None:
     print(f"{args.tag}: NVRTC sm_{args.arch} {args.output} of the adjoint replay_step (inline {args.inline}, "
           f"min_len {args.min_len or 'default'}, {chunks} chunks, optimization_level {opt}): {wall:.1f} s wall, "
           f"{cpu:.1f} CPU-s; "
-          f"{out.stat().st_size / 1e6:.2f} MB{extra}; load {' '.join(load0)} -> {' '.join(load1)}", flush=True)
+          f"{out.stat().st_size / 1e6:.2f} MB{extra}; load {load0} -> {load1}", flush=True)
 
 
 if __name__ == "__main__":

@@ -23,11 +23,11 @@ import argparse
 import functools
 import os
 import runpy
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
+
+from compile_cuda_probe import in_scratch, load_average, with_opt_level  # this folder: the script's own
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,15 +41,7 @@ def main() -> None:
     p.add_argument("--split", action="store_true", help="also time NVRTC to PTX and to CUBIN for the adjoint step")
     p.add_argument("--identify", action="store_true", help="then time a fused identification iteration")
     p.add_argument("--cache", default=None, help="a Warp kernel cache to use (and keep) instead of an empty one")
-    args = p.parse_args()
-    if args.min_len is not None and args.min_len < 1:
-        sys.exit("--min-len must be >= 1")
-    scratch = Path(tempfile.mkdtemp(prefix="cold_compile_"))
-    os.environ["WRESDYN_KERNEL_DIR"] = str(scratch / "src")
-    try:
-        run(args, scratch)
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+    in_scratch("cold_compile_", run, p.parse_args())
 
 
 def run(args, scratch: Path) -> None:
@@ -72,13 +64,13 @@ def run(args, scratch: Path) -> None:
         sys.exit("--split needs a CUDA device")
     print(f"Warp {wp.__version__}: toolkit {rt.toolkit_version}, driver {rt.driver_version}, {dev.name} sm_{dev.arch}: "
           f"Warp compiles to {dev.get_cuda_output_format()} by default; CUDA_CACHE_DISABLE="
-          f"{os.environ.get('CUDA_CACHE_DISABLE', '(unset)')}; load {_load()}", flush=True)
+          f"{os.environ.get('CUDA_CACHE_DISABLE', '(unset)')}; load {load_average()}", flush=True)
     robot = load_robot(DEFAULT_ROBOT)
     t = time.perf_counter()
     compile_kernels(robot, 500.0, ("forward", "param_grads"), device=args.device)
     opt = "default" if args.opt_level is None else args.opt_level
     print(f"compile_kernels (forward, param_grads), inline {args.inline or 'default'}, min_len "
-          f"{args.min_len or 'default'}, optimization_level {opt}: {time.perf_counter() - t:.1f} s; load {_load()}",
+          f"{args.min_len or 'default'}, optimization_level {opt}: {time.perf_counter() - t:.1f} s; load {load_average()}",
           flush=True)
     if args.split:
         from wresdyn.sim import Simulator
@@ -89,7 +81,7 @@ def run(args, scratch: Path) -> None:
             t, c = time.perf_counter(), time.process_time()
             wp.compile_aot_module(module, arch=dev.arch, module_dir=str(scratch / f"aot_{fmt}"), use_ptx=fmt == "ptx")
             print(f"adjoint replay_step ahead of time to {fmt}: {time.perf_counter() - t:.1f} s wall, "
-                  f"{time.process_time() - c:.1f} CPU-s; load {_load()}", flush=True)
+                  f"{time.process_time() - c:.1f} CPU-s; load {load_average()}", flush=True)
     if args.identify:
         sys.argv = [str(ROOT / "benchmarks" / "profile_identify.py"), "--device", args.device, "--fused"]
         runpy.run_path(sys.argv[0], run_name="__main__")
@@ -99,14 +91,7 @@ def _variant(generate, hint, opt, tree, scalar="float32", backward=True, inline=
     """The solver's source with the chunks' inline hint replaced (``"solver"``: kept) and, for the adjoint module, an
     ``optimization_level`` module option."""
     src = generate(tree, scalar, backward, inline=inline if hint == "solver" else hint, **kw)
-    if backward and opt is not None:
-        head = '@wp.kernel(enable_backward=True, module="unique"'
-        src = src.replace(head, head + f', module_options={{"optimization_level": {opt}}}')
-    return src
-
-
-def _load() -> str:
-    return " ".join(open("/proc/loadavg").read().split()[:3])
+    return with_opt_level(src, opt) if backward else src
 
 
 if __name__ == "__main__":

@@ -51,7 +51,7 @@ def test_project_keeps_the_floor_and_the_default_keeps_its_own(humanoid):
         model.project()
         return model.u_effort.detach().numpy()
 
-    assert np.array_equal(projected(None), np.maximum(u, 0.05))  # the coordinate's floor, as before the option
+    assert np.array_equal(projected(None), np.maximum(u, 0.05))  # without the option: the coordinate's own floor
     assert np.array_equal(projected(FLOOR), np.maximum(u, FLOOR))
     assert np.array_equal(projected(0.0), np.maximum(u, 0.05))  # below the coordinate's own floor: that one
 

@@ -84,7 +84,7 @@ class ChangeDetector:
             self.joint_ratios = None
         else:  # a joint's own jump counts for the effort grid once it too is the confirm-th in a row
             self.joint_streak = np.where(jratio > self.factor, self.joint_streak + 1, 0)
-            self.joint_ratios = jratio if self.confirm == 1 else np.where(self.joint_streak >= self.confirm, jratio, 0.0)
+            self.joint_ratios = np.where(self.joint_streak >= self.confirm, jratio, 0.0)
         self.errors.append(float(error))
         self.joints.append(np.asarray(joints, dtype=np.float64).copy())
         return bool(jumped), ratio, jratio
