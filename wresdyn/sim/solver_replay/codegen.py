@@ -26,6 +26,7 @@ import numpy as np
 from ...robot.servo import STARTUP_RAMP, STICTION_SPEED
 from .dynamics import dynamics, inertial_params, solve_ltdl
 from .emit import Emitter, branched, gate, indent, outline, unmarked
+from .split import split_pieces
 from .tree import ReplayTree
 
 __all__ = ["generate_source"]
@@ -247,7 +248,8 @@ def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | 
 
 
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
-                    inline: bool | None = False, friction_sweeps: int = 4, servo: np.ndarray | None = None) -> str:
+                    inline: bool | None = False, friction_sweeps: int = 4, servo: np.ndarray | None = None,
+                    pieces: int | None = None) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
@@ -261,6 +263,9 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     (a run-time branch, so the same module serves any friction values). Every physical parameter is read from the
     arrays: the source depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
     kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
+    ``pieces`` (with ``backward``): the adjoint comes as a chain of kernels ``replay_piece_<c>`` of about that many
+    statements each (:mod:`.split`; listed in ``PIECES``, with ``PIECE_SLOTS`` scratch values per world), and
+    ``replay_step`` is the forward kernel alone.
     """
     n = tree.n_dof
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
@@ -268,25 +273,36 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
 
     params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
-    if backward:
+    step_args = f"""world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, fric_m0: wp.array(dtype=S),
+    fric_grad: wp.array(dtype=wp.int32),
+    {param_args}, gravity: wp.array(dtype=V3),
+    joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
+    target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),
+    joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),"""
+    prelude = ["w = wp.tid() + world_start", f"bq = w * {tree.coords_per_world}", f"bd = w * {tree.dofs_per_world}",
+               f"bb = w * {tree.bodies_per_world}"]
+    if backward and pieces:
+        bodies, slots = split_pieces(params + loads, compute, stores, {"w", "bq", "bd", "bb", *_SCALARS}, pieces)
+        for c, body in enumerate(bodies):
+            src.append(f'''
+@wp.kernel(enable_backward=True, module="unique")
+def replay_piece_{c}(
+    {step_args} scratch: wp.array2d(dtype=S),
+):
+{indent(prelude + body, 1)}
+''')
+        src.append(f"PIECES = [{', '.join(f'replay_piece_{c}' for c in range(len(bodies)))}]\nPIECE_SLOTS = {slots}\n")
+        backward = False  # replay_step: the forward kernel alone
+    elif backward:
         external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
         funcs, compute = outline(compute, "step_part", inline, stores, external)
         src += funcs
     src.append(f'''
 @wp.kernel(enable_backward={backward}, module="unique")
 def replay_step(
-    world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, fric_m0: wp.array(dtype=S),
-    fric_grad: wp.array(dtype=wp.int32),
-    {param_args}, gravity: wp.array(dtype=V3),
-    joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
-    target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),
-    joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),
+    {step_args}
 ):
-    w = wp.tid() + world_start
-    bq = w * {tree.coords_per_world}
-    bd = w * {tree.dofs_per_world}
-    bb = w * {tree.bodies_per_world}
-{indent(params + loads + branched(compute) + stores, 1)}
+{indent(prelude + params + loads + branched(compute) + stores, 1)}
 ''')
 
     params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)

@@ -88,12 +88,11 @@ import warp as wp
 from newton import ModelFlags
 from newton.solvers import SolverBase
 
-from .cache import load_module
-from .codegen import generate_source
+from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, load_kernels
 from .launch import cpu_call, grad_of, launch_signature
 from .tree import ReplayTree, tree_from_model
 
-__all__ = ["FRICTION_KAPPA", "FRICTION_SWEEPS", "SolverReplay"]
+__all__ = ["ADJOINT_PIECES", "FRICTION_KAPPA", "FRICTION_SWEEPS", "SolverReplay"]
 
 _MJ_D0, _MJ_DMAX, _MJ_TIMECONST = 0.9, 0.95, 0.02
 """MuJoCo's default ``solimp[0]``, ``solimp[1]`` and ``solref[0]`` [s]."""
@@ -112,29 +111,6 @@ _SERVO_PARAMS = ("joint_servo_deadband", "joint_servo_noload_speed", "joint_serv
 """Per-DoF model arrays the kernels of a model with servo drives also read."""
 _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 """Per-body model arrays the kernels read."""
-
-
-def _load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
-                  servo: np.ndarray | None = None):
-    """Generate and load (:func:`~.cache.load_module`) the kernel module for ``tree``.
-
-    The step kernel's adjoint is outlined into non-inlined functions for Clang (CPU), where the whole step
-    as one function compiled for two minutes (16 s outlined); NVRTC is the other way round: the humanoid's
-    adjoint compiles for sm_90 in 76 CPU-seconds force-inlined (as without a hint: NVRTC then inlines the
-    chunks itself), while out-of-line chunks keep its front end busy past 760 CPU-seconds
-    (``benchmarks/results/compile/cuda_probe_cpu.txt``), so CUDA inlines.
-    """
-    servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
-    key = (tree.digest(), scalar, bool(backward), bool(cuda), int(friction_sweeps),
-           None if servo is None else servo.tobytes())
-    if key not in _SOURCES:  # a robot's solvers are built many times a process; its source depends on the key only
-        _SOURCES[key] = generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
-                                        servo=servo)
-    return load_module(_SOURCES[key])
-
-
-_SOURCES: dict[tuple, str] = {}
-"""Generated kernel sources of this process by (tree digest, scalar, backward, cuda, friction sweeps, servo DoFs)."""
 
 
 class SolverReplay(SolverBase):
@@ -164,6 +140,7 @@ class SolverReplay(SolverBase):
         update_body_q: bool = False,
         threads: int = 1,
         dtype=wp.float32,
+        adjoint_pieces: int | None = None,
     ):
         """
         Args:
@@ -185,6 +162,9 @@ class SolverReplay(SolverBase):
                 threads one after another; separate launches run concurrently).
             dtype: ``wp.float32`` (Newton's state arrays) or ``wp.float64`` (:meth:`rollout` only, for
                 finite-difference checks; the parameters are then float64 copies, see :attr:`parameters`).
+            adjoint_pieces: With ``requires_grad``: the adjoint as a chain of kernels of about this many statements
+                (:mod:`.split`), 0 as one kernel. Default: :func:`.kernels.choose_pieces` (on CUDA the one kernel
+                once Warp's cache holds it, pieces of :data:`ADJOINT_PIECES` until then; on the CPU one kernel).
         """
         super().__init__(model)
         if dtype not in (wp.float32, wp.float64):
@@ -198,6 +178,11 @@ class SolverReplay(SolverBase):
         self.update_body_q = bool(update_body_q)
         self.threads = max(1, int(threads)) if model.device.is_cpu else 1
         self.dtype = dtype
+        if adjoint_pieces is not None and int(adjoint_pieces) < 0:
+            raise ValueError("adjoint_pieces must be >= 0")
+        self._pieces_arg = adjoint_pieces
+        self.adjoint_pieces = 0  # statements per adjoint kernel in use (0: one kernel), set by _load
+        self._scratch = None
         self.parameters: dict[str, wp.array] = {}
         """The arrays the kernels read, by :class:`newton.Model` attribute name (``joint_*`` per DoF,
         ``body_mass/com/inertia`` per body, ``gravity``): the model's own arrays for float32, float64 copies
@@ -261,8 +246,16 @@ class SolverReplay(SolverBase):
     def _load(self) -> None:
         scalar = "float64" if self.dtype == wp.float64 else "float32"
         sweeps = self.friction_sweeps if self.friction_kappa != 0.0 else 0  # kappa = 0: no friction at all
-        self.kernels = _load_kernels(self.tree, scalar, self.requires_grad, self.model.device.is_cuda, sweeps,
-                                     self.servo)
+        dev = self.model.device
+        self.adjoint_pieces, later = choose_pieces(self.tree, scalar, self.requires_grad, dev, sweeps, self.servo,
+                                                   self._pieces_arg)
+        self.kernels = load_kernels(self.tree, scalar, self.requires_grad, dev.is_cuda, sweeps, self.servo,
+                                    self.adjoint_pieces)
+        compile_now(self.kernels, dev, later)
+        self._scratch = None
+        if self.adjoint_pieces:  # the values the chain's kernels hand on, (slots, worlds): one step at a time
+            self._scratch = wp.zeros((max(1, self.kernels.PIECE_SLOTS), self.tree.world_count), dtype=self.dtype,
+                                     device=self.model.device, requires_grad=True)
         self._refresh_params()
 
     def _refresh_params(self) -> None:
@@ -341,6 +334,18 @@ class SolverReplay(SolverBase):
             self._pool = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="replay")
         list(self._pool.map(lambda calls: [call() for call in calls], plan))
 
+    def _adjoint(self, chunk: tuple[int, int], args: list, outputs: list) -> list:
+        """The launches of one step's adjoint on ``chunk``: the step kernel's, or with :attr:`adjoint_pieces` the
+        chain's (:mod:`.split`): its pieces but the last forward to refill the scratch (they write nothing else),
+        the chunk's scratch gradient zeroed, then every piece's adjoint, last to first."""
+        if not self.adjoint_pieces:
+            return [self._command(self.kernels.replay_step, chunk, args, outputs, adjoint=True)]
+        pieces, out = self.kernels.PIECES, [*outputs, self._scratch]
+        grad = self._scratch.grad if chunk[1] == self.tree.world_count else \
+            self._scratch.grad[:, chunk[0]:chunk[0] + chunk[1]]
+        return ([self._command(k, chunk, args, out) for k in pieces[:-1]] + [grad.zero_]
+                + [self._command(k, chunk, args, out, adjoint=True) for k in reversed(pieces)])
+
     def _record(self, backward, arrays: list) -> None:
         """Under a recording ``wp.Tape``, register ``backward`` for the arrays that carry gradients."""
         tape = wp._src.context.runtime.tape
@@ -366,8 +371,8 @@ class SolverReplay(SolverBase):
         args, outputs = [*self._leading_args(dt), *self._params, self._gravity, *arrays[:5]], arrays[5:]
         kernel = self.kernels.replay_step
         self._execute(self._plan(key, lambda c: [self._command(kernel, c, args, outputs)]))
-        self._record(lambda: self._execute(self._plan(key + ("adjoint",), lambda c: [
-            self._command(kernel, c, args, outputs, adjoint=True)])), args + outputs)
+        self._record(lambda: self._execute(self._plan(key + ("adjoint",), lambda c: self._adjoint(c, args, outputs))),
+                     args + outputs)
         if self.update_body_q:
             import newton
 
@@ -420,9 +425,8 @@ class SolverReplay(SolverBase):
             # step t's adjoint reads the gradient of state t + 1 and adds into state t and step t's inputs;
             # row t of a time-major trajectory has Newton's flat layout, so the step kernel's adjoint applies
             rows = [[a[t].flatten() for t in range(a.shape[0])] for a in arrays]
-            step = self.kernels.replay_step
-            return [self._command(step, chunk, [*fixed, *(r[t] for r in rows)], [rows[0][t + 1], rows[1][t + 1]], True)
-                    for t in reversed(range(t_len))]
+            return [call for t in reversed(range(t_len))
+                    for call in self._adjoint(chunk, [*fixed, *(r[t] for r in rows)], [rows[0][t + 1], rows[1][t + 1]])]
 
         self._record(lambda: self._execute(self._plan(key + ("adjoint",), adjoints)), fixed + arrays)
 

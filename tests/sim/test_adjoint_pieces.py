@@ -1,0 +1,104 @@
+"""SolverReplay's adjoint as a chain of kernels (:mod:`wresdyn.sim.solver_replay.split`) gives the one kernel's
+gradients: through the fused rollout and the per-step tape, with the friction solve (a gated region cut into pieces
+of its own) on, in one and in two CPU threads; and the choice of pieces is validated.
+
+The humanoid's chain (12 pieces) is checked against its one kernel by ``benchmarks/adjoint_pieces.py check`` on the
+CPU and on a GPU (``benchmarks/results/first_fit/h100_pieces/``): its Clang compile is too slow for the suite.
+"""
+
+import numpy as np
+import pytest
+import warp as wp
+from test_solver_replay import DT, TRI_URDF
+
+from wresdyn.robot.description import load_robot
+from wresdyn.sim.solver_replay import SolverReplay
+from wresdyn.sim.solver_replay.kernels import choose_pieces
+
+T, W = 8, 3
+PARAMS = ("body_mass", "body_com", "body_inertia", "joint_friction", "joint_armature", "joint_target_ke",
+          "joint_target_kd", "joint_damping")
+
+
+@pytest.fixture(scope="module")
+def tri_friction(tmp_path_factory):
+    path = tmp_path_factory.mktemp("tri") / "tri.urdf"
+    path.write_text(TRI_URDF)
+    gains = {"joint": [{"match": "*", "kp": 30.0, "kd": 1.0, "armature": 0.01, "friction": 0.3}]}
+    return load_robot(path, gains=gains)
+
+
+def gradients(robot, pieces, threads=1, stepped=False):
+    """The end state and the gradients of a random loss on it, through T steps of W worlds."""
+    model = robot.build_model(W, "cpu", requires_grad=True)
+    solver = SolverReplay(model, adjoint_pieces=pieces, threads=threads, friction_grad=True)
+    n = solver.tree.dofs_per_world
+    rng = np.random.default_rng(3)
+    q0, tq, jf = rng.uniform(-0.3, 0.3, (W, n)), rng.uniform(-0.3, 0.3, (T, W, n)), rng.normal(size=(T, W, n))
+    seed = rng.normal(size=(W, n)).astype(np.float32)
+    if stepped:
+        states = [model.state(requires_grad=True) for _ in range(T + 1)]
+        controls = [model.control(requires_grad=True) for _ in range(T)]
+        states[0].joint_q.assign(q0.ravel().astype(np.float32))
+        tape = wp.Tape()
+        with tape:
+            for k in range(T):
+                controls[k].joint_target_q.assign(tq[k].ravel().astype(np.float32))
+                controls[k].joint_f.assign(jf[k].ravel().astype(np.float32))
+                solver.step(states[k], states[k + 1], controls[k], None, DT)
+        tape.backward(grads={states[T].joint_q: wp.array(seed.ravel())})
+        out = {"q": states[T].joint_q.numpy(), "q0": states[0].joint_q.grad.numpy(),
+               "jf": np.stack([c.joint_f.grad.numpy() for c in controls])}
+    else:
+        q = wp.array(np.concatenate([q0[None], np.zeros((T, W, n))]).astype(np.float32), requires_grad=True)
+        qd = wp.zeros((T + 1, W, n), requires_grad=True)
+        tqa = wp.array(tq.astype(np.float32), requires_grad=True)
+        jfa = wp.array(jf.astype(np.float32), requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            solver.rollout(q, qd, tqa, DT, joint_f=jfa)
+        full = np.zeros((T + 1, W, n), np.float32)
+        full[T] = seed
+        tape.backward(grads={q: wp.array(full)})
+        out = {"q": q.numpy()[T], "q0": q.grad.numpy()[0], "qd0": qd.grad.numpy()[0], "tq": tqa.grad.numpy(),
+               "jf": jfa.grad.numpy()}
+    out.update({p: getattr(model, p).grad.numpy() for p in PARAMS})
+    return {k: v.copy() for k, v in out.items()}, solver
+
+
+@pytest.mark.parametrize("stepped", [False, True], ids=["rollout", "step"])
+def test_pieces_give_the_one_kernels_gradients(tri_friction, stepped):
+    ref, one = gradients(tri_friction, 0, stepped=stepped)
+    got, chain = gradients(tri_friction, 5, stepped=stepped)
+    assert one.adjoint_pieces == 0 and chain.adjoint_pieces == 5
+    assert len(chain.kernels.PIECES) >= 8  # the friction sweeps are pieces of their own: the gate is cut too
+    assert np.array_equal(got["q"], ref["q"])  # the forward is the one step kernel either way
+    for k, v in ref.items():
+        assert np.abs(v).max() > 0.0, k
+        # float32: the pieces round at their boundaries where the one kernel may fuse (measured <= 1e-7 relative)
+        assert np.allclose(got[k], v, rtol=1e-5, atol=1e-6 * np.abs(v).max()), k
+
+
+def test_pieces_split_over_threads_agree(tri_friction):
+    one, _ = gradients(tri_friction, 5)
+    two, _ = gradients(tri_friction, 5, threads=2)
+    for k, v in one.items():
+        assert np.array_equal(two[k], v), k
+
+
+def test_piece_choice_is_validated(tri_friction, monkeypatch):
+    model = tri_friction.build_model(1, "cpu", requires_grad=True)
+    with pytest.raises(ValueError, match="adjoint_pieces"):
+        SolverReplay(model, adjoint_pieces=-1)
+    solver = SolverReplay(model)
+    assert solver.adjoint_pieces == 0  # the CPU default: one kernel
+    cpu = wp.get_device("cpu")
+    args = (solver.tree, "float32", True, cpu, solver.friction_sweeps, None, None)
+    monkeypatch.setenv("WRESDYN_ADJOINT_PIECES", "7")
+    assert choose_pieces(*args) == (7, None)
+    assert SolverReplay(model).adjoint_pieces == 7
+    assert choose_pieces(*args[:2], False, *args[3:]) == (0, None)  # no adjoint, no pieces
+    for bad in ("many", "-3"):
+        monkeypatch.setenv("WRESDYN_ADJOINT_PIECES", bad)
+        with pytest.raises(ValueError, match="WRESDYN_ADJOINT_PIECES"):
+            SolverReplay(model)

@@ -1,0 +1,169 @@
+"""Which kernels a :class:`~.solver.SolverReplay` runs, and when they compile.
+
+A robot's kernels are generated once per process (:func:`load_kernels`) and compiled by Warp into its cache. On CUDA
+the adjoint comes in two forms: one kernel, which NVRTC compiles for the humanoid in 76 CPU-seconds (the first GPU
+run's wait), and a chain of pieces (:mod:`.split`), which compile side by side in a fraction of that and run
+1.3-1.5x slower. :func:`choose_pieces` takes the one kernel where Warp's cache holds it, else the pieces, and
+compiles the one kernel in a background thread for the next run. :func:`deferred_compile` lets a caller building
+several solvers (a command's variants) compile all their modules in one parallel batch.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+
+import numpy as np
+import warp as wp
+
+from .cache import load_module
+from .codegen import generate_source
+from .tree import ReplayTree
+
+__all__ = ["ADJOINT_PIECES", "background_compiles", "choose_pieces", "compile_now", "deferred_compile",
+           "load_kernels", "start_background_compiles"]
+
+
+def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
+                  servo: np.ndarray | None = None, pieces: int = 0):
+    """Generate and load (:func:`~.cache.load_module`) the kernel module for ``tree``.
+
+    The step kernel's adjoint is outlined into non-inlined functions for Clang (CPU), where the whole step
+    as one function compiled for two minutes (16 s outlined); NVRTC is the other way round: the humanoid's
+    adjoint compiles for sm_90 in 76 CPU-seconds force-inlined (as without a hint: NVRTC then inlines the
+    chunks itself), while out-of-line chunks keep its front end busy past 760 CPU-seconds
+    (``benchmarks/results/compile/cuda_probe_cpu.txt``), so CUDA inlines. ``pieces`` > 0: the adjoint as a chain
+    of kernels of about that many statements (:mod:`.split`), which NVRTC compiles side by side.
+    """
+    servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
+    pieces = int(pieces) if backward else 0
+    key = (tree.digest(), scalar, bool(backward), bool(cuda), int(friction_sweeps),
+           None if servo is None else servo.tobytes(), pieces)
+    if key not in _SOURCES:  # a robot's solvers are built many times a process; its source depends on the key only
+        _SOURCES[key] = generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
+                                        servo=servo, pieces=pieces or None)
+    return load_module(_SOURCES[key])
+
+
+_SOURCES: dict[tuple, str] = {}
+"""Generated kernel sources of this process by (tree digest, scalar, backward, cuda, friction sweeps, servo DoFs,
+adjoint pieces)."""
+
+ADJOINT_PIECES = 400
+"""Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled (``SolverReplay(adjoint_pieces=)``):
+the humanoid's adjoint as one kernel takes NVRTC 76 CPU-seconds for sm_90, its 12 pieces of this size 2-5 s each
+(35 in all, side by side); the pieces run 1.3-1.5x slower (``benchmarks/results/first_fit/h100_pieces/``)."""
+
+_BACKGROUND: dict[str, threading.Thread] = {}
+"""Background compiles of one-kernel adjoints this process started, by Warp module identifier."""
+
+
+def background_compiles() -> list[str]:
+    """Identifiers of the one-kernel adjoint modules still compiling in the background (:class:`SolverReplay`)."""
+    return [k for k, t in _BACKGROUND.items() if t.is_alive()]
+
+
+_PENDING: list[tuple] = []
+"""(module, device) to compile in the background once :func:`deferred_compile`'s caller has compiled its batch."""
+
+
+def start_background_compiles() -> None:
+    """Start the background compiles the solvers built under :func:`deferred_compile` asked for (after the batch:
+    Warp's code generation holds the GIL, so started earlier they slow the batch down)."""
+    while _PENDING:
+        _compile_later(*_PENDING.pop(0))
+
+
+def _compile_later(module, device) -> None:
+    """Compile ``module`` into Warp's kernel cache in a background thread (NVRTC runs on the CPU and releases the
+    GIL), once per process; not a daemon, so a short command waits for it at exit rather than leave a cache
+    entry half made. A failure only leaves the pieces in use. Under :func:`deferred_compile`: listed for
+    :func:`start_background_compiles`."""
+    key = module.get_module_identifier()
+    if key in _BACKGROUND or any(m is module for m, _ in _PENDING):
+        return
+    if _DEFERRED is not None:
+        _PENDING.append((module, device))
+        return
+
+    def work():
+        try:
+            wp.compile_aot_module(module, device=device)
+        except Exception:  # noqa: BLE001 - the pieces serve; the next run tries again
+            pass
+
+    _BACKGROUND[key] = threading.Thread(target=work, name="wresdyn-adjoint-compile")
+    _BACKGROUND[key].start()
+
+
+def _pieces_from_env() -> int | None:
+    """``$WRESDYN_ADJOINT_PIECES`` as a number of statements (0: one kernel), None where unset or empty."""
+    raw = os.environ.get("WRESDYN_ADJOINT_PIECES", "").strip()
+    if not raw:
+        return None
+    try:
+        value = int(raw)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise ValueError(f"WRESDYN_ADJOINT_PIECES={raw!r}: give a number of statements >= 0 (0: one kernel)")
+    return value
+
+
+def _compiled(module, device) -> bool:
+    """Whether Warp's kernel cache holds ``module``'s binary for ``device`` (Warp 1.19's cache layout; False if
+    that cannot be told)."""
+    try:
+        name = module._get_compile_output_name(device)
+        return os.path.exists(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(), name))
+    except (AttributeError, TypeError, OSError):
+        return False
+
+
+_DEFERRED: list | None = None
+"""While :func:`deferred_compile` runs: the CUDA modules solvers built meanwhile would have compiled."""
+
+
+@contextlib.contextmanager
+def deferred_compile():
+    """Within: CUDA solvers leave their step, rollout and adjoint modules uncompiled and list them in the yielded
+    list instead, so that a caller building several (a command's variants) compiles them all in one parallel
+    ``wp.force_load``; the dynamics-terms kernel still compiles when a solver is built (it sets ``fric_m0``)."""
+    global _DEFERRED
+    outer, _DEFERRED = _DEFERRED, [] if _DEFERRED is None else _DEFERRED
+    try:
+        yield _DEFERRED
+    finally:
+        _DEFERRED = outer
+
+
+
+
+def choose_pieces(tree: ReplayTree, scalar: str, backward: bool, device, friction_sweeps: int,
+                  servo: np.ndarray | None, pieces: int | None) -> tuple[int, object]:
+    """Statements per adjoint kernel for a solver, and the one-kernel adjoint module to compile in the background
+    (or None). ``pieces`` as given to the solver; None: ``$WRESDYN_ADJOINT_PIECES`` where set, else on CUDA the
+    one kernel where Warp's cache holds it and :data:`ADJOINT_PIECES` otherwise, on the CPU the one kernel."""
+    if pieces is None:
+        pieces = _pieces_from_env()
+    later = None
+    if pieces is None and device.is_cuda and backward and ADJOINT_PIECES:
+        whole = load_kernels(tree, scalar, True, True, friction_sweeps, servo, 0).replay_step.module
+        pieces = 0 if _compiled(whole, device) else ADJOINT_PIECES
+        later = whole if pieces else None
+    return (int(pieces or 0) if backward else 0), later
+
+
+def compile_now(kernels, device, later) -> None:
+    """On CUDA: compile ``kernels``' step, rollout and adjoint modules side by side (or list them for the caller of
+    :func:`deferred_compile`), then ``later`` (a module or None) in the background."""
+    if not device.is_cuda:
+        return
+    mods = [x.module for x in (kernels.replay_step, kernels.replay_rollout, *getattr(kernels, "PIECES", ()))]
+    if _DEFERRED is not None:
+        _DEFERRED.extend(m for m in mods if m not in _DEFERRED)
+    else:
+        wp.force_load(device=device, modules=mods, max_workers=min(len(mods), os.cpu_count() or 1))
+    if later is not None:
+        _compile_later(later, device)

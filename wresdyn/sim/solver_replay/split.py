@@ -1,0 +1,144 @@
+"""One step cut into a chain of small kernels for the adjoint, so that NVRTC compiles pieces in parallel.
+
+NVRTC compiles a kernel's forward and adjoint as one function, superlinearly in its length: the humanoid's whole
+step with an adjoint is 76 CPU-seconds for sm_90 (``benchmarks/results/compile/cuda_probe_cpu.txt``), the first
+GPU run's wait. Cut at the step's marks into kernels of about ``min_len`` statements, each piece compiles in
+seconds and the pieces compile side by side (each kernel is its own Warp module). The values a later piece reads
+travel through a per-world scratch array, written once per step (single assignment, so Warp's adjoint of every
+piece reads the values of the step being differentiated):
+
+- forward: the solver keeps running the whole step as one kernel (no scratch traffic);
+- adjoint of one step: pieces ``0 .. m-2`` forward (they write the scratch, never the outputs), the scratch's
+  gradient zeroed, then the adjoints of pieces ``m-1 .. 0``. Piece ``m-1`` writes the new state.
+
+A :func:`~.emit.gate` region (the friction solve) is cut into pieces of its own that run under its condition;
+its reassignments of earlier names become new names (``<name>_g``, the region's result where the condition holds,
+the earlier value elsewhere), so that no scratch slot is written twice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .emit import _ENDIF, _IDENT, _IF, _MARK, indent
+
+__all__ = ["Piece", "split_pieces"]
+
+
+@dataclass
+class Piece:
+    """One kernel of the chain: its statements and the scratch slots it reads and writes."""
+
+    lines: list[str] = field(default_factory=list)
+    cond: str | None = None
+    """The gate condition the piece runs under (None: always)."""
+    phis: list[tuple[str, str, str]] = field(default_factory=list)
+    """(new name, value where ``cond`` holds, value elsewhere) defined at the end of the piece."""
+
+
+def _rename(line: str, names: dict[str, str]) -> str:
+    if not names:
+        return line
+    return _IDENT.sub(lambda m: names.get(m.group(0), m.group(0)), line)
+
+
+def _cut(compute: list[str], stores: list[str], min_len: int) -> list[Piece]:
+    """The statements in pieces cut at marks (at least ``min_len`` statements each) and at gate boundaries; the
+    stores go in a last piece outside any gate."""
+    pieces = [Piece()]
+    defined: set[str] = set()
+    renamed: dict[str, str] = {}
+    for line in compute:
+        if line.startswith(_IF) or line == _ENDIF:
+            if pieces[-1].lines or pieces[-1].phis:
+                pieces.append(Piece())
+            pieces[-1].cond = line[len(_IF):] if line.startswith(_IF) else None
+            continue
+        if line.startswith(_MARK):
+            if len(pieces[-1].lines) >= min_len:
+                pieces.append(Piece(cond=pieces[-1].cond))
+            continue
+        lhs, rhs = line.split(" = ", 1)
+        rhs = _rename(rhs, renamed)
+        if pieces[-1].cond is not None and lhs in defined:  # the region hands on a new value of an earlier name
+            new = f"{lhs}_g"
+            pieces[-1].phis.append((new, rhs, renamed.get(lhs, lhs)))
+            renamed[lhs] = new
+            continue
+        defined.add(lhs)
+        pieces[-1].lines.append(f"{lhs} = {rhs}")
+    if pieces[-1].cond is not None:
+        pieces.append(Piece())
+    pieces[-1].lines += [_rename(s, renamed) for s in stores]
+    return [p for p in pieces if p.lines or p.phis]
+
+
+def split_pieces(prologue: list[str], compute: list[str], stores: list[str], external: set[str], min_len: int
+                 ) -> tuple[list[list[str]], int]:
+    """Kernel bodies of the chain for one step.
+
+    Args:
+        prologue: Loads and definitions any piece may need (parameter and state loads, gravity, ``fric_on``):
+            each piece repeats the ones it uses, and what they use.
+        compute: The step's statements, with :meth:`~.emit.Emitter.mark` and :func:`~.emit.gate` lines.
+        stores: The array stores of the new state (``joint_q_out[...] = name``).
+        external: Names every kernel has without a load (scalar arguments, ``w``, ``bq``, ...).
+        min_len: Statements a piece reaches before it is cut at the next mark.
+
+    Returns:
+        (the body statements of each piece, reading and writing ``scratch[slot, w]``; the number of slots).
+    """
+    pre = [line.split(" = ", 1) for line in prologue]
+    pre_names = {lhs for lhs, _ in pre}
+    pieces = _cut(compute, stores, min_len)
+    uses = []
+    for p in pieces:
+        u: list[str] = []
+        for line in p.lines + [f"_ = {rhs} + {old}" for _, rhs, old in p.phis]:
+            rhs = line.split(" = ", 1)[1]
+            u += [x for x in _IDENT.findall(rhs) if x not in u]
+        if p.cond is not None:
+            u += [x for x in _IDENT.findall(p.cond) if x not in u]
+        uses.append(u)
+    defs = [{line.split(" = ", 1)[0] for line in p.lines if not _is_store(line)} | {new for new, _, _ in p.phis}
+            for p in pieces]
+    slots: dict[str, int] = {}
+    reads: list[list[str]] = []
+    for c, p in enumerate(pieces):
+        r = [x for x in uses[c] if x not in defs[c] and x not in pre_names and x not in external
+             and any(x in defs[k] for k in range(c))]
+        for x in r:
+            slots.setdefault(x, len(slots))
+        reads.append(r)
+    bodies = []
+    for c, p in enumerate(pieces):
+        need = set(uses[c])
+        body_pre = []
+        for lhs, rhs in reversed(pre):  # the prologue's closure over what this piece uses
+            if lhs in need:
+                need |= set(_IDENT.findall(rhs))
+                body_pre.append(f"{lhs} = {rhs}")
+        body_pre.reverse()
+        loads = [f"{x} = scratch[{slots[x]}, w]" for x in reads[c]]
+        writes = [f"scratch[{slots[x]}, w] = {x}" for x in sorted(defs[c], key=_order(p)) if x in slots]
+        if p.cond is None:
+            bodies.append(body_pre + loads + p.lines + writes)
+            continue
+        phi_lines = [f"{new} = {rhs}" for new, rhs, _ in p.phis]
+        inner = indent(p.lines + phi_lines + writes, 1).split("\n")
+        other = [f"scratch[{slots[new]}, w] = {old}" for new, _, old in p.phis if new in slots]
+        bodies.append(body_pre + loads + [f"if {p.cond}:", *inner] + (["else:", *indent(other, 1).split("\n")]
+                                                                      if other else []))
+    return bodies, len(slots)
+
+
+def _is_store(line: str) -> bool:
+    return "[" in line.split(" = ", 1)[0]
+
+
+def _order(p: Piece):
+    """Sort key: a name's position in the piece (phis last), so that slot writes follow the statements."""
+    pos = {line.split(" = ", 1)[0]: i for i, line in enumerate(p.lines)}
+    pos.update({new: len(p.lines) + i for i, (new, _, _) in enumerate(p.phis)})
+    return lambda x: pos.get(x, 0)
+
