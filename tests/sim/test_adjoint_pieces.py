@@ -13,7 +13,7 @@ from test_solver_replay import DT, TRI_URDF
 
 from wresdyn.robot.description import load_robot
 from wresdyn.sim.solver_replay import SolverReplay
-from wresdyn.sim.solver_replay.kernels import choose_pieces
+from wresdyn.sim.solver_replay.kernels import choose_pieces, compile_in_processes, load_kernels
 
 T, W = 8, 3
 PARAMS = ("body_mass", "body_com", "body_inertia", "joint_friction", "joint_armature", "joint_target_ke",
@@ -102,3 +102,16 @@ def test_piece_choice_is_validated(tri_friction, monkeypatch):
         monkeypatch.setenv("WRESDYN_ADJOINT_PIECES", bad)
         with pytest.raises(ValueError, match="WRESDYN_ADJOINT_PIECES"):
             SolverReplay(model)
+
+
+def test_worker_processes_fill_the_cache_this_process_reads(tri_friction, tmp_path, monkeypatch):
+    """The compile workers (NVRTC on the CPU, no GPU) write each module where this process's Warp looks for it: the
+    module hash a worker computes from the generated file is this process's."""
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path))
+    solver = SolverReplay(tri_friction.build_model(1, "cpu", requires_grad=True))
+    kernels = load_kernels(solver.tree, "float32", True, True, solver.friction_sweeps, None, 5)
+    mods = [k.module for k in kernels.PIECES[:2]]
+    compile_in_processes(mods, 90, ptx=False)
+    for m in mods:
+        name = m.get_module_identifier()
+        assert (tmp_path / name / f"{name}.sm90.cubin").stat().st_size > 0, name

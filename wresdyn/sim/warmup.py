@@ -18,14 +18,13 @@ pieces: :mod:`~wresdyn.sim.solver_replay.split`) compiles in one parallel batch.
 
 from __future__ import annotations
 
-import os
 import time
 import weakref
 from pathlib import Path
 
 from ..errors import WresdynError
 from .simulator import Simulator
-from .solver_replay.kernels import background_compiles, deferred_compile, start_background_compiles
+from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
 __all__ = ["MODULES", "VARIANTS", "compile_kernels"]
 
@@ -114,8 +113,7 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     mods = _step_modules(sims.values())
     mods += [m for m in cuda_mods if m not in mods]
     if len(mods) > 1:
-        wp.force_load(device=sims[next(iter(sims))].model.device, modules=mods,
-                      max_workers=min(len(mods), os.cpu_count() or 1))
+        compile_batch(mods, sims[next(iter(sims))].model.device)
     start_background_compiles()
     parts = []
     for module, v in todo.items():

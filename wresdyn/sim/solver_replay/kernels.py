@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import subprocess
+import sys
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import warp as wp
@@ -21,8 +24,8 @@ from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
 
-__all__ = ["ADJOINT_PIECES", "background_compiles", "choose_pieces", "compile_now", "deferred_compile",
-           "load_kernels", "start_background_compiles"]
+__all__ = ["ADJOINT_PIECES", "background_compiles", "choose_pieces", "compile_batch", "compile_now",
+           "compile_in_processes", "deferred_compile", "load_kernels", "start_background_compiles"]
 
 
 def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
@@ -43,7 +46,14 @@ def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fric
     if key not in _SOURCES:  # a robot's solvers are built many times a process; its source depends on the key only
         _SOURCES[key] = generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
                                         servo=servo, pieces=pieces or None)
-    return load_module(_SOURCES[key])
+    mod = load_module(_SOURCES[key])
+    for k in (mod.replay_step, mod.replay_rollout, mod.replay_terms, *getattr(mod, "PIECES", ())):
+        _JOBS[id(k.module)] = (mod.__file__, k.func.__name__)
+    return mod
+
+
+_JOBS: dict[int, tuple[str, str]] = {}
+"""Warp module id -> (its generated file, its kernel's name): what a worker process needs to compile it."""
 
 
 _SOURCES: dict[tuple, str] = {}
@@ -127,9 +137,8 @@ _DEFERRED: list | None = None
 
 @contextlib.contextmanager
 def deferred_compile():
-    """Within: CUDA solvers leave their step, rollout and adjoint modules uncompiled and list them in the yielded
-    list instead, so that a caller building several (a command's variants) compiles them all in one parallel
-    ``wp.force_load``; the dynamics-terms kernel still compiles when a solver is built (it sets ``fric_m0``)."""
+    """Within: CUDA solvers leave their modules uncompiled and list them in the yielded list instead, so that a caller
+    building several (a command's variants) compiles them all in one batch (:func:`compile_batch`)."""
     global _DEFERRED
     outer, _DEFERRED = _DEFERRED, [] if _DEFERRED is None else _DEFERRED
     try:
@@ -160,10 +169,38 @@ def compile_now(kernels, device, later) -> None:
     :func:`deferred_compile`), then ``later`` (a module or None) in the background."""
     if not device.is_cuda:
         return
-    mods = [x.module for x in (kernels.replay_step, kernels.replay_rollout, *getattr(kernels, "PIECES", ()))]
+    mods = [x.module for x in (kernels.replay_step, kernels.replay_rollout, kernels.replay_terms,
+                               *getattr(kernels, "PIECES", ()))]
     if _DEFERRED is not None:
         _DEFERRED.extend(m for m in mods if m not in _DEFERRED)
     else:
-        wp.force_load(device=device, modules=mods, max_workers=min(len(mods), os.cpu_count() or 1))
+        compile_batch(mods, device)
     if later is not None:
         _compile_later(later, device)
+
+
+def compile_batch(mods: list, device) -> None:
+    """Compile and load Warp modules side by side: on CUDA the generated ones not yet in Warp's cache first in worker
+    processes (:mod:`.compile_worker`; NVRTC in threads of one process slows each compile down several times), then
+    every module in this process's threads, which load what the workers wrote. A worker that fails leaves its module
+    to the in-process load, which compiles it."""
+    todo = [m for m in mods if device.is_cuda and id(m) in _JOBS and not _compiled(m, device)]
+    if len(todo) > 1:
+        compile_in_processes(todo, device.arch, todo[0]._get_compile_output_name(device).endswith(".ptx"))
+    wp.force_load(device=device, modules=mods, max_workers=min(len(mods), os.cpu_count() or 1))
+
+
+def compile_in_processes(mods: list, arch: int, ptx: bool) -> None:
+    """Compile generated modules (made by :func:`load_kernels`) for CUDA architecture ``arch`` (PTX or CUBIN) into
+    Warp's kernel cache, one worker process each, as many at once as there are cores; no GPU needed."""
+    worker = os.path.join(os.path.dirname(os.path.abspath(__file__)), "compile_worker.py")
+    env = dict(os.environ, CUDA_VISIBLE_DEVICES="")  # NVRTC needs no GPU: no CUDA context per worker
+
+    def run(m):
+        path, name = _JOBS[id(m)]
+        subprocess.run([sys.executable, worker, path, name, str(arch), "1" if ptx else "0",
+                        str(wp.config.kernel_cache_dir)], env=env, stdin=subprocess.DEVNULL,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
+
+    with ThreadPoolExecutor(max_workers=min(len(mods), os.cpu_count() or 1)) as pool:
+        list(pool.map(run, mods))

@@ -128,20 +128,10 @@ class SolverReplay(SolverBase):
     For open-loop replay of a whole command sequence, :meth:`rollout` runs ``T`` steps in one launch.
     """
 
-    def __init__(
-        self,
-        model,
-        *,
-        friction_kappa: float | None = None,
-        friction_sweeps: int = FRICTION_SWEEPS,
-        implicit_stiffness: bool = False,
-        requires_grad: bool | None = None,
-        friction_grad: bool | None = None,
-        update_body_q: bool = False,
-        threads: int = 1,
-        dtype=wp.float32,
-        adjoint_pieces: int | None = None,
-    ):
+    def __init__(self, model, *, friction_kappa: float | None = None, friction_sweeps: int = FRICTION_SWEEPS,
+                 implicit_stiffness: bool = False, requires_grad: bool | None = None,
+                 friction_grad: bool | None = None, update_body_q: bool = False, threads: int = 1, dtype=wp.float32,
+                 adjoint_pieces: int | None = None):
         """
         Args:
             model: Newton model holding one fixed-base robot per world (same topology and joint frames;
@@ -218,19 +208,26 @@ class SolverReplay(SolverBase):
         self.tree: ReplayTree = tree_from_model(self.model)
         self.servo = self._servo_dofs()
         self._load()
-        self._m0 = self._reference_inertia()
+        # fric_m0 of the parameters as built, computed at the first launch: building a solver compiles nothing
+        self._m0 = None
+        bpw = self.tree.bodies_per_world
+        self._m0_from = ([wp.clone(self.parameters[name][:bpw]) for name in _BODY_PARAMS],
+                         self.model.joint_armature.numpy()[np.asarray(self.tree.qd_offset)])
 
     def _reference_inertia(self) -> wp.array:
         """``fric_m0``: each DoF's effective inertia at the reference pose (all joints at 0) of world 0 as built,
         armature included, ``1 / (M^-1)_ii`` [kg m^2 or kg], shape (n_dof,): MuJoCo's ``1 / dof_invweight0``,
         the scale of its soft friction's regulariser. Fixed at construction (as MuJoCo fixes it when it compiles
         a model): edits of masses or armature later, identification's included, do not change it."""
+        if self._m0 is not None:
+            return self._m0
         n = self.tree.n_dof
-        mass, _ = self.dynamics_terms(np.zeros(n), np.zeros(n))
-        arm = self.model.joint_armature.numpy()[np.asarray(self.tree.qd_offset)]
+        body, arm = self._m0_from
+        mass, _ = self._terms(np.zeros(n), np.zeros(n), 0, body)
         inv = np.linalg.inv(mass[0].astype(np.float64) + np.diag(arm.astype(np.float64)))
         dt = np.float64 if self.dtype == wp.float64 else np.float32
-        return wp.array((1.0 / np.diag(inv)).astype(dt), dtype=self.dtype, device=self.model.device)
+        self._m0 = wp.array((1.0 / np.diag(inv)).astype(dt), dtype=self.dtype, device=self.model.device)
+        return self._m0
 
     def _servo_dofs(self) -> np.ndarray | None:
         """Which DoFs of a world (in DoF order) have a servo drive (``Model.joint_servo``), or None for none."""
@@ -292,7 +289,8 @@ class SolverReplay(SolverBase):
             c, kdt, shift = _MJ_D0 / (1.0 - _MJ_D0), 0.0, 1.0 - 2.0 / (_MJ_DMAX * _MJ_TIMECONST) * dt
         else:  # a damper kappa H_ii on the new velocity (inf: hard Coulomb)
             c, kdt, shift = 0.0, k * dt, 0.0
-        return [float(dt), c, kdt, shift, 1.0 if self.implicit_stiffness else 0.0, self._m0, self._fric_grad]
+        return [float(dt), c, kdt, shift, 1.0 if self.implicit_stiffness else 0.0, self._reference_inertia(),
+                self._fric_grad]
 
     def _chunks(self) -> list[tuple[int, int]]:
         w = self.tree.world_count
@@ -434,6 +432,9 @@ class SolverReplay(SolverBase):
         """Mass matrix ``M(q)`` (without armature) and bias ``c(q, qd)`` (Coriolis, centrifugal, gravity) of
         ``world``'s robot (its body parameters, world 0's gravity) at a batch of states, in DoF order; for
         tests. Shapes (B, n, n) and (B, n)."""
+        return self._terms(q, qd, world, [self.parameters[name] for name in _BODY_PARAMS])
+
+    def _terms(self, q, qd, world: int, body: list) -> tuple[np.ndarray, np.ndarray]:
         q, qd = np.atleast_2d(q), np.atleast_2d(qd)
         b, n = q.shape[0], self.tree.n_dof
         dev = self.model.device
@@ -443,7 +444,6 @@ class SolverReplay(SolverBase):
         g = wp.array(np.repeat(self._gravity.numpy()[:1], b, axis=0), dtype=self._gravity.dtype, device=dev)
         q_in = wp.array(q.astype(dt), dtype=self.dtype, device=dev)
         qd_in = wp.array(qd.astype(dt), dtype=self.dtype, device=dev)
-        body = [self.parameters[name] for name in _BODY_PARAMS]
         wp.launch(self.kernels.replay_terms, dim=b, inputs=[int(world), *body, g, q_in, qd_in],
                   outputs=[m_out, c_out], device=dev)
         return m_out.numpy(), c_out.numpy()
