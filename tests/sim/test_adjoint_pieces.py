@@ -9,7 +9,7 @@ CPU and on a GPU (``benchmarks/results/first_fit/h100_pieces/``): its Clang comp
 import numpy as np
 import pytest
 import warp as wp
-from test_solver_replay import DT, TRI_URDF
+from test_solver_replay import TRI_URDF, rollout_tape, step_tape
 
 from wresdyn.robot.description import load_robot
 from wresdyn.sim.solver_replay import SolverReplay
@@ -37,26 +37,12 @@ def gradients(robot, pieces, threads=1, stepped=False):
     q0, tq, jf = rng.uniform(-0.3, 0.3, (W, n)), rng.uniform(-0.3, 0.3, (T, W, n)), rng.normal(size=(T, W, n))
     seed = rng.normal(size=(W, n)).astype(np.float32)
     if stepped:
-        states = [model.state(requires_grad=True) for _ in range(T + 1)]
-        controls = [model.control(requires_grad=True) for _ in range(T)]
-        states[0].joint_q.assign(q0.ravel().astype(np.float32))
-        tape = wp.Tape()
-        with tape:
-            for k in range(T):
-                controls[k].joint_target_q.assign(tq[k].ravel().astype(np.float32))
-                controls[k].joint_f.assign(jf[k].ravel().astype(np.float32))
-                solver.step(states[k], states[k + 1], controls[k], None, DT)
+        states, controls, tape = step_tape(solver, q0, tq, jf)
         tape.backward(grads={states[T].joint_q: wp.array(seed.ravel())})
         out = {"q": states[T].joint_q.numpy(), "q0": states[0].joint_q.grad.numpy(),
                "jf": np.stack([c.joint_f.grad.numpy() for c in controls])}
     else:
-        q = wp.array(np.concatenate([q0[None], np.zeros((T, W, n))]).astype(np.float32), requires_grad=True)
-        qd = wp.zeros((T + 1, W, n), requires_grad=True)
-        tqa = wp.array(tq.astype(np.float32), requires_grad=True)
-        jfa = wp.array(jf.astype(np.float32), requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            solver.rollout(q, qd, tqa, DT, joint_f=jfa)
+        q, qd, tqa, jfa, tape = rollout_tape(solver, q0, tq, jf)
         full = np.zeros((T + 1, W, n), np.float32)
         full[T] = seed
         tape.backward(grads={q: wp.array(full)})

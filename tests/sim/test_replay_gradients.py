@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 import warp as wp
-from test_solver_replay import TRI_URDF
+from test_solver_replay import TRI_URDF, step_tape
 
 from wresdyn.robot.description import load_robot
 from wresdyn.sim.solver_replay import SolverReplay
@@ -256,16 +256,7 @@ def test_float32_step_and_rollout_reach_the_model_arrays(tmp_path):
     tape.backward(grads={q: wp.array(sq), qd: wp.array(sqd)})
     via_rollout = grads()
 
-    states = [model.state(requires_grad=True) for _ in range(T + 1)]
-    controls = [model.control(requires_grad=True) for _ in range(T)]
-    states[0].joint_q.assign(q0.ravel().astype(np.float32))
-    states[0].joint_qd.assign(qd0.ravel().astype(np.float32))
-    tape = wp.Tape()
-    with tape:
-        for k in range(T):
-            controls[k].joint_target_q.assign(tq[k].ravel().astype(np.float32))
-            controls[k].joint_f.assign(jf[k].ravel().astype(np.float32))
-            solver.step(states[k], states[k + 1], controls[k], None, DT)
+    states, controls, tape = step_tape(solver, q0, tq, jf, qd0)
     tape.backward(grads={states[T].joint_q: wp.array(seed_q.ravel()), states[T].joint_qd: wp.array(seed_qd.ravel())})
     via_step = grads()
     for name in names:

@@ -88,6 +88,38 @@ def rollout(solver, q0, qd0, cmd, joint_f=None, dtype=np.float32):
     return qa.numpy()[:, 0], qda.numpy()[:, 0]
 
 
+def step_tape(solver, q0, tq, jf, qd0=None):
+    """A Tape over ``solver.step`` for each row of targets ``tq`` and residual torques ``jf`` (T, W, n) from
+    ``q0`` (and ``qd0``) (W, n), on per-step states and controls of the solver's model: (states, controls, tape)."""
+    model, t_len = solver.model, tq.shape[0]
+    states = [model.state(requires_grad=True) for _ in range(t_len + 1)]
+    controls = [model.control(requires_grad=True) for _ in range(t_len)]
+    states[0].joint_q.assign(q0.ravel().astype(np.float32))
+    if qd0 is not None:
+        states[0].joint_qd.assign(qd0.ravel().astype(np.float32))
+    tape = wp.Tape()
+    with tape:
+        for k in range(t_len):
+            controls[k].joint_target_q.assign(tq[k].ravel().astype(np.float32))
+            controls[k].joint_f.assign(jf[k].ravel().astype(np.float32))
+            solver.step(states[k], states[k + 1], controls[k], None, DT)
+    return states, controls, tape
+
+
+def rollout_tape(solver, q0, tq, jf):
+    """A Tape over the fused ``solver.rollout`` of targets ``tq`` and residual torques ``jf`` (T, W, n) from ``q0``
+    (W, n) at rest, float32: (q, qd, target_q, joint_f arrays, tape)."""
+    t_len, w, n = tq.shape
+    q = wp.array(np.concatenate([q0[None], np.zeros((t_len, w, n))]).astype(np.float32), requires_grad=True)
+    qd = wp.zeros((t_len + 1, w, n), requires_grad=True)
+    tqa = wp.array(tq.astype(np.float32), requires_grad=True)
+    jfa = wp.array(jf.astype(np.float32), requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        solver.rollout(q, qd, tqa, DT, joint_f=jfa)
+    return q, qd, tqa, jfa, tape
+
+
 def mujoco_run(robot, q0, qd0, cmd):
     import mujoco
 
@@ -304,28 +336,13 @@ def test_step_tape_matches_rollout_tape_and_threads_agree(tri):
     q0, tq, jf = rng.uniform(-0.3, 0.3, (W, n)), rng.uniform(-0.3, 0.3, (T, W, n)), rng.normal(size=(T, W, n))
 
     def via_rollout(s):
-        q = wp.array(np.concatenate([q0[None], np.zeros((T, W, n))]).astype(np.float32), requires_grad=True)
-        qd = wp.zeros((T + 1, W, n), requires_grad=True)
-        tqa = wp.array(tq.astype(np.float32), requires_grad=True)
-        jfa = wp.array(jf.astype(np.float32), requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            s.rollout(q, qd, tqa, DT, joint_f=jfa)
+        q, _, _, jfa, tape = rollout_tape(s, q0, tq, jf)
         seed = np.zeros((T + 1, W, n), np.float32)
         seed[T] = 1.0
         tape.backward(grads={q: wp.array(seed)})
         return q.numpy()[T], q.grad.numpy()[0], jfa.grad.numpy()
 
-    model = solver.model
-    states = [model.state(requires_grad=True) for _ in range(T + 1)]
-    controls = [model.control(requires_grad=True) for _ in range(T)]
-    states[0].joint_q.assign(q0.ravel().astype(np.float32))
-    tape = wp.Tape()
-    with tape:
-        for k in range(T):
-            controls[k].joint_target_q.assign(tq[k].ravel().astype(np.float32))
-            controls[k].joint_f.assign(jf[k].ravel().astype(np.float32))
-            solver.step(states[k], states[k + 1], controls[k], None, DT)
+    states, controls, tape = step_tape(solver, q0, tq, jf)
     tape.backward(grads={states[T].joint_q: wp.array(np.ones(W * n, np.float32))})
     q_end, g_q0, g_jf = via_rollout(solver)
     assert np.abs(states[T].joint_q.numpy() - q_end.ravel()).max() < 1e-6
