@@ -25,7 +25,7 @@ from .codegen import generate_source
 from .tree import ReplayTree
 
 __all__ = ["ADJOINT_PIECES", "background_compiles", "choose_pieces", "compile_batch", "compile_now",
-           "compile_in_processes", "deferred_compile", "load_kernels", "start_background_compiles"]
+           "compile_in_processes", "deferred_compile", "deferring", "load_kernels", "start_background_compiles"]
 
 
 def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
@@ -135,6 +135,11 @@ _DEFERRED: list | None = None
 """While :func:`deferred_compile` runs: the CUDA modules solvers built meanwhile would have compiled."""
 
 
+def deferring() -> bool:
+    """Whether :func:`deferred_compile` is in force (solvers built now compile nothing, not even at construction)."""
+    return _DEFERRED is not None
+
+
 @contextlib.contextmanager
 def deferred_compile():
     """Within: CUDA solvers leave their modules uncompiled and list them in the yielded list instead, so that a caller
@@ -185,8 +190,12 @@ def compile_batch(mods: list, device) -> None:
     every module in this process's threads, which load what the workers wrote. A worker that fails leaves its module
     to the in-process load, which compiles it."""
     todo = [m for m in mods if device.is_cuda and id(m) in _JOBS and not _compiled(m, device)]
-    if len(todo) > 1:
-        compile_in_processes(todo, device.arch, todo[0]._get_compile_output_name(device).endswith(".ptx"))
+    try:
+        ptx = todo[0]._get_compile_output_name(device).endswith(".ptx") if len(todo) > 1 else None
+    except (AttributeError, TypeError):  # not Warp 1.19's layout: the in-process load compiles them
+        ptx = None
+    if ptx is not None:
+        compile_in_processes(todo, device.arch, ptx)
     wp.force_load(device=device, modules=mods, max_workers=min(len(mods), os.cpu_count() or 1))
 
 

@@ -88,7 +88,7 @@ import warp as wp
 from newton import ModelFlags
 from newton.solvers import SolverBase
 
-from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, load_kernels
+from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, deferring, load_kernels
 from .launch import cpu_call, grad_of, launch_signature
 from .tree import ReplayTree, tree_from_model
 
@@ -208,11 +208,11 @@ class SolverReplay(SolverBase):
         self.tree: ReplayTree = tree_from_model(self.model)
         self.servo = self._servo_dofs()
         self._load()
-        # fric_m0 of the parameters as built, computed at the first launch: building a solver compiles nothing
         self._m0 = None
-        bpw = self.tree.bodies_per_world
-        self._m0_from = ([wp.clone(self.parameters[name][:bpw]) for name in _BODY_PARAMS],
+        self._m0_from = ([wp.clone(self.parameters[n][:self.tree.bodies_per_world]) for n in _BODY_PARAMS],
                          self.model.joint_armature.numpy()[np.asarray(self.tree.qd_offset)])
+        if not deferring():  # under deferred_compile: at the first launch, after the caller's batch compile
+            self._reference_inertia()
 
     def _reference_inertia(self) -> wp.array:
         """``fric_m0``: each DoF's effective inertia at the reference pose (all joints at 0) of world 0 as built,
