@@ -48,14 +48,26 @@ def gradients(robot, pieces, threads=1, stepped=False):
         tape.backward(grads={q: wp.array(full)})
         out = {"q": q.numpy()[T], "q0": q.grad.numpy()[0], "qd0": qd.grad.numpy()[0], "tq": tqa.grad.numpy(),
                "jf": jfa.grad.numpy()}
-    out.update({p: getattr(model, p).grad.numpy() for p in PARAMS})
+    servo = () if solver.servo is None else ("joint_servo_deadband", "joint_servo_noload_speed",
+                                             "joint_servo_stiction")
+    out.update({p: getattr(model, p).grad.numpy() for p in (*PARAMS, *servo)})
     return {k: v.copy() for k, v in out.items()}, solver
 
 
+@pytest.fixture(scope="module")
+def tri_servo(tmp_path_factory):
+    """Two of three joints servo drives (dead band, torque-speed line, stiction), dry friction on all."""
+    from test_servo import make_robot
+
+    return make_robot(tmp_path_factory.mktemp("servo"), joints="[ss]*", stiction=0.4)
+
+
 @pytest.mark.parametrize("stepped", [False, True], ids=["rollout", "step"])
-def test_pieces_give_the_one_kernels_gradients(tri_friction, stepped):
-    ref, one = gradients(tri_friction, 0, stepped=stepped)
-    got, chain = gradients(tri_friction, 5, stepped=stepped)
+@pytest.mark.parametrize("which", ["tri_friction", "tri_servo"])
+def test_pieces_give_the_one_kernels_gradients(which, stepped, request):
+    robot = request.getfixturevalue(which)
+    ref, one = gradients(robot, 0, stepped=stepped)
+    got, chain = gradients(robot, 5, stepped=stepped)
     assert one.adjoint_pieces == 0 and chain.adjoint_pieces == 5
     assert len(chain.kernels.PIECES) >= 8  # the friction sweeps are pieces of their own: the gate is cut too
     assert np.array_equal(got["q"], ref["q"])  # the forward is the one step kernel either way

@@ -273,8 +273,8 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
 
     params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
-    step_args = f"""world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, fric_m0: wp.array(dtype=S),
-    fric_grad: wp.array(dtype=wp.int32),
+    step_args = ("world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, "
+                 "fric_m0: wp.array(dtype=S),\n") + f"""    fric_grad: wp.array(dtype=wp.int32),
     {param_args}, gravity: wp.array(dtype=V3),
     joint_q: wp.array(dtype=S), joint_qd: wp.array(dtype=S), target_q: wp.array(dtype=S),
     target_qd: wp.array(dtype=S), joint_f: wp.array(dtype=S),

@@ -61,8 +61,8 @@ _SOURCES: dict[tuple, str] = {}
 adjoint pieces)."""
 
 ADJOINT_PIECES = 400
-"""Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled (``SolverReplay(adjoint_pieces=)``):
-the humanoid's adjoint as one kernel takes NVRTC 76 CPU-seconds for sm_90, its 12 pieces of this size 2-5 s each
+"""Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled
+(``SolverReplay(adjoint_pieces=)``): the humanoid's adjoint as one kernel takes NVRTC 76 CPU-seconds for sm_90, its 12 pieces of this size 2-5 s each
 (35 in all, side by side); the pieces run 1.3-1.5x slower (``benchmarks/results/first_fit/h100_pieces/``)."""
 
 _BACKGROUND: dict[str, threading.Thread] = {}
