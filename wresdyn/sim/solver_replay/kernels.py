@@ -20,6 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import warp as wp
 
+from ...errors import WresdynError
 from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
@@ -62,8 +63,9 @@ adjoint pieces)."""
 
 ADJOINT_PIECES = 400
 """Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled
-(``SolverReplay(adjoint_pieces=)``): the humanoid's adjoint as one kernel takes NVRTC 76 CPU-seconds for sm_90, its 12 pieces of this size 2-5 s each
-(35 in all, side by side); the pieces run 1.3-1.5x slower (``benchmarks/results/first_fit/h100_pieces/``)."""
+(``SolverReplay(adjoint_pieces=)``): the humanoid's adjoint as one kernel takes NVRTC 76 CPU-seconds for sm_90,
+its 12 pieces of this size 0.5-5 s each (35 in all, side by side); the pieces run 1.3-1.5x slower
+(``benchmarks/results/first_fit/h100_pieces/``)."""
 
 _BACKGROUND: dict[str, threading.Thread] = {}
 """Background compiles of one-kernel adjoints this process started, by Warp module identifier."""
@@ -117,7 +119,7 @@ def _pieces_from_env() -> int | None:
     except ValueError:
         value = -1
     if value < 0:
-        raise ValueError(f"WRESDYN_ADJOINT_PIECES={raw!r}: give a number of statements >= 0 (0: one kernel)")
+        raise WresdynError(f"WRESDYN_ADJOINT_PIECES={raw!r}: give a number of statements >= 0 (0: one kernel)")
     return value
 
 
