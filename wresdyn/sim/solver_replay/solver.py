@@ -208,10 +208,11 @@ class SolverReplay(SolverBase):
         self.tree: ReplayTree = tree_from_model(self.model)
         self.servo = self._servo_dofs()
         self._load()
-        self._m0 = None
-        self._m0_from = ([wp.clone(self.parameters[n][:self.tree.bodies_per_world]) for n in _BODY_PARAMS],
-                         self.model.joint_armature.numpy()[np.asarray(self.tree.qd_offset)])
-        if not deferring():  # under deferred_compile: at the first launch, after the caller's batch compile
+        body = [self.parameters[n][:self.tree.bodies_per_world] for n in _BODY_PARAMS]
+        if deferring():  # fric_m0 at the first launch (after the caller's batch compile), of the values as built
+            body = [wp.clone(b) for b in body]
+        self._m0, self._m0_from = None, (body, self.model.joint_armature.numpy()[np.asarray(self.tree.qd_offset)])
+        if not deferring():
             self._reference_inertia()
 
     def _reference_inertia(self) -> wp.array:
@@ -339,8 +340,7 @@ class SolverReplay(SolverBase):
         if not self.adjoint_pieces:
             return [self._command(self.kernels.replay_step, chunk, args, outputs, adjoint=True)]
         pieces, out = self.kernels.PIECES, [*outputs, self._scratch]
-        grad = self._scratch.grad if chunk[1] == self.tree.world_count else \
-            self._scratch.grad[:, chunk[0]:chunk[0] + chunk[1]]
+        grad = self._scratch.grad[:, chunk[0]:chunk[0] + chunk[1]]  # this chunk's worlds: chunks run side by side
         return ([self._command(k, chunk, args, out) for k in pieces[:-1]] + [grad.zero_]
                 + [self._command(k, chunk, args, out, adjoint=True) for k in reversed(pieces)])
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .emit import _ENDIF, _IDENT, _IF, _MARK, indent
+from .emit import _ENDIF, _IDENT, _IF, _MARK
 
 __all__ = ["Piece", "split_pieces"]
 
@@ -89,56 +89,43 @@ def split_pieces(prologue: list[str], compute: list[str], stores: list[str], ext
         (the body statements of each piece, reading and writing ``scratch[slot, w]``; the number of slots).
     """
     pre = [line.split(" = ", 1) for line in prologue]
-    pre_names = {lhs for lhs, _ in pre}
     pieces = _cut(compute, stores, min_len)
-    uses = []
-    for p in pieces:
-        u: list[str] = []
-        for line in p.lines + [f"_ = {rhs} + {old}" for _, rhs, old in p.phis]:
-            rhs = line.split(" = ", 1)[1]
-            u += [x for x in _IDENT.findall(rhs) if x not in u]
-        if p.cond is not None:
-            u += [x for x in _IDENT.findall(p.cond) if x not in u]
-        uses.append(u)
-    defs = [{line.split(" = ", 1)[0] for line in p.lines if not _is_store(line)} | {new for new, _, _ in p.phis}
-            for p in pieces]
     slots: dict[str, int] = {}
-    reads: list[list[str]] = []
-    for c, p in enumerate(pieces):
-        r = [x for x in uses[c] if x not in defs[c] and x not in pre_names and x not in external
-             and any(x in defs[k] for k in range(c))]
-        for x in r:
+    plans = []  # per piece: (names it uses, scratch names it reads, names it defines in order)
+    before: set[str] = set()  # names the earlier pieces define
+    for p in pieces:
+        texts = [line.split(" = ", 1)[1] for line in p.lines] + [f"{rhs} {old}" for _, rhs, old in p.phis]
+        uses = list(dict.fromkeys(x for t in texts + [p.cond or ""] for x in _IDENT.findall(t)))
+        own = [line.split(" = ", 1)[0] for line in p.lines if not _is_store(line)] + [new for new, _, _ in p.phis]
+        reads = [x for x in uses if x in before and x not in own]
+        for x in reads:
             slots.setdefault(x, len(slots))
-        reads.append(r)
+        plans.append((uses, reads, own))
+        before.update(own)
     bodies = []
-    for c, p in enumerate(pieces):
-        need = set(uses[c])
+    for p, (uses, reads, own) in zip(pieces, plans):
+        need = set(uses)
         body_pre = []
         for lhs, rhs in reversed(pre):  # the prologue's closure over what this piece uses
             if lhs in need:
                 need |= set(_IDENT.findall(rhs))
                 body_pre.append(f"{lhs} = {rhs}")
         body_pre.reverse()
-        loads = [f"{x} = scratch[{slots[x]}, w]" for x in reads[c]]
-        writes = [f"scratch[{slots[x]}, w] = {x}" for x in sorted(defs[c], key=_order(p)) if x in slots]
+        loads = [f"{x} = scratch[{slots[x]}, w]" for x in reads]
+        writes = [f"scratch[{slots[x]}, w] = {x}" for x in own if x in slots]
         if p.cond is None:
             bodies.append(body_pre + loads + p.lines + writes)
             continue
-        phi_lines = [f"{new} = {rhs}" for new, rhs, _ in p.phis]
-        inner = indent(p.lines + phi_lines + writes, 1).split("\n")
+        inner = p.lines + [f"{new} = {rhs}" for new, rhs, _ in p.phis] + writes
         other = [f"scratch[{slots[new]}, w] = {old}" for new, _, old in p.phis if new in slots]
-        bodies.append(body_pre + loads + [f"if {p.cond}:", *inner] + (["else:", *indent(other, 1).split("\n")]
-                                                                      if other else []))
+        bodies.append(body_pre + loads + [f"if {p.cond}:", *_indented(inner)]
+                      + (["else:", *_indented(other)] if other else []))
     return bodies, len(slots)
+
+
+def _indented(lines: list[str]) -> list[str]:
+    return ["    " + line for line in lines]
 
 
 def _is_store(line: str) -> bool:
     return "[" in line.split(" = ", 1)[0]
-
-
-def _order(p: Piece):
-    """Sort key: a name's position in the piece (phis last), so that slot writes follow the statements."""
-    pos = {line.split(" = ", 1)[0]: i for i, line in enumerate(p.lines)}
-    pos.update({new: len(p.lines) + i for i, (new, _, _) in enumerate(p.phis)})
-    return lambda x: pos.get(x, 0)
-
