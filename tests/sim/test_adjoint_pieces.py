@@ -6,6 +6,9 @@ The humanoid's chain (12 pieces) is checked against its one kernel by ``benchmar
 CPU and on a GPU (``benchmarks/results/first_fit/h100_pieces/``): its Clang compile is too slow for the suite.
 """
 
+import os
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import warp as wp
@@ -113,3 +116,20 @@ def test_worker_processes_fill_the_cache_this_process_reads(tri_friction, tmp_pa
     for m in mods:
         name = m.get_module_identifier()
         assert (tmp_path / name / f"{name}.sm90.cubin").stat().st_size > 0, name
+
+
+def test_background_compile_is_a_detached_worker(tri_friction, tmp_path, monkeypatch):
+    """The one-kernel adjoint compiles for the next run in a worker process of its own session (a command neither
+    waits for it at exit nor takes it down), into the cache this process reads."""
+    from wresdyn.sim.solver_replay import kernels as km
+
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path))
+    monkeypatch.setattr(km, "_ptx", lambda module, device: False)  # Warp's CUBIN naming, as for sm_90 on a GPU
+    solver = SolverReplay(tri_friction.build_model(1, "cpu", requires_grad=True))
+    module = load_kernels(solver.tree, "float32", True, True, solver.friction_sweeps, None, 0).replay_step.module
+    key = module.get_module_identifier()
+    km._compile_later(module, SimpleNamespace(arch=90, is_cuda=True))
+    worker = km._BACKGROUND.pop(key)
+    assert os.getsid(worker.pid) == worker.pid != os.getsid(0)
+    assert worker.wait(timeout=300) == 0
+    assert (tmp_path / key / f"{key}.sm90.cubin").stat().st_size > 0

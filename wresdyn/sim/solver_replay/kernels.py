@@ -4,7 +4,7 @@ A robot's kernels are generated once per process (:func:`load_kernels`) and comp
 the adjoint comes in two forms: one kernel, which NVRTC compiles for the humanoid in 76 CPU-seconds (the first GPU
 run's wait), and a chain of pieces (:mod:`.split`), which compile side by side in a fraction of that and run
 1.3-1.5x slower. :func:`choose_pieces` takes the one kernel where Warp's cache holds it, else the pieces, and
-compiles the one kernel in a background thread for the next run. :func:`deferred_compile` lets a caller building
+compiles the one kernel in a detached worker process for the next run. :func:`deferred_compile` lets a caller building
 several solvers (a command's variants) compile all their modules in one parallel batch.
 """
 
@@ -67,13 +67,14 @@ ADJOINT_PIECES = 400
 its 12 pieces of this size 0.5-5 s each (35 in all, side by side); the pieces run 1.3-1.5x slower
 (``benchmarks/results/first_fit/h100_pieces/``)."""
 
-_BACKGROUND: dict[str, threading.Thread] = {}
-"""Background compiles of one-kernel adjoints this process started, by Warp module identifier."""
+_BACKGROUND: dict[str, object] = {}
+"""Background compiles of one-kernel adjoint modules this process started, by Warp module identifier: a detached
+worker process (:class:`subprocess.Popen`) or, where Warp's cache layout is not 1.19's, a thread."""
 
 
 def background_compiles() -> list[str]:
     """Identifiers of the one-kernel adjoint modules still compiling in the background (:class:`SolverReplay`)."""
-    return [k for k, t in _BACKGROUND.items() if t.is_alive()]
+    return [k for k, w in _BACKGROUND.items() if (w.poll() is None if hasattr(w, "poll") else w.is_alive())]
 
 
 _PENDING: list[tuple] = []
@@ -82,21 +83,29 @@ _PENDING: list[tuple] = []
 
 def start_background_compiles() -> None:
     """Start the background compiles the solvers built under :func:`deferred_compile` asked for (after the batch:
-    Warp's code generation holds the GIL, so started earlier they slow the batch down)."""
+    started earlier they compete with it for the cores)."""
     while _PENDING:
         _compile_later(*_PENDING.pop(0))
 
 
 def _compile_later(module, device) -> None:
-    """Compile ``module`` into Warp's kernel cache in a background thread (NVRTC runs on the CPU and releases the
-    GIL), once per process; not a daemon, so a short command waits for it at exit rather than leave a cache
-    entry half made. A failure only leaves the pieces in use. Under :func:`deferred_compile`: listed for
+    """Compile ``module`` into Warp's kernel cache in the background, once per process, for the next run: a worker
+    process (:mod:`.compile_worker`) in a session of its own, which outlives the command, so that a short command
+    neither waits for it at exit nor kills it (Warp builds into a temporary folder and renames it: a cache entry is
+    whole or absent). Where Warp's cache layout is not 1.19's, a thread the command waits for at exit instead. A
+    failure only leaves the pieces in use. Under :func:`deferred_compile`: listed for
     :func:`start_background_compiles`."""
     key = module.get_module_identifier()
     if key in _BACKGROUND or any(m is module for m, _ in _PENDING):
         return
     if _DEFERRED is not None:
         _PENDING.append((module, device))
+        return
+    ptx = _ptx(module, device)
+    if ptx is not None and id(module) in _JOBS:
+        _BACKGROUND[key] = subprocess.Popen(_worker_args(module, device.arch, ptx), env=_worker_env(),
+                                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                            stderr=subprocess.DEVNULL, start_new_session=True)
         return
 
     def work():
@@ -192,25 +201,37 @@ def compile_batch(mods: list, device) -> None:
     every module in this process's threads, which load what the workers wrote. A worker that fails leaves its module
     to the in-process load, which compiles it."""
     todo = [m for m in mods if device.is_cuda and id(m) in _JOBS and not _compiled(m, device)]
-    try:
-        ptx = todo[0]._get_compile_output_name(device).endswith(".ptx") if len(todo) > 1 else None
-    except (AttributeError, TypeError):  # not Warp 1.19's layout: the in-process load compiles them
-        ptx = None
-    if ptx is not None:
+    ptx = _ptx(todo[0], device) if len(todo) > 1 else None
+    if ptx is not None:  # not Warp 1.19's layout: the in-process load compiles them
         compile_in_processes(todo, device.arch, ptx)
     wp.force_load(device=device, modules=mods, max_workers=min(len(mods), os.cpu_count() or 1))
+
+
+def _ptx(module, device) -> bool | None:
+    """Whether Warp 1.19 writes ``module`` for ``device`` as PTX (else CUBIN); None where its layout is another."""
+    try:
+        return module._get_compile_output_name(device).endswith(".ptx")
+    except (AttributeError, TypeError):
+        return None
+
+
+def _worker_env() -> dict:
+    """A compile worker's environment: NVRTC needs no GPU, so none is visible (no CUDA context per worker)."""
+    return dict(os.environ, CUDA_VISIBLE_DEVICES="")
+
+
+def _worker_args(module, arch: int, ptx: bool) -> list[str]:
+    """The command line of a compile worker (:mod:`.compile_worker`) for a generated ``module``."""
+    path, name = _JOBS[id(module)]
+    worker = os.path.join(os.path.dirname(os.path.abspath(__file__)), "compile_worker.py")
+    return [sys.executable, worker, path, name, str(arch), "1" if ptx else "0", str(wp.config.kernel_cache_dir)]
 
 
 def compile_in_processes(mods: list, arch: int, ptx: bool) -> None:
     """Compile generated modules (made by :func:`load_kernels`) for CUDA architecture ``arch`` (PTX or CUBIN) into
     Warp's kernel cache, one worker process each, as many at once as there are cores; no GPU needed."""
-    worker = os.path.join(os.path.dirname(os.path.abspath(__file__)), "compile_worker.py")
-    env = dict(os.environ, CUDA_VISIBLE_DEVICES="")  # NVRTC needs no GPU: no CUDA context per worker
-
     def run(m):
-        path, name = _JOBS[id(m)]
-        subprocess.run([sys.executable, worker, path, name, str(arch), "1" if ptx else "0",
-                        str(wp.config.kernel_cache_dir)], env=env, stdin=subprocess.DEVNULL,
+        subprocess.run(_worker_args(m, arch, ptx), env=_worker_env(), stdin=subprocess.DEVNULL,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
 
     with ThreadPoolExecutor(max_workers=min(len(mods), os.cpu_count() or 1)) as pool:
