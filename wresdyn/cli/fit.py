@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=choices(FitModel), default="hybrid",
                    help="hybrid: identified physics + residual network (default); network: the residual alone; "
                         "parametric: the residual-torque baseline")
-    p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards (like `wresdyn eval`)")
+    p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards, on the fit's device (like `wresdyn eval`)")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
     add_config_flags(p, _hybrid(), skip=("model",), aliases=FIT_ALIASES,
@@ -136,5 +136,7 @@ def run(args: argparse.Namespace) -> int:
     if args.eval:
         from ..evaluation.evaluate_run import evaluate_run
 
-        evaluate_run(str(out), ds, robot, data_label=str(args.data))
+        # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would wait
+        # for Clang's first compile of them)
+        evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
     return 0

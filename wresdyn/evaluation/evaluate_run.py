@@ -6,7 +6,7 @@ from ..learn.ppo import load_policy
 from ..learn.ppo_config import config_from_dict
 from ..learn.runs import RunError, run_physics
 from ..sim.warmup import compile_kernels
-from .open_loop import evaluate_split, summary_line, write_report
+from .open_loop import evaluate_splits, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves
 
 __all__ = ["evaluate_run", "load_run_model", "run_friction_kappa"]
@@ -35,13 +35,16 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)
     results = {}
+    todo = {}
     for split in splits:
-        trajs = ds.split(split)
-        if not trajs:
+        todo[split] = ds.split(split)
+        if not todo[split]:
             print(f"{split}: no trajectories, skipped")
-            continue
-        summary, runs = evaluate_split(robot, trajs, ds.rate_hz, policy, meta["kind"], solver, substeps, device,
-                                       physics=physics, weights=weights, friction_kappa=kappa)
+            del todo[split]
+    done = evaluate_splits(robot, todo, ds.rate_hz, policy, meta["kind"], solver, substeps, device, physics=physics,
+                           weights=weights, friction_kappa=kappa) if todo else {}
+    for split, (summary, runs) in done.items():
+        trajs = todo[split]
         results[split] = summary
         plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
                   title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)

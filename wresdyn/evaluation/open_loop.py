@@ -14,7 +14,7 @@ trajectory (the robot "stops"), so its growing error to the recording counts aga
 number of diverged trajectories is reported next to every figure. PD-only and PD + residual are averaged over
 the same trajectories.
 
-:func:`evaluate_split` takes any residual ``policy(obs) -> residual`` (a torch module mapping raw
+:func:`evaluate_split` (:func:`evaluate_splits`: several splits in one batch) takes any residual ``policy(obs) -> residual`` (a torch module mapping raw
 [q, q̇, q̈, q_cmd] (N, 4n) to N*m or rad, (N, n), with an optional ``reset()``); :func:`write_report` writes
 ``metrics.json`` and ``report.md``; :func:`pd_gap` is the PD-only gap of a set of recordings.
 """
@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from ..data.dataset import fitted_mask
-from ..sim.rollout import replay_trajectories
+from ..sim.rollout import Replays, replay_trajectories
 
-__all__ = ["Metrics", "fitted_mask", "excluded_names", "metrics", "evaluate_split", "pd_gap", "summary_line",
+__all__ = ["Metrics", "fitted_mask", "excluded_names", "metrics", "evaluate_split", "evaluate_splits", "pd_gap", "summary_line",
            "write_report"]
 
 
@@ -105,24 +105,39 @@ def evaluate_split(robot, trajectories, rate_hz: float, policy=None, kind: str |
         "improvement": mean |Δq| PD-only / PD + residual, "n_trajectories", "seconds", "excluded_joints": names
         left out of the metrics}`` and the replays of :func:`wresdyn.sim.rollout.replay_trajectories`.
     """
-    trajectories = list(trajectories)
-    if not trajectories:
+    return evaluate_splits(robot, {"split": trajectories}, rate_hz, policy, kind, solver, substeps, device, delay,
+                           physics, weights, friction_kappa)["split"]
+
+
+def evaluate_splits(robot, splits: dict, rate_hz: float, policy=None, kind: str | None = None, solver: str = "auto",
+                    substeps: int = 1, device: str | None = "cpu", delay: float = 0.0, physics=None, weights=None,
+                    friction_kappa: float | None = None) -> dict[str, tuple[dict, dict]]:
+    """:func:`evaluate_split` for each split of ``splits`` (name -> trajectories), all replayed in one batch (on a GPU
+    one step launch serves every split); returns name -> ``(summary, replays)``."""
+    splits = {k: list(v) for k, v in splits.items()}
+    if not all(splits.values()):
         raise ValueError("no trajectories to evaluate")
     excluded = excluded_names(robot.joint_names, weights)  # checks the weights before the replay
-    runs = replay_trajectories(robot, trajectories, rate_hz, policy, kind=kind, solver=solver, substeps=substeps,
+    every = [t for trajs in splits.values() for t in trajs]
+    runs = replay_trajectories(robot, every, rate_hz, policy, kind=kind, solver=solver, substeps=substeps,
                                device=device, with_baseline=True, delay=delay, physics=physics,
                                friction_kappa=friction_kappa)
-    pd = metrics(trajectories, runs["pd"], weights)
-    res = metrics(trajectories, runs["residual"], weights) if "residual" in runs else None
-    summary = {
-        "n_trajectories": len(trajectories),
-        "excluded_joints": excluded,
-        "seconds": float(sum(len(t.q) - 1 for t in trajectories) / rate_hz),
-        "pd_only": asdict(pd),
-        "pd_residual": asdict(res) if res else None,
-        "improvement": (pd.mean_abs_dq / res.mean_abs_dq) if res and res.mean_abs_dq > 0 else None,
-    }
-    return summary, runs
+    out, first = {}, 0
+    for name, trajectories in splits.items():
+        part = slice(first, first + len(trajectories))
+        first = part.stop
+        own = {g: Replays(r.q[part], r.qd[part], r.diverged_at[part]) for g, r in runs.items()}
+        pd = metrics(trajectories, own["pd"], weights)
+        res = metrics(trajectories, own["residual"], weights) if "residual" in own else None
+        out[name] = ({
+            "n_trajectories": len(trajectories),
+            "excluded_joints": excluded,
+            "seconds": float(sum(len(t.q) - 1 for t in trajectories) / rate_hz),
+            "pd_only": asdict(pd),
+            "pd_residual": asdict(res) if res else None,
+            "improvement": (pd.mean_abs_dq / res.mean_abs_dq) if res and res.mean_abs_dq > 0 else None,
+        }, own)
+    return out
 
 
 def pd_gap(robot, trajectories, rate_hz: float, solver: str = "auto", device: str | None = "cpu",
