@@ -1,7 +1,5 @@
 """``python -m wresdyn.cli``: the ``wresdyn`` command."""
 
-import sys
+from wresdyn.cli import entry
 
-from wresdyn.cli import main
-
-sys.exit(main())
+entry()
