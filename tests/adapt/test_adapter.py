@@ -76,6 +76,24 @@ def test_with_confirmation_a_winner_becomes_the_model_one_update_later(humanoid,
     assert len(list(tmp_path.glob("physics_*.json"))) == sum(u.accepted or u.reverted for u in updates)
 
 
+def test_with_persist_a_candidate_that_loses_goes_on_from_where_it_is(humanoid, stream):
+    # the truth as the warm start and steps far too large: every candidate loses. Without persist each update starts
+    # again from the model; with it the next update trains on from the last candidate, unless that candidate's
+    # held-back error is above persist times the model's
+    truth = RealRobot(humanoid, REAL).physics()
+
+    def candidates(persist):
+        cfg = TINY.__class__(**{**TINY.__dict__, "lr": 1.0, "persist": persist})
+        updates = _run(Adapter(humanoid, truth, stream.rate_hz, cfg), stream)
+        assert not any(u.accepted for u in updates)
+        return [u.open_loop_candidate for u in updates]
+
+    back, on, reset = candidates(0.0), candidates(1e9), candidates(1.0)
+    assert len(back) >= 3
+    assert on[0] == back[0] and on[1:] != back[1:]
+    assert reset == back
+
+
 def test_the_model_goes_back_to_the_warm_start_where_that_is_better(humanoid, stream, tmp_path):
     # the truth as the warm start, the current model set far from it: on the first held-back part the warm start
     # wins, so the model goes back to it (published) unless the candidate beats the truth by the margin, which a few

@@ -282,7 +282,8 @@ class Adapter:
             self._kept = _copy(self._start_state)
         self._pending = (cand, _copy(self.model.state_dict())) if (
             confirm and wins) else None
-        if self._pending is None:
+        challenger = self.cfg.persist > 0 and new is None and np.isfinite(loss) and ol[2] <= self.cfg.persist * after
+        if self._pending is None and not challenger:
             self.model.load_state_dict(self._kept)
         tried, set_ = 0, ""
         if select is not None and self.cfg.effort_grid and "effort" in self.cfg.fit:

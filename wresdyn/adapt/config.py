@@ -75,6 +75,14 @@ class AdaptConfig:
     On the validation timeline: without drift 1.000x the warm start at every second (no update kept) against up to
     1.32-1.41x without it; back within 1.5x the oracle 6, 5 and 0 s after the three changes against 5, 0 and
     0 s without it."""
+    persist: float = 0.0
+    """0: a candidate that does not win goes back to the model's coordinates, so each update starts
+    :attr:`iterations` steps from the model and can move only that far from it. > 0: the candidate keeps training
+    from where it is across updates (a challenger following a slow drift step by step), and goes back to the model
+    only where its held-back error exceeds ``persist`` times the model's; it still becomes the model only by winning
+    (with :attr:`confirm`, twice). On the drift benchmark's validation timeline 1.2 and 1.5 followed noise as well
+    as the drift (6 s to come back within 1.5x the oracle after the friction ramp against 0 s, a higher error in the
+    drift phases): off."""
     detect: bool = True
     """A change detector (:mod:`wresdyn.adapt.detect`): where the current model's held-back error jumps above
     ``detect_factor`` times the median of the last ``detect_history`` seconds' updates, the adapter tracks for
@@ -134,6 +142,7 @@ class AdaptConfig:
         for name in ("w_q", "w_qd", "w_prior", "excited_min"):
             check_number(getattr(self, name), name, ge=0)
         check_number(self.min_gain, "min_gain", ge=0, le=0.5)
+        check_number(self.persist, "persist", ge=0)
         for name in ("iterations", "windows", "horizon", "one_step_every", "track_iterations", "effort_joints",
                      "detect_confirm"):
             check_number(getattr(self, name), name, integer=True, ge=1)
