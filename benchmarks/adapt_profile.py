@@ -47,9 +47,12 @@ def main() -> None:
     over = {}
     for item in args.set:
         name, value = item.split("=", 1)
+        if name not in fields:
+            p.error(f"--set {item}: AdaptConfig has no field {name!r}")
         kind = type(getattr(AdaptConfig(), name))
-        over[name] = kind(value) if kind in (int, float, str) else value.lower() == "true" if kind is bool else value
-    assert set(over) <= set(fields), f"unknown fields {set(over) - set(fields)}"
+        if kind not in (bool, int, float, str):
+            p.error(f"--set {item}: only scalar fields here")
+        over[name] = value.lower() == "true" if kind is bool else kind(value)
     cfg = AdaptConfig(**{**over, "device": args.device})
     ds, robot = load_data(args.data)
     adapter = Adapter(robot, run_physics(args.run, robot), ds.rate_hz, cfg)
@@ -94,7 +97,8 @@ def main() -> None:
         if later:
             print(f"  {name:13s} {len(later):3d} calls, {np.mean(later) * 1e3:7.1f} ms each, "
                   f"{sum(later) / total:5.1%} of the later updates' compute")
-    print(f"  (rest: buffers, decisions, publishing: {1 - sum(sum(s for k, s in spent[n] if k >= 1) for n in PARTS) / total:.1%})")
+    parts = sum(sum(s for k, s in spent[n] if k >= 1) for n in PARTS)
+    print(f"  (rest: buffers, decisions, publishing: {1 - parts / total:.1%})")
     if prof is not None:
         buf = io.StringIO()
         pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(args.cprofile)

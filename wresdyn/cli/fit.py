@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=choices(FitModel), default="hybrid",
                    help="hybrid: identified physics + residual network (default); network: the residual alone; "
                         "parametric: the residual-torque baseline")
-    p.add_argument("--eval", action="store_true", help="evaluate held-out and OOD afterwards, on the fit's device (like `wresdyn eval`)")
+    p.add_argument("--eval", action="store_true",
+                   help="evaluate held-out and OOD afterwards, on the fit's device (like `wresdyn eval`)")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
     add_config_flags(p, _hybrid(), skip=("model",), aliases=FIT_ALIASES,

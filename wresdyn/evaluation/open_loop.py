@@ -14,9 +14,10 @@ trajectory (the robot "stops"), so its growing error to the recording counts aga
 number of diverged trajectories is reported next to every figure. PD-only and PD + residual are averaged over
 the same trajectories.
 
-:func:`evaluate_split` (:func:`evaluate_splits`: several splits in one batch) takes any residual ``policy(obs) -> residual`` (a torch module mapping raw
-[q, q̇, q̈, q_cmd] (N, 4n) to N*m or rad, (N, n), with an optional ``reset()``); :func:`write_report` writes
-``metrics.json`` and ``report.md``; :func:`pd_gap` is the PD-only gap of a set of recordings.
+:func:`evaluate_split` (:func:`evaluate_splits`: several splits in one batch) takes any residual
+``policy(obs) -> residual`` (a torch module mapping raw [q, q̇, q̈, q_cmd] (N, 4n) to N*m or rad, (N, n), with an
+optional ``reset()``); :func:`write_report` writes ``metrics.json`` and ``report.md``; :func:`pd_gap` is the PD-only
+gap of a set of recordings.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ import numpy as np
 from ..data.dataset import fitted_mask
 from ..sim.rollout import Replays, replay_trajectories
 
-__all__ = ["Metrics", "fitted_mask", "excluded_names", "metrics", "evaluate_split", "evaluate_splits", "pd_gap", "summary_line",
-           "write_report"]
+__all__ = ["Metrics", "fitted_mask", "excluded_names", "metrics", "evaluate_split", "evaluate_splits", "pd_gap",
+           "summary_line", "write_report"]
 
 
 @dataclass(frozen=True)
