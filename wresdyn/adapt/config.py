@@ -75,6 +75,13 @@ class AdaptConfig:
     On the validation timeline: without drift 1.000x the warm start at every second (no update kept) against up to
     1.32-1.41x without it; back within 1.5x the oracle 6, 5 and 0 s after the three changes against 5, 0 and
     0 s without it."""
+    confirm_leave: int = 5
+    """With :attr:`confirm`, the held-back parts in a row, after the one it won on, that a winner must win on before
+    the model first leaves the warm start (and again after :attr:`fallback` sent it back); an adapted model then
+    moves on one. The calibration was identified on far more data than a window holds, and where the motion changes
+    from second to second a model fitted on a few seconds wins two or four of them in a row and loses the next by
+    20 % (a deployed policy's motion, the drift benchmark's validation timeline): 5 asks it to win on a window's
+    worth (6 s) of data it was not fitted on. While it waits, the training goes on from it."""
     detect: bool = True
     """A change detector (:mod:`wresdyn.adapt.detect`): where the current model's held-back error jumps above
     ``detect_factor`` times the median of the last ``detect_history`` seconds' updates, the adapter tracks for
@@ -94,6 +101,10 @@ class AdaptConfig:
     1.51x to 1.22x the fixed model (target 1.05x) but tracked the changes worse (0.0077 / 0.0043 / 0.0035 rad against
     0.0050 / 0.0029 / 0.0025), and on the excitation's validation timeline came back within 1.5x of the oracle after
     8, 0 and 3 s against 0, 0 and 0 s."""
+    detect_jump_confirm: bool = True
+    """The update whose held-back error jumps judges its candidate as the guarded mode does (:attr:`confirm`): that
+    candidate was fitted on the data before the jump. The tracking mode's own candidates, from the next update on,
+    are kept without confirmation."""
     detect_history: float = 6.0
     """Robot time whose updates' held-back errors the median is taken over [s]."""
     track_for: float = 4.0
@@ -108,6 +119,11 @@ class AdaptConfig:
     gives: the one that lowers that joint's error most on the held-back part that showed the jump, by ``min_gain``,
     is kept if on the next held-back part it lowers it by ``min_gain`` again and the mean over joints not at all.
     Empty: none tried."""
+    effort_overall: float = 1.0
+    """The effort grid tries a joint whose own error jumped only where the overall held-back error of that update is
+    above this times its recent median too (0: wherever a joint's jumped). A drive that loses torque makes the
+    robot's prediction worse; a motion that moves from some joints to others raises their errors and lowers the
+    rest's, which a joint's own jump cannot tell from a change."""
     effort_joints: int = 2
     """At most this many joints (those whose error jumped most) get the effort grid in one update."""
     one_step_every: int = 5
@@ -131,11 +147,11 @@ class AdaptConfig:
         for name in ("window", "holdout", "update_every", "lr", "grad_clip", "detect_factor", "detect_history",
                      "track_for", "track_lr"):
             check_number(getattr(self, name), name, gt=0)
-        for name in ("w_q", "w_qd", "w_prior", "excited_min"):
+        for name in ("w_q", "w_qd", "w_prior", "excited_min", "effort_overall"):
             check_number(getattr(self, name), name, ge=0)
         check_number(self.min_gain, "min_gain", ge=0, le=0.5)
         for name in ("iterations", "windows", "horizon", "one_step_every", "track_iterations", "effort_joints",
-                     "detect_confirm"):
+                     "detect_confirm", "confirm_leave"):
             check_number(getattr(self, name), name, integer=True, ge=1)
         check_number(self.seed, "seed", integer=True, ge=0)
         for name in ("torch_threads", "grad_truncation"):
