@@ -64,7 +64,7 @@ def test_an_update_that_raises_the_held_back_error_is_rejected(humanoid, stream,
 
 def test_with_confirmation_a_winner_becomes_the_model_one_update_later(humanoid, stream, tmp_path):
     start = PhysicalParams.nominal(humanoid)
-    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "confirm": True, "update_every": 0.2})
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "confirm": True, "update_every": 0.2, "confirm_leave": 1})
     adapter = Adapter(humanoid, start, stream.rate_hz, cfg, publish=tmp_path)
     updates = _run(adapter, stream)
     assert not updates[0].accepted and updates[0].pending  # the first winner waits
@@ -92,6 +92,26 @@ def test_with_persist_a_candidate_that_loses_goes_on_from_where_it_is(humanoid, 
     assert len(back) >= 3
     assert on[0] == back[0] and on[1:] != back[1:]
     assert reset == back
+
+
+def test_to_leave_the_warm_start_a_winner_must_win_confirm_leave_times_in_a_row(humanoid, stream, tmp_path):
+    # the robot file's physics is far from the real robot's: the first winner goes on winning; it waits for two
+    # more held-back parts before it becomes the model, and the training goes on from it meanwhile
+    start = PhysicalParams.nominal(humanoid)
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "confirm": True, "update_every": 0.2, "confirm_leave": 2,
+                            "detect": False})
+    adapter = Adapter(humanoid, start, stream.rate_hz, cfg, publish=tmp_path)
+    updates = _run(adapter, stream)
+    first = next((i for i, u in enumerate(updates) if u.accepted), None)
+    assert first is not None, [(u.pending, u.open_loop_candidate, u.open_loop_before) for u in updates]
+    assert first >= 2 and updates[first - 1].pending and updates[first - 2].pending
+    # it won on each held-back part it waited on, against the warm start (the model meanwhile)
+    for u in updates[first - 1:first + 1]:
+        assert u.open_loop_before == u.open_loop_start
+    assert updates[first].open_loop < (1 - cfg.min_gain) * updates[first].open_loop_before
+    # once the model has left the warm start, a winner needs one held-back part (as with confirm_leave = 1)
+    later = [i for i, u in enumerate(updates) if u.accepted and i > first]
+    assert all(updates[i - 1].pending for i in later)
 
 
 def test_the_model_goes_back_to_the_warm_start_where_that_is_better(humanoid, stream, tmp_path):
@@ -222,7 +242,8 @@ def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_pat
     out = tmp_path / "out"
     code = main(["adapt", str(run), str(tmp_path / "data.npz"), "--out", str(out), "--window", "1.2",
                  "--holdout", "0.3", "--update-every", "0.4", "--iterations", "2", "--windows", "4", "--horizon", "16",
-                 "--lr", "0.02", "--track", "friction:*knee", "--export", str(tmp_path / "calibrated")])
+                 "--lr", "0.02", "--confirm-leave", "1", "--track", "friction:*knee", "--export",
+                 str(tmp_path / "calibrated")])
     printed = capsys.readouterr().out
     assert code == 0
     summary = json.loads((out / "updates.json").read_text())

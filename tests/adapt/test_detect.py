@@ -47,6 +47,23 @@ def test_with_confirm_two_jumps_in_a_row_open_the_tracking_mode_from_the_first()
     assert (det.joint_ratios > 2.0).all()
 
 
+def test_a_joint_jump_counts_for_the_effort_grid_only_where_the_overall_error_rose_too():
+    det = ChangeDetector(factor=2.0, history=4, track_for=3.0, overall=1.0)
+    for k in range(4):
+        det.observe(float(k), k - 1.0, 1e-3, np.full(3, 1e-3))
+    # the motion moves to joint 1: its error jumps, the others' fall, and the overall error with them
+    jumped, ratio, joints = det.observe(4.0, 3.0, 0.9e-3, np.array([0.2e-3, 2.5e-3, 0.1e-3]))
+    assert not jumped and ratio < 1.0 and joints[1] > 2.0
+    assert not det.joint_ratios.any()
+    det.observe(5.0, 4.0, 1.5e-3, np.array([1e-3, 3.5e-3, 1e-3]))  # above its median overall: the joint counts
+    assert det.joint_ratios[1] > 2.0 and det.joint_ratios[0] == det.joint_ratios[2] == 0.0
+    plain = ChangeDetector(factor=2.0, history=4, track_for=3.0)  # overall 0: every joint jump counts
+    for k in range(4):
+        plain.observe(float(k), k - 1.0, 1e-3, np.full(3, 1e-3))
+    plain.observe(4.0, 3.0, 0.9e-3, np.array([0.2e-3, 2.5e-3, 0.1e-3]))
+    assert plain.joint_ratios[1] > 2.0
+
+
 def test_the_effort_grid_tries_only_limits_below_the_demanded_torque():
     t = np.linspace(0, 1, 50)[:, None]
     q, qd, target = np.zeros((50, 2)), np.zeros((50, 2)), np.hstack([0.1 * t, 0.5 * t])
@@ -62,7 +79,7 @@ def _stream(humanoid, record):
 
 def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, record):
     stream = _stream(humanoid, record)
-    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "effort_grid": ()})
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "effort_grid": (), "detect_jump_confirm": False})
     adapter = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)
     adapter.detector.errors.extend([1e-6] * 3)  # a recent level far below any error: the first update jumps
     adapter.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
@@ -77,6 +94,13 @@ def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, re
     plain = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)  # no history: guarded mode
     v = plain.push(*next(iter(dataset_blocks(stream))))[0]
     assert not v.tracking and not v.accepted and v.pending
+    # detect_jump_confirm: the update that detects the jump fitted its candidate before it, so confirms it
+    jc = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz,
+                 cfg.__class__(**{**cfg.__dict__, "detect_jump_confirm": True}))
+    jc.detector.errors.extend([1e-6] * 3)
+    jc.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
+    w = jc.push(*next(iter(dataset_blocks(stream))))[0]
+    assert w.tracking and w.jump > 100 and not w.accepted and w.pending
 
 
 def test_a_saturating_joint_gets_its_lower_effort_limit_from_the_grid(humanoid, record):

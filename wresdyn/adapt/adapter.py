@@ -13,9 +13,10 @@ joint the training part does not move (RMS velocity under :attr:`AdaptConfig.exc
 what the recent data do not excite stays as the calibration left it. The candidate wins only if the whole
 held-back segment, replayed open loop from its first recorded state, is closer to the recording than with the current
 model by :attr:`AdaptConfig.min_gain`; with :attr:`AdaptConfig.confirm` a winner becomes the model only if it wins
-again on the next update's held-back segment, which it was not fitted on; otherwise the coordinates go back to the
-current model's. With :attr:`AdaptConfig.fallback` the model returns to the warm start where that is no worse on the
-held-back segment. Accepted updates are published as ``physics.json``-compatible files with their robot time
+again on the next update's held-back segment, which it was not fitted on (to leave the warm start, on
+:attr:`AdaptConfig.confirm_leave` of them in a row); otherwise the coordinates go back to the current model's.
+With :attr:`AdaptConfig.fallback` the model returns to the warm start where that is no worse on the held-back
+segment. Accepted updates are published as ``physics.json``-compatible files with their robot time
 (:meth:`Adapter.publish`) and, with an export folder, rewrite the exported calibrated robot.
 
 A jump in time of more than 1.5 sample periods starts a new segment: windows never span one, and the held-back part
@@ -83,8 +84,8 @@ class Update:
     reverted: bool = False
     """Whether the model went back to the warm start (:attr:`AdaptConfig.fallback`)."""
     pending: bool = False
-    """Whether the candidate won here and waits to be confirmed on the next held-back part
-    (:attr:`AdaptConfig.confirm`)."""
+    """Whether a winner waits to be confirmed on the next held-back part (:attr:`AdaptConfig.confirm`,
+    :attr:`AdaptConfig.confirm_leave`)."""
     jump: float = 0.0
     """The model's held-back error before the update over the median of the recent ones (:attr:`AdaptConfig.detect`;
     0 without it or while the history is short)."""
@@ -136,14 +137,14 @@ class Adapter:
                                       lr=cfg.lr)
         self._lrs = [g["lr"] for g in self.optim.param_groups]
         self.detector = ChangeDetector(cfg.detect_factor, round(cfg.detect_history / cfg.update_every),
-                                       cfg.track_for, cfg.detect_confirm) if cfg.detect else None
+                                       cfg.track_for, cfg.detect_confirm, cfg.effort_overall) if cfg.detect else None
         """The change detector (:attr:`AdaptConfig.detect`), ``None`` without it."""
         self.sim_grid = None  # the effort grid's replays, made on first use
         self.physics = start
         """The current model (the last accepted update, or the warm start)."""
         self._kept = _copy(m.state_dict())
         self._start_state = _copy(self._kept)
-        self._pending = None  # (physics, coordinates) of the last update's winner, to be confirmed
+        self._pending = None  # (physics, coordinates, held-back parts won since) of a winner to be confirmed
         self.delay = torch.as_tensor(start.delay / self.dt, dtype=torch.float32)
         self.sim = Simulator(robot, cfg.windows, self.dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              param_grads=True)
@@ -250,6 +251,7 @@ class Adapter:
         holdout = TrajectoryBank([_traj(x[hold])], self.device, self.delay.to(self.device))
         excited = np.sqrt(np.mean(np.concatenate([tr.qd for tr in train]) ** 2, 0)) >= self.cfg.excited_min
         loss = self._steps(train, excited, track)
+        fitted_tracking = track
         cand = self.model.values() if np.isfinite(loss) else self.physics
         pending = self._pending
         ol, ol_joint = self._open_loop(holdout, cand, None if pending is None else pending[0])
@@ -257,7 +259,7 @@ class Adapter:
         if det is not None:
             _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
             track = det.tracking(float(t[-1]))
-        confirm = self.cfg.confirm and not track
+        confirm = self.cfg.confirm and not (track and (fitted_tracking or not self.cfg.detect_jump_confirm))
         # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
         # back to it unless something beats it): without drift, updates that only fit one held-back second's noise
         # do not pile up
@@ -265,8 +267,10 @@ class Adapter:
         ref = ol[0] if revert else ol[1]
         gain = 1.0 - self.cfg.min_gain
         wins = bool(np.isfinite(loss) and ol[2] < gain * ref)
+        again = False
         if confirm:  # publish the last update's winner if it wins again here, on data it was not fitted on
-            accepted = pending is not None and ol[3] < gain * ref
+            again = pending is not None and ol[3] < gain * ref
+            accepted = again and pending[2] + 1 >= (self.cfg.confirm_leave if self.physics is self.start else 1)
             new = pending if accepted else None
             after = ol[3] if accepted else ref
             wins = wins and ol[2] < gain * after
@@ -280,8 +284,11 @@ class Adapter:
         elif revert:
             self.physics = self.start
             self._kept = _copy(self._start_state)
-        self._pending = (cand, _copy(self.model.state_dict())) if (
-            confirm and wins) else None
+        if again and not accepted:  # it waits for more wins (confirm_leave); the training goes on from it
+            self._pending = (*pending[:2], pending[2] + 1)
+            self.model.load_state_dict(pending[1])
+        else:
+            self._pending = (cand, _copy(self.model.state_dict()), 0) if confirm and wins else None
         challenger = self.cfg.persist > 0 and new is None and np.isfinite(loss) and ol[2] <= self.cfg.persist * after
         if self._pending is None and not challenger:
             self.model.load_state_dict(self._kept)

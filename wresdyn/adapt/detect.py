@@ -34,10 +34,14 @@ class ChangeDetector:
         track_for: Robot time the tracking mode lasts after a jump [s].
         confirm: Consecutive updates whose error must jump before the tracking mode opens (1: the first jump opens
             it); a change persists, a swing of the motion often lasts one held-back part.
+        overall: A joint's own jump counts for the effort grid only where the overall error is above ``overall``
+            times its median too (0: always).
     """
 
-    def __init__(self, factor: float, history: int, track_for: float, confirm: int = 1) -> None:
+    def __init__(self, factor: float, history: int, track_for: float, confirm: int = 1, overall: float = 0.0
+                 ) -> None:
         self.factor, self.track_for, self.confirm = float(factor), float(track_for), max(1, int(confirm))
+        self.overall = float(overall)
         self.streak = 0
         """Consecutive updates, up to the last, whose error jumped."""
         self.streak_from = -np.inf
@@ -54,7 +58,8 @@ class ChangeDetector:
         """Robot time from which the window holds data after the last jump [s]."""
         self.joint_ratios: np.ndarray | None = None
         """Each joint's held-back error over its recent median at the last update, (n,) (``None`` before one); 0
-        where the joint's jump is not yet the ``confirm``-th in a row."""
+        where the joint's jump is not yet the ``confirm``-th in a row, and everywhere while the overall error is not
+        above ``overall`` times its median."""
 
     def ratios(self, error: float, joints: np.ndarray) -> tuple[float, np.ndarray]:
         """``error`` [rad] and ``joints`` (n,) [rad] over the medians of the earlier ones (0 while fewer than 3)."""
@@ -84,7 +89,7 @@ class ChangeDetector:
             self.joint_ratios = None
         else:  # a joint's own jump counts for the effort grid once it too is the confirm-th in a row
             self.joint_streak = np.where(jratio > self.factor, self.joint_streak + 1, 0)
-            self.joint_ratios = np.where(self.joint_streak >= self.confirm, jratio, 0.0)
+            self.joint_ratios = np.where((self.joint_streak >= self.confirm) & (ratio > self.overall), jratio, 0.0)
         self.errors.append(float(error))
         self.joints.append(np.asarray(joints, dtype=np.float64).copy())
         return bool(jumped), ratio, jratio
