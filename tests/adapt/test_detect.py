@@ -101,6 +101,13 @@ def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, re
     jc.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
     w = jc.push(*next(iter(dataset_blocks(stream))))[0]
     assert w.tracking and w.jump > 100 and not w.accepted and w.pending
+    # track_leave = False: not even the tracking mode takes the model off the warm start unconfirmed
+    tl = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz,
+                 cfg.__class__(**{**cfg.__dict__, "track_leave": False}))
+    tl.detector.errors.extend([1e-6] * 3)
+    tl.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
+    z = tl.push(*next(iter(dataset_blocks(stream))))[0]
+    assert z.tracking and z.jump > 100 and not z.accepted and z.pending
 
 
 def test_a_saturating_joint_gets_its_lower_effort_limit_from_the_grid(humanoid, record):

@@ -259,7 +259,8 @@ class Adapter:
         if det is not None:
             _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
             track = det.tracking(float(t[-1]))
-        confirm = self.cfg.confirm and not (track and (fitted_tracking or not self.cfg.detect_jump_confirm))
+        confirm = self.cfg.confirm and (not (track and (fitted_tracking or not self.cfg.detect_jump_confirm))
+                                        or (not self.cfg.track_leave and self.physics is self.start))
         # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
         # back to it unless something beats it): without drift, updates that only fit one held-back second's noise
         # do not pile up
