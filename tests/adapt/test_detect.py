@@ -80,10 +80,15 @@ def _stream(humanoid, record):
 def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, record):
     stream = _stream(humanoid, record)
     cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "effort_grid": (), "detect_jump_confirm": False})
-    adapter = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)
-    adapter.detector.errors.extend([1e-6] * 3)  # a recent level far below any error: the first update jumps
-    adapter.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
-    u = adapter.push(*next(iter(dataset_blocks(stream))))[0]
+
+    def first_update(cfg, history=True):
+        adapter = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)
+        if history:  # a recent level far below any error: the first update jumps
+            adapter.detector.errors.extend([1e-6] * 3)
+            adapter.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
+        return adapter, adapter.push(*next(iter(dataset_blocks(stream))))[0]
+
+    adapter, u = first_update(cfg)
     assert u.tracking and u.jump > 100
     assert u.accepted and not u.pending and u.open_loop == u.open_loop_candidate < u.open_loop_before
     # the tracking mode trains on the samples after the jump where they hold a window, else on all
@@ -91,23 +96,13 @@ def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, re
     after = adapter._train(x, seg, np.arange(300) >= 200)
     assert len(after) == 1 and np.array_equal(after[0].q, x[200:, 0])
     assert len(adapter._train(x, seg, np.arange(300) >= 295)[0].q) == 300  # 5 samples: no window, all of them
-    plain = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)  # no history: guarded mode
-    v = plain.push(*next(iter(dataset_blocks(stream))))[0]
+    _, v = first_update(cfg, history=False)  # no history: guarded mode
     assert not v.tracking and not v.accepted and v.pending
-    # detect_jump_confirm: the update that detects the jump fitted its candidate before it, so confirms it
-    jc = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz,
-                 cfg.__class__(**{**cfg.__dict__, "detect_jump_confirm": True}))
-    jc.detector.errors.extend([1e-6] * 3)
-    jc.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
-    w = jc.push(*next(iter(dataset_blocks(stream))))[0]
-    assert w.tracking and w.jump > 100 and not w.accepted and w.pending
-    # track_leave = False: not even the tracking mode takes the model off the warm start unconfirmed
-    tl = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz,
-                 cfg.__class__(**{**cfg.__dict__, "track_leave": False}))
-    tl.detector.errors.extend([1e-6] * 3)
-    tl.detector.joints.extend([np.full(humanoid.n_dof, 1e-6)] * 3)
-    z = tl.push(*next(iter(dataset_blocks(stream))))[0]
-    assert z.tracking and z.jump > 100 and not z.accepted and z.pending
+    # detect_jump_confirm: the update that detects the jump fitted its candidate before it, so confirms it; with
+    # track_leave = False not even the tracking mode takes the model off the warm start unconfirmed
+    for option in ({"detect_jump_confirm": True}, {"track_leave": False}):
+        _, w = first_update(cfg.__class__(**{**cfg.__dict__, **option}))
+        assert w.tracking and w.jump > 100 and not w.accepted and w.pending, option
 
 
 def test_a_saturating_joint_gets_its_lower_effort_limit_from_the_grid(humanoid, record):
