@@ -79,7 +79,8 @@ def _stream(humanoid, record):
 
 def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, record):
     stream = _stream(humanoid, record)
-    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "effort_grid": (), "detect_jump_confirm": False})
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "effort_grid": (), "detect_jump_confirm": False,
+                                "track_leave": True})
 
     def first_update(cfg, history=True):
         adapter = Adapter(humanoid, PhysicalParams.nominal(humanoid), stream.rate_hz, cfg)
