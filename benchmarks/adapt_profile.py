@@ -56,7 +56,7 @@ def main() -> None:
     cfg = AdaptConfig(**{**over, "device": args.device})
     ds, robot = load_data(args.data)
     adapter = Adapter(robot, run_physics(args.run, robot), ds.rate_hz, cfg)
-    cuda = adapter.device.is_cuda if hasattr(adapter.device, "is_cuda") else str(adapter.device).startswith("cuda")
+    cuda = str(adapter.device).startswith("cuda")
     spent = {k: [] for k in PARTS}
 
     def timed(name, fn):

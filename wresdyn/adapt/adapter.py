@@ -251,7 +251,7 @@ class Adapter:
         holdout = TrajectoryBank([_traj(x[hold])], self.device, self.delay.to(self.device))
         excited = np.sqrt(np.mean(np.concatenate([tr.qd for tr in train]) ** 2, 0)) >= self.cfg.excited_min
         loss = self._steps(train, excited, track)
-        fitted_tracking = track
+        fitted_in_tracking = track
         cand = self.model.values() if np.isfinite(loss) else self.physics
         pending = self._pending
         ol, ol_joint = self._open_loop(holdout, cand, None if pending is None else pending[0])
@@ -259,19 +259,20 @@ class Adapter:
         if det is not None:
             _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
             track = det.tracking(float(t[-1]))
-        confirm = self.cfg.confirm and (not (track and (fitted_tracking or not self.cfg.detect_jump_confirm))
-                                        or (not self.cfg.track_leave and self.physics is self.start))
+        leaving = self.physics is self.start  # a winner now would take the model off the warm start
+        unconfirmed = track and (fitted_in_tracking or not self.cfg.detect_jump_confirm)  # a tracking-mode candidate
+        confirm = self.cfg.confirm and (not unconfirmed or (leaving and not self.cfg.track_leave))
         # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
         # back to it unless something beats it): without drift, updates that only fit one held-back second's noise
         # do not pile up
-        revert = self.cfg.fallback and self.physics is not self.start and ol[0] <= ol[1]
+        revert = self.cfg.fallback and not leaving and ol[0] <= ol[1]
         ref = ol[0] if revert else ol[1]
         gain = 1.0 - self.cfg.min_gain
         wins = bool(np.isfinite(loss) and ol[2] < gain * ref)
         again = False
         if confirm:  # publish the last update's winner if it wins again here, on data it was not fitted on
             again = pending is not None and ol[3] < gain * ref
-            accepted = again and pending[2] + 1 >= (self.cfg.confirm_leave if self.physics is self.start else 1)
+            accepted = again and pending[2] + 1 >= (self.cfg.confirm_leave if leaving else 1)
             new = pending if accepted else None
             after = ol[3] if accepted else ref
             wins = wins and ol[2] < gain * after

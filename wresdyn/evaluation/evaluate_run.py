@@ -37,10 +37,11 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     results = {}
     todo = {}
     for split in splits:
-        todo[split] = ds.split(split)
-        if not todo[split]:
+        trajs = ds.split(split)
+        if trajs:
+            todo[split] = trajs
+        else:
             print(f"{split}: no trajectories, skipped")
-            del todo[split]
     done = evaluate_splits(robot, todo, ds.rate_hz, policy, meta["kind"], solver, substeps, device, physics=physics,
                            weights=weights, friction_kappa=kappa) if todo else {}
     for split, (summary, runs) in done.items():

@@ -282,7 +282,7 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     prelude = ["w = wp.tid() + world_start", f"bq = w * {tree.coords_per_world}", f"bd = w * {tree.dofs_per_world}",
                f"bb = w * {tree.bodies_per_world}"]
     if backward and pieces:
-        bodies, slots = split_pieces(params + loads, compute, stores, {"w", "bq", "bd", "bb", *_SCALARS}, pieces)
+        bodies, slots = split_pieces(params + loads, compute, stores, pieces)
         for c, body in enumerate(bodies):
             src.append(f'''
 @wp.kernel(enable_backward=True, module="unique")

@@ -163,8 +163,6 @@ def deferred_compile():
         _DEFERRED = outer
 
 
-
-
 def choose_pieces(tree: ReplayTree, scalar: str, backward: bool, device, friction_sweeps: int,
                   servo: np.ndarray | None, pieces: int | None) -> tuple[int, object]:
     """Statements per adjoint kernel for a solver, and the one-kernel adjoint module to compile in the background

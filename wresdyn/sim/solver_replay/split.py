@@ -73,7 +73,7 @@ def _cut(compute: list[str], stores: list[str], min_len: int) -> list[Piece]:
     return [p for p in pieces if p.lines or p.phis]
 
 
-def split_pieces(prologue: list[str], compute: list[str], stores: list[str], external: set[str], min_len: int
+def split_pieces(prologue: list[str], compute: list[str], stores: list[str], min_len: int
                  ) -> tuple[list[list[str]], int]:
     """Kernel bodies of the chain for one step.
 
@@ -82,7 +82,6 @@ def split_pieces(prologue: list[str], compute: list[str], stores: list[str], ext
             each piece repeats the ones it uses, and what they use.
         compute: The step's statements, with :meth:`~.emit.Emitter.mark` and :func:`~.emit.gate` lines.
         stores: The array stores of the new state (``joint_q_out[...] = name``).
-        external: Names every kernel has without a load (scalar arguments, ``w``, ``bq``, ...).
         min_len: Statements a piece reaches before it is cut at the next mark.
 
     Returns:
