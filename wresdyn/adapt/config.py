@@ -32,8 +32,8 @@ class AdaptConfig:
     the drift benchmark's validation timelines over adapter seeds 0-2, by a rule written before the runs
     (``benchmarks/results/adapt_drift/recovery_seeds/RULE.txt``): 8 came back within 1.5x of the oracle 3.7 s after
     the friction ramp on average against 8.0 s with 4, at a 12 % lower error over the drift phases, and kept every
-    no-drift second under a policy within 1.026x (its tracking after the changes about 30 % worse there). With the
-    settings before ``confirm_leave``, on one seed, 8 had been worse after the payload and the derate."""
+    no-drift second under a policy within 1.026x (its tracking after the changes about 30 % worse there). With
+    ``confirm_leave`` 1, on one seed, 8 was worse after the payload and the derate."""
     windows: int = 8
     """Windows B (Newton worlds) drawn from the training part of the buffer per step."""
     horizon: int = 64
@@ -96,7 +96,7 @@ class AdaptConfig:
     While it waits, the training goes on from it. Chosen with :attr:`detect_jump_confirm` and :attr:`effort_overall`
     on the drift benchmark's validation timelines (``adapt_drift.py --splits validation --seed 1``, the excitation and
     ``--motion policy``, adapter seeds 0-2): every no-drift second under the policy within 1.05x the fixed model
-    (2-4: up to 1.12-1.21x; before, 1: 1.21-1.72x), the same errors after the changes on average."""
+    (2-4: up to 1.12-1.21x; 1: 1.21-1.72x), the same errors after the changes on average."""
     detect: bool = True
     """A change detector (:mod:`wresdyn.adapt.detect`): where the current model's held-back error jumps above
     ``detect_factor`` times the median of the last ``detect_history`` seconds' updates, the adapter tracks for
