@@ -105,6 +105,29 @@ def test_piece_choice_is_validated(tri_friction, monkeypatch):
             SolverReplay(model)
 
 
+def test_cuda_block_size_is_built_into_the_modules(tri_friction, monkeypatch):
+    """The CUDA modules are built for the block size the solver launches them with (Warp compiles a module per block
+    size and launches at 256 unless told), one module per size; the CPU source has none; bad overrides are refused."""
+    from wresdyn.sim.solver_replay import kernels as km
+
+    solver = SolverReplay(tri_friction.build_model(1, "cpu", requires_grad=True))
+    args = (solver.tree, "float32", True, True, solver.friction_sweeps, None, 0)
+    cuda = load_kernels(*args)
+    assert cuda.BLOCK_DIM == km.BLOCK_DIM == cuda.replay_step.module.options["block_dim"]
+    cpu = load_kernels(*args[:3], False, *args[4:])
+    assert cpu.KERNEL["module_options"] is None and cpu.BLOCK_DIM is None  # a CPU launch: Warp's one thread a block
+    monkeypatch.setenv("WRESDYN_REPLAY_BLOCK_DIM", "64")
+    wide = load_kernels(*args)
+    assert wide.BLOCK_DIM == 64 == wide.replay_step.module.options["block_dim"]
+    assert wide.replay_step.module.get_module_identifier() != cuda.replay_step.module.get_module_identifier()
+    for name, bad in (("WRESDYN_REPLAY_BLOCK_DIM", "0"), ("WRESDYN_REPLAY_BLOCK_DIM", "big"),
+                      ("WRESDYN_REPLAY_SMEM_SPILL", "yes")):
+        monkeypatch.setenv(name, bad)
+        with pytest.raises(ValueError, match=name):
+            load_kernels(*args)
+        monkeypatch.delenv(name)
+
+
 def test_worker_processes_fill_the_cache_this_process_reads(tri_friction, tmp_path, monkeypatch):
     """The compile workers (NVRTC on the CPU, no GPU) write each module where this process's Warp looks for it: the
     module hash a worker computes from the generated file is this process's."""

@@ -249,7 +249,7 @@ def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | 
 
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
                     inline: bool | None = False, friction_sweeps: int = 4, servo: np.ndarray | None = None,
-                    pieces: int | None = None) -> str:
+                    pieces: int | None = None, block_dim: int | None = None, smem_spill: bool = False) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
@@ -265,12 +265,18 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
     ``pieces`` (with ``backward``): the adjoint comes as a chain of kernels ``replay_piece_<c>`` of about that many
     statements each (:mod:`.split`; listed in ``PIECES``, with ``PIECE_SLOTS`` scratch values per world), and
-    ``replay_step`` is the forward kernel alone.
+    ``replay_step`` is the forward kernel alone. ``block_dim``: threads per CUDA block of every kernel (Warp's module
+    option, part of the modules' hashes; it bounds the block at launch too), None: Warp's default. ``smem_spill``: let
+    NVCC/NVRTC spill registers to shared memory (CUDA 13 toolkits; Warp ignores it elsewhere).
     """
     n = tree.n_dof
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
     param_args = _param_args(servo is not None)
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
+    options = {"module": "unique", "module_options": {"block_dim": int(block_dim)} if block_dim else None}
+    if smem_spill:  # the spill space is sized for the largest block the kernel declares it may run in
+        options |= {"enable_cuda_smem_spilling": True, "launch_bounds": int(block_dim or 256)}
+    src.append(f"KERNEL = {options!r}\nBLOCK_DIM = {block_dim and int(block_dim)!r}\n")  # None: Warp's default
 
     params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
     step_args = ("world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, "
@@ -285,7 +291,7 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
         bodies, slots = split_pieces(params + loads, compute, stores, pieces)
         for c, body in enumerate(bodies):
             src.append(f'''
-@wp.kernel(enable_backward=True, module="unique")
+@wp.kernel(enable_backward=True, **KERNEL)
 def replay_piece_{c}(
     {step_args} scratch: wp.array2d(dtype=S),
 ):
@@ -298,7 +304,7 @@ def replay_piece_{c}(
         funcs, compute = outline(compute, "step_part", inline, stores, external)
         src += funcs
     src.append(f'''
-@wp.kernel(enable_backward={backward}, module="unique")
+@wp.kernel(enable_backward={backward}, **KERNEL)
 def replay_step(
     {step_args}
 ):
@@ -307,7 +313,7 @@ def replay_step(
 
     params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)
     src.append(f'''
-@wp.kernel(enable_backward=False, module="unique")
+@wp.kernel(enable_backward=False, **KERNEL)
 def replay_rollout(
     world_start: int, n_steps: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S,
     fric_m0: wp.array(dtype=S), fric_grad: wp.array(dtype=wp.int32), {param_args},
@@ -336,7 +342,7 @@ def replay_rollout(
         e.lines.append(f"mass_matrix[w, {k}, {j}] = {e.sym(v)}")
         e.lines.append(f"mass_matrix[w, {j}, {k}] = {e.sym(v)}")
     src.append(f'''
-@wp.kernel(enable_backward=False, module="unique")
+@wp.kernel(enable_backward=False, **KERNEL)
 def replay_terms(
     world: int, body_mass: wp.array(dtype=S), body_com: wp.array(dtype=V3), body_inertia: wp.array(dtype=M33),
     gravity: wp.array(dtype=V3), q: wp.array2d(dtype=S), qd: wp.array2d(dtype=S),

@@ -25,8 +25,9 @@ from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
 
-__all__ = ["ADJOINT_PIECES", "background_compiles", "choose_pieces", "compile_batch", "compile_now",
-           "compile_in_processes", "deferred_compile", "deferring", "load_kernels", "start_background_compiles"]
+__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "SMEM_SPILL", "background_compiles", "choose_pieces", "compile_batch",
+           "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile", "deferring", "load_kernels",
+           "start_background_compiles"]
 
 
 def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
@@ -42,15 +43,43 @@ def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fric
     """
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
     pieces = int(pieces) if backward else 0
+    block_dim, spill = cuda_launch() if cuda else (None, False)
     key = (tree.digest(), scalar, bool(backward), bool(cuda), int(friction_sweeps),
-           None if servo is None else servo.tobytes(), pieces)
+           None if servo is None else servo.tobytes(), pieces, block_dim, spill)
     if key not in _SOURCES:  # a robot's solvers are built many times a process; its source depends on the key only
         _SOURCES[key] = generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
-                                        servo=servo, pieces=pieces or None)
+                                        servo=servo, pieces=pieces or None, block_dim=block_dim, smem_spill=spill)
     mod = load_module(_SOURCES[key])
     for k in (mod.replay_step, mod.replay_rollout, mod.replay_terms, *getattr(mod, "PIECES", ())):
         _JOBS[id(k.module)] = (mod.__file__, k.func.__name__)
     return mod
+
+
+BLOCK_DIM = 32
+"""Threads per CUDA block of the replay kernels (``$WRESDYN_REPLAY_BLOCK_DIM`` overrides it). A world is one long
+serial thread, so a block of Warp's default 256 puts 1024 worlds on 4 of the GPU's ~132 multiprocessors; blocks of 32
+spread them over 32. On an H200 at 1024 worlds the adjoint step takes 0.19 ms against 0.34 ms, the forward 0.04
+against 0.07; at 16384 worlds the replay runs within -2 to +6 % of it, and blocks of 64 are 3-8 % behind 32
+(``benchmarks/results/speed_paths/block_dim/``)."""
+
+SMEM_SPILL = False
+"""Let the replay kernels spill registers to shared memory (``$WRESDYN_REPLAY_SMEM_SPILL`` 0/1 overrides it; CUDA 13
+toolkits). Off: on an H200 it slowed the adjoint at blocks of 32 from 0.19 to 0.23 ms a step."""
+
+
+def cuda_launch() -> tuple[int, bool]:
+    """(threads per block, shared-memory spilling) of the CUDA replay kernels: :data:`BLOCK_DIM` and
+    :data:`SMEM_SPILL`, or ``$WRESDYN_REPLAY_BLOCK_DIM`` / ``$WRESDYN_REPLAY_SMEM_SPILL`` where set."""
+    raw = os.environ.get("WRESDYN_REPLAY_BLOCK_DIM", "").strip()
+    block = BLOCK_DIM
+    if raw:
+        block = int(raw) if raw.isdigit() else 0
+        if not 1 <= block <= 1024:
+            raise WresdynError(f"WRESDYN_REPLAY_BLOCK_DIM={raw!r}: give threads per block, 1 to 1024")
+    raw = os.environ.get("WRESDYN_REPLAY_SMEM_SPILL", "").strip()
+    if raw not in ("", "0", "1"):
+        raise WresdynError(f"WRESDYN_REPLAY_SMEM_SPILL={raw!r}: give 0 or 1")
+    return block, (raw == "1") if raw else SMEM_SPILL
 
 
 _JOBS: dict[int, tuple[str, str]] = {}
@@ -59,7 +88,7 @@ _JOBS: dict[int, tuple[str, str]] = {}
 
 _SOURCES: dict[tuple, str] = {}
 """Generated kernel sources of this process by (tree digest, scalar, backward, cuda, friction sweeps, servo DoFs,
-adjoint pieces)."""
+adjoint pieces, CUDA block size, shared-memory spilling)."""
 
 ADJOINT_PIECES = 400
 """Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled

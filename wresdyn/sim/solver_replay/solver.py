@@ -316,9 +316,9 @@ class SolverReplay(SolverBase):
     def _command(self, kernel, chunk: tuple[int, int], args: list, outputs: list, adjoint: bool = False):
         """A callable that launches ``kernel(world_start, *args, *outputs)`` (or its adjoint) on one chunk."""
         inputs = [chunk[0], *args]
-        extra = {}
+        extra = {"block_dim": self.kernels.BLOCK_DIM}  # CUDA: Warp launches at 256 unless told, whatever it built
         if adjoint:
-            extra = {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
+            extra |= {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
         cmd = wp.launch(kernel, dim=chunk[1], inputs=inputs, outputs=outputs, device=self.model.device,
                         adjoint=adjoint, record_cmd=True, **extra)
         return cpu_call(cmd) or cmd.launch
@@ -445,6 +445,6 @@ class SolverReplay(SolverBase):
         q_in = wp.array(q.astype(dt), dtype=self.dtype, device=dev)
         qd_in = wp.array(qd.astype(dt), dtype=self.dtype, device=dev)
         wp.launch(self.kernels.replay_terms, dim=b, inputs=[int(world), *body, g, q_in, qd_in],
-                  outputs=[m_out, c_out], device=dev)
+                  outputs=[m_out, c_out], device=dev, block_dim=self.kernels.BLOCK_DIM)
         return m_out.numpy(), c_out.numpy()
 
