@@ -120,8 +120,11 @@ def test_cuda_block_size_is_built_into_the_modules(tri_friction, monkeypatch):
     wide = load_kernels(*args)
     assert wide.BLOCK_DIM == 64 == wide.replay_step.module.options["block_dim"]
     assert wide.replay_step.module.get_module_identifier() != cuda.replay_step.module.get_module_identifier()
+    monkeypatch.setenv("WRESDYN_REPLAY_FAST_MATH", "1")
+    assert load_kernels(*args).replay_step.module.options["fast_math"] is True
+    monkeypatch.delenv("WRESDYN_REPLAY_FAST_MATH")
     for name, bad in (("WRESDYN_REPLAY_BLOCK_DIM", "0"), ("WRESDYN_REPLAY_BLOCK_DIM", "big"),
-                      ("WRESDYN_REPLAY_SMEM_SPILL", "yes")):
+                      ("WRESDYN_REPLAY_SMEM_SPILL", "yes"), ("WRESDYN_REPLAY_FAST_MATH", "2")):
         monkeypatch.setenv(name, bad)
         with pytest.raises(ValueError, match=name):
             load_kernels(*args)

@@ -249,7 +249,8 @@ def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | 
 
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
                     inline: bool | None = False, friction_sweeps: int = 4, servo: np.ndarray | None = None,
-                    pieces: int | None = None, block_dim: int | None = None, smem_spill: bool = False) -> str:
+                    pieces: int | None = None, block_dim: int | None = None, smem_spill: bool = False,
+                    fast_math: bool = False) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
@@ -267,13 +268,15 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     statements each (:mod:`.split`; listed in ``PIECES``, with ``PIECE_SLOTS`` scratch values per world), and
     ``replay_step`` is the forward kernel alone. ``block_dim``: threads per CUDA block of every kernel (Warp's module
     option, part of the modules' hashes; it bounds the block at launch too), None: Warp's default. ``smem_spill``: let
-    NVCC/NVRTC spill registers to shared memory (CUDA 13 toolkits; Warp ignores it elsewhere).
+    NVCC/NVRTC spill registers to shared memory (CUDA 13 toolkits; Warp ignores it elsewhere). ``fast_math``: Warp's
+    module option (``--use_fast_math``).
     """
     n = tree.n_dof
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
     param_args = _param_args(servo is not None)
     src = [_HEADER.format(digest=tree.digest(), n=n, scalar=scalar, suffix="d" if scalar == "float64" else "f")]
-    options = {"module": "unique", "module_options": {"block_dim": int(block_dim)} if block_dim else None}
+    module = ({"block_dim": int(block_dim)} if block_dim else {}) | ({"fast_math": True} if fast_math else {})
+    options = {"module": "unique", "module_options": module or None}
     if smem_spill:  # the spill space is sized for the largest block the kernel declares it may run in
         options |= {"enable_cuda_smem_spilling": True, "launch_bounds": int(block_dim or 256)}
     src.append(f"KERNEL = {options!r}\nBLOCK_DIM = {block_dim and int(block_dim)!r}\n")  # None: Warp's default
