@@ -32,6 +32,7 @@ from ..errors import SimulationDiverged
 from ..robot.ground import base_index
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
+from .tape_step import TapeBuffers, TapeStep
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
 
@@ -125,6 +126,7 @@ class Simulator:
         self._force = wp.to_torch(self.control.joint_f, requires_grad=False).view(w, self.nqd)
         self.q_index = _index(robot.q_index, self.device)
         self.qd_index = _index(robot.qd_index, self.device)
+        self._index_pairs = (self.q_index, self.qd_index, self.q_index, self.qd_index)  # step_diff's inputs' layouts
         f32 = dict(dtype=torch.float32, device=self.device)
         self.lower = torch.as_tensor(robot.lower, **f32)
         self.upper = torch.as_tensor(robot.upper, **f32)
@@ -354,10 +356,9 @@ class Simulator:
         if tau is None:
             tau = torch.zeros_like(target)
         while len(self._tape_buffers) <= k:
-            self._tape_buffers.append(([self.model.state(requires_grad=True) for _ in range(self.substeps + 1)],
-                                       self.model.control(requires_grad=True)))
+            self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.n_worlds, self.nq, self.nqd))
         names = tuple(self._physics)
-        return _Step.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))
+        return TapeStep.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))
 
     def diverged(self, q: torch.Tensor, qd: torch.Tensor, limits: DivergenceLimits,
                  q_ref: torch.Tensor | None = None) -> torch.Tensor:
@@ -370,7 +371,7 @@ class Simulator:
             bad |= ((q - q_ref).abs() > limits.max_error).any(-1)
         return bad
 
-    # ------------------------------------------------------------------------------------------------ scatter
+    # ------------------------------------------------------------------------------------------------ gradients
     def _physics_grads(self, names, meta) -> list[torch.Tensor]:
         """Gradients the tape left in the model's fields ``names``, summed over worlds (one robot), each as the
         ``(dtype, device)`` of ``meta``."""
@@ -380,71 +381,3 @@ class Simulator:
             g = g.sum(0) if f.startswith("body_") else g[:, self.qd_index].sum(0)
             out.append(g.to(device, dtype))
         return out
-
-    def _scatter(self, x: torch.Tensor, index, width: int) -> torch.Tensor:
-        """Actuated-joint values (N, n) -> Newton's flat per-world layout (N * width,), zeros elsewhere."""
-        if isinstance(index, slice) and index.start == 0 and index.stop == width == x.shape[-1]:
-            return x.to(torch.float32).reshape(-1)  # every coordinate actuated (a fixed base): the layout already
-        full = torch.zeros(self.n_worlds, width, dtype=torch.float32, device=x.device)
-        full[:, index] = x.to(torch.float32)
-        return full.reshape(-1)
-
-
-class _Step(torch.autograd.Function):
-    """One differentiable sample period: (q, q̇, PD target, joint torque) -> (q', q̇'), each (N, n)."""
-
-    @staticmethod
-    def forward(ctx, q, qd, target, tau, sim: Simulator, k: int, names: tuple = (), *physics):
-        import warp as wp
-
-        states, ctrl = sim._tape_buffers[k]
-        inputs = [sim._scatter(q, sim.q_index, sim.nq), sim._scatter(qd, sim.qd_index, sim.nqd),
-                  sim._scatter(target, sim.q_index, sim.nq), sim._scatter(tau, sim.qd_index, sim.nqd)]
-        tape = wp.Tape()
-        with sim._tape_stream():
-            for dst, src in zip((states[0].joint_q, states[0].joint_qd, ctrl.joint_target_q, ctrl.joint_f), inputs):
-                wp.copy(dst, wp.from_torch(src))
-            with tape:
-                if sim._needs_fk:
-                    sim._eval_fk(states[0])
-                for s in range(sim.substeps):
-                    sim.solver.step(states[s], states[s + 1], ctrl, None, sim.dt_sub)
-        ctx.tape, ctx.sim, ctx.k, ctx.names = tape, sim, k, names
-        ctx.physics_meta = [(p.dtype, p.device) for p in physics]
-        out = states[-1]
-        q_out = wp.to_torch(out.joint_q).view(sim.n_worlds, sim.nq)[:, sim.q_index].clone()
-        qd_out = wp.to_torch(out.joint_qd).view(sim.n_worlds, sim.nqd)[:, sim.qd_index].clone()
-        return q_out, qd_out
-
-    @staticmethod
-    def backward(ctx, g_q, g_qd):
-        import warp as wp
-
-        sim, tape = ctx.sim, ctx.tape
-        states, ctrl = sim._tape_buffers[ctx.k]
-        for f in ctx.names:  # the parameters' gradients accumulate over every step's tape: start this one at 0
-            sim._model_view(f, grad=True).zero_()
-        with sim._tape_stream():
-            tape.backward(grads={
-                states[-1].joint_q: wp.from_torch(sim._scatter(g_q, sim.q_index, sim.nq)),
-                states[-1].joint_qd: wp.from_torch(sim._scatter(g_qd, sim.qd_index, sim.nqd)),
-            })
-
-        def grad(a, idx, width):
-            return wp.to_torch(a.grad).view(sim.n_worlds, width)[:, idx].clone()
-
-        out = (grad(states[0].joint_q, sim.q_index, sim.nq), grad(states[0].joint_qd, sim.qd_index, sim.nqd),
-               grad(ctrl.joint_target_q, sim.q_index, sim.nq), grad(ctrl.joint_f, sim.qd_index, sim.nqd))
-        physics = sim._physics_grads(ctx.names, ctx.physics_meta)
-        with sim._tape_stream():
-            if ctx.names or sim.solver_kind != "replay" or getattr(sim.solver, "update_body_q", False):
-                tape.zero()
-            else:  # SolverReplay adds into the inputs' gradients only (the outputs' are overwritten next time):
-                # zero those, not the 13 parameter arrays no one reads here (one memset each, every step)
-                for st in states[:-1]:
-                    st.joint_q.grad.zero_()
-                    st.joint_qd.grad.zero_()
-                for a in (ctrl.joint_target_q, ctrl.joint_target_qd, ctrl.joint_f):
-                    a.grad.zero_()
-        ctx.tape = None
-        return (*out, None, None, None, *physics)
