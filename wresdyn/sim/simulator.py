@@ -10,8 +10,9 @@ stays valid.
 - Fast path, :meth:`Simulator.step`: writes the PD target and joint torque into ``control``, advances
   ``substeps`` solver steps in place (on CUDA replayed from a captured graph on the simulator's own stream,
   ordered against torch's current stream).
-- Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function`` whose
-  backward runs the Warp tape, so gradients reach the previous state, the PD target and the torque. On CUDA its
+- Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function``
+  (:class:`~wresdyn.sim.tape_step.TapeStep`) whose backward runs the Warp tape, so gradients reach the previous
+  state, the PD target and the torque. On CUDA its
   Warp work runs on torch's current stream when that is a stream of its own (the gradient fit's CUDA graph,
   :meth:`Simulator._tape_stream`), else on Warp's device stream.
 
