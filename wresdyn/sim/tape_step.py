@@ -50,6 +50,8 @@ class TapeStep(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, q, qd, target, tau, sim, k: int, names: tuple = (), *physics):
+        """Step ``k`` of ``sim`` from (q, q̇) with the PD target and joint torque, recorded on a Warp tape; ``names``:
+        the model fields in ``physics`` whose gradients the backward returns."""
         import warp as wp
 
         buf = sim._tape_buffers[k]
@@ -68,6 +70,7 @@ class TapeStep(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, g_q, g_qd):
+        """Run the step's tape backwards from the gradients of (q', q̇'); return those of the inputs and fields."""
         sim, tape = ctx.sim, ctx.tape
         buf = sim._tape_buffers[ctx.k]
         for f in ctx.names:  # the parameters' gradients accumulate over every step's tape: start this one at 0
