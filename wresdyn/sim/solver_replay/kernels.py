@@ -25,9 +25,9 @@ from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
 
-__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "SMEM_SPILL", "background_compiles", "choose_pieces", "compile_batch",
-           "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile", "deferring", "load_kernels",
-           "start_background_compiles"]
+__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "FAST_MATH", "SMEM_SPILL", "background_compiles", "choose_pieces",
+           "compile_batch", "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile", "deferring",
+           "load_kernels", "start_background_compiles"]
 
 
 def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
@@ -60,13 +60,12 @@ BLOCK_DIM = 32
 """Threads per CUDA block of the replay kernels (``$WRESDYN_REPLAY_BLOCK_DIM`` overrides it). A world is one long
 serial thread, so a block of Warp's default 256 puts 1024 worlds on 4 of the GPU's ~132 multiprocessors; blocks of 32
 spread them over 32. On an H200 at 1024 worlds the adjoint step takes 0.19 ms against 0.34 ms, the forward 0.04
-against 0.07; at 16384 worlds the replay runs within -2 to +6 % of it, and blocks of 64 are 3-8 % behind 32
-(``benchmarks/results/speed_paths/block_dim/``)."""
+against 0.07; at 16384 worlds the replay runs within -2 to +6 % of it. Blocks of 64 run 4-10 % behind 32 at 1024
+worlds and within 1 % of it at 16384 (``benchmarks/results/speed_paths/block_dim/``)."""
 
 SMEM_SPILL = False
 """Let the replay kernels spill registers to shared memory (``$WRESDYN_REPLAY_SMEM_SPILL`` 0/1 overrides it; CUDA 13
 toolkits). Off: on an H200 it slowed the adjoint at blocks of 32 from 0.19 to 0.23 ms a step."""
-
 
 FAST_MATH = False
 """Compile the replay kernels with fast math (``$WRESDYN_REPLAY_FAST_MATH`` 0/1 overrides it). Off: on an H200 it saved
@@ -75,7 +74,8 @@ FAST_MATH = False
 
 def cuda_launch() -> tuple[int, bool, bool]:
     """(threads per block, shared-memory spilling, fast math) of the CUDA replay kernels: :data:`BLOCK_DIM`,
-    :data:`SMEM_SPILL`, :data:`FAST_MATH`, or ``$WRESDYN_REPLAY_BLOCK_DIM``, ``_SMEM_SPILL``, ``_FAST_MATH`` where set."""
+    :data:`SMEM_SPILL`, :data:`FAST_MATH`, or where set ``$WRESDYN_REPLAY_BLOCK_DIM``, ``_SMEM_SPILL``,
+    ``_FAST_MATH``."""
     raw = os.environ.get("WRESDYN_REPLAY_BLOCK_DIM", "").strip()
     block = BLOCK_DIM
     if raw:
