@@ -9,7 +9,8 @@ the loop, and minimises the joint position and velocity mismatch against the rec
 the regularisers mirroring Table I's torque and action-rate penalties. Gradients come from a ``wp.Tape`` per
 solver step, bridged into torch by :meth:`wresdyn.sim.Simulator.step_diff` (a ``torch.autograd.Function``):
 torch's autograd walks the steps backwards and each step's tape turns the incoming state gradient into gradients
-of the previous state and of the residual, all on the device (``wp.from_torch`` / ``wp.to_torch`` are zero-copy).
+of the previous state and of the residual, all on the device (through torch views of each step's Warp buffers,
+:mod:`wresdyn.sim.tape_step`).
 Windows come from the simulation layer's :class:`~wresdyn.sim.TrajectoryBank` and run through its rollout driver
 (:func:`wresdyn.sim.rollout`, ``grad=True``), the same code that evaluation replays with.
 
