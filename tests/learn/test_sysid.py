@@ -208,3 +208,19 @@ def test_fused_identification_follows_the_stepped_one(humanoid, recorded):
     with pytest.raises(ValueError, match="fused replays whole windows"):
         dataclasses.replace(cfg, fused=True, grad_truncation=8)
     dataclasses.replace(cfg, grad_truncation=8, shooting=1)  # the default steps there instead
+
+
+def test_solver_threads_split_the_windows_with_the_same_results(humanoid, recorded):
+    """``sim_threads`` runs the replay solver's worlds on several host threads: every world's arithmetic and the order
+    of the sums over worlds stay the same, so the identification is the same bit for bit, fused and stepped."""
+    cfg = dataclasses.replace(SMALL, iterations=10, select_every=5)
+    strip = lambda curve: [{k: v for k, v in c.items() if k != "wall"} for c in curve]  # noqa: E731
+    for fused in (True, False):
+        runs = [identify(humanoid, recorded, dataclasses.replace(cfg, fused=fused, sim_threads=t), log=lambda *_: None)
+                for t in (1, 2)]
+        (one, c_one), (two, c_two) = runs
+        assert strip(c_one) == strip(c_two), fused
+        for field in ("kp", "kd", "armature", "damping", "friction", "effort"):
+            assert np.array_equal(getattr(one, field), getattr(two, field)), (fused, field)
+    with pytest.raises(ValueError, match="sim_threads"):
+        dataclasses.replace(cfg, sim_threads=0)

@@ -85,7 +85,7 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
     return loss, {k: v.detach() for k, v in parts.items()}
 
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "cuda_graph")
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph")
 """:class:`GradFitConfig` fields a resumed fit may change: where it runs, not what it learns (``iterations``
 shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
@@ -137,7 +137,7 @@ class _FitLearner:
         self.policy = self.module = build_policy(robot, cfg.residual, *obs_stats(train), cfg.model).to(cfg.device)
         self.horizons = cfg.horizon_curriculum or (cfg.horizon,)
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                             friction_kappa=cfg.friction_kappa)
+                             friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
         self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
         self.optim = torch.optim.Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred)
         self.map_location = cfg.device

@@ -47,7 +47,7 @@ from .window_fit_config import SysIdConfig
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "refine", "refine_windows", "fused")
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "fused")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
 states are the stepped replay's) and the L-BFGS refinement, which runs after the checkpointed Adam steps."""
 
@@ -139,7 +139,7 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     model = PhysicsModel(robot, start, fit=fields, dt=dt)
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                    param_grads=True, friction_kappa=cfg.friction_kappa)
+                    param_grads=True, friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
     delay = torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device)
     bank.set_command_path(delay, servo_goal_accel(robot, start, dt, sim.device))
     traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
@@ -257,7 +257,7 @@ class _IdentifyLearner:
                                           weights=dataset.fit_weights(), friction_kappa=cfg.friction_kappa
                                           ) if validation else None
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                             param_grads=True, friction_kappa=cfg.friction_kappa)
+                             param_grads=True, friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
         fusable = can_fuse(self.sim) and cfg.grad_truncation is None and cfg.shooting == 1
         if cfg.fused is True and not fusable:
             raise ValueError("fused replays PD drives with the replay solver at one substep; this identification's "
@@ -272,7 +272,8 @@ class _IdentifyLearner:
             self.parts = (*self.parts, "defect")
             self.checkpoint_keys = (*self.checkpoint_keys, "nodes", "node_optim")
             self.chain_sim = Simulator(robot, cfg.windows * cfg.shooting, dt, solver=cfg.solver, device=cfg.device,
-                                       requires_grad=True, param_grads=True, friction_kappa=cfg.friction_kappa)
+                                       requires_grad=True, param_grads=True, friction_kappa=cfg.friction_kappa,
+                                       solver_threads=cfg.sim_threads)
             self.nodes = ShootingNodes(self.bank, min(self.horizons))
             self.node_optim = torch.optim.SparseAdam(self.nodes.parameters(), lr=cfg.shooting_lr)
 

@@ -82,6 +82,7 @@ class Simulator:
             solver (``auto`` picks it), so no gradients.
         contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (default ``ContactSettings()``).
         friction_kappa: Dry-friction law of the replay solver (:func:`~wresdyn.sim.solvers.make_solver`).
+        solver_threads: CPU host threads the replay solver splits the worlds over (its ``threads``).
 
     Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
     shape (n_worlds, n_dof), float32 on :attr:`device`. A floating base adds ``base_pose`` and ``base_twist``
@@ -90,7 +91,8 @@ class Simulator:
 
     def __init__(self, robot, n_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
                  device: str | None = "cpu", requires_grad: bool = False, param_grads: bool = False,
-                 graph: bool | None = None, ground: bool = False, contact=None, friction_kappa=None) -> None:
+                 graph: bool | None = None, ground: bool = False, contact=None, friction_kappa=None,
+                 solver_threads: int = 1) -> None:
         import warp as wp
 
         if n_worlds < 1 or substeps < 1 or not dt > 0:
@@ -110,7 +112,7 @@ class Simulator:
         self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
                                        contact=contact)
         self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, ground=self.ground,
-                                  contact=contact, friction_kappa=friction_kappa)
+                                  contact=contact, friction_kappa=friction_kappa, threads=solver_threads)
         if self.solver_kind == "replay":
             self.solver.friction_grad = False  # until set_physics hands it a friction that carries gradients
         self.device = _torch_device(device)

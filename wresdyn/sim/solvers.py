@@ -89,7 +89,7 @@ def resolve_solver(robot: Robot, dt: float, kind: str = "auto", ground: bool = F
 
 
 def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: bool = False, contact=None,
-                friction_kappa: float | None = None):
+                friction_kappa: float | None = None, threads: int = 1):
     """Create the Newton solver for replay. See the module docstring for the choice.
 
     ``friction_kappa``: the replay solver's dry-friction law (``SolverReplay(friction_kappa=)``): ``None``, the soft
@@ -98,6 +98,8 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: b
     ``ground``: the model has a floor (``Robot.build_model(ground=True)``): SolverMuJoCo with contacts on and the
     solver options of ``contact`` (:class:`~wresdyn.robot.ground.ContactSettings`, default ``ContactSettings()``),
     the same as :func:`wresdyn.robot.mujoco_model.build_mujoco` writes for the MuJoCo C robot.
+
+    ``threads``: the replay solver's host threads on the CPU (``SolverReplay(threads=)``); the others ignore it.
     """
     import newton
 
@@ -107,7 +109,7 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: b
     if kind == "replay":
         from .solver_replay import SolverReplay
 
-        return SolverReplay(model, friction_kappa=friction_kappa)
+        return SolverReplay(model, friction_kappa=friction_kappa, threads=threads)
     if kind == "featherstone":
         return newton.solvers.SolverFeatherstone(model)
     # Newton's MuJoCo C backend holds one world; several run on mujoco_warp, on the CPU too (Warp's CPU device)
