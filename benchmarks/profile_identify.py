@@ -45,12 +45,13 @@ def main() -> None:
     p.add_argument("--horizon", type=int, default=64)
     p.add_argument("--repeat", type=int, default=10, help="iterations timed")
     p.add_argument("--fused", action="store_true", help="SysIdConfig.fused: the windows replayed in one launch")
+    p.add_argument("--sim-threads", type=int, default=1, help="SysIdConfig.sim_threads: the solver's CPU host threads")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     wp.config.quiet = True
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
-    cfg = SysIdConfig(device=args.device, torch_threads=1, fused=args.fused)
+    cfg = SysIdConfig(device=args.device, torch_threads=1, fused=args.fused, sim_threads=args.sim_threads)
     rng, train, dt = start_window_fit(cfg, dataset)
     learner = _IdentifyLearner(robot, dataset, cfg, None, rng, train, dt, lambda s: None, None)
     cuda = learner.sim.device.type == "cuda"
