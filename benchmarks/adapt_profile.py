@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import dataclasses
 import io
 import pstats
 import time
@@ -40,20 +39,15 @@ def main() -> None:
     from wresdyn.adapt.adapter import Adapter
     from wresdyn.adapt.config import AdaptConfig
     from wresdyn.adapt.stream import dataset_blocks
+    from wresdyn.cli import UserError
+    from wresdyn.cli.config_flags import build_config, parse_assignments
     from wresdyn.data.loading import load_data
     from wresdyn.learn.runs import run_physics
 
-    fields = {f.name: f for f in dataclasses.fields(AdaptConfig)}
-    over = {}
-    for item in args.set:
-        name, value = item.split("=", 1)
-        if name not in fields:
-            p.error(f"--set {item}: AdaptConfig has no field {name!r}")
-        kind = type(getattr(AdaptConfig(), name))
-        if kind not in (bool, int, float, str):
-            p.error(f"--set {item}: only scalar fields here")
-        over[name] = value.lower() == "true" if kind is bool else kind(value)
-    cfg = AdaptConfig(**{**over, "device": args.device})
+    try:
+        cfg = build_config(AdaptConfig(), {**parse_assignments(AdaptConfig, args.set), "device": args.device})
+    except UserError as e:
+        p.error(str(e))
     ds, robot = load_data(args.data)
     adapter = Adapter(robot, run_physics(args.run, robot), ds.rate_hz, cfg)
     cuda = str(adapter.device).startswith("cuda")

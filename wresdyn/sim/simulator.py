@@ -129,7 +129,6 @@ class Simulator:
         self._force = wp.to_torch(self.control.joint_f, requires_grad=False).view(w, self.nqd)
         self.q_index = _index(robot.q_index, self.device)
         self.qd_index = _index(robot.qd_index, self.device)
-        self._index_pairs = (self.q_index, self.qd_index, self.q_index, self.qd_index)  # step_diff's inputs' layouts
         f32 = dict(dtype=torch.float32, device=self.device)
         self.lower = torch.as_tensor(robot.lower, **f32)
         self.upper = torch.as_tensor(robot.upper, **f32)
@@ -359,7 +358,8 @@ class Simulator:
         if tau is None:
             tau = torch.zeros_like(target)
         while len(self._tape_buffers) <= k:
-            self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.n_worlds, self.nq, self.nqd))
+            self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.n_worlds, self.nq, self.nqd,
+                                                  self.q_index, self.qd_index))
         names = tuple(self._physics)
         return TapeStep.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))
 

@@ -16,9 +16,11 @@ __all__ = ["TapeBuffers", "TapeStep"]
 
 class TapeBuffers:
     """One step's Newton states (``substeps + 1``) and control, and (N, width) torch views of the arrays the step
-    reads (q, q̇, PD target, joint force), of their gradients, and of the last state's q, q̇ and their gradients."""
+    reads (q, q̇, PD target, joint force), of their gradients, and of the last state's q, q̇ and their gradients;
+    ``index``: where the actuated joints' values sit in each of the four (``Simulator.q_index``/``qd_index``). The
+    entries outside it are never written (zeros, as allocated)."""
 
-    def __init__(self, model, substeps: int, n_worlds: int, nq: int, nqd: int) -> None:
+    def __init__(self, model, substeps: int, n_worlds: int, nq: int, nqd: int, q_index, qd_index) -> None:
         import warp as wp
 
         self.states = [model.state(requires_grad=True) for _ in range(substeps + 1)]
@@ -26,6 +28,7 @@ class TapeBuffers:
         first, last, ctrl = self.states[0], self.states[-1], self.control
         inputs = (first.joint_q, first.joint_qd, ctrl.joint_target_q, ctrl.joint_f)
         widths = (nq, nqd, nq, nqd)
+        self.index = (q_index, qd_index, q_index, qd_index)
 
         def view(a, width):
             return wp.to_torch(a, requires_grad=False).view(n_worlds, width)
@@ -34,15 +37,6 @@ class TapeBuffers:
         self.input_grads = [view(a.grad, w) for a, w in zip(inputs, widths)]
         self.outputs = [view(last.joint_q, nq), view(last.joint_qd, nqd)]
         self.output_grads = [view(last.joint_q.grad, nq), view(last.joint_qd.grad, nqd)]
-
-
-def _put(dst: torch.Tensor, x: torch.Tensor, index) -> None:
-    """Actuated-joint values (N, n) into a buffer view (N, width), zeros elsewhere."""
-    if isinstance(index, slice) and index.start == 0 and index.stop == dst.shape[1] == x.shape[-1]:
-        dst.copy_(x)  # every coordinate actuated (a fixed base)
-        return
-    dst.zero_()
-    dst[:, index] = x
 
 
 class TapeStep(torch.autograd.Function):
@@ -55,8 +49,8 @@ class TapeStep(torch.autograd.Function):
         import warp as wp
 
         buf = sim._tape_buffers[k]
-        for dst, x, index in zip(buf.inputs, (q, qd, target, tau), sim._index_pairs):
-            _put(dst, x, index)  # on torch's current stream, which step_diff's Warp work follows (_tape_stream)
+        for dst, x, index in zip(buf.inputs, (q, qd, target, tau), buf.index):
+            dst[:, index] = x  # on torch's current stream, which step_diff's Warp work follows (_tape_stream)
         tape = wp.Tape()
         with sim._tape_stream():
             with tape:
@@ -66,7 +60,7 @@ class TapeStep(torch.autograd.Function):
                     sim.solver.step(buf.states[s], buf.states[s + 1], buf.control, None, sim.dt_sub)
         ctx.tape, ctx.sim, ctx.k, ctx.names = tape, sim, k, names
         ctx.physics_meta = [(p.dtype, p.device) for p in physics]
-        return buf.outputs[0][:, sim.q_index].clone(), buf.outputs[1][:, sim.qd_index].clone()
+        return tuple(out[:, index].clone() for out, index in zip(buf.outputs, buf.index))
 
     @staticmethod
     def backward(ctx, g_q, g_qd):
@@ -75,11 +69,11 @@ class TapeStep(torch.autograd.Function):
         buf = sim._tape_buffers[ctx.k]
         for f in ctx.names:  # the parameters' gradients accumulate over every step's tape: start this one at 0
             sim._model_view(f, grad=True).zero_()
-        _put(buf.output_grads[0], g_q, sim.q_index)
-        _put(buf.output_grads[1], g_qd, sim.qd_index)
+        for dst, g, index in zip(buf.output_grads, (g_q, g_qd), buf.index):
+            dst[:, index] = g
         with sim._tape_stream():
             tape.backward()
-        out = tuple(g[:, index].clone() for g, index in zip(buf.input_grads, sim._index_pairs))
+        out = tuple(g[:, index].clone() for g, index in zip(buf.input_grads, buf.index))
         physics = sim._physics_grads(ctx.names, ctx.physics_meta)
         with sim._tape_stream():
             if ctx.names or sim.solver_kind != "replay" or getattr(sim.solver, "update_body_q", False):
