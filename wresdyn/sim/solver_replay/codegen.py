@@ -41,19 +41,22 @@ _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
 
-def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray | None = None) -> dict:
-    """Loads of the per-DoF arrays; ``fric_m0`` (one entry per DoF, shared by the worlds) and ``fric_on`` where
-    ``friction``, the servo arrays only where ``servo``. ``fric_on``: the world has friction, or the kernel
-    argument ``fric_grad[0]`` asks for the friction solve everywhere (an adjoint that differentiates a friction
-    of 0: its gradient is not 0)."""
+def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray | None = None,
+                 dofs: list[int] | None = None) -> dict:
+    """Loads of the per-DoF arrays; where ``friction``, ``fric_m0`` (one entry per DoF of the whole robot, shared by
+    the worlds) and ``fric_on``; the servo arrays only where ``servo``. ``dofs``: where ``tree`` is one branch
+    (:func:`_lanes`), its DoFs in the whole robot; ``fric_on`` is then the caller's. ``fric_on``: the world has
+    friction, or the kernel argument ``fric_grad[0]`` asks for the friction solve everywhere (an adjoint that
+    differentiates a friction of 0: its gradient is not 0)."""
     out = {}
     for name in _PARAMS:
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") for k in range(tree.n_dof)]
     for name in _SERVO_PARAMS if servo is not None else ():
         out[name] = [e.let(f"{name}[bd + {int(tree.qd_offset[k])}]", prefix=f"p{name}_") if servo[k] else None
                      for k in range(tree.n_dof)]
-    out["m0"] = [e.let(f"fric_m0[{k}]", prefix="pm0_") if friction else None for k in range(tree.n_dof)]
-    if friction:
+    index = list(range(tree.n_dof)) if dofs is None else dofs
+    out["m0"] = [e.let(f"fric_m0[{index[k]}]", prefix="pm0_") if friction else None for k in range(tree.n_dof)]
+    if friction and dofs is None:
         # != rather than >: a NaN friction runs the solve and shows in the state. The flag is added, not or-ed: with
         # `or` (a branch in the C++) Clang's build of the humanoid's rollout loop kept 3x as many values on the stack
         # and ran 2-3x slower (benchmarks/results/compile/forward_spills.txt)
@@ -227,16 +230,18 @@ _TIME_MAJOR = {"q": "q[t, w, {}]", "qd": "qd[t, w, {}]", "tq": "target_q[t, w, {
 """Array accesses of the rollout kernel (time, world, coordinate)."""
 
 
-def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None = None
-               ) -> tuple[list[str], list[str], list[str], list[str]]:
-    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores)."""
+def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None = None,
+               lane: tuple[int, list[int]] | None = None) -> tuple[list[str], list[str], list[str], list[str]]:
+    """Statements of one step: (parameter loads and prologue, state and control loads, compute, stores). ``lane``:
+    (its number, its DoFs in the whole robot) where ``tree`` is one branch of :func:`_lanes`: its own names, without
+    ``fric_on`` and gravity, which the branches share."""
     n = tree.n_dof
     co = [int(x) for x in tree.q_offset]
     do = [int(x) for x in tree.qd_offset]
-    e = Emitter()
-    p = _load_params(e, tree, sweeps > 0, servo)
+    e = Emitter(0 if lane is None else (lane[0] + 1) * 1_000_000)
+    p = _load_params(e, tree, sweeps > 0, servo, None if lane is None else lane[1])
     groups = inertial_params(e, tree)
-    params, e.lines = unmarked(e.lines) + _GRAVITY, []
+    params, e.lines = unmarked(e.lines) + (_GRAVITY if lane is None else []), []
     q = [e.let(access["q"].format(co[k]), prefix="q_") for k in range(n)]
     qd, tq, tqd, jf = ([e.let(access[kind].format(do[k]), prefix=f"{kind}_") for k in range(n)]
                        for kind in ("qd", "tq", "tqd", "jf"))
@@ -247,10 +252,33 @@ def _step_code(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | 
     return params, loads, e.lines, stores
 
 
+def _lanes(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None) -> tuple[list[str], list[tuple]]:
+    """One step as one thread per branch of the robot (:meth:`~.tree.ReplayTree.branches`): (the statements every
+    thread runs first: the world's ``fric_on``, the same flag as the one thread's, and gravity; per branch the
+    :func:`_step_code` of the robot restricted to it). A branch's code is the one thread's statements on its DoFs,
+    in the same order: on the CPU the results are the same bit for bit; NVRTC compiles the two kernels into code
+    that rounds differently (on an H200 the gradient fit's gradients within 2e-7 of the CPU's)."""
+    shared = list(_GRAVITY)
+    if sweeps > 0:
+        do = [int(x) for x in tree.qd_offset]
+        dry = [f"fric[bd + {o}]" for o in do] + [f"sfs[bd + {do[k]}]" for k in range(tree.n_dof)
+                                                  if servo is not None and servo[k]]
+        shared.insert(0, f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)")
+    parts = []
+    for lane, dofs in enumerate(tree.branches()):
+        own = None if servo is None or not servo[dofs].any() else servo[dofs]
+        parts.append(_step_code(tree.restrict(dofs), access, sweeps, own, lane=(lane, dofs)))
+    return shared, parts
+
+
+def _under(cond: str, lines: list[str]) -> list[str]:
+    return [f"if {cond}:", *("    " + x for x in lines)]
+
+
 def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = True,
                     inline: bool | None = False, friction_sweeps: int = 4, servo: np.ndarray | None = None,
                     pieces: int | None = None, block_dim: int | None = None, smem_spill: bool = False,
-                    fast_math: bool = False) -> str:
+                    fast_math: bool = False, lanes: bool = False) -> str:
     """Python source of a module with kernels ``replay_step``, ``replay_rollout`` and ``replay_terms``.
 
     ``replay_step`` advances one step on Newton's flat ``joint_q``/``joint_qd`` arrays (one thread per
@@ -269,7 +297,9 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     ``replay_step`` is the forward kernel alone. ``block_dim``: threads per CUDA block of every kernel (Warp's module
     option, part of the modules' hashes; it bounds the block at launch too), None: Warp's default. ``smem_spill``: let
     NVCC/NVRTC spill registers to shared memory (CUDA 13 toolkits; Warp ignores it elsewhere). ``fast_math``: Warp's
-    module option (``--use_fast_math``).
+    module option (``--use_fast_math``). ``lanes``: where the robot has several branches from its base, ``replay_step``
+    and ``replay_rollout`` run one thread per branch and world (:func:`_lanes`; launched on ``(LANES, worlds)``), so a
+    world's serial chain, forward and adjoint, is its longest branch; the adjoint's pieces stay one thread per world.
     """
     n = tree.n_dof
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
@@ -280,6 +310,9 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     if smem_spill:  # the spill space is sized for the largest block the kernel declares it may run in
         options |= {"enable_cuda_smem_spilling": True, "launch_bounds": int(block_dim or 256)}
     src.append(f"KERNEL = {options!r}\nBLOCK_DIM = {block_dim and int(block_dim)!r}\n")  # None: Warp's default
+    n_lanes = len(tree.branches()) if lanes else 1
+    if n_lanes > 1:  # launched on (LANES, worlds); without it on (worlds,)
+        src.append(f"LANES = {n_lanes}\n")
 
     params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
     step_args = ("world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, "
@@ -302,19 +335,38 @@ def replay_piece_{c}(
 ''')
         src.append(f"PIECES = [{', '.join(f'replay_piece_{c}' for c in range(len(bodies)))}]\nPIECE_SLOTS = {slots}\n")
         backward = False  # replay_step: the forward kernel alone
-    elif backward:
-        external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
-        funcs, compute = outline(compute, "step_part", inline, stores, external)
-        src += funcs
+    if n_lanes > 1:
+        shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo)
+        body = ["lane, i = wp.tid()", "w = i + world_start", *prelude[1:], *shared]
+        for lane, (params, loads, compute, stores) in enumerate(parts):
+            if backward:
+                external = {x.split(" = ", 1)[0] for x in params + loads + shared} | set(_SCALARS)
+                funcs, compute = outline(compute, f"step_part_l{lane}_", inline, stores, external)
+                src += funcs
+            body += _under(f"lane == {lane}", params + loads + branched(compute) + stores)
+    else:
+        if backward:
+            external = {x.split(" = ", 1)[0] for x in params + loads} | set(_SCALARS)
+            funcs, compute = outline(compute, "step_part", inline, stores, external)
+            src += funcs
+        body = prelude + params + loads + branched(compute) + stores
     src.append(f'''
 @wp.kernel(enable_backward={backward}, **KERNEL)
 def replay_step(
     {step_args}
 ):
-{indent(prelude + params + loads + branched(compute) + stores, 1)}
+{indent(body, 1)}
 ''')
 
     params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)
+    head, body = ["w = wp.tid() + world_start"], [*params, "for t in range(n_steps):",
+                                                  *("    " + x for x in loads + branched(compute) + stores)]
+    if n_lanes > 1:
+        shared, parts = _lanes(tree, _TIME_MAJOR, friction_sweeps, servo)
+        head, body = ["lane, i = wp.tid()", "w = i + world_start"], list(shared)
+        for lane, (params, loads, compute, stores) in enumerate(parts):
+            body += _under(f"lane == {lane}", [*params, "for t in range(n_steps):",
+                                                *("    " + x for x in loads + branched(compute) + stores)])
     src.append(f'''
 @wp.kernel(enable_backward=False, **KERNEL)
 def replay_rollout(
@@ -324,12 +376,7 @@ def replay_rollout(
     joint_f: wp.array3d(dtype=S),
     q: wp.array3d(dtype=S), qd: wp.array3d(dtype=S),
 ):
-    w = wp.tid() + world_start
-    bd = w * {tree.dofs_per_world}
-    bb = w * {tree.bodies_per_world}
-{indent(params, 1)}
-    for t in range(n_steps):
-{indent(loads + branched(compute) + stores, 2)}
+{indent(head + [f"bd = w * {tree.dofs_per_world}", f"bb = w * {tree.bodies_per_world}"] + body, 1)}
 ''')
 
     e = Emitter()

@@ -21,9 +21,10 @@ _MARK = "#@ "
 class Emitter:
     """Writes SSA statements and folds constants (products with 0 vanish, with +-1 are free)."""
 
-    def __init__(self):
+    def __init__(self, start: int = 0):
+        """``start``: names are numbered from it on, so that emitters sharing a kernel do not reuse them."""
         self.lines: list[str] = []
-        self._count = 0
+        self._count = int(start)
 
     def const(self, x: float) -> str:
         return f"S({float(x)!r})"

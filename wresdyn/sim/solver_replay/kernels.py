@@ -25,7 +25,8 @@ from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
 
-__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "FAST_MATH", "SMEM_SPILL", "background_compiles", "choose_pieces",
+__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "FAST_MATH", "LANES", "SMEM_SPILL", "background_compiles", "branch_lanes",
+           "choose_pieces",
            "compile_batch", "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile", "deferring",
            "load_kernels", "start_background_compiles"]
 
@@ -44,12 +45,13 @@ def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, fric
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
     pieces = int(pieces) if backward else 0
     block_dim, spill, fast = cuda_launch() if cuda else (None, False, False)
+    lanes = branch_lanes(cuda)
     key = (tree.digest(), scalar, bool(backward), bool(cuda), int(friction_sweeps),
-           None if servo is None else servo.tobytes(), pieces, block_dim, spill, fast)
+           None if servo is None else servo.tobytes(), pieces, block_dim, spill, fast, lanes)
     if key not in _SOURCES:  # a robot's solvers are built many times a process; its source depends on the key only
         _SOURCES[key] = generate_source(tree, scalar, backward, inline=bool(cuda), friction_sweeps=friction_sweeps,
                                         servo=servo, pieces=pieces or None, block_dim=block_dim, smem_spill=spill,
-                                        fast_math=fast)
+                                        fast_math=fast, lanes=lanes)
     mod = load_module(_SOURCES[key])
     for k in (mod.replay_step, mod.replay_rollout, mod.replay_terms, *getattr(mod, "PIECES", ())):
         _JOBS[id(k.module)] = (mod.__file__, k.func.__name__)
@@ -70,6 +72,20 @@ toolkits). Off: on an H200 it slowed the adjoint at blocks of 32 from 0.19 to 0.
 FAST_MATH = False
 """Compile the replay kernels with fast math (``$WRESDYN_REPLAY_FAST_MATH`` 0/1 overrides it). Off: on an H200 it saved
 2 % of the adjoint step and moved the gradient fit's result (validation 0.0314 against 0.0311 rad)."""
+
+
+LANES = True
+"""On CUDA, step a world's branches from the fixed base in threads of their own (:func:`.codegen._lanes`;
+``$WRESDYN_REPLAY_LANES`` 0/1 overrides it on any device). The CPU runs a kernel's threads one after another, so
+there they would only add loads: off unless the variable asks."""
+
+
+def branch_lanes(cuda: bool) -> bool:
+    """Whether the step and rollout kernels run one thread per branch (:data:`LANES`, ``$WRESDYN_REPLAY_LANES``)."""
+    raw = os.environ.get("WRESDYN_REPLAY_LANES", "").strip()
+    if raw not in ("", "0", "1"):
+        raise WresdynError(f"WRESDYN_REPLAY_LANES={raw!r}: give 0 or 1")
+    return raw == "1" if raw else LANES and bool(cuda)
 
 
 def cuda_launch() -> tuple[int, bool, bool]:
@@ -97,7 +113,7 @@ _JOBS: dict[int, tuple[str, str]] = {}
 
 _SOURCES: dict[tuple, str] = {}
 """Generated kernel sources of this process by (tree digest, scalar, backward, cuda, friction sweeps, servo DoFs,
-adjoint pieces, CUDA block size, shared-memory spilling)."""
+adjoint pieces, CUDA block size, shared-memory spilling, fast math, branch lanes)."""
 
 ADJOINT_PIECES = 400
 """Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled

@@ -3,9 +3,9 @@
 The replay workload is one articulated robot per world, PD drives plus a residual torque, no contacts.
 Newton's ``SolverFeatherstone`` handles it with ~20 kernel launches per step, a dense ``J^T M J`` mass
 matrix and explicit PD (unstable at 500 Hz on light joints without armature). This solver runs a step in one
-kernel, one thread per world, with code generated for the robot at hand (:mod:`.codegen`): RNEA bias,
-CRBA mass matrix, a tree ``L^T D L`` factorisation, a dry-friction solve and semi-implicit Euler, all
-differentiable by Warp's Tape. One step, with ``H`` the matrix the kernel factorises::
+kernel, one thread per world (on CUDA per world and branch of the base), with code generated for the robot at hand
+(:mod:`.codegen`): RNEA bias, CRBA mass matrix, a tree ``L^T D L`` factorisation, a dry-friction solve and
+semi-implicit Euler, all differentiable by Warp's Tape. One step, with ``H`` the matrix the kernel factorises::
 
     H = M(q) + A + dt D + dt^2 K
     H (v* - qd) = dt (tau_pd + joint_f - c(q, qd) - d qd + tau_lim - dt K qd)        frictionless velocity
@@ -319,8 +319,9 @@ class SolverReplay(SolverBase):
         extra = {"block_dim": self.kernels.BLOCK_DIM}  # CUDA: Warp launches at 256 unless told, whatever it built
         if adjoint:
             extra |= {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
-        cmd = wp.launch(kernel, dim=chunk[1], inputs=inputs, outputs=outputs, device=self.model.device,
-                        adjoint=adjoint, record_cmd=True, **extra)
+        laned = hasattr(self.kernels, "LANES") and kernel in (self.kernels.replay_step, self.kernels.replay_rollout)
+        cmd = wp.launch(kernel, dim=(self.kernels.LANES, chunk[1]) if laned else chunk[1], inputs=inputs,
+                        outputs=outputs, device=self.model.device, adjoint=adjoint, record_cmd=True, **extra)
         return cpu_call(cmd) or cmd.launch
 
     def _execute(self, plan: list) -> None:
@@ -405,10 +406,9 @@ class SolverReplay(SolverBase):
                              f"(T+1 | T, {tr.world_count} worlds, {tr.coords_per_world} coords / "
                              f"{tr.dofs_per_world} dofs)")
         if target_qd is None or joint_f is None:
-            zeros = self._zeros.get(target_q.shape)
-            if zeros is None:
-                zeros = wp.zeros(target_q.shape, dtype=self.dtype, device=self.model.device)
-                self._zeros[target_q.shape] = zeros
+            if target_q.shape not in self._zeros:
+                self._zeros[target_q.shape] = wp.zeros(target_q.shape, dtype=self.dtype, device=self.model.device)
+            zeros = self._zeros[target_q.shape]
             target_qd = zeros if target_qd is None else target_qd
             joint_f = zeros if joint_f is None else joint_f
         arrays = [q, qd, target_q, target_qd, joint_f]

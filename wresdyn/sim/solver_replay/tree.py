@@ -84,6 +84,33 @@ class ReplayTree:
         """Bodies (index within a world) of DoF ``k``'s rigid group."""
         return [int(b) for b in np.flatnonzero(self.body_dof == k)]
 
+    def branches(self) -> list[list[int]]:
+        """The DoFs of each subtree hanging from the fixed base, in DoF order: the base does not move, so these
+        subtrees share no inertia, no mass-matrix entry and no friction coupling, and step independently."""
+        top = [k if self.parent[k] < 0 else -1 for k in range(self.n_dof)]
+        for k in range(self.n_dof):  # parents come first in DoF order
+            if top[k] < 0:
+                top[k] = top[int(self.parent[k])]
+        return [[k for k in range(self.n_dof) if top[k] == r] for r in sorted(set(top))]
+
+    def restrict(self, dofs: list[int]) -> "ReplayTree":
+        """The robot with only ``dofs`` (a union of :meth:`branches`) moving, at their offsets in a world's slices:
+        the bodies of the other DoFs count as fixed to the base, which they are not, so only a whole branch gives
+        that branch's motion."""
+        dofs = [int(k) for k in dofs]
+        new = {k: i for i, k in enumerate(dofs)}
+        if any(int(self.parent[k]) >= 0 and int(self.parent[k]) not in new for k in dofs):
+            raise TreeError("restrict needs whole subtrees of the base")
+        return ReplayTree(
+            n_dof=len(dofs), prismatic=self.prismatic[dofs],
+            parent=np.array([new.get(int(self.parent[k]), -1) for k in dofs], dtype=np.int64),
+            rot_pj=self.rot_pj[dofs], pos_pj=self.pos_pj[dofs], rot_jc=self.rot_jc[dofs], pos_jc=self.pos_jc[dofs],
+            axis=self.axis[dofs], body_dof=np.array([new.get(int(k), -1) for k in self.body_dof], dtype=np.int64),
+            rot_db=self.rot_db, pos_db=self.pos_db, origin=self.origin, q_offset=self.q_offset[dofs],
+            qd_offset=self.qd_offset[dofs], coords_per_world=self.coords_per_world,
+            dofs_per_world=self.dofs_per_world, bodies_per_world=self.bodies_per_world, world_count=self.world_count,
+        )
+
     def digest(self) -> str:
         """Hash of the constants the kernel bakes in: topology and joint frames, not the inertial parameters
         (read from the model arrays) nor the world count."""
