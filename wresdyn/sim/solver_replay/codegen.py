@@ -26,7 +26,7 @@ import numpy as np
 from ...robot.servo import STARTUP_RAMP, STICTION_SPEED
 from .dynamics import dynamics, inertial_params, solve_ltdl
 from .emit import Emitter, branched, gate, indent, outline, unmarked
-from .split import split_pieces
+from .split import split_lanes, split_pieces
 from .tree import ReplayTree
 
 __all__ = ["generate_source"]
@@ -298,8 +298,8 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     option, part of the modules' hashes; it bounds the block at launch too), None: Warp's default. ``smem_spill``: let
     NVCC/NVRTC spill registers to shared memory (CUDA 13 toolkits; Warp ignores it elsewhere). ``fast_math``: Warp's
     module option (``--use_fast_math``). ``lanes``: where the robot has several branches from its base, ``replay_step``
-    and ``replay_rollout`` run one thread per branch and world (:func:`_lanes`; launched on ``(LANES, worlds)``), so a
-    world's serial chain, forward and adjoint, is its longest branch; the adjoint's pieces stay one thread per world.
+    and ``replay_rollout`` (and the adjoint's pieces) run one thread per branch and world (:func:`_lanes`; launched on
+    ``(LANES, worlds)``), so a world's serial chain, forward and adjoint, is its longest branch.
     """
     n = tree.n_dof
     servo = None if servo is None or not np.asarray(servo).any() else np.asarray(servo, dtype=bool)
@@ -323,21 +323,28 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),"""
     prelude = ["w = wp.tid() + world_start", f"bq = w * {tree.coords_per_world}", f"bd = w * {tree.dofs_per_world}",
                f"bb = w * {tree.bodies_per_world}"]
+    laned = ["lane, i = wp.tid()", "w = i + world_start", *prelude[1:]]
     if backward and pieces:
-        bodies, slots = split_pieces(params + loads, compute, stores, pieces)
+        if n_lanes > 1:
+            shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo)
+            bodies, slots = split_lanes(parts, max(1, pieces // n_lanes))  # a kernel holds a piece of each lane
+            bodies = [laned + shared + b for b in bodies]
+        else:
+            bodies, slots = split_pieces(params + loads, compute, stores, pieces)
+            bodies = [prelude + b for b in bodies]
         for c, body in enumerate(bodies):
             src.append(f'''
 @wp.kernel(enable_backward=True, **KERNEL)
 def replay_piece_{c}(
     {step_args} scratch: wp.array2d(dtype=S),
 ):
-{indent(prelude + body, 1)}
+{indent(body, 1)}
 ''')
         src.append(f"PIECES = [{', '.join(f'replay_piece_{c}' for c in range(len(bodies)))}]\nPIECE_SLOTS = {slots}\n")
         backward = False  # replay_step: the forward kernel alone
     if n_lanes > 1:
         shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo)
-        body = ["lane, i = wp.tid()", "w = i + world_start", *prelude[1:], *shared]
+        body = [*laned, *shared]
         for lane, (params, loads, compute, stores) in enumerate(parts):
             if backward:
                 external = {x.split(" = ", 1)[0] for x in params + loads + shared} | set(_SCALARS)

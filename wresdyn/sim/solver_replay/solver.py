@@ -319,7 +319,7 @@ class SolverReplay(SolverBase):
         extra = {"block_dim": self.kernels.BLOCK_DIM}  # CUDA: Warp launches at 256 unless told, whatever it built
         if adjoint:
             extra |= {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
-        laned = hasattr(self.kernels, "LANES") and kernel in (self.kernels.replay_step, self.kernels.replay_rollout)
+        laned = hasattr(self.kernels, "LANES")  # then every kernel launched here runs a thread per world and branch
         cmd = wp.launch(kernel, dim=(self.kernels.LANES, chunk[1]) if laned else chunk[1], inputs=inputs,
                         outputs=outputs, device=self.model.device, adjoint=adjoint, record_cmd=True, **extra)
         return cpu_call(cmd) or cmd.launch

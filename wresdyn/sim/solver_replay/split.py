@@ -18,11 +18,14 @@ the earlier value elsewhere), so that no scratch slot is written twice.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 from .emit import _ENDIF, _IDENT, _IF, _MARK
 
-__all__ = ["Piece", "split_pieces"]
+__all__ = ["Piece", "split_lanes", "split_pieces"]
+
+_SLOT = re.compile(r"scratch\[(\d+), w\]")
 
 
 @dataclass
@@ -120,6 +123,25 @@ def split_pieces(prologue: list[str], compute: list[str], stores: list[str], min
         bodies.append(body_pre + loads + [f"if {p.cond}:", *_indented(inner)]
                       + (["else:", *_indented(other)] if other else []))
     return bodies, len(slots)
+
+
+def split_lanes(parts: list[tuple[list[str], list[str], list[str], list[str]]], min_len: int
+                ) -> tuple[list[list[str]], int]:
+    """Kernel bodies of the chain for one step run as lanes (:func:`~.codegen._lanes`: one thread per world and branch,
+    ``parts`` each lane's (parameter loads, state loads, statements, stores)). Each lane's step is cut on its own by
+    :func:`split_pieces`, its scratch slots placed after the earlier lanes', and the lanes' pieces aligned at the end,
+    so that the last kernel writes every lane's new state (the chain's contract): kernel ``c`` of ``m`` runs, under
+    ``if lane == l``, lane ``l``'s piece ``c - m + m_l``. Returns (the body statements of each kernel, the slots)."""
+    cut = [split_pieces(params + loads, compute, stores, min_len) for params, loads, compute, stores in parts]
+    m = max(len(lane_bodies) for lane_bodies, _ in cut)
+    bodies: list[list[str]] = [[] for _ in range(m)]
+    offset = 0
+    for lane, (lane_bodies, slots) in enumerate(cut):
+        for j, body in enumerate(lane_bodies):
+            moved = [_SLOT.sub(lambda x: f"scratch[{int(x.group(1)) + offset}, w]", line) for line in body]
+            bodies[m - len(lane_bodies) + j] += [f"if lane == {lane}:", *_indented(moved)]
+        offset += slots
+    return bodies, offset
 
 
 def _indented(lines: list[str]) -> list[str]:
