@@ -119,7 +119,9 @@ ADJOINT_PIECES = 400
 """Statements per adjoint kernel on CUDA while the one-kernel adjoint is not compiled
 (``SolverReplay(adjoint_pieces=)``): the humanoid's adjoint as one kernel takes NVRTC 76 CPU-seconds for sm_90,
 its 12 pieces of this size 0.5-5 s each (35 in all, side by side); the pieces run 1.3-1.5x slower
-(``benchmarks/results/first_fit/h100_pieces/``)."""
+(``benchmarks/results/first_fit/h100_pieces/``). In lanes (:data:`LANES`) a kernel holds a piece of about this many
+statements over the lanes together: the humanoid's 13 kernels take 0.5-7.9 CPU-seconds each, and a fresh H200's first
+default fit 110 s against 130 with the pieces one thread per world (``benchmarks/results/first_fit/h200_lanes/``)."""
 
 _BACKGROUND: dict[str, object] = {}
 """Background compiles of one-kernel adjoint modules this process started, by Warp module identifier: a detached

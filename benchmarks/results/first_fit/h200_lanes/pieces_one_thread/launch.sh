@@ -1,0 +1,25 @@
+#!/bin/bash
+# device: after install.py; PYTHONPATH exported by the caller. A fresh H200, an empty Warp cache: the first two default
+# `wresdyn fit` runs with the robot's branches in threads of their own (the default on CUDA). The installed packages'
+# bytecode is compiled first, as pip does by default (the staging installs with --no-compile). Results in /root/res.
+R=/root/res; mkdir -p $R /root/runs
+export PYTHONUNBUFFERED=1
+{ nvidia-smi; nproc; python3 -c "import torch,warp;print(torch.__version__, warp.__version__)"; } > $R/machine.txt 2>&1
+s=$(date +%s.%N); python3 -m compileall -q -j 16 /tmp/site > /dev/null 2>&1; echo "compileall: $(python3 -c "import time;print(round(time.time()-$s,1))") s" > $R/compileall.txt
+ts() { python3 -u -c '
+import sys,time
+t0=time.time()
+for l in sys.stdin: sys.stdout.write(f"{time.time()-t0:8.2f} {l}")'; }
+fit() {
+  s=$(date +%s.%N)
+  python3 -m wresdyn.cli fit data/dataset.npz --device cuda:0 --eval --out /root/runs/fit_$1 2>&1 | ts > $R/fit_$1.log
+  echo "whole command: $(python3 -c "import time;print(round(time.time()-$s,1))") s" >> $R/fit_$1.log
+}
+export CUDA_CACHE_DISABLE=1 WARP_CACHE_PATH=/root/wc
+fit first
+echo first > $R/STAGE
+s=$(date +%s)
+while pgrep -f compile_worker.py > /dev/null; do sleep 1; done
+echo "detached one-kernel compile still running after the first fit's exit for $(( $(date +%s) - s )) s" > $R/background_wait.txt
+fit second
+echo done > $R/DONE
