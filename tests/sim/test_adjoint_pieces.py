@@ -31,10 +31,10 @@ def tri_friction(tmp_path_factory):
     return load_robot(path, gains=gains)
 
 
-def gradients(robot, pieces, threads=1, stepped=False):
+def gradients(robot, pieces, threads=1, stepped=False, friction_grad=True):
     """The end state and the gradients of a random loss on it, through T steps of W worlds."""
     model = robot.build_model(W, "cpu", requires_grad=True)
-    solver = SolverReplay(model, adjoint_pieces=pieces, threads=threads, friction_grad=True)
+    solver = SolverReplay(model, adjoint_pieces=pieces, threads=threads, friction_grad=friction_grad)
     n = solver.tree.dofs_per_world
     rng = np.random.default_rng(3)
     q0, tq, jf = rng.uniform(-0.3, 0.3, (W, n)), rng.uniform(-0.3, 0.3, (T, W, n)), rng.normal(size=(T, W, n))
