@@ -324,9 +324,9 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     prelude = ["w = wp.tid() + world_start", f"bq = w * {tree.coords_per_world}", f"bd = w * {tree.dofs_per_world}",
                f"bb = w * {tree.bodies_per_world}"]
     laned = ["lane, i = wp.tid()", "w = i + world_start", *prelude[1:]]
+    shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo) if n_lanes > 1 else ([], [])
     if backward and pieces:
         if n_lanes > 1:
-            shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo)
             bodies, slots = split_lanes(parts, max(1, pieces // n_lanes))  # a kernel holds a piece of each lane
             bodies = [laned + shared + b for b in bodies]
         else:
@@ -343,7 +343,6 @@ def replay_piece_{c}(
         src.append(f"PIECES = [{', '.join(f'replay_piece_{c}' for c in range(len(bodies)))}]\nPIECE_SLOTS = {slots}\n")
         backward = False  # replay_step: the forward kernel alone
     if n_lanes > 1:
-        shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo)
         body = [*laned, *shared]
         for lane, (params, loads, compute, stores) in enumerate(parts):
             if backward:

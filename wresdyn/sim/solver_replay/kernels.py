@@ -26,9 +26,8 @@ from .codegen import generate_source
 from .tree import ReplayTree
 
 __all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "FAST_MATH", "LANES", "SMEM_SPILL", "background_compiles", "branch_lanes",
-           "choose_pieces",
-           "compile_batch", "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile", "deferring",
-           "load_kernels", "start_background_compiles"]
+           "choose_pieces", "compile_batch", "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile",
+           "deferring", "load_kernels", "start_background_compiles"]
 
 
 def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
@@ -81,7 +80,8 @@ there they would only add loads: off unless the variable asks."""
 
 
 def branch_lanes(cuda: bool) -> bool:
-    """Whether the step and rollout kernels run one thread per branch (:data:`LANES`, ``$WRESDYN_REPLAY_LANES``)."""
+    """Whether the replay kernels (step, rollout, the adjoint's pieces) run one thread per world and branch of the base
+    (:data:`LANES`, ``$WRESDYN_REPLAY_LANES``)."""
     raw = os.environ.get("WRESDYN_REPLAY_LANES", "").strip()
     if raw not in ("", "0", "1"):
         raise WresdynError(f"WRESDYN_REPLAY_LANES={raw!r}: give 0 or 1")
