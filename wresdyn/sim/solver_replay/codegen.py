@@ -61,8 +61,13 @@ def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray
         # `or` (a branch in the C++) Clang's build of the humanoid's rollout loop kept 3x as many values on the stack
         # and ran 2-3x slower (benchmarks/results/compile/forward_spills.txt)
         dry = out["fric"] + [x for x in out.get("sfs", ()) if x is not None]  # a servo's stiction needs the solve too
-        e.lines.append(f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)")
+        e.lines.append(_friction_flag(dry))
     return out
+
+
+def _friction_flag(dry: list[str]) -> str:
+    """The statement of ``fric_on`` (:func:`_load_params`) from every DoF's dry friction and servo stiction."""
+    return f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)"
 
 
 def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: list, mu: list, m0: list,
@@ -263,7 +268,7 @@ def _lanes(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None
         do = [int(x) for x in tree.qd_offset]
         dry = [f"fric[bd + {o}]" for o in do] + [f"sfs[bd + {do[k]}]" for k in range(tree.n_dof)
                                                   if servo is not None and servo[k]]
-        shared.insert(0, f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)")
+        shared.insert(0, _friction_flag(dry))
     parts = []
     for lane, dofs in enumerate(tree.branches()):
         own = None if servo is None or not servo[dofs].any() else servo[dofs]
@@ -314,7 +319,10 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     if n_lanes > 1:  # launched on (LANES, worlds); without it on (worlds,)
         src.append(f"LANES = {n_lanes}\n")
 
-    params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
+    if n_lanes > 1:
+        shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo)
+    else:
+        params, loads, compute, stores = _step_code(tree, _FLAT, friction_sweeps, servo)
     step_args = ("world_start: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S, "
                  "fric_m0: wp.array(dtype=S),\n") + f"""    fric_grad: wp.array(dtype=wp.int32),
     {param_args}, gravity: wp.array(dtype=V3),
@@ -324,7 +332,6 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     prelude = ["w = wp.tid() + world_start", f"bq = w * {tree.coords_per_world}", f"bd = w * {tree.dofs_per_world}",
                f"bb = w * {tree.bodies_per_world}"]
     laned = ["lane, i = wp.tid()", "w = i + world_start", *prelude[1:]]
-    shared, parts = _lanes(tree, _FLAT, friction_sweeps, servo) if n_lanes > 1 else ([], [])
     if backward and pieces:
         if n_lanes > 1:
             bodies, slots = split_lanes(parts, max(1, pieces // n_lanes))  # a kernel holds a piece of each lane
@@ -364,15 +371,16 @@ def replay_step(
 {indent(body, 1)}
 ''')
 
-    params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)
-    head, body = ["w = wp.tid() + world_start"], [*params, "for t in range(n_steps):",
-                                                  *("    " + x for x in loads + branched(compute) + stores)]
     if n_lanes > 1:
         shared, parts = _lanes(tree, _TIME_MAJOR, friction_sweeps, servo)
         head, body = ["lane, i = wp.tid()", "w = i + world_start"], list(shared)
         for lane, (params, loads, compute, stores) in enumerate(parts):
             body += _under(f"lane == {lane}", [*params, "for t in range(n_steps):",
                                                 *("    " + x for x in loads + branched(compute) + stores)])
+    else:
+        params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)
+        head, body = ["w = wp.tid() + world_start"], [*params, "for t in range(n_steps):",
+                                                      *("    " + x for x in loads + branched(compute) + stores)]
     src.append(f'''
 @wp.kernel(enable_backward=False, **KERNEL)
 def replay_rollout(

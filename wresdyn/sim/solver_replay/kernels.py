@@ -82,10 +82,15 @@ there they would only add loads: off unless the variable asks."""
 def branch_lanes(cuda: bool) -> bool:
     """Whether the replay kernels (step, rollout, the adjoint's pieces) run one thread per world and branch of the base
     (:data:`LANES`, ``$WRESDYN_REPLAY_LANES``)."""
-    raw = os.environ.get("WRESDYN_REPLAY_LANES", "").strip()
+    return _env_flag("WRESDYN_REPLAY_LANES", LANES and bool(cuda))
+
+
+def _env_flag(name: str, default: bool) -> bool:
+    """The environment variable ``name`` as 0 or 1, ``default`` where unset or empty."""
+    raw = os.environ.get(name, "").strip()
     if raw not in ("", "0", "1"):
-        raise WresdynError(f"WRESDYN_REPLAY_LANES={raw!r}: give 0 or 1")
-    return raw == "1" if raw else LANES and bool(cuda)
+        raise WresdynError(f"{name}={raw!r}: give 0 or 1")
+    return raw == "1" if raw else default
 
 
 def cuda_launch() -> tuple[int, bool, bool]:
@@ -98,13 +103,8 @@ def cuda_launch() -> tuple[int, bool, bool]:
         block = int(raw) if raw.isdigit() else 0
         if not 1 <= block <= 1024:
             raise WresdynError(f"WRESDYN_REPLAY_BLOCK_DIM={raw!r}: give threads per block, 1 to 1024")
-    flags = []
-    for name, default in (("WRESDYN_REPLAY_SMEM_SPILL", SMEM_SPILL), ("WRESDYN_REPLAY_FAST_MATH", FAST_MATH)):
-        raw = os.environ.get(name, "").strip()
-        if raw not in ("", "0", "1"):
-            raise WresdynError(f"{name}={raw!r}: give 0 or 1")
-        flags.append(raw == "1" if raw else default)
-    return block, *flags
+    return (block, _env_flag("WRESDYN_REPLAY_SMEM_SPILL", SMEM_SPILL),
+            _env_flag("WRESDYN_REPLAY_FAST_MATH", FAST_MATH))
 
 
 _JOBS: dict[int, tuple[str, str]] = {}
