@@ -1,6 +1,6 @@
 """Where an online update's time goes (``wresdyn adapt``'s :class:`~wresdyn.adapt.adapter.Adapter`), per part.
 
-    PYTHONPATH=. python benchmarks/adapt_profile.py [--device cuda] [--set NAME=VALUE ...] [--cprofile N]
+    PYTHONPATH=. python benchmarks/adapt_profile.py [--device cuda] [--set NAME=VALUE ...] [--cprofile N] [--kernels N]
 
 Streams the shipped validation and held-out trajectories (``data/dataset.npz``, 32 s at 500 Hz) through an adapter
 warm-started from ``benchmarks/results/grey_box/soft_friction`` (the realtime command of ``docs/adaptation.md``) and
@@ -8,6 +8,10 @@ times each part of every update (the Adam steps, the held-back open-loop replay,
 grid), synchronising the GPU around each part so that a part's time is its own. The first update (kernel loads,
 on a fresh machine the compiles) is reported apart. ``--cprofile N``: the N functions with the most own time over the
 later updates.
+``--kernels N`` (CUDA): N later updates run under ``torch.profiler`` (CUPTI sees Warp's kernels as well as torch's);
+each kernel is counted in the part whose synchronised interval holds its start, by kind (the replay solver's forward,
+its adjoint, Warp's other kernels, copies and memsets, torch), with its GPU time: a part's wall-clock against its
+kernels' busy time tells how much of it is work and how much the host's launches and synchronisations.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ def main() -> None:
     p.add_argument("--run", default=str(ROOT / "benchmarks/results/grey_box/soft_friction"))
     p.add_argument("--data", default=str(ROOT / "data/dataset.npz"))
     p.add_argument("--cprofile", type=int, default=0)
+    p.add_argument("--kernels", type=int, default=0, metavar="N", help="CUDA: profile N later updates' kernels")
     args = p.parse_args()
 
     import torch
@@ -51,6 +56,8 @@ def main() -> None:
     ds, robot = load_data(args.data)
     adapter = Adapter(robot, run_physics(args.run, robot), ds.rate_hz, cfg)
     cuda = str(adapter.device).startswith("cuda")
+    if args.kernels and not cuda:
+        p.error("--kernels needs a CUDA device (--device cuda)")
     spent = {k: [] for k in PARTS}
 
     def timed(name, fn):
@@ -58,9 +65,10 @@ def main() -> None:
             if cuda:
                 torch.cuda.synchronize()
             t0 = time.perf_counter()
-            out = fn(*a, **kw)
-            if cuda:
-                torch.cuda.synchronize()
+            with torch.profiler.record_function(f"part:{name}"):
+                out = fn(*a, **kw)
+                if cuda:
+                    torch.cuda.synchronize()
             spent[name].append((len(adapter.updates), time.perf_counter() - t0))
             return out
         return wrapper
@@ -68,11 +76,17 @@ def main() -> None:
     for name in PARTS:
         setattr(adapter, name, timed(name, getattr(adapter, name)))
     prof = cProfile.Profile() if args.cprofile else None
+    kspan = (1, 1 + args.kernels)  # the updates profiled: after the first (its compiles and loads)
+    kprof = kernels = None
     streamed, t_all = 0.0, time.perf_counter()
     for t, q, qd, q_cmd in dataset_blocks(ds, ["validation", "heldout"]):
         for i in range(0, len(t), 50):  # 0.1 s blocks, as a live stream delivers them
             if prof is not None and len(adapter.updates) >= 1:
                 prof.enable()
+            if args.kernels and kprof is None and kernels is None and len(adapter.updates) == kspan[0]:
+                kprof = _start_kernels()
+            elif kprof is not None and len(adapter.updates) >= kspan[1]:
+                kernels, kprof = _stop_kernels(kprof, len(adapter.updates) - kspan[0]), None
             adapter.push(t[i:i + 50], q[i:i + 50], qd[i:i + 50], q_cmd[i:i + 50])
             if prof is not None:
                 prof.disable()
@@ -93,11 +107,88 @@ def main() -> None:
                   f"{sum(later) / total:5.1%} of the later updates' compute")
     parts = sum(sum(s for k, s in spent[n] if k >= 1) for n in PARTS)
     print(f"  (rest: buffers, decisions, publishing: {1 - parts / total:.1%})")
+    if args.kernels:
+        if kprof is not None:  # the stream ended first
+            kernels = _stop_kernels(kprof, len(adapter.updates) - kspan[0])
+        _print_kernels(kernels, spent, comp, kspan[0])
     if prof is not None:
         buf = io.StringIO()
         pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(args.cprofile)
         print(buf.getvalue())
 
+
+def _kind(name: str) -> str:
+    """A kernel's group: the replay solver's forward (step, rollout), its adjoint (their backward kernels and the
+    adjoint's pieces), other Warp kernels, copies, memsets, torch."""
+    n = name.lower()
+    if "replay_" in n:
+        return "solver adjoint" if ("backward" in n or "replay_piece" in n) else "solver forward"
+    if "memset" in n:
+        return "memset"
+    if "memcpy" in n:
+        return "copy"
+    if "cuda_kernel" in n:
+        return "warp other"
+    return "torch"
+
+
+def _start_kernels():
+    import torch
+
+    torch.cuda.synchronize()
+    # CPU activity too: the parts' record_function ranges, in the same clock as the kernels
+    prof = torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU,
+                                              torch.profiler.ProfilerActivity.CUDA])
+    prof.__enter__()
+    return prof
+
+
+def _stop_kernels(prof, updates: int, device_type=None) -> dict:
+    """{part: {kind: [count, GPU seconds]}} of the profiled updates' kernels, each in the part whose range (host
+    time, the device synchronised at its start and end) holds its start; "(between parts)" where none does."""
+    import torch
+
+    torch.cuda.synchronize()
+    prof.__exit__(None, None, None)
+    device_type = torch.autograd.DeviceType.CUDA if device_type is None else device_type
+    events = prof.events()
+    ranges = [(e.name[len("part:"):], e.time_range.start, e.time_range.end) for e in events
+              if e.name.startswith("part:")]
+    out: dict = {"updates": updates}
+    for e in events:
+        if e.device_type != device_type or e.name.startswith("part:"):
+            continue
+        at = e.time_range.start
+        part = next((r[0] for r in ranges if r[1] <= at <= r[2]), "(between parts)")
+        row = out.setdefault(part, {}).setdefault(_kind(e.name), [0, 0.0])
+        row[0] += 1
+        row[1] += e.device_time * 1e-6  # us -> s
+    return out
+
+
+def _print_kernels(kernels: dict, spent: dict, comp: np.ndarray, first: int) -> None:
+    """Per update, each part's kernels and their GPU time against the part's wall-clock over the updates after the
+    profiled ones (the profiler slows the host down)."""
+    n = kernels.pop("updates", 0)
+    if not n:
+        print("kernels: no update profiled")
+        return
+    after = first + n  # the updates timed unprofiled
+    print(f"\nkernels of updates {first}..{after - 1}, per update; wall-clock of the {len(comp) - after} after them")
+    print("| part | wall [ms] | kernels | GPU busy [ms] | solver forward | solver adjoint | torch | other |")
+    print("|---|---|---|---|---|---|---|---|")
+    walls = {p: sum(s for k, s in spent[p] if k >= after) / max(len(comp) - after, 1) for p in PARTS}
+    walls["(between parts)"] = comp[after:].mean() - sum(walls.values()) if len(comp) > after else float("nan")
+    for part in (*PARTS, "(between parts)"):
+        rows = kernels.get(part, {})
+        busy = {k: 1e3 * v[1] / n for k, v in rows.items()}
+        other = sum(v for k, v in busy.items() if k not in ("solver forward", "solver adjoint", "torch"))
+        print(f"| {part} | {1e3 * walls[part]:.1f} | {sum(v[0] for v in rows.values()) / n:.0f} | "
+              f"{sum(busy.values()):.1f} | {busy.get('solver forward', 0):.1f} | {busy.get('solver adjoint', 0):.1f} | "
+              f"{busy.get('torch', 0):.1f} | {other:.1f} |")
+    count = sum(v[0] for rows in kernels.values() for v in rows.values()) / n
+    busy = sum(v[1] for rows in kernels.values() for v in rows.values()) / n
+    print(f"| update | {1e3 * comp[after:].mean():.1f} | {count:.0f} | {1e3 * busy:.1f} | | | | |")
 
 if __name__ == "__main__":
     main()
