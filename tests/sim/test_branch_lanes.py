@@ -14,7 +14,8 @@ from test_solver_replay import DT
 
 from wresdyn.robot.description import load_robot
 from wresdyn.sim.solver_replay import SolverReplay, TreeError
-from wresdyn.sim.solver_replay.kernels import branch_lanes, load_kernels
+from wresdyn.sim.solver_replay import solver as solver_module
+from wresdyn.sim.solver_replay.kernels import branch_lanes, lane_width, load_kernels
 
 _LINK = ('<link name="{}"><inertial><origin xyz="{} 0.01 -0.1" rpy="0.1 0.0 0.2"/><mass value="{}"/>'
          '<inertia ixx="0.004" iyy="0.005" izz="0.002" ixy="0.0003" ixz="0.0" iyz="0.0002"/></inertial></link>')
@@ -100,6 +101,24 @@ def test_laned_pieces_give_the_laned_kernels_gradients(fork, stepped, monkeypatc
         # (measured on this robot: within 1.4e-5 of the largest gradient, either way; the two chains within 7e-8)
         assert np.abs(got[k] - v).max() <= 4e-5 * scale, k
         assert np.abs(got[k] - one[k]).max() <= 5e-7 * scale, k
+
+
+@pytest.mark.parametrize("stepped", [False, True], ids=["rollout", "step"])
+def test_threads_past_the_last_world_write_nothing(fork, stepped, monkeypatch):
+    """On CUDA a branch's threads are rounded up to a warp, so that a warp runs one branch's code; the threads past a
+    chunk's last world return at once. Padded on the CPU here (29 threads more per branch, in chunks of two CPU
+    threads), forward, adjoint in one kernel and in pieces: the results are the unpadded ones bit for bit."""
+    assert (lane_width(8, True), lane_width(32, True), lane_width(33, True), lane_width(8, False)) == (32, 32, 64, 8)
+    monkeypatch.setenv("WRESDYN_REPLAY_LANES", "1")
+    for pieces in (0, 6):
+        ref, _ = gradients(fork, pieces, threads=2, stepped=stepped, friction_grad=False)
+        with monkeypatch.context() as m:
+            m.setattr(solver_module, "lane_width", lambda worlds, cuda: worlds + 29)
+            got, solver = gradients(fork, pieces, threads=2, stepped=stepped, friction_grad=False)
+        assert solver.kernels.LANES == 3 and len(solver._chunks()) == 2
+        for k, v in ref.items():
+            assert np.abs(v).max() > 0.0, k
+            assert np.array_equal(got[k], v), (pieces, k)
 
 
 def test_lane_gradients_match_central_differences(fork, monkeypatch):

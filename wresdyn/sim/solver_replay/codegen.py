@@ -276,6 +276,9 @@ def _lanes(tree: ReplayTree, access: dict, sweeps: int, servo: np.ndarray | None
     return shared, parts
 
 
+_WARP_GUARD = ["if w >= world_end:", "    return"]
+
+
 def _under(cond: str, lines: list[str]) -> list[str]:
     return [f"if {cond}:", *("    " + x for x in lines)]
 
@@ -331,7 +334,11 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     joint_q_out: wp.array(dtype=S), joint_qd_out: wp.array(dtype=S),"""
     prelude = ["w = wp.tid() + world_start", f"bq = w * {tree.coords_per_world}", f"bd = w * {tree.dofs_per_world}",
                f"bb = w * {tree.bodies_per_world}"]
-    laned = ["lane, i = wp.tid()", "w = i + world_start", *prelude[1:]]
+    # laned: launched on (LANES, worlds rounded up to a warp) so that a warp runs one branch's code (a warp holding
+    # several branches would run them one after another); the threads past the chunk's last world return
+    laned = ["lane, i = wp.tid()", "w = i + world_start", *_WARP_GUARD, *prelude[1:]]
+    if n_lanes > 1:
+        step_args = step_args.replace("world_start: int,", "world_start: int, world_end: int,", 1)
     if backward and pieces:
         if n_lanes > 1:
             bodies, slots = split_lanes(parts, max(1, pieces // n_lanes))  # a kernel holds a piece of each lane
@@ -373,7 +380,7 @@ def replay_step(
 
     if n_lanes > 1:
         shared, parts = _lanes(tree, _TIME_MAJOR, friction_sweeps, servo)
-        head, body = ["lane, i = wp.tid()", "w = i + world_start"], list(shared)
+        head, body = ["lane, i = wp.tid()", "w = i + world_start", *_WARP_GUARD], list(shared)
         for lane, (params, loads, compute, stores) in enumerate(parts):
             body += _under(f"lane == {lane}", [*params, "for t in range(n_steps):",
                                                 *("    " + x for x in loads + branched(compute) + stores)])
@@ -381,10 +388,11 @@ def replay_step(
         params, loads, compute, stores = _step_code(tree, _TIME_MAJOR, friction_sweeps, servo)
         head, body = ["w = wp.tid() + world_start"], [*params, "for t in range(n_steps):",
                                                       *("    " + x for x in loads + branched(compute) + stores)]
+    end = "world_end: int, " if n_lanes > 1 else ""
     src.append(f'''
 @wp.kernel(enable_backward=False, **KERNEL)
 def replay_rollout(
-    world_start: int, n_steps: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S,
+    world_start: int, {end}n_steps: int, dt: S, fric_c: S, fric_k: S, fric_shift: S, kp_implicit: S,
     fric_m0: wp.array(dtype=S), fric_grad: wp.array(dtype=wp.int32), {param_args},
     gravity: wp.array(dtype=V3), target_q: wp.array3d(dtype=S), target_qd: wp.array3d(dtype=S),
     joint_f: wp.array3d(dtype=S),

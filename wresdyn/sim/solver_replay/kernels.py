@@ -25,9 +25,9 @@ from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
 
-__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "FAST_MATH", "LANES", "SMEM_SPILL", "background_compiles", "branch_lanes",
-           "choose_pieces", "compile_batch", "compile_now", "compile_in_processes", "cuda_launch", "deferred_compile",
-           "deferring", "load_kernels", "start_background_compiles"]
+__all__ = ["ADJOINT_PIECES", "BLOCK_DIM", "FAST_MATH", "LANES", "LANE_WARP", "SMEM_SPILL", "background_compiles",
+           "branch_lanes", "choose_pieces", "compile_batch", "compile_now", "compile_in_processes", "cuda_launch",
+           "deferred_compile", "deferring", "lane_width", "load_kernels", "start_background_compiles"]
 
 
 def load_kernels(tree: ReplayTree, scalar: str, backward: bool, cuda: bool, friction_sweeps: int,
@@ -83,6 +83,18 @@ def branch_lanes(cuda: bool) -> bool:
     """Whether the replay kernels (step, rollout, the adjoint's pieces) run one thread per world and branch of the base
     (:data:`LANES`, ``$WRESDYN_REPLAY_LANES``)."""
     return _env_flag("WRESDYN_REPLAY_LANES", LANES and bool(cuda))
+
+
+LANE_WARP = 32
+"""On CUDA a laned kernel's threads per branch are its worlds rounded up to a multiple of this (a warp), the threads
+past the last world returning at once: a warp then runs one branch's code. With (LANES, worlds) as such, a batch of
+8 worlds put its three branches in one warp, which ran them one after another."""
+
+
+def lane_width(worlds: int, cuda: bool) -> int:
+    """Threads per branch of a laned launch of ``worlds`` worlds: on CUDA rounded up to :data:`LANE_WARP`; on the CPU,
+    where a kernel's threads run one after another, ``worlds``."""
+    return -(-worlds // LANE_WARP) * LANE_WARP if cuda else worlds
 
 
 def _env_flag(name: str, default: bool) -> bool:

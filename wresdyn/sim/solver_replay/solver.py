@@ -88,7 +88,7 @@ import warp as wp
 from newton import ModelFlags
 from newton.solvers import SolverBase
 
-from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, deferring, load_kernels
+from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, deferring, lane_width, load_kernels
 from .launch import cpu_call, grad_of, launch_signature
 from .tree import ReplayTree, tree_from_model
 
@@ -304,8 +304,7 @@ class SolverReplay(SolverBase):
 
         A CPU ``wp.launch`` with ~30 arguments costs tens of microseconds of Python, more than a step of a
         few worlds, so launches are recorded once (``record_cmd``) and replayed; the signature holds the
-        arrays' addresses, so new arrays get a new plan.
-        """
+        arrays' addresses, so new arrays get a new plan."""
         plan = self._plans.get(key)
         if plan is None:
             if len(self._plans) >= 256:
@@ -315,13 +314,14 @@ class SolverReplay(SolverBase):
 
     def _command(self, kernel, chunk: tuple[int, int], args: list, outputs: list, adjoint: bool = False):
         """A callable that launches ``kernel(world_start, *args, *outputs)`` (or its adjoint) on one chunk."""
-        inputs = [chunk[0], *args]
+        laned = hasattr(self.kernels, "LANES")  # a thread per world and branch: kernel(world_start, world_end, ...)
+        inputs = [chunk[0], *((chunk[0] + chunk[1],) if laned else ()), *args]
         extra = {"block_dim": self.kernels.BLOCK_DIM}  # CUDA: Warp launches at 256 unless told, whatever it built
         if adjoint:
             extra |= {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
-        laned = hasattr(self.kernels, "LANES")  # then every kernel launched here runs a thread per world and branch
-        cmd = wp.launch(kernel, dim=(self.kernels.LANES, chunk[1]) if laned else chunk[1], inputs=inputs,
-                        outputs=outputs, device=self.model.device, adjoint=adjoint, record_cmd=True, **extra)
+        dim = (self.kernels.LANES, lane_width(chunk[1], self.model.device.is_cuda)) if laned else chunk[1]
+        cmd = wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.model.device, adjoint=adjoint,
+                        record_cmd=True, **extra)
         return cpu_call(cmd) or cmd.launch
 
     def _execute(self, plan: list) -> None:
