@@ -260,7 +260,7 @@ class Adapter:
             _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
             track = det.tracking(float(t[-1]))
         leaving = self.physics is self.start  # a winner now would take the model off the warm start
-        unconfirmed = track and (fitted_in_tracking or not self.cfg.detect_jump_confirm)  # a tracking-mode candidate
+        unconfirmed = track and not self.cfg.track_confirm and (fitted_in_tracking or not self.cfg.detect_jump_confirm)
         confirm = self.cfg.confirm and (not unconfirmed or (leaving and not self.cfg.track_leave))
         # the reference to beat: the current model, or the warm start where that is no worse (the model then goes
         # back to it unless something beats it): without drift, updates that only fit one held-back second's noise
@@ -327,7 +327,7 @@ class Adapter:
         cfg, model = self.cfg, self.model
         bank = TrajectoryBank(train, self.device, self.delay.to(self.device))
         frozen = torch.as_tensor(~excited)
-        loss = float("nan")
+        last = torch.tensor(float("nan"))
         for g, lr in zip(self.optim.param_groups, self._lrs):
             g["lr"] = lr * (cfg.track_lr if track else 1.0)
         for _ in range(cfg.track_iterations if track else cfg.iterations):
@@ -347,8 +347,8 @@ class Adapter:
                 for f, v in held.items():
                     u = getattr(model, f"u_{f}")
                     u.copy_(torch.where(frozen, v, u))
-            loss = float(value.detach())
-        return loss
+            last = value.detach()  # read once, after the steps: on a GPU each read waits for the device
+        return float(last)
 
     def _open_loop(self, holdout: TrajectoryBank, candidate: PhysicalParams, pending: PhysicalParams | None
                    ) -> tuple[tuple[float, float, float, float], np.ndarray]:

@@ -123,7 +123,7 @@ def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = Fal
         q, qd = run.q, run.qd
     pos = squared_error(q[:, 1:], window.q[:, 1:], weights)
     vel = squared_error(qd[:, 1:], window.qd[:, 1:], weights)
-    return cfg.w_q * pos + cfg.w_qd * vel, {"pos": float(pos.detach()), "vel": float(vel.detach())}
+    return cfg.w_q * pos + cfg.w_qd * vel, {"pos": pos.detach(), "vel": vel.detach()}  # read when logged
 
 
 def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
@@ -341,7 +341,7 @@ class _IdentifyLearner:
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
         self.optim.step()
         model.project()
-        return {"loss": float(loss.detach()), **parts}, None
+        return {"loss": float(loss.detach()), **{k: float(v) for k, v in parts.items()}}, None
 
     def _chains(self, h: int):
         """This iteration's chains of ``cfg.shooting`` windows of ``h`` steps: (trajectory, first sample), (B,) each,
