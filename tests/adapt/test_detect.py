@@ -100,8 +100,9 @@ def test_in_the_tracking_mode_a_winner_is_kept_without_confirmation(humanoid, re
     _, v = first_update(cfg, history=False)  # no history: guarded mode
     assert not v.tracking and not v.accepted and v.pending
     # detect_jump_confirm: the update that detects the jump fitted its candidate before it, so confirms it; with
-    # track_leave = False not even the tracking mode takes the model off the warm start unconfirmed
-    for option in ({"detect_jump_confirm": True}, {"track_leave": False}):
+    # track_leave = False not even the tracking mode takes the model off the warm start unconfirmed; with
+    # track_confirm the tracking mode's candidates wait for a confirmation as in the guarded mode
+    for option in ({"detect_jump_confirm": True}, {"track_leave": False}, {"track_confirm": True}):
         _, w = first_update(cfg.__class__(**{**cfg.__dict__, **option}))
         assert w.tracking and w.jump > 100 and not w.accepted and w.pending, option
 

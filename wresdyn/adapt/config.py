@@ -129,6 +129,13 @@ class AdaptConfig:
     rule written before the runs (``benchmarks/results/adapt_drift/track_leave/RULE.txt``): with True one seed's
     worst no-drift second was 1.087x the fixed model, with False every one 1.000x, at a lower mean error after the
     changes (3.83 against 4.24 mrad); the excitation's validation figures are the same either way."""
+    track_confirm: bool = False
+    """Whether the tracking mode's candidates too become the model only if they win again on the next update's
+    held-back part (as in the guarded mode: the mode then only trains harder, on the data after the jump). Off, by a
+    rule written before the runs (``benchmarks/results/adapt_drift/track_confirm/RULE.txt``): on the policy's
+    validation timelines with benchmark seeds 2-11 it halved the runs with a no-drift second above 1.05x the fixed
+    model (3 of 10 against 6) but tracked the changes worse (drift-phase error 1.145x; on the excitation's validation
+    timelines 1.165x, and 14 s to come back after the friction ramp in one run)."""
     detect_history: float = 6.0
     """Robot time whose updates' held-back errors the median is taken over [s]."""
     track_for: float = 4.0
