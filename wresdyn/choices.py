@@ -15,8 +15,8 @@ from typing import Literal, get_args
 
 from .errors import WresdynError
 
-__all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "FitModel", "Learner", "ExcitationMode", "choices",
-           "check_choice", "check_number", "check_friction_kappa", "check_device"]
+__all__ = ["ResidualKind", "Arch", "SolverKind", "ModelKind", "FitModel", "Learner", "ExcitationMode", "DetectNorm",
+           "choices", "check_choice", "check_number", "check_friction_kappa", "check_device"]
 
 ResidualKind = Literal["torque", "delta_action"]
 """Joint torque added to τ_pd (the paper, eq. 1) or offset added to the PD target (ASAP)."""
@@ -33,6 +33,9 @@ Learner = Literal["ppo", "gradient", "parametric"]
 """Learners of the ablation."""
 ExcitationMode = Literal["auto", "foot", "joint"]
 """Excitation of ``wresdyn collect``: foot IK targets, joint space, or foot when the robot has all the frames."""
+DetectNorm = Literal["none", "command"]
+"""What the online identifier's change detector divides a held-back error by (:attr:`wresdyn.adapt.config.AdaptConfig.
+detect_norm`)."""
 
 
 def choices(literal) -> tuple[str, ...]:

@@ -6,7 +6,7 @@ import numpy as np
 
 from wresdyn.adapt.adapter import Adapter
 from wresdyn.adapt.config import AdaptConfig
-from wresdyn.adapt.detect import ChangeDetector, demanded_torque, effort_candidates
+from wresdyn.adapt.detect import NORM_FLOOR, ChangeDetector, command_rate, demanded_torque, effort_candidates
 from wresdyn.adapt.stream import dataset_blocks
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
@@ -31,6 +31,27 @@ def test_the_detector_fires_on_a_jump_above_the_recent_median_and_tracks_for_a_w
     assert det.since == 9.0 and det.tracking(12.9) and not det.tracking(13.1)
     jumped, *_ = det.observe(11.0, 10.0, 3e-3, np.full(3, 3e-3))  # a second jump extends the mode, not its start
     assert det.since == 9.0 and det.tracking(13.9)
+
+
+def test_normalised_by_the_command_a_swing_of_the_motion_is_not_a_jump_and_a_change_is():
+    q_cmd = np.cumsum(np.full((11, 2), 0.01), 0)  # 0.01 rad per sample on both joints
+    assert abs(command_rate(q_cmd) - 0.01) < 1e-12
+    assert command_rate(q_cmd[:1]) == 0.0
+    det = ChangeDetector(factor=2.0, history=4, track_for=3.0, norm=True)
+    for k in range(4):
+        det.observe(float(k), k - 1.0, 1e-3, np.full(3, 1e-3), scale=0.01)
+    # the motion three times as fast, its error three times as large: no jump (the raw detector's would be 3)
+    jumped, ratio, _ = det.observe(4.0, 3.0, 3e-3, np.full(3, 3e-3), scale=0.03)
+    assert not jumped and abs(ratio - 1.0) < 1e-9
+    # the same motion, the error three times as large: a change
+    jumped, ratio, _ = det.observe(5.0, 4.0, 3e-3, np.full(3, 3e-3), scale=0.01)
+    assert jumped and abs(ratio - 3.0) < 1e-9
+    # a robot coming to rest: the command hardly moves, its motion counts as NORM_FLOOR times the recent median
+    rest = ChangeDetector(factor=2.0, history=4, track_for=3.0, norm=True)
+    for k in range(4):
+        rest.observe(float(k), k - 1.0, 1e-3, np.full(3, 1e-3), scale=0.01)
+    jumped, ratio, _ = rest.observe(4.0, 3.0, 0.2e-3, np.full(3, 0.2e-3), scale=1e-9)
+    assert not jumped and abs(ratio - 0.2 / NORM_FLOOR) < 1e-9
 
 
 def test_with_confirm_two_jumps_in_a_row_open_the_tracking_mode_from_the_first():

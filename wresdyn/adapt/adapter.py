@@ -40,7 +40,7 @@ from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
-from .detect import ChangeDetector, search_effort
+from .detect import ChangeDetector, command_rate, search_effort
 
 __all__ = ["Adapter", "StreamError", "Update"]
 
@@ -137,7 +137,8 @@ class Adapter:
                                       lr=cfg.lr)
         self._lrs = [g["lr"] for g in self.optim.param_groups]
         self.detector = ChangeDetector(cfg.detect_factor, round(cfg.detect_history / cfg.update_every),
-                                       cfg.track_for, cfg.detect_confirm, cfg.effort_overall) if cfg.detect else None
+                                       cfg.track_for, cfg.detect_confirm, cfg.effort_overall,
+                                       cfg.detect_norm == "command") if cfg.detect else None
         """The change detector (:attr:`AdaptConfig.detect`), ``None`` without it."""
         self.sim_grid = None  # the effort grid's replays, made on first use
         self.physics = start
@@ -257,7 +258,7 @@ class Adapter:
         ol, ol_joint = self._open_loop(holdout, cand, None if pending is None else pending[0])
         jump = 0.0
         if det is not None:
-            _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint)
+            _, jump, _ = det.observe(float(t[-1]), float(t[hold[0]]), ol[1], ol_joint, command_rate(x[hold, 2]))
             track = det.tracking(float(t[-1]))
         leaving = self.physics is self.start  # a winner now would take the model off the warm start
         unconfirmed = track and not self.cfg.track_confirm and (fitted_in_tracking or not self.cfg.detect_jump_confirm)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..choices import SolverKind, check_choice, check_device, check_number
+from ..choices import DetectNorm, SolverKind, check_choice, check_device, check_number
 from ..learn.window_fit_config import FIT_FIELDS
 
 __all__ = ["ADAPT_FIT", "AdaptConfig"]
@@ -136,6 +136,14 @@ class AdaptConfig:
     validation timelines with benchmark seeds 2-11 it halved the runs with a no-drift second above 1.05x the fixed
     model (3 of 10 against 6) but tracked the changes worse (drift-phase error 1.145x; on the excitation's validation
     timelines 1.165x, and 14 s to come back after the friction ramp in one run)."""
+    detect_norm: DetectNorm = "none"
+    """What the detector divides each held-back error by before comparing it with the recent ones: ``"none"``, or
+    ``"command"``, how fast the held-back part's command moves (:func:`~wresdyn.adapt.detect.command_rate`): a swing
+    of the motion moves the error and the command together, a change of the robot the error alone. ``"none"``, by a
+    rule written before the runs (``benchmarks/results/adapt_drift/detect_norm/RULE.txt``): with ``"command"`` at
+    ``detect_factor`` 1.75, 2 or 2.25, 3 of the 10 policy validation streams had a no-drift second above 1.05x the
+    fixed model (6 with ``"none"``), but the drift phases' error rose by 21-31 % under the policy (a policy closing the
+    loop on a drifting robot changes its command too) and by 8-17 % on the excitation."""
     detect_history: float = 6.0
     """Robot time whose updates' held-back errors the median is taken over [s]."""
     track_for: float = 4.0
@@ -176,6 +184,7 @@ class AdaptConfig:
 
     def __post_init__(self) -> None:
         check_choice(self.solver, SolverKind, "solver")
+        check_choice(self.detect_norm, DetectNorm, "detect_norm")
         check_device(self.device, "device")
         for name in ("window", "holdout", "update_every", "lr", "grad_clip", "detect_factor", "detect_history",
                      "track_for", "track_lr"):

@@ -22,7 +22,19 @@ import numpy as np
 from ..sim import rollout
 from ..sim.fused import fused_rollout
 
-__all__ = ["ChangeDetector", "demanded_torque", "effort_candidates", "replay_limits", "search_effort"]
+__all__ = ["NORM_FLOOR", "ChangeDetector", "command_rate", "demanded_torque", "effort_candidates", "replay_limits", "search_effort"]
+
+
+NORM_FLOOR = 0.25
+"""With :attr:`ChangeDetector.norm`, a held-back part's motion counts as at least this times the recent median: a robot
+coming to rest (a command that hardly moves) would otherwise blow its error up."""
+
+
+def command_rate(q_cmd: np.ndarray) -> float:
+    """How fast a command moves: the RMS over samples and joints of its change from one sample to the next [rad],
+    ``q_cmd`` (T, n) [rad]."""
+    d = np.diff(np.asarray(q_cmd, dtype=np.float64), axis=0)
+    return float(np.sqrt(np.mean(d ** 2))) if d.size else 0.0
 
 
 class ChangeDetector:
@@ -36,12 +48,17 @@ class ChangeDetector:
             it); a change persists, a swing of the motion often lasts one held-back part.
         overall: A joint's own jump counts for the effort grid only where the overall error is above ``overall``
             times its median too (0: always).
+        norm: Divide each held-back error by the held-back part's motion (``scale`` of :meth:`observe`), at least
+            :data:`NORM_FLOOR` times the recent ones' median, before comparing it with the recent ones: a swing of the
+            motion moves the error and the motion together, a change of the robot the error alone.
     """
 
-    def __init__(self, factor: float, history: int, track_for: float, confirm: int = 1, overall: float = 0.0
-                 ) -> None:
+    def __init__(self, factor: float, history: int, track_for: float, confirm: int = 1, overall: float = 0.0,
+                 norm: bool = False) -> None:
         self.factor, self.track_for, self.confirm = float(factor), float(track_for), max(1, int(confirm))
-        self.overall = float(overall)
+        self.overall, self.norm = float(overall), bool(norm)
+        self.scales: deque[float] = deque(maxlen=max(3, int(history)))
+        """The motion of each recent update's held-back part (with ``norm``)."""
         self.streak = 0
         """Consecutive updates, up to the last, whose error jumped."""
         self.streak_from = -np.inf
@@ -70,12 +87,18 @@ class ChangeDetector:
         # 1e-12 rad: only a joint that never moved has a median this small; it keeps the division finite
         return error / max(med, 1e-12), joints / np.maximum(jmed, 1e-12)
 
-    def observe(self, t: float, t_holdout: float, error: float, joints: np.ndarray) -> tuple[bool, float, np.ndarray]:
+    def observe(self, t: float, t_holdout: float, error: float, joints: np.ndarray, scale: float = 1.0
+                ) -> tuple[bool, float, np.ndarray]:
         """Take the current model's held-back error of the update at robot time ``t`` [s] (its held-back part starts
-        at ``t_holdout``): ``error`` [rad] overall and ``joints`` (n,) [rad] per joint. Returns (whether it jumped,
-        the ratio to the median, the per-joint ratios). A jump (the ``confirm``-th in a row) outside the tracking
-        mode opens it and marks the held-back start of the streak's first jump as the start of the data after the
-        change."""
+        at ``t_holdout``): ``error`` [rad] overall and ``joints`` (n,) [rad] per joint; with ``norm`` both divided by
+        the held-back part's motion ``scale`` (:func:`command_rate`). Returns (whether it jumped, the ratio to the
+        median, the per-joint ratios). A jump (the ``confirm``-th in a row) outside the tracking mode opens it and
+        marks the held-back start of the streak's first jump as the start of the data after the change."""
+        if self.norm:
+            floor = NORM_FLOOR * float(np.median(self.scales)) if self.scales else 0.0
+            self.scales.append(float(scale))
+            scale = max(float(scale), floor, 1e-12)
+            error, joints = error / scale, np.asarray(joints) / scale
         ratio, jratio = self.ratios(error, joints)
         self.streak = self.streak + 1 if ratio > self.factor else 0
         if self.streak == 1:
