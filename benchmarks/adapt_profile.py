@@ -143,20 +143,19 @@ def _start_kernels():
     return prof
 
 
-def _stop_kernels(prof, updates: int, device_type=None) -> dict:
+def _stop_kernels(prof, updates: int) -> dict:
     """{part: {kind: [count, GPU seconds]}} of the profiled updates' kernels, each in the part whose range (host
     time, the device synchronised at its start and end) holds its start; "(between parts)" where none does."""
     import torch
 
     torch.cuda.synchronize()
     prof.__exit__(None, None, None)
-    device_type = torch.autograd.DeviceType.CUDA if device_type is None else device_type
     events = prof.events()
     ranges = [(e.name[len("part:"):], e.time_range.start, e.time_range.end) for e in events
               if e.name.startswith("part:")]
     out: dict = {"updates": updates}
     for e in events:
-        if e.device_type != device_type or e.name.startswith("part:"):
+        if e.device_type != torch.autograd.DeviceType.CUDA or e.name.startswith("part:"):
             continue
         at = e.time_range.start
         part = next((r[0] for r in ranges if r[1] <= at <= r[2]), "(between parts)")
