@@ -1,30 +1,10 @@
 """The rule of RULE.txt on the runs here: python benchmarks/results/adapt_drift/detect_norm/rule.py"""
-import re
+import sys
 from pathlib import Path
 
-import numpy as np
-
 HERE = Path(__file__).parent
-PHASES = ("friction", "payload", "derate")
-
-
-def parse(run: Path):
-    t = (run / "run.txt").read_text()
-    m = re.search(r"no drift: online / fixed at most ([\d.]+) \(target <= 1.05\), mean ([\d.]+)", t)
-    err = {k: float(v) for k, v in re.findall(r"^\s*(friction|payload|derate): fixed [\d.]+\s+online ([\d.]+)", t, re.M)}
-    rec = {k: int(v) for k, v in re.findall(r"^\s*(\w+): online within 1.5x the oracle \(3 s mean\) after (\d+) s", t, re.M)}
-    return float(m.group(1)), float(m.group(2)), np.mean([err[k] for k in PHASES]), rec
-
-
-def table(name, runs):
-    rows = [parse(r) for r in runs]
-    bad = sum(r[0] > 1.05 for r in rows)
-    drift = float(np.mean([r[2] for r in rows]))
-    print(f"{name}: {len(rows)} runs; a no-drift second above 1.05x in {bad}; worst seconds "
-          f"{[r[0] for r in rows]}; no-drift means {[r[1] for r in rows]}; drift-phase error {1e3 * drift:.3f} mrad; "
-          f"back within 1.5x of the oracle after (friction, payload, derate) {[tuple(r[3][k] for k in PHASES) for r in rows]}")
-    return bad, drift, rows
-
+sys.path.insert(0, str(HERE.parent / "track_confirm"))
+from rule import PHASES, table  # noqa: E402  (the same parsing of run.txt)
 
 v = HERE / "validation"
 defaults = HERE.parent / "track_confirm" / "validation"

@@ -26,19 +26,24 @@ def table(name, runs):
     return bad, drift, rows
 
 
-v = HERE / "validation"
-exc_defaults = HERE.parent / "track_leave"
-a = table("policy, defaults", [v / f"policy_defaults_s{s}" for s in range(2, 12)])
-b = table("policy, track_confirm", [v / f"policy_track_confirm_s{s}" for s in range(2, 12)])
-c = table("excitation, defaults", [exc_defaults / f"exc_s{s}_tlf" for s in range(3)])
-d = table("excitation, track_confirm", [v / f"excitation_track_confirm_s{s}" for s in range(3)])
-one, two = b[0] < a[0], b[1] <= 1.1 * a[1]
-three = all(max(r[3][k] for k in PHASES) <= 10 for r in d[2]) and d[1] <= 1.1 * c[1]
-print(f"(1) fewer runs above 1.05x: {one}; (2) policy drift error {b[1] / a[1]:.3f}x the defaults': {two}; "
-      f"(3) excitation back within 10 s in every run and drift error {d[1] / c[1]:.3f}x: {three}")
-print("track_confirm becomes the default" if one and two and three else "the default stays false")
+def main() -> None:
+    v = HERE / "validation"
+    exc_defaults = HERE.parent / "track_leave"
+    a = table("policy, defaults", [v / f"policy_defaults_s{s}" for s in range(2, 12)])
+    b = table("policy, track_confirm", [v / f"policy_track_confirm_s{s}" for s in range(2, 12)])
+    c = table("excitation, defaults", [exc_defaults / f"exc_s{s}_tlf" for s in range(3)])
+    d = table("excitation, track_confirm", [v / f"excitation_track_confirm_s{s}" for s in range(3)])
+    one, two = b[0] < a[0], b[1] <= 1.1 * a[1]
+    three = all(max(r[3][k] for k in PHASES) <= 10 for r in d[2]) and d[1] <= 1.1 * c[1]
+    print(f"(1) fewer runs above 1.05x: {one}; (2) policy drift error {b[1] / a[1]:.3f}x the defaults': {two}; "
+          f"(3) excitation back within 10 s in every run and drift error {d[1] / c[1]:.3f}x: {three}")
+    print("track_confirm becomes the default" if one and two and three else "the default stays false")
 
-# reporting only, not part of the rule: the reported (held-out) policy timeline, the defaults, benchmark seed 0
-# (track_leave/heldout/policy) and seeds 1-6
-table("held-out policy timeline, defaults, seeds 0-6",
-      [HERE.parent / "track_leave/heldout/policy", *(HERE / "heldout_seeds" / f"s{s}" for s in range(1, 7))])
+    # reporting only, not part of the rule: the reported (held-out) policy timeline, the defaults, benchmark seed 0
+    # (track_leave/heldout/policy) and seeds 1-6
+    table("held-out policy timeline, defaults, seeds 0-6",
+          [HERE.parent / "track_leave/heldout/policy", *(HERE / "heldout_seeds" / f"s{s}" for s in range(1, 7))])
+
+
+if __name__ == "__main__":
+    main()
