@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from profile_gradfit import _kind  # the same grouping of kernels by name
+
 ROOT = Path(__file__).resolve().parents[1]
 PARTS = ("_steps", "_open_loop", "_one_step", "_effort_grid")
 
@@ -115,21 +117,6 @@ def main() -> None:
         buf = io.StringIO()
         pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(args.cprofile)
         print(buf.getvalue())
-
-
-def _kind(name: str) -> str:
-    """A kernel's group: the replay solver's forward (step, rollout), its adjoint (their backward kernels and the
-    adjoint's pieces), other Warp kernels, copies, memsets, torch."""
-    n = name.lower()
-    if "replay_" in n:
-        return "solver adjoint" if ("backward" in n or "replay_piece" in n) else "solver forward"
-    if "memset" in n:
-        return "memset"
-    if "memcpy" in n:
-        return "copy"
-    if "cuda_kernel" in n:
-        return "warp other"
-    return "torch"
 
 
 def _start_kernels():

@@ -24,9 +24,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _kind(name: str) -> str:
+    """A kernel's group: the replay solver's forward (step, rollout), its adjoint (their backward kernels and the
+    adjoint's pieces), other Warp kernels, copies, memsets, torch."""
     n = name.lower()
-    if "replay_step" in n:
-        return "solver adjoint" if "backward" in n else "solver forward"
+    if "replay_" in n:
+        return "solver adjoint" if ("backward" in n or "replay_piece" in n) else "solver forward"
     if "memset" in n:
         return "memset"
     if "memcpy" in n:

@@ -22,7 +22,8 @@ import numpy as np
 from ..sim import rollout
 from ..sim.fused import fused_rollout
 
-__all__ = ["NORM_FLOOR", "ChangeDetector", "command_rate", "demanded_torque", "effort_candidates", "replay_limits", "search_effort"]
+__all__ = ["NORM_FLOOR", "ChangeDetector", "command_rate", "demanded_torque", "effort_candidates", "replay_limits",
+           "search_effort"]
 
 
 NORM_FLOOR = 0.25
