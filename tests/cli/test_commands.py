@@ -17,7 +17,7 @@ from wresdyn.data.signals import ExcitationConfig
 from wresdyn.experiments.ablation_config import AblationConfig
 from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
 from wresdyn.learn.ppo_config import default_config
-from wresdyn.learn.window_fit_config import HYBRID_ITERATIONS, GradFitConfig, SysIdConfig
+from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
 from wresdyn.skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 
 OLD_FLAGS = {
@@ -57,7 +57,7 @@ CONFIG_FLAGS = {
     "collect": [(CollectConfig(), "", ())],
     "identify": [(SysIdConfig(), "", ())],
     "adapt": [(AdaptConfig(), "", ())],
-    "fit": [(replace(GradFitConfig(), iterations=HYBRID_ITERATIONS), "", ("model",)),
+    "fit": [(GradFitConfig(), "", ("model",)),
             (SysIdConfig(), "identify.", ("device", "seed", "solver", "friction_kappa"))],
     "train": [(default_config(), "", ())],
     "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig))),
@@ -118,7 +118,7 @@ def _config(argv: list[str]):
 
 
 # each line with the fields the code before generated flags built from it (the rest: the defaults)
-FIT = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS)
+FIT = GradFitConfig()
 SAME = [
     (["collect", "--train", "2", "--validation", "0", "--heldout", "1", "--ood", "3", "--duration", "2.5", "--rate",
       "250", "--seed", "7", "--frames", "a, b", "--max-velocity", "3"],

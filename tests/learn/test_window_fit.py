@@ -115,3 +115,74 @@ def test_a_non_finite_loss_read_back_late_names_its_iteration():
     rng = np.random.default_rng(0)
     with pytest.raises(FloatingPointError, match="toy fit: non-finite loss at iteration 3"):
         run_window_fit(Cfg(), Diverging(rng, deferred=True), RunFolder(None, {}), rng, log=lambda *_: None)
+
+
+@dataclass(frozen=True)
+class PlateauCfg:
+    iterations: None = None
+    lr: float = 0.1
+    lr_final: float = 0.025
+    select_every: int = 2
+    patience: int = 2
+    min_improvement: float = 0.01
+    lr_decay: float = 0.5
+    max_iterations: int = 400
+    max_seconds: float | None = None
+
+
+class Target(Toy):
+    """Descends towards the validation optimum itself (w = 2), so validation improves until w has arrived: a fit
+    that must run until it plateaus, wherever the count would have stopped."""
+
+    def step(self, it, h, lr):
+        self.seen.append((it, h, lr))
+        w = self.module.weight
+        with torch.no_grad():
+            w -= lr * 0.2 * (w - 2.0)
+        loss = (w.detach() - 2.0) ** 2
+        return {"h": h, "loss": float(loss), "pos": float(loss)}, None
+
+    def score(self):  # a floor, as a real validation error has: the relative gains fade
+        return super().score() + 0.05
+
+    def on_stage(self, stage, it):
+        self.stages = getattr(self, "stages", []) + [(stage, it)]
+
+
+def _plateau(out, cfg=PlateauCfg(), until=None):
+    rng = np.random.default_rng(0)
+    toy, lines = Target(rng), []
+    run = RunFolder(out, {"iterations": None}, key="toy")
+    curve = run_window_fit(cfg, toy, run, rng, log=lines.append, until=until)
+    return toy, run, curve, lines
+
+
+def test_until_a_plateau_each_horizon_runs_until_validation_stops_improving_then_the_rate_falls():
+    toy, run, curve, lines = _plateau(None)
+    n = len(curve)
+    assert 20 < n < 400  # neither a fixed count nor the ceiling
+    assert any("converged" in line for line in lines), lines[-3:]
+    stages = toy.stages
+    assert [s for s, _ in stages] == [0, 1] and stages[0][1] == 0 and stages[1][1] > 0
+    hs = [h for _, h, _ in toy.seen]
+    assert hs == sorted(hs) and set(hs) == {2, 4}  # the curriculum in order, each horizon once
+    lrs = [lr for _, h, lr in toy.seen if h == 4]
+    assert lrs[0] == pytest.approx(0.0625)  # stage 1 of 2 starts at the cosine's rate halfway
+    assert min(lrs) == pytest.approx(0.025) and lrs == sorted(lrs, reverse=True)  # plateaus lower it to lr_final
+    scores = [r["validation"] for r in curve if "validation" in r]
+    # when it stops, the last `patience` checks brought less than 1 % on the best before them
+    assert min(scores[-2:]) > min(scores[:-2]) * 0.99
+    assert run.best.value == min(scores)
+
+
+def test_until_a_plateau_stops_at_the_ceiling_and_says_so():
+    toy, _, curve, lines = _plateau(None, cfg=PlateauCfg(max_iterations=10))
+    assert len(curve) == 10 and any("ceiling of 10 iterations" in line for line in lines)
+
+
+def test_until_a_plateau_resumes_to_the_same_numbers(tmp_path):
+    _, _, straight, _ = _plateau(None)
+    _plateau(tmp_path / "run", until=len(straight) // 2)
+    toy, _, resumed, lines = _plateau(tmp_path / "run")
+    strip = lambda rows: [{k: v for k, v in r.items() if k != "wall"} for r in rows]  # noqa: E731
+    assert strip(resumed) == strip(straight) and any("converged" in line for line in lines)

@@ -18,7 +18,7 @@ import argparse
 from dataclasses import replace
 
 from ..choices import FitModel, choices
-from ..learn.window_fit_config import HYBRID_ITERATIONS, GradFitConfig, SysIdConfig
+from ..learn.window_fit_config import GradFitConfig, SysIdConfig
 from .config_flags import add_config_flags, build_config, given_fields
 
 FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
@@ -27,10 +27,6 @@ FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "
 
 IDENTIFY_SHARED = ("device", "seed", "solver", "friction_kappa")
 """Fields of the hybrid's identification (``--identify.*``) that are the fit's own: both stages run alike."""
-
-
-def _hybrid() -> GradFitConfig:
-    return replace(GradFitConfig(), iterations=HYBRID_ITERATIONS)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,8 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="evaluate held-out and OOD afterwards, on the fit's device (like `wresdyn eval`)")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
-    add_config_flags(p, _hybrid(), skip=("model",), aliases=FIT_ALIASES,
-                     variants={"--model network or parametric": GradFitConfig()},
+    add_config_flags(p, GradFitConfig(), skip=("model",), aliases=FIT_ALIASES,
                      title="gradient fit (wresdyn.learn.window_fit_config.GradFitConfig; --horizon-curriculum "
                            "without --horizon also sets the horizon to its last length)")
     add_config_flags(p, SysIdConfig(), prefix="identify.", skip=IDENTIFY_SHARED,
@@ -65,7 +60,7 @@ def config_from_args(args: argparse.Namespace) -> GradFitConfig:
     if curriculum and "horizon" not in given:
         given["horizon"] = curriculum[-1]
     given["model"] = "parametric" if args.model == "parametric" else "network"
-    return build_config(_hybrid() if args.model == "hybrid" else GradFitConfig(), given)
+    return build_config(GradFitConfig(), given)
 
 
 def identify_config_from_args(args: argparse.Namespace, cfg: GradFitConfig) -> SysIdConfig:
@@ -102,8 +97,10 @@ def run(args: argparse.Namespace) -> int:
     from ..progress import Log
 
     log = Log(out / "fit.log", quiet=args.quiet)
-    log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {cfg.iterations} "
-          f"iterations x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}")
+    from ..learn.schedule import describe_length
+
+    log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {describe_length(cfg)} "
+        f"x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}")
     from ..sim.physics import PhysicalParams
     from ..sim.warmup import compile_kernels
 
@@ -128,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
         (out / "parameters.json").write_text(json.dumps(params, indent=1))
     wall = curve[-1]["wall"] if curve else 0.0
-    summary = {"iterations": cfg.iterations, "wall_s": wall + (id_wall or 0.0), "residual_wall_s": wall,
+    summary = {"iterations": curve[-1]["iteration"] if curve else 0, "wall_s": wall + (id_wall or 0.0), "residual_wall_s": wall,
                "identify_wall_s": id_wall, "sim_steps": curve[-1]["sim_steps"] if curve else 0, "config": asdict(cfg)}
     (out / "train_summary.json").write_text(json.dumps(summary, indent=2))
     stages = f" (identification {id_wall:.0f} s + residual {wall:.0f} s)" if id_wall is not None else ""

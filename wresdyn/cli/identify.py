@@ -50,8 +50,10 @@ def run(args: argparse.Namespace) -> int:
     from ..progress import Log
 
     log = Log(out / "identify.log", quiet=args.quiet)
+    from ..learn.schedule import describe_length
+
     log(f"identifying {', '.join(cfg.fit)} on {len(ds.split('train'))} trajectories of {args.data}: "
-          f"{cfg.iterations} iterations x {cfg.windows} windows -> {out}")
+        f"{describe_length(cfg)} x {cfg.windows} windows -> {out}")
     from ..sim.warmup import compile_kernels
 
     compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device, say=log)

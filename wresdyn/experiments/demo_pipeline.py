@@ -31,7 +31,6 @@ from ..learn.hybrid import fit_hybrid
 from ..learn.ppo import train
 from ..learn.ppo_config import default_config
 from ..learn.sysid import SysIdConfig
-from ..learn.window_fit_config import HYBRID_ITERATIONS
 from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
 from ..robot.description import load_robot
 from ..sim.parity import pd_agreement
@@ -76,7 +75,7 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
           f", {data.rate_hz:g} Hz)", flush=True)
 
     log = lambda line: print("      " + line, flush=True)  # noqa: E731
-    gcfg = GradFitConfig(iterations=HYBRID_ITERATIONS)
+    gcfg = GradFitConfig()
     scfg = SysIdConfig()
     tcfg = default_config()
     tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=ppo_iterations))
@@ -89,7 +88,9 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
         tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=2, num_envs=8, num_steps_per_env=8))
         dcfg = dataclasses.replace(dcfg, train_per_family=1, iterations=2, finetune=1, envs=8)
         skill_ppo = dataclasses.replace(skill_ppo, torch_threads=1)  # tiny networks: a second thread only waits
-    print(f"[3/5] the calibrated robot: gradient fit through the simulation ({scfg.iterations} identification + "
+    print("[3/5] the calibrated robot: gradient fit through the simulation (identification, then a residual, each "
+          "until validation plateaus, `wresdyn fit`) ..." if scfg.iterations is None else
+          f"[3/5] the calibrated robot: gradient fit through the simulation ({scfg.iterations} identification + "
           f"{gcfg.iterations} residual iterations, `wresdyn fit`) ...", flush=True)
     fit_dir = out / "fit"
     hybrid = fit_hybrid(robot, data, scfg, gcfg, fit_dir, data_path=data_path, log=log)

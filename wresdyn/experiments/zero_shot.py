@@ -15,7 +15,6 @@ from ..data.mismatch import Mismatch
 from ..learn.gradfit import GradFitConfig, export_run, fit
 from ..learn.hybrid import fit_hybrid
 from ..learn.sysid import SysIdConfig
-from ..learn.window_fit_config import HYBRID_ITERATIONS
 from ..skills.skill_config import SkillPPOConfig
 
 __all__ = ["POLICIES", "BenchmarkStart", "start_benchmark", "fit_corrections", "write_results"]
@@ -59,7 +58,7 @@ def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, dev
         calibrated = out / "calibrated"
         if not (calibrated / "policy.pt").is_file():
             log(f"fitting the calibrated robot (hybrid, `wresdyn fit`) -> {calibrated}")
-            cfg = replace(GradFitConfig(), iterations=HYBRID_ITERATIONS, device=device)
+            cfg = replace(GradFitConfig(), device=device)
             hybrid = fit_hybrid(robot, dataset, replace(SysIdConfig(), device=device), cfg, calibrated,
                                 data_path=data_path, log=lambda s: None)
             export_run(hybrid.policy, calibrated, hybrid.config, dataset, data_path, physics=hybrid.physics)

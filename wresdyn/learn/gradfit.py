@@ -85,9 +85,9 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
     return loss, {k: v.detach() for k, v in parts.items()}
 
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph")
-""":class:`GradFitConfig` fields a resumed fit may change: where it runs, not what it learns (``iterations``
-shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph", "max_iterations", "max_seconds")
+""":class:`GradFitConfig` fields a resumed fit may change: where it runs and the ceilings of a run until convergence,
+not what it learns (``iterations`` shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
 
 def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None,
@@ -102,8 +102,8 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         out: Optional run folder (:class:`~wresdyn.learn.runs.RunFolder`): ``config.json``, ``checkpoint.pt``
             (resumed if present; a changed config is refused), ``curve.json``.
         log: Progress printer.
-        until: Stop (and checkpoint) after this many iterations of the ``cfg.iterations`` schedule (horizon
-            curriculum and learning rate), to resume later; ``None`` runs the whole schedule.
+        until: Stop (and checkpoint) after this many iterations of the schedule (horizon curriculum and learning
+            rate), to resume later; ``None`` runs the whole schedule.
         stop_below: End the fit at the first validation check whose error is at or below this [rad] (time to
             fidelity, ``benchmarks/time_to_fidelity.py``), returning the residual selected so far.
         physics: Physical parameters of the simulator (identified: the hybrid), with their command delay; ``None``

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..sim.warmup import compile_kernels
 from .gradfit import fit
+from .schedule import describe_length
 from .sysid import identify
 
 __all__ = ["fit_hybrid", "HybridFit", "save_identify_config"]
@@ -58,12 +59,12 @@ def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=No
     out = Path(out)
     id_dir = out / "identify"
     id_dir.mkdir(parents=True, exist_ok=True)
-    log(f"stage 1/2: identifying {', '.join(sysid_cfg.fit)} ({sysid_cfg.iterations} iterations) -> {id_dir}")
+    log(f"stage 1/2: identifying {', '.join(sysid_cfg.fit)} ({describe_length(sysid_cfg)}) -> {id_dir}")
     params, id_curve = identify(robot, dataset, sysid_cfg, out=id_dir, log=log)
     save_identify_config(id_dir, sysid_cfg, dataset.rate_hz, data_path)
     cfg = replace(fit_cfg, model="network", physics=str(id_dir / "physics.json"))
     compile_kernels(robot, dataset.rate_hz, ("forward", "grad"), solver=cfg.solver, device=cfg.device, say=log)
     log(f"stage 2/2: {cfg.residual.kind} residual ({cfg.residual.arch}) on the identified model "
-        f"({cfg.iterations} iterations)")
+        f"({describe_length(cfg)})")
     policy, curve = fit(robot, dataset, cfg, out=out, log=log, physics=params)
     return HybridFit(params, policy, curve, cfg, id_curve[-1]["wall"] if id_curve else 0.0)

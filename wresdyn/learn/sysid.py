@@ -25,6 +25,7 @@ each step validated the same way. Held-out and OOD data are never read. The Adam
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from pathlib import Path
 
@@ -47,9 +48,11 @@ from .window_fit_config import SysIdConfig
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "fused")
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "fused", "max_iterations",
+                     "max_seconds")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
-states are the stepped replay's) and the L-BFGS refinement, which runs after the checkpointed Adam steps."""
+states are the stepped replay's), the L-BFGS refinement, which runs after the checkpointed Adam steps, and the
+ceilings of a run until convergence."""
 
 
 class NonFiniteLoss(WresdynError):
@@ -251,7 +254,9 @@ class _IdentifyLearner:
                   [model.u_body_logdiag, model.u_body_off]]
         self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
                                        for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
-        self.effort_from = int(round(cfg.effort_after * cfg.iterations)) if "effort" in cfg.fit else cfg.iterations
+        self.effort_from = math.inf  # the iteration where the effort limit joins the fit (never, unless fitted)
+        if "effort" in cfg.fit and cfg.iterations is not None:
+            self.effort_from = int(round(cfg.effort_after * cfg.iterations))
         validation = dataset.split("validation")
         self.physics_score = PhysicsScore(robot, validation, dataset.rate_hz, cfg.solver, cfg.device,
                                           weights=dataset.fit_weights(), friction_kappa=cfg.friction_kappa
@@ -282,6 +287,13 @@ class _IdentifyLearner:
         if self.physics_score is not None:
             run.best.take(self.score(), 0, self.model)
             self.log(f"start: validation {run.best.value:.4f} rad")
+
+    def on_stage(self, stage: int, it: int) -> None:
+        """Until a plateau, the effort limit joins the fit where the stage holding ``effort_after`` of the
+        curriculum begins."""
+        if self.cfg.iterations is None and "effort" in self.cfg.fit \
+                and stage == int(self.cfg.effort_after * len(self.horizons)) and it < self.effort_from:
+            self.effort_from = it
 
     def _search(self, field: str, grid, values, per_joint: bool = False) -> GridChoice | None:
         return grid_search(self.cfg, self.model, self.sim, self.train, self.rng, field, grid, values, self.log,
@@ -364,9 +376,10 @@ class _IdentifyLearner:
         return {"model": self.model.state_dict(), "optim": self.optim.state_dict(), **nodes}
 
     def meta(self) -> dict:
-        return {}
+        return {"effort_from": self.effort_from}
 
     def restore(self, data: dict) -> None:
+        self.effort_from = data["meta"].get("effort_from", self.effort_from)
         self.model.load_state_dict(data["model"])
         self.optim.load_state_dict(data["optim"])
         if self.nodes is not None:

@@ -2,11 +2,10 @@
 
 Both fit by multiple shooting: each iteration replays B windows of H recorded steps from their recorded start state
 and descends the mismatch. What they share lives here, as rsl_rl splits its runner from the algorithm: the
-schedule (the horizon curriculum in equal parts of training, the cosine learning rate from ``cfg.lr`` to
-``cfg.lr_final``), the run folder (:class:`~wresdyn.learn.runs.RunFolder`: resume, checkpoints, the curve), scoring
-on the validation split every ``select_every`` iterations (the wall-clock counts training only), the log line and
-checkpoint every ``iterations // 20``, the stops (``until``, ``stop_below``) and the final selection of the best
-iterate on validation. A learner (:class:`WindowLearner`) keeps its model, its loss and its step, with whatever
+schedule (:mod:`.schedule`: the horizon curriculum and the learning rate, for a fixed count or until validation
+plateaus), the run folder (:class:`~wresdyn.learn.runs.RunFolder`: resume, checkpoints, the curve), scoring
+on the validation split (the wall-clock counts training only), the log lines and checkpoints, the stops (the
+schedule's, ``until``, ``stop_below``) and the final selection of the best iterate on validation. A learner (:class:`WindowLearner`) keeps its model, its loss and its step, with whatever
 it does at given iterations.
 """
 
@@ -20,6 +19,7 @@ import torch
 
 from ..progress import bar
 from .runs import RunFolder
+from .schedule import FixedSchedule, make_schedule
 
 __all__ = ["WindowLearner", "run_window_fit", "schedule", "start_window_fit",
            "joint_weights", "squared_error"]
@@ -67,43 +67,46 @@ class WindowLearner(Protocol):
 
 
 def schedule(cfg, horizons, it: int) -> tuple[int, float]:
-    """Window length [steps] and learning rate at iteration ``it`` of ``cfg.iterations``: the horizons in equal parts
-    of training, the learning rate on a cosine from ``cfg.lr`` (first iteration) to ``cfg.lr_final`` (the end)."""
-    h = horizons[min(it * len(horizons) // cfg.iterations, len(horizons) - 1)]
-    lr = float(cfg.lr_final + 0.5 * (cfg.lr - cfg.lr_final) * (1.0 + np.cos(np.pi * it / cfg.iterations)))
+    """Window length [steps] and learning rate at iteration ``it`` of a fixed ``cfg.iterations``
+    (:class:`~wresdyn.learn.schedule.FixedSchedule`)."""
+    _, h, lr = FixedSchedule(cfg, horizons).at(it)
     return h, lr
 
 
 def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.Generator, log=print,
                    until: int | None = None, stop_below: float | None = None) -> list[dict]:
-    """Resume ``run`` if it holds a checkpoint, iterate ``learner`` to the end of the schedule (or ``until``), and
+    """Resume ``run`` if it holds a checkpoint, iterate ``learner`` until its schedule ends (or ``until``), and
     leave ``learner.module`` at the best iterate on validation when the schedule is done (or ``stop_below`` reached).
 
     Args:
-        cfg: The learner's config: ``iterations``, ``lr``, ``lr_final``, ``select_every`` (``None``: ten times per run).
-        learner: The model, its loss and its step.
+        cfg: The learner's config: ``iterations`` (``None``: until validation plateaus, :mod:`.schedule`), ``lr``,
+            ``lr_final``, ``select_every`` and the plateau rule's fields.
+        learner: The model, its loss and its step; its optional ``on_stage(stage, it)`` is called where a horizon
+            stage begins.
         run: The run folder (``RunFolder(None, ...)`` keeps it in memory).
         rng: The window sampler, checkpointed with the run.
         log: Progress printer.
-        until: Stop (and checkpoint) after this many iterations of the schedule, to resume later; ``None``: the end.
+        until: Stop (and checkpoint) after this many iterations, to resume later; ``None``: the schedule's end.
         stop_below: End at the first validation score at or below this [rad], with the best selected so far.
 
     Returns:
         The learning curve (``run.curve``), also written to ``curve.json``.
     """
+    sched = make_schedule(cfg, learner.horizons)
     data = run.resume(keys=learner.checkpoint_keys, map_location=learner.map_location)
     if data is not None:
         learner.restore(data)
         rng.bit_generator.state = data["meta"]["rng"]
+        sched.restore(data["meta"].get("schedule", {}))
         log(f"resumed from {run.checkpoint} at iteration {run.iteration}")
     else:
         learner.begin(run)
     start_it, curve, best = run.iteration, run.curve, run.best
-    select_every = max(1, cfg.select_every or cfg.iterations // 10)
-    log_every = max(1, cfg.iterations // 20)
-    stop = cfg.iterations if until is None else min(until, cfg.iterations)
     t0 = time.perf_counter() - run.wall
     reached = False
+    finished = False
+    stage = None
+    on_stage = getattr(learner, "on_stage", None)
     pending: list[tuple[dict, torch.Tensor]] = []  # rows whose loss parts are still on the device
 
     def settle() -> None:
@@ -118,9 +121,23 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
                                          "(simulation diverged)")
         pending.clear()
 
-    with bar(log, stop, learner.name, start_it) as progress:
-        for it in range(start_it, stop):
-            h, lr = schedule(cfg, learner.horizons, it)
+    def checkpoint() -> None:
+        run.save(learner.state(), rng=rng.bit_generator.state, schedule=sched.state(), **learner.meta())
+
+    total = sched.total if until is None else min(until, sched.total)
+    it = start_it
+    with bar(log, total, learner.name, start_it) as progress:
+        while True:
+            wall = curve[-1]["wall"] if curve else run.wall
+            if sched.finished(it, wall):
+                finished = True
+                break
+            if until is not None and it >= until:
+                break
+            s, h, lr = sched.at(it)
+            if s != stage and on_stage is not None:
+                on_stage(s, it)
+            stage = s
             fields, parts = learner.step(it, h, lr)
             row = {"iteration": it + 1, "wall": time.perf_counter() - t0, **fields}
             if parts is not None:
@@ -130,11 +147,13 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
                 # capture) wait for the device, so their rows' wall-clock is exact (a reference for throughput)
                 settle()
                 row["wall"] = time.perf_counter() - t0
-            validate = (it + 1) % select_every == 0 or it + 1 == cfg.iterations
-            report = (it + 1) % log_every == 0 or it + 1 == stop
+            validate = sched.validate_now(it)
+            last = it + 1 == total
+            report = sched.log_now(it) or last
             if validate or report:
                 settle()
                 row["wall"] = time.perf_counter() - t0  # the device has caught up: the row's true wall-clock
+            note = ""
             if validate:
                 t_eval = time.perf_counter()
                 value = learner.score()
@@ -143,19 +162,28 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
                     row["validation"] = value
                     best.consider(value, it + 1, learner.module)
                     reached = stop_below is not None and value <= stop_below
+                note = sched.observe(value, it + 1, row["wall"])
             curve.append(row)
             progress.update(1, f"H={h}" + (f"  loss {row['loss']:.2e}" if "loss" in row else ""))
+            it += 1
             if report or reached:
-                msg = f"iter {it + 1:5d}/{cfg.iterations}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
+                of = f"/{cfg.iterations}" if cfg.iterations is not None else ""
+                msg = f"iter {it:5d}{of}  H={h:3d}  loss {row['loss']:.3e}  |dq|² {row['pos']:.3e}"
                 log(msg + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "")
                     + f"  {row['wall']:.0f}s")
-                run.save(learner.state(), rng=rng.bit_generator.state, **learner.meta())
+                checkpoint()
+            if note:
+                log(note)
             if reached:
-                log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it + 1}: stopping")
+                log(f"validation {row['validation']:.4f} rad <= {stop_below:.4f} rad at iteration {it}: stopping")
                 break
     settle()
+    if finished:
+        if curve and run.iteration != it:
+            checkpoint()
+        log(f"{learner.what}: {sched.reason}")
     run.write_curve()
-    if best.state is not None and (stop == cfg.iterations or reached):
+    if best.state is not None and (finished or reached):
         learner.module.load_state_dict(best.state)
         log(f"selected iteration {best.iteration} by validation ({best.value:.4f} rad)")
     return curve
