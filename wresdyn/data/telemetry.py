@@ -48,8 +48,8 @@ UNITS_BEYOND_RAD = 1.0
 or zero: a calibration offset or a loose limit in the file is a few tenths of a radian, degrees read as radians
 put a 10 degree angle 9.8 rad out."""
 UNITS_DEG_MARGIN_RAD = 0.2
-"""Degrees are suggested when the values times pi/180 lie within the joint range widened by this much [rad]
-(the same few tenths a calibration may be off by)."""
+"""Degrees are suggested when the values spread wider than the joint range plus this much [rad] and, times pi/180,
+lie within the range widened by this much (the few tenths a calibration may be off by)."""
 VELOCITY_RATIO_MAX = 5.0
 """A logged velocity whose typical size is more than this factor off the derivative of the logged position has
 other units (degrees per second: 57x; a raw tick rate: hundreds). Servo velocity estimates are coarse: on the
@@ -263,9 +263,12 @@ def check_units(name: str, joint: str, q: np.ndarray, q_cmd: np.ndarray, lower: 
         beyond = float(max(lower - x.min(), x.max() - upper, 0.0))
         if beyond > UNITS_BEYOND_RAD:
             r = x * math.pi / 180.0
-            degrees = r.min() >= lower - UNITS_DEG_MARGIN_RAD and r.max() <= upper + UNITS_DEG_MARGIN_RAD
+            # degrees: the values spread wider than the joint can move, and times pi/180 they fit; a spread that
+            # fits but sits outside the range is a zero offset instead
+            degrees = bool(np.ptp(x) > upper - lower + UNITS_DEG_MARGIN_RAD and r.min() >= lower - UNITS_DEG_MARGIN_RAD
+                           and r.max() <= upper + UNITS_DEG_MARGIN_RAD)
             hint = ("looks like degrees read as radians (times pi/180 it fits the range): map it with units "
-                    "\"deg\"" if degrees else "wrong units, scale or zero offset: check the map's [units]")
+                    "\"deg\"" if degrees else "wrong zero offset, scale or units: check the map's [units]")
             out.append(Finding(name, joint, "units", {"min_rad": float(x.min()), "max_rad": float(x.max()),
                                                       "lower_rad": lower, "upper_rad": upper, "beyond_rad": beyond,
                                                       "degrees": bool(degrees)},
