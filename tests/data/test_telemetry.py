@@ -176,7 +176,8 @@ def test_constant_commands(tmp_path):
                               ("never_excited", "wrist_roll")]
     first = next(f for f in found if f["run"] == "r0")
     assert first["numbers"]["joints"] == ["shoulder_pan", "wrist_roll"] and first["numbers"]["command_rad"] == [0.1] * 2
-    assert "r0: command constant over the whole run (10.0 s) on shoulder_pan +0.100, wrist_roll +0.100" in first["message"]
+    assert first["message"].startswith("r0: command constant over the whole run (10.0 s) on shoulder_pan +0.100, "
+                                       "wrist_roll +0.100 rad: ")
     log = _clean()
     log["q_cmd"][:, 5] = 0.4
     assert _findings(tmp_path, [_write(tmp_path, "csv", log, "grip")], exclude=("gripper",)) == []

@@ -276,8 +276,8 @@ def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = N
     run's index when two runs share one. ``meta`` gets ``source_logs`` (per run: name, split, file, format,
     samples, duration, median rate, jitter, max gap; LeRobot followers read without a map: their ``units``),
     ``excluded_joints``, ``log_map`` and ``telemetry`` (the :mod:`wresdyn.data.telemetry` findings of every run,
-    as dicts; a run those checks find unusable is an error). ``lerobot``: calibration and units of LeRobot datasets read without a
-    ``log_map`` (a map sets the units itself: giving both is an error)."""
+    as dicts; a run those checks find unusable is an error). ``lerobot``: calibration and units of LeRobot
+    datasets read without a ``log_map`` (a map sets the units itself: giving both is an error)."""
     joint_names = list(robot.joint_names)
     if log_map is not None and lerobot is not None:
         raise DatasetError(f"{log_map.source}: a mapping file sets the units itself; give it or LeRobot's "

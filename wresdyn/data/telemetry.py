@@ -87,9 +87,12 @@ def check_run(name: str, log: dict, joint_names: list[str], lower: np.ndarray, u
     """Every check on one run as read (:func:`~wresdyn.data.logs.read_log` arrays).
 
     Args:
-        name: the run's name. log: ``t`` (N,) [s], ``q`` (N, n) [rad], ``q_cmd`` (M, n) [rad] on ``t_cmd`` (M,) [s]
-            or on ``t``, ``qd`` (N, n) [rad/s] or None. joint_names: (n,). lower, upper: the robot's joint limits
-            [rad], (n,), infinite where unlimited. excluded: joints not fitted: only their units are checked.
+        name: the run's name.
+        log: ``t`` (N,) [s], ``q`` (N, n) [rad], ``q_cmd`` (M, n) [rad] on ``t_cmd`` (M,) [s] (or on ``t``),
+            ``qd`` (N, n) [rad/s] or None.
+        joint_names: the robot's joints, the columns, (n,).
+        lower, upper: the robot's joint limits [rad], (n,), infinite where unlimited.
+        excluded: joints not fitted: only their units are checked.
         where: prefix of an error message (the run's file).
 
     Raises:
