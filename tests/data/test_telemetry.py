@@ -213,6 +213,20 @@ def so101_file():
     return SO101
 
 
+def test_the_simulated_real_so101_is_clean(tmp_path, so101_file, record):
+    """A multisine recorded on the project's simulated real SO-101 (MuJoCo, its mismatch config, sensor noise),
+    written as an NPZ log and imported onto the robot file's own limits: no finding."""
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.robot.description import load_robot
+
+    robot = load_robot(so101_file)
+    (tr,) = record(robot, Mismatch.load(so101_file.parent / "mismatch.toml"), {"train": 1}, 3.0,
+                   amplitude=0.4).trajectories
+    path = tmp_path / "sim.npz"
+    np.savez(path, time=tr.t, joint_names=np.array(robot.joint_names), q=tr.q, q_cmd=tr.q_cmd, qd=tr.qd)
+    assert import_runs([path], robot, RATE).meta["telemetry"] == []
+
+
 def test_cli_writes_warnings_and_report_or_fails_writing_nothing(tmp_path, so101_file, capsys):
     """collect --logs on a SAGE run with a frozen wrist: the warning line on stdout and in collect.log, the record
     in telemetry.json and the dataset's meta; a run with gaps over most of it: exit 2, one line, no folder."""
