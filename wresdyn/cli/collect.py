@@ -10,7 +10,8 @@ then replays the validation, held-out and OOD commands PD-only in Newton and rep
 also stored in the dataset's meta.
 Logs: ``--logs A.csv B.npz RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, SAGE runs, LeRobot datasets;
 docs/dataset.md) onto the ``--rate`` grid instead, with a ``--map`` file and splits by ``--assign`` / ``--split-map``
-patterns or fractions, and reports the same PD-only gap.
+patterns or fractions, prints the telemetry checks' warnings (:mod:`wresdyn.data.telemetry`; also in
+``OUT/telemetry.json``) and reports the same PD-only gap.
 
 Every line printed is also in ``OUT/collect.log``; on a terminal a progress bar over the trajectories shows the
 elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
@@ -19,6 +20,7 @@ elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing
 from __future__ import annotations
 
 import argparse
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -174,12 +176,18 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
     excluded = ds.meta["excluded_joints"]
     if excluded:
         log(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")
+    findings = ds.meta["telemetry"]
+    log(f"telemetry checks (docs/logs.md): {len(findings)} warning(s)" + (":" if findings else ""))
+    for f in findings:
+        log(f"warning: {f['message']}")
     if not args.no_gap:
         ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, rate, "run(s)", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
+    report = out / "telemetry.json"  # one record per finding, also in the dataset's meta["telemetry"]
+    report.write_text(json.dumps(findings, indent=1) + "\n")
     counts = ", ".join(f"{len(ds.split(s))} {s}" for s in ("train", "validation", "heldout", "ood") if ds.split(s))
-    log(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB): {counts}")
+    log(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB) and {report}: {counts}")
     return 0
 
 

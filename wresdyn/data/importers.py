@@ -41,6 +41,7 @@ from .log_files import (
     read_toml,
     to_trajectory,
 )
+from .telemetry import check_runs
 
 __all__ = ["Run", "SplitRule", "sage_run", "lerobot_root", "read_sage", "read_lerobot", "read_runs", "import_runs",
            "parse_assign", "load_split_map"]
@@ -274,8 +275,9 @@ def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = N
     (:func:`read_runs`), resampled onto ``rate_hz``, its split from ``splits``. Names are made unique with the
     run's index when two runs share one. ``meta`` gets ``source_logs`` (per run: name, split, file, format,
     samples, duration, median rate, jitter, max gap; LeRobot followers read without a map: their ``units``),
-    ``excluded_joints`` and ``log_map``. ``lerobot``: calibration and units of LeRobot datasets read without a
-    ``log_map`` (a map sets the units itself: giving both is an error)."""
+    ``excluded_joints``, ``log_map`` and ``telemetry`` (the :mod:`wresdyn.data.telemetry` findings of every run,
+    as dicts; a run those checks find unusable is an error). ``lerobot``: calibration and units of LeRobot
+    datasets read without a ``log_map`` (a map sets the units itself: giving both is an error)."""
     joint_names = list(robot.joint_names)
     if log_map is not None and lerobot is not None:
         raise DatasetError(f"{log_map.source}: a mapping file sets the units itself; give it or LeRobot's "
@@ -293,12 +295,15 @@ def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = N
     shown = maps[0] if all(m == maps[0] for m in maps) else log_map  # one derived map for every run, or the given
     names = [r.name for r in runs]
     names = [f"{n}_{i}" if names.count(n) > 1 else n for i, n in enumerate(names)]
+    wheres = [f"{r.file}: episode {r.info['episode_index']}" if r.format == "lerobot" else r.file for r in runs]
+    findings = check_runs([(n, r.log, tuple(m.excluded_joints(joint_names)), w)
+                           for r, n, m, w in zip(runs, names, maps, wheres)], joint_names, robot.lower, robot.upper)
     trajs, sources = [], []
-    for run, name, split in zip(runs, names, splits.assign(names)):
-        where = f"{run.file}: episode {run.info['episode_index']}" if run.format == "lerobot" else run.file
+    for run, name, split, where in zip(runs, names, splits.assign(names), wheres):
         trajs.append(to_trajectory(run.log, rate_hz, name, split, where, store_tau))
         sources.append({"name": name, "split": split, "file": run.file, **log_stats(run.log["t"]), **run.info})
     meta = {"generator": "wresdyn collect --logs", "source_logs": sources, "excluded_joints": excluded,
+            "telemetry": [f.to_dict() for f in findings],
             "log_map": shown.to_dict(),
             "split_rule": {"default": splits.default, "patterns": [list(p) for p in splits.patterns],
                            "validation_fraction": splits.validation_fraction,
