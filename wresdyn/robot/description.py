@@ -246,7 +246,8 @@ def resolve_path(path: str | Path) -> Path:
     return Path(path)
 
 
-def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed") -> Robot:
+def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed",
+               package_path: list[str] | str | None = None) -> Robot:
     """Load a robot file into a :class:`Robot`.
 
     Args:
@@ -256,6 +257,8 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
             (see :func:`~wresdyn.robot.gains.apply_overrides`); kept on the robot (:attr:`Robot.gains`) so a dataset
             can store it.
         base: ``"fixed"`` (the robot hangs on a stand, as in data collection) or ``"floating"``.
+        package_path: Folders that hold the ROS packages a URDF's ``package://`` URIs name
+            (:mod:`wresdyn.robot.packages`); default: the command line's ``--package-path``.
 
     Raises:
         RobotError: one-line message naming the file and the problem.
@@ -275,9 +278,14 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     kind = _SUFFIX_KIND.get(path.suffix.lower())
     if kind is None:
         raise RobotError(f"{path}: unknown robot file type {path.suffix!r} (expected .usd/.usda/.usdc, .urdf or .xml)")
+    from .packages import user_roots
+
+    roots = user_roots() if package_path is None else package_path
     builder = newton.ModelBuilder()
     try:
-        import_file(builder, path, kind, floating=(base == "floating"))
+        import_file(builder, path, kind, floating=(base == "floating"), package_path=roots)
+    except RobotError:
+        raise
     except Exception as e:  # importers raise many types on malformed input; report one line
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise RobotError(f"{path}: cannot parse {kind.upper()} file: {msg}") from None
@@ -291,7 +299,8 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     robot.gains, robot.gains_file = config, gains_file
     robot.effort_given = np.array([int(d) in effort_dofs for d in robot.qd_index], dtype=bool)
     robot.servo = read_servo(config, robot.joint_names, robot.effort, gains_file or "gains config")
-    robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
+    robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base,
+                        [str(r) for r in roots] if isinstance(roots, list) else roots)
     return robot
 
 
@@ -301,6 +310,16 @@ def _reload(args: tuple, sha256: str) -> Robot:
     if robot.source_sha256 != sha256:
         raise RobotError(f"{robot.source}: the robot file changed since it was loaded in the parent process")
     return robot
+
+
+_RESERVED_BODY = {"world": "world_link"}
+"""Body names MuJoCo reserves, and what the body is called instead: a ROS URDF often has a link ``world`` (fixed to
+the world frame) that Newton imports as a body, and MuJoCo's own world body is ``world``."""
+
+
+def _body_name(label: str) -> str:
+    name = short_label(label)
+    return _RESERVED_BODY.get(name, name)
 
 
 def _describe(builder, path: Path, base: str) -> Robot:
@@ -358,7 +377,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
         source_sha256=_sha256(path),
         base=base,
         builder=builder,
-        body_names=[short_label(builder.body_label[b]) for b in range(nb)],
+        body_names=[_body_name(builder.body_label[b]) for b in range(nb)],
         body_parent=np.array([parent[by_child[b]] for b in range(nb)], dtype=np.int64),
         joint_type=[names[JT(jt[by_child[b]])] for b in range(nb)],
         joint_X_p=np.array([builder.joint_X_p[by_child[b]] for b in range(nb)], dtype=np.float64),
