@@ -205,6 +205,10 @@ def run(args: argparse.Namespace) -> int:
     from ..data.real_robot import collect
 
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
+    from ..data.real_robot import RealRobot
+    from ..sim.first_steps import check_mujoco
+
+    check_mujoco(RealRobot(robot, mismatch, cfg.rate))  # a model that blows up is refused before the long recording
     probes = f" (with {cfg.probe_saturation} saturation probes)" if cfg.probe_saturation else ""
     log(f"collecting {sum(cfg.counts.values()) + cfg.probe_saturation} trajectories{probes} of {cfg.duration:g} s at "
         f"{cfg.rate:g} Hz on {robot.source.name} with mismatch "

@@ -149,23 +149,48 @@ class Robot:
         given = self.effort_given if self.effort_given is not None else np.zeros(self.n_dof, dtype=bool)
         return [n for n, e, g in zip(self.joint_names, self.effort, given) if not e < PLACEHOLDER_EFFORT and not g]
 
+    def missing_gains(self) -> list[str]:
+        """Actuated joints without PD stiffness (``kp`` zero or absent in the file and in the gains config): a
+        position replay cannot drive them."""
+        return [n for n, k in zip(self.joint_names, self.kp) if not k > 0.0]
+
+    def check_gains(self) -> None:
+        """Raise :class:`RobotError` if any actuated joint has no PD stiffness (:meth:`missing_gains`)."""
+        self._refuse(self.missing_gains(), [])
+
     def check_effort(self) -> None:
         """Raise :class:`RobotError` if any actuated joint has a placeholder effort limit (see
         :meth:`placeholder_effort`): the real robot's torque saturation and the mismatch's friction (a fraction of
         the effort limit) would be made up."""
-        bad = self.placeholder_effort()
-        if bad:
-            raise RobotError(
-                f"{self.source}: {len(bad)} of {self.n_dof} joints have no effort limit in the file, only the "
-                f"importer's placeholder ({', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}); set it in a gains "
-                "config and pass it with --gains FILE.toml, e.g. [[joint]] match = \"*\" effort = 3.0 (N*m)"
-            )
+        self._refuse([], self.placeholder_effort())
 
     def check_replay(self) -> None:
         """Everything a replay or a fit needs from the robot: PD gains (:meth:`check_gains`) and stated effort
-        limits (:meth:`check_effort`)."""
-        self.check_gains()
-        self.check_effort()
+        limits (:meth:`check_effort`), refused together in one line that names the joints. Position limits are not
+        required: a continuous joint is excited over +-pi."""
+        self._refuse(self.missing_gains(), self.placeholder_effort())
+
+    def _refuse(self, no_gains: list[str], no_effort: list[str]) -> None:
+        """One :class:`RobotError` line naming the joints without gains and without an effort limit, with the gains
+        config that supplies them (a pattern for one joint, ``*`` for several)."""
+        if not no_gains and not no_effort:
+            return
+
+        def names(bad):
+            return f"{', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}"
+
+        parts, keys = [], []
+        if no_gains:
+            parts.append(f"{len(no_gains)} of {self.n_dof} joints have no PD gains ({names(no_gains)})")
+            keys.append("kp = 100.0 kd = 5.0")
+        if no_effort:
+            parts.append(f"{len(no_effort)} of {self.n_dof} joints have no effort limit in the file, only the "
+                         f"importer's placeholder ({names(no_effort)})")
+            keys.append("effort = 3.0 (N*m)")
+        bad = set(no_gains) | set(no_effort)
+        match = next(iter(bad)) if len(bad) == 1 else "*"
+        raise RobotError(f"{self.source}: {' and '.join(parts)}; set them in a gains config passed with --gains "
+                         f"FILE.toml, e.g. [[joint]] match = \"{match}\" {' '.join(keys)}")
 
     def gains_record(self) -> dict | None:
         """The gains config as a dataset stores it: ``{"file": path or None, "config": parsed TOML}``, or ``None``
@@ -173,16 +198,6 @@ class Robot:
         if self.gains is None:
             return None
         return {"file": self.gains_file, "config": copy.deepcopy(self.gains)}
-
-    def check_gains(self) -> None:
-        """Raise :class:`RobotError` if any actuated joint has no PD stiffness (nothing to replay)."""
-        missing = [n for n, k in zip(self.joint_names, self.kp) if not k > 0.0]
-        if missing:
-            raise RobotError(
-                f"{self.source}: {len(missing)} of {self.n_dof} joints have no PD gains ({', '.join(missing[:4])}"
-                f"{', ...' if len(missing) > 4 else ''}); supply them with a gains config (--gains FILE.toml, "
-                "e.g. [[joint]] match = \"*\" kp = 100.0 kd = 5.0)"
-            )
 
     def build_model(self, n_worlds: int = 1, device: str | None = None, requires_grad: bool = False,
                     ground: bool = False, contact=None):
