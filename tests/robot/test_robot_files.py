@@ -7,6 +7,7 @@ code 2 and nothing written."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import warnings
 from pathlib import Path
@@ -264,9 +265,14 @@ def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, caps
     assert str(alone.parent) in line and "--package-path" in line
     assert main(["--package-path", str(tmp_path / "ws"), "inspect", str(alone), "--floating"]) == 0
     assert "1 actuated joints" in capsys.readouterr().out
-    roots = f"{tmp_path / 'nothing_here'}{__import__('os').pathsep}{tmp_path / 'ws'}"
+    roots = f"{tmp_path / 'nothing_here'}{os.pathsep}{tmp_path / 'ws'}"
     (tmp_path / "nothing_here").mkdir()
     assert _mesh_shapes(load_robot(alone, base="floating", package_path=roots)) >= 2
+    # a relative mesh path that names no file is refused too, not dropped
+    broken = tmp_path / "elsewhere" / "broken.urdf"
+    broken.write_text(MINI.replace("package://mini_description/meshes/base.dae", "meshes/base.dae"))
+    with pytest.raises(RobotError, match="mesh 'meshes/base.dae' not found"):
+        load_robot(broken, package_path=[tmp_path / "ws"])
 
 
 def test_robot_without_gains_is_refused_naming_the_joint(tmp_path, capsys):

@@ -2,7 +2,7 @@
 
 ROS description packages name their meshes ``package://NAME/path/in/package``. Newton resolves such URIs only
 through ``resolve-robotics-uri-py`` (not a dependency) and otherwise guesses, warns and drops the mesh; wresdyn
-resolves them itself, so a mesh that cannot be found is a one-line :class:`~wresdyn.errors.RobotError` naming the
+resolves them itself, so a mesh that cannot be found (by URI or by relative path) is a one-line :class:`~wresdyn.errors.RobotError` naming the
 URI and the folders searched instead of a robot silently missing its geometry.
 
 A package ``NAME`` is looked for, in this order, in:
@@ -33,6 +33,7 @@ _USER_ROOTS: list[Path] = []
 """Package roots given on the command line (``--package-path``); set once per command by :func:`set_package_path`."""
 
 PREFIX = "package://"
+"""The scheme of a ROS package URI: ``package://NAME/path/in/package``."""
 
 
 def _split(entries: Iterable[str | Path] | str | None) -> list[Path]:
@@ -100,14 +101,14 @@ def resolve_package_uri(uri: str, urdf: Path, roots: Iterable[str | Path] | str 
 
 def resolved_urdf(path: Path, roots: Iterable[str | Path] | str | None = None) -> str | None:
     """The URDF's XML with the ``filename`` of every ``<mesh>`` and ``<texture>`` made an absolute path (``package://``
-    URIs resolved, relative paths against the URDF's folder), or ``None`` when the file has no ``package://`` URI
-    (it is then imported as it is).
+    URIs resolved, relative paths against the URDF's folder), or ``None`` when the file names no file at all (it
+    is then imported as it is). A mesh Newton could not find would only be warned about and dropped.
 
     Raises:
         RobotError: a ``package://`` URI resolves to no file, or a relative mesh path names a missing file.
     """
     text = path.read_text(errors="replace")
-    if PREFIX not in text:
+    if "filename" not in text:
         return None
     try:
         tree = ET.ElementTree(ET.fromstring(text))
