@@ -265,6 +265,8 @@ def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, caps
     assert str(alone.parent) in line and "--package-path" in line
     assert main(["--package-path", str(tmp_path / "ws"), "inspect", str(alone), "--floating"]) == 0
     assert "1 actuated joints" in capsys.readouterr().out
+    assert main(["--package-path", str(tmp_path / "missing"), "inspect", str(alone), "--floating"]) == 2
+    assert "not a folder" in _one_line(capsys)
     roots = f"{tmp_path / 'nothing_here'}{os.pathsep}{tmp_path / 'ws'}"
     (tmp_path / "nothing_here").mkdir()
     assert _mesh_shapes(load_robot(alone, base="floating", package_path=roots)) >= 2
@@ -322,3 +324,12 @@ def test_a_diverging_model_is_refused_by_collect_and_fit(tmp_path, capsys):
     assert line.startswith("wresdyn fit: error:") and "Newton replay" in line and "diverges" in line
     assert "joint pole" in line
     assert not run.exists()
+    # the same checks pass the robot with its real gains, from rest and from the data's first sample
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
+    from wresdyn.sim.first_steps import check_mujoco, check_newton
+
+    ds, cartpole = load_data(str(data / "dataset.npz"))
+    check_mujoco(RealRobot(cartpole, Mismatch.load("data/mismatch_default.toml"), ds.rate_hz))
+    first = ds.trajectories[0]
+    check_newton(cartpole, ds.rate_hz, first.q[0], first.qd[0], first.q_cmd)
