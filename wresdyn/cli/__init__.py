@@ -69,17 +69,15 @@ def main(argv: list[str] | None = None) -> int:
     parser, _ = build_parser()
     args = parser.parse_args(argv)
     mod = importlib.import_module(args._module)
-    try:
-        from ..robot.packages import set_package_path
+    from ..robot.packages import set_package_path
 
+    try:
         set_package_path(args.package_path)
         return int(mod.run(args) or 0)
     except _user_errors() as e:
         print(f"wresdyn {args.command}: error: {e}", file=sys.stderr)
         return 2
     finally:
-        from ..robot.packages import set_package_path
-
         set_package_path([])  # the roots belong to this command, not to later calls in the same process
 
 
