@@ -2,8 +2,9 @@
 
 ROS description packages name their meshes ``package://NAME/path/in/package``. Newton resolves such URIs only
 through ``resolve-robotics-uri-py`` (not a dependency) and otherwise guesses, warns and drops the mesh; wresdyn
-resolves them itself, so a mesh that cannot be found (by URI or by relative path) is a one-line :class:`~wresdyn.errors.RobotError` naming the
-URI and the folders searched instead of a robot silently missing its geometry.
+resolves them itself, so a mesh that cannot be found (by URI or by path) is a one-line
+:class:`~wresdyn.errors.RobotError` naming the URI and the folders searched instead of a robot silently missing its
+geometry.
 
 A package ``NAME`` is looked for, in this order, in:
 
@@ -105,7 +106,7 @@ def resolved_urdf(path: Path, roots: Iterable[str | Path] | str | None = None) -
     is then imported as it is). A mesh Newton could not find would only be warned about and dropped.
 
     Raises:
-        RobotError: a ``package://`` URI resolves to no file, or a relative mesh path names a missing file.
+        RobotError: a ``package://`` URI resolves to no file, or a mesh path names a missing file.
     """
     text = path.read_text(errors="replace")
     if "filename" not in text:
@@ -120,8 +121,8 @@ def resolved_urdf(path: Path, roots: Iterable[str | Path] | str | None = None) -
             continue
         if fn.startswith(PREFIX):
             el.set("filename", str(resolve_package_uri(fn, path, roots)))
-        elif "://" not in fn and not fn.lower().startswith("file:") and not os.path.isabs(fn):
-            full = (path.resolve().parent / fn).resolve()
+        elif "://" not in fn and not fn.lower().startswith("file:"):
+            full = (path.resolve().parent / fn).resolve()  # an absolute path stays itself
             if not full.is_file():
                 raise RobotError(f"{path}: mesh {fn!r} not found (looked for {full})")
             el.set("filename", str(full))
