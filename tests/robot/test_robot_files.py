@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import shutil
 import warnings
 from pathlib import Path
@@ -237,7 +238,7 @@ def _mini_package(root: Path) -> Path:
     return urdf
 
 
-def test_ur5_with_collada_meshes_loads():
+def test_ur5_with_collada_meshes_loads(capsys):
     urdf = _erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf"
     assert ".dae" in urdf.read_text() and "package://example-robot-data/" in urdf.read_text()
     with warnings.catch_warnings(record=True) as caught:
@@ -249,6 +250,11 @@ def test_ur5_with_collada_meshes_loads():
     assert _mesh_shapes(ur5) >= 14  # 7 Collada visuals (some hold several meshes) + 7 STL collision meshes
     assert "world" not in ur5.body_names and "world_link" in ur5.body_names  # MuJoCo's world keeps its name
     ur5.check_effort()  # the URDF states its effort limits (150 / 28 N*m)
+    # inspect lists a robot file without gains, says how to add them and skips the PD check it cannot run
+    assert main(["inspect", str(urdf)]) == 0
+    out = capsys.readouterr().out
+    assert "6 actuated joints" in out and "shoulder_pan_joint" in out and "PD replay check skipped" in out
+    assert "warning: 6 of 6 joints have no PD gains" in out and "--gains" in out
 
 
 def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, capsys):
@@ -269,7 +275,10 @@ def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, caps
     assert "not a folder" in _one_line(capsys)
     roots = f"{tmp_path / 'nothing_here'}{os.pathsep}{tmp_path / 'ws'}"
     (tmp_path / "nothing_here").mkdir()
-    assert _mesh_shapes(load_robot(alone, base="floating", package_path=roots)) >= 2
+    found = load_robot(alone, base="floating", package_path=roots)
+    assert _mesh_shapes(found) >= 2
+    # a worker process (parallel ablation) loads the file again with the same roots
+    assert _mesh_shapes(pickle.loads(pickle.dumps(found))) >= 2
     # a relative mesh path that names no file is refused too, not dropped
     broken = tmp_path / "elsewhere" / "broken.urdf"
     broken.write_text(MINI.replace("package://mini_description/meshes/base.dae", "meshes/base.dae"))
