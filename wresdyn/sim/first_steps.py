@@ -1,14 +1,14 @@
 """Does the model survive its first steps? A cheap check before a long job.
 
 A gains config with an absurd stiffness, or a file with a tiny mass or inertia behind a stiff drive, makes the PD
-step unstable: the simulation blows up within milliseconds, but ``collect`` would only find out after recording
-every trajectory and ``fit`` after compiling and windowing the data. Both commands therefore simulate
-:data:`SECONDS` of one robot first, starting at rest (or at the dataset's first sample) and commanding a small step
-away from the start pose so the drives act even where gravity does not load a joint, and refuse a model whose
-joint speed becomes non-finite or exceeds :attr:`~wresdyn.sim.simulator.DivergenceLimits.max_qd` (the limit the
-learners reset a world at), naming the worst joint: :func:`check_mujoco` for the MuJoCo "real robot" of
-``collect`` (mismatch, delay and servo law included), :func:`check_newton` for the Newton replay of ``fit``.
-Both cost a few milliseconds on a compiled model.
+step unstable: the simulation blows up within milliseconds, but ``collect`` would find out only at the end of a
+recorded trajectory and ``fit`` only inside its optimisation. Both commands therefore simulate
+:data:`SECONDS` of one robot first and refuse a model whose joint speed becomes non-finite or exceeds
+:attr:`~wresdyn.sim.simulator.DivergenceLimits.max_qd` (the limit the learners reset a world at), naming the worst
+joint: :func:`check_mujoco` for the MuJoCo "real robot" of ``collect`` (mismatch, delay and servo law included),
+from rest at the neutral pose under a small commanded step (:func:`probe_command`: the drives act even where gravity
+does not load a joint); :func:`check_newton` for the Newton replay of ``fit``, from the data's first sample under
+its own commands. Both cost a few milliseconds on a compiled model.
 """
 
 from __future__ import annotations
