@@ -257,7 +257,7 @@ def test_ur5_with_collada_meshes_loads(capsys):
     assert "warning: 6 of 6 joints have no PD gains" in out and "--gains" in out
 
 
-def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, capsys):
+def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, capsys, monkeypatch):
     urdf = _mini_package(tmp_path / "ws")
     mini = load_robot(urdf)  # mini_description is a folder above the URDF
     assert _mesh_shapes(mini) >= 2
@@ -279,6 +279,9 @@ def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, caps
     assert _mesh_shapes(found) >= 2
     # a worker process (parallel ablation) loads the file again with the same roots
     assert _mesh_shapes(pickle.loads(pickle.dumps(found))) >= 2
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws"))  # ROS's own variable serves as well
+    assert _mesh_shapes(load_robot(alone, base="floating")) >= 2
+    monkeypatch.delenv("ROS_PACKAGE_PATH")
     # a relative mesh path that names no file is refused too, not dropped
     broken = tmp_path / "elsewhere" / "broken.urdf"
     broken.write_text(MINI.replace("package://mini_description/meshes/base.dae", "meshes/base.dae"))
