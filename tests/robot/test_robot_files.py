@@ -1,10 +1,17 @@
 """Robot files as they come: effort limits the importers leave out (MJCF actuator force range, USD mjc:
-attributes), placeholder effort limits refused in one line, and the gains config travelling with a dataset."""
+attributes), placeholder effort limits refused in one line, the gains config travelling with a dataset, URDFs with
+Collada meshes behind package:// URIs (resolved in the description's tree or --package-path), and bad input (no
+gains, a gains pattern matching no joint, a model that diverges in its first steps) refused in one line with exit
+code 2 and nothing written."""
 
 from __future__ import annotations
 
 import json
+import os
+import pickle
+import shutil
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -183,3 +190,158 @@ def test_shipped_dataset_has_no_gains_and_loads():
 
     assert "gains" not in _raw_header(DEFAULT_DATASET) and read_header(DEFAULT_DATASET)["gains"] is None
     assert load_dataset(DEFAULT_DATASET).gains is None
+
+
+def _erd_robots() -> Path:
+    """example-robot-data's robots folder (a dev dependency: its URDFs name Collada meshes by package:// URI); the
+    cmeel wheel installs it under site-packages/cmeel.prefix."""
+    import sysconfig
+
+    robots = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share" / "example-robot-data" / "robots"
+    if not robots.is_dir():
+        pytest.skip("example-robot-data is not installed")
+    return robots
+
+
+def _mesh_shapes(robot) -> int:
+    """Mesh shapes of the robot's Newton builder that hold vertices (a mesh that failed to load is not added)."""
+    import newton
+
+    return sum(1 for t, src in zip(robot.builder.shape_type, robot.builder.shape_source)
+               if int(t) == int(newton.GeoType.MESH) and src is not None and len(src.vertices) > 0)
+
+
+MINI = """<robot name="mini">
+  <link name="base"><inertial><mass value="1.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/>
+    </inertial></link>
+  <link name="arm"><inertial><origin xyz="0 0 -0.1"/><mass value="0.5"/>
+      <inertia ixx="0.002" iyy="0.002" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>
+    <visual><geometry><mesh filename="package://mini_description/meshes/base.dae"/></geometry></visual>
+    <collision><geometry><mesh filename="package://mini_description/meshes/wrist3.stl"/></geometry></collision></link>
+  <joint name="hinge" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+    <limit lower="-1.5" upper="1.5" velocity="3.0"/></joint>
+</robot>
+"""
+"""A one-joint arm whose meshes (Collada visual, STL collision) are package:// URIs; its joint states neither gains
+nor an effort limit."""
+
+
+def _mini_package(root: Path) -> Path:
+    """``root/mini_description/{meshes,urdf}`` with meshes copied from example-robot-data's UR5; the URDF's path."""
+    ur5 = _erd_robots() / "ur_description" / "meshes" / "ur5"
+    (root / "mini_description" / "meshes").mkdir(parents=True)
+    shutil.copy(ur5 / "visual" / "base.dae", root / "mini_description" / "meshes")
+    shutil.copy(ur5 / "collision" / "wrist3.stl", root / "mini_description" / "meshes")
+    (root / "mini_description" / "urdf").mkdir()
+    urdf = root / "mini_description" / "urdf" / "mini.urdf"
+    urdf.write_text(MINI)
+    return urdf
+
+
+def test_ur5_with_collada_meshes_loads(capsys):
+    urdf = _erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf"
+    assert ".dae" in urdf.read_text() and "package://example-robot-data/" in urdf.read_text()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ur5 = load_robot(urdf)
+    # Newton warns and drops a mesh it cannot find or read: none may be dropped
+    assert not [w for w in caught if "resolve" in str(w.message) or "exist" in str(w.message)], caught
+    assert ur5.n_dof == 6 and ur5.joint_names[0] == "shoulder_pan_joint"
+    assert _mesh_shapes(ur5) >= 14  # 7 Collada visuals (some hold several meshes) + 7 STL collision meshes
+    assert "world" not in ur5.body_names and "world_link" in ur5.body_names  # MuJoCo's world keeps its name
+    ur5.check_effort()  # the URDF states its effort limits (150 / 28 N*m)
+    # inspect lists a robot file without gains, says how to add them and skips the PD check it cannot run
+    assert main(["inspect", str(urdf)]) == 0
+    out = capsys.readouterr().out
+    assert "6 actuated joints" in out and "shoulder_pan_joint" in out and "PD replay check skipped" in out
+    assert "warning: 6 of 6 joints have no PD gains" in out and "--gains" in out
+
+
+def test_package_uri_resolves_in_the_tree_and_on_the_package_path(tmp_path, capsys, monkeypatch):
+    urdf = _mini_package(tmp_path / "ws")
+    mini = load_robot(urdf)  # mini_description is a folder above the URDF
+    assert _mesh_shapes(mini) >= 2
+    # the same file away from its package: found only through --package-path (or ROS_PACKAGE_PATH)
+    alone = tmp_path / "elsewhere" / "mini.urdf"
+    alone.parent.mkdir()
+    shutil.copy(urdf, alone)
+    assert main(["inspect", str(alone), "--floating"]) == 2
+    line = _one_line(capsys)
+    assert line.startswith("wresdyn inspect: error:") and "package://mini_description/meshes/base.dae" in line
+    assert str(alone.parent) in line and "--package-path" in line
+    assert main(["--package-path", str(tmp_path / "ws"), "inspect", str(alone), "--floating"]) == 0
+    assert "1 actuated joints" in capsys.readouterr().out
+    assert main(["--package-path", str(tmp_path / "missing"), "inspect", str(alone), "--floating"]) == 2
+    assert "not a folder" in _one_line(capsys)
+    roots = f"{tmp_path / 'nothing_here'}{os.pathsep}{tmp_path / 'ws'}"
+    (tmp_path / "nothing_here").mkdir()
+    found = load_robot(alone, base="floating", package_path=roots)
+    assert _mesh_shapes(found) >= 2
+    # a worker process (parallel ablation) loads the file again with the same roots
+    assert _mesh_shapes(pickle.loads(pickle.dumps(found))) >= 2
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws"))  # ROS's own variable serves as well
+    assert _mesh_shapes(load_robot(alone, base="floating")) >= 2
+    monkeypatch.delenv("ROS_PACKAGE_PATH")
+    # a relative mesh path that names no file is refused too, not dropped
+    broken = tmp_path / "elsewhere" / "broken.urdf"
+    broken.write_text(MINI.replace("package://mini_description/meshes/base.dae", "meshes/base.dae"))
+    with pytest.raises(RobotError, match="mesh 'meshes/base.dae' not found"):
+        load_robot(broken, package_path=[tmp_path / "ws"])
+
+
+def test_robot_without_gains_is_refused_naming_the_joint(tmp_path, capsys):
+    urdf = _mini_package(tmp_path / "ws")
+    out = tmp_path / "o"
+    assert main(["collect", "--robot", str(urdf), "--train", "1", "--validation", "0", "--heldout", "0", "--ood",
+                 "0", "--duration", "0.2", "--out", str(out)]) == 2
+    line = _one_line(capsys)
+    assert "hinge" in line and "no PD gains" in line and "no effort limit" in line
+    assert '[[joint]] match = "hinge" kp = ' in line and "effort = " in line and "--gains" in line
+    assert not out.exists()
+
+
+def test_gains_naming_a_missing_joint_writes_nothing(tmp_path, capsys):
+    gains = tmp_path / "typo.toml"
+    gains.write_text('[[joint]]\nmatch = "slider_to_kart"\nkp = 100.0\nkd = 5.0\n')
+    out = tmp_path / "o"
+    assert main(["collect", "--robot", "newton:cartpole.urdf", "--gains", str(gains), "--out", str(out)]) == 2
+    line = _one_line(capsys)
+    assert "slider_to_kart" in line and "matches no 1-DoF joint" in line and str(gains) in line
+    assert not out.exists()
+
+
+ABSURD = '[[joint]]\nmatch = "*"\nkp = 1e9\nkd = 1.0\neffort = 1e9\n'
+"""Gains no explicit PD step survives: a stiffness of 1e9 N*m/rad on the cartpole's light links, unsaturated."""
+
+
+def test_a_diverging_model_is_refused_by_collect_and_fit(tmp_path, capsys):
+    absurd = tmp_path / "absurd.toml"
+    absurd.write_text(ABSURD)
+    short = ["--train", "1", "--validation", "0", "--heldout", "0", "--ood", "0", "--duration", "0.2"]
+    out = tmp_path / "o"
+    assert main(["collect", "--robot", "newton:cartpole.urdf", "--gains", str(absurd), *short, "--out", str(out)]) == 2
+    line = _one_line(capsys)
+    assert "MuJoCo real robot diverges" in line and "joint pole1_to_pole2" in line and "kp" in line
+    assert not out.exists()
+    data = tmp_path / "d"
+    assert main(["collect", "--robot", "newton:cartpole.urdf", "--gains", "examples/gains/cartpole.toml", *short,
+                 "--no-gap", "--out", str(data)]) == 0
+    capsys.readouterr()
+    run = tmp_path / "fit"
+    with pytest.warns(UserWarning, match="instead of the one stored"):
+        code = main(["fit", str(data / "dataset.npz"), "--gains", str(absurd), "--model", "network", "--iterations",
+                     "1", "--windows", "1", "--out", str(run)])
+    assert code == 2
+    line = _one_line(capsys)
+    assert line.startswith("wresdyn fit: error:") and "Newton replay" in line and "diverges" in line
+    assert "joint pole" in line
+    assert not run.exists()
+    # the same checks pass the robot with its real gains, from rest and from the data's first sample
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
+    from wresdyn.sim.first_steps import check_mujoco, check_newton
+
+    ds, cartpole = load_data(str(data / "dataset.npz"))
+    check_mujoco(RealRobot(cartpole, Mismatch.load("data/mismatch_default.toml"), ds.rate_hz))
+    first = ds.trajectories[0]
+    check_newton(cartpole, ds.rate_hz, first.q[0], first.qd[0], first.q_cmd)

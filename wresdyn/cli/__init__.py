@@ -51,6 +51,10 @@ def _user_errors():
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
     """The ``wresdyn`` parser and each command's own (its module's ``add_arguments``), by command name."""
     parser = _Parser(prog="wresdyn", description=__doc__.splitlines()[0])
+    parser.add_argument("--package-path", action="append", default=[], metavar="DIR",
+                        help="folder holding ROS packages that a URDF's package://NAME/... mesh URIs name (repeatable, "
+                             "or several joined by the path separator); searched before the URDF's own folder tree "
+                             "and ROS_PACKAGE_PATH")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     subs = {}
     for name, (module, help_) in COMMANDS.items():
@@ -65,11 +69,16 @@ def main(argv: list[str] | None = None) -> int:
     parser, _ = build_parser()
     args = parser.parse_args(argv)
     mod = importlib.import_module(args._module)
+    from ..robot.packages import set_package_path
+
     try:
+        set_package_path(args.package_path)
         return int(mod.run(args) or 0)
     except _user_errors() as e:
         print(f"wresdyn {args.command}: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        set_package_path([])  # the roots belong to this command, not to later calls in the same process
 
 
 def entry() -> None:

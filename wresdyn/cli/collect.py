@@ -210,9 +210,11 @@ def run(args: argparse.Namespace) -> int:
     robot.check_replay()  # simulating needs PD gains and stated effort limits
     from ..data.excitation import plot_spectrum
     from ..data.mismatch import Mismatch
-    from ..data.real_robot import collect
+    from ..data.real_robot import RealRobot, collect
+    from ..sim.first_steps import check_mujoco
 
     mismatch = Mismatch() if args.mismatch.lower() == "none" else Mismatch.load(args.mismatch)
+    check_mujoco(RealRobot(robot, mismatch, cfg.rate))  # a model that blows up is refused before the long recording
     probes = f" (with {cfg.probe_saturation} saturation probes)" if cfg.probe_saturation else ""
     log(f"collecting {sum(cfg.counts.values()) + cfg.probe_saturation} trajectories{probes} of {cfg.duration:g} s at "
         f"{cfg.rate:g} Hz on {robot.source.name} with mismatch "

@@ -108,6 +108,12 @@ def run(args: argparse.Namespace) -> int:
     # the hybrid's stage 2 (grad) runs on stage 1's adjoint module (param_grads), whatever physics was identified
     compile_kernels(robot, ds.rate_hz, ("forward", "param_grads") if identify_first else ("forward", "grad"),
                     solver=cfg.solver, device=cfg.device, say=log)
+    from ..sim.first_steps import check_newton
+
+    # a model that blows up is refused before the long fit, from the data's first sample under its commands
+    first = (ds.split("train") or ds.trajectories)[0]
+    check_newton(robot, ds.rate_hz, first.q[0], first.qd[0], first.q_cmd, solver=cfg.solver, device=cfg.device,
+                 physics=physics, friction_kappa=cfg.friction_kappa)
     try:
         if identify_first:
             from ..learn.hybrid import fit_hybrid

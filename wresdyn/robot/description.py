@@ -149,23 +149,48 @@ class Robot:
         given = self.effort_given if self.effort_given is not None else np.zeros(self.n_dof, dtype=bool)
         return [n for n, e, g in zip(self.joint_names, self.effort, given) if not e < PLACEHOLDER_EFFORT and not g]
 
+    def missing_gains(self) -> list[str]:
+        """Actuated joints without PD stiffness (``kp`` zero or absent in the file and in the gains config): a
+        position replay cannot drive them."""
+        return [n for n, k in zip(self.joint_names, self.kp) if not k > 0.0]
+
+    def check_gains(self) -> None:
+        """Raise :class:`RobotError` if any actuated joint has no PD stiffness (:meth:`missing_gains`)."""
+        self._refuse(self.missing_gains(), [])
+
     def check_effort(self) -> None:
         """Raise :class:`RobotError` if any actuated joint has a placeholder effort limit (see
         :meth:`placeholder_effort`): the real robot's torque saturation and the mismatch's friction (a fraction of
         the effort limit) would be made up."""
-        bad = self.placeholder_effort()
-        if bad:
-            raise RobotError(
-                f"{self.source}: {len(bad)} of {self.n_dof} joints have no effort limit in the file, only the "
-                f"importer's placeholder ({', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}); set it in a gains "
-                "config and pass it with --gains FILE.toml, e.g. [[joint]] match = \"*\" effort = 3.0 (N*m)"
-            )
+        self._refuse([], self.placeholder_effort())
 
     def check_replay(self) -> None:
         """Everything a replay or a fit needs from the robot: PD gains (:meth:`check_gains`) and stated effort
-        limits (:meth:`check_effort`)."""
-        self.check_gains()
-        self.check_effort()
+        limits (:meth:`check_effort`), refused together in one line that names the joints. Position limits are not
+        required: a continuous joint is excited over +-pi."""
+        self._refuse(self.missing_gains(), self.placeholder_effort())
+
+    def _refuse(self, no_gains: list[str], no_effort: list[str]) -> None:
+        """One :class:`RobotError` line naming the joints without gains and without an effort limit, with the gains
+        config that supplies them (a pattern for one joint, ``*`` for several)."""
+        if not no_gains and not no_effort:
+            return
+
+        def names(bad):
+            return f"{', '.join(bad[:4])}{', ...' if len(bad) > 4 else ''}"
+
+        parts, keys = [], []
+        if no_gains:
+            parts.append(f"{len(no_gains)} of {self.n_dof} joints have no PD gains ({names(no_gains)})")
+            keys.append("kp = 100.0 kd = 5.0")
+        if no_effort:
+            parts.append(f"{len(no_effort)} of {self.n_dof} joints have no effort limit in the file, only the "
+                         f"importer's placeholder ({names(no_effort)})")
+            keys.append("effort = 3.0 (N*m)")
+        bad = set(no_gains) | set(no_effort)
+        match = next(iter(bad)) if len(bad) == 1 else "*"
+        raise RobotError(f"{self.source}: {' and '.join(parts)}; set them in a gains config passed with --gains "
+                         f"FILE.toml, e.g. [[joint]] match = \"{match}\" {' '.join(keys)}")
 
     def gains_record(self) -> dict | None:
         """The gains config as a dataset stores it: ``{"file": path or None, "config": parsed TOML}``, or ``None``
@@ -173,16 +198,6 @@ class Robot:
         if self.gains is None:
             return None
         return {"file": self.gains_file, "config": copy.deepcopy(self.gains)}
-
-    def check_gains(self) -> None:
-        """Raise :class:`RobotError` if any actuated joint has no PD stiffness (nothing to replay)."""
-        missing = [n for n, k in zip(self.joint_names, self.kp) if not k > 0.0]
-        if missing:
-            raise RobotError(
-                f"{self.source}: {len(missing)} of {self.n_dof} joints have no PD gains ({', '.join(missing[:4])}"
-                f"{', ...' if len(missing) > 4 else ''}); supply them with a gains config (--gains FILE.toml, "
-                "e.g. [[joint]] match = \"*\" kp = 100.0 kd = 5.0)"
-            )
 
     def build_model(self, n_worlds: int = 1, device: str | None = None, requires_grad: bool = False,
                     ground: bool = False, contact=None):
@@ -246,7 +261,8 @@ def resolve_path(path: str | Path) -> Path:
     return Path(path)
 
 
-def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed") -> Robot:
+def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed",
+               package_path: list[str] | str | None = None) -> Robot:
     """Load a robot file into a :class:`Robot`.
 
     Args:
@@ -256,6 +272,8 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
             (see :func:`~wresdyn.robot.gains.apply_overrides`); kept on the robot (:attr:`Robot.gains`) so a dataset
             can store it.
         base: ``"fixed"`` (the robot hangs on a stand, as in data collection) or ``"floating"``.
+        package_path: Folders that hold the ROS packages a URDF's ``package://`` URIs name
+            (:mod:`wresdyn.robot.packages`); default: the command line's ``--package-path``.
 
     Raises:
         RobotError: one-line message naming the file and the problem.
@@ -275,9 +293,14 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     kind = _SUFFIX_KIND.get(path.suffix.lower())
     if kind is None:
         raise RobotError(f"{path}: unknown robot file type {path.suffix!r} (expected .usd/.usda/.usdc, .urdf or .xml)")
+    from .packages import user_roots
+
+    roots = user_roots() if package_path is None else package_path
     builder = newton.ModelBuilder()
     try:
-        import_file(builder, path, kind, floating=(base == "floating"))
+        import_file(builder, path, kind, floating=(base == "floating"), package_path=roots)
+    except RobotError:
+        raise
     except Exception as e:  # importers raise many types on malformed input; report one line
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise RobotError(f"{path}: cannot parse {kind.upper()} file: {msg}") from None
@@ -291,7 +314,8 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     robot.gains, robot.gains_file = config, gains_file
     robot.effort_given = np.array([int(d) in effort_dofs for d in robot.qd_index], dtype=bool)
     robot.servo = read_servo(config, robot.joint_names, robot.effort, gains_file or "gains config")
-    robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base)
+    robot._load_args = (str(path), gains if isinstance(gains, dict) or gains is None else str(gains), base,
+                        [str(r) for r in roots] if isinstance(roots, list) else roots)
     return robot
 
 
@@ -301,6 +325,16 @@ def _reload(args: tuple, sha256: str) -> Robot:
     if robot.source_sha256 != sha256:
         raise RobotError(f"{robot.source}: the robot file changed since it was loaded in the parent process")
     return robot
+
+
+_RESERVED_BODY = {"world": "world_link"}
+"""Body names MuJoCo reserves, and what the body is called instead: a ROS URDF often has a link ``world`` (fixed to
+the world frame) that Newton imports as a body, and MuJoCo's own world body is ``world``."""
+
+
+def _body_name(label: str) -> str:
+    name = short_label(label)
+    return _RESERVED_BODY.get(name, name)
 
 
 def _describe(builder, path: Path, base: str) -> Robot:
@@ -358,7 +392,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
         source_sha256=_sha256(path),
         base=base,
         builder=builder,
-        body_names=[short_label(builder.body_label[b]) for b in range(nb)],
+        body_names=[_body_name(builder.body_label[b]) for b in range(nb)],
         body_parent=np.array([parent[by_child[b]] for b in range(nb)], dtype=np.int64),
         joint_type=[names[JT(jt[by_child[b]])] for b in range(nb)],
         joint_X_p=np.array([builder.joint_X_p[by_child[b]] for b in range(nb)], dtype=np.float64),

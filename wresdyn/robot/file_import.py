@@ -22,14 +22,19 @@ def short_label(label: str) -> str:
     return label.rstrip("/").split("/")[-1]
 
 
-def import_file(builder, path: Path, kind: str, floating: bool) -> None:
+def import_file(builder, path: Path, kind: str, floating: bool, package_path=None) -> None:
     """Add the robot file ``path`` of ``kind`` (``"usd"``, ``"urdf"`` or ``"mjcf"``) to ``builder``, with what Newton's
-    importer leaves out."""
+    importer leaves out. A URDF's ``package://`` mesh URIs are resolved first (:mod:`wresdyn.robot.packages`; user
+    roots ``package_path``, default ``--package-path``); one that names no file raises
+    :class:`~wresdyn.errors.RobotError`."""
     if kind == "usd":
         builder.add_usd(str(path), floating=floating, enable_self_collisions=False, load_visual_shapes=False)
         _usd_mjc_attributes(builder, path)
     elif kind == "urdf":
-        builder.add_urdf(str(path), floating=floating, enable_self_collisions=False)
+        from .packages import resolved_urdf
+
+        xml = resolved_urdf(path, package_path)
+        builder.add_urdf(str(path) if xml is None else xml, floating=floating, enable_self_collisions=False)
     else:
         builder.add_mjcf(str(path), floating=floating, enable_self_collisions=False, parse_visuals=False)
         _mjcf_actuator_limits(builder, path)

@@ -9,7 +9,8 @@
 - :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`; :mod:`.fused`: PD-only
   window rollouts in one solver launch, differentiable to the physical parameters (online identification's);
 - :mod:`.solvers`: the Newton solver choice; :mod:`.solver_replay`: SolverReplay, this project's fused differentiable
-  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.solver_benchmark`: the solver benchmark behind ``wresdyn bench``.
+  solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.solver_benchmark`: the solver benchmark behind ``wresdyn bench``;
+- :mod:`.first_steps`: the cheap check that a model survives its first steps, before ``collect`` and ``fit`` start.
 """
 
 from ..errors import SimulationDiverged
