@@ -119,3 +119,33 @@ def test_excitation_spans_a_broad_frequency_range(humanoid, ik, ws, tmp_path):
     png = tmp_path / "spectrum.png"
     ex.plot_spectrum({"train": qs}, RATE, png, humanoid.joint_names)
     assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+_FINGER_URDF = """<robot name="gripper">
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="arm"><inertial><origin xyz="0.1 0 0"/><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="finger"><inertial><mass value="0.02"/><inertia ixx="1e-5" iyy="1e-5" izz="1e-5" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="20" velocity="2"/></joint>
+  <joint name="finger_joint" type="prismatic"><parent link="arm"/><child link="finger"/><origin xyz="0.2 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="20" velocity="0.2"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize("family", ["multisine", "chirp", "steps"])
+def test_a_joint_narrower_than_the_margin_still_moves(tmp_path, family):
+    """A Panda-like finger (0.04 m of travel) is narrower than twice the 0.05 limit margin: its margin shrinks to a
+    quarter of its range, so every joint-space family still draws inside the limits and moves it."""
+    from wresdyn.data.joint_excitation import generate_joint
+    from wresdyn.data.signals import ExcitationConfig, limit_margin
+    from wresdyn.robot.description import load_robot
+
+    assert limit_margin(0.0, 0.04, 0.05) == pytest.approx(0.01)
+    assert limit_margin(-1.0, 1.0, 0.05) == pytest.approx(0.05)
+    (tmp_path / "g.urdf").write_text(_FINGER_URDF)
+    robot = load_robot(tmp_path / "g.urdf", gains={"joint": [{"match": "*", "kp": 50.0, "kd": 2.0}]})
+    e = generate_joint(family, robot, 2.0, 100.0, np.random.default_rng(0), ExcitationConfig())
+    finger = e.q_cmd[:, robot.joint_names.index("finger_joint")]
+    assert finger.min() >= 0.005 and finger.max() <= 0.035  # inside the halved margin (0.01 / 2)
+    assert np.ptp(finger) > 1e-3

@@ -150,3 +150,31 @@ def test_unpickling_a_robot_whose_file_changed_fails(tmp_path):
     path.write_text(DEFAULT_ROBOT.read_text() + "\n# edited\n")
     with pytest.raises(RobotError, match="changed since it was loaded"):
         pickle.loads(blob)
+
+
+_WORLD_LINK_URDF = """<robot name="arm">
+  <link name="world"/>
+  <link name="world_link"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="forearm"><inertial><origin xyz="0 0 0.2"/><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="base_fixed" type="fixed"><parent link="world"/><child link="world_link"/></joint>
+  <joint name="elbow" type="revolute"><parent link="world_link"/><child link="forearm"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
+</robot>
+"""
+
+
+def test_mujoco_renames_a_world_body(tmp_path):
+    """A URDF whose root link is ``world`` (UR5, Panda in example-robot-data) builds in MuJoCo, which reserves the
+    name for its own world body: the link becomes ``world_link``, here ``world_link_1`` as that name is taken."""
+    import mujoco
+
+    from wresdyn.robot.mujoco_model import build_mujoco, mujoco_body_names
+
+    assert mujoco_body_names(["world", "base"]) == ["world_link", "base"]
+    assert mujoco_body_names(["world", "world_link"]) == ["world_link_1", "world_link"]
+    (tmp_path / "arm.urdf").write_text(_WORLD_LINK_URDF)
+    robot = load_robot(tmp_path / "arm.urdf", gains={"joint": [{"match": "*", "kp": 10.0, "kd": 1.0}]})
+    m = build_mujoco(robot)
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(m.nbody)]
+    assert names[0] == "world" and "world_link_1" in names and len(set(names)) == len(names)
+    assert m.nu == robot.n_dof == 1

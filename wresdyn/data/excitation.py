@@ -48,6 +48,7 @@ from .signals import (
     centre_amplitude,
     chirp,
     finite_limits,
+    limit_margin,
     min_jerk,
     multisine,
 )
@@ -290,7 +291,8 @@ def generate(family: str, robot: Robot, ik: FootIK, ws: Workspace, duration: flo
                 continue
         speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz)
         lo, hi = finite_limits(robot)
-        inside = (q >= lo + 0.5 * cfg.limit_margin).all() and (q <= hi - 0.5 * cfg.limit_margin).all()
+        margin = limit_margin(lo, hi, cfg.limit_margin)
+        inside = (q >= lo + 0.5 * margin).all() and (q <= hi - 0.5 * margin).all()
         if speed <= cfg.max_velocity and inside:
             params.update(family=family, draws=draw + 1, ik_max_error_m=ik_err, max_speed=speed)
             return Excitation(family=family, q_cmd=q, params=params)

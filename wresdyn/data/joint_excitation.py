@@ -22,6 +22,7 @@ from .signals import (
     chirp,
     fade,
     finite_limits,
+    limit_margin,
     min_jerk,
 )
 
@@ -99,7 +100,8 @@ def _joint_steps(rng, robot: Robot, t, cfg, amax) -> tuple[np.ndarray, dict]:
     lo, hi = finite_limits(robot)
     q, moves = np.empty((len(t), robot.n_dof)), {}
     for j in range(robot.n_dof):
-        a, b = lo[j] + cfg.limit_margin, hi[j] - cfg.limit_margin
+        m = limit_margin(lo[j], hi[j], cfg.limit_margin)
+        a, b = lo[j] + m, hi[j] - m
         cur = rng.uniform(a, b) if b > a else 0.5 * (lo[j] + hi[j])
         q[:, j] = cur
         t0, js = rng.uniform(0.0, 0.3), []
@@ -140,6 +142,7 @@ def generate_joint(family: str, robot: Robot, duration: float, rate_hz: float, r
     dyn = dynamics or JointDynamics(robot)
     t = np.arange(int(round(duration * rate_hz))) / rate_hz
     lo, hi = finite_limits(robot)
+    margin = limit_margin(lo, hi, cfg.limit_margin)
     limit = effort_limit(robot, cfg)
     amax = dyn.accel_budget(np.clip(np.zeros(robot.n_dof), lo, hi), limit)
     amax = np.where(np.isfinite(amax), amax, 1e6)
@@ -152,7 +155,7 @@ def generate_joint(family: str, robot: Robot, duration: float, rate_hz: float, r
         else:
             q, params = _joint_steps(rng, robot, t, cfg, amax)
         speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz)
-        inside = (q >= lo + 0.5 * cfg.limit_margin).all() and (q <= hi - 0.5 * cfg.limit_margin).all()
+        inside = (q >= lo + 0.5 * margin).all() and (q <= hi - 0.5 * margin).all()
         tau = dyn.torque(q, rate_hz)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(np.isfinite(limit), np.abs(tau).max(axis=0) / limit, 0.0)

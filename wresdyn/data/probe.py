@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..robot.description import Robot, RobotError
-from .signals import Excitation, finite_limits, min_jerk
+from .signals import Excitation, finite_limits, limit_margin, min_jerk
 
 __all__ = ["PROBE_FAMILY", "SaturationProbe", "saturation_probe"]
 
@@ -89,7 +89,8 @@ def saturation_probe(robot: Robot, chains: list[np.ndarray], home: np.ndarray, d
         raise RobotError(f"saturation probe: {duration:g} s holds no {cfg.steps} step pairs on each of {n_slots} "
                          f"joints per chain with {cfg.rise:g} s rises; make the trajectories longer")
     lo, hi = finite_limits(robot)
-    lo, hi = lo + cfg.limit_margin, hi - cfg.limit_margin
+    m = limit_margin(lo, hi, cfg.limit_margin)
+    lo, hi = lo + m, hi - m
     home = np.clip(np.asarray(home, dtype=np.float64), lo, hi)
     kp, effort = np.asarray(robot.kp, dtype=np.float64), np.asarray(robot.effort, dtype=np.float64)
     q = np.broadcast_to(home, (len(t), robot.n_dof)).copy()

@@ -15,7 +15,7 @@ from .ik import SOLES
 
 __all__ = ["ExcitationConfig", "Excitation", "FAMILIES", "TRAIN_FAMILIES", "OOD_FAMILIES", "JOINT_FAMILIES",
            "JOINT_TRAIN_FAMILIES", "JOINT_OOD_FAMILIES", "MODES", "fade", "multisine", "centre_amplitude",
-           "finite_limits", "min_jerk", "chirp"]
+           "limit_margin", "finite_limits", "min_jerk", "chirp"]
 
 TRAIN_FAMILIES = ("ellipsoid",)
 """Families used for train and held-out data (the paper's excitation)."""
@@ -53,7 +53,8 @@ class ExcitationConfig:
     amplitude: float = 0.8
     """Largest excursion of a multisine or chirp joint from its centre [rad]."""
     limit_margin: float = 0.05
-    """Commands stay this far inside every joint limit [rad]."""
+    """Commands stay this far inside every joint limit [rad], a narrow joint a quarter of its range
+    (:func:`limit_margin`)."""
     fade: float = 0.3
     """Multisines and chirps fade in over this time (raised cosine), so every command starts at rest [s]."""
     max_velocity: float = 12.0
@@ -112,8 +113,16 @@ def multisine(rng, t: np.ndarray, amplitude: float, cfg: ExcitationConfig) -> tu
     return fade(t, cfg) * s, {"f": f.tolist(), "a": a.tolist(), "phase": ph.tolist()}
 
 
+def limit_margin(lo, hi, margin: float):
+    """How far commands stay inside the limits ``lo``, ``hi`` (scalars or arrays): ``margin``, but at most a quarter
+    of the range, so a joint narrower than twice the margin (a Panda finger's 0.04 m against 0.05) keeps half its
+    range to move in rather than none."""
+    return np.minimum(margin, 0.25 * (np.asarray(hi) - np.asarray(lo)))
+
+
 def centre_amplitude(rng, lo: float, hi: float, cfg: ExcitationConfig) -> tuple[float, float]:
-    lo, hi = lo + cfg.limit_margin, hi - cfg.limit_margin
+    m = limit_margin(lo, hi, cfg.limit_margin)
+    lo, hi = lo + m, hi - m
     span = min(hi - lo, 2 * cfg.amplitude)
     c = rng.uniform(lo + 0.5 * span, hi - 0.5 * span) if hi - lo > span else 0.5 * (lo + hi)
     return c, 0.5 * span

@@ -19,7 +19,12 @@ from .contact import ContactSettings
 from .description import Robot
 from .ground import collision_shapes
 
-__all__ = ["build_mujoco", "mujoco_spec", "free_from_mujoco", "free_to_mujoco", "quat_xyzw_to_wxyz"]
+__all__ = ["build_mujoco", "mujoco_spec", "mujoco_body_names", "free_from_mujoco", "free_to_mujoco",
+           "quat_xyzw_to_wxyz"]
+
+MUJOCO_WORLD = "world"
+"""The name MuJoCo reserves for its world body; a robot body of that name (a URDF's fixed ``world`` link, as in the
+UR5 and Panda files of example-robot-data) is renamed in the MuJoCo model."""
 
 
 def quat_xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
@@ -41,6 +46,24 @@ def _tf_inv(a: np.ndarray) -> np.ndarray:
 
     r = R.from_quat(a[3:]).inv()
     return np.concatenate([-r.apply(a[:3]), r.as_quat()])
+
+
+def mujoco_body_names(names: list[str]) -> list[str]:
+    """The robot's body names as the MuJoCo model carries them: each as it is, except a body named ``world`` (MuJoCo
+    refuses a second body of its world's name), which becomes ``world_link`` (``world_link_1``, ... if that name is
+    taken), so every name stays unique and the rest keep the robot's."""
+    taken = set(names)
+    out = []
+    for name in names:
+        if name == MUJOCO_WORLD:
+            new, k = f"{name}_link", 0
+            while new in taken:
+                k += 1
+                new = f"{name}_link_{k}"
+            taken.add(new)
+            name = new
+        out.append(name)
+    return out
 
 
 def build_mujoco(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast", ground: bool = False,
@@ -87,12 +110,13 @@ def mujoco_spec(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast
         spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
 
     dof_of_body = {int(b): i for i, b in enumerate(robot.dof_body)}
+    body_names = mujoco_body_names(robot.body_names)
     sbodies = []
     for b in range(robot.n_bodies):
         parent = spec.worldbody if robot.body_parent[b] < 0 else sbodies[robot.body_parent[b]]
         # body frame in the parent frame at q = 0: X_p * inv(X_c)
         x = _tf_mul(robot.joint_X_p[b], _tf_inv(robot.joint_X_c[b]))
-        body = parent.add_body(name=robot.body_names[b], pos=x[:3], quat=quat_xyzw_to_wxyz(x[3:]))
+        body = parent.add_body(name=body_names[b], pos=x[:3], quat=quat_xyzw_to_wxyz(x[3:]))
         sbodies.append(body)
         m = float(robot.body_mass[b])
         if m > 0.0:
@@ -109,7 +133,7 @@ def mujoco_spec(robot: Robot, dt: float = 0.002, integrator: str = "implicitfast
         jt = robot.joint_type[b]
         xc = robot.joint_X_c[b]
         if jt == "free":
-            body.add_freejoint(name=robot.body_names[b] + "_free")
+            body.add_freejoint(name=body_names[b] + "_free")
         elif jt in ("revolute", "prismatic"):
             i = dof_of_body[b]
             axis = R.from_quat(xc[3:]).apply(robot.axis[i])
