@@ -20,6 +20,7 @@ from wresdyn.cli import main
 from wresdyn.data.dataset import Dataset, DatasetError, load_dataset, read_header
 from wresdyn.data.loading import load_data
 from wresdyn.robot.description import PLACEHOLDER_EFFORT, RobotError, load_robot
+from wresdyn.robot.mujoco_model import build_mujoco
 
 KP_ONLY = {"joint": [{"match": "*", "kp": 20.0, "kd": 0.5}]}
 """Gains for newton's nv_ant.xml: its motors state no force range, so the effort limits stay placeholders."""
@@ -248,7 +249,7 @@ def test_ur5_with_collada_meshes_loads(capsys):
     assert not [w for w in caught if "resolve" in str(w.message) or "exist" in str(w.message)], caught
     assert ur5.n_dof == 6 and ur5.joint_names[0] == "shoulder_pan_joint"
     assert _mesh_shapes(ur5) >= 14  # 7 Collada visuals (some hold several meshes) + 7 STL collision meshes
-    assert "world" not in ur5.body_names and "world_link" in ur5.body_names  # MuJoCo's world keeps its name
+    build_mujoco(ur5)  # its link "world" is the MuJoCo body world_link (MuJoCo's world keeps its name)
     ur5.check_effort()  # the URDF states its effort limits (150 / 28 N*m)
     # inspect lists a robot file without gains, says how to add them and skips the PD check it cannot run
     assert main(["inspect", str(urdf)]) == 0

@@ -327,16 +327,6 @@ def _reload(args: tuple, sha256: str) -> Robot:
     return robot
 
 
-_RESERVED_BODY = {"world": "world_link"}
-"""Body names MuJoCo reserves, and what the body is called instead: a ROS URDF often has a link ``world`` (fixed to
-the world frame) that Newton imports as a body, and MuJoCo's own world body is ``world``."""
-
-
-def _body_name(label: str) -> str:
-    name = short_label(label)
-    return _RESERVED_BODY.get(name, name)
-
-
 def _describe(builder, path: Path, base: str) -> Robot:
     import newton
 
@@ -392,7 +382,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
         source_sha256=_sha256(path),
         base=base,
         builder=builder,
-        body_names=[_body_name(builder.body_label[b]) for b in range(nb)],
+        body_names=[short_label(builder.body_label[b]) for b in range(nb)],
         body_parent=np.array([parent[by_child[b]] for b in range(nb)], dtype=np.int64),
         joint_type=[names[JT(jt[by_child[b]])] for b in range(nb)],
         joint_X_p=np.array([builder.joint_X_p[by_child[b]] for b in range(nb)], dtype=np.float64),
