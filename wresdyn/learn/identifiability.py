@@ -199,7 +199,7 @@ def _residuals(run, window, weights, w_q: float, w_qd: float, copies: int) -> to
 
 
 def _jacobian(robot, params, plist, validation, dt, cfg, weights):
-    """(r0 (N,), J (N, P)) by forward differences, the perturbations batched (:data:`MAX_WORLDS` worlds a replay)."""
+    """(r0 (N,), Jᵀ (P, N), windows, steps) by forward differences, the perturbations batched (:data:`MAX_WORLDS` worlds a replay)."""
     device = cfg.device
     bank = TrajectoryBank(validation, _torch_device(device), delay=torch.as_tensor(params.delay / dt,
                                                                                     dtype=torch.float32))
@@ -240,7 +240,7 @@ def _jacobian(robot, params, plist, validation, dt, cfg, weights):
         r_all.append(_residuals(run, window, weights, cfg.w_q, cfg.w_qd, len(chunk)))
     r = torch.cat(r_all).numpy()[:len(blocks)]
     scale = np.array([np.log1p(STEP) if v > 0 else STEP for *_, v, _ in plist])  # the step in θ
-    return r[0], ((r[1:] - r[0]) / scale[:, None]).T, b, steps
+    return r[0], (r[1:] - r[0]) / scale[:, None], b, steps
 
 
 def _torch_device(device):
@@ -303,7 +303,7 @@ def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> list[dic
     return flags
 
 
-def identifiability(robot, dataset, params, cfg, log=print) -> Identifiability | None:
+def identifiability(robot, dataset, params, cfg) -> Identifiability | None:
     """The identifiability of ``params`` (the identified :class:`~wresdyn.robot.physical.PhysicalParams`) on
     ``dataset`` under the identification settings ``cfg`` (:class:`~wresdyn.learn.window_fit_config.SysIdConfig`:
     its fields, loss weights, solver and ``identifiability_windows``); ``None`` without a validation split."""
@@ -315,13 +315,14 @@ def identifiability(robot, dataset, params, cfg, log=print) -> Identifiability |
     fitted = dataset.fit_weights() > 0
     fields = set(cfg.fit)
     plist = _parameters(robot, params, fields, fitted)
-    r0, jac, b, steps = _jacobian(robot, params, plist, validation, dt, cfg, dataset.fit_weights())
-    n, p = jac.shape
+    r0, jac_t, b, steps = _jacobian(robot, params, plist, validation, dt, cfg, dataset.fit_weights())
+    p, n = jac_t.shape
     sigma2 = float(r0 @ r0) / max(n - p, 1)
-    norm = np.linalg.norm(jac, axis=0)
+    info = jac_t @ jac_t.T  # JᵀJ
+    norm = np.sqrt(np.diag(info))
     valid = norm > 0
-    unit = jac / np.where(valid, norm, 1.0)
-    info = unit.T @ unit + RIDGE * np.eye(p)
+    inv_norm = 1.0 / np.where(valid, norm, 1.0)
+    info = info * np.outer(inv_norm, inv_norm) + RIDGE * np.eye(p)  # of the unit columns J_i / |J_i|
     cov = np.linalg.inv(info)
     d = np.sqrt(np.diag(cov))
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -198,7 +198,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         dataset: A :class:`~wresdyn.data.dataset.Dataset` (``q``, ``qd``, ``q_cmd`` of train; validation selects).
         cfg: Settings.
         out: Optional run folder (:class:`~wresdyn.learn.runs.RunFolder`): ``config.json``, ``checkpoint.pt``
-            (resumed; a changed config is refused), ``physics.json`` (the selected parameters), ``curve.json``.
+            (resumed; a changed config is refused), ``physics.json`` (the selected parameters), ``curve.json`` and,
+            with ``cfg.identifiability``, ``identifiability.json`` / ``.md`` (:mod:`.identifiability`).
         log: Progress printer.
         start: Values to start from (default the robot file's).
         on_search: Optional ``callable(GridChoice)``, called after each grid search (kp, delay, effort) with what
