@@ -199,23 +199,22 @@ def _residuals(run, window, weights, w_q: float, w_qd: float, copies: int) -> to
 
 
 def _jacobian(robot, params, plist, validation, dt, cfg, weights):
-    """(r0 (N,), Jᵀ (P, N), windows, steps) by forward differences, the perturbations batched (:data:`MAX_WORLDS` worlds a replay)."""
-    device = cfg.device
-    bank = TrajectoryBank(validation, _torch_device(device), delay=torch.as_tensor(params.delay / dt,
-                                                                                    dtype=torch.float32))
-    steps = min(max(cfg.horizon_curriculum or (64,)), int(max(len(t.q) for t in validation)) - 1)
-    traj, first = bank.draw(np.random.default_rng(cfg.seed + 2), cfg.identifiability_windows, steps)
-    window = bank.window(traj, first, steps)
-    rows = bank.rows(traj, first, steps)[:, :-1]
-    b = len(traj)
-    base = {f: torch.as_tensor(np.asarray(getattr(params, f), dtype=np.float64))
-            for f in ("kp", "kd", "armature", "damping", "friction", "effort", "body_mass", "body_inertia")}
+    """(r0 (N,), Jᵀ (P, N), windows, steps) by forward differences, the perturbations batched (:data:`MAX_WORLDS`
+    worlds a replay)."""
+    b = cfg.identifiability_windows
     blocks = [None, *range(len(plist))]  # None: the identified parameters themselves
     n_chunks = -(-len(blocks) * b // MAX_WORLDS)
     per_chunk = -(-len(blocks) // n_chunks)
     padded = blocks + [None] * (n_chunks * per_chunk - len(blocks))  # equal chunks: one simulator for all
-    sim = Simulator(robot, per_chunk * b, dt, solver=cfg.solver, device=device, friction_kappa=cfg.friction_kappa,
+    sim = Simulator(robot, per_chunk * b, dt, solver=cfg.solver, device=cfg.device, friction_kappa=cfg.friction_kappa,
                     solver_threads=cfg.sim_threads)
+    bank = TrajectoryBank(validation, sim.device, delay=torch.as_tensor(params.delay / dt, dtype=torch.float32))
+    steps = min(max(cfg.horizon_curriculum or (64,)), int(max(len(t.q) for t in validation)) - 1)
+    traj, first = bank.draw(np.random.default_rng(cfg.seed + 2), b, steps)
+    window = bank.window(traj, first, steps)
+    rows = bank.rows(traj, first, steps)[:, :-1]
+    base = {f: torch.as_tensor(np.asarray(getattr(params, f), dtype=np.float64))
+            for f in ("kp", "kd", "armature", "damping", "friction", "effort", "body_mass", "body_inertia")}
     r_all = []
     for c in range(0, len(padded), per_chunk):
         chunk = padded[c:c + per_chunk]
@@ -241,12 +240,6 @@ def _jacobian(robot, params, plist, validation, dt, cfg, weights):
     r = torch.cat(r_all).numpy()[:len(blocks)]
     scale = np.array([np.log1p(STEP) if v > 0 else STEP for *_, v, _ in plist])  # the step in θ
     return r[0], (r[1:] - r[0]) / scale[:, None], b, steps
-
-
-def _torch_device(device):
-    from ..sim.simulator import _torch_device as td
-
-    return td(device)
 
 
 def _groups(names, corr, valid) -> list[list[str]]:
@@ -299,7 +292,8 @@ def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> list[dic
         if short:
             flags.append({"kind": "delay_below_sample", "parameters": [f"delay:{robot.joint_names[j]}" for j in short],
                           "detail": ", ".join(f"{1e3 * params.delay[j]:.2g} ms" for j in short)
-                                    + f" < the sample period {1e3 * dt:.3g} ms", "advice": ADVICE["delay_below_sample"]})
+                                    + f" < the sample period {1e3 * dt:.3g} ms",
+                          "advice": ADVICE["delay_below_sample"]})
     return flags
 
 
