@@ -133,10 +133,10 @@ class Identifiability:
                  f"Gauss-Newton information of the validation loss over {self.windows} windows of {self.steps} steps "
                  f"(σ = {self.sigma:.2e}, {len(self.names)} parameters, {self.seconds:.1f} s; "
                  "`identifiability.json`). Standard errors are lower bounds (model error counts as noise).", ""]
-        order = np.argsort(-np.where(np.isfinite(self.se), self.se, np.inf))
-        rel = [i for i in order if self.relative[i]][:10]
-        if rel:
-            lines += ["Largest relative standard errors: " + ", ".join(
+        order = np.argsort(-np.where(np.isfinite(self.se), self.se, -np.inf))
+        rel = [i for i in order if self.relative[i] and np.isfinite(self.se[i])][:10]
+        if rel:  # the infinite ones (nothing in the loss moves with them) are flagged below
+            lines += ["Largest finite relative standard errors: " + ", ".join(
                 f"{self.names[i]} {_pct(self.se[i])}" for i in rel) + ".", ""]
         if not self.flags:
             lines += ["No flags: every parameter is excited and told apart.", ""]
