@@ -170,7 +170,8 @@ def _parameters(robot, params, fields, fitted: np.ndarray):
     and, with ``"bodies"``, each moving link's mass and inertia (scaled whole: the principal moments together)."""
     from ..sim.physics import PhysicsModel
 
-    refs = PhysicsModel(robot, params, fit=fields).ref
+    model = PhysicsModel(robot, params, fit=fields)
+    refs, moving = model.ref, set(model.moving.tolist())
     out = []
     for f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay"):
         if f not in fields:
@@ -183,7 +184,7 @@ def _parameters(robot, params, fields, fitted: np.ndarray):
     if "bodies" in fields:
         mass = np.asarray(params.body_mass)
         for b, name in enumerate(robot.body_names):
-            if mass[b] > 0 and robot.joint_type[b] != "fixed":
+            if b in moving:  # as identification fits them: mass > 0 and not welded to the world
                 out.append((f"body_mass:{name}", "body_mass", b, float(mass[b]), 1.0))
                 out.append((f"body_inertia:{name}", "body_inertia", b, float(np.trace(params.body_inertia[b])), 1.0))
     return out
