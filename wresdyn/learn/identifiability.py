@@ -36,12 +36,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..evaluation.identification import MOVING_SPEED  # |q̇| [rad/s] above which a sample counts as moving
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import delay_commands
 from .unexcited_limits import limit_unexcited_efforts
 
 __all__ = ["Identifiability", "identifiability", "write_identifiability", "CORRELATED", "STEP", "RIDGE",
-           "MIN_RANGE", "MOVING_SPEED", "MIN_MOVING"]
+           "MIN_RANGE", "MIN_MOVING"]
 
 STEP = 0.01
 """Forward-difference step in θ (1 % of a value, or 0.01 of the reference unit where the value is 0): far above the
@@ -52,8 +53,6 @@ CORRELATED = 0.95
 """|ρ| above which two parameters count as ones the data cannot tell apart."""
 MIN_RANGE = 0.05
 """Range of motion [rad] below which a joint counts as still (its inertia, damping and gains barely show)."""
-MOVING_SPEED = 0.1
-"""|q̇| [rad/s] above which a sample counts as moving (as the identification report's)."""
 MIN_MOVING = 0.05
 """Fraction of moving samples below which a joint counts as still."""
 MAX_WORLDS = 1024
