@@ -38,7 +38,7 @@ import torch
 
 from ..evaluation.identification import MOVING_SPEED  # |q̇| [rad/s] above which a sample counts as moving
 from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.bank import delay_commands
+from ..sim.bank import servo_goal_accel
 from .unexcited_limits import limit_unexcited_efforts
 
 __all__ = ["Identifiability", "identifiability", "write_identifiability", "CORRELATED", "STEP", "RIDGE",
@@ -208,13 +208,16 @@ def _jacobian(robot, params, plist, validation, dt, cfg, weights):
     padded = blocks + [None] * (n_chunks * per_chunk - len(blocks))  # equal chunks: one simulator for all
     sim = Simulator(robot, per_chunk * b, dt, solver=cfg.solver, device=cfg.device, friction_kappa=cfg.friction_kappa,
                     solver_threads=cfg.sim_threads)
-    bank = TrajectoryBank(validation, sim.device, delay=torch.as_tensor(params.delay / dt, dtype=torch.float32))
+    delay0 = torch.as_tensor(params.delay / dt, dtype=torch.float32, device=sim.device)
+    goal = servo_goal_accel(robot, params, dt, sim.device)  # servo joints' goal profile (None without servos)
+    bank = TrajectoryBank(validation, sim.device, delay=delay0, goal_accel=goal)
     steps = min(max(cfg.horizon_curriculum or (64,)), int(max(len(t.q) for t in validation)) - 1)
     traj, first = bank.draw(np.random.default_rng(cfg.seed + 2), b, steps)
     window = bank.window(traj, first, steps)
     rows = bank.rows(traj, first, steps)[:, :-1]
+    servo = () if goal is None else ("deadband", "noload_speed", "startup_torque", "stiction")  # kept as identified
     base = {f: torch.as_tensor(np.asarray(getattr(params, f), dtype=np.float64))
-            for f in ("kp", "kd", "armature", "damping", "friction", "effort", "body_mass", "body_inertia")}
+            for f in ("kp", "kd", "armature", "damping", "friction", "effort", "body_mass", "body_inertia", *servo)}
     r_all = []
     for c in range(0, len(padded), per_chunk):
         chunk = padded[c:c + per_chunk]
@@ -224,10 +227,12 @@ def _jacobian(robot, params, plist, validation, dt, cfg, weights):
             if p is None:
                 continue
             _, f, i, v, unit = plist[p]
-            if f == "delay":
-                delay = torch.as_tensor(params.delay / dt, dtype=torch.float32).clone()
+            if f == "delay":  # the command path's: other PD targets in this block's worlds
+                delay = delay0.clone()
                 delay[i] = (v * (1 + STEP) if v > 0 else STEP * unit) / dt
-                target[k * b:(k + 1) * b] = delay_commands(bank.q_cmd, rows, bank.first[rows], delay.to(bank.device))
+                bank.set_command_path(delay, goal)
+                target[k * b:(k + 1) * b] = bank.target(rows)
+                bank.set_command_path(delay0, goal)
             else:
                 x = values[f][k]
                 x[i] = x[i] * (1 + STEP) if v > 0 else x[i] + STEP * unit
