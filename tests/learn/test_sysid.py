@@ -72,6 +72,7 @@ def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys
     assert main(["identify", str(data), "--out", str(run), "--iterations", "8", "--windows", "2", "--eval"]) == 0
     report = (run / "identification.md").read_text()
     assert "left_knee" in report and "Within 10 %" in report
+    assert "## What the data can identify" in report and (run / "identifiability.json").exists()
     metrics = json.loads((run / "eval" / "metrics.json").read_text())
     assert metrics["splits"]["heldout"]["pd_residual"] is not None  # the calibrated model, PD only
     fit = tmp_path / "fit"

@@ -114,3 +114,33 @@ def test_parameter_gradients_match_finite_differences(humanoid):
     model.zero_grad()
     loss().backward()
     check_directional_gradients(loss, params, {k: p.grad.clone() for k, p in params.items()}, eps=EPS)
+
+
+def test_per_world_physics_replay_as_each_world_set_alone(humanoid):
+    """Simulator.set_world_physics: world 1 with other gains and link masses steps as a simulator given those values
+    for every world (set_physics), and world 0 as the file's."""
+    nominal = PhysicalParams.nominal(humanoid)
+    other = nominal.copy()
+    other.kp = 0.7 * nominal.kp
+    other.body_mass = 1.3 * nominal.body_mass
+    fields = ("kp", "body_mass")
+    per_world = {f: torch.as_tensor(np.stack([getattr(nominal, f), getattr(other, f)])) for f in fields}
+    q0 = torch.zeros(2, humanoid.n_dof)
+    target = torch.full((2, humanoid.n_dof), 0.2)
+
+    def run(sim):
+        sim.set_state(None, q0, q0)
+        for _ in range(20):
+            q, _ = sim.step(target)
+        return q
+
+    both = Simulator(humanoid, 2, 0.002)
+    both.set_world_physics(per_world)
+    mixed = run(both)
+    for w, params in enumerate((nominal, other)):
+        alone = Simulator(humanoid, 2, 0.002)
+        alone.set_physics(params)
+        assert torch.equal(mixed[w], run(alone)[w])
+    assert not torch.equal(mixed[0], mixed[1])
+    with pytest.raises(ValueError, match="worlds"):
+        both.set_world_physics({"kp": per_world["kp"][:1]})

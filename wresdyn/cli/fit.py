@@ -6,7 +6,8 @@ The run folder has the same layout as a ``wresdyn train`` (PPO) run: ``config.js
 printed is also in ``fit.log``; on a terminal a progress bar shows the elapsed and remaining time
 (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
 ``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
-``OUT/identify/``) and learns the residual network on top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
+``OUT/identify/``, with its ``identifiability.json``: what the data can identify) and learns the residual network on
+top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
 the given physics is used instead of identifying. ``--model network`` learns the residual on the robot file's
 physics (the residual alone, nothing identified). ``--model parametric`` fits the residual-torque baseline
 (per-joint gains, damping, friction, armature as an extra torque) and writes its parameters to ``parameters.json``.

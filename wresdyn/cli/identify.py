@@ -6,7 +6,8 @@ folder holds ``physics.json`` (the calibrated robot's parameters, JSON), ``confi
 (resumed when present; a changed config is refused), ``curve.json`` and ``identify.log`` (every line printed;
 ``--quiet`` prints none); with ``--eval`` the calibrated model is replayed on every split (``eval/report.md``)
 and, for data recorded on the simulated real robot, the identified values are compared with the truth
-(``identification.md``). ``wresdyn fit DATA --physics RUN/physics.json``
+(``identification.md``, with the section of ``identifiability.md``: what the data can identify, also in
+``identifiability.json`` unless ``--no-identifiability``). ``wresdyn fit DATA --physics RUN/physics.json``
 then learns a residual on top (the hybrid model).
 """
 
@@ -74,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
 
             truth = RealRobot(robot, Mismatch.from_dict(ds.mismatch), ds.rate_hz).physics()
         report = write_identification_report(out, params, truth, ds.split("train"))
+        section = out / "identifiability.md"
+        if section.exists():  # the run's identifiability (written by identify) as a section of the report
+            with open(report, "a") as f:
+                f.write("\n" + section.read_text())
         print(f"wrote {report}")
         evaluate_run(str(out), ds, robot, data_label=str(args.data))
     return 0

@@ -49,10 +49,10 @@ __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice"
            "physics_window_loss", "NonFiniteLoss"]
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "fused", "max_iterations",
-                     "max_seconds")
+                     "max_seconds", "identifiability", "identifiability_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
-states are the stepped replay's), the L-BFGS refinement, which runs after the checkpointed Adam steps, and the
-ceilings of a run until convergence."""
+states are the stepped replay's), the L-BFGS refinement, which runs after the checkpointed Adam steps, the
+ceilings of a run until convergence, and the identifiability report, which reads the selected parameters only."""
 
 
 class NonFiniteLoss(WresdynError):
@@ -198,7 +198,8 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         dataset: A :class:`~wresdyn.data.dataset.Dataset` (``q``, ``qd``, ``q_cmd`` of train; validation selects).
         cfg: Settings.
         out: Optional run folder (:class:`~wresdyn.learn.runs.RunFolder`): ``config.json``, ``checkpoint.pt``
-            (resumed; a changed config is refused), ``physics.json`` (the selected parameters), ``curve.json``.
+            (resumed; a changed config is refused), ``physics.json`` (the selected parameters), ``curve.json`` and,
+            with ``cfg.identifiability``, ``identifiability.json`` / ``.md`` (:mod:`.identifiability`).
         log: Progress printer.
         start: Values to start from (default the robot file's).
         on_search: Optional ``callable(GridChoice)``, called after each grid search (kp, delay, effort) with what
@@ -225,7 +226,24 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     if run.path is not None:
         params.save(run.path / "physics.json")
         run.write_curve()
+        if cfg.identifiability:
+            _report_identifiability(robot, dataset, params, cfg, run.path, log)
     return params, curve
+
+
+def _report_identifiability(robot, dataset, params, cfg, out, log) -> None:
+    """Write ``identifiability.json`` and ``.md`` to ``out`` (:mod:`.identifiability`) and log its summary and
+    flags."""
+    from .identifiability import identifiability, write_identifiability
+
+    found = identifiability(robot, dataset, params, cfg)
+    if found is None:
+        log("identifiability: no validation split, no report")
+        return
+    write_identifiability(out, found)
+    log(found.summary())
+    for f in found.flags:
+        log(f"  {f['kind']}: {', '.join(f['parameters'])}: {f['advice']}")
 
 
 def run_record(cfg: SysIdConfig, dataset) -> dict:

@@ -190,6 +190,14 @@ class SysIdConfig(WindowFitStop):
     each iteration's ``windows`` among them, so that every free start state is visited many times and can move to
     where the chain is continuous; 0 = fresh chains anywhere every iteration (on the SO-101's 1.2 M training samples
     a node is then drawn about once in a run: the free states stay the recorded ones)."""
+    identifiability: bool = True
+    """After the selection, write what the data can identify (``identifiability.json`` and ``.md`` in the run
+    folder, :mod:`wresdyn.learn.identifiability`): per-parameter standard errors and correlations from the
+    Gauss-Newton information of the validation loss, and the parameters the recordings never excite, each with
+    advice on the recording that would. One batched replay of every parameter's perturbation; needs a validation
+    split. On the shipped data a few seconds against the identification's minute or two."""
+    identifiability_windows: int = 16
+    """Validation windows (of the curriculum's longest length) the identifiability report replays."""
 
     def __post_init__(self) -> None:
         check_window_fit_config(self)
@@ -216,6 +224,7 @@ class SysIdConfig(WindowFitStop):
         check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
         check_number(self.saturated_min, "saturated_min", gt=0, le=1)
         check_number(self.shooting, "shooting", integer=True, ge=1)
+        check_number(self.identifiability_windows, "identifiability_windows", integer=True, ge=1)
         if self.fused is True and (self.grad_truncation is not None or self.shooting > 1):
             raise ValueError("fused replays whole windows without truncation or shooting: set grad_truncation to "
                              "none and shooting to 1, or fused to false")
