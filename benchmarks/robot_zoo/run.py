@@ -27,6 +27,7 @@ import os
 import shlex
 import subprocess
 import sys
+import sysconfig
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -36,6 +37,7 @@ from zoo import ZooRobot, load_zoo  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_OUT = REPO / "benchmarks" / "results" / "robot_zoo"
+SITE = Path(sysconfig.get_paths()["purelib"])
 SMOKE_COLLECT = ("--train", "2", "--validation", "1", "--heldout", "1", "--ood", "1", "--duration", "1")
 """Smoke sizes of the recording: one trajectory per evaluation split, 1 s each."""
 SMOKE_FIT = ("--iterations", "4", "--windows", "4", "--curriculum", "8", "--identify-iterations", "4")
@@ -43,9 +45,23 @@ SMOKE_FIT = ("--iterations", "4", "--windows", "4", "--curriculum", "8", "--iden
 SUMMARY_FIELDS = ("source", "dof", "heldout_ratio", "ood_ratio", "validation_ratio", "fit_seconds", "device")
 
 
+def _shown(arg: str) -> str:
+    """An argument as ``commands.txt`` writes it, free of this machine's paths: this interpreter as ``python``, a
+    path in the checkout relative to its root, a path in the environment's packages from ``<site-packages>``."""
+    if arg == sys.executable:
+        return "python"
+    for root, name in ((SITE, "<site-packages>"), (REPO, None)):
+        try:
+            rel = Path(arg).relative_to(root)
+        except ValueError:
+            continue
+        return str(rel) if name is None else f"{name}/{rel}"
+    return arg
+
+
 def _run(cmd: list[str], log: Path, commands: Path) -> float:
     """Run ``cmd`` (from the repository root), its output into ``log``; returns its wall-clock [s]."""
-    line = " ".join(shlex.quote(c) for c in cmd)
+    line = " ".join(shlex.quote(_shown(c)) for c in cmd)
     with commands.open("a") as f:
         f.write(f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M:%S} UTC  {line}\n")
     print(f"$ {line}", flush=True)
