@@ -77,8 +77,8 @@ def test_readme_results_equal_summary(zoo):
 
     results = ZOO_DIR.parent / "results" / "robot_zoo"
     summary = json.loads((results / "summary.json").read_text())
-    rows = {m[0]: m[1:] for m in re.findall(r"^\| (\w+) \| (\d+) \| ([\d.]+) \| ([\d.]+)× \| ([\d.]+)× \| ([\d.]+)× \| "
-                                             r"(\d+) \|$", (ZOO_DIR / "README.md").read_text(), re.M)}
+    row = r"^\| (\w+) \| (\d+) \| ([\d.]+) \| ([\d.]+)× \| ([\d.]+)× \| ([\d.]+)× \| (\d+) \|$"
+    rows = {m[0]: m[1:] for m in re.findall(row, (ZOO_DIR / "README.md").read_text(), re.M)}
     assert set(rows) == set(summary) == set(zoo)
     for name, s in summary.items():
         gap = json.loads((results / name / "result.json").read_text())["pd_only_rad"]["heldout"]
