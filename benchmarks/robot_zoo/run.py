@@ -120,15 +120,15 @@ def write_manifest(out: Path, names: list[str], smoke: bool, device: str) -> Non
     cpu = next((ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
                 if ln.startswith("model name")), platform.processor()) if Path("/proc/cpuinfo").exists() else ""
     packages = ", ".join(f"{p} {version(p)}" for p in ("example-robot-data", "newton", "warp-lang", "mujoco", "torch"))
+    sizes = f"smoke ({' '.join(SMOKE_COLLECT)} / {' '.join(SMOKE_FIT)})" if smoke else "defaults"
     lines = [f"## {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC: {', '.join(names)}", "",
              f"- command: `python benchmarks/robot_zoo/run.py {' '.join(sys.argv[1:])}`",
-             f"- sizes: {'smoke (' + ' '.join(SMOKE_COLLECT) + ' / ' + ' '.join(SMOKE_FIT) + ')' if smoke else 'defaults'}"
-             f"; device {device}",
+             f"- sizes: {sizes}; device {device}",
              f"- commit {commit.strip()}{' with uncommitted changes' if dirty else ''}; {packages}",
              f"- machine: {os.cpu_count()} CPU cores ({cpu}), Python {platform.python_version()}", ""]
     path = out / "MANIFEST.md"
-    head = "" if path.exists() else ("# Robot zoo raw output\n\nWritten by `benchmarks/robot_zoo/run.py`, one section per "
-                                     "invocation; every command in `commands.txt`.\n\n")
+    head = "" if path.exists() else ("# Robot zoo raw output\n\nWritten by `benchmarks/robot_zoo/run.py`, one "
+                                     "section per invocation; every command in `commands.txt`.\n\n")
     with path.open("a") as f:
         f.write(head + "\n".join(lines) + "\n")
 
@@ -181,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['validation_ratio']:.2f}x  fit {r['fit_seconds']:.0f} s ({time.perf_counter() - start:.0f} s with "
               "the recording)", flush=True)
     summary = write_summary(out, zoo)
-    print(f"wrote {out / 'summary.json'} ({len(summary)} robots)" + (f"; failed: {', '.join(failed)}" if failed else ""))
+    print(f"wrote {out / 'summary.json'} ({len(summary)} robots)"
+          + (f"; failed: {', '.join(failed)}" if failed else ""))
     return 1 if failed else 0
 
 

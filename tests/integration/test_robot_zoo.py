@@ -67,3 +67,20 @@ def test_tiny_collect_on_the_panda(zoo, tmp_path):
     finger = ds.joint_names.index("panda_finger_joint1")
     for tr in ds.trajectories:
         assert np.ptp(tr.q_cmd[:, finger]) > 1e-4 and np.all(np.isfinite(tr.q))
+
+
+def test_readme_results_equal_summary(zoo):
+    """The README's results rows are ``benchmarks/results/robot_zoo/summary.json`` (and each ``result.json``'s
+    PD-only gap), rounded as printed."""
+    import json
+    import re
+
+    results = ZOO_DIR.parent / "results" / "robot_zoo"
+    summary = json.loads((results / "summary.json").read_text())
+    row = r"^\| (\w+) \| (\d+) \| ([\d.]+) \| ([\d.]+)× \| ([\d.]+)× \| ([\d.]+)× \| (\d+) \|$"
+    rows = {m[0]: m[1:] for m in re.findall(row, (ZOO_DIR / "README.md").read_text(), re.M)}
+    assert set(rows) == set(summary) == set(zoo)
+    for name, s in summary.items():
+        gap = json.loads((results / name / "result.json").read_text())["pd_only_rad"]["heldout"]
+        assert rows[name] == (str(s["dof"]), f"{gap:.4f}", f"{s['heldout_ratio']:.1f}", f"{s['ood_ratio']:.1f}",
+                              f"{s['validation_ratio']:.1f}", f"{s['fit_seconds']:.0f}"), name

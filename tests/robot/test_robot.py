@@ -154,8 +154,10 @@ def test_unpickling_a_robot_whose_file_changed_fails(tmp_path):
 
 _WORLD_LINK_URDF = """<robot name="arm">
   <link name="world"/>
-  <link name="world_link"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="forearm"><inertial><origin xyz="0 0 0.2"/><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="world_link"><inertial><mass value="1"/>
+    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="forearm"><inertial><origin xyz="0 0 0.2"/><mass value="1"/>
+    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
   <joint name="base_fixed" type="fixed"><parent link="world"/><child link="world_link"/></joint>
   <joint name="elbow" type="revolute"><parent link="world_link"/><child link="forearm"/><axis xyz="0 1 0"/>
     <limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
