@@ -121,7 +121,8 @@ def saturation(ds, robot, params, real) -> dict:
         g = np.abs(np.array(grav))
         row["gravity_max"] = g.max(0).tolist()
         row["gravity_over_limit"] = (g > truth.effort).mean(0).tolist()
-        row["q_range"] = [np.min([t.q.min(0) for t in trajs], 0).tolist(), np.max([t.q.max(0) for t in trajs], 0).tolist()]
+        row["q_range"] = [np.min([t.q.min(0) for t in trajs], 0).tolist(),
+                          np.max([t.q.max(0) for t in trajs], 0).tolist()]
         out[split] = row
     return out
 
@@ -133,12 +134,14 @@ def _f(x, p=3):
 def markdown(name, joints, errors, sat, limits, found) -> str:
     lines = [f"# {name}: diagnosis", "",
              f"Written by `benchmarks/robot_zoo/diagnose.py`. Limits [N·m]: file / true (mismatch) / identified "
-             "(`fit/physics.json`).", "", "| joint | file | true | identified | identified / true |", "|---|---|---|---|---|"]
+             "(`fit/physics.json`).", "",
+             "| joint | file | true | identified | identified / true |", "|---|---|---|---|---|"]
     for j, jn in enumerate(joints):
         f_, t_, i_ = limits["file"][j], limits["true"][j], limits["identified"][j]
         lines.append(f"| {jn} | {_f(f_)} | {_f(t_)} | {_f(i_)} | {i_ / t_:.2f} |")
     lines += ["", "## Saturation of the real robot, per split and joint", "",
-              f"Fraction of samples: `rec` recorded |τ| ≥ {AT_LIMIT} × true limit; `dem` true PD demand above the true "
+              f"Fraction of samples: `rec` recorded |τ| ≥ {AT_LIMIT} × true limit; `dem` true PD demand above the "
+              "true "
               "limit; `id` the identified model's demand above its identified limit. `g/lim`: largest static gravity "
               "torque on the split's poses over the true limit.", "",
               "| split | " + " | ".join(joints) + " |", "|---|" + "---|" * len(joints)]
@@ -152,7 +155,8 @@ def markdown(name, joints, errors, sat, limits, found) -> str:
     lines += ["", "## Open-loop error per trajectory (RMSE per joint [rad], fitted model; PD only in brackets)", ""]
     for split, e in errors.items():
         lines += [f"### {split} (ratio {e['improvement']:.1f}×)", "",
-                  "| trajectory | mean abs PD / fit | " + " | ".join(joints) + " | recorded saturation (joints > 1 %) |",
+                  "| trajectory | mean abs PD / fit | " + " | ".join(joints)
+                  + " | recorded saturation (joints > 1 %) |",
                   "|---|---|" + "---|" * len(joints) + "---|"]
         per = sat.get(split, {}).get("per_trajectory", {})
         for t in e["trajectories"]:
