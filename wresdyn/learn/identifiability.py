@@ -59,8 +59,9 @@ MAX_WORLDS = 1024
 """Worlds per batched replay (the parameters' perturbations in chunks of this many, bounding memory)."""
 
 ADVICE = {
-    "unexcited_effort": "record with `wresdyn collect --probe-saturation 6` (steps each leg joint into its limit); a "
-                        "joint the probe does not step needs a recording that loads it to its limit",
+    "unexcited_effort": "record with `wresdyn collect --probe-saturation 6` (steps each leg joint of the foot "
+                        "excitation into its limit); a joint the probe does not step (arms, joint-space robots) "
+                        "needs a recording that loads it to its limit: fast steps, or holds where gravity exceeds it",
     "still_joint": "larger amplitude: `--excitation.amplitude`, `--excitation.radius-frac`, `--excitation.tilt` "
                    "(hip yaw, ankles), so the joint moves over more than a few degrees",
     "delay_below_sample": "a delay under one sample shows only as phase at the top of the band: faster chirps "
