@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import WresdynError
 
 __all__ = ["SCHEMA_VERSION", "READ_VERSIONS", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset",
-           "load_dataset", "read_header", "derive_qdd", "fitted_mask"]
+           "load_dataset", "read_header", "derive_qdd", "fitted_mask", "MOVING_SPEED"]
 
 SCHEMA_VERSION = 2
 """Version of the file layout that :meth:`Dataset.save` writes."""
@@ -45,6 +45,9 @@ FORMAT = "wresdyn-dataset"
 RATE_RTOL = 1e-3
 """Every time step must equal 1 / rate_hz within this fraction of a step: a log with more clock jitter is
 not uniformly sampled and must be resampled first (:mod:`wresdyn.data.logs`)."""
+MOVING_SPEED = 0.1
+"""|q̇| above which a recorded joint counts as moving [rad/s] (five times the default velocity noise): how much
+of a recording excites a joint, for the identification report and the identifiability flags."""
 QDD_WINDOW = 0.022
 """Length of the Savitzky-Golay window that differentiates q̇ into q̈ [s] (11 samples at 500 Hz)."""
 

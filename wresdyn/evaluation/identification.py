@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.dataset import MOVING_SPEED
+
 __all__ = ["excitation_coverage", "identification_table", "write_identification_report", "MOVING_SPEED"]
 
-MOVING_SPEED = 0.1
-"""|q̇| above which a joint counts as moving [rad/s] (five times the default velocity noise)."""
 FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
 UNITS = {"kp": "N·m/rad", "kd": "N·m·s/rad", "armature": "kg·m²", "damping": "N·m·s/rad", "friction": "N·m",
          "effort": "N·m", "delay": "ms"}

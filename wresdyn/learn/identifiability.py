@@ -36,8 +36,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..evaluation.identification import MOVING_SPEED  # |q̇| [rad/s] above which a sample counts as moving
+from ..data.dataset import MOVING_SPEED
 from ..sim import Simulator, TrajectoryBank, rollout
+from ..sim.physics import PhysicsModel
 from ..sim.bank import servo_goal_accel
 from .unexcited_limits import limit_unexcited_efforts
 
@@ -168,7 +169,6 @@ def _pct(x: float) -> str:
 def _parameters(robot, params, fields, fitted: np.ndarray):
     """The parameters in θ: (name, field, index, value, unit) for each fitted joint field's fitted, finite joints
     and, with ``"bodies"``, each moving link's mass and inertia (scaled whole: the principal moments together)."""
-    from ..sim.physics import PhysicsModel
 
     model = PhysicsModel(robot, params, fit=fields)
     refs, moving = model.ref, set(model.moving.tolist())

@@ -38,6 +38,7 @@ from ..sim.bank import servo_goal_accel
 from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
+from .identifiability import identifiability, write_identifiability
 from .runs import RunFolder
 from .selection import ValidationScore
 from .shooting import ShootingNodes, chain_loss, draw_chains
@@ -234,8 +235,6 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
 def _report_identifiability(robot, dataset, params, cfg, out, log) -> None:
     """Write ``identifiability.json`` and ``.md`` to ``out`` (:mod:`.identifiability`) and log its summary and
     flags."""
-    from .identifiability import identifiability, write_identifiability
-
     found = identifiability(robot, dataset, params, cfg)
     if found is None:
         log("identifiability: no validation split, no report")

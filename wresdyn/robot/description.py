@@ -27,6 +27,7 @@ from ..paths import DEFAULT_ROBOT
 from .contact import ContactSettings
 from .file_import import import_file, short_label
 from .gains import apply_overrides, read_gains
+from .packages import user_roots
 from .servo import ServoDrives, attach_servo, read_servo
 
 __all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
@@ -293,8 +294,6 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
     kind = _SUFFIX_KIND.get(path.suffix.lower())
     if kind is None:
         raise RobotError(f"{path}: unknown robot file type {path.suffix!r} (expected .usd/.usda/.usdc, .urdf or .xml)")
-    from .packages import user_roots
-
     roots = user_roots() if package_path is None else package_path
     builder = newton.ModelBuilder()
     try:

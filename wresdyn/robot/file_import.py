@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .packages import resolved_urdf
+
 __all__ = ["import_file", "dof_by_label", "short_label"]
 
 
@@ -31,8 +33,6 @@ def import_file(builder, path: Path, kind: str, floating: bool, package_path=Non
         builder.add_usd(str(path), floating=floating, enable_self_collisions=False, load_visual_shapes=False)
         _usd_mjc_attributes(builder, path)
     elif kind == "urdf":
-        from .packages import resolved_urdf
-
         xml = resolved_urdf(path, package_path)
         builder.add_urdf(str(path) if xml is None else xml, floating=floating, enable_self_collisions=False)
     else:

@@ -18,7 +18,8 @@ from collections import deque
 import numpy as np
 
 from ..errors import SimulationDiverged
-from .simulator import DivergenceLimits
+from ..robot.servo import GoalProfile
+from .simulator import DivergenceLimits, Simulator
 
 __all__ = ["SECONDS", "check_mujoco", "check_newton", "probe_command"]
 
@@ -74,8 +75,6 @@ def check_mujoco(real, q_start: np.ndarray | None = None, seconds: float = SECON
     """
     import mujoco
 
-    from ..robot.servo import GoalProfile
-
     robot, m = real.robot, real.model
     n = robot.n_dof
     q_start = robot.q0 if q_start is None else np.asarray(q_start, dtype=np.float64)
@@ -116,8 +115,6 @@ def check_newton(robot, rate_hz: float, q_start: np.ndarray, qd_start: np.ndarra
         SimulationDiverged: a non-finite or runaway joint speed; the message names the worst joint.
     """
     import torch
-
-    from .simulator import Simulator
 
     n_steps = max(int(round(seconds * rate_hz)), 2)
     q_start = np.asarray(q_start, dtype=np.float64)
