@@ -191,31 +191,14 @@ class Simulator:
         self._physics_changed()
 
     def set_world_physics(self, values: dict[str, torch.Tensor]) -> None:
-        """Write different physical parameters into each world (no gradients): ``values`` maps
-        :class:`~wresdyn.sim.physics.PhysicalParams` fields to tensors with a leading world axis, joint fields
-        (W, n), body fields (W, nb), (W, nb, 3), (W, nb, 3, 3); fields not given keep what the worlds have. An
-        infinite effort is written as 0 (unlimited). For a finite-difference Jacobian: one parameter perturbed per
-        world, all replayed in one batch (:mod:`wresdyn.learn.identifiability`)."""
-        arrays = MODEL_ARRAYS if getattr(self.robot, "servo", None) is None else {**MODEL_ARRAYS, **SERVO_ARRAYS}
-        self._physics = {}
-        with torch.no_grad():
-            for f, v in values.items():
-                if f not in arrays:
-                    continue
-                if v.shape[0] != self.n_worlds:
-                    raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.n_worlds}")
-                v32 = v.detach().to(self.device, torch.float32)
-                if f == "effort":
-                    v32 = torch.where(torch.isfinite(v32), v32, torch.zeros_like(v32))
-                view = self._model_view(f)
-                if f.startswith("body_"):
-                    view[:] = v32
-                else:
-                    view[:, self.qd_index] = v32
-        if self.solver_kind == "replay":
-            self.solver.friction_grad = False
-            return
-        self._physics_changed()
+        """Write different physical parameters into each world (no gradients): :meth:`set_physics` with tensors that
+        carry a leading world axis, joint fields (W, n), body fields (W, nb), (W, nb, 3), (W, nb, 3, 3); fields not
+        given keep what the worlds have. For a finite-difference Jacobian: one parameter perturbed per world, all
+        replayed in one batch (:mod:`wresdyn.learn.identifiability`)."""
+        for f, v in values.items():
+            if v.shape[0] != self.n_worlds:
+                raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.n_worlds}")
+        self.set_physics({f: v.detach() for f, v in values.items()})
 
     def _physics_changed(self) -> None:
         """Tell a solver that caches model properties that they changed."""
