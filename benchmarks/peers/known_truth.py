@@ -119,7 +119,8 @@ CASES = {
         f"{PEER_TEST}::test_spring_mass_recover_mass (also the sysid.ipynb notebook's first example)"),
     "arm5_armature": Case(
         "arm5_armature", "arm5.xml", {"joint": [{"match": "*", "effort": 1000.0}]},
-        tuple(Param(f"{j}_armature", "armature", j, a, 0.01, (0.001, 1.0), 1e-4) for j, a in zip(ARM_JOINTS, ARM_TRUTH)),
+        tuple(Param(f"{j}_armature", "armature", j, a, 0.01, (0.001, 1.0), 1e-4)
+              for j, a in zip(ARM_JOINTS, ARM_TRUTH)),
         ("armature",), 2.0,
         {"train": sines(ARM_AMPS, (0.5, 0.7, 0.4, 0.9, 0.6), (0.0, 0.5, 1.0, 1.5, 2.0)),  # the peer's
          "validation": sines(ARM_AMPS, (0.6, 0.45, 0.8, 0.5, 0.7), (1.0, 0.0, 2.0, 0.5, 1.5)),
@@ -138,9 +139,11 @@ def mismatch_of(case: Case, robot):
     joint, link = [], []
     for p in case.params:
         if p.kind == "mass":
-            link.append({"match": p.target, "mass_scale": p.truth / robot.body_mass[robot.body_names.index(p.target)]})
+            file = robot.body_mass[robot.body_names.index(p.target)]
+            link.append({"match": p.target, "mass_scale": p.truth / file})
         else:
-            joint.append({"match": p.target, "armature_scale": p.truth / robot.armature[robot.joint_names.index(p.target)]})
+            file = robot.armature[robot.joint_names.index(p.target)]
+            joint.append({"match": p.target, "armature_scale": p.truth / file})
     return Mismatch.from_dict({"joint": joint, "link": link})
 
 
@@ -241,8 +244,8 @@ def run_wresdyn(case: Case, robot, ds, cfg=None, log=print) -> dict:
             "ood_error": err["ood"], "seconds_to_final": total, "seconds_kernel_warmup": warm,
             "iterations": len(curve), "converged": "converged" in stop, "stop": stop.removeprefix("identification: "),
             "samples_used": sum(len(t.t) for t in ds.split("train") + ds.split("validation")),
-            "settings": {k: v for k, v in dataclasses.asdict(cfg).items() if k in ("fit", "iterations", "lr", "windows",
-                                                                                   "horizon_curriculum", "device")}}
+            "settings": {k: v for k, v in dataclasses.asdict(cfg).items()
+                         if k in ("fit", "iterations", "lr", "w_prior", "windows", "horizon_curriculum", "device")}}
 
 
 def truth_error(robot, ds, truth) -> dict:
@@ -332,7 +335,8 @@ def run_peer(case: Case, robot, ds, max_iters: int = 200, log=print) -> dict:
             "ood_error": err["ood"], "seconds_to_final": total, "iterations": iters[0],
             "converged": iters[0] < max_iters, "stop": f"{iters[0]} Gauss-Newton iterations (max_iters {max_iters})",
             "samples_used": sum(len(t.t) for t in ds.split("train")),
-            "settings": {"optimizer": "mujoco", "max_iters": max_iters, "bounds": {p.name: p.bounds for p in case.params}}}
+            "settings": {"optimizer": "mujoco", "max_iters": max_iters,
+                         "bounds": {p.name: p.bounds for p in case.params}}}
 
 
 # ------------------------------------------------------------------------------------------------ main
@@ -350,6 +354,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", required=True, help="output folder (summary.json, run.log)")
     p.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, from {list(CASES)}")
+    p.add_argument("--tools", default="mujoco.sysid,wresdyn,wresdyn w_prior=0",
+                   help="comma-separated, from mujoco.sysid, wresdyn (defaults), 'wresdyn w_prior=0'")
     p.add_argument("--peer-max-iters", type=int, default=200, help="peer Gauss-Newton iterations at most (its default)")
     args = p.parse_args()
 
@@ -379,8 +385,16 @@ def main() -> None:
         entry = {"source": case.source, "robot": f"tests/data/known_truth/{case.robot}", "duration_s": case.duration,
                  "rate_hz": RATE_HZ, "wresdyn_at_truth": {"heldout_error": floor["heldout"], "ood_error": floor["ood"]},
                  "tools": {}}
-        for tool, run in (("mujoco.sysid", lambda: run_peer(case, robot, ds, args.peer_max_iters, log)),
-                          ("wresdyn", lambda: run_wresdyn(case, robot, ds, log=log))):
+        from wresdyn.learn.window_fit_config import SysIdConfig
+
+        runs = {"mujoco.sysid": lambda: run_peer(case, robot, ds, args.peer_max_iters, log),
+                "wresdyn": lambda: run_wresdyn(case, robot, ds, log=log),
+                # the default prior pulls every coordinate towards the file's value (w_prior 1e-5); without it the
+                # optimum of the data term alone
+                "wresdyn w_prior=0": lambda: run_wresdyn(
+                    case, robot, ds, SysIdConfig(fit=case.fit, identifiability=False, w_prior=0.0), log=log)}
+        for tool in args.tools.split(","):
+            run = runs[tool]
             r = run()
             r["recovery"] = recovery(case, r.pop("estimates"))
             r["machine"] = summary["machine"]
