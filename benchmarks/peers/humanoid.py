@@ -433,13 +433,35 @@ def final_peer(args, state, ds, robot, truth, n_res: int, log) -> None:
 
 # --- the wresdyn leg -----------------------------------------------------------------------------------------------
 
-def run_wresdyn(args) -> dict:
-    """``wresdyn identify`` with its defaults on ``args.device``: ``OUT/wresdyn_{cpu,cuda}.json``."""
+def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | None = None) -> dict:
+    """``wresdyn identify`` (defaults; ``iterations`` a fixed count instead of its plateau stopping) on ``device``,
+    kernels compiled first and counted: the identified parameters, the best-validation curve ``[(s, rad)]``, the
+    final scores per split, setup / total seconds."""
     from wresdyn.evaluation.open_loop import evaluate_split
     from wresdyn.learn.sysid import identify
     from wresdyn.learn.window_fit_config import SysIdConfig
     from wresdyn.sim.warmup import compile_kernels
 
+    cfg = SysIdConfig(device=device) if iterations is None else SysIdConfig(device=device, iterations=iterations)
+    load0, t0 = os.getloadavg()[0], time.perf_counter()
+    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device, say=log)
+    setup = time.perf_counter() - t0
+    params, curve = identify(robot, ds, cfg, out=out, log=log)
+    total = time.perf_counter() - t0
+    points = [(setup + r["wall"], r["validation"]) for r in curve if r.get("validation") is not None]
+    final = {}
+    for split in SPLITS:
+        s, _ = evaluate_split(robot, ds.split(split), ds.rate_hz, physics=params, weights=ds.fit_weights(),
+                              device=device)
+        final[split] = s["pd_residual"]["mean_abs_dq"]
+    return {"params": params, "curve": best_so_far(points), "scores": final, "setup_s": setup, "total_s": total,
+            "train_s": points[-1][0] if points else total, "load_start": load0, "load_end": os.getloadavg()[0],
+            "config": dataclasses.asdict(cfg)}
+
+
+def run_wresdyn(args) -> dict:
+    """The wresdyn leg: :func:`identify_wresdyn` with its defaults on ``args.device``, ``OUT/wresdyn_{cpu,cuda}.json``
+    (resumable through its run folder ``OUT/wresdyn_{cpu,cuda}/``)."""
     tag = "cuda" if args.device.startswith("cuda") else "cpu"
     out = Path(args.out) / f"wresdyn_{tag}"
     log_ = open_log(out / "log.txt")
@@ -450,35 +472,23 @@ def run_wresdyn(args) -> dict:
         log_(line)
 
     ds, robot, truth = load(args.data)
-    cfg = SysIdConfig(device=args.device)
-    log(f"# wresdyn identify on {args.data}, device {args.device}; {machine(None, args.device)}; "
+    threads = 1 if tag == "cpu" else None  # its default torch_threads
+    log(f"# wresdyn identify on {args.data}, device {args.device}; {machine(threads, args.device)}; "
         f"load average {os.getloadavg()[0]:.2f}")
-    t0 = time.perf_counter()
-    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device, say=log)
-    setup = time.perf_counter() - t0
-    params, curve = identify(robot, ds, cfg, out=out, log=log)
-    total = time.perf_counter() - t0
-    points = [(setup + r["wall"], r["validation"]) for r in curve if r.get("validation") is not None]
-    final = {}
-    for split in SPLITS:
-        s, _ = evaluate_split(robot, ds.split(split), ds.rate_hz, physics=params, weights=ds.fit_weights(),
-                              device=args.device)
-        final[split] = s["pd_residual"]["mean_abs_dq"]
-    best = best_so_far(points)
-    reason = next((ln.split(": ", 1)[1] for ln in reversed(lines) if ": converged at iteration" in ln
-                   or ": stopped at the" in ln), "unknown")
-    result = {
-        "scores": final, "curve": best, "setup_s": setup, "total_s": total,
-        "seconds_to_final": time_to(best, best[-1][1]) if best else total,
+    w = identify_wresdyn(robot, ds, out, args.device, log)
+    best = w["curve"]
+    reason = next((ln.split(": ", 1)[1] for ln in reversed(lines)
+                   if ": converged at iteration" in ln or ": stopped at the" in ln), "unknown")
+    result = {k: v for k, v in w.items() if k != "params"} | {
+        "seconds_to_final": time_to(best, best[-1][1]) if best else w["total_s"],
         "converged": {"value": reason.startswith("converged"), "reason": reason},
         "samples_used": sum(len(t.q) for t in ds.split("train")),
-        "param_errors": param_errors(params, truth, ds.split("train")),
-        "machine": machine(cfg.torch_threads if tag == "cpu" else None, args.device), "device": args.device,
-        "config": dataclasses.asdict(cfg),
+        "param_errors": param_errors(w["params"], truth, ds.split("train")),
+        "machine": machine(threads, args.device), "device": args.device,
     }
-    params.save(out / "physics.json")
+    w["params"].save(out / "physics.json")
     write_json(Path(args.out) / f"wresdyn_{tag}.json", result)
-    log(f"# wresdyn done in {total:.0f}s: " + " / ".join(f"{s} {v:.4f}" for s, v in final.items()))
+    log(f"# wresdyn done in {w['total_s']:.0f}s: " + " / ".join(f"{s} {v:.4f}" for s, v in w["scores"].items()))
     return result
 
 
