@@ -568,9 +568,15 @@ def table(tools: dict, extra: dict) -> None:
         fmt = (lambda v, n: f"{v} / {tools[n]['param_errors']['identifiable']}") if f == "within_10pct" else \
             (lambda v, n: f"{v:.3f}")
         print(f"| {f} | " + " | ".join(fmt(v, n) for v, n in zip(vals, names)) + " |")
+    if "mujoco.sysid" in tools:
+        p = tools["mujoco.sysid"]
+        for key, what in (("own_return_scores", "mujoco.sysid's own return (its last iterate)"),
+                          ("truth_in_peer_model", "the truth in the peer's model (its floor)")):
+            print(f"{what}, validation / held-out / OOD [rad]: " + " / ".join(f"{p[key][s]:.4f}" for s in SPLITS))
     for tag in ("cpu", "cuda"):
         if f"ratio_{tag}" in extra:
-            print(f"ratio ({tag}): {extra[f'ratio_{tag}']}")
+            print(f"wresdyn ({tag}) to the peer's final validation {extra['peer_final_validation']:.4f} rad: "
+                  f"{extra[f'ratio_{tag}']}")
 
 
 def main(argv=None) -> None:
