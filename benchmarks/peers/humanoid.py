@@ -23,7 +23,12 @@ Three legs, each its own call, so a remote machine lent in 10-minute calls can r
   iterate, when the effort limit joins its fit: part of its method and of its wall-clock), so neither tool gets a
   searched start;
 - run to the optimiser's own termination (its default ``xtol``, ``gtol``, regulariser ceiling; ``max_iters`` set
-  out of reach); ``x_scale="jac"``, the scaling its conditioning warning advises.
+  out of reach); ``x_scale="jac"``, the scaling its conditioning warning advises. The backend is called as
+  ``sysid.optimize(optimizer="mujoco")`` calls it (``mujoco.minimize.least_squares`` on the stacked residual of
+  ``build_residual_fn``, the parameters' bounds), at iteration verbosity instead of the full one ``optimize`` forces:
+  the same iterates, without the Jacobian ``optimize`` computes once more at the end for confidence intervals (a
+  whole iteration's rollouts at each stage's end, which a 10-minute call may not hold) and without every
+  iteration's Jacobian kept in memory.
 
 It checkpoints after every Gauss-Newton iteration (``OUT/peer/checkpoint.json``: stage, iteration, the accepted
 parameter vector, the peer's seconds so far, the curve) and ``--resume`` continues from there; ``--max-seconds``
@@ -283,7 +288,7 @@ def run_peer(args) -> dict:
     """The peer leg: returns the checkpoint state (``done`` once both stages ended on their own criteria)."""
     from absl import logging as absl_logging
 
-    from mujoco import sysid
+    from mujoco import minimize, sysid
 
     absl_logging.set_verbosity(absl_logging.ERROR)  # the peer warns once per sequence that it has no sensors
     call_start = time.perf_counter()
@@ -350,42 +355,42 @@ def run_peer(args) -> dict:
             if state["x"] is not None:  # resumed within the stage
                 x0 = np.asarray(state["x"], dtype=np.float64)
             prob.params.update_from_vector(x0)
-            last_cost = [np.nan]
+            last = {"x": x0, "cost": np.nan}  # the last single (not finite-difference) evaluation
 
-            def timed(x, p, **kw):
-                res = residual_fn(x, p, **kw)
+            def residual(x):
+                x = np.asarray(x, dtype=np.float64)
+                r = np.concatenate(residual_fn(x, prob.params)[0])
                 if x.ndim == 1 or x.shape[1] == 1:
-                    r = np.concatenate(res[0]).ravel()
-                    last_cost[0] = 0.5 * float(r @ r)
-                return res
+                    last["x"], last["cost"] = x.ravel().copy(), 0.5 * float(r.ravel() @ r.ravel())
+                return r
 
             if not state["curve"]:  # the start, once
-                timed(x0, prob.params)
-                record(stage, x0, last_cost[0])
+                residual(x0[:, None])
+                record(stage, x0, last["cost"])
 
             def on_iteration(trace, stage=stage):
-                # the backend keeps every iteration's Jacobian and residual in its trace (optimize() runs it at full
-                # verbosity); none is read, so the earlier ones are dropped
-                if len(trace) > 1:
-                    trace[-2] = dataclasses.replace(trace[-2], jacobian=None, residual=None)
-                if trace[-1].step is None:  # its closing entry: the point of the last iteration, already recorded
+                # called after each accepted step, whose point was the last single evaluation (the Armijo loop's
+                # accepted candidate); the closing entry (no step: reduction 0) repeats the last recorded point
+                if trace[-1].reduction == 0:
                     return
                 state["iteration"] += 1
                 state["stage_iteration"] += 1
-                record(stage, (trace[-1].candidate + trace[-1].step).ravel(), last_cost[0])
+                record(stage, last["x"], last["cost"])
                 if args.max_seconds is not None and time.perf_counter() - call_start > args.max_seconds:
                     raise _Budget
 
             output = _Output(log)
-            _, result = sysid.optimize(initial_params=prob.params, residual_fn=timed, optimizer="mujoco",
-                                       verbose=False, max_iters=config["max_iters"] - state["stage_iteration"],
-                                       x_scale="jac", iter_callback=on_iteration, output=output)
+            lo, hi = prob.params.get_bounds()
+            x_end, _ = minimize.least_squares(x0, residual, bounds=(lo, hi), max_iter=config["max_iters"] -
+                                              state["stage_iteration"], x_scale="jac", verbose=minimize.Verbosity.ITER,
+                                              output=output, iter_callback=on_iteration)
+            result = argparse.Namespace(x=x_end)
             stop = output.stop or "unknown"
             state["stops"].append({"stage": stage + 1, "stop": stop, "iterations": state["stage_iteration"],
                                    "seconds": clock.now()})
             log(f"peer  stage {stage + 1} ended on its own: {stop} after {state['stage_iteration']} iterations, "
                 f"{clock.now():.1f}s")
-            state["returned"].append([float(a) for a in result.x])  # what optimize() returns: its last iterate
+            state["returned"].append([float(a) for a in result.x])  # what the backend returns: its last iterate
             if stage == 0:
                 state["x_joints"] = state["returned"][0]
             state["stage"], state["stage_iteration"], state["x"] = stage + 1, 0, None
