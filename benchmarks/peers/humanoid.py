@@ -405,34 +405,51 @@ def run_peer(args) -> dict:
         return state
     state["done"] = True
     write_json(ckpt, state)
-    final_peer(args, state, ds, robot, truth, n_res, log)
+    final_peer(args, state, ds, robot, truth, log)
     return state
 
 
-def final_peer(args, state, ds, robot, truth, n_res: int, log) -> None:
-    """Score the peer's selection (best on validation) and its own return (the last stage's end) on every split,
-    its parameters against the truth, and the truth in its model class: ``OUT/peer/final.json``."""
-    dt, stages = state["config"]["dt"], state["config"]["stages"]
+def peer_result(state, ds, robot, truth, threads: int, out: Path) -> dict:
+    """The peer's selection (best on validation) and its own return (its last iterate; unfinished: the current one)
+    scored on every split, its parameters against the truth (``out/physics.json``), the truth in its model class,
+    and the fight's fields."""
+    config = state["config"]
+    dt, stages = config["dt"], config["stages"]
     best = state["best"]
     model = peer_model(robot, ds, dt, stages, best["stage"], best["x"], best["x_joints"])
-    own = peer_model(robot, ds, dt, stages, len(stages) - 1, state["returned"][-1], state["x_joints"])
+    if state["x"] is not None:  # inside a stage
+        own = peer_model(robot, ds, dt, stages, state["stage"], state["x"], state["x_joints"])
+    else:  # at a stage's end
+        own = peer_model(robot, ds, dt, stages, len(state["returned"]) - 1, state["returned"][-1], state["x_joints"])
     params = peer.physical_params(model, robot)
-    params.save(Path(args.out) / "peer" / "physics.json")
+    out.mkdir(parents=True, exist_ok=True)
+    params.save(out / "physics.json")
     stops = state["stops"]
-    converged = all(s["stop"] in CONVERGED for s in stops)
-    final = {
-        "scores": peer_scores(model, ds, args.threads), "own_return_scores": peer_scores(own, ds, args.threads),
-        "truth_in_peer_model": truth_in_peer(robot, ds, truth, args.threads),
-        "param_errors": param_errors(params, truth, ds.split("train")),
+    reason = "; ".join(f"stage {s['stage']}: {s['stop']}" for s in stops)
+    if not state["done"]:
+        reason = (reason + "; " if reason else "") + (
+            f"not terminated: paused at stage {state['stage'] + 1}, iteration {state['stage_iteration']} "
+            f"({state['iteration']} in all)")
+    train = ds.split("train")
+    return {
+        "scores": peer_scores(model, ds, threads), "own_return_scores": peer_scores(own, ds, threads),
+        "truth_in_peer_model": truth_in_peer(robot, ds, truth, threads),
+        "param_errors": param_errors(params, truth, train),
         "curve": best_so_far([(c["seconds"], c["validation"]) for c in state["curve"]]),
-        "seconds_to_final": best["seconds"], "total_s": stops[-1]["seconds"], "iterations": state["iteration"],
-        "stops": stops, "converged": {"value": converged, "reason": "; ".join(
-            f"stage {s['stage']}: {s['stop']}" for s in stops)},
-        "samples_used": sum(len(t.q) for t in ds.split("train")), "residual_samples": n_res,
-        "machine": state["calls"][-1]["machine"], "calls": state["calls"], "config": state["config"],
+        "seconds_to_final": best["seconds"], "total_s": stops[-1]["seconds"] if state["done"] else state["seconds"],
+        "iterations": state["iteration"], "stops": stops,
+        "converged": {"value": state["done"] and all(s["stop"] in CONVERGED for s in stops), "reason": reason},
+        "samples_used": sum(len(t.q) for t in train),
+        "residual_samples": sum(len(t.q) - len(peer.tiles(len(t.q), config["horizon"])) for t in train),
+        "machine": state["calls"][-1]["machine"], "calls": state["calls"], "config": config,
     }
+
+
+def final_peer(args, state, ds, robot, truth, log) -> None:
+    """:func:`peer_result` of the finished run: ``OUT/peer/final.json``."""
+    final = peer_result(state, ds, robot, truth, args.threads, Path(args.out) / "peer")
     write_json(Path(args.out) / "peer" / "final.json", final)
-    log(f"peer: done; best validation {best['validation']:.4f} at {best['seconds']:.1f}s; " +
+    log(f"peer: done; best validation {state['best']['validation']:.4f} at {state['best']['seconds']:.1f}s; " +
         " / ".join(f"{s} {v:.4f}" for s, v in final["scores"].items()))
 
 
@@ -507,7 +524,12 @@ def report(args) -> dict:
     if (out / "peer" / "final.json").exists():
         tools["mujoco.sysid"] = json.loads((out / "peer" / "final.json").read_text())
     elif (out / "peer" / "checkpoint.json").exists():
-        raise SystemExit(f"error: the peer leg in {out / 'peer'} has not finished: run it again with --resume")
+        if not args.partial:
+            raise SystemExit(f"error: the peer leg in {out / 'peer'} has not finished: run it again with --resume, "
+                             "or report its best so far with --partial")
+        state = json.loads((out / "peer" / "checkpoint.json").read_text())
+        ds, robot, truth = load(state["config"]["data"])
+        tools["mujoco.sysid"] = peer_result(state, ds, robot, truth, os.cpu_count() or 1, out / "peer" / "partial")
     for tag in ("cpu", "cuda"):
         if (out / f"wresdyn_{tag}.json").exists():
             tools[f"wresdyn_{tag}"] = json.loads((out / f"wresdyn_{tag}.json").read_text())
@@ -606,6 +628,8 @@ def main(argv=None) -> None:
     c = sub.add_parser("report", help="summary.json, curves.json / .png and the tables from the legs' outputs")
     c.add_argument("--out", required=True)
     c.add_argument("--title", default=None)
+    c.add_argument("--partial", action="store_true",
+                   help="an unfinished peer leg enters with its best so far, marked not converged")
     args = p.parse_args(argv)
     {"peer": run_peer, "wresdyn": run_wresdyn, "report": report}[args.leg](args)
 
