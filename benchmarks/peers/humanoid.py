@@ -343,7 +343,7 @@ def run_peer(args) -> dict:
             if state["best"] is None or v < state["best"]["validation"]:
                 state["best"] = {"validation": v, "stage": stage, "x": [float(a) for a in x],
                                  "x_joints": state["x_joints"], "seconds": t, "iteration": state["iteration"]}
-            state["x"], state["seconds"] = [float(a) for a in x], clock.now()
+            state["x"], state["seconds"] = [float(a) for a in x], t  # validation excluded
             write_json(ckpt, state)
         log(f"peer  stage {stage + 1}  iteration {state['stage_iteration']:3d} ({state['iteration']} in all)  "
             f"cost {cost:.4e}  validation {v:.4f}  best {state['best']['validation']:.4f}  {t:.1f}s")
