@@ -6,14 +6,17 @@ API only (``Parameter``, ``ParameterDict``, ``body_inertia_param``, ``apply_pgai
 ``TimeSeries``, ``ModelSequences``, ``build_residual_fn``, ``optimize``). Its choices:
 
 - **Model.** The nominal robot's ``MjSpec`` (:func:`wresdyn.robot.mujoco_model.mujoco_spec`: the robot file's
-  bodies, inertias, joints and PD position actuators with the effort limit as force range), ``implicitfast`` at the
-  recording step. The "real" robot is that same MuJoCo model perturbed and stepped at 1 ms, so the peer simulates
-  in the truth's own engine: an advantage over wresdyn, whose SolverReplay is another simulator.
-- **Commands.** Each actuator's ``ctrl`` is the recorded command ``q_cmd``, held for one sample (the peer resamples
-  the control series to the model step, here the identity). Every actuator carries MuJoCo's native control
-  history (``nsample`` :data:`NSAMPLE`, linear interpolation) so the actuator ``delay`` is a continuous,
-  finite-differenceable model parameter; the history at the start of a sequence holds the commands before it
-  (the first command before sample 0: the robot held it while settling).
+  bodies, inertias, joints and PD position actuators with the effort limit as force range), ``implicitfast`` at a
+  model step ``dt``: the recording step by default, or the "real" robot's own 1 ms step (``dt=``). The "real" robot
+  is that same MuJoCo model perturbed and stepped at 1 ms, so the peer simulates in the truth's own engine: an
+  advantage over wresdyn, whose SolverReplay is another simulator.
+- **Commands.** Each actuator's ``ctrl`` is the recorded command ``q_cmd``, held for one sample as the real robot
+  holds it: at a model step finer than the sample the control series is written at the model step, each command
+  repeated (the peer resamples controls to the model step by linear interpolation, here the identity). Every
+  actuator carries MuJoCo's native control history (:func:`history_size` entries, linear interpolation) so the
+  actuator ``delay`` is a continuous, finite-differenceable model parameter up to :data:`MAX_DELAY`; the history
+  at the start of a sequence holds the commands before it (the first command before sample 0: the robot held it
+  while settling).
 - **Observations.** The joint state: each joint's qpos and qvel (``SignalType.MjStateQPos`` / ``MjStateQVel``)
   against the recorded q and q̇, with the peer's default residual (each column divided by its RMS over the
   sequence). Not ``jointpos`` / ``jointvel`` sensors: ``mujoco.rollout`` returns the sensors computed at the start
@@ -21,9 +24,10 @@ API only (``Parameter``, ``ParameterDict``, ``body_inertia_param``, ``apply_pgai
   recording one sample late (on a noise-free cartpole, damping then converges 50 % off the truth).
 - **Initial state.** ``mjSTATE_FULLPHYSICS`` with the recorded q, q̇ of the sequence's first sample and the history
   above, built with ``mj_initCtrlHistory`` (the peer's ``create_initial_state`` leaves the history empty).
-- **Sequences.** ``chunks`` windows of ``horizon`` samples per training trajectory, evenly spaced, each its own
-  sequence from its own recorded start state (the peer's ``SystemTrajectory.split`` layout); ``horizon=None``:
-  whole trajectories.
+- **Sequences.** :func:`tiled_sequences`: consecutive windows of ``horizon`` samples tiling every training
+  trajectory end to end (the peer's ``SystemTrajectory.split`` layout, the short tail kept as a window of its own so
+  every sample is used once), each its own sequence from its own recorded start state. :func:`sequences`:
+  ``chunks`` evenly spaced windows per trajectory.
 - **Parameters** (the set wresdyn identifies): per joint armature, damping, friction loss, kp, kd (``apply_pgain``,
   ``apply_dgain``), effort limit (force range) and delay; per moving link the 10-D pseudo-inertia
   (``body_inertia_param(..., InertiaType.Pseudo)``, its default bounds). Bounds below; every parameter starts at
@@ -37,20 +41,39 @@ from dataclasses import dataclass
 
 import numpy as np
 
+MAX_DELAY = 0.012
+"""Largest actuator delay the peer may fit [s] (a few ms of bus latency at most, with room on both mismatches)."""
 NSAMPLE = 8
-"""Control-history samples per actuator: delays up to ``(NSAMPLE - 2)`` sample periods are representable."""
+"""Control-history samples per actuator at the 2 ms recording step: :func:`history_size` of it."""
 JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
 """Per-joint fields the peer fits, named as :class:`~wresdyn.robot.physical.PhysicalParams`' fields."""
 
 
-def peer_spec(robot, rate_hz: float):
-    """The nominal robot's ``MjSpec`` at the recording step, every actuator with a control history."""
+def history_size(dt: float) -> int:
+    """Control-history entries per actuator at model step ``dt`` [s]: MuJoCo interpolates a delayed control between
+    two entries and needs one more, so ``MAX_DELAY / dt + 2``."""
+    return int(round(MAX_DELAY / dt)) + 2
+
+
+def peer_spec(robot, rate_hz: float, dt: float | None = None):
+    """The nominal robot's ``MjSpec`` at model step ``dt`` [s] (default the recording step ``1 / rate_hz``), every
+    actuator with a control history."""
     from wresdyn.robot.mujoco_model import mujoco_spec
 
-    spec = mujoco_spec(robot, 1.0 / rate_hz, "implicitfast")
+    dt = 1.0 / rate_hz if dt is None else dt
+    substeps(rate_hz, dt)  # refuses a step that does not divide the sample period
+    spec = mujoco_spec(robot, dt, "implicitfast")
     for a in spec.actuators:
-        a.nsample, a.interp, a.delay = NSAMPLE, 1, 0.0
+        a.nsample, a.interp, a.delay = history_size(dt), 1, 0.0
     return spec
+
+
+def substeps(rate_hz: float, dt: float) -> int:
+    """Model steps per recorded sample."""
+    n = int(round(1.0 / (rate_hz * dt)))
+    if n < 1 or abs(n * dt * rate_hz - 1.0) > 1e-9:
+        raise ValueError(f"model step {dt} s does not divide the sample period {1.0 / rate_hz} s")
+    return n
 
 
 def _setter(kind: str, name: str, attr: str | None = None):
@@ -73,8 +96,10 @@ def peer_parameters(spec, robot, fields=(*JOINT_FIELDS, "bodies")):
     """``mujoco.sysid.ParameterDict`` of ``fields`` (per-joint fields of :data:`JOINT_FIELDS`, ``"bodies"``).
 
     Bounds: kp, kd and armature 0.2-5x the file's value; damping 0 to 2 kd; friction loss 0 to half the effort
-    limit; effort limit 2-100 % of the file's (joints without a limit are left unlimited); delay 0 to
-    ``NSAMPLE - 2`` sample periods; link inertia: ``body_inertia_param``'s defaults (mass 0.1-10x, principal
+    limit; effort limit 2-100 % of the file's (joints without a limit are left unlimited); delay one model step
+    to :data:`MAX_DELAY` (MuJoCo's delayed control is the same for every delay in (0, dt], so a start there has a
+    zero delay gradient and the peer never moves it; from one step up the control is interpolated: continuous);
+    link inertia: ``body_inertia_param``'s defaults (mass 0.1-10x, principal
     stretch 0.5-2x, shear ±0.5, centre of mass ±0.5 m)."""
     from mujoco import sysid
 
@@ -88,7 +113,7 @@ def peer_parameters(spec, robot, fields=(*JOINT_FIELDS, "bodies")):
                "armature": (robot.armature[i], 0.2 * robot.armature[i], 5 * robot.armature[i]),
                "damping": (robot.damping[i], 0.0, 2 * kd),
                "friction": (robot.friction[i], 0.0, 0.5 * effort if np.isfinite(effort) else 10.0),
-               "effort": (effort, 0.02 * effort, effort), "delay": (0.0, 0.0, (NSAMPLE - 2) * dt)}
+               "effort": (effort, 0.02 * effort, effort), "delay": (dt, dt, MAX_DELAY)}
         for f in JOINT_FIELDS:
             if f not in fields or (f == "effort" and not np.isfinite(effort)):
                 continue
@@ -106,7 +131,7 @@ def _pseudo_inertia(body: str):
     """The peer's own pseudo-inertia writer (``apply_body_inertia``), then the inertial frame's orientation set to
     the identity: the writer leaves ``iquat`` NaN beside ``fullinertia``, which MuJoCo 3.17's compiler rejects
     ("mass and inertia of moving bodies must be larger than mjMINVAL"); with a defined ``iquat`` it takes the
-    full inertia (checked by a round trip in ``tests/test_peer_sysid.py``)."""
+    full inertia (checked by a round trip in ``tests/integration/test_peer_sysid.py``)."""
     from mujoco import sysid
 
     def modifier(spec, param):
@@ -128,7 +153,7 @@ def moving_bodies(model) -> list[str]:
 
 def initial_state(model, q, qd, history) -> np.ndarray:
     """``mjSTATE_FULLPHYSICS`` at time 0: joint state ``q``, ``qd`` (n,), each actuator's control history set to
-    ``history`` (NSAMPLE, n), the commands of the samples before (oldest first)."""
+    ``history`` (nsample, n), the commands of the model steps before (oldest first)."""
     import mujoco
 
     d = mujoco.MjData(model)
@@ -141,10 +166,62 @@ def initial_state(model, q, qd, history) -> np.ndarray:
     return state
 
 
-def command_history(q_cmd: np.ndarray, start: int) -> np.ndarray:
-    """The NSAMPLE commands before sample ``start`` (oldest first); before sample 0 the first command."""
-    idx = np.clip(np.arange(start - NSAMPLE, start), 0, None)
-    return q_cmd[idx]
+def command_history(q_cmd: np.ndarray, start: int, nsample: int = NSAMPLE, n_sub: int = 1) -> np.ndarray:
+    """The commands of the ``nsample`` model steps before sample ``start`` (oldest first), each sample's command held
+    for its ``n_sub`` model steps; before sample 0 the first command. Shape (nsample, n)."""
+    steps = np.arange(start * n_sub - nsample, start * n_sub)
+    return q_cmd[np.clip(steps // n_sub, 0, None)]
+
+
+def _history(model, q_cmd, start: int, n_sub: int) -> np.ndarray:
+    return command_history(q_cmd, start, int(model.actuator_history[0, 0]) if model.nu else 0, n_sub)
+
+
+def tiles(length: int, horizon: int | None) -> list[tuple[int, int]]:
+    """``(start, stop)`` sample ranges of consecutive windows of ``horizon`` samples covering ``range(length)`` end to
+    end, each sample in exactly one (the last window shorter when ``horizon`` does not divide ``length``; a tail of a
+    single sample, which carries no residual, joins the window before). ``None``: one window."""
+    if horizon is None or horizon >= length:
+        return [(0, length)]
+    starts = list(range(0, length, horizon))
+    if length - starts[-1] < 2 and len(starts) > 1:
+        starts.pop()
+    return [(s, e) for s, e in zip(starts, starts[1:] + [length])]
+
+
+def _sequence(model, t, s: int, e: int, rate_hz: float, n_sub: int, observed):
+    """One sequence: samples ``s:e`` of trajectory ``t`` from its recorded state at ``s``, the controls at the model
+    step (each command held ``n_sub`` steps)."""
+    from mujoco import sysid
+
+    h = e - s
+    state = initial_state(model, t.q[s], t.qd[s], _history(model, t.q_cmd, s, n_sub))
+    ctrl_times = np.arange(h * n_sub) * model.opt.timestep
+    control = sysid.TimeSeries.from_control_names(ctrl_times, np.repeat(t.q_cmd[s:e], n_sub, axis=0), model)
+    sensors = sysid.TimeSeries.from_names(np.arange(h) / rate_hz, np.hstack([t.q[s:e], t.qd[s:e]]), model,
+                                          names=observed)
+    return f"{t.name}@{s}", state, control, sensors
+
+
+def _observed(model):
+    from mujoco import sysid
+
+    return [(f"{j}_qpos", sysid.SignalType.MjStateQPos) for j in spec_joints(model)] + \
+        [(f"{j}_qvel", sysid.SignalType.MjStateQVel) for j in spec_joints(model)]
+
+
+def tiled_sequences(spec, trajectories, rate_hz: float, horizon: int | None):
+    """``mujoco.sysid.ModelSequences`` of the training ``trajectories`` cut into :func:`tiles` of ``horizon``
+    samples, each from its recorded start state, at the spec's model step. The peer compares a window's samples
+    after its first (the start state) with the rollout resampled at their times."""
+    from mujoco import sysid
+
+    model = spec.compile()
+    n_sub = substeps(rate_hz, model.opt.timestep)
+    observed = _observed(model)
+    seqs = [_sequence(model, t, s, e, rate_hz, n_sub, observed) for t in trajectories for s, e in tiles(len(t.q), horizon)]
+    names, states, controls, sensors = (list(c) for c in zip(*seqs))
+    return sysid.ModelSequences("robot", spec, names, states, controls, sensors, allow_missing_sensors=True)
 
 
 def sequences(spec, trajectories, rate_hz: float, horizon: int | None = None, chunks: int = 1):
@@ -153,19 +230,14 @@ def sequences(spec, trajectories, rate_hz: float, horizon: int | None = None, ch
     from mujoco import sysid
 
     model = spec.compile()
-    observed = [(f"{j}_qpos", sysid.SignalType.MjStateQPos) for j in spec_joints(model)] + \
-        [(f"{j}_qvel", sysid.SignalType.MjStateQVel) for j in spec_joints(model)]
-    names, states, controls, sensors = [], [], [], []
+    n_sub = substeps(rate_hz, model.opt.timestep)
+    observed = _observed(model)
+    seqs = []
     for t in trajectories:
         h = len(t.q) if horizon is None else min(horizon, len(t.q))
         starts = np.linspace(0, len(t.q) - h, chunks).round().astype(int) if horizon is not None else [0]
-        for s in starts:
-            times = np.arange(h) / rate_hz
-            names.append(f"{t.name}@{s}")
-            states.append(initial_state(model, t.q[s], t.qd[s], command_history(t.q_cmd, s)))
-            controls.append(sysid.TimeSeries.from_control_names(times, t.q_cmd[s:s + h], model))
-            sensors.append(sysid.TimeSeries.from_names(times, np.hstack([t.q[s:s + h], t.qd[s:s + h]]), model,
-                                                       names=observed))
+        seqs += [_sequence(model, t, int(s), int(s) + h, rate_hz, n_sub, observed) for s in starts]
+    names, states, controls, sensors = (list(c) for c in zip(*seqs))
     return sysid.ModelSequences("robot", spec, names, states, controls, sensors, allow_missing_sensors=True)
 
 
@@ -178,9 +250,9 @@ class Replays:
     diverged_at: list
 
 
-def replay(model, trajectories, threads: int = 2) -> Replays:
+def replay(model, trajectories, threads: int = 2, rate_hz: float | None = None) -> Replays:
     """Replay each whole trajectory open loop in MuJoCo (``mujoco.rollout``) from its first recorded state, command
-    k held during step k. A replay that turns non-finite holds its last finite state from there (as the project's
+    k held during sample k (its model steps; ``rate_hz`` the recording rate, default one step a sample). A replay that turns non-finite holds its last finite state from there (as the project's
     evaluation does)."""
     import mujoco
     import mujoco.rollout as mj_rollout
@@ -189,11 +261,13 @@ def replay(model, trajectories, threads: int = 2) -> Replays:
     out = Replays([], [], [])
     datas = [mujoco.MjData(model) for _ in range(threads)]
     n = model.nq
+    n_sub = 1 if rate_hz is None else substeps(rate_hz, model.opt.timestep)
     for t in trajectories:  # one call each: lengths may differ
-        s0 = initial_state(model, t.q[0], t.qd[0], command_history(t.q_cmd, 0))
-        state, _ = mj_rollout.rollout(model, datas, s0[None], t.q_cmd[None, :-1])
-        q = np.vstack([t.q[:1], state[0, :, 1:1 + n]])
-        qd = np.vstack([t.qd[:1], state[0, :, 1 + n:1 + 2 * n]])
+        s0 = initial_state(model, t.q[0], t.qd[0], _history(model, t.q_cmd, 0, n_sub))
+        state, _ = mj_rollout.rollout(model, datas, s0[None], np.repeat(t.q_cmd[:-1], n_sub, axis=0)[None])
+        state = state[0, n_sub - 1::n_sub]  # the state at each following sample
+        q = np.vstack([t.q[:1], state[:, 1:1 + n]])
+        qd = np.vstack([t.qd[:1], state[:, 1 + n:1 + 2 * n]])
         bad = ~(np.isfinite(q).all(1) & np.isfinite(qd).all(1))
         at = int(np.argmax(bad)) if bad.any() else -1
         if at >= 0:

@@ -15,6 +15,10 @@ the peer's candidates are validated afterwards). The curve is the best validatio
 wresdyn validates every ``select_every`` iterations, the peer every Gauss-Newton candidate that lowered its cost.
 
     python benchmarks/peer_sysid.py data/dataset.npz --out benchmarks/results/peer_sysid/default
+
+A budgeted, single-call comparison (the peer at the recording step on a few windows); the peer run its own way
+(every training sample, the real robot's step, staged, to its own termination, resumable) is
+``benchmarks/peers/humanoid.py``, whose scoring and ``wresdyn identify`` runner this script shares.
 """
 
 from __future__ import annotations
@@ -28,53 +32,19 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).resolve().parent)]  # this checkout
+sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).resolve().parent),
+                str(Path(__file__).resolve().parent / "peers")]  # this checkout, benchmarks/ and the fights
 import peer_adapter as peer  # noqa: E402
-
-SPLITS = ("validation", "heldout", "ood")
+from humanoid import SPLITS, best_so_far, identify_wresdyn, param_errors, time_to  # noqa: E402
 
 
 def load_avg() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def param_errors(ident, truth, train) -> dict:
-    """Identifiable (joint, field) pairs within 10 % of the truth, median |ratio − 1| per field, and the links'
-    median relative mass error and centre-of-mass error [m]."""
-    from wresdyn.evaluation.identification import excitation_coverage, identification_table
-
-    rows = identification_table(ident, truth, excitation_coverage(train, truth))
-    counted = [r for r in rows if r["identifiable"] and np.isfinite(r["ratio"])]
-    out = {"within_10pct": sum(abs(r["ratio"] - 1) <= 0.1 for r in counted), "identifiable": len(counted)}
-    for f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay"):
-        rs = [abs(r["ratio"] - 1) for r in counted if r["field"] == f]
-        out[f"median_err_{f}"] = float(np.median(rs)) if rs else float("nan")
-    moving = truth.body_mass > 0
-    moving[0] = False  # the stand holds the root
-    out["median_err_mass"] = float(np.median(np.abs(ident.body_mass[moving] / truth.body_mass[moving] - 1)))
-    out["median_err_com_m"] = float(np.median(np.linalg.norm(ident.body_com[moving] - truth.body_com[moving], axis=1)))
-    return out
-
-
 def run_wresdyn(robot, ds, out: Path, iterations: int | None, log) -> dict:
-    from wresdyn.evaluation.open_loop import evaluate_split
-    from wresdyn.learn.sysid import identify
-    from wresdyn.learn.window_fit_config import SysIdConfig
-    from wresdyn.sim.warmup import compile_kernels
-
-    cfg = SysIdConfig() if iterations is None else SysIdConfig(iterations=iterations)
-    load0, t0 = load_avg(), time.perf_counter()
-    compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device, say=log)
-    setup = time.perf_counter() - t0
-    params, curve = identify(robot, ds, cfg, out=out, log=log)
-    total = time.perf_counter() - t0
-    points = [(setup + r["wall"], r["validation"]) for r in curve if r.get("validation") is not None]
-    final = {}
-    for split in SPLITS:
-        s, _ = evaluate_split(robot, ds.split(split), ds.rate_hz, physics=params, weights=ds.fit_weights())
-        final[split] = s["pd_residual"]["mean_abs_dq"]
-    return {"params": params, "curve": best_so_far(points), "final": final, "setup_s": setup, "total_s": total,
-            "train_s": points[-1][0] if points else total, "load_start": load0, "load_end": load_avg()}
+    w = identify_wresdyn(robot, ds, out, "cpu", log, iterations)
+    return w | {"final": w["scores"], "load_start": f"{w['load_start']:.2f}", "load_end": f"{w['load_end']:.2f}"}
 
 
 def run_peer(robot, ds, args, log) -> dict:
@@ -114,19 +84,6 @@ def truth_in_peer(robot, ds, truth, threads: int = 2) -> dict:
     model = peer.with_params(peer.peer_spec(robot, ds.rate_hz), truth)
     return {s: metrics(ds.split(s), peer.replay(model, ds.split(s), threads), ds.fit_weights()).mean_abs_dq
             for s in SPLITS}
-
-
-def best_so_far(points):
-    out, best = [], np.inf
-    for t, v in points:
-        best = min(best, v)
-        out.append((float(t), float(best)))
-    return out
-
-
-def time_to(curve, level: float):
-    """First time the curve's best validation error is ≤ ``level`` [s], or ``None``."""
-    return next((t for t, v in curve if v <= level + 5e-5), None)  # levels are printed to 4 decimals
 
 
 def main() -> None:
