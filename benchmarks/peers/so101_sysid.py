@@ -308,9 +308,9 @@ def bam_native(base: mujoco.MjModel, p: BamParams) -> mujoco.MjModel:
     BAM: τ = kt/R · vin · clip(kp · error_gain · (target − q), ±max_pwm) − kt²/R · q̇ with the friction model's
     Coulomb (frictionloss) and viscous (damping) terms. Here: a position actuator of gain K = kt/R · vin · kp ·
     error_gain on the target, force-limited to ±kt/R · vin · max_pwm (the duty clip), and the back-EMF term
-    kt²/R added to the joint damping (outside the clip, as in BAM); the target's rate limit is on the controls
-    (:func:`bam_targets`). MuJoCo integrates joint damping implicitly where BamDrive applies it explicitly: the
-    only difference, small at the 2 ms step (the test bounds it)."""
+    kt²/R added to the joint damping (outside the clip, as in BAM), integrated explicitly as BamDrive applies it;
+    the target's rate limit is on the controls (:func:`bam_targets`). The one difference left: the viscous friction
+    is explicit here and implicit in BamDrive's model (the test bounds the effect)."""
     m = copy.deepcopy(base)
     k = p.kt / p.R * p.vin * p.kp * p.error_gain
     limit = p.kt / p.R * p.vin * p.max_pwm
@@ -324,6 +324,8 @@ def bam_native(base: mujoco.MjModel, p: BamParams) -> mujoco.MjModel:
     m.dof_armature[:] = p.armature
     m.dof_frictionloss[:] = p.friction_base
     m.dof_damping[:] = p.friction_viscous + p.kt**2 / p.R
+    # BamDrive's back-EMF is an explicit torque: Euler's implicit joint damping would change it by h·b/M, 4 % here
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
     return m
 
 
