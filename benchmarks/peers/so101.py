@@ -7,7 +7,8 @@ state (:func:`wresdyn.evaluation.servo_baselines.evaluate_baseline`, MuJoCo C, t
 is the import of ``benchmarks/so101_servo_real.sh`` (same command, same splits: 26 training, 6 validation, 6
 held-out, 2 OOD runs); training runs fit, validation only draws the curves, held-out and OOD are scored once per
 model. The recipes and the adapter: ``so101_sysid.py`` beside this file. wresdyn's row is read from its committed
-result (:data:`WRESDYN_RUN`), not rerun.
+result (:data:`WRESDYN_RUN`), not rerun. The unfitted rows and the three fits are independent: each runs in its own
+process (``--part``, ``parts/*.json``), then one merge writes ``summary.json`` and the tables.
 
     PYTHONPATH=. python benchmarks/peers/so101.py --tarballs ../shared/real/so101 --work /tmp/peers_so101 \\
         --out benchmarks/results/peers/so101 | tee benchmarks/results/peers/so101/log.txt
@@ -94,24 +95,29 @@ def wresdyn_row(root: Path) -> dict:
     }
 
 
-def main() -> None:
+def parse_args():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--tarballs", default="../shared/real/so101", help="folder with so101-sage-logs.tar.xz")
     p.add_argument("--work", default="/tmp/peers_so101", help="scratch folder for the import")
     p.add_argument("--out", default="benchmarks/results/peers/so101")
     p.add_argument("--robot", default="scenes/so101/so101.xml")
     p.add_argument("--horizon", type=int, default=1000, help="fit window length [samples at 500 Hz]")
-    p.add_argument("--per-run", type=int, default=2, help="fit windows per training run, evenly spaced")
-    p.add_argument("--max-iters", type=int, default=30, help="mujoco.sysid's iteration cap")
-    p.add_argument("--max-nfev", type=int, default=100, help="scipy least_squares' evaluation cap (BAM)")
-    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--per-run", type=int, default=1, help="fit windows per training run, evenly spaced")
+    p.add_argument("--max-iters", type=int, default=20, help="mujoco.sysid's iteration cap")
+    p.add_argument("--max-nfev", type=int, default=60, help="scipy least_squares' evaluation cap (BAM)")
+    p.add_argument("--threads", type=int, default=1, help="mujoco.rollout threads per part")
     p.add_argument("--train-runs", type=int, default=None, help="only the first N training runs (smoke tests)")
-    p.add_argument("--only", default="playground,lerobot,bam", help="which fits to run")
-    p.add_argument("--no-unfitted", action="store_true", help="skip the unfitted rows (smoke tests)")
-    args = p.parse_args()
-    t_all = time.perf_counter()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    p.add_argument("--only", default=",".join(PARTS), help=f"parts to run, of {','.join(PARTS)}")
+    p.add_argument("--part", action="store_true", help="run the one part of --only here (the parallel runner's "
+                                                          "call) instead of spawning every part and merging")
+    return p.parse_args()
+
+
+PARTS = ("unfitted", "playground", "lerobot", "bam")
+"""Each part is its own process (the fits are independent); the merge reads their ``parts/*.json``."""
+
+
+def run_part(key: str, args) -> None:
     data = build_dataset(Path(args.tarballs), Path(args.work), args.robot)
     robot = load_robot(args.robot)
     ds = load_dataset(str(data), robot)
@@ -121,21 +127,10 @@ def main() -> None:
     train = list(ds.split("train"))[:args.train_runs]
     val = list(ds.split("validation"))
     split_runs = {s: list(ds.split(s)) for s in SPLITS}
-    print(f"{data}: {len(ds.trajectories)} runs at {rate:g} Hz; train {len(train)}, "
+    no_ref = {s: {"mean_abs_dq": float("nan")} for s in SPLITS}  # ratios are taken at the merge
+    print(f"[{key}] {data}: {len(ds.trajectories)} runs at {rate:g} Hz; train {len(train)}, "
           + ", ".join(f"{s} {len(v)}" for s, v in split_runs.items())
-          + f"; mujoco {mujoco.__version__}; windows {args.per_run} x {args.horizon} per training run", flush=True)
-
-    def file_model():
-        m = mujoco.MjModel.from_xml_path(args.robot)
-        m.opt.timestep = dt
-        return m
-
-    # The reference every improvement is over: the robot file's PD model in MuJoCo C (the Playground fit's start).
-    ref = {}
-    for s in SPLITS:
-        ref[s] = asdict(metrics(split_runs[s], replay(file_model(), split_runs[s]), weights))
-    print("robot file's PD model (MuJoCo C): " + "  ".join(f"{s} {ref[s]['mean_abs_dq']:.4f}" for s in SPLITS),
-          flush=True)
+          + f"; mujoco {mujoco.__version__}", flush=True)
 
     def score(name, m, drive=None, delay=0.0):
         row = {}
@@ -144,40 +139,29 @@ def main() -> None:
             runs = split_runs[s]
             if delay:
                 runs = [dataclasses.replace(t, q_cmd=adapter.shift(t.q_cmd, delay, dt)) for t in runs]
-            r = evaluate_baseline(m, runs, ref[s], drive, weights)
+            r = evaluate_baseline(m, runs, no_ref[s], drive, weights)["model"]
             row[s] = r
-            print(f"{name:58s} {s:10s} mean |dq| {r['model']['mean_abs_dq']:.4f} ± {r['model']['std_abs_dq']:.4f} "
-                  f"rad ({r['improvement']:.2f}x over the file's PD)  diverged {r['model']['diverged']}  "
-                  f"{time.perf_counter() - t0:.1f} s", flush=True)
+            print(f"[{key}] {name:58s} {s:10s} mean |dq| {r['mean_abs_dq']:.4f} ± {r['std_abs_dq']:.4f} rad  "
+                  f"diverged {r['diverged']}  {time.perf_counter() - t0:.1f} s", flush=True)
         return row
 
-    unfitted = {}
-    if not args.no_unfitted:
+    part = {"key": key}
+    if key == "unfitted":
+        m = mujoco.MjModel.from_xml_path(args.robot)
+        m.opt.timestep = dt
         bam32 = dataclasses.replace(BAM_STS3215_7V4, kp=32.0)
-        unfitted["LeRobot's MuJoCo model (kp 17.8, as it is)"] = score(
-            "LeRobot's MuJoCo model (kp 17.8, as it is)", lerobot_model(args.robot, rate))
-        unfitted["BAM-style drive, STS3215 7.4 V m1, P 16 (LeRobot's)"] = score(
-            "BAM-style drive, STS3215 7.4 V m1, P 16 (LeRobot's)", bam_model(args.robot, rate),
-            lambda q0: BamDrive(BAM_STS3215_7V4, q0))
-        unfitted["BAM-style drive, STS3215 7.4 V m1, P 32 (BAM's bench)"] = score(
-            "BAM-style drive, STS3215 7.4 V m1, P 32 (BAM's bench)", bam_model(args.robot, rate, bam32),
-            lambda q0: BamDrive(bam32, q0))
-
-    fitted, records = {}, {}
-    settings = {"horizon": args.horizon, "per_run": args.per_run, "max_iters": args.max_iters,
-                "max_nfev": args.max_nfev, "threads": args.threads, "train_runs": len(train)}
-    todo = args.only.split(",")
-
-    def val_pd(spec_fit):
-        def f(params):
-            m = adapter.build(params, spec_fit)
-            delay = float(params["delay"].value[0]) if "delay" in params else 0.0
-            return adapter.mean_abs_dq(val, adapter.replay_q(m, val, delay, threads=args.threads))
-        return f
-
-    for key in ("playground", "lerobot"):
-        if key not in todo:
-            continue
+        part["rows"] = {
+            REF: score(REF, m),
+            "LeRobot's MuJoCo model (kp 17.8, as it is)": score(
+                "LeRobot's MuJoCo model (kp 17.8, as it is)", lerobot_model(args.robot, rate)),
+            "BAM-style drive, STS3215 7.4 V m1, P 16 (LeRobot's)": score(
+                "BAM-style drive, STS3215 7.4 V m1, P 16 (LeRobot's)", bam_model(args.robot, rate),
+                lambda q0: BamDrive(BAM_STS3215_7V4, q0)),
+            "BAM-style drive, STS3215 7.4 V m1, P 32 (BAM's bench)": score(
+                "BAM-style drive, STS3215 7.4 V m1, P 32 (BAM's bench)", bam_model(args.robot, rate, bam32),
+                lambda q0: BamDrive(bam32, q0)),
+        }
+    elif key in ("playground", "lerobot"):
         spec_fit = adapter.load_spec(args.robot, rate, contact=False)
         spec_score = adapter.load_spec(args.robot, rate, contact=True)
         if key == "lerobot":
@@ -185,17 +169,21 @@ def main() -> None:
             adapter.lerobot_spec(spec_score)
         params = adapter.playground_params(spec_fit) if key == "playground" else adapter.lerobot_params(spec_fit)
         ms = adapter.model_sequences(spec_fit, train, args.horizon, args.per_run)
-        print(f"\n== {key}: {params.size} parameters, {len(ms.sensordata)} windows", flush=True)
-        opt, rec = adapter.fit_sysid(params, ms, val_pd(spec_fit), delay=key == "playground",
-                                     max_iters=args.max_iters, threads=args.threads)
-        print(f"  {rec.method}: {rec.iterations} iterations, {rec.seconds:.0f} s, {rec.status}", flush=True)
-        delay = float(opt["delay"].value[0]) if key == "playground" else 0.0
-        name = ("MuJoCo Playground's recipe (24 joint parameters + delay, mujoco.sysid)" if key == "playground"
-                else "LeRobot's MuJoCo model, joint parameters + kp fitted (mujoco.sysid)")
-        fitted[key] = {"name": name, "scores": score(name, adapter.build(opt, spec_score), delay=delay)}
-        records[key] = rec
+        print(f"[{key}] {params.size} parameters, {len(ms.sensordata)} windows of {args.horizon}", flush=True)
 
-    if "bam" in todo:
+        def val_pd(params):
+            m = adapter.build(params, spec_fit)
+            delay = float(params["delay"].value[0]) if "delay" in params else 0.0
+            return adapter.mean_abs_dq(val, adapter.replay_q(m, val, delay, threads=args.threads))
+
+        opt, rec = adapter.fit_sysid(params, ms, val_pd, delay=key == "playground", max_iters=args.max_iters,
+                                     threads=args.threads, log=lambda *a, **k: print(f"[{key}]", *a, **k))
+        print(f"[{key}] {rec.method}: {rec.seconds:.0f} s, {rec.status}", flush=True)
+        delay = float(opt["delay"].value[0]) if key == "playground" else 0.0
+        part["name"] = NAMES[key]
+        part["scores"] = score(NAMES[key], adapter.build(opt, spec_score), delay=delay)
+        part["record"] = asdict(rec)
+    elif key == "bam":
         base_fit = adapter.load_spec(args.robot, rate, contact=False).compile()
         windows = adapter.BamWindows(base_fit, train, args.horizon, args.per_run)
 
@@ -204,58 +192,114 @@ def main() -> None:
             controls = [adapter.bam_targets(t.q_cmd, t.q[0], bp.max_velocity, dt) for t in val]
             return adapter.mean_abs_dq(val, adapter.replay_q(m, val, controls=controls, threads=args.threads))
 
-        print(f"\n== bam: {len(adapter.BAM_FIELDS)} parameters, {windows.x0.shape[0]} windows", flush=True)
-        bp, rec = adapter.fit_bam(windows, BAM_STS3215_7V4, val_bam, max_nfev=args.max_nfev, threads=args.threads)
-        print(f"  {rec.method}: {rec.iterations} evaluations, {rec.seconds:.0f} s, {rec.status}", flush=True)
-        name = "BAM's STS3215 model class fitted (scipy least_squares on the MuJoCo replay)"
-        fitted["bam"] = {"name": name, "scores": score(name, bam_model(args.robot, rate, bp),
-                                                       lambda q0: BamDrive(bp, q0))}
-        records["bam"] = rec
+        print(f"[{key}] {len(adapter.BAM_FIELDS)} parameters, {windows.x0.shape[0]} windows of {args.horizon}",
+              flush=True)
+        bp, rec = adapter.fit_bam(windows, BAM_STS3215_7V4, val_bam, max_nfev=args.max_nfev, threads=args.threads,
+                                  log=lambda *a, **k: print(f"[{key}]", *a, **k))
+        print(f"[{key}] {rec.method}: {rec.seconds:.0f} s, {rec.status}", flush=True)
+        part["name"] = NAMES[key]
+        part["scores"] = score(NAMES[key], bam_model(args.robot, rate, bp), lambda q0: BamDrive(bp, q0))
+        part["record"] = asdict(rec)
+    else:
+        raise ValueError(f"unknown part {key!r}; parts: {PARTS}")
+    part["settings"] = {"horizon": args.horizon, "per_run": args.per_run, "max_iters": args.max_iters,
+                        "max_nfev": args.max_nfev, "threads": args.threads, "train_runs": len(train)}
+    part["dataset"] = str(data)
+    parts = Path(args.out) / "parts"
+    parts.mkdir(parents=True, exist_ok=True)
+    (parts / f"{key}.json").write_text(json.dumps(part, indent=2))
 
+
+REF = "robot file's PD model (MuJoCo C)"
+"""The reference of every ratio: ``scenes/so101/so101.xml`` as it is (the Playground fit's start)."""
+NAMES = {
+    "playground": "MuJoCo Playground's recipe (24 joint parameters + delay, mujoco.sysid)",
+    "lerobot": "LeRobot's MuJoCo model, joint parameters + kp fitted (mujoco.sysid)",
+    "bam": "BAM's STS3215 model class fitted (scipy least_squares on the MuJoCo replay)",
+}
+
+
+def merge(args, wall: float) -> None:
+    """``summary.json`` and the table from the parts."""
+    out = Path(args.out)
+    parts = {p.stem: json.loads(p.read_text()) for p in sorted((out / "parts").glob("*.json"))}
     wres = wresdyn_row(Path.cwd())
     mach = machine()
 
-    def entry(key):
-        sc, rec = fitted[key]["scores"], records[key]
-        return {"heldout_error": sc["heldout"]["model"]["mean_abs_dq"], "ood_error": sc["ood"]["model"]["mean_abs_dq"],
-                "seconds_to_final": round(rec.seconds, 1),
-                "converged": {"value": rec.converged, "reason": rec.status},
-                "samples_used": rec.samples, "machine": mach,
-                "extras": {"name": fitted[key]["name"], "method": rec.method, "iterations": rec.iterations,
-                           "validation_error": sc["validation"]["model"]["mean_abs_dq"],
-                           "diverged": {s: sc[s]["model"]["diverged"] for s in SPLITS},
-                           "fitted": rec.values, "validation_curve": rec.curve,
-                           "samples_used_means": "recorded training samples in the residual (windows x horizon, "
-                                                 "500 Hz), each evaluated every iteration"}}
+    def entry(part):
+        sc, rec = part["scores"], part["record"]
+        return {"heldout_error": sc["heldout"]["mean_abs_dq"], "ood_error": sc["ood"]["mean_abs_dq"],
+                "seconds_to_final": round(rec["seconds"], 1),
+                "converged": {"value": rec["converged"], "reason": rec["status"]},
+                "samples_used": rec["samples"], "machine": mach,
+                "extras": {"name": part["name"], "method": rec["method"], "iterations": rec["iterations"],
+                           "validation_error": sc["validation"]["mean_abs_dq"],
+                           "diverged": {s: sc[s]["diverged"] for s in SPLITS}, "fitted": rec["values"],
+                           "validation_curve": rec["curve"], "settings": part["settings"],
+                           "samples_used_means": "recorded training samples in the residual (windows x horizon at "
+                                                 "500 Hz), every one evaluated at every iteration"}}
 
     fights = {}
-    if "playground" in fitted:
-        fights["fight2_playground_recipe"] = {"playground_recipe": entry("playground"), "wresdyn_servo": wres}
-    if "lerobot" in fitted or "bam" in fitted:
-        f3 = {k + "_fitted": entry(k) for k in ("lerobot", "bam") if k in fitted}
+    if "playground" in parts:
+        fights["fight2_playground_recipe"] = {"playground_recipe": entry(parts["playground"]), "wresdyn_servo": wres}
+    f3 = {f"{k}_fitted": entry(parts[k]) for k in ("lerobot", "bam") if k in parts}
+    if f3:
         f3["wresdyn_servo"] = wres
         fights["fight3_fitted_baselines"] = f3
+    rows = parts.get("unfitted", {}).get("rows", {})
     summary = {"fields": list(FIELDS), "fights": fights,
-               "unfitted": {n: {s: r[s]["model"]["mean_abs_dq"] for s in SPLITS} for n, r in unfitted.items()},
-               "reference_file_pd_mujoco": {s: ref[s]["mean_abs_dq"] for s in SPLITS},
-               "settings": settings, "dataset": str(data), "mujoco": mujoco.__version__,
-               "wall_seconds": round(time.perf_counter() - t_all, 1)}
+               "unfitted": {n: {s: r[s]["mean_abs_dq"] for s in SPLITS} for n, r in rows.items()},
+               "mujoco": mujoco.__version__, "wall_seconds_all_parts": round(wall, 1),
+               "dataset": next(iter(parts.values()))["dataset"] if parts else None}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
 
-    print("\n| model | validation | held-out | OOD | held-out: peer / wresdyn |\n|---|---|---|---|---|")
-    w_h = wres["heldout_error"]
+    ref = rows.get(REF)
+    w_h, w_o = wres["heldout_error"], wres["ood_error"]
+    print("\n| model | validation | held-out | OOD | held-out vs file's PD | held-out / wresdyn's | OOD / wresdyn's |"
+          "\n|---|---|---|---|---|---|---|")
 
-    def line(name, v, h, o):
-        print(f"| {name} | {v:.4f} | {h:.4f} | {o:.4f} | {h / w_h:.2f} |")
+    def line(name, sc):
+        v, h, o = (sc[s] for s in SPLITS)
+        r = f"{ref['heldout']['mean_abs_dq'] / h:.2f}x" if ref else "-"
+        print(f"| {name} | {v:.4f} | {h:.4f} | {o:.4f} | {r} | {h / w_h:.2f} | {o / w_o:.2f} |")
 
-    line("robot file's PD model (MuJoCo C), unfitted", *(ref[s]["mean_abs_dq"] for s in SPLITS))
-    for n, r in unfitted.items():
-        line(n + ", unfitted", *(r[s]["model"]["mean_abs_dq"] for s in SPLITS))
-    for k, f in fitted.items():
-        line(f["name"], *(f["scores"][s]["model"]["mean_abs_dq"] for s in SPLITS))
-    line(f"wresdyn servo model ({WRESDYN_RUN})", wres["extras"]["validation_error"], wres["heldout_error"],
-         wres["ood_error"])
-    print(f"\nwrote {out / 'summary.json'}; {time.perf_counter() - t_all:.0f} s in all", flush=True)
+    for n, r in rows.items():
+        line(n + ", unfitted", {s: r[s]["mean_abs_dq"] for s in SPLITS})
+    for k in ("playground", "lerobot", "bam"):
+        if k in parts:
+            line(parts[k]["name"], {s: parts[k]["scores"][s]["mean_abs_dq"] for s in SPLITS})
+    line(f"wresdyn servo model ({WRESDYN_RUN})", {"validation": wres["extras"]["validation_error"],
+                                                  "heldout": w_h, "ood": w_o})
+    print("\n| fit | seconds to final | converged | samples used |\n|---|---|---|---|")
+    for fight in fights.values():
+        for k, e in fight.items():
+            if k != "wresdyn_servo":
+                print(f"| {e['extras']['name']} | {e['seconds_to_final']} | {e['converged']['value']}: "
+                      f"{e['converged']['reason']} | {e['samples_used']} |")
+    print(f"| wresdyn servo model | {wres['seconds_to_final']} | {wres['converged']['value']}: "
+          f"{wres['converged']['reason']} | {wres['samples_used']} |")
+    print(f"\nwrote {out / 'summary.json'}", flush=True)
+
+
+def main() -> None:
+    args = parse_args()
+    keys = args.only.split(",")
+    if args.part:
+        run_part(keys[0], args)
+        return
+    t0 = time.perf_counter()
+    build_dataset(Path(args.tarballs), Path(args.work), args.robot)
+    passed = ["--tarballs", args.tarballs, "--work", args.work, "--out", args.out, "--robot", args.robot,
+              "--horizon", str(args.horizon), "--per-run", str(args.per_run), "--max-iters", str(args.max_iters),
+              "--max-nfev", str(args.max_nfev), "--threads", str(args.threads)]
+    if args.train_runs:
+        passed += ["--train-runs", str(args.train_runs)]
+    procs = [subprocess.Popen([sys.executable, __file__, *passed, "--only", k, "--part"]) for k in keys]
+    codes = [p.wait() for p in procs]
+    if any(codes):
+        raise SystemExit(f"parts {keys} exited with {codes}")
+    merge(args, time.perf_counter() - t0)
+    print(f"{time.perf_counter() - t0:.0f} s in all", flush=True)
 
 
 if __name__ == "__main__":

@@ -141,11 +141,12 @@ def lerobot_params(spec: mujoco.MjSpec) -> sysid.ParameterDict:
 
 
 def window_starts(n_samples: int, horizon: int, per_run: int) -> np.ndarray:
-    """``per_run`` evenly spaced window starts over a run of ``n_samples`` (fewer if the run is short)."""
+    """``per_run`` window starts over a run of ``n_samples``, at the middles of ``per_run`` equal parts of the
+    possible starts (one window: the run's middle, past the settling hold most runs begin with)."""
     last = n_samples - horizon
     if last < 0:
         return np.zeros(0, dtype=int)
-    return np.unique(np.linspace(0, last, per_run).astype(int))
+    return np.unique(((np.arange(per_run) + 0.5) / per_run * last).astype(int))
 
 
 def shift(values: np.ndarray, delay_s: float, dt: float) -> np.ndarray:
