@@ -108,6 +108,7 @@ def parse_args():
     p.add_argument("--threads", type=int, default=1, help="mujoco.rollout threads per part")
     p.add_argument("--train-runs", type=int, default=None, help="only the first N training runs (smoke tests)")
     p.add_argument("--only", default=",".join(PARTS), help=f"parts to run, of {','.join(PARTS)}")
+    p.add_argument("--merge", action="store_true", help="only merge the parts already in OUT/parts")
     p.add_argument("--part", action="store_true", help="run the one part of --only here (the parallel runner's "
                                                           "call) instead of spawning every part and merging")
     return p.parse_args()
@@ -219,7 +220,7 @@ NAMES = {
 }
 
 
-def merge(args, wall: float) -> None:
+def merge(args, wall: float | None) -> None:
     """``summary.json`` and the table from the parts."""
     out = Path(args.out)
     parts = {p.stem: json.loads(p.read_text()) for p in sorted((out / "parts").glob("*.json"))}
@@ -240,8 +241,17 @@ def merge(args, wall: float) -> None:
                                                  "500 Hz), every one evaluated at every iteration"}}
 
     fights = {}
-    if "playground" in parts:
-        fights["fight2_playground_recipe"] = {"playground_recipe": entry(parts["playground"]), "wresdyn_servo": wres}
+    # several window settings of the Playground recipe (parts/playground*.json): validation picks the one reported
+    configs = {k: v for k, v in parts.items() if k.startswith("playground")}
+    if configs:
+        chosen = min(configs, key=lambda k: configs[k]["scores"]["validation"]["mean_abs_dq"])
+        e = entry(configs[chosen])
+        e["extras"]["chosen_by_validation_from"] = {
+            k: {"settings": v["settings"], **{f"{s}_error": v["scores"][s]["mean_abs_dq"] for s in SPLITS},
+                "seconds_to_final": round(v["record"]["seconds"], 1), "converged": v["record"]["converged"],
+                "status": v["record"]["status"], "samples_used": v["record"]["samples"]}
+            for k, v in configs.items()}
+        fights["fight2_playground_recipe"] = {"playground_recipe": e, "wresdyn_servo": wres}
     f3 = {f"{k}_fitted": entry(parts[k]) for k in ("lerobot", "bam") if k in parts}
     if f3:
         f3["wresdyn_servo"] = wres
@@ -249,7 +259,7 @@ def merge(args, wall: float) -> None:
     rows = parts.get("unfitted", {}).get("rows", {})
     summary = {"fields": list(FIELDS), "fights": fights,
                "unfitted": {n: {s: r[s]["mean_abs_dq"] for s in SPLITS} for n, r in rows.items()},
-               "mujoco": mujoco.__version__, "wall_seconds_all_parts": round(wall, 1),
+               "mujoco": mujoco.__version__, "wall_seconds_all_parts": None if wall is None else round(wall, 1),
                "dataset": next(iter(parts.values()))["dataset"] if parts else None}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
 
@@ -265,9 +275,11 @@ def merge(args, wall: float) -> None:
 
     for n, r in rows.items():
         line(n + ", unfitted", {s: r[s]["mean_abs_dq"] for s in SPLITS})
-    for k in ("playground", "lerobot", "bam"):
-        if k in parts:
-            line(parts[k]["name"], {s: parts[k]["scores"][s]["mean_abs_dq"] for s in SPLITS})
+    for k, part in parts.items():
+        if k != "unfitted":
+            st = part["settings"]
+            line(f"{part['name']}, windows {st['per_run']} x {st['horizon']}",
+                 {s: part["scores"][s]["mean_abs_dq"] for s in SPLITS})
     line(f"wresdyn servo model ({WRESDYN_RUN})", {"validation": wres["extras"]["validation_error"],
                                                   "heldout": w_h, "ood": w_o})
     print("\n| fit | seconds to final | converged | samples used |\n|---|---|---|---|")
@@ -286,6 +298,9 @@ def main() -> None:
     keys = args.only.split(",")
     if args.part:
         run_part(keys[0], args)
+        return
+    if args.merge:
+        merge(args, None)
         return
     t0 = time.perf_counter()
     build_dataset(Path(args.tarballs), Path(args.work), args.robot)
