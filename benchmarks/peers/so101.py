@@ -278,7 +278,8 @@ def merge(args, wall: float | None) -> None:
     for k, part in parts.items():
         if k != "unfitted":
             st = part["settings"]
-            line(f"{part['name']}, windows {st['per_run']} x {st['horizon']}",
+            cap = st["max_nfev"] if k == "bam" else st["max_iters"]
+            line(f"{part['name']}, windows {st['per_run']} x {st['horizon']}, cap {cap}",
                  {s: part["scores"][s]["mean_abs_dq"] for s in SPLITS})
     line(f"wresdyn servo model ({WRESDYN_RUN})", {"validation": wres["extras"]["validation_error"],
                                                   "heldout": w_h, "ood": w_o})
