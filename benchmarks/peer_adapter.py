@@ -219,7 +219,8 @@ def tiled_sequences(spec, trajectories, rate_hz: float, horizon: int | None):
     model = spec.compile()
     n_sub = substeps(rate_hz, model.opt.timestep)
     observed = _observed(model)
-    seqs = [_sequence(model, t, s, e, rate_hz, n_sub, observed) for t in trajectories for s, e in tiles(len(t.q), horizon)]
+    seqs = [_sequence(model, t, s, e, rate_hz, n_sub, observed)
+            for t in trajectories for s, e in tiles(len(t.q), horizon)]
     names, states, controls, sensors = (list(c) for c in zip(*seqs))
     return sysid.ModelSequences("robot", spec, names, states, controls, sensors, allow_missing_sensors=True)
 
@@ -252,8 +253,8 @@ class Replays:
 
 def replay(model, trajectories, threads: int = 2, rate_hz: float | None = None) -> Replays:
     """Replay each whole trajectory open loop in MuJoCo (``mujoco.rollout``) from its first recorded state, command
-    k held during sample k (its model steps; ``rate_hz`` the recording rate, default one step a sample). A replay that turns non-finite holds its last finite state from there (as the project's
-    evaluation does)."""
+    k held during sample k (its model steps; ``rate_hz`` the recording rate, default one step a sample). A replay
+    that turns non-finite holds its last finite state from there (as the project's evaluation does)."""
     import mujoco
     import mujoco.rollout as mj_rollout
 

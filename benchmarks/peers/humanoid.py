@@ -323,10 +323,11 @@ def run_peer(args) -> dict:
     n_res = sum(len(s.sensordata) - 1 for s in ms.measured_rollout)  # a window's first sample is its start
     if resumed:
         clock = Clock(state["seconds"])
+    where = f"resumed at stage {state['stage'] + 1} iteration {state['stage_iteration']}" if resumed else "fresh"
     log(f"# peer on {args.data}: {len(train)} training trajectories, {len(ms.measured_rollout)} windows of "
         f"<= {args.horizon} samples, {sum(len(s.sensordata) for s in ms.measured_rollout)} samples "
         f"({n_res} in the residual); model step {config['dt'] * 1e3:g} ms; {machine(args.threads)}; "
-        f"{'resumed at stage ' + str(state['stage'] + 1) + ' iteration ' + str(state['stage_iteration']) if resumed else 'fresh'}; "
+        f"{where}; "
         f"setup {time.perf_counter() - setup_start:.1f}s; load average {os.getloadavg()[0]:.2f}")
     state["calls"].append({"machine": machine(args.threads), "threads": args.threads, "start_seconds": clock.now()})
 
@@ -584,7 +585,8 @@ def table(tools: dict, extra: dict) -> None:
     print("| | " + " | ".join(names) + " |")
     print("|---" * (len(names) + 1) + "|")
     for split in SPLITS:
-        print(f"| {split} mean \\|Δq\\| [rad] | " + " | ".join(f"{tools[n]['scores'][split]:.4f}" for n in names) + " |")
+        row = " | ".join(f"{tools[n]['scores'][split]:.4f}" for n in names)
+        print(f"| {split} mean \\|Δq\\| [rad] | {row} |")
     for key in ("seconds_to_final", "total_s"):
         print(f"| {key} | " + " | ".join(f"{tools[n][key]:.1f}" for n in names) + " |")
     print("| converged | " + " | ".join(f"{tools[n]['converged']['value']} ({tools[n]['converged']['reason']})"
