@@ -1,40 +1,48 @@
-"""Isaac Sim 6.2's System Identification backend (``isaacsim.robot_setup.sysid``) on the project's humanoid, outside
-Kit: its standalone Newton path, its own recipe, scored like the other peers.
+"""Isaac Sim 6.2's System Identification backend (``isaacsim.robot_setup.sysid`` 3.2.0) on the project's humanoid,
+outside Kit: its standalone differentiable Newton path, its own recipe, scored like the other peers.
 
 The backend ships in the ``isaacsim-robot-setup`` wheel (NVIDIA's licence: an optional peer of this benchmark, never
-a dependency; install it only into a throwaway folder). Its package lives inside a Kit extension folder, so outside
-Kit that folder and its ``pip_prebundle`` go on ``sys.path`` by hand. Its modules import ``carb`` (Carbonite) at
-module level for logging; ``carb`` comes from the ``isaacsim-kernel`` wheel's ``kit/kernel/py`` (its ``libcarb.so``
-in ``kit/`` on ``LD_LIBRARY_PATH``), and its logging works without a running Kit (``carb.settings`` does not, and
-the Newton path does not need it). ``--carb-stub`` puts a logging-only stand-in first instead, for interpreters the
-cp312 ``_carb`` cannot load.
+a dependency; install it only into a throwaway folder). Outside Kit three things stand in for what Kit provides:
 
-Four steps, so the peer's interpreter (Python 3.12, its Newton pin) never imports wresdyn and wresdyn's never
-imports the peer:
+- its package lives inside a Kit extension folder (``isaacsim/exts/isaacsim.robot_setup.sysid``): that folder and
+  its ``pip_prebundle`` go on ``sys.path`` by hand;
+- 14 of its modules import ``carb`` (Carbonite) at module level, for logging: ``--kit`` takes it from the
+  ``isaacsim-kernel`` wheel's ``isaacsim/kit`` (``kernel/py`` and ``libcarb.so``), whose logging works without a
+  running Kit (``carb.settings`` does not; the Newton path does not use it); ``--carb-stub`` writes a logging-only
+  stand-in instead, for interpreters the cp312 ``_carb`` cannot load;
+- Kit registers Newton's USD schemas at start-up; here ``newton_usd_schemas`` does, before the first stage opens
+  (the writeback applies ``NewtonJointAPI``).
 
-    # wresdyn's interpreter: the robot as a USD layer on a stand, the recordings as the peer's CSV, its run spec
+Four steps; the peer's interpreter (Python 3.12, the peer's Newton) never imports wresdyn:
+
+    # wresdyn's interpreter: the robot as a USD layer on a stand, the recordings as the peer's CSV, the job
     python benchmarks/peers/isaac_sim.py prepare data/dataset.npz --out OUT --recipe drive_calibration_inair
-    # the peer's interpreter (needs torch, newton, warp, mujoco-warp, usd-core, pyyaml and the two wheels)
-    python3.12 benchmarks/peers/isaac_sim.py solve OUT --isaac /tmp/isaac/site --kit /tmp/isaac/kernel/isaacsim/kit
+    # the peer's interpreter: torch, newton, warp, mujoco-warp, usd-core, newton-usd-schemas, pyyaml, the wheels
+    python3.12 benchmarks/peers/isaac_sim.py solve OUT --isaac ISAAC_SITE --kit KERNEL/isaacsim/kit
     # wresdyn's interpreter: the peer's USD writeback read by Newton's importer, open-loop |Δq| on every split
     python benchmarks/peers/isaac_sim.py score data/dataset.npz OUT
-    # anything: what imports and what does not, for the record (benchmarks/results/peers/isaac_sim/probe.txt)
-    python benchmarks/peers/isaac_sim.py probe --python python3.12 --isaac /tmp/isaac/site --kit ...
+    # any interpreter: what imports outside Kit and what does not (benchmarks/results/peers/isaac_sim/probe.txt)
+    python benchmarks/peers/isaac_sim.py probe --python python3.12 --isaac ISAAC_SITE --kit KERNEL/isaacsim/kit
 
 Choices (each says why):
 
-- **Robot.** ``OUT/robot.usda``, a layer over the shipped ``scenes/humanoid.usda`` (untouched) that adds a fixed
-  joint from the world to the pelvis: the recordings hang the robot on a stand, and the peer's Newton bridge loads
-  the USD with ``ModelBuilder.add_usd`` as authored (a root without a joint would fall freely). The peer writes its
-  accepted values into this layer (its writeback).
+- **Robot.** ``OUT/robot.usda``, a layer over a copy of the shipped ``scenes/humanoid.usda`` (untouched) that puts
+  the robot on a stand in the peer's terms: a fixed joint from the world to the pelvis (the peer loads the USD with
+  ``ModelBuilder.add_usd`` as authored; the recordings hang the robot on a stand); the articulation root moved from
+  the pelvis body to the robot's Xform (the peer collects joints only below the root's prim, and the shipped file's
+  links are the pelvis's siblings: it found 3 of 21 joints); ``physxScene:timeStepsPerSecond`` at the recording
+  rate (the peer resamples the telemetry to the scene's step and assumes 60 Hz when none is authored). The peer's
+  writeback authors into this layer; ``solve`` exports it as ``OUT/identified.usda``.
 - **Telemetry.** One CSV in the peer's compact layout (``time, q1..qN, dq1..dqN, cmd1..cmdN``, joints in the
   robot's order), the training and validation trajectories one after another with a gap, and one explicit chunk per
-  trajectory (``train`` / ``validation``): each chunk is rolled from its own first recorded state, the peer's
-  multiple-shooting layout. The recipe's ``chunking: auto`` would cut the training data 80/20 by time instead; the
-  project's validation split is the fair selection set for every tool.
-- **Recipe.** The peer's own built-in recipe by name, applied with its ``synthesize_run_spec_from_quickstart``
-  (parameters and bounds: its registry defaults, as its quick start does); only paths, chunks and the device are
-  set here.
+  trajectory (``train`` / ``validation``): each chunk rolls from its own first recorded state, the peer's multiple
+  shooting. The recipe's ``chunking: auto`` would cut the training data 80/20 by time instead; the project's
+  validation split is every tool's selection set.
+- **Recipe.** The peer's built-in recipe by name, applied with its own ``synthesize_run_spec_from_quickstart``
+  (parameters and bounds: its registry defaults, as its quick start does). Only paths, chunks and the device are
+  set here, and ``--featherstone-substeps`` where the recipe's 4 diverge: the peer's own stability message names
+  the count (on the humanoid at 500 Hz: 39; the recipe's second restart row starts uniformly inside the registry
+  bounds, drive damping up to 100x the file's, 160 N·m·s/rad on the worst joint).
 """
 
 from __future__ import annotations
@@ -59,11 +67,32 @@ GAP_S = 1.0
 """Time gap between trajectories in the telemetry CSV [s]: chunk bounds never share a sample."""
 
 
+CARB_STUB = '''"""Logging-only stand-in for Carbonite's Python module, for interpreters the cp312 _carb cannot load."""
+import logging
+
+_log = logging.getLogger("carb")
+log_error, log_warn, log_info, log_verbose = _log.error, _log.warning, _log.info, _log.debug
+'''
+
+
+def write_carb_stub(folder: str) -> None:
+    """``folder/carb/__init__.py``: :data:`CARB_STUB` (the peer's Newton path calls only ``carb.log_*``)."""
+    path = Path(folder) / "carb" / "__init__.py"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(CARB_STUB)
+
+
 def peer_paths(isaac: str, kit: str | None, carb_stub: str | None) -> None:
     """Put the peer's package (inside its Kit extension folder) and Carbonite's Python bindings on ``sys.path``."""
     ext = Path(isaac) / EXT
+    if carb_stub:
+        write_carb_stub(carb_stub)
     first = [str(carb_stub)] if carb_stub else []
     if kit and not carb_stub:
+        import ctypes
+
+        # _carb links libcarb.so by name; loading it first stands in for LD_LIBRARY_PATH, read only at start-up.
+        ctypes.CDLL(str(Path(kit) / "libcarb.so"), mode=ctypes.RTLD_GLOBAL)
         first.append(str(Path(kit) / "kernel/py"))
     sys.path[:0] = first + [str(ext), str(ext / "pip_prebundle")]
 
@@ -136,6 +165,9 @@ def prepare(args) -> None:
 # --- solve (the peer's interpreter) ------------------------------------------------------------------------------
 def solve(args) -> None:
     peer_paths(args.isaac, args.kit, args.carb_stub)
+    # Kit registers Newton's USD schemas at start-up; outside Kit the package does it on import, and it must come
+    # before the first stage is opened (USD builds its schema registry then): the writeback applies NewtonJointAPI.
+    import newton_usd_schemas  # noqa: F401
     from isaacsim.robot_setup.sysid.execution import run_sysid
     from isaacsim.robot_setup.sysid.preset_loader import load_builtin_parameter_preset
     from isaacsim.robot_setup.sysid.recipes import synthesize_run_spec_from_quickstart
@@ -152,6 +184,8 @@ def solve(args) -> None:
     spec.simulation.newton.device = args.device or job["device"]
     if args.max_iterations:
         spec.solver.max_iterations = args.max_iterations
+    if args.max_rollout_steps:
+        spec.solver.max_rollout_steps = args.max_rollout_steps
     if args.featherstone_substeps:
         spec.simulation.newton.featherstone_substeps = args.featherstone_substeps
     spec.outputs.compute_parameter_confidence = False  # extra rollouts after the solve, not part of the fit
@@ -187,7 +221,7 @@ def solve(args) -> None:
     wall = time.perf_counter() - t0
     summary = {"wall_s": wall, "recipe": args.recipe or job["recipe"], "device": spec.simulation.newton.device,
                "featherstone_substeps": spec.simulation.newton.featherstone_substeps,
-               "max_iterations": spec.solver.max_iterations,
+               "max_iterations": spec.solver.max_iterations, "max_rollout_steps": spec.solver.max_rollout_steps,
                "result": _plain(result), "versions": versions()}
     (out / "solve.json").write_text(json.dumps(summary, indent=1, default=str))
     print(f"# solve done in {wall:.1f}s: {out / 'solve.json'}")
@@ -338,6 +372,7 @@ def probe(args) -> None:
         setups["+ carb from isaacsim-kernel (kit/kernel/py, libcarb.so on LD_LIBRARY_PATH)"] = [
             str(Path(args.kit) / "kernel/py"), str(ext), str(ext / "pip_prebundle")]
     if args.carb_stub:
+        write_carb_stub(args.carb_stub)
         setups["+ a logging-only carb stand-in"] = [str(args.carb_stub), str(ext), str(ext / "pip_prebundle")]
     for label, path in setups.items():
         print(f"## {args.python} (Python {version}): {label}")
@@ -371,10 +406,11 @@ def main() -> None:
     s.add_argument("out")
     s.add_argument("--isaac", required=True, help="folder the isaacsim-robot-setup wheel was installed into")
     s.add_argument("--kit", default=None, help="the isaacsim-kernel wheel's isaacsim/kit folder (for carb)")
-    s.add_argument("--carb-stub", default=None, help="folder holding a logging-only carb stand-in, used first")
+    s.add_argument("--carb-stub", default=None, help="folder to write a logging-only carb stand-in into, used first")
     s.add_argument("--recipe", default=None, help="override the prepared recipe")
     s.add_argument("--device", default=None, help="override the prepared device")
     s.add_argument("--max-iterations", type=int, default=None, help="override the recipe's (smoke runs only)")
+    s.add_argument("--max-rollout-steps", type=int, default=None, help="override the recipe's (smoke runs only)")
     s.add_argument("--featherstone-substeps", type=int, default=None,
                    help="override the recipe's (its stability message names the count a robot needs)")
     s.set_defaults(fn=solve)
@@ -386,7 +422,7 @@ def main() -> None:
     r.add_argument("--python", default=sys.executable, help="interpreter to probe")
     r.add_argument("--isaac", required=True, help="folder the isaacsim-robot-setup wheel was installed into")
     r.add_argument("--kit", default=None, help="the isaacsim-kernel wheel's isaacsim/kit folder (for carb)")
-    r.add_argument("--carb-stub", default=None, help="folder holding a logging-only carb stand-in")
+    r.add_argument("--carb-stub", default=None, help="folder to write a logging-only carb stand-in into")
     r.set_defaults(fn=probe)
     args = p.parse_args()
     args.fn(args)
