@@ -222,7 +222,8 @@ def solve(args) -> None:
     summary = {"wall_s": wall, "recipe": args.recipe or job["recipe"], "device": spec.simulation.newton.device,
                "featherstone_substeps": spec.simulation.newton.featherstone_substeps,
                "max_iterations": spec.solver.max_iterations, "max_rollout_steps": spec.solver.max_rollout_steps,
-               "result": _plain(result), "versions": versions()}
+               "result": _plain(result), "versions": versions(args.isaac),
+               "carb": "stand-in" if args.carb_stub else args.kit}
     (out / "solve.json").write_text(json.dumps(summary, indent=1, default=str))
     print(f"# solve done in {wall:.1f}s: {out / 'solve.json'}")
 
@@ -240,11 +241,18 @@ def _plain(v):
     return v if isinstance(v, (str, int, float, bool, type(None))) else str(v)
 
 
-def versions() -> dict:
+def versions(isaac: str) -> dict:
+    import glob
+    import tomllib
     from importlib import metadata
 
     found = {"python": sys.version.split()[0]}
-    for name in ("isaacsim-robot-setup", "isaacsim-kernel", "newton", "warp-lang", "mujoco", "mujoco-warp", "torch",
+    for info in glob.glob(str(Path(isaac) / "isaacsim_robot_setup-*.dist-info")):
+        found["isaacsim-robot-setup wheel"] = Path(info).name.removesuffix(".dist-info").split("-")[1]
+    toml = Path(isaac) / EXT / "config/extension.toml"
+    if toml.exists():
+        found["isaacsim.robot_setup.sysid extension"] = tomllib.loads(toml.read_text())["package"]["version"]
+    for name in ("newton", "warp-lang", "mujoco", "mujoco-warp", "torch",
                  "usd-core", "numpy"):
         try:
             found[name] = metadata.version(name)
@@ -294,6 +302,8 @@ def score(args) -> None:
                 raise SystemExit(f"{layer}: joints {peer_robot.joint_names} != {robot.joint_names}")
             models[f"isaac {layer}"] = PhysicalParams.nominal(peer_robot)
     rows = {}
+    print("| model | validation | held-out | OOD | (joint, field) within 10 % of the truth |")
+    print("|---|---|---|---|---|")
     for name, physics in models.items():
         res = evaluate_splits(robot, {s: ds.split(s) for s in SPLITS}, ds.rate_hz, physics=physics,
                               weights=ds.fit_weights())
