@@ -40,7 +40,8 @@ Choices (each says why):
   validation split is every tool's selection set.
 - **Recipe.** The peer's built-in recipe by name, applied with its own ``synthesize_run_spec_from_quickstart``
   (parameters and bounds: its registry defaults, as its quick start does). Only paths, chunks and the device are
-  set here, and ``--featherstone-substeps`` where the recipe's 4 diverge: the peer's own stability message names
+  set here, the parameter-confidence report after the solve is off (extra rollouts, not part of the fit), and
+  ``--featherstone-substeps`` where the recipe's 4 diverge: the peer's own stability message names
   the count (on the humanoid at 500 Hz: 39; the recipe's second restart row starts uniformly inside the registry
   bounds, drive damping up to 100x the file's, 160 N·m·s/rad on the worst joint).
 """
