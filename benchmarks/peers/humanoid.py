@@ -54,7 +54,6 @@ import dataclasses
 import hashlib
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -62,7 +61,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parents[1]), str(HERE.parent)]  # this checkout and benchmarks/ (peer_adapter)
+sys.path[:0] = [str(HERE.parents[1]), str(HERE.parent), str(HERE)]  # this checkout, benchmarks/ (peer_adapter), host
+import host  # noqa: E402
 import peer_adapter as peer  # noqa: E402
 
 SPLITS = ("validation", "heldout", "ood")
@@ -86,10 +86,7 @@ class _Budget(Exception):
 
 def machine(threads: int | None, device: str = "cpu") -> str:
     """CPU model, cores visible / used, and the GPU when ``device`` is CUDA."""
-    cpu = platform.processor() or "unknown CPU"
-    with contextlib.suppress(OSError):
-        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                   if line.startswith("model name"))
+    cpu = host.cpu_model()
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     out = f"{cpu}, {cores} cores visible" + (f", {threads} threads used" if threads else "")
     if device.startswith("cuda"):

@@ -36,7 +36,9 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))  # this checkout's wresdyn
+sys.path[:0] = [str(REPO), str(Path(__file__).resolve().parent)]  # this checkout's wresdyn, host
+import host  # noqa: E402
+
 DATA = REPO / "tests" / "data" / "known_truth"
 RATE_HZ = 500.0
 """Recording rate [Hz]: the peer's model step, 2 ms, one sample per step."""
@@ -345,11 +347,8 @@ def run_peer(case: Case, robot, ds, max_iters: int = 200, log=print) -> dict:
 def machine() -> str:
     import mujoco
 
-    cpu = next((ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-                if ln.startswith("model name")), platform.processor()) if Path("/proc/cpuinfo").exists() else ""
-    return (f"{os.cpu_count()} CPU cores ({cpu}), {platform.system()} {platform.machine()}, Python "
-            f"{platform.python_version()}, MuJoCo {mujoco.__version__}; load average at start "
-            f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return (f"{os.cpu_count()} CPU cores ({host.cpu_model()}), {platform.system()} {platform.machine()}, Python "
+            f"{platform.python_version()}, MuJoCo {mujoco.__version__}; load average at start {host.load_average()}")
 
 
 def main() -> None:

@@ -20,7 +20,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -31,6 +30,7 @@ import mujoco
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import host  # noqa: E402
 import so101_sysid as adapter  # noqa: E402
 
 from wresdyn.data.dataset import load_dataset  # noqa: E402
@@ -64,9 +64,7 @@ def build_dataset(tarballs: Path, work: Path, robot: str) -> Path:
 
 
 def machine() -> str:
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor())
-    return f"{os.cpu_count()} CPU cores ({cpu}), shared with other jobs"
+    return f"{os.cpu_count()} CPU cores ({host.cpu_model()}); load average at start {host.load_average()}"
 
 
 def wresdyn_row(root: Path) -> dict:
