@@ -482,7 +482,7 @@ def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | N
 def run_wresdyn(args) -> dict:
     """The wresdyn leg: :func:`identify_wresdyn` with its defaults on ``args.device``, ``OUT/wresdyn_{cpu,cuda}.json``
     (resumable through its run folder ``OUT/wresdyn_{cpu,cuda}/``)."""
-    tag = "cuda" if args.device.startswith("cuda") else "cpu"
+    tag = args.tag or ("cuda" if args.device.startswith("cuda") else "cpu")
     out = Path(args.out) / f"wresdyn_{tag}"
     log_ = open_log(out / "log.txt")
     lines = []
@@ -492,7 +492,7 @@ def run_wresdyn(args) -> dict:
         log_(line)
 
     ds, robot, truth = load(args.data)
-    threads = 1 if tag == "cpu" else None  # its default torch_threads
+    threads = None if args.device.startswith("cuda") else 1  # its default torch_threads
     log(f"# wresdyn identify on {args.data}, device {args.device}; {machine(threads, args.device)}; "
         f"load average {os.getloadavg()[0]:.2f}")
     w = identify_wresdyn(robot, ds, out, args.device, log)
@@ -528,9 +528,8 @@ def report(args) -> dict:
         state = json.loads((out / "peer" / "checkpoint.json").read_text())
         ds, robot, truth = load(state["config"]["data"])
         tools["mujoco.sysid"] = peer_result(state, ds, robot, truth, os.cpu_count() or 1, out / "peer" / "partial")
-    for tag in ("cpu", "cuda"):
-        if (out / f"wresdyn_{tag}.json").exists():
-            tools[f"wresdyn_{tag}"] = json.loads((out / f"wresdyn_{tag}.json").read_text())
+    for leg in sorted(out.glob("wresdyn_*.json")):
+        tools[leg.stem] = json.loads(leg.read_text())
     if not tools:
         raise SystemExit(f"error: no leg output in {out}")
     summary = {name: {"heldout_error": r["scores"]["heldout"], "ood_error": r["scores"]["ood"],
@@ -541,9 +540,9 @@ def report(args) -> dict:
         p = tools["mujoco.sysid"]
         level = p["curve"][-1][1]
         extra["peer_final_validation"] = level
-        for tag in ("cpu", "cuda"):
-            w = tools.get(f"wresdyn_{tag}")
-            if w is not None:
+        for name, w in tools.items():
+            tag = name.removeprefix("wresdyn_")
+            if name != "mujoco.sysid":
                 t_w = time_to(w["curve"], level)
                 extra[f"ratio_{tag}"] = {
                     "wresdyn_seconds_to_peer_final": t_w,
@@ -599,10 +598,9 @@ def table(tools: dict, extra: dict) -> None:
         for key, what in (("own_return_scores", "mujoco.sysid's own return (its last iterate)"),
                           ("truth_in_peer_model", "the truth in the peer's model (its floor)")):
             print(f"{what}, validation / held-out / OOD [rad]: " + " / ".join(f"{p[key][s]:.4f}" for s in SPLITS))
-    for tag in ("cpu", "cuda"):
-        if f"ratio_{tag}" in extra:
-            print(f"wresdyn ({tag}) to the peer's final validation {extra['peer_final_validation']:.4f} rad: "
-                  f"{extra[f'ratio_{tag}']}")
+    for tag in (k.removeprefix("ratio_") for k in extra if k.startswith("ratio_")):
+        print(f"wresdyn ({tag}) to the peer's final validation {extra['peer_final_validation']:.4f} rad: "
+              f"{extra[f'ratio_{tag}']}")
 
 
 def main(argv=None) -> None:
@@ -624,6 +622,9 @@ def main(argv=None) -> None:
     b.add_argument("data")
     b.add_argument("--out", required=True)
     b.add_argument("--device", default="cpu", help="cpu or cuda:0")
+    b.add_argument("--tag", default=None,
+                   help="names the leg's outputs OUT/wresdyn_TAG{,.json} (default: cpu or cuda), so that one device on "
+                        "two machines keeps two legs")
     c = sub.add_parser("report", help="summary.json, curves.json / .png and the tables from the legs' outputs")
     c.add_argument("--out", required=True)
     c.add_argument("--title", default=None)
