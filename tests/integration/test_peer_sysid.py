@@ -1,5 +1,5 @@
-"""The ``mujoco.sysid`` adapter of the peer benchmark (``benchmarks/peers/peer_adapter.py``) at tiny size: the peer's model
-of the robot is the nominal MuJoCo model, its pseudo-inertia writer round-trips every link, the control history
+"""The ``mujoco.sysid`` adapter of the peer benchmark (``benchmarks/peers/peer_adapter.py``) at tiny size: the peer's
+model of the robot is the nominal MuJoCo model, its pseudo-inertia writer round-trips every link, the control history
 carries the delay, and the peer's own Gauss-Newton recovers a joint damping it can identify."""
 
 from __future__ import annotations

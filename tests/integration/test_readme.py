@@ -122,7 +122,8 @@ ROWS = {
         f"{pd('ood', PD_UNEVEN) / js(UNEVEN, 'wresdyn', 'final', 'ood'):.1f}× OOD"]),
     "real SO-101 arm": ([SO101], lambda: [
         f"{rx(SO101, SERVO.format('', 'heldout')):.2f}× held-out", f"{rx(SO101, SERVO.format('', 'ood')):.2f}× OOD",
-        f"seed 1: {rx(SO101, SERVO.format('_seed1', 'heldout')):.2f}×", f"{rx(SO101, SERVO.format('_seed1', 'ood')):.2f}×"]),
+        f"seed 1: {rx(SO101, SERVO.format('_seed1', 'heldout')):.2f}×",
+        f"{rx(SO101, SERVO.format('_seed1', 'ood')):.2f}×"]),
     "skills on the stand": (["deploy/default/results.json", "deploy/seed1/results.json", "deploy/seed2/results.json",
                              "deploy/full_h200/results.json"], stand),
     "skills on the floor, 3 seeds": (["floor/full_h100_seeds/three_seeds.txt"],

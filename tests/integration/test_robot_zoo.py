@@ -1,6 +1,7 @@
-"""The robot zoo benchmark (``benchmarks/fidelity/robot_zoo/``): every robot of ``robots.toml`` is found inside its installed
-package, loads with its gains file, has the joints the table states and builds in MuJoCo; each gains file is what
-``make_gains.py``'s rule writes; a tiny recording on the Panda (a ``world`` link, 0.04 m fingers) goes through."""
+"""The robot zoo benchmark (``benchmarks/fidelity/robot_zoo/``): every robot of ``robots.toml`` is found inside its
+installed package, loads with its gains file, has the joints the table states and builds in MuJoCo; each gains file
+is what ``make_gains.py``'s rule writes; a tiny recording on the Panda (a ``world`` link, 0.04 m fingers) goes
+through."""
 
 from __future__ import annotations
 
