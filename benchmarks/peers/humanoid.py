@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parents[1]), str(HERE.parent), str(HERE)]  # this checkout, benchmarks/ (peer_adapter), host
+sys.path[:0] = [str(HERE.parents[1]), str(HERE)]  # this checkout, this folder (peer_adapter, host)
 import host  # noqa: E402
 import peer_adapter as peer  # noqa: E402
 

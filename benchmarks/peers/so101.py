@@ -1,10 +1,10 @@
 """Peers on the real SO-101: MuJoCo Playground's identification recipe, LeRobot's MuJoCo model and BAM's STS3215
 model class, each fitted on the training runs of wresdyn's servo benchmark, scored on its validation, held-out and
-OOD runs like the published (unfitted) models of ``benchmarks/so101_baselines.py`` and like wresdyn's servo model.
+OOD runs like the published (unfitted) models of ``benchmarks/real/so101_baselines.py`` and like wresdyn's servo model.
 
 Metric: mean |Δq| [rad] over the five arm joints and every sample of whole runs, open loop from the first recorded
 state (:func:`wresdyn.evaluation.servo_baselines.evaluate_baseline`, MuJoCo C, the robot file's options). The data
-is the import of ``benchmarks/so101_servo_real.sh`` (same command, same splits: 26 training, 6 validation, 6
+is the import of ``benchmarks/real/so101_servo_real.sh`` (same command, same splits: 26 training, 6 validation, 6
 held-out, 2 OOD runs); training runs fit, validation only draws the curves, held-out and OOD are scored once per
 model. The recipes and the adapter: ``so101_sysid.py`` beside this file. wresdyn's row is read from its committed
 result (:data:`WRESDYN_RUN`), not rerun. The unfitted rows and the three fits are independent: each runs in its own
@@ -29,25 +29,24 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import host  # noqa: E402
-import so101_sysid as adapter  # noqa: E402
+import host
+import so101_sysid as adapter
 
-from wresdyn.data.dataset import load_dataset  # noqa: E402
-from wresdyn.evaluation.open_loop import metrics  # noqa: E402
-from wresdyn.evaluation.servo_baselines import (BAM_STS3215_7V4, BamDrive, bam_model, evaluate_baseline,  # noqa: E402
+from wresdyn.data.dataset import load_dataset
+from wresdyn.evaluation.open_loop import metrics
+from wresdyn.evaluation.servo_baselines import (BAM_STS3215_7V4, BamDrive, bam_model, evaluate_baseline,
                                                 lerobot_model, replay)
-from wresdyn.robot.description import load_robot  # noqa: E402
+from wresdyn.robot.description import load_robot
 
 SPLITS = ("validation", "heldout", "ood")
 WRESDYN_RUN = "benchmarks/results/so101_servo/effort/k3e4_reset"
-"""wresdyn's servo model as chosen on validation (``benchmarks/so101_servo_real.sh``, seed 0): its
+"""wresdyn's servo model as chosen on validation (``benchmarks/real/so101_servo_real.sh``, seed 0): its
 ``eval_metrics.json`` and ``identify.log``."""
 FIELDS = ("heldout_error", "ood_error", "seconds_to_final", "converged", "samples_used", "machine")
 
 
 def build_dataset(tarballs: Path, work: Path, robot: str) -> Path:
-    """The servo benchmark's import (``benchmarks/so101_servo_real.sh``'s ``collect`` line), built once."""
+    """The servo benchmark's import (``benchmarks/real/so101_servo_real.sh``'s ``collect`` line), built once."""
     data = work / "servo_data" / "dataset.npz"
     if data.exists():
         return data

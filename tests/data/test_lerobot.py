@@ -1,5 +1,5 @@
 """LeRobot datasets without a mapping file (:mod:`wresdyn.data.lerobot`): the shipped fixture written by LeRobot's
-own writer (benchmarks/so101_lerobot_fixture.py) imports to the SAGE runs it was made from, LeRobot's units convert
+own writer (benchmarks/real/so101_lerobot_fixture.py) imports to the SAGE runs it was made from, LeRobot's units convert
 as its motor bus defines them, and every missing piece or bad input is a one-line error that writes nothing."""
 
 from __future__ import annotations

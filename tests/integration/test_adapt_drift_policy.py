@@ -1,4 +1,4 @@
-"""A deployed skill as the drift benchmark's motion (``benchmarks/adapt_drift_policy.py``) at tiny size: a policy
+"""A deployed skill as the drift benchmark's motion (``benchmarks/adapt/adapt_drift_policy.py``) at tiny size: a policy
 trained for one PPO iteration runs closed loop on the drifting real robot, its log holds every sample with the PD
 target the policy wrote, the drift reaches the plant's MuJoCo model, and the online identifier consumes the stream."""
 
@@ -21,7 +21,7 @@ from wresdyn.skills.plants import SimPlant
 from wresdyn.skills.skill_config import SkillPPOConfig
 from wresdyn.skills.skill_ppo import train_skill
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "adapt"
 RATE = 500.0
 SECONDS = 3.0
 """Robot time of the run [s]: the drift timeline scaled to it ramps the leg friction from 0.375 to 1.5 s."""
@@ -88,7 +88,7 @@ def test_policy_stream_is_the_robot_log_and_the_adapter_consumes_it(humanoid, sh
     np.testing.assert_allclose(real.model.dof_frictionloss[:12], 2.0 * friction0[:12])
     cfg = AdaptConfig(window=1.2, holdout=0.3, update_every=0.5, iterations=2, windows=4, horizon=16,
                       one_step_every=10)
-    calib = PhysicalParams.load(BENCH / "results" / "grey_box" / "soft_friction" / "physics.json", humanoid)
+    calib = PhysicalParams.load(BENCH.parent / "results" / "grey_box" / "soft_friction" / "physics.json", humanoid)
     adapter = Adapter(humanoid, calib, RATE, cfg)
     t = np.arange(len(run.q)) / RATE
     updates = [u for s in range(0, len(t), 50) for u in adapter.push(t[s:s + 50], run.q[s:s + 50],

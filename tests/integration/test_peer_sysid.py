@@ -1,5 +1,5 @@
-"""The ``mujoco.sysid`` adapter of the peer benchmark (``benchmarks/peer_adapter.py``) at tiny size: the peer's model
-of the robot is the nominal MuJoCo model, its pseudo-inertia writer round-trips every link, the control history
+"""The ``mujoco.sysid`` adapter of the peer benchmark (``benchmarks/peers/peer_adapter.py``) at tiny size: the peer's
+model of the robot is the nominal MuJoCo model, its pseudo-inertia writer round-trips every link, the control history
 carries the delay, and the peer's own Gauss-Newton recovers a joint damping it can identify."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ EXACT = 1e-12
 
 @pytest.fixture(scope="module")
 def peer():
-    spec = importlib.util.spec_from_file_location("peer_adapter", BENCH / "peer_adapter.py")
+    spec = importlib.util.spec_from_file_location("peer_adapter", BENCH / "peers" / "peer_adapter.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules["peer_adapter"] = module
     spec.loader.exec_module(module)

@@ -1,6 +1,7 @@
-"""The robot zoo benchmark (``benchmarks/robot_zoo/``): every robot of ``robots.toml`` is found inside its installed
-package, loads with its gains file, has the joints the table states and builds in MuJoCo; each gains file is what
-``make_gains.py``'s rule writes; a tiny recording on the Panda (a ``world`` link, 0.04 m fingers) goes through."""
+"""The robot zoo benchmark (``benchmarks/fidelity/robot_zoo/``): every robot of ``robots.toml`` is found inside its
+installed package, loads with its gains file, has the joints the table states and builds in MuJoCo; each gains file
+is what ``make_gains.py``'s rule writes; a tiny recording on the Panda (a ``world`` link, 0.04 m fingers) goes
+through."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ZOO_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "robot_zoo"
+ZOO_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "fidelity" / "robot_zoo"
 sys.path.insert(0, str(ZOO_DIR))
 
 from zoo import load_zoo  # noqa: E402
@@ -75,7 +76,7 @@ def test_readme_results_equal_summary(zoo):
     import json
     import re
 
-    results = ZOO_DIR.parent / "results" / "robot_zoo"
+    results = ZOO_DIR.parents[1] / "results" / "robot_zoo"
     summary = json.loads((results / "summary.json").read_text())
     row = r"^\| (\w+) \| (\d+) \| ([\d.]+) \| ([\d.]+)× \| ([\d.]+)× \| ([\d.]+)× \| (\d+) \|$"
     rows = {m[0]: m[1:] for m in re.findall(row, (ZOO_DIR / "README.md").read_text(), re.M)}

@@ -109,7 +109,7 @@ def test_shooting_config_checks_and_non_finite_error():
 
 def test_identify_with_a_shooting_pool_runs_and_moves_the_free_states(problem):
     """A few identification steps with chains from a pool: the free states of the drawn nodes move, the others stay."""
-    from wresdyn.learn.sysid import _IdentifyLearner
+    from wresdyn.learn.sysid import IdentifyLearner
 
     robot, _, _, bank, _, _, _, _ = problem
     runs = recordings()
@@ -117,7 +117,7 @@ def test_identify_with_a_shooting_pool_runs_and_moves_the_free_states(problem):
                         "excluded_joints": [], "rate_hz": 1.0 / DT})()
     cfg = SysIdConfig(shooting=K, shooting_pool=3, windows=B, horizon_curriculum=(H,), iterations=4,
                       fit=("kp", "damping"), shooting_lr=1e-2)
-    learner = _IdentifyLearner(robot, ds, cfg, None, np.random.default_rng(0), runs, DT, lambda *_: None, None)
+    learner = IdentifyLearner(robot, ds, cfg, None, np.random.default_rng(0), runs, DT, lambda *_: None, None)
     before = learner.nodes.states.weight.detach().clone()
     for it in range(4):
         parts, _ = learner.step(it, H, cfg.lr)

@@ -2,7 +2,7 @@
 gradients: through the fused rollout and the per-step tape, with the friction solve (a gated region cut into pieces
 of its own) on, in one and in two CPU threads; and the choice of pieces is validated.
 
-The humanoid's chain (12 pieces) is checked against its one kernel by ``benchmarks/adjoint_pieces.py check`` on the
+The humanoid's chain (12 pieces) is checked against its one kernel by ``benchmarks/speed/adjoint_pieces.py check`` on the
 CPU and on a GPU (``benchmarks/results/first_fit/h100_pieces/``): its Clang compile is too slow for the suite.
 """
 

@@ -43,7 +43,7 @@ class AdaptConfig:
     start's values."""
     lr: float = 0.005
     """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`. Chosen with ``min_gain``
-    on the drift benchmark (``benchmarks/adapt_drift.py``, its reported timeline: before the validation timeline
+    on the drift benchmark (``benchmarks/adapt/adapt_drift.py``, its reported timeline: before the validation timeline
     existed) among (0.01, 0), (0.005, 0.05), (0.01, 0.1): the lowest error in every drift phase."""
     lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
     """Learning-rate factors of the gain/armature log scales, the linear fields and the link pseudo-inertia factors
@@ -63,7 +63,7 @@ class AdaptConfig:
     """A candidate wins when its held-back error is below ``(1 - min_gain)`` times the reference's (the current
     model's, or the warm start's where that is no worse): a margin against updates that only fit the held-back
     second's noise. With :attr:`confirm`, chosen among 0, 0.05 and 0.1 on the drift benchmark's validation timeline
-    (``benchmarks/adapt_drift.py --splits validation --seed 1``): 0.1 adapts too slowly (12 s to recover after the
+    (``benchmarks/adapt/adapt_drift.py --splits validation --seed 1``): 0.1 adapts too slowly (12 s to recover after the
     payload), 0 no better than 0.05."""
     fallback: bool = False
     """Each update also replays the warm start on the held-back part; where it is no worse there than the current
@@ -102,7 +102,7 @@ class AdaptConfig:
     ``detect_factor`` times the median of the last ``detect_history`` seconds' updates, the adapter tracks for
     ``track_for`` seconds: no confirmation, ``track_iterations`` steps at ``track_lr`` times the learning rate on the
     data after the jump only; then back to the guarded mode. Where one joint's own error jumps, lower effort limits
-    are tried for it (``effort_grid``). On the drift benchmark's validation timeline (``benchmarks/adapt_drift.py
+    are tried for it (``effort_grid``). On the drift benchmark's validation timeline (``benchmarks/adapt/adapt_drift.py
     --splits validation --seed 1``), with the other defaults: back within 1.5x the oracle 0, 0 and 0 s after the three
     changes against 6, 5 and 0 s without it, no update kept without drift either way."""
     detect_factor: float = 1.75

@@ -232,7 +232,7 @@ class RealRobot:
         tau /= self.n_sub
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):
             raise SimulationDiverged(f"{self.robot.source.name}: the real robot simulation diverged")
-        return self._sense(q, qd, rng) + (_quantise(tau, mm.torque_resolution),)
+        return self.sense(q, qd, rng) + (_quantise(tau, mm.torque_resolution),)
 
     def reset(self, state, rng: np.random.Generator | None = None) -> None:
         """Place the floating-base robot at ``state`` (a :class:`~wresdyn.robot.ground.FloatingState`, e.g.
@@ -292,10 +292,12 @@ class RealRobot:
         if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             raise SimulationDiverged(f"{self.robot.source.name}: the real robot simulation diverged")
         true = self.state
-        q, qd = self._sense(true.q[None], true.qd[None], self._rng)
+        q, qd = self.sense(true.q[None], true.qd[None], self._rng)
         return FloatingState(true.base_pose, true.base_twist, q[0], qd[0])
 
-    def _sense(self, q, qd, rng):
+    def sense(self, q, qd, rng):
+        """What the robot's encoders report for the true ``q``, ``qd`` (..., n_dof) [rad, rad/s]: the mismatch's
+        sensor noise (drawn from ``rng``, a numpy Generator, required when noise is on) and quantisation."""
         mm = self.mismatch
         if (mm.position_noise > 0 or mm.velocity_noise > 0) and rng is None:
             raise ValueError("sensor noise is on: pass a numpy Generator")

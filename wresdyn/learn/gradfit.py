@@ -105,7 +105,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
         until: Stop (and checkpoint) after this many iterations of the schedule (horizon curriculum and learning
             rate), to resume later; ``None`` runs the whole schedule.
         stop_below: End the fit at the first validation check whose error is at or below this [rad] (time to
-            fidelity, ``benchmarks/time_to_fidelity.py``), returning the residual selected so far.
+            fidelity, ``benchmarks/speed/time_to_fidelity.py``), returning the residual selected so far.
         physics: Physical parameters of the simulator (identified: the hybrid), with their command delay; ``None``
             = the robot file's. ``cfg.physics`` records where they came from.
 
@@ -126,7 +126,7 @@ def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=p
 
 class _FitLearner:
     """The gradient fit as a :class:`~wresdyn.learn.window_fit.WindowLearner`: the residual, Adam, the training
-    windows and their observation noise, one :class:`_Iteration` per step."""
+    windows and their observation noise, one :class:`GradFitIteration` per step."""
 
     name, what, parts, checkpoint_keys = "fit", "gradient fit", ("loss", "pos", "vel", "torque", "rate"), \
         ("policy", "optim", "noise_rng")
@@ -155,7 +155,7 @@ class _FitLearner:
         self.noise_gen = torch.Generator(device=cfg.device)
         self.noise_gen.manual_seed(cfg.seed)
         self.sim_steps = 0
-        self._iteration = _Iteration(cfg, self.sim, self.bank, self.policy, self.optim, self.obs_noise, self.deferred,
+        self._iteration = GradFitIteration(cfg, self.sim, self.bank, self.policy, self.optim, self.obs_noise, self.deferred,
                                      weights)
 
     def begin(self, run: RunFolder) -> None:
@@ -194,7 +194,7 @@ class _FitLearner:
         self._iteration.adopt_optimiser()
 
 
-class _Iteration:
+class GradFitIteration:
     """One optimiser step of the fit: windows of ``h`` steps at (trajectory, start) (B,) each, the rollout with the
     residual in the loop, the loss, the backward pass (torch's autograd through each step's Warp tape), gradient
     clipping and Adam. A call returns the loss and its parts (:attr:`_FitLearner.parts`) as one tensor (5,) on the

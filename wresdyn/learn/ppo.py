@@ -55,7 +55,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         resume: Continue from ``model_<it>.pt`` in ``run_dir``; with ``False`` an existing checkpoint is an error.
         data_path: Where ``dataset`` was read from, recorded in ``config.json`` for ``wresdyn eval``.
         stop_below: Stop at the first validation check whose error is at or below this [rad] (time to fidelity,
-            ``benchmarks/time_to_fidelity.py``); the run is then exported as if it had ended there.
+            ``benchmarks/speed/time_to_fidelity.py``); the run is then exported as if it had ended there.
         log: Printer of the run's lines; a :class:`wresdyn.progress.Log` also draws a bar over the iterations.
         physics: The identified physics the residual is learned on (the hybrid; ``cfg.env.physics`` records where
             they came from), or ``None``: the robot file's values, no delay.

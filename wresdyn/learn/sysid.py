@@ -136,7 +136,7 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     no step beats ``start_validation``). Appends to ``curve``.
 
     Adam's steps through the multiple-shooting loss stop in a long, ill-conditioned valley: on the shipped data the
-    loss keeps falling along the straight line to the true parameters (``benchmarks/sysid_valley.py``), and a
+    loss keeps falling along the straight line to the true parameters (``benchmarks/fidelity/sysid_valley.py``), and a
     quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
     2 cores, rerun on resume."""
     fields = [f for f in cfg.fit if f not in ("effort", "delay")]
@@ -210,7 +210,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
         ``(params, curve)``: the selected :class:`~wresdyn.sim.physics.PhysicalParams` and the learning curve.
     """
     rng, train, dt = start_window_fit(cfg, dataset)
-    learner = _IdentifyLearner(robot, dataset, cfg, start, rng, train, dt, log, on_search)
+    learner = IdentifyLearner(robot, dataset, cfg, start, rng, train, dt, log, on_search)
     run = RunFolder(out, dataclasses.asdict(cfg), RESUME_MAY_CHANGE, key="sysid", record=run_record(cfg, dataset))
     curve = run_window_fit(cfg, learner, run, rng, log)
     params = learner.model.values()
@@ -252,7 +252,7 @@ def run_record(cfg: SysIdConfig, dataset) -> dict:
             "friction_kappa": cfg.friction_kappa}
 
 
-class _IdentifyLearner:
+class IdentifyLearner:
     """Identification as a :class:`~wresdyn.learn.window_fit.WindowLearner`: the physical parameters
     (:class:`~wresdyn.sim.physics.PhysicsModel`) under Adam, with the grid searches before the first step (kp) and
     where the effort limit joins the fit (delay, effort)."""

@@ -5,7 +5,7 @@ starts every limit from one searched fraction of the robot file's and refines it
 joint whose drive never saturates in the replay: that joint keeps the searched fraction, a compromise of all
 joints, however far it is from its own. On a robot hung on a stand this is the rule, not the exception: the legs
 swing free, so hip roll, knees and ankles never need the torque that balance on the floor does, and their limits
-come out where the search left them (1.6x the true ones on the shipped data, ``benchmarks/effort_limits.py``).
+come out where the search left them (1.6x the true ones on the shipped data, ``benchmarks/skills/effort_limits.py``).
 
 What the data does say about such a joint:
 

@@ -123,7 +123,7 @@ class SysIdConfig(WindowFitStop):
     least training error (forward only, every joint at one factor per rollout); empty = start from the file's kp.
     Off by default. Where the file's kp is so stiff that the drive saturates on every move (the SO-101's servo
     model: kp 998 N·m/rad against 3.35 N·m), the loss barely depends on kp and Adam cannot walk down to a soft
-    servo's: ``benchmarks/so101_real.sh`` uses it."""
+    servo's: ``benchmarks/real/so101_real.sh`` uses it."""
     effort_floor: float | None = None
     """Least effort limit the fit may reach, as a fraction of the robot file's (gains config's) limit, 0-1: the grid
     of ``effort_grid`` is raised to it and every step projected above it; ``None`` = down to 0.05 of it. Where the
@@ -308,7 +308,7 @@ class GradFitConfig(WindowFitStop):
     cuda_graph: bool = True
     """On CUDA, replay each iteration (the rollout with the residual in the loop, the loss, the backward pass
     through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
-    length, with no host synchronisation inside (:class:`_Iteration`). The CPU runs the same code eagerly; off,
+    length, with no host synchronisation inside (:class:`GradFitIteration`). The CPU runs the same code eagerly; off,
     CUDA does too. May change on resume."""
     physics: str = ""
     """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn

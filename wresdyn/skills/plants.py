@@ -309,6 +309,6 @@ class RealPlant:
         self.state = np.where(bad[:, None], self.state, new)
         self.q_true = self.state[:, self._iq:self._iq + n].copy()
         self.qd_true = self.state[:, self._iv:self._iv + n].copy()
-        q, qd = self.real._sense(self.q_true, self.qd_true, self.rng)
+        q, qd = self.real.sense(self.q_true, self.qd_true, self.rng)
         f32 = dict(dtype=torch.float32)
         return torch.as_tensor(q, **f32), torch.as_tensor(qd, **f32), torch.as_tensor(bad)

@@ -60,7 +60,7 @@ Why the soft law is the default: against MuJoCo C (``frictionloss``, default ``s
 "real" robot of the shipped data replayed with its true parameters matches its noise-free recording to 0.0003 rad,
 where the damper law leaves 0.0063 rad, the whole gap between the two simulators. The figures are in
 docs/results/simulation.md ("Dry friction against MuJoCo") and
-``benchmarks/results/grey_box/soft_friction/friction_law.txt``, made by ``benchmarks/friction_law.py``.
+``benchmarks/results/grey_box/soft_friction/friction_law.txt``, made by ``benchmarks/fidelity/friction_law.py``.
 
 Gradients (a ``wp.Tape`` around :meth:`step` or :meth:`rollout`, ``requires_grad``) reach the states,
 targets and ``joint_f`` and, when the model was finalized with ``requires_grad``, every parameter above:

@@ -9,8 +9,8 @@
 # 3. the reported held-out timelines (the excitation and the skill motions) with the default and the chosen windows.
 R=/root/res; mkdir -p $R
 export PYTHONUNBUFFERED=1 WRESDYN_ADJOINT_PIECES=0 OMP_NUM_THREADS=1
-B="python3 benchmarks/adapt_drift.py --oracles benchmarks/results/adapt_drift"
-python3 benchmarks/adapt_profile.py --device cuda > $R/warmup_profile.txt 2>&1
+B="python3 benchmarks/adapt/adapt_drift.py --oracles benchmarks/results/adapt_drift"
+python3 benchmarks/speed/adapt_profile.py --device cuda > $R/warmup_profile.txt 2>&1
 for w in 8 64 256; do
   $B --splits validation --seed 1 --set device=cuda windows=$w --out $R/validation_w$w > $R/validation_w$w.log 2>&1 &
 done

@@ -22,8 +22,8 @@ while pgrep -f compile_worker.py > /dev/null; do sleep 1; done
 echo "detached one-kernel compile still running after the first fit's exit for $(( $(date +%s) - s )) s" > $R/background_wait.txt
 ls -la --time-style=+%T.%N /root/wc/*/ > $R/cache_after_first.txt
 fit second
-python3 benchmarks/adapt_profile.py --device cuda --cprofile 30 > $R/adapt_profile_cuda.txt 2>&1
-python3 benchmarks/adapt_profile.py --device cpu > $R/adapt_profile_cpu.txt 2>&1
+python3 benchmarks/speed/adapt_profile.py --device cuda --cprofile 30 > $R/adapt_profile_cuda.txt 2>&1
+python3 benchmarks/speed/adapt_profile.py --device cpu > $R/adapt_profile_cpu.txt 2>&1
 s=$(date +%s.%N)
 python3 -m wresdyn.cli adapt benchmarks/results/grey_box/soft_friction data/dataset.npz --split validation,heldout --quiet --out /root/runs/adapt_rt --device cuda > $R/adapt_rt.log 2>&1
 echo "whole command: $(python3 -c "import time;print(round(time.time()-$s,1))") s" >> $R/adapt_rt.log

@@ -23,6 +23,6 @@ echo "detached one-kernel compile still running after the first fit's exit for $
 ls -la --time-style=+%T.%N /root/wc/*/ > $R/cache_after_first.txt
 fit second
 python3 -c "import time;t=time.time();import torch,warp,newton;print(\"imports\",round(time.time()-t,2));t=time.time();import warp as wp;wp.init();print(\"wp.init\",round(time.time()-t,2));t=time.time();torch.zeros(1,device=\"cuda\");print(\"torch cuda init\",round(time.time()-t,2))" > $R/startup.txt 2>&1
-for w in 8 64 256; do python3 benchmarks/adapt_profile.py --device cuda --set windows=$w > $R/adapt_profile_cuda_w$w.txt 2>&1; done
-python3 benchmarks/adapt_profile.py --device cpu --set windows=64 > $R/adapt_profile_cpu_w64.txt 2>&1
+for w in 8 64 256; do python3 benchmarks/speed/adapt_profile.py --device cuda --set windows=$w > $R/adapt_profile_cuda_w$w.txt 2>&1; done
+python3 benchmarks/speed/adapt_profile.py --device cpu --set windows=64 > $R/adapt_profile_cpu_w64.txt 2>&1
 echo done > $R/DONE

@@ -21,5 +21,5 @@ while pgrep -f compile_worker.py > /dev/null; do sleep 1; done
 echo "detached one-kernel compile still running after the first fit's exit for $(( $(date +%s) - s )) s" > $R/background_wait.txt
 fit second
 echo fits > $R/STAGE
-for w in 8 64 256; do python3 benchmarks/adapt_profile.py --device cuda --set windows=$w > $R/adapt_profile_cuda_w$w.txt 2>&1; done
+for w in 8 64 256; do python3 benchmarks/speed/adapt_profile.py --device cuda --set windows=$w > $R/adapt_profile_cuda_w$w.txt 2>&1; done
 echo done > $R/DONE

@@ -3,7 +3,7 @@
 # 1. a default `wresdyn fit` on GPU 0 with the one-kernel adjoint from the start (WRESDYN_ADJOINT_PIECES=0: its
 #    compile in the batch), for its training time;
 # 2. the residual PPO's scaling, repeated: three rounds of one GPU at 4096 worlds, then torchrun on two at 4096 each,
-#    alternating, 2 untimed and 15 timed iterations per case (benchmarks/ppo_scaling.py, as gpu_scaling.sh's steps 1-2).
+#    alternating, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py, as gpu_scaling.sh's steps 1-2).
 # Results in /root/res.
 R=/root/res; mkdir -p $R /root/runs
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 CUDA_CACHE_DISABLE=1 WARP_CACHE_PATH=/root/wc
@@ -21,10 +21,10 @@ export WRESDYN_ADJOINT_PIECES=0
 fit one_kernel
 unset WRESDYN_ADJOINT_PIECES
 for r in 1 2 3; do
-  CUDA_VISIBLE_DEVICES=0 python3 -m torch.distributed.run --standalone --nproc_per_node 1 benchmarks/ppo_scaling.py \
+  CUDA_VISIBLE_DEVICES=0 python3 -m torch.distributed.run --standalone --nproc_per_node 1 benchmarks/speed/ppo_scaling.py \
     --device cuda --iterations 15 --json $R/one_r$r.json --cases residual:4096 > $R/one_r$r.txt 2>&1
-  CUDA_VISIBLE_DEVICES=0,1 python3 -m torch.distributed.run --standalone --nproc_per_node 2 benchmarks/ppo_scaling.py \
+  CUDA_VISIBLE_DEVICES=0,1 python3 -m torch.distributed.run --standalone --nproc_per_node 2 benchmarks/speed/ppo_scaling.py \
     --device cuda --iterations 15 --json $R/two_r$r.json --cases residual:8192 > $R/two_r$r.txt 2>&1
-  python3 benchmarks/ppo_scaling.py --table $R/one_r$r.json $R/two_r$r.json > $R/table_r$r.txt 2>&1
+  python3 benchmarks/speed/ppo_scaling.py --table $R/one_r$r.json $R/two_r$r.json > $R/table_r$r.txt 2>&1
 done
 echo done > $R/DONE

@@ -15,11 +15,11 @@ v() {  # NAME then the command
 }
 for n in base new; do
   v $n python3 -c "import wresdyn, wresdyn.paths as p; print(wresdyn.__file__, p.REPO)" > $R/$n/which.txt 2>&1
-  v $n python3 /root/repo/benchmarks/adapt_profile.py --device cuda --kernels 5 > $R/$n/adapt_kernels_w8.txt 2>&1
+  v $n python3 /root/repo/benchmarks/speed/adapt_profile.py --device cuda --kernels 5 > $R/$n/adapt_kernels_w8.txt 2>&1
   echo $n-k > $R/STAGE
 done
 for rep in 1 2; do for n in base new; do
-  v $n python3 /root/repo/benchmarks/adapt_profile.py --device cuda > $R/$n/adapt_w8_$rep.txt 2>&1
+  v $n python3 /root/repo/benchmarks/speed/adapt_profile.py --device cuda > $R/$n/adapt_w8_$rep.txt 2>&1
 done; done
 echo plain > $R/STAGE
 for n in base new; do
@@ -27,6 +27,6 @@ for n in base new; do
 done
 echo bench > $R/STAGE
 for n in base new; do
-  v $n python3 /root/repo/benchmarks/adapt_profile.py --device cuda --set windows=256 > $R/$n/adapt_w256.txt 2>&1
+  v $n python3 /root/repo/benchmarks/speed/adapt_profile.py --device cuda --set windows=256 > $R/$n/adapt_w256.txt 2>&1
 done
 echo done > $R/DONE

@@ -1,6 +1,6 @@
 #!/bin/bash
 # The A/B runs of this folder. They ran through a wrapper that set SolverReplay's CUDA default before running the
-# command (`benchmarks/adjoint_pieces.py run PIECES ...`, since replaced by the environment variable below, which
+# command (`benchmarks/speed/adjoint_pieces.py run PIECES ...`, since replaced by the environment variable below, which
 # fixes the same choice); everything else as run. After the wheels' install.py, PYTHONPATH exported by the caller.
 R=/root/res; mkdir -p $R /root/runs
 export PYTHONUNBUFFERED=1
@@ -22,6 +22,6 @@ export WRESDYN_KERNEL_DIR=/root/ks_mono WARP_CACHE_PATH=/root/wc_mono
 fit mono_prefilled 0
 fit mono_warm 0
 unset CUDA_CACHE_DISABLE
-python3 benchmarks/adjoint_pieces.py check --device cuda:0 --worlds 1024 --steps 64 > $R/check.txt 2>&1
-for p in 400 0; do WRESDYN_ADJOINT_PIECES=$p python3 benchmarks/learners.py --device cuda:0 --envs "" --graphs on \
+python3 benchmarks/speed/adjoint_pieces.py check --device cuda:0 --worlds 1024 --steps 64 > $R/check.txt 2>&1
+for p in 400 0; do WRESDYN_ADJOINT_PIECES=$p python3 benchmarks/speed/learners.py --device cuda:0 --envs "" --graphs on \
   --windows 1024 --grad-iterations 30 > $R/learners_$p.txt 2>&1; done
