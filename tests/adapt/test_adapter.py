@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from wresdyn.adapt.adapter import Adapter, StreamError
-from wresdyn.adapt.config import AdaptConfig
+from wresdyn.adapt.config import ADAPT_FIT, AdaptConfig
 from wresdyn.adapt.stream import dataset_blocks, text_blocks
 from wresdyn.cli import main
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
-from wresdyn.sim.physics import PhysicalParams
+from wresdyn.sim.physics import SERVO_FIELDS, PhysicalParams
 
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, torque_limit_scale=0.5)
 """The real robot of these tests: gains, friction, damping and saturation off the file's, no delay, no noise."""
@@ -47,6 +47,38 @@ def test_an_update_that_lowers_the_held_back_error_is_accepted_and_published(hum
     assert published.friction.tolist() == adapter.physics.friction.tolist()
     assert json.loads((tmp_path / "physics.json").read_text())["t"] == pytest.approx(last.t)
     assert len(list(tmp_path.glob("physics_*.json"))) == sum(u.accepted or u.reverted for u in updates)
+
+
+def test_a_field_in_fit_is_adapted_and_the_others_keep_the_warm_start(humanoid, stream):
+    # friction alone: the real robot's friction is off the file's, so the accepted updates move it toward the truth
+    start, truth = PhysicalParams.nominal(humanoid), RealRobot(humanoid, REAL).physics()
+    cfg = TINY.__class__(**{**TINY.__dict__, "lr": 0.02, "fit": ("friction",)})
+    adapter = Adapter(humanoid, start, stream.rate_hz, cfg)
+    updates = _run(adapter, stream)
+    assert any(u.accepted for u in updates)
+    moved = np.abs(adapter.physics.friction - start.friction)
+    assert moved.max() > 0.1 * np.abs(truth.friction - start.friction).max(), moved
+    assert np.abs(adapter.physics.friction - truth.friction).mean() < np.abs(start.friction - truth.friction).mean()
+    for f in ("kp", "kd", "armature", "damping", "effort", "delay", "body_mass"):  # to rounding of their coordinates
+        np.testing.assert_allclose(getattr(adapter.physics, f), getattr(start, f), rtol=1e-12, err_msg=f)
+
+
+def test_fit_accepts_exactly_the_fields_the_adapter_steps(humanoid):
+    # every field AdaptConfig accepts is one the adapter's optimiser steps, and every field it steps is one asked for
+    adapter = Adapter(humanoid, PhysicalParams.nominal(humanoid), 500.0, TINY)
+    assert TINY.fit == ADAPT_FIT
+    stepped = {id(p) for g in adapter.optim.param_groups for p in g["params"]}
+    fitted = {id(p) for p in adapter.model.parameters() if p.requires_grad}
+    assert stepped == fitted
+    for name in ("u_delay", *(f"u_{f}" for f in SERVO_FIELDS)):
+        assert id(getattr(adapter.model, name)) not in stepped, name
+    # the delay and the servo drive's fields are not adapted: asking for one is refused in one line naming the rest
+    for field in ("delay", *SERVO_FIELDS):
+        with pytest.raises(ValueError) as e:
+            AdaptConfig(fit=("kp", field))
+        message = str(e.value)
+        assert "\n" not in message and f"[{field!r}] cannot be adapted" in message
+        assert message.endswith(f"choose from {list(ADAPT_FIT)}"), message
 
 
 def test_an_update_that_raises_the_held_back_error_is_rejected(humanoid, stream, tmp_path):

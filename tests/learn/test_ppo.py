@@ -1,4 +1,5 @@
-"""PPO through rsl-rl at tiny sizes (4 envs, 8 steps, 32-unit nets): runs, checkpoints, resumes, exports."""
+"""PPO through rsl-rl at tiny sizes (4 envs, 8 steps, 32-unit nets): runs, checkpoints, resumes, exports; and one
+seeded run of 64 envs on the cart-pole whose selected residual beats PD only on validation."""
 
 import dataclasses
 import json
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from wresdyn.data.mismatch import Mismatch
 from wresdyn.errors import WresdynError
 from wresdyn.learn.ppo import RunError, load_policy, train
 from wresdyn.learn.ppo_config import PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config
@@ -15,6 +17,7 @@ from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
 from wresdyn.learn.rewards import RewardConfig
 from wresdyn.learn.runs import load_checkpoint
+from wresdyn.learn.selection import ValidationScore
 
 from conftest import tiny_ppo_config as tiny
 
@@ -291,3 +294,27 @@ def test_example_smoke_run(tmp_path):
     assert res.returncode == 0, res.stderr[-2000:]
     assert "heldout: mean |dq| PD only" in res.stdout
     assert (tmp_path / "ex" / "policy.onnx").is_file() and (tmp_path / "ex" / "eval" / "metrics.json").is_file()
+
+
+def test_the_selected_residual_beats_pd_only(cartpole, record, tmp_path):
+    # the cart-pole on a real robot with dry friction and softer gains: PD alone misses the validation replay by
+    # about 0.0125 rad. The reward's kernel is narrowed to that scale (the default 0.1 rad² is flat there). Seeded:
+    # on the CPU the validation error falls below 0.8x PD's from iteration 7 on, to 0.58x at iteration 10. A claim
+    # about the training and its selection only: this tiny run's residual does not carry over to other commands (on
+    # one held-out trajectory it missed by 9x PD's error)
+    data = record(cartpole, Mismatch(friction=0.1, kp_scale=0.6), {"train": 2, "validation": 1}, seconds=0.1,
+                  amplitude=0.4)
+    cfg = TrainConfig(env=ReplayEnvConfig(horizon=48), rewards=RewardConfig(sigma_q=1e-3),
+                      residual=ResidualConfig(hidden_dims=(32, 32), critic_hidden_dims=(32, 32), init_std=0.5),
+                      ppo=PPOConfig(num_envs=64, num_steps_per_env=48, iterations=12, save_interval=12,
+                                    num_mini_batches=2, num_learning_epochs=4, learning_rate=3e-4, desired_kl=0.01,
+                                    select_every=1))
+    summary = train(data, cartpole, cfg, tmp_path / "run")
+    val = np.array([row["validation"] for row in summary["validation_curve"]])
+    score = ValidationScore(cartpole, data.split("validation"), data.rate_hz)
+    pd = score()
+    assert summary["selected_validation"] == val.min() < 0.7 * pd, (val / pd).round(3)
+    # a stretch of iterations below PD, not one lucky iterate that the selection on these replays picked
+    assert (val < 0.9 * pd).sum() >= 3, (val / pd).round(3)
+    policy, meta = load_policy(tmp_path / "run")  # the export is the selected residual
+    assert score(policy, meta["kind"]) == pytest.approx(val.min(), rel=1e-5)

@@ -33,8 +33,9 @@ def test_gradient_fit_returns_the_residual_of_its_best_validation(quadruped, rec
     assert len(val) == 6
     score = ValidationScore(quadruped, data.split("validation"), data.rate_hz)
     assert score(policy) == pytest.approx(val[best], rel=1e-6)
-    if best == len(val) - 1:  # the validation curve is the training's outcome, not something this test controls
-        pytest.skip("the last iteration scored best on validation here: returning the best shows no selection")
+    # this seeded run overfits its two training trajectories: its best validation comes before its last (on the CPU
+    # iteration 1, 0.0529 rad, the last 0.0576), so returning the last would fail here
+    assert best < len(val) - 1 and val[-1] > val[best], val
     # the checkpoint keeps the last iteration too: it scores as its own curve entry, worse than the returned one
     last = build_policy(quadruped, cfg.residual, *obs_stats(data.split("train")))
     last.load_state_dict(load_checkpoint(tmp_path / "checkpoint.pt", keys=("policy",))["policy"])
@@ -44,12 +45,12 @@ def test_gradient_fit_returns_the_residual_of_its_best_validation(quadruped, rec
 def test_ppo_exports_the_actor_of_its_best_validation(robot, data, tmp_path, best_actor):
     cfg = TrainConfig(env=ReplayEnvConfig(horizon=8),
                       residual=ResidualConfig(hidden_dims=(32, 32), critic_hidden_dims=(32, 32)),
-                      ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=4, save_interval=1, num_mini_batches=2,
+                      ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=3, save_interval=1, num_mini_batches=2,
                                     num_learning_epochs=2, select_every=1))
     run = tmp_path / "run"
     summary = train(data, robot, cfg, run)
     curve = summary["validation_curve"]
-    assert [row["iteration"] for row in curve] == [1, 2, 3, 4]
+    assert [row["iteration"] for row in curve] == [1, 2, 3]
     val = [row["validation"] for row in curve]
     best = int(np.argmin(val))
     assert summary["selected_iteration"] == curve[best]["iteration"] and summary["selected_validation"] == val[best]
@@ -67,8 +68,9 @@ def test_ppo_exports_the_actor_of_its_best_validation(robot, data, tmp_path, bes
         torch.testing.assert_close(exported(obs), expected(obs), rtol=1e-5, atol=1e-7)
     score = ValidationScore(robot, data.split("validation"), data.rate_hz)
     assert score(exported, meta["kind"]) == pytest.approx(val[best], rel=1e-5)
-    if best == len(val) - 1:  # the validation curve is the training's outcome, not something this test controls
-        pytest.skip("the last iteration scored best on validation here: the export and the last actor coincide")
+    # this seeded run's validation worsens after its first iteration (on the CPU 0.0224, 0.0228, 0.0268 rad), so an
+    # export of the last actor would fail here
+    assert best < len(val) - 1 and val[-1] > val[best], val
     with torch.no_grad():  # ...and not the last one, which the newest checkpoint holds
         actor.load_state_dict(load_checkpoint(latest_checkpoint(run), keys=("actor_state_dict",))["actor_state_dict"])
         last = policy_from_actor(actor, mean, std, meta["scale"], cfg.residual.kind, cfg.residual.action_gain)

@@ -6,13 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..choices import DetectNorm, SolverKind, check_choice, check_device, check_number
-from ..learn.window_fit_config import FIT_FIELDS
 
 __all__ = ["ADAPT_FIT", "AdaptConfig"]
 
 ADAPT_FIT = ("kp", "kd", "armature", "damping", "friction", "effort", "bodies")
-"""What is adapted unless told: the identified fields except the command delay, which stays the warm start's (the
-held-back replay then compares models on the same PD targets)."""
+"""What the adapter can adapt, and adapts unless told: the identified fields
+(:data:`~wresdyn.learn.window_fit_config.FIT_FIELDS`) except the command delay, which stays the warm start's (the
+held-back replay then compares models on the same PD targets), and the servo drive's fields, which its optimiser does
+not step."""
 
 
 @dataclass(frozen=True)
@@ -39,8 +40,7 @@ class AdaptConfig:
     horizon: int = 64
     """Window length [steps] (at 500 Hz, 128 ms)."""
     fit: tuple[str, ...] = ADAPT_FIT
-    """Fields adapted (:data:`~wresdyn.learn.window_fit_config.FIT_FIELDS` except ``delay``); the others keep the warm
-    start's values."""
+    """Fields adapted, a subset of :data:`ADAPT_FIT`; the others keep the warm start's values."""
     lr: float = 0.005
     """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`. Chosen with ``min_gain``
     on the drift benchmark (``benchmarks/adapt/adapt_drift.py``, its reported timeline: before the validation timeline
@@ -206,7 +206,6 @@ class AdaptConfig:
             check_number(f, f"lr_scale[{i}]", gt=0)
         for i, f in enumerate(self.effort_grid):
             check_number(f, f"effort_grid[{i}]", gt=0, le=1)
-        bad = sorted(set(self.fit) - (set(FIT_FIELDS) - {"delay"}))
+        bad = sorted(set(self.fit) - set(ADAPT_FIT))
         if bad:
-            raise ValueError(f"fit: field(s) {bad} cannot be adapted; choose from "
-                             f"{[f for f in FIT_FIELDS if f != 'delay']}")
+            raise ValueError(f"fit: field(s) {bad} cannot be adapted; choose from {list(ADAPT_FIT)}")
