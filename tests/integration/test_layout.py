@@ -5,10 +5,14 @@ Ranks (an import may point to its own rank or a lower one, never a higher one):
 
 0. the shared leaves at the top of the package: ``errors``, ``choices``, ``paths``, ``progress`` (each imports at
    most another leaf);
-1. ``robot``; 2. ``data``; 3. ``sim``; 4. ``learn``; 5. ``evaluation``, ``export`` and ``adapt`` (online
-   identification); 6. ``skills``;
-7. ``experiments`` (the drivers that train and compare several things); 8. ``cli``;
-9. the package's face: ``wresdyn/__init__.py`` (re-exports the robot's API) and ``wresdyn/__main__.py`` (runs the
+1. ``robot``; 2. ``data``; 3. ``sim``;
+4. ``learn``, what every learner shares (run folders, the window-fit loop, residual models, validation selection,
+   network files);
+5. ``identify`` (the simulator's own physics); 6. ``fit`` (a residual by gradient, alone or over identified physics:
+   it calls ``identify``) and ``ppo`` (a residual by reinforcement learning);
+7. ``evaluation``, ``export`` and ``adapt`` (online identification: the offline loss of ``identify``); 8. ``skills``;
+9. ``experiments`` (the drivers that train and compare several things); 10. ``cli``;
+11. the package's face: ``wresdyn/__init__.py`` (re-exports the robot's API) and ``wresdyn/__main__.py`` (runs the
    command line).
 
 A top-level module not named here fails :func:`test_every_module_has_a_rank`: give a new one its rank here.
@@ -27,7 +31,8 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[2] / "wresdyn"
 
 RANK = {"errors": 0, "choices": 0, "paths": 0, "progress": 0, "robot": 1, "data": 2, "sim": 3, "learn": 4,
-        "evaluation": 5, "export": 5, "adapt": 5, "skills": 6, "experiments": 7, "cli": 8, "__init__": 9, "__main__": 9}
+        "identify": 5, "fit": 6, "ppo": 6, "evaluation": 7, "export": 7, "adapt": 7, "skills": 8, "experiments": 9,
+        "cli": 10, "__init__": 11, "__main__": 11}
 """Rank of each top-level module or subpackage of ``wresdyn`` (see the module docstring)."""
 
 MAX_LINES = 450

@@ -13,11 +13,11 @@ import pytest
 import torch
 
 from wresdyn.experiments.ablation import cell_devices
-from wresdyn.learn.gradfit import GradFitConfig, fit
-from wresdyn.learn.ppo import train
-from wresdyn.learn.ppo_config import default_config, set_fields
-from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
+from wresdyn.fit.gradfit import GradFitConfig, fit
 from wresdyn.learn.residual import ResidualConfig
+from wresdyn.ppo.ppo_config import default_config, set_fields
+from wresdyn.ppo.replay_env import ReplayEnv, ReplayEnvConfig
+from wresdyn.ppo.trainer import train
 
 TORCHRUN = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m", "wresdyn.cli",
             "train", "data/dataset.npz", "--num-envs", "16", "--steps-per-env", "8", "--device", "cpu",
@@ -94,7 +94,7 @@ from pathlib import Path
 
 import torch
 
-from wresdyn.learn.ppo_runner import Ranks
+from wresdyn.ppo.runner import Ranks
 from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
 from wresdyn.skills.floor_motions import make_floor_motions

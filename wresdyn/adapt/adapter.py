@@ -3,7 +3,7 @@
 An :class:`Adapter` starts from an offline calibration (``physics.json`` of ``wresdyn identify`` or a hybrid ``wresdyn
 fit``), consumes the robot's stream of samples (t, q, q̇, q_cmd) and keeps the last :attr:`AdaptConfig.window`
 seconds. Every :attr:`AdaptConfig.update_every` seconds of robot time it runs a bounded number of identification
-steps, the offline loss of :mod:`wresdyn.learn.sysid` (multiple shooting on windows cut from the buffer, through the
+steps, the offline loss of :mod:`wresdyn.identify.sysid` (multiple shooting on windows cut from the buffer, through the
 differentiable solver, in the physically consistent coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`)
 
     L = mean_k [ w_q |q_k − q_r,k|² + w_qd |q̇_k − q̇_r,k|² ] + w_prior |u − u_warm|²,
@@ -34,7 +34,7 @@ import torch
 
 from ..errors import WresdynError
 from ..export.usd import check_usd_robot, write_export
-from ..learn.sysid import physics_window_loss
+from ..identify.sysid import physics_window_loss
 from ..robot.physical import PhysicalParams
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import can_fuse, fused_rollout

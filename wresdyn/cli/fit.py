@@ -7,7 +7,7 @@ printed is also in ``fit.log``; on a terminal a progress bar shows the elapsed a
 (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
 ``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
 ``OUT/identify/``, with its ``identifiability.json``: what the data can identify) and learns the residual network on
-top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
+top of it (:mod:`wresdyn.fit.hybrid`); with ``--physics``
 the given physics is used instead of identifying. ``--model network`` learns the residual on the robot file's
 physics (the residual alone, nothing identified). ``--model parametric`` fits the residual-torque baseline
 (per-joint gains, damping, friction, armature as an extra torque) and writes its parameters to ``parameters.json``.
@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..data.loading import load_data
-    from ..learn.gradfit import export_run, fit
+    from ..fit.gradfit import export_run, fit
     from . import UserError
 
     cfg = config_from_args(args)
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
                  physics=physics, friction_kappa=cfg.friction_kappa)
     try:
         if identify_first:
-            from ..learn.hybrid import fit_hybrid
+            from ..fit.hybrid import fit_hybrid
 
             hybrid = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data, log=log)
             policy, curve, cfg, id_wall, physics = (hybrid.policy, hybrid.curve, hybrid.config, hybrid.identify_wall,

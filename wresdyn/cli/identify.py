@@ -1,6 +1,6 @@
 """``wresdyn identify DATA``: identify the simulator's own physical parameters through the differentiable solver.
 
-Grey-box system identification (:mod:`wresdyn.learn.sysid`): per joint PD gains, armature, viscous damping, dry
+Grey-box system identification (:mod:`wresdyn.identify.sysid`): per joint PD gains, armature, viscous damping, dry
 friction with stiction, effort limit and command delay; per link mass, centre of mass and inertia. The run
 folder holds ``physics.json`` (the calibrated robot's parameters, JSON), ``config.json``, ``checkpoint.pt``
 (resumed when present; a changed config is refused), ``curve.json`` and ``identify.log`` (every line printed;
@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..data.loading import load_data
-    from ..learn.hybrid import save_identify_config
-    from ..learn.sysid import identify
+    from ..fit.hybrid import save_identify_config
+    from ..identify.sysid import identify
     from . import UserError
 
     cfg = config_from_args(args)

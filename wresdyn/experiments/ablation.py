@@ -24,10 +24,10 @@ import numpy as np
 from ..errors import WresdynError
 from ..evaluation.open_loop import evaluate_split
 from ..evaluation.plots import save_figure
-from ..learn.gradfit import fit
-from ..learn.ppo import load_policy, train
-from ..learn.ppo_config import default_config, set_field, set_fields
+from ..fit.gradfit import fit
 from ..learn.window_fit_config import GradFitConfig
+from ..ppo.ppo_config import default_config, set_field, set_fields
+from ..ppo.trainer import load_policy, train
 from .ablation_config import AblationConfig
 
 __all__ = ["AblationConfig", "cells", "run_cell", "run_cells", "run_ablation", "write_summary", "table_markdown",

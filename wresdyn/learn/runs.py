@@ -349,7 +349,7 @@ class RunFolder:
 
 class RunnerFolder(RunFolder):
     """The run folder of a runner that keeps its own checkpoints (rsl-rl's ``model_<it>.pt``: PPO of the residual,
-    :mod:`wresdyn.learn.ppo`, and of the skills, :mod:`wresdyn.skills.skill_ppo`).
+    :mod:`wresdyn.ppo.trainer`, and of the skills, :mod:`wresdyn.skills.skill_ppo`).
 
     It owns the record ``config.json``, the resume check against it (:meth:`check`: the runner's checkpoint holds
     weights only, so the configuration it was trained with is the one ``config.json`` recorded) and

@@ -1,5 +1,5 @@
 """The configurations of the two window fits, identification (:class:`SysIdConfig`) and the gradient fit of a
-residual (:class:`GradFitConfig`), and their shared checks, apart from the learners (:mod:`.sysid`, :mod:`.gradfit`)
+residual (:class:`GradFitConfig`), and their shared checks, apart from the learners (:mod:`wresdyn.identify.sysid`, :mod:`wresdyn.fit.gradfit`)
 so that the command line reads them without importing torch or Warp."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ __all__ = ["DEFAULT_FIT", "FIT_FIELDS", "WindowFitStop", "SysIdConfig", "GradFit
 
 
 def check_window_fit_config(cfg) -> None:
-    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
-    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
+    """Checks shared by the two window fits' configs (:class:`~wresdyn.fit.gradfit.GradFitConfig`,
+    :class:`~wresdyn.identify.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
     check_choice(cfg.solver, SolverKind, "solver")
     check_friction_kappa(cfg.friction_kappa, "friction_kappa", cfg.solver)
     check_device(cfg.device, "device")
@@ -143,11 +143,11 @@ class SysIdConfig(WindowFitStop):
     """Newton solver; must be differentiable (SolverReplay)."""
     friction_kappa: float | None = None
     """Dry-friction law of the replay solver, ``None`` (the soft default) or a damper-law rate [1/s]: as
-    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.learn.replay_env_config`)."""
+    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.ppo.replay_env_config`)."""
     device: str = "cpu"
     """Warp / torch device."""
     torch_threads: int | None = 1
-    """CPU threads for torch (``None``: torch's default); see :class:`wresdyn.learn.gradfit.GradFitConfig`."""
+    """CPU threads for torch (``None``: torch's default); see :class:`wresdyn.fit.gradfit.GradFitConfig`."""
     sim_threads: int = 1
     """CPU threads the replay solver splits the windows over (``SolverReplay(threads=)``; the same results bit for
     bit). On an idle 2-core machine 2 took the default identification from 27 to 17 s of training; 1 by default, so
@@ -166,7 +166,7 @@ class SysIdConfig(WindowFitStop):
     share_effort_ratio: bool = True
     """After the selection, give the effort limits the training data never reaches the ratio to the file's limit that
     the saturating joints share, bounded below by the torque the data demands
-    (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
+    (:func:`~wresdyn.identify.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
     when the effort limit is fitted."""
     effort_reset: bool = False
     """After the selection (and ``share_effort_ratio``), the selected parameters with every fitted effort limit put
@@ -176,7 +176,7 @@ class SysIdConfig(WindowFitStop):
     saturated_min: float = 0.01
     """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
     shooting: int = 1
-    """Consecutive windows per training sample (multiple shooting with state continuity, :mod:`.shooting`): each of
+    """Consecutive windows per training sample (multiple shooting with state continuity, :mod:`wresdyn.identify.shooting`): each of
     the ``windows`` samples is a chain of this many windows of the curriculum's length from one run, simulated side by
     side, the later ones from free start states stitched by the defect penalty ``w_defect``; 1 = independent windows
     from their recorded start. Above 1 every horizon must be a multiple of the shortest (the nodes' spacing)."""
@@ -192,7 +192,7 @@ class SysIdConfig(WindowFitStop):
     a node is then drawn about once in a run: the free states stay the recorded ones)."""
     identifiability: bool = True
     """After the selection, write what the data can identify (``identifiability.json`` and ``.md`` in the run
-    folder, :mod:`wresdyn.learn.identifiability`): per-parameter standard errors and correlations from the
+    folder, :mod:`wresdyn.identify.identifiability`): per-parameter standard errors and correlations from the
     Gauss-Newton information of the validation loss, and the parameters the recordings never excite, each with
     advice on the recording that would. One batched replay of every parameter's perturbation; needs a validation
     split. On the shipped data a few seconds against the identification's minute or two."""
@@ -289,7 +289,7 @@ class GradFitConfig(WindowFitStop):
     """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
     friction_kappa: float | None = None
     """Dry-friction law of the replay solver, ``None`` (the soft default) or a damper-law rate [1/s]: as
-    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.learn.replay_env_config`)."""
+    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.ppo.replay_env_config`)."""
     device: str = "cpu"
     """Warp / torch device."""
     torch_threads: int | None = 1
@@ -297,7 +297,7 @@ class GradFitConfig(WindowFitStop):
     ran 12x slower on a loaded 2-core machine (threads contending with the simulation and each other)."""
     sim_threads: int = 1
     """CPU threads the replay solver splits the windows over (the same results; see
-    :class:`~wresdyn.learn.sysid.SysIdConfig`). The fit launches one step at a time, so small batches gain nothing: at
+    :class:`~wresdyn.identify.sysid.SysIdConfig`). The fit launches one step at a time, so small batches gain nothing: at
     the default 32 windows 2 threads took the residual stage on an idle 2-core machine from 26 to 30 s."""
     seed: int = 0
     """Seed of the window sampler and network initialisation."""

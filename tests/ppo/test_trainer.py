@@ -8,13 +8,13 @@ import pytest
 import torch
 
 from wresdyn.errors import WresdynError
-from wresdyn.learn.ppo import RunError, load_policy, train
-from wresdyn.learn.ppo_config import PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config
-from wresdyn.learn.ppo_runner import latest_checkpoint
-from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
-from wresdyn.learn.rewards import RewardConfig
 from wresdyn.learn.runs import load_checkpoint
+from wresdyn.ppo.ppo_config import PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config
+from wresdyn.ppo.replay_env import ReplayEnvConfig
+from wresdyn.ppo.rewards import RewardConfig
+from wresdyn.ppo.runner import latest_checkpoint
+from wresdyn.ppo.trainer import RunError, load_policy, train
 
 from conftest import tiny_ppo_config as tiny
 

@@ -3,7 +3,7 @@
 The fitted quantities are the model arrays SolverReplay reads (per joint: PD gains, armature, viscous damping,
 dry friction with stiction, effort limit, command delay; per link: mass, centre of mass and inertia through the
 log-Cholesky pseudo-inertia), produced by :class:`~wresdyn.sim.physics.PhysicsModel`. As in the gradient fit of a
-residual (:mod:`.gradfit`), each iteration replays B windows of recorded commands open loop from their recorded
+residual (:mod:`wresdyn.fit.gradfit`), each iteration replays B windows of recorded commands open loop from their recorded
 start state and minimises
 
     L = mean_k [ w_q |q_k − q_r,k|² + w_qd |q̇_k − q̇_r,k|² ] + w_prior |u − u_0|²,
@@ -33,18 +33,18 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..learn.runs import RunFolder
+from ..learn.selection import ValidationScore
+from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
+from ..learn.window_fit_config import SysIdConfig
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .identifiability import identifiability, write_identifiability
-from .runs import RunFolder
-from .selection import ValidationScore
 from .shooting import ShootingNodes, chain_loss, draw_chains
 from .unexcited_limits import limit_unexcited_efforts
-from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from .window_fit_config import SysIdConfig
 
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]

@@ -1,4 +1,4 @@
-"""The configuration of a residual-learning run (:func:`wresdyn.learn.ppo.train`) and how to change it by name.
+"""The configuration of a residual-learning run (:func:`wresdyn.ppo.trainer.train`) and how to change it by name.
 
 :class:`TrainConfig` gathers the replay environment, the residual, the Table I rewards and the PPO settings;
 :func:`set_fields` and :func:`parse_overrides` change nested fields by their dotted names, as ``wresdyn train --set
@@ -12,9 +12,9 @@ from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
 
 from ..choices import check_device, check_number
 from ..errors import WresdynError
+from ..learn.residual_config import ResidualConfig
+from ..learn.runs import read_unset
 from .replay_env_config import ReplayEnvConfig, RewardConfig
-from .residual_config import ResidualConfig
-from .runs import read_unset
 
 __all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config",
            "config_from_dict", "parse_overrides", "apply_overrides", "set_fields", "set_field"]
@@ -72,11 +72,11 @@ class PPOConfig:
     """Replay the validation split open loop every this many iterations and export the residual with the lowest
     validation error (model selection on validation); ``None`` = ten times per run."""
     cuda_graph: bool = True
-    """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.learn.replay_env.ReplayEnv`); the
+    """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.ppo.replay_env.ReplayEnv`); the
     runner's per-step NaN check (a host sync) is then off: the environment keeps non-finite states out of what it
     returns (diverged worlds are reset and counted)."""
     one_sync_update: bool = False
-    """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.learn.ppo_update.OneSyncPPO`:
+    """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.ppo.update.OneSyncPPO`:
     the adaptive learning rate on the device, gradients and KL in one all-reduce per mini-batch across processes)
     instead of rsl-rl's ~5 per mini-batch; the same update up to rounding."""
     mixed_precision: bool = False

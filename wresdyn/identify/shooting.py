@@ -25,8 +25,8 @@ import dataclasses
 import numpy as np
 import torch
 
+from ..learn.window_fit import squared_error
 from ..sim import rollout
-from .window_fit import squared_error
 
 __all__ = ["ShootingNodes", "chain_loss"]
 

@@ -1,0 +1,2 @@
+"""A residual learned by gradient descent through the differentiable simulation (:mod:`.gradfit`), alone or on top of
+physics identified first (:mod:`.hybrid`, which runs :mod:`wresdyn.identify`)."""
