@@ -71,7 +71,8 @@ def _parse_case(text: str) -> tuple[str, int, dict]:
 def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path):
     """The residual's worlds and runner, as :func:`wresdyn.ppo.trainer.train` builds them."""
     from wresdyn.ppo.trainer import runner_cfg
-    from wresdyn.ppo.ppo_config import default_config, set_fields
+    from wresdyn.config_fields import set_fields
+    from wresdyn.ppo.ppo_config import default_config
     from wresdyn.ppo.runner import make_runner, seed_processes
     from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
@@ -164,7 +165,8 @@ def _throughput(ranks, robot, data, case: str, device: str, warmup: int, iterati
 
 def _time_to_target(ranks, robot, data, args) -> dict:
     from wresdyn.ppo.trainer import train
-    from wresdyn.ppo.ppo_config import default_config, set_fields
+    from wresdyn.config_fields import set_fields
+    from wresdyn.ppo.ppo_config import default_config
     from wresdyn.learn.selection import ValidationScore
 
     pd_only = ValidationScore(robot, data.split("validation"), data.rate_hz, device=ranks.device(args.device),

@@ -159,7 +159,8 @@ def main() -> None:
 
     from wresdyn.data.dataset import load_dataset
     from wresdyn.ppo.trainer import runner_cfg
-    from wresdyn.ppo.ppo_config import apply_overrides, default_config, set_fields
+    from wresdyn.config_fields import apply_overrides, set_fields
+    from wresdyn.ppo.ppo_config import default_config
     from wresdyn.ppo.runner import Ranks, make_runner, seed_processes
     from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats

@@ -99,8 +99,10 @@ def run_gradient(robot, dataset, args, target: float, out: Path, graph: bool) ->
 
 
 def run_ppo(robot, dataset, args, target: float, out: Path, graph: bool) -> dict:
-    from wresdyn.ppo.trainer import load_policy, train
-    from wresdyn.ppo.ppo_config import default_config, set_fields
+    from wresdyn.learn.run_residual import load_policy
+    from wresdyn.ppo.trainer import train
+    from wresdyn.config_fields import set_fields
+    from wresdyn.ppo.ppo_config import default_config
 
     cfg = set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
                                         "ppo.iterations": args.ppo_iterations, "ppo.select_every": args.check,

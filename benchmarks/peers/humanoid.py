@@ -459,7 +459,7 @@ def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | N
     final scores per split, setup / total seconds."""
     from wresdyn.evaluation.open_loop import evaluate_split
     from wresdyn.identify.sysid import identify
-    from wresdyn.learn.window_fit_config import SysIdConfig
+    from wresdyn.identify.sysid_config import SysIdConfig
     from wresdyn.sim.warmup import compile_kernels
 
     cfg = SysIdConfig(device=device) if iterations is None else SysIdConfig(device=device, iterations=iterations)

@@ -60,7 +60,7 @@ def load(robot_dir: Path, data_root: Path | None, fit_root: Path | None):
 
 def sysid_config(fit: Path):
     """The fit's stage-1 settings (``fit/identify/config.json``) as a :class:`SysIdConfig`, on the CPU."""
-    from wresdyn.learn.window_fit_config import SysIdConfig
+    from wresdyn.identify.sysid_config import SysIdConfig
 
     saved = json.loads((fit / "identify" / "config.json").read_text())["sysid"]
     known = {f.name: f for f in dataclasses.fields(SysIdConfig)}

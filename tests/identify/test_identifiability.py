@@ -12,7 +12,7 @@ from wresdyn.data.dataset import Dataset, Trajectory, derive_qdd
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
 from wresdyn.identify.identifiability import identifiability, write_identifiability
-from wresdyn.learn.window_fit_config import SysIdConfig
+from wresdyn.identify.sysid_config import SysIdConfig
 from wresdyn.sim.parity import multisine_command
 from wresdyn.sim.physics import PhysicalParams
 

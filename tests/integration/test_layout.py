@@ -3,8 +3,8 @@ pipeline, no import cycle, one module per basename, modules small enough to read
 
 Ranks (an import may point to its own rank or a lower one, never a higher one):
 
-0. the shared leaves at the top of the package: ``errors``, ``choices``, ``paths``, ``progress`` (each imports at
-   most another leaf);
+0. the shared leaves at the top of the package: ``errors``, ``choices``, ``config_fields``, ``paths``, ``progress``
+   (each imports at most another leaf);
 1. ``robot``; 2. ``data``; 3. ``sim``;
 4. ``learn``, what every learner shares (run folders, the window-fit loop, residual models, validation selection,
    network files);
@@ -30,9 +30,9 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[2] / "wresdyn"
 
-RANK = {"errors": 0, "choices": 0, "paths": 0, "progress": 0, "robot": 1, "data": 2, "sim": 3, "learn": 4,
-        "identify": 5, "fit": 6, "ppo": 6, "evaluation": 7, "export": 7, "adapt": 7, "skills": 8, "experiments": 9,
-        "cli": 10, "__init__": 11, "__main__": 11}
+RANK = {"errors": 0, "choices": 0, "config_fields": 0, "paths": 0, "progress": 0, "robot": 1, "data": 2, "sim": 3,
+        "learn": 4, "identify": 5, "fit": 6, "ppo": 6, "evaluation": 7, "export": 7, "adapt": 7, "skills": 8,
+        "experiments": 9, "cli": 10, "__init__": 11, "__main__": 11}
 """Rank of each top-level module or subpackage of ``wresdyn`` (see the module docstring)."""
 
 MAX_LINES = 450

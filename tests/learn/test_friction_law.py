@@ -13,9 +13,10 @@ from wresdyn.cli import main
 from wresdyn.errors import WresdynError
 from wresdyn.evaluation.evaluate_run import run_friction_kappa
 from wresdyn.evaluation.open_loop import evaluate_split
+from wresdyn.fit.gradfit_config import GradFitConfig
 from wresdyn.identify.sysid import identify
+from wresdyn.identify.sysid_config import SysIdConfig
 from wresdyn.learn.runs import RunError
-from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
 from wresdyn.ppo.ppo_config import TrainConfig, config_from_dict
 from wresdyn.ppo.replay_env_config import ReplayEnvConfig
 from wresdyn.robot.physical import PhysicalParams

@@ -8,8 +8,8 @@ import json
 import pytest
 import torch
 
+from wresdyn.config_fields import set_fields
 from wresdyn.learn.residual import obs_stats
-from wresdyn.ppo.ppo_config import set_fields
 from wresdyn.ppo.replay_env import ReplayEnv
 from wresdyn.ppo.runner import make_runner
 from wresdyn.ppo.trainer import runner_cfg, train

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..choices import DetectNorm, SolverKind, check_choice, check_device, check_number
-from ..learn.window_fit_config import FIT_FIELDS
+from ..identify.sysid_config import FIT_FIELDS
 
 __all__ = ["ADAPT_FIT", "AdaptConfig"]
 
@@ -39,7 +39,7 @@ class AdaptConfig:
     horizon: int = 64
     """Window length [steps] (at 500 Hz, 128 ms)."""
     fit: tuple[str, ...] = ADAPT_FIT
-    """Fields adapted (:data:`~wresdyn.learn.window_fit_config.FIT_FIELDS` except ``delay``); the others keep the warm
+    """Fields adapted (:data:`~wresdyn.identify.sysid_config.FIT_FIELDS` except ``delay``); the others keep the warm
     start's values."""
     lr: float = 0.005
     """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`. Chosen with ``min_gain``
@@ -47,7 +47,7 @@ class AdaptConfig:
     existed) among (0.01, 0), (0.005, 0.05), (0.01, 0.1): the lowest error in every drift phase."""
     lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
     """Learning-rate factors of the gain/armature log scales, the linear fields and the link pseudo-inertia factors
-    (as :attr:`~wresdyn.learn.window_fit_config.SysIdConfig.lr_scale`)."""
+    (as :attr:`~wresdyn.identify.sysid_config.SysIdConfig.lr_scale`)."""
     w_q: float = 1.0
     """Weight of the joint position error [1/rad²]."""
     w_qd: float = 0.01

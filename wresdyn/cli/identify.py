@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..learn.window_fit_config import SysIdConfig
+from ..identify.sysid_config import SysIdConfig
 from .config_flags import add_config_flags, build_config, given_fields
 
 
@@ -28,11 +28,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--eval", action="store_true", help="replay every split with the identified model and report")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while identifying (OUT/identify.log keeps every line; no progress bar)")
-    add_config_flags(p, SysIdConfig(), title="identification (wresdyn.learn.window_fit_config.SysIdConfig)")
+    add_config_flags(p, SysIdConfig(), title="identification (wresdyn.identify.sysid_config.SysIdConfig)")
 
 
 def config_from_args(args: argparse.Namespace) -> SysIdConfig:
-    """The default :class:`~wresdyn.learn.window_fit_config.SysIdConfig` with the flags given applied."""
+    """The default :class:`~wresdyn.identify.sysid_config.SysIdConfig` with the flags given applied."""
     return build_config(SysIdConfig(), given_fields(args))
 
 

@@ -7,9 +7,10 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from ..choices import Arch, Learner, ResidualKind, SolverKind, check_choice, check_device, check_number, choices
+from ..config_fields import set_fields
 from ..errors import WresdynError
-from ..learn.window_fit_config import GradFitConfig
-from ..ppo.ppo_config import default_config, set_fields
+from ..fit.gradfit_config import GradFitConfig
+from ..ppo.ppo_config import default_config
 
 __all__ = ["AblationConfig"]
 

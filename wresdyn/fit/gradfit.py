@@ -32,11 +32,11 @@ from ..learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfi
 from ..learn.runs import RunFolder
 from ..learn.selection import ValidationScore
 from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from ..learn.window_fit_config import GradFitConfig
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
+from .gradfit_config import GradFitConfig
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
 

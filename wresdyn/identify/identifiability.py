@@ -305,7 +305,7 @@ def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> list[dic
 
 def identifiability(robot, dataset, params, cfg) -> Identifiability | None:
     """The identifiability of ``params`` (the identified :class:`~wresdyn.robot.physical.PhysicalParams`) on
-    ``dataset`` under the identification settings ``cfg`` (:class:`~wresdyn.learn.window_fit_config.SysIdConfig`:
+    ``dataset`` under the identification settings ``cfg`` (:class:`~wresdyn.identify.sysid_config.SysIdConfig`:
     its fields, loss weights, solver and ``identifiability_windows``); ``None`` without a validation split."""
     t0 = time.perf_counter()
     validation, train = dataset.split("validation"), dataset.split("train")

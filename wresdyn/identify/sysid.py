@@ -36,7 +36,6 @@ from ..errors import WresdynError
 from ..learn.runs import RunFolder
 from ..learn.selection import ValidationScore
 from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from ..learn.window_fit_config import SysIdConfig
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.fused import can_fuse, fused_rollout
@@ -44,6 +43,7 @@ from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .identifiability import identifiability, write_identifiability
 from .shooting import ShootingNodes, chain_loss, draw_chains
+from .sysid_config import SysIdConfig
 from .unexcited_limits import limit_unexcited_efforts
 
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
