@@ -5,8 +5,8 @@ import json
 import pytest
 import torch
 
-from wresdyn.learn.runs import (RunError, check_resume, config_diff, describe_diff, load_checkpoint, read_unset,
-                                save_checkpoint)
+from wresdyn.learn.config_diff import config_diff, describe_diff
+from wresdyn.learn.runs import RunError, check_resume, load_checkpoint, read_unset, save_checkpoint
 
 
 def test_config_diff_names_nested_fields_as_json_reads_them():
