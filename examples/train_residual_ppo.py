@@ -14,8 +14,9 @@ import dataclasses
 from wresdyn import load_robot
 from wresdyn.evaluation.open_loop import evaluate_split, write_report
 from wresdyn.evaluation.plots import plot_fig3
-from wresdyn.learn.ppo import load_policy, train
-from wresdyn.learn.ppo_config import default_config
+from wresdyn.learn.run_residual import load_policy
+from wresdyn.ppo.ppo_config import default_config
+from wresdyn.ppo.trainer import train
 from wresdyn.robot.description import DEFAULT_ROBOT
 
 

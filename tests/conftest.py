@@ -25,8 +25,8 @@ LEARNER_COUNTS = {"train": 2, "validation": 1, "heldout": 1, "ood": 1}
 
 def tiny_ppo_config(arch="mlp", iterations=2, kind="torque"):
     """A PPO residual configuration at rsl_rl's test sizes (4 envs, 8 steps, 32-unit nets), for the PPO tests."""
-    from wresdyn.learn.ppo_config import PPOConfig, TrainConfig
-    from wresdyn.learn.replay_env import ReplayEnvConfig
+    from wresdyn.ppo.ppo_config import PPOConfig, TrainConfig
+    from wresdyn.ppo.replay_env import ReplayEnvConfig
     from wresdyn.learn.residual import ResidualConfig
 
     return TrainConfig(
@@ -169,11 +169,11 @@ def record():
 
 
 def ppo_best_actor(run_dir, dataset, robot, cfg):
-    """The rsl-rl actor a PPO run kept in ``best.pt`` (the networks :func:`wresdyn.learn.ppo.train` builds, in eval
-    mode) and a fresh :class:`~wresdyn.learn.replay_env.ReplayEnv` set up as ``train`` sets up its own."""
-    from wresdyn.learn.ppo import runner_cfg
-    from wresdyn.learn.ppo_runner import Runner
-    from wresdyn.learn.replay_env import ReplayEnv
+    """The rsl-rl actor a PPO run kept in ``best.pt`` (the networks :func:`wresdyn.ppo.trainer.train` builds, in eval
+    mode) and a fresh :class:`~wresdyn.ppo.replay_env.ReplayEnv` set up as ``train`` sets up its own."""
+    from wresdyn.ppo.trainer import runner_cfg
+    from wresdyn.ppo.runner import Runner
+    from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
     from wresdyn.learn.runs import load_checkpoint
 

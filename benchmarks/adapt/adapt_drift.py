@@ -169,7 +169,7 @@ def oracle(robot, ds, mismatch, drift_args, calib, iterations: int, n_train: int
     """Identify offline on a recording of one condition held fixed (``drift_args`` of :meth:`Drift.apply`)."""
     from wresdyn.data.dataset import Trajectory, derive_qdd
     from wresdyn.data.real_robot import RealRobot
-    from wresdyn.learn.sysid import SysIdConfig, identify
+    from wresdyn.identify.sysid import SysIdConfig, identify
 
     real = RealRobot(robot, mismatch, ds.rate_hz)
     Drift(real, robot, phases(160.0), ds.rate_hz).apply(*drift_args)

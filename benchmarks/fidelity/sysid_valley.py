@@ -2,7 +2,7 @@
 
     python benchmarks/fidelity/sysid_valley.py RUN/physics.json [DATA]      # DATA: default the shipped dataset
 
-Identification's own loss (:func:`wresdyn.learn.sysid.physics_window_loss`: w_q |Δq|² + w_qd |Δq̇|², the training
+Identification's own loss (:func:`wresdyn.identify.sysid.physics_window_loss`: w_q |Δq|² + w_qd |Δq̇|², the training
 split's windows, open loop from each window's recorded start) is evaluated, forward only, on the same fixed windows for:
 
 - the identified parameters (RUN/physics.json) and the real robot's true parameters (``RealRobot.physics()``);
@@ -48,7 +48,7 @@ def main() -> None:
     from wresdyn.data.real_robot import RealRobot
     from wresdyn.evaluation.open_loop import evaluate_split
     from wresdyn.learn.window_fit import joint_weights, squared_error
-    from wresdyn.learn.sysid import SysIdConfig
+    from wresdyn.identify.sysid import SysIdConfig
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.sim import Simulator, TrajectoryBank, rollout
     from wresdyn.sim.physics import PhysicalParams

@@ -36,7 +36,7 @@ ends a call cleanly after the iteration that passes it. A resumed stage restarts
 vector with its regulariser reset (the backend takes no regulariser in), so a resumed run is the same iterates only
 while the regulariser of the interrupted run was 0; the iteration count and the curve continue.
 
-``wresdyn``: :func:`wresdyn.learn.sysid.identify` with its defaults (it stops when validation plateaus) on
+``wresdyn``: :func:`wresdyn.identify.sysid.identify` with its defaults (it stops when validation plateaus) on
 ``--device``, kernels compiled first (counted in its wall-clock), resumable through its own run folder.
 
 Scoring, the same for both: each candidate is replayed open loop over every whole validation trajectory from its
@@ -458,8 +458,8 @@ def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | N
     kernels compiled first and counted: the identified parameters, the best-validation curve ``[(s, rad)]``, the
     final scores per split, setup / total seconds."""
     from wresdyn.evaluation.open_loop import evaluate_split
-    from wresdyn.learn.sysid import identify
-    from wresdyn.learn.window_fit_config import SysIdConfig
+    from wresdyn.identify.sysid import identify
+    from wresdyn.identify.sysid_config import SysIdConfig
     from wresdyn.sim.warmup import compile_kernels
 
     cfg = SysIdConfig(device=device) if iterations is None else SysIdConfig(device=device, iterations=iterations)

@@ -7,7 +7,7 @@ recording step) with the truth injected by a mismatch, under the peer's own exci
 the same parameters from the same training trajectory, and each estimate is checked against the truth with the
 peer's tolerance:
 
-- **wresdyn**: :func:`wresdyn.learn.sysid.identify` with its defaults, the fitted fields limited to the case's
+- **wresdyn**: :func:`wresdyn.identify.sysid.identify` with its defaults, the fitted fields limited to the case's
   (``SysIdConfig.fit``), model selection on a validation trajectory of the same family (it needs one);
 - **mujoco.sysid** (the peer): ``sysid.optimize`` with its ``"mujoco"`` Gauss-Newton, the peer's published
   parameter bounds and start, on the nominal robot's own MuJoCo model (``mujoco_spec``), observing the joint state
@@ -225,8 +225,8 @@ def recovery(case: Case, estimates: dict) -> dict:
 def run_wresdyn(case: Case, robot, ds, cfg=None, log=print) -> dict:
     """Identify with wresdyn's defaults on the case's fields; times the kernel warm-up and the identification."""
     from wresdyn.evaluation.open_loop import evaluate_split
-    from wresdyn.learn.sysid import identify
-    from wresdyn.learn.window_fit_config import SysIdConfig
+    from wresdyn.identify.sysid import identify
+    from wresdyn.identify.sysid_config import SysIdConfig
     from wresdyn.sim.warmup import compile_kernels
 
     cfg = cfg or SysIdConfig(fit=case.fit, identifiability=False)
@@ -386,7 +386,7 @@ def main() -> None:
         entry = {"source": case.source, "robot": f"tests/data/known_truth/{case.robot}", "duration_s": case.duration,
                  "rate_hz": RATE_HZ, "wresdyn_at_truth": {"heldout_error": floor["heldout"], "ood_error": floor["ood"]},
                  "tools": {}}
-        from wresdyn.learn.window_fit_config import SysIdConfig
+        from wresdyn.identify.sysid_config import SysIdConfig
 
         runs = {"mujoco.sysid": lambda: run_peer(case, robot, ds, args.peer_max_iters, log),
                 "wresdyn": lambda: run_wresdyn(case, robot, ds, log=log),

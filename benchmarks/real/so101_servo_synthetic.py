@@ -26,7 +26,7 @@ from wresdyn.data import excitation as ex
 from wresdyn.data.dataset import Dataset, Trajectory, derive_qdd
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
-from wresdyn.learn.sysid import SysIdConfig, identify
+from wresdyn.identify.sysid import SysIdConfig, identify
 from wresdyn.robot.description import load_robot
 from wresdyn.robot.servo import STS3215
 from wresdyn.sim import replay_trajectories

@@ -5,12 +5,12 @@
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF, dt = 2 ms).
 
-- PPO: :func:`wresdyn.learn.ppo.train` with the default config (24 steps per env per iteration, MLP 256-128-64,
+- PPO: :func:`wresdyn.ppo.trainer.train` with the default config (24 steps per env per iteration, MLP 256-128-64,
   5 epochs x 4 mini-batches) and ``--envs`` worlds, ``--ppo-iterations`` iterations after a 2-iteration
   warm-up run. ``collect`` = the rollout (policy + :class:`ReplayEnv.step`), ``learn`` = the PPO update, as rsl-rl
   times them; env-steps/s (collection) = env-steps / collection time. Peers: every ``--solvers`` entry and, on
   CUDA, ``--graphs on,off`` (environment step replayed from a CUDA graph, or eager) in the same run.
-- Gradient fit: :func:`wresdyn.learn.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
+- Gradient fit: :func:`wresdyn.fit.gradfit.fit` with ``--windows`` parallel windows of ``--horizon`` steps (no
   curriculum), ``--grad-iterations`` iterations after 2 warm-up ones (the eager one and the capture, on CUDA). One
   env-step = one window advanced one step, forward and backward counted once each (as in ``curve.json``'s
   ``sim_steps``). On CUDA ``--graphs`` applies here too (the whole iteration replayed from a CUDA graph, or eager).
@@ -32,8 +32,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str, graph: bool = True) -> dict:
-    from wresdyn.learn.ppo import train
-    from wresdyn.learn.ppo_config import default_config
+    from wresdyn.ppo.trainer import train
+    from wresdyn.ppo.ppo_config import default_config
 
     cfg = default_config()
     cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),
@@ -50,7 +50,7 @@ def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str, g
 
 
 def _gradient(robot, dataset, device: str, windows: int, horizon: int, iterations: int, graph: bool = True) -> dict:
-    from wresdyn.learn.gradfit import GradFitConfig, fit
+    from wresdyn.fit.gradfit import GradFitConfig, fit
 
     cfg = GradFitConfig(windows=windows, horizon=horizon, horizon_curriculum=(), iterations=iterations + 2,
                         device=device, select_every=10**6, cuda_graph=graph)  # validation once, at the end

@@ -13,7 +13,7 @@ splits them); an option sets a PPO field (:data:`OPTIONS`): ``+one_sync`` the up
 (``ppo.one_sync_update``), ``+bf16`` rsl-rl's mixed precision, ``+compile`` rsl-rl's ``torch.compile``, ``+mbK``
 K mini-batches, ``+epK`` K epochs.
 
-- ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.learn.ppo.runner_cfg`, 24 steps per
+- ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
   world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph.
 - ``skill``: policy (a) of the floor benchmark (``wresdyn deploy --floor --full``'s sizes: 16 training motions per
   family of 4 s; :class:`~wresdyn.skills.floor_env.FloorTrackingEnv` on the nominal simulator with a floor,
@@ -26,7 +26,7 @@ collect + learn time (the processes meet at every mini-batch, so rank 0's time i
 prints the rows of several runs side by side with the efficiency of each several-process row: its env-steps/s over
 (processes x the one-process row of the same learner, options and worlds per process).
 
-``--ttf RATIO``: :func:`wresdyn.learn.ppo.train` with validation every ``--check`` iterations, stopping at the first
+``--ttf RATIO``: :func:`wresdyn.ppo.trainer.train` with validation every ``--check`` iterations, stopping at the first
 check at or below the PD-only validation error / RATIO (at most ``--max-iterations``): training wall-clock to the
 target (validation checks excluded), as ``benchmarks/speed/time_to_fidelity.py`` measures it.
 """
@@ -69,11 +69,12 @@ def _parse_case(text: str) -> tuple[str, int, dict]:
 
 
 def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path):
-    """The residual's worlds and runner, as :func:`wresdyn.learn.ppo.train` builds them."""
-    from wresdyn.learn.ppo import runner_cfg
-    from wresdyn.learn.ppo_config import default_config, set_fields
-    from wresdyn.learn.ppo_runner import make_runner, seed_processes
-    from wresdyn.learn.replay_env import ReplayEnv
+    """The residual's worlds and runner, as :func:`wresdyn.ppo.trainer.train` builds them."""
+    from wresdyn.ppo.trainer import runner_cfg
+    from wresdyn.config_fields import set_fields
+    from wresdyn.ppo.ppo_config import default_config
+    from wresdyn.ppo.runner import make_runner, seed_processes
+    from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
 
     cfg = set_fields(default_config(), {"ppo.num_envs": envs, "ppo.device": device,
@@ -93,7 +94,7 @@ def _skill(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path, 
            per_family: int | None):
     """Policy (a) of the floor benchmark at full size: its worlds and runner, as the benchmark builds them."""
     from wresdyn.experiments.deploy_config import FloorDeployConfig
-    from wresdyn.learn.ppo_runner import make_runner, seed_processes
+    from wresdyn.ppo.runner import make_runner, seed_processes
     from wresdyn.robot.description import load_robot
     from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
     from wresdyn.skills.floor_motions import make_floor_motions
@@ -163,8 +164,9 @@ def _throughput(ranks, robot, data, case: str, device: str, warmup: int, iterati
 
 
 def _time_to_target(ranks, robot, data, args) -> dict:
-    from wresdyn.learn.ppo import train
-    from wresdyn.learn.ppo_config import default_config, set_fields
+    from wresdyn.ppo.trainer import train
+    from wresdyn.config_fields import set_fields
+    from wresdyn.ppo.ppo_config import default_config
     from wresdyn.learn.selection import ValidationScore
 
     pd_only = ValidationScore(robot, data.split("validation"), data.rate_hz, device=ranks.device(args.device),
@@ -256,7 +258,7 @@ def main() -> None:
     import warp as wp
 
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.learn.ppo_runner import Ranks
+    from wresdyn.ppo.runner import Ranks
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 
     wp.config.quiet = True

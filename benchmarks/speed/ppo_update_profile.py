@@ -5,7 +5,7 @@
     python benchmarks/speed/ppo_update_profile.py --device cuda:0 --envs 4096 --set ppo.one_sync_update=true
     torchrun --standalone --nproc_per_node 2 benchmarks/speed/ppo_update_profile.py --device cuda --envs 8192
 
-Workload: the shipped benchmark with the default residual PPO (:func:`wresdyn.learn.ppo.runner_cfg`, 24 steps per
+Workload: the shipped benchmark with the default residual PPO (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
 world, 5 epochs x 4 mini-batches, adaptive learning rate), ``--envs`` worlds in total (split over torchrun's
 processes, as ``wresdyn train`` splits them), ``--set`` overrides as on ``wresdyn train``.
 
@@ -100,7 +100,7 @@ class Parts:
 
 
 def instrument(alg, parts: Parts) -> None:
-    """Wrap the parts of ``alg.update`` (rsl-rl's PPO or :class:`~wresdyn.learn.ppo_update.OneSyncPPO`)."""
+    """Wrap the parts of ``alg.update`` (rsl-rl's PPO or :class:`~wresdyn.ppo.update.OneSyncPPO`)."""
     import torch
 
     parts.wrap_generator(alg.storage, "mini_batch_generator", "mini-batch gather")
@@ -158,10 +158,11 @@ def main() -> None:
     import warp as wp
 
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.learn.ppo import runner_cfg
-    from wresdyn.learn.ppo_config import apply_overrides, default_config, set_fields
-    from wresdyn.learn.ppo_runner import Ranks, make_runner, seed_processes
-    from wresdyn.learn.replay_env import ReplayEnv
+    from wresdyn.ppo.trainer import runner_cfg
+    from wresdyn.config_fields import apply_overrides, set_fields
+    from wresdyn.ppo.ppo_config import default_config
+    from wresdyn.ppo.runner import Ranks, make_runner, seed_processes
+    from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
     from wresdyn.progress import into_file
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot

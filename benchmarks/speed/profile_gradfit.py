@@ -4,8 +4,8 @@ wall-clock of the iteration eager and replayed from its CUDA graph.
     python benchmarks/speed/profile_gradfit.py --device cuda:0 --windows 1024 --horizon 64
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF), the default gradient-fit
-configuration at ``--windows`` windows of ``--horizon`` steps, built as :func:`wresdyn.learn.gradfit.fit` builds it
-(the same :class:`~wresdyn.learn.gradfit.GradFitIteration`). One eager iteration runs under ``torch.profiler`` (CUPTI sees
+configuration at ``--windows`` windows of ``--horizon`` steps, built as :func:`wresdyn.fit.gradfit.fit` builds it
+(the same :class:`~wresdyn.fit.gradfit.GradFitIteration`). One eager iteration runs under ``torch.profiler`` (CUPTI sees
 Warp's kernels as well as torch's); kernels are grouped as the solver's forward step, its adjoint, Warp copies and
 memsets, and torch (the residual network, the loss, autograd, Adam). Then ``--repeat`` iterations are timed eagerly
 and replayed from the graph. The graph's wall-clock against the kernels' summed GPU time shows how much of it is
@@ -44,7 +44,7 @@ def main() -> None:
     import warp as wp
 
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.learn.gradfit import GradFitConfig, GradFitIteration, build_policy
+    from wresdyn.fit.gradfit import GradFitConfig, GradFitIteration, build_policy
     from wresdyn.learn.residual import obs_stats
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
     from wresdyn.sim import Simulator, TrajectoryBank

@@ -9,7 +9,7 @@ counted under ``torch.profiler``.
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF), :class:`SysIdConfig`'s
 defaults (32 windows; ``--horizon`` steps, default 64, the curriculum's mean length), built as
-:func:`wresdyn.learn.sysid.identify` builds it (the same ``IdentifyLearner``, its iterations after the effort
+:func:`wresdyn.identify.sysid.identify` builds it (the same ``IdentifyLearner``, its iterations after the effort
 limit has joined the fit). The parts: the physical parameters from their coordinates and into the simulator's
 arrays, the rollout (forward through every step, recording its tape), the loss, the backward pass (every step's
 adjoint), and clipping, Adam and the projection. What the parts' sum leaves of the whole iteration is the
@@ -33,7 +33,7 @@ def main() -> None:
     import warp as wp
 
     from wresdyn.data.dataset import load_dataset
-    from wresdyn.learn.sysid import SysIdConfig, IdentifyLearner
+    from wresdyn.identify.sysid import SysIdConfig, IdentifyLearner
     from wresdyn.learn.window_fit import squared_error, start_window_fit
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
     from wresdyn.sim import rollout

@@ -7,7 +7,7 @@ Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 
 validation error (open-loop replay of the validation split from the first recorded state, the metric every learner
 is selected by) at or below the PD-only validation error divided by ``--ratio`` (default 3). Each learner trains
 with its defaults at the given size, checks validation every ``--check`` iterations and stops at the first check at
-or below the target (``stop_below`` of :func:`wresdyn.learn.ppo.train` and :func:`wresdyn.learn.gradfit.fit`):
+or below the target (``stop_below`` of :func:`wresdyn.ppo.trainer.train` and :func:`wresdyn.fit.gradfit.fit`):
 
 - ``gradient``: the gradient fit (network residual, MLP, its default 2000-iteration schedule) with ``--windows``;
   on CUDA each iteration is replayed from a CUDA graph (``--no-graph``: also eager, the peer);
@@ -79,7 +79,7 @@ def _heldout(robot, dataset, policy, device: str) -> float:
 
 
 def run_gradient(robot, dataset, args, target: float, out: Path, graph: bool) -> dict:
-    from wresdyn.learn.gradfit import GradFitConfig, fit
+    from wresdyn.fit.gradfit import GradFitConfig, fit
 
     cfg = GradFitConfig(windows=args.windows, device=args.device, select_every=args.check, seed=args.seed,
                         cuda_graph=graph)
@@ -99,8 +99,10 @@ def run_gradient(robot, dataset, args, target: float, out: Path, graph: bool) ->
 
 
 def run_ppo(robot, dataset, args, target: float, out: Path, graph: bool) -> dict:
-    from wresdyn.learn.ppo import load_policy, train
-    from wresdyn.learn.ppo_config import default_config, set_fields
+    from wresdyn.learn.run_residual import load_policy
+    from wresdyn.ppo.trainer import train
+    from wresdyn.config_fields import set_fields
+    from wresdyn.ppo.ppo_config import default_config
 
     cfg = set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
                                         "ppo.iterations": args.ppo_iterations, "ppo.select_every": args.check,

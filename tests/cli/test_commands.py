@@ -16,8 +16,9 @@ from wresdyn.cli.config_flags import config_fields, plain_help
 from wresdyn.data.signals import ExcitationConfig
 from wresdyn.experiments.ablation_config import AblationConfig
 from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
-from wresdyn.learn.ppo_config import default_config
-from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
+from wresdyn.fit.gradfit_config import GradFitConfig
+from wresdyn.identify.sysid_config import SysIdConfig
+from wresdyn.ppo.ppo_config import default_config
 from wresdyn.skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 
 OLD_FLAGS = {

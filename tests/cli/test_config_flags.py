@@ -33,7 +33,7 @@ class Outer:
     steps: int = 10
     """Optimiser steps, 100 % of them."""
     rate: float = 1e-3
-    """Step size (see :class:`~wresdyn.learn.window_fit_config.SysIdConfig`, ``lr``)."""
+    """Step size (see :class:`~wresdyn.identify.sysid_config.SysIdConfig`, ``lr``)."""
     kind: Literal["a", "b"] = "a"
     """Which kind."""
     scale: tuple[float, float] = (1.0, 2.0)

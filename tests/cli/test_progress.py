@@ -257,7 +257,7 @@ def test_ppo_draws_a_line_per_iteration_and_keeps_rsl_rls_tables_in_the_run(robo
 
     from conftest import tiny_ppo_config as tiny
 
-    from wresdyn.learn.ppo import train
+    from wresdyn.ppo.trainer import train
     from wresdyn.progress import Log
 
     out = io.StringIO()  # not a terminal, every=0: a plain line after every iteration

@@ -141,7 +141,7 @@ def test_eval_command_reports_a_residual_that_diverges_everywhere(robot, data, t
     """`wresdyn eval RUN` on a run whose exported residual (written as `wresdyn fit` writes it) pushes 50x the effort
     limits: every replay diverges, one line per split says so, and the command succeeds with its report."""
     from wresdyn.cli import main
-    from wresdyn.learn.gradfit import GradFitConfig, build_policy, export_run
+    from wresdyn.fit.gradfit import GradFitConfig, build_policy, export_run
     from wresdyn.learn.residual import ResidualConfig, obs_stats
 
     path = tmp_path / "data.npz"

@@ -12,7 +12,7 @@ from PIL import Image
 from wresdyn.cli import main
 from wresdyn.data.dataset import load_dataset
 from wresdyn.experiments.ablation import AblationConfig, cells, run_ablation
-from wresdyn.learn.ppo import load_policy
+from wresdyn.learn.run_residual import load_policy
 
 
 @pytest.fixture(scope="module")

@@ -51,7 +51,7 @@ def _physics(robot):
 def _run(tmp_path: Path, robot, data, physics=True, residual=True, scale=100.0) -> Path:
     """A run folder as `wresdyn fit` leaves it, from the real writers; the residual's last layer is ``scale``
     times its near-zero start."""
-    from wresdyn.learn.gradfit import build_policy
+    from wresdyn.fit.gradfit import build_policy
     from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
 
     run = tmp_path / "run"

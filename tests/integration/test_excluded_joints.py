@@ -148,7 +148,7 @@ def test_validation_score_ignores_the_gripper(so101, shipped):
 
 
 def test_identification_loss_ignores_the_gripper(so101, shipped):
-    from wresdyn.learn.sysid import SysIdConfig, physics_window_loss
+    from wresdyn.identify.sysid import SysIdConfig, physics_window_loss
     from wresdyn.sim import Simulator, TrajectoryBank
     from wresdyn.sim.physics import PhysicsModel
 
@@ -167,7 +167,7 @@ def test_identification_loss_ignores_the_gripper(so101, shipped):
 
 
 def test_rewards_ignore_an_excluded_joint():
-    from wresdyn.learn.rewards import RewardConfig, reward_terms
+    from wresdyn.ppo.rewards import RewardConfig, reward_terms
 
     g = torch.Generator().manual_seed(0)
     n, w = 4, torch.tensor([1.0, 1.0, 0.0, 1.0])
@@ -198,7 +198,7 @@ def test_rewards_ignore_an_excluded_joint():
 
 
 def test_gradient_fit_loss_ignores_the_gripper(so101, shipped):
-    from wresdyn.learn.gradfit import GradFitConfig, build_policy, window_loss
+    from wresdyn.fit.gradfit import GradFitConfig, build_policy, window_loss
     from wresdyn.learn.residual import obs_stats
     from wresdyn.sim import Simulator, TrajectoryBank, rollout
 
@@ -219,7 +219,7 @@ def test_gradient_fit_loss_ignores_the_gripper(so101, shipped):
 
 
 def test_ppo_environment_ignores_the_gripper(so101, shipped):
-    from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
+    from wresdyn.ppo.replay_env import ReplayEnv, ReplayEnvConfig
 
     train = shipped.split("train")
 

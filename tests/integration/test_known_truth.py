@@ -62,7 +62,7 @@ def test_wresdyn_recovers_the_spring_mass_within_the_peer_tolerance(kt, spring):
     """wresdyn's identification, fixed at 200 iterations and without the pull towards the file's values
     (``w_prior`` 0; the default 1e-5 leaves the mass 5e-4 high, over the peer's 1e-4), recovers the 1 kg mass from
     the file's 2 kg within the peer's tolerance (measured 4e-5 kg)."""
-    from wresdyn.learn.window_fit_config import SysIdConfig
+    from wresdyn.identify.sysid_config import SysIdConfig
 
     robot, ds, _ = spring
     case = kt.CASES["spring_mass"]

@@ -13,11 +13,12 @@ from wresdyn.cli import main
 from wresdyn.errors import WresdynError
 from wresdyn.evaluation.evaluate_run import run_friction_kappa
 from wresdyn.evaluation.open_loop import evaluate_split
-from wresdyn.learn.ppo_config import TrainConfig, config_from_dict
-from wresdyn.learn.replay_env_config import ReplayEnvConfig
+from wresdyn.fit.gradfit_config import GradFitConfig
+from wresdyn.identify.sysid import identify
+from wresdyn.identify.sysid_config import SysIdConfig
 from wresdyn.learn.runs import RunError
-from wresdyn.learn.sysid import identify
-from wresdyn.learn.window_fit_config import GradFitConfig, SysIdConfig
+from wresdyn.ppo.ppo_config import TrainConfig, config_from_dict
+from wresdyn.ppo.replay_env_config import ReplayEnvConfig
 from wresdyn.robot.physical import PhysicalParams
 from wresdyn.sim import Simulator
 from wresdyn.sim.rollout import replay_trajectories
@@ -91,7 +92,7 @@ def test_identify_records_the_law_eval_replays_under_it_resume_refuses_another(h
                                                                                capsys):
     cfg = dataclasses.replace(TINY, friction_kappa=KAPPA)
     identify(humanoid, recorded, cfg, out=tmp_path, log=lambda *_: None)
-    from wresdyn.learn.hybrid import save_identify_config
+    from wresdyn.fit.hybrid import save_identify_config
 
     save_identify_config(tmp_path, cfg, recorded.rate_hz)
     assert run_friction_kappa(tmp_path) == KAPPA
@@ -133,7 +134,7 @@ def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(record
 def test_train_flag_reaches_the_replay_environment(humanoid, recorded):
     from wresdyn.cli import build_parser
     from wresdyn.cli.train import config_from_args
-    from wresdyn.learn.replay_env import ReplayEnv
+    from wresdyn.ppo.replay_env import ReplayEnv
 
     parser, _ = build_parser()
     cfg = config_from_args(parser.parse_args(["train", "d.npz", "--friction-kappa", "inf"]))

@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 import torch
 
+from wresdyn.config_fields import set_fields
 from wresdyn.experiments.ablation import cell_devices
-from wresdyn.learn.gradfit import GradFitConfig, fit
-from wresdyn.learn.ppo import train
-from wresdyn.learn.ppo_config import default_config, set_fields
-from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
+from wresdyn.fit.gradfit import GradFitConfig, fit
 from wresdyn.learn.residual import ResidualConfig
+from wresdyn.ppo.ppo_config import default_config
+from wresdyn.ppo.replay_env import ReplayEnv, ReplayEnvConfig
+from wresdyn.ppo.trainer import train
 
 TORCHRUN = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m", "wresdyn.cli",
             "train", "data/dataset.npz", "--num-envs", "16", "--steps-per-env", "8", "--device", "cpu",
@@ -61,7 +62,7 @@ def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(t
     assert refusals and (run / "config.json").read_text() == saved and not (run / "model_3.pt").exists()
 
 
-@pytest.mark.slow  # an option off by default; tests/learn/test_ppo_update.py checks it against rsl-rl's update in one process
+@pytest.mark.slow  # an option off by default; tests/ppo/test_update.py checks it against rsl-rl's update in one process
 def test_torchrun_one_sync_update_trains_as_rsl_rls(tmp_path):
     """Across two processes the one-sync update (gradients and KL in one all-reduce, the learning rate adapted on
     every rank) ends where rsl-rl's (KL all-reduced, rate broadcast from rank 0) does, up to float rounding."""
@@ -94,7 +95,7 @@ from pathlib import Path
 
 import torch
 
-from wresdyn.learn.ppo_runner import Ranks
+from wresdyn.ppo.runner import Ranks
 from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
 from wresdyn.skills.floor_motions import make_floor_motions

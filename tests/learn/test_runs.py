@@ -5,8 +5,8 @@ import json
 import pytest
 import torch
 
-from wresdyn.learn.runs import (RunError, check_resume, config_diff, describe_diff, load_checkpoint, read_unset,
-                                save_checkpoint)
+from wresdyn.learn.config_diff import config_diff, describe_diff
+from wresdyn.learn.runs import RunError, check_resume, load_checkpoint, read_unset, save_checkpoint
 
 
 def test_config_diff_names_nested_fields_as_json_reads_them():
@@ -49,7 +49,7 @@ def test_a_run_folder_written_with_0_for_unset_resumes_and_reads_back_as_none():
     0 for it: they resume with the config that means the same, and another value is still refused."""
     from dataclasses import asdict
 
-    from wresdyn.learn.ppo_config import config_from_dict, default_config
+    from wresdyn.ppo.ppo_config import config_from_dict, default_config
 
     new = asdict(default_config())
     old = {**new, "ppo": {**new["ppo"], "select_every": 0}}

@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit
-from wresdyn.learn.ppo import load_policy, train
-from wresdyn.learn.ppo_config import PPOConfig, TrainConfig
-from wresdyn.learn.ppo_runner import latest_checkpoint
-from wresdyn.learn.replay_env import ReplayEnvConfig
+from wresdyn.fit.gradfit import GradFitConfig, build_policy, fit
 from wresdyn.learn.residual import ResidualConfig, obs_stats, policy_from_actor
+from wresdyn.learn.run_residual import load_policy
 from wresdyn.learn.runs import load_checkpoint
 from wresdyn.learn.selection import ValidationScore
+from wresdyn.ppo.ppo_config import PPOConfig, TrainConfig
+from wresdyn.ppo.replay_env import ReplayEnvConfig
+from wresdyn.ppo.runner import latest_checkpoint
+from wresdyn.ppo.trainer import train
 
 
 def _raw_observations(trajectories):

@@ -14,7 +14,7 @@ from test_solver_replay import DT
 
 from wresdyn.robot.description import load_robot
 from wresdyn.sim.solver_replay import SolverReplay, TreeError
-from wresdyn.sim.solver_replay import solver as solver_module
+from wresdyn.sim.solver_replay import launch as launch_module
 from wresdyn.sim.solver_replay.kernels import branch_lanes, lane_width, load_kernels
 
 _LINK = ('<link name="{}"><inertial><origin xyz="{} 0.01 -0.1" rpy="0.1 0.0 0.2"/><mass value="{}"/>'
@@ -113,7 +113,7 @@ def test_threads_past_the_last_world_write_nothing(fork, stepped, monkeypatch):
     for pieces in (0, 6):
         ref, _ = gradients(fork, pieces, threads=2, stepped=stepped, friction_grad=False)
         with monkeypatch.context() as m:
-            m.setattr(solver_module, "lane_width", lambda worlds, cuda: worlds + 29)
+            m.setattr(launch_module, "lane_width", lambda worlds, cuda: worlds + 29)
             got, solver = gradients(fork, pieces, threads=2, stepped=stepped, friction_grad=False)
         assert solver.kernels.LANES == 3 and len(solver._chunks()) == 2
         for k, v in ref.items():

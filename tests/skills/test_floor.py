@@ -134,7 +134,7 @@ def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions
 
 
 def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
-    from wresdyn.learn.gradfit import build_policy
+    from wresdyn.fit.gradfit import build_policy
     from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
     from wresdyn.sim.physics import PhysicalParams
 

@@ -146,7 +146,7 @@ def test_deploy_metrics_count_a_failure(humanoid, motions, quiet_real):
 
 def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
     """A `wresdyn fit` run folder from the real writers: a (tiny, untrained) residual, identified physics or not."""
-    from wresdyn.learn.gradfit import build_policy
+    from wresdyn.fit.gradfit import build_policy
     from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
     from wresdyn.sim.physics import PhysicalParams
 
@@ -178,7 +178,7 @@ def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
 
 def load_skill_std(run) -> float:
     """Mean action noise std of a skill run's last checkpoint."""
-    from wresdyn.learn.ppo_runner import latest_checkpoint
+    from wresdyn.ppo.runner import latest_checkpoint
 
     state = torch.load(latest_checkpoint(run), map_location="cpu", weights_only=True)["actor_state_dict"]
     return float(state["distribution.log_std_param"].exp().mean())

@@ -3,7 +3,7 @@
 An :class:`Adapter` starts from an offline calibration (``physics.json`` of ``wresdyn identify`` or a hybrid ``wresdyn
 fit``), consumes the robot's stream of samples (t, q, q̇, q_cmd) and keeps the last :attr:`AdaptConfig.window`
 seconds. Every :attr:`AdaptConfig.update_every` seconds of robot time it runs a bounded number of identification
-steps, the offline loss of :mod:`wresdyn.learn.sysid` (multiple shooting on windows cut from the buffer, through the
+steps, the offline loss of :mod:`wresdyn.identify.sysid` (multiple shooting on windows cut from the buffer, through the
 differentiable solver, in the physically consistent coordinates of :class:`~wresdyn.sim.physics.PhysicsModel`)
 
     L = mean_k [ w_q |q_k − q_r,k|² + w_qd |q̇_k − q̇_r,k|² ] + w_prior |u − u_warm|²,
@@ -25,7 +25,6 @@ is the end of the latest segment.
 
 import json
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -34,12 +33,13 @@ import torch
 
 from ..errors import WresdynError
 from ..export.usd import check_usd_robot, write_export
-from ..learn.sysid import physics_window_loss
+from ..identify.sysid import physics_window_loss
 from ..robot.physical import PhysicalParams
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicsModel
 from .config import AdaptConfig
+from .adapter_update import Update
 from .detect import ChangeDetector, command_rate, search_effort
 
 __all__ = ["Adapter", "StreamError", "Update"]
@@ -50,56 +50,6 @@ _JOINT_PARAMS = ("kp", "kd", "armature", "damping", "friction", "effort")
 
 class StreamError(WresdynError):
     """A sample the adapter cannot take (wrong size, not finite, time not increasing); one line."""
-
-
-@dataclass
-class Update:
-    """One update of the adapter: what it tried, what it kept, the errors and the compute it took."""
-
-    t: float
-    """Robot time of the update [s] (the last sample's)."""
-    accepted: bool
-    """Whether a candidate became the model: this update's, where it lowered the held-back error; with
-    :attr:`AdaptConfig.confirm`, the last update's, where it lowered it again here."""
-    open_loop: float
-    """Held-back open-loop error of the model after the decision, mean |q_sim − q| [rad]."""
-    open_loop_before: float
-    """The same for the model before the update [rad]."""
-    open_loop_candidate: float
-    """The same for the candidate [rad]."""
-    open_loop_start: float
-    """The same for the warm start (the offline calibration, held fixed) [rad]."""
-    one_step: float
-    """One-step prediction error of the model after the decision on the held-back samples, mean |q_sim − q| [rad]."""
-    one_step_start: float
-    """The same for the warm start [rad]."""
-    loss: float
-    """Training loss of the last step (with the prior)."""
-    excited: int
-    """Joints the training part excites (their joint fields were adapted)."""
-    compute: float
-    """Wall-clock time of the update [s]."""
-    physics: PhysicalParams = field(repr=False)
-    """The model after the decision."""
-    reverted: bool = False
-    """Whether the model went back to the warm start (:attr:`AdaptConfig.fallback`)."""
-    pending: bool = False
-    """Whether a winner waits to be confirmed on the next held-back part (:attr:`AdaptConfig.confirm`,
-    :attr:`AdaptConfig.confirm_leave`)."""
-    jump: float = 0.0
-    """The model's held-back error before the update over the median of the recent ones (:attr:`AdaptConfig.detect`;
-    0 without it or while the history is short)."""
-    tracking: bool = False
-    """Whether the update was decided in the tracking mode after a jump (no confirmation)."""
-    effort_tried: int = 0
-    """Lower effort limits replayed on the last update's held-back part, where a joint's own error jumped
-    (:attr:`AdaptConfig.effort_grid`)."""
-    effort_set: str = ""
-    """``joint=limit`` [N·m] where one of them won and became the model's; empty otherwise."""
-
-    def row(self) -> dict:
-        """The scalar fields, for a CSV / JSON log."""
-        return {k: v for k, v in self.__dict__.items() if k != "physics"}
 
 
 class Adapter:

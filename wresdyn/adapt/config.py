@@ -47,7 +47,7 @@ class AdaptConfig:
     existed) among (0.01, 0), (0.005, 0.05), (0.01, 0.1): the lowest error in every drift phase."""
     lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
     """Learning-rate factors of the gain/armature log scales, the linear fields and the link pseudo-inertia factors
-    (as :attr:`~wresdyn.learn.window_fit_config.SysIdConfig.lr_scale`)."""
+    (as :attr:`~wresdyn.identify.sysid_config.SysIdConfig.lr_scale`)."""
     w_q: float = 1.0
     """Weight of the joint position error [1/rad²]."""
     w_qd: float = 0.01

@@ -52,7 +52,7 @@ def tracked_names(start, fit, patterns=(), top: int = 3, latest=None) -> list[st
 
 
 def write_updates(out: Path, updates, fit, summary: dict) -> tuple[Path, Path]:
-    """``updates.csv`` (one row per update: the scalar fields of :class:`~wresdyn.adapt.adapter.Update` and every
+    """``updates.csv`` (one row per update: the scalar fields of :class:`~wresdyn.adapt.adapter_update.Update` and every
     adapted parameter) and ``updates.json`` (``summary`` and the rows) in ``out``."""
     rows = [{**u.row(), **parameter_columns(u.physics, fit)} for u in updates]
     csv_path, json_path = out / "updates.csv", out / "updates.json"

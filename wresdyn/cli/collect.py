@@ -208,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
         return _import_logs(args, cfg.rate, robot, out, path, log)
 
     robot.check_replay()  # simulating needs PD gains and stated effort limits
-    from ..data.excitation import plot_spectrum
+    from ..data.spectrum import plot_spectrum
     from ..data.mismatch import Mismatch
     from ..data.real_robot import RealRobot, collect
     from ..sim.first_steps import check_mujoco

@@ -27,7 +27,7 @@ import types
 import typing
 from typing import Literal, get_args, get_origin, get_type_hints
 
-from ..learn.ppo_config import set_fields
+from ..config_fields import set_fields
 
 __all__ = ["add_config_flags", "given_fields", "build_config", "parse_assignments", "comma_list", "field_docs",
            "config_fields", "plain_help"]

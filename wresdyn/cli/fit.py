@@ -7,7 +7,7 @@ printed is also in ``fit.log``; on a terminal a progress bar shows the elapsed a
 (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
 ``--model hybrid`` (the default) first identifies the simulator's own physics (``wresdyn identify``, into
 ``OUT/identify/``, with its ``identifiability.json``: what the data can identify) and learns the residual network on
-top of it (:mod:`wresdyn.learn.hybrid`); with ``--physics``
+top of it (:mod:`wresdyn.fit.hybrid`); with ``--physics``
 the given physics is used instead of identifying. ``--model network`` learns the residual on the robot file's
 physics (the residual alone, nothing identified). ``--model parametric`` fits the residual-torque baseline
 (per-joint gains, damping, friction, armature as an extra torque) and writes its parameters to ``parameters.json``.
@@ -19,7 +19,8 @@ import argparse
 from dataclasses import replace
 
 from ..choices import FitModel, choices
-from ..learn.window_fit_config import GradFitConfig, SysIdConfig
+from ..fit.gradfit_config import GradFitConfig
+from ..identify.sysid_config import SysIdConfig
 from .config_flags import add_config_flags, build_config, given_fields
 
 FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
@@ -44,18 +45,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
     add_config_flags(p, GradFitConfig(), skip=("model",), aliases=FIT_ALIASES,
-                     title="gradient fit (wresdyn.learn.window_fit_config.GradFitConfig; --horizon-curriculum "
+                     title="gradient fit (wresdyn.fit.gradfit_config.GradFitConfig; --horizon-curriculum "
                            "without --horizon also sets the horizon to its last length)")
     add_config_flags(p, SysIdConfig(), prefix="identify.", skip=IDENTIFY_SHARED,
                      aliases={"iterations": ("--identify-iterations",), "gain_grid": ("--gain-grid",),
                               "refine": ("--refine",)},
-                     title="the hybrid's identification (wresdyn.learn.window_fit_config.SysIdConfig, as `wresdyn "
+                     title="the hybrid's identification (wresdyn.identify.sysid_config.SysIdConfig, as `wresdyn "
                            "identify`; device, seed, solver and friction law are the fit's, --windows too unless "
                            "--identify.windows is given)")
 
 
 def config_from_args(args: argparse.Namespace) -> GradFitConfig:
-    """The :class:`~wresdyn.learn.window_fit_config.GradFitConfig` of ``--model`` with the flags given applied."""
+    """The :class:`~wresdyn.fit.gradfit_config.GradFitConfig` of ``--model`` with the flags given applied."""
     given = given_fields(args)
     curriculum = given.get("horizon_curriculum")
     if curriculum and "horizon" not in given:
@@ -65,7 +66,7 @@ def config_from_args(args: argparse.Namespace) -> GradFitConfig:
 
 
 def identify_config_from_args(args: argparse.Namespace, cfg: GradFitConfig) -> SysIdConfig:
-    """The hybrid's identification: :class:`~wresdyn.learn.window_fit_config.SysIdConfig` with the ``--identify.*``
+    """The hybrid's identification: :class:`~wresdyn.identify.sysid_config.SysIdConfig` with the ``--identify.*``
     flags given, on the fit's device, seed, solver and friction law (and ``--windows`` unless ``--identify.windows``
     is given)."""
     given = {name: getattr(cfg, name) for name in IDENTIFY_SHARED} | given_fields(args, "identify.")
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..data.loading import load_data
-    from ..learn.gradfit import export_run, fit
+    from ..fit.gradfit import export_run, fit
     from . import UserError
 
     cfg = config_from_args(args)
@@ -117,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
                  physics=physics, friction_kappa=cfg.friction_kappa)
     try:
         if identify_first:
-            from ..learn.hybrid import fit_hybrid
+            from ..fit.hybrid import fit_hybrid
 
             hybrid = fit_hybrid(robot, ds, sysid, cfg, out, data_path=args.data, log=log)
             policy, curve, cfg, id_wall, physics = (hybrid.policy, hybrid.curve, hybrid.config, hybrid.identify_wall,

@@ -1,6 +1,6 @@
 """``wresdyn identify DATA``: identify the simulator's own physical parameters through the differentiable solver.
 
-Grey-box system identification (:mod:`wresdyn.learn.sysid`): per joint PD gains, armature, viscous damping, dry
+Grey-box system identification (:mod:`wresdyn.identify.sysid`): per joint PD gains, armature, viscous damping, dry
 friction with stiction, effort limit and command delay; per link mass, centre of mass and inertia. The run
 folder holds ``physics.json`` (the calibrated robot's parameters, JSON), ``config.json``, ``checkpoint.pt``
 (resumed when present; a changed config is refused), ``curve.json`` and ``identify.log`` (every line printed;
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..learn.window_fit_config import SysIdConfig
+from ..identify.sysid_config import SysIdConfig
 from .config_flags import add_config_flags, build_config, given_fields
 
 
@@ -28,11 +28,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--eval", action="store_true", help="replay every split with the identified model and report")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while identifying (OUT/identify.log keeps every line; no progress bar)")
-    add_config_flags(p, SysIdConfig(), title="identification (wresdyn.learn.window_fit_config.SysIdConfig)")
+    add_config_flags(p, SysIdConfig(), title="identification (wresdyn.identify.sysid_config.SysIdConfig)")
 
 
 def config_from_args(args: argparse.Namespace) -> SysIdConfig:
-    """The default :class:`~wresdyn.learn.window_fit_config.SysIdConfig` with the flags given applied."""
+    """The default :class:`~wresdyn.identify.sysid_config.SysIdConfig` with the flags given applied."""
     return build_config(SysIdConfig(), given_fields(args))
 
 
@@ -40,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..data.loading import load_data
-    from ..learn.hybrid import save_identify_config
-    from ..learn.sysid import identify
+    from ..fit.hybrid import save_identify_config
+    from ..identify.sysid import identify
     from . import UserError
 
     cfg = config_from_args(args)

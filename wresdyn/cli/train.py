@@ -1,7 +1,7 @@
 """``wresdyn train DATA``: learn a residual with PPO on the dataset's training split (resumes a killed run).
 
 Several GPUs: ``torchrun --nproc_per_node N -m wresdyn train DATA --device cuda ...`` (one process per GPU,
-``--num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.learn.ppo.train`).
+``--num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.ppo.trainer.train`).
 
 Every line printed, and rsl-rl's per-iteration tables, are in ``OUT/train.log``; on a terminal a progress bar shows
 the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing."""
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..learn.ppo_config import TrainConfig, default_config
+from ..ppo.ppo_config import TrainConfig, default_config
 from .config_flags import add_config_flags, build_config, given_fields, parse_assignments
 
 TRAIN_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
@@ -38,11 +38,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="print nothing while training (OUT/train.log keeps every line and rsl-rl's tables; the "
                         "progress bar is not drawn)")
     add_config_flags(p, default_config(), aliases=TRAIN_ALIASES,
-                     title="run configuration (wresdyn.learn.ppo_config.TrainConfig)")
+                     title="run configuration (wresdyn.ppo.ppo_config.TrainConfig)")
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    """The default :class:`~wresdyn.learn.ppo_config.TrainConfig` with the flags given on the command line applied.
+    """The default :class:`~wresdyn.ppo.ppo_config.TrainConfig` with the flags given on the command line applied.
 
     Flags and ``--set`` items are applied in one step (``--set`` wins for the same field), so the config's own
     checks, across fields too, see what was asked for as a whole; a refused value is a one-line error."""
@@ -53,8 +53,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from ..learn.ppo import RunError, train
-    from ..learn.ppo_runner import Ranks
+    from ..ppo.trainer import RunError, train
+    from ..ppo.runner import Ranks
     from . import UserError
 
     cfg = config_from_args(args)

@@ -1,2 +1,2 @@
-"""Stage 2, the data: excitation (eq. 2 foot paths by IK, multisines, chirps, kicks), the simulated "real"
+"""The data: excitation (eq. 2 foot paths by IK, multisines, chirps, kicks), the simulated "real"
 robot that records it, the dataset file format and its migration, and the import of real robot logs."""

@@ -10,7 +10,8 @@ the learners; a measured torque may ride along for diagnostics.
 On disk a dataset is one ``.npz`` (zip) file: a UTF-8 JSON ``header`` and per-trajectory arrays
 ``traj/<index>/<field>``; docs/dataset.md describes it. Arrays are stored as float32 where that is exact and
 float64 otherwise, and always loaded as float64, so a save / load round trip is exact. Loading validates
-everything and raises :class:`DatasetError` with a one-line message naming the file and the problem.
+everything and raises :class:`DatasetError` with a one-line message naming the file and the problem; the header's
+checks and the schema versions are :mod:`wresdyn.data.dataset_header`'s.
 """
 
 from __future__ import annotations
@@ -26,22 +27,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import WresdynError
+from .dataset_header import (FORMAT, READ_VERSIONS, SCHEMA_VERSION, DatasetError, check_gains, first_line,
+                             header_from, read_header)
 
 __all__ = ["SCHEMA_VERSION", "READ_VERSIONS", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset",
            "load_dataset", "read_header", "derive_qdd", "fitted_mask", "MOVING_SPEED"]
 
-SCHEMA_VERSION = 2
-"""Version of the file layout that :meth:`Dataset.save` writes."""
-READ_VERSIONS = {1: ("train", "heldout", "ood"), 2: ("train", "validation", "heldout", "ood")}
-"""Schema versions :meth:`Dataset.load` reads, with the splits each allows; any other version is refused.
-Version 1 is version 2 without the validation split (``wresdyn migrate`` rewrites it as version 2)."""
 SPLITS = READ_VERSIONS[SCHEMA_VERSION]
 """Trajectory splits: training; validation (same motion family as train: every choice of hyper-parameters,
 early stopping or sweep is made on it); held-out (same family) and out-of-distribution (other families), both
 for reporting only."""
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "q_cmd": "rad", "tau": "N*m"}
 """Units of the array fields (prismatic joints: m, m/s, m/s^2, N)."""
-FORMAT = "wresdyn-dataset"
 RATE_RTOL = 1e-3
 """Every time step must equal 1 / rate_hz within this fraction of a step: a log with more clock jitter is
 not uniformly sampled and must be resampled first (:mod:`wresdyn.data.logs`)."""
@@ -52,10 +49,6 @@ QDD_WINDOW = 0.022
 """Length of the Savitzky-Golay window that differentiates q̇ into q̈ [s] (11 samples at 500 Hz)."""
 
 _FIELDS = ("t", "q", "qd", "qdd", "q_cmd", "tau")
-
-
-class DatasetError(WresdynError):
-    """A dataset file or object that wresdyn cannot use; the message is one line naming the file."""
 
 
 @dataclass
@@ -168,7 +161,7 @@ class Dataset:
 
     def validate(self, where: str = "dataset") -> None:
         """Check names, rate, shapes, finiteness and time stamps; raise :class:`DatasetError` naming ``where``."""
-        _check_gains(self.gains, where)
+        check_gains(self.gains, where)
         names = self.joint_names
         if not names or not all(isinstance(n, str) and n for n in names):
             raise DatasetError(f"{where}: joint_names must be a non-empty list of non-empty strings")
@@ -305,8 +298,8 @@ class Dataset:
             with np.load(path, allow_pickle=False) as z:
                 files = {k: z[k] for k in z.files}
         except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
-            raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {_first_line(e)}") from None
-        h = _read_header(files, path)
+            raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {first_line(e)}") from None
+        h = header_from(files, path)
         splits = READ_VERSIONS[h["schema_version"]]
         trajs = []
         for i, e in enumerate(h["trajectories"]):
@@ -343,57 +336,6 @@ def load_dataset(path, robot=None) -> Dataset:
     return Dataset.load(path, robot)
 
 
-def read_header(path) -> dict:
-    """The checked JSON header of a dataset file (its ``schema_version`` included), without reading the arrays."""
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"{path}: dataset file not found")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            files = {"header": z["header"]} if "header" in z.files else {}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
-        raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {_first_line(e)}") from None
-    return _read_header(files, path)
-
-
-def _read_header(files: dict, path: Path) -> dict:
-    if "header" not in files:
-        raise DatasetError(f"{path}: no header: not a wresdyn dataset file")
-    try:
-        h = json.loads(files["header"].astype(np.uint8).tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise DatasetError(f"{path}: malformed header: {e}") from None
-    if not isinstance(h, dict) or h.get("format") != FORMAT:
-        raise DatasetError(f"{path}: not a wresdyn dataset file (header format is not {FORMAT!r})")
-    version = h.get("schema_version")
-    if type(version) is not int or version not in READ_VERSIONS:  # JSON true is not version 1
-        raise DatasetError(f"{path}: schema version {version!r} is not supported (this wresdyn reads versions "
-                           f"{', '.join(map(str, READ_VERSIONS))})")
-    need = {"joint_names": list, "rate_hz": (int, float), "robot_file": str, "robot_sha256": str, "mismatch": dict,
-            "meta": dict, "trajectories": list}
-    for key, typ in need.items():
-        if not isinstance(h.get(key), typ):
-            raise DatasetError(f"{path}: header field {key!r} is missing or has the wrong type")
-    if h.get("seed") is not None and not isinstance(h["seed"], int):
-        raise DatasetError(f"{path}: header field 'seed' must be an integer or null")
-    h.setdefault("seed", None)
-    h.setdefault("gains", None)
-    _check_gains(h["gains"], str(path))
-    return h
-
-
-def _check_gains(gains, where: str) -> None:
-    """The optional gains record: ``None`` or ``{"file": str or None, "config": {"joint": [tables]}}``."""
-    if gains is None:
-        return
-    if not isinstance(gains, dict) or set(gains) != {"file", "config"} or not isinstance(gains["config"], dict) \
-            or not (gains["file"] is None or isinstance(gains["file"], str)):
-        raise DatasetError(f"{where}: gains must be null or {{\"file\": path or null, \"config\": {{...}}}}")
-    joints = gains["config"].get("joint")
-    if not isinstance(joints, list) or not all(isinstance(e, dict) for e in joints):
-        raise DatasetError(f"{where}: gains config needs a list of [[joint]] tables")
-
-
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
@@ -408,11 +350,6 @@ def _jsonable(o):
     if isinstance(o, Path):
         return str(o)
     raise TypeError(f"{type(o).__name__} {o!r} is not JSON-serialisable")
-
-
-def _first_line(e: Exception) -> str:
-    s = str(e).strip()
-    return s.splitlines()[0] if s else type(e).__name__
 
 
 def fitted_mask(weights, n_dof: int) -> np.ndarray:

@@ -35,12 +35,11 @@ from .log_files import (
     Run,
     check_finite,
     check_stamps,
-    log_stats,
     map_joints,
     read_file,
     read_toml,
-    to_trajectory,
 )
+from .log_resample import log_stats, to_trajectory
 from .telemetry import check_runs
 
 __all__ = ["Run", "SplitRule", "sage_run", "lerobot_root", "read_sage", "read_lerobot", "read_runs", "import_runs",

@@ -13,7 +13,8 @@ import numpy as np
 
 from .dataset import Dataset, Trajectory
 from .importers import SplitRule, import_runs, read_sage, sage_run
-from .log_files import IDENTITY, LogMap, log_stats, read_file, resample, to_trajectory
+from .log_files import IDENTITY, LogMap, read_file
+from .log_resample import log_stats, resample, to_trajectory
 
 __all__ = ["LogMap", "read_log", "resample", "log_stats", "import_log", "import_logs"]
 

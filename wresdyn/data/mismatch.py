@@ -1,10 +1,12 @@
 """The mismatch config: how the simulated "real" robot (:class:`~wresdyn.data.real_robot.RealRobot`) differs from
 the nominal model (physics, PD gains, delay, torque limits, sensors), as global scalars and per-joint / per-link
-entries, read from TOML with its keys, types and signs checked."""
+entries, read from TOML with its keys, types and signs checked, and applied to the robot's MuJoCo model
+(:func:`perturb_mujoco`)."""
 
 from __future__ import annotations
 
 import dataclasses
+import fnmatch
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,7 +15,7 @@ import tomllib
 
 from ..robot.description import RobotError
 
-__all__ = ["Mismatch", "MismatchError", "JOINT_KEYS", "LINK_KEYS"]
+__all__ = ["Mismatch", "MismatchError", "JOINT_KEYS", "LINK_KEYS", "perturb_mujoco"]
 
 
 class MismatchError(RobotError):
@@ -148,3 +150,48 @@ def _entry(e, allowed, where: str) -> dict:
             raise MismatchError(f"{where}: {k} = {v} must be > 0")
         out[k] = float(v)
     return out
+
+
+def _matches(names, pattern: str, what: str, source) -> np.ndarray:
+    hits = np.array([fnmatch.fnmatchcase(n, pattern) for n in names], dtype=bool)
+    if not hits.any():
+        raise MismatchError(f"mismatch: [[{what}]] pattern {pattern!r} matches no {what} of {source}")
+    return hits
+
+
+def perturb_mujoco(m, mm: Mismatch, r, v0: int, rng: np.random.Generator) -> None:
+    """Apply the physical mismatch ``mm`` to the fields of ``m``, the compiled MuJoCo model of the robot ``r`` (a
+    :class:`~wresdyn.robot.description.Robot`), in place; MuJoCo dof ``v0 + i`` is joint i (6 after a free joint);
+    ``rng`` draws the random errors."""
+    n = r.n_dof
+    # per-link errors; body 0 of MuJoCo is the world, MuJoCo body i+1 is robot body i
+    nb = m.nbody - 1
+    mass_f = np.clip(1.0 + mm.mass_error * rng.standard_normal(nb), 0.3, None)
+    com_d = mm.com_error * rng.standard_normal((nb, 3))
+    inertia_f = np.clip(1.0 + mm.inertia_error * rng.standard_normal((nb, 3)), 0.3, None)
+    for e in mm.link:
+        hits = _matches(r.body_names, e["match"], "link", r.source)
+        mass_f[hits] *= e.get("mass_scale", 1.0)
+        com_d[hits] += np.asarray(e.get("com_offset", (0.0, 0.0, 0.0)))
+        inertia_f[hits] *= e.get("inertia_scale", 1.0)
+    m.body_mass[1:] *= mass_f
+    m.body_ipos[1:] += com_d
+    m.body_inertia[1:] *= mass_f[:, None] * inertia_f
+    # joints (MuJoCo dof v0 + i is robot joint i, actuator i drives it): global, then per joint
+    jv = {k: np.full(n, float(getattr(mm, k))) for k in JOINT_KEYS}
+    for e in mm.joint:
+        hits = _matches(r.joint_names, e["match"], "joint", r.source)
+        for k, v in e.items():
+            if k != "match":
+                jv[k][hits] = v
+    effort = np.where(np.isfinite(r.effort), r.effort, 0.0)
+    dof = slice(v0, v0 + n)
+    m.dof_armature[dof] *= jv["armature_scale"]
+    m.dof_damping[dof] += jv["damping"] * r.kd
+    m.dof_frictionloss[dof] += jv["friction"] * effort
+    gain_f = np.clip(1.0 + mm.gain_error * rng.standard_normal((2, n)), 0.3, None)
+    kp, kd = r.kp * jv["kp_scale"] * gain_f[0], r.kd * jv["kd_scale"] * gain_f[1]
+    m.actuator_gainprm[:n, 0] = kp
+    m.actuator_biasprm[:n, 1] = -kp
+    m.actuator_biasprm[:n, 2] = -kd
+    m.actuator_forcerange[:n] *= jv["torque_limit_scale"][:, None]

@@ -2,7 +2,7 @@
 
 A drive's effort limit shows in a recording only while the drive saturates, and hung on a stand the legs swing
 free: the paper's ellipsoid excitation never asks the knees for the torque that balance on the floor needs, so their
-limits cannot be identified from it (:mod:`wresdyn.learn.unexcited_limits`). The probe asks for it on purpose:
+limits cannot be identified from it (:mod:`wresdyn.identify.unexcited_limits`). The probe asks for it on purpose:
 from the foot workspace's home pose, each leg joint in turn steps by δ and back, the step rising in ``rise``
 seconds (a minimum-jerk move, faster than the drive can follow), while every other joint holds its home position.
 The step is sized so the PD demand kp·δ is ``effort_fraction`` of the robot file's effort limit (drawn per step),
@@ -47,7 +47,7 @@ class SaturationProbe:
     steps: int = 4
     """Out-and-back step pairs per joint and trajectory (with 6 probes of 4 s beside 16 other training trajectories,
     every drive the probe saturates does so on more than 1 % of the training samples, the share identification needs
-    to call its limit identified, :mod:`wresdyn.learn.unexcited_limits`)."""
+    to call its limit identified, :mod:`wresdyn.identify.unexcited_limits`)."""
     lead: float = 0.1
     """Hold of the home pose before the first step [s]."""
     limit_margin: float = 0.05

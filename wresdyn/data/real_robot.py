@@ -17,7 +17,6 @@ commands, with the same mismatch (physics, delay, saturation, sensors) as a reco
 from __future__ import annotations
 
 import dataclasses
-import fnmatch
 from collections import deque
 from pathlib import Path
 
@@ -33,7 +32,7 @@ from ..robot.physical import SERVO_FIELDS, PhysicalParams
 from ..robot.servo import STARTUP_RAMP, GoalProfile, friction_bound
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
-from .mismatch import JOINT_KEYS, Mismatch, MismatchError
+from .mismatch import Mismatch, MismatchError, perturb_mujoco
 from .probe import PROBE_FAMILY, SaturationProbe, saturation_probe
 
 __all__ = ["RealRobot", "SPAWN_KEYS", "PROBE_SPAWN_KEY", "collect"]
@@ -70,46 +69,10 @@ class RealRobot:
         self.substep = dt / self.n_sub
         self.n_delay = int(round(self.mismatch.delay / self.substep))
         self.model = build_mujoco(robot, self.substep, "implicitfast", ground=floating, contact=contact)
-        self._perturb(self.model, np.random.default_rng(self.mismatch.seed))
+        perturb_mujoco(self.model, self.mismatch, robot, self._v0, np.random.default_rng(self.mismatch.seed))
         self._servo = self._servo_motors()
         self._mujoco = mujoco
         self._data = self._fifo = self._rng = None  # reset / step
-
-    def _perturb(self, m, rng: np.random.Generator) -> None:
-        """Apply the physical mismatch to the compiled model's fields, in place."""
-        mm, r = self.mismatch, self.robot
-        n = r.n_dof
-        # per-link errors; body 0 of MuJoCo is the world, MuJoCo body i+1 is robot body i
-        nb = m.nbody - 1
-        mass_f = np.clip(1.0 + mm.mass_error * rng.standard_normal(nb), 0.3, None)
-        com_d = mm.com_error * rng.standard_normal((nb, 3))
-        inertia_f = np.clip(1.0 + mm.inertia_error * rng.standard_normal((nb, 3)), 0.3, None)
-        for e in mm.link:
-            hits = _matches(r.body_names, e["match"], "link", r.source)
-            mass_f[hits] *= e.get("mass_scale", 1.0)
-            com_d[hits] += np.asarray(e.get("com_offset", (0.0, 0.0, 0.0)))
-            inertia_f[hits] *= e.get("inertia_scale", 1.0)
-        m.body_mass[1:] *= mass_f
-        m.body_ipos[1:] += com_d
-        m.body_inertia[1:] *= mass_f[:, None] * inertia_f
-        # joints (MuJoCo dof v0 + i is robot joint i, actuator i drives it): global, then per joint
-        jv = {k: np.full(n, float(getattr(mm, k))) for k in JOINT_KEYS}
-        for e in mm.joint:
-            hits = _matches(r.joint_names, e["match"], "joint", r.source)
-            for k, v in e.items():
-                if k != "match":
-                    jv[k][hits] = v
-        effort = np.where(np.isfinite(r.effort), r.effort, 0.0)
-        dof = slice(self._v0, self._v0 + n)
-        m.dof_armature[dof] *= jv["armature_scale"]
-        m.dof_damping[dof] += jv["damping"] * r.kd
-        m.dof_frictionloss[dof] += jv["friction"] * effort
-        gain_f = np.clip(1.0 + mm.gain_error * rng.standard_normal((2, n)), 0.3, None)
-        kp, kd = r.kp * jv["kp_scale"] * gain_f[0], r.kd * jv["kd_scale"] * gain_f[1]
-        m.actuator_gainprm[:n, 0] = kp
-        m.actuator_biasprm[:n, 1] = -kp
-        m.actuator_biasprm[:n, 2] = -kd
-        m.actuator_forcerange[:n] *= jv["torque_limit_scale"][:, None]
 
     def _servo_motors(self) -> dict | None:
         """Turn the (perturbed) position actuators of servo joints (:attr:`Robot.servo`) into affine actuators
@@ -306,13 +269,6 @@ class RealRobot:
         if mm.velocity_noise > 0:
             qd = qd + mm.velocity_noise * rng.standard_normal(qd.shape)
         return _quantise(q, mm.encoder_resolution), _quantise(qd, mm.velocity_resolution)
-
-
-def _matches(names, pattern: str, what: str, source) -> np.ndarray:
-    hits = np.array([fnmatch.fnmatchcase(n, pattern) for n in names], dtype=bool)
-    if not hits.any():
-        raise MismatchError(f"mismatch: [[{what}]] pattern {pattern!r} matches no {what} of {source}")
-    return hits
 
 
 def _quantise(a: np.ndarray, resolution: float) -> np.ndarray:

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from ..learn.ppo import load_policy
-from ..learn.ppo_config import config_from_dict
+from ..learn.run_residual import load_policy
 from ..learn.runs import RunError, run_physics
+from ..ppo.ppo_config import config_from_dict
 from ..sim.warmup import compile_kernels
 from .open_loop import evaluate_splits, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves

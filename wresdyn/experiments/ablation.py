@@ -21,13 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config_fields import set_field, set_fields
 from ..errors import WresdynError
 from ..evaluation.open_loop import evaluate_split
 from ..evaluation.plots import save_figure
-from ..learn.gradfit import fit
-from ..learn.ppo import load_policy, train
-from ..learn.ppo_config import default_config, set_field, set_fields
-from ..learn.window_fit_config import GradFitConfig
+from ..fit.gradfit import fit
+from ..fit.gradfit_config import GradFitConfig
+from ..learn.run_residual import load_policy
+from ..ppo.ppo_config import default_config
+from ..ppo.trainer import train
 from .ablation_config import AblationConfig
 
 __all__ = ["AblationConfig", "cells", "run_cell", "run_cells", "run_ablation", "write_summary", "table_markdown",

@@ -7,9 +7,10 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from ..choices import Arch, Learner, ResidualKind, SolverKind, check_choice, check_device, check_number, choices
+from ..config_fields import set_fields
 from ..errors import WresdynError
-from ..learn.ppo_config import default_config, set_fields
-from ..learn.window_fit_config import GradFitConfig
+from ..fit.gradfit_config import GradFitConfig
+from ..ppo.ppo_config import default_config
 
 __all__ = ["AblationConfig"]
 
@@ -39,9 +40,9 @@ class AblationConfig:
     device: str = "cpu"
     """Device for simulation and networks."""
     ppo_overrides: dict = field(default_factory=dict)
-    """Dotted overrides of :class:`wresdyn.learn.ppo_config.TrainConfig` (e.g. ``{"ppo.num_envs": 64}``)."""
+    """Dotted overrides of :class:`wresdyn.ppo.ppo_config.TrainConfig` (e.g. ``{"ppo.num_envs": 64}``)."""
     gradient_overrides: dict = field(default_factory=dict)
-    """Overrides of :class:`wresdyn.learn.gradfit.GradFitConfig` fields (e.g. ``{"windows": 32}``)."""
+    """Overrides of :class:`wresdyn.fit.gradfit.GradFitConfig` fields (e.g. ``{"windows": 32}``)."""
 
     def __post_init__(self) -> None:
         for name, literal in (("learners", Learner), ("archs", Arch), ("kinds", ResidualKind)):

@@ -26,12 +26,12 @@ from ..data.mismatch import Mismatch
 from ..data.real_robot import collect as record_dataset
 from ..evaluation.evaluate_run import evaluate_run
 from ..export.usd import export_run as export_usd
-from ..learn.gradfit import GradFitConfig, export_run
-from ..learn.hybrid import fit_hybrid
-from ..learn.ppo import train
-from ..learn.ppo_config import default_config
-from ..learn.sysid import SysIdConfig
+from ..fit.gradfit import GradFitConfig, export_run
+from ..fit.hybrid import fit_hybrid
+from ..identify.sysid import SysIdConfig
 from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
+from ..ppo.ppo_config import default_config
+from ..ppo.trainer import train
 from ..robot.description import load_robot
 from ..sim.parity import pd_agreement
 from ..skills.skill_config import SkillPPOConfig

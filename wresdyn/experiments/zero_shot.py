@@ -12,9 +12,9 @@ import numpy as np
 import torch
 
 from ..data.mismatch import Mismatch
-from ..learn.gradfit import GradFitConfig, export_run, fit
-from ..learn.hybrid import fit_hybrid
-from ..learn.sysid import SysIdConfig
+from ..fit.gradfit import GradFitConfig, export_run, fit
+from ..fit.hybrid import fit_hybrid
+from ..identify.sysid import SysIdConfig
 from ..skills.skill_config import SkillPPOConfig
 
 __all__ = ["POLICIES", "BenchmarkStart", "start_benchmark", "fit_corrections", "write_results"]

@@ -10,7 +10,7 @@ a robot (as fitted by ``mujoco.sysid`` or PACE), per joint i:
 
 with b, μ, Δa ≥ 0 through a softplus of O(1) parameters in per-joint units (b in kd_i, μ in 5 % of the effort
 limit, Δa in the nominal armature or 0.01 kg·m²), so Adam moves every term at a comparable rate. It has the interface of :class:`~wresdyn.learn.residual.ResidualPolicy`
-(``kind == "torque"``), so it is fitted by the same gradient machinery (:func:`wresdyn.learn.gradfit.fit` with
+(``kind == "torque"``), so it is fitted by the same gradient machinery (:func:`wresdyn.fit.gradfit.fit` with
 ``arch="parametric"``) and evaluated identically. The armature term uses the observed q̈ (one step old), an
 explicit stand-in for a mass-matrix change; the other terms are exact in form.
 """

@@ -16,7 +16,7 @@ small σ in action units pins the learning rate at its floor and the policy rand
 Observations (paper Sec. II-B) are the simulated joint states and the command, [q, q̇, q̈, q_cmd],
 shape (N, 4·n_dof), normalised by fixed per-channel statistics of the training recordings.
 
-The networks are rsl-rl models (MLP with ELU, or GRU + MLP), trained by :mod:`wresdyn.learn.ppo`.
+The networks are rsl-rl models (MLP with ELU, or GRU + MLP), trained by :mod:`wresdyn.ppo.trainer`.
 :class:`ResidualPolicy` is the deterministic, batched, exportable form that every consumer uses
 (evaluation, a gradient learner, deployment): raw observation in, physical residual out.
 """

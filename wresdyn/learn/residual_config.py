@@ -22,7 +22,7 @@ class ResidualConfig:
     ``delta_action``, divided by kp). PPO's default 0.5, checked on validation: 0.0315 rad against 0.0352 at
     0.25 after 1200 iterations (``benchmarks/results/validation_protocol/ppo_sweep_authority_1200_summary.md``);
     the "real" drives saturate at 20 % of the limit and cancelling PD torque beyond that needs room. The
-    gradient fit's default is 0.25 (:class:`wresdyn.learn.gradfit.GradFitConfig`)."""
+    gradient fit's default is 0.25 (:class:`wresdyn.fit.gradfit.GradFitConfig`)."""
     action_gain: float = 0.2
     """Normalised residual per unit of network output, g in clip(g · a, −1, 1); 0.2 makes one unit
     0.05 of the effort limit and the initial exploration noise (``init_std`` 1) that large."""

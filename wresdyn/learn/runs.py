@@ -2,11 +2,11 @@
 
 A :class:`RunFolder` owns a learner's folder: its ``config.json``, the resume check, the weights-only checkpoint, the
 learning curve (``curve.json``) and the best iterate on validation; a :class:`RunnerFolder` the folder of a runner that
-keeps its own checkpoints (rsl-rl's PPO): the record, the resume check against it and the summary. A resumed run must learn what it started
-learning, so the configuration saved with the checkpoint is compared with the new one field by field
-(:func:`config_diff`, :func:`check_resume`), and the refusal names the fields. Checkpoints are read with
-``torch.load(..., weights_only=True)`` (:func:`load_checkpoint`): tensors and plain containers only, so a run folder
-from elsewhere cannot run code by being resumed.
+keeps its own checkpoints (rsl-rl's PPO): the record, the resume check against it and the summary. A resumed run must
+learn what it started learning, so the configuration saved with the checkpoint is compared with the new one field by
+field (:func:`~wresdyn.learn.config_diff.config_diff`, :func:`check_resume`), and the refusal names the fields.
+Checkpoints are read with ``torch.load(..., weights_only=True)`` (:func:`load_checkpoint`): tensors and plain
+containers only, so a run folder from elsewhere cannot run code by being resumed.
 """
 
 from __future__ import annotations
@@ -19,85 +19,14 @@ from pathlib import Path
 
 from ..errors import WresdynError
 from ..robot.physical import PhysicalParams
+from .config_diff import config_diff, describe_diff, plain_json
 
-__all__ = ["RunError", "RunFolder", "RunnerFolder", "Best", "config_diff", "describe_diff", "check_resume", "read_unset",
-           "UNSET_WAS_ZERO", "run_physics", "load_checkpoint", "save_checkpoint", "write_json"]
+__all__ = ["RunError", "RunFolder", "RunnerFolder", "Best", "check_resume", "read_unset", "UNSET_WAS_ZERO",
+           "run_physics", "load_checkpoint", "save_checkpoint", "write_json"]
 
 
 class RunError(WresdynError):
     """A run folder that cannot be used as asked (another config, nothing to load, a bad checkpoint)."""
-
-
-def _plain(value):
-    # what the value reads back as from config.json: tuples become lists, dataclasses are already dicts
-    return json.loads(json.dumps(value))
-
-
-def _same(a, b) -> bool:
-    if isinstance(a, bool) or isinstance(b, bool):
-        return type(a) is type(b) and a == b  # True == 1 in Python, not in a config
-    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-        return True
-    return a == b
-
-
-def _diff(old, new, path: str, out: list[str]) -> None:
-    if isinstance(old, dict) and isinstance(new, dict):
-        for key in list(old) + [k for k in new if k not in old]:
-            sub = f"{path}.{key}" if path else str(key)
-            if key not in old or key not in new:
-                out.append(sub)
-            else:
-                _diff(old[key], new[key], sub, out)
-    elif isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
-        for i, (a, b) in enumerate(zip(old, new)):
-            _diff(a, b, f"{path}[{i}]", out)
-    elif isinstance(old, (dict, list)) or isinstance(new, (dict, list)):
-        if old != new:
-            out.append(path)
-    elif not _same(old, new):
-        out.append(path)
-
-
-def config_diff(old: dict, new: dict) -> list[str]:
-    """Dotted paths at which two JSON-like configs differ, in ``old``'s key order.
-
-    Both are compared as they read back from JSON (tuples are lists; floats exactly, after the round trip, so
-    a config equals the one it wrote). Nested dicts give ``a.b.c``; lists of the same length are compared per
-    element, ``a.b[2]``; a key on one side only, or a list whose length changed, gives its own path.
-    """
-    out: list[str] = []
-    _diff(_plain(old), _plain(new), "", out)
-    return out
-
-
-def _lookup(d, path: str):
-    for part in path.replace("[", ".[").split("."):
-        if not isinstance(d, (dict, list)):
-            return "<missing>"
-        if part.startswith("["):
-            d = d[int(part[1:-1])]
-        elif part in d:
-            d = d[part]
-        else:
-            return "<missing>"
-    return d
-
-
-def _short(value, width: int = 60) -> str:
-    text = value if value == "<missing>" else json.dumps(value)
-    return text if len(text) <= width else text[: width - 3] + "..."
-
-
-def describe_diff(old: dict, new: dict, paths=None, limit: int = 3) -> str:
-    """Differences in words, ``"ppo.gamma = 0.9, now 0.95; ..."``: those at ``paths`` (default: all of
-    :func:`config_diff`), at most ``limit`` with values, then how many more; ``""`` when there are none."""
-    paths = config_diff(old, new) if paths is None else list(paths)
-    old, new = _plain(old), _plain(new)
-    parts = [f"{p} = {_short(_lookup(old, p))}, now {_short(_lookup(new, p))}" for p in paths[:limit]]
-    if len(paths) > limit:
-        parts.append(f"and {len(paths) - limit} more ({', '.join(paths[limit:])})")
-    return "; ".join(parts)
 
 
 UNSET_WAS_ZERO = ("select_every", "grad_truncation", "torch_threads", "restart_std")
@@ -138,8 +67,8 @@ def check_resume(run_dir, old: dict, new: dict, may_change=(), what: str = "conf
     Args:
         run_dir: The run folder (named in the message).
         old, new: JSON-like configs (the saved one and the one asked for), both read with :func:`read_unset`.
-        may_change: Dotted paths (as :func:`config_diff` gives them) that a resumed run may change, e.g.
-            ``("ppo.iterations", "ppo.device")``; a path also covers everything under it.
+        may_change: Dotted paths (as :func:`~wresdyn.learn.config_diff.config_diff` gives them) that a resumed run
+            may change, e.g. ``("ppo.iterations", "ppo.device")``; a path also covers everything under it.
         what: What the dicts are, for the message (``"configuration"``, ``"data"``).
     """
     keep = tuple(may_change)
@@ -349,7 +278,7 @@ class RunFolder:
 
 class RunnerFolder(RunFolder):
     """The run folder of a runner that keeps its own checkpoints (rsl-rl's ``model_<it>.pt``: PPO of the residual,
-    :mod:`wresdyn.learn.ppo`, and of the skills, :mod:`wresdyn.skills.skill_ppo`).
+    :mod:`wresdyn.ppo.trainer`, and of the skills, :mod:`wresdyn.skills.skill_ppo`).
 
     It owns the record ``config.json``, the resume check against it (:meth:`check`: the runner's checkpoint holds
     weights only, so the configuration it was trained with is the one ``config.json`` recorded) and
@@ -365,7 +294,7 @@ class RunnerFolder(RunFolder):
     """
 
     def __init__(self, path, record: dict, may_change=(), key: str | None = None, writer: str = "this learner"):
-        record = _plain(record)
+        record = plain_json(record)
         super().__init__(path, record if key is None else record[key], may_change, key or "", record)
         self.checkpoint = None
         self.writer = writer

@@ -1,4 +1,4 @@
-"""The window-fit loop shared by identification (:mod:`.sysid`) and the gradient fit of a residual (:mod:`.gradfit`).
+"""The window-fit loop shared by identification (:mod:`wresdyn.identify.sysid`) and the gradient fit of a residual (:mod:`wresdyn.fit.gradfit`).
 
 Both fit by multiple shooting: each iteration replays B windows of H recorded steps from their recorded start state
 and descends the mismatch. What they share lives here, as rsl_rl splits its runner from the algorithm: the

@@ -1,23 +1,21 @@
-"""The configurations of the two window fits, identification (:class:`SysIdConfig`) and the gradient fit of a
-residual (:class:`GradFitConfig`), and their shared checks, apart from the learners (:mod:`.sysid`, :mod:`.gradfit`)
-so that the command line reads them without importing torch or Warp."""
+"""What the two window fits' configurations share, identification's
+(:class:`~wresdyn.identify.sysid_config.SysIdConfig`) and the gradient fit's
+(:class:`~wresdyn.fit.gradfit_config.GradFitConfig`): how long a fit runs (:class:`WindowFitStop`) and the checks of
+the fields both have (:func:`check_window_fit_config`). Torch- and Warp-free, as the configurations themselves: the
+command line reads them without building a learner."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
+from ..choices import SolverKind, check_choice, check_device, check_friction_kappa, check_number
 
-from ..choices import ModelKind, SolverKind, check_choice, check_device, check_friction_kappa, check_number
-from ..robot.physical import JOINT_FIELDS, SERVO_FIELDS
-from .residual_config import ResidualConfig
-
-__all__ = ["DEFAULT_FIT", "FIT_FIELDS", "WindowFitStop", "SysIdConfig", "GradFitConfig", "check_window_fit_config"]
+__all__ = ["WindowFitStop", "check_window_fit_config"]
 
 
 def check_window_fit_config(cfg) -> None:
-    """Checks shared by the two window fits' configs (:class:`~wresdyn.learn.gradfit.GradFitConfig`,
-    :class:`~wresdyn.learn.sysid.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
+    """Checks shared by the two window fits' configs (:class:`~wresdyn.fit.gradfit_config.GradFitConfig`,
+    :class:`~wresdyn.identify.sysid_config.SysIdConfig`): solver, device, sizes, schedule, seeds and loss weights."""
     check_choice(cfg.solver, SolverKind, "solver")
     check_friction_kappa(cfg.friction_kappa, "friction_kappa", cfg.solver)
     check_device(cfg.device, "device")
@@ -42,13 +40,6 @@ def check_window_fit_config(cfg) -> None:
         check_number(getattr(cfg, name), name, ge=0)
 
 
-FIT_FIELDS = (*JOINT_FIELDS, *SERVO_FIELDS, "bodies")
-"""What can be identified: the per-joint fields, the servo drive's (:data:`~wresdyn.robot.physical.SERVO_FIELDS`,
-read on servo joints only) and ``"bodies"`` (every moving link's mass, com, inertia)."""
-DEFAULT_FIT = (*JOINT_FIELDS, "bodies")
-"""What is identified unless told: :data:`FIT_FIELDS` without the servo fields."""
-
-
 @dataclass(frozen=True)
 class WindowFitStop:
     """How long a window fit runs (:mod:`wresdyn.learn.schedule`): a fixed count, or until validation plateaus."""
@@ -70,254 +61,3 @@ class WindowFitStop:
     still improving)."""
     max_seconds: float | None = None
     """Ceiling on the training wall-clock [s] when ``iterations`` is ``None``; ``None`` = none."""
-
-
-@dataclass(frozen=True)
-class SysIdConfig(WindowFitStop):
-    """Identification settings (defaults: a CPU run of a few minutes on the shipped data)."""
-
-    lr_decay: float = 0.3
-    """Factor on the learning rate at each plateau of the last horizon, down to ``lr_final``; only with
-    ``iterations`` ``None``. 0.3 reaches ``lr_final`` in one step from the last stage's 0.0023: on the shipped data
-    validation 0.0016 rad in 91 s of training against 0.0015 rad in 139 s at 0.5 (2 cores shared with other work)."""
-    fit: tuple[str, ...] = DEFAULT_FIT
-    """Fields to identify (:data:`FIT_FIELDS`, default :data:`DEFAULT_FIT`); the others keep the robot file's
-    values."""
-    windows: int = 32
-    """Windows B (Newton worlds) per iteration."""
-    horizon_curriculum: tuple[int, ...] = (16, 32, 64, 128)
-    """Window lengths [steps], one stage each: short windows first (a far-off start diverges over
-    long ones), long windows last (delay, friction and saturation act over tens of steps)."""
-    grad_truncation: int | None = None
-    """Detach the state every this many steps; ``None`` = full backpropagation (the parameters are few and the
-    identified model is stable, unlike a residual network early in training)."""
-    fused: bool | None = None
-    """Replay each batch of training windows in one solver launch and its adjoint in one plan
-    (:func:`wresdyn.sim.fused.fused_rollout`) instead of step by step: the same states, gradients equal to float32
-    rounding, far fewer launches and host synchronisations (2.7x per iteration on an H100, 2.3x over a whole
-    identification on 2 CPU cores, the same selection). It needs the replay solver at one substep, PD drives (no
-    servo), no ``grad_truncation`` and independent windows (``shooting`` 1); ``None`` fuses where those hold and steps
-    elsewhere, ``True`` refuses a setting that cannot fuse, ``False`` always steps. The grid searches and the refinement
-    step either way."""
-    lr: float = 0.01
-    """Adam learning rate in the coordinates of :class:`~wresdyn.sim.physics.PhysicsModel` (log scales and
-    reference units, all O(0.1-1))."""
-    lr_final: float = 0.001
-    """Learning rate at the last iteration (cosine decay)."""
-    w_q: float = 1.0
-    """Weight of the joint position error [1/rad²]."""
-    w_qd: float = 0.01
-    """Weight of the joint velocity error [s²/rad²]."""
-    w_prior: float = 1e-5
-    """Weight of the squared distance of the coordinates from the start."""
-    effort_grid: tuple[float, ...] = tuple(round(float(x), 4) for x in np.geomspace(0.05, 1.0, 9))
-    """Fractions of the robot file's effort limits tried when the effort limit joins the fit (forward only, on
-    training windows); empty = continue from the file's limits."""
-    delay_grid: tuple[float, ...] = ()
-    """Command delays [steps] tried (one for every joint) when the effort limit joins the fit, before it. Off by
-    default: on the shipped data (true delay 3 steps) the grid 0-8 picked 0 there, the gains, damping and
-    friction having already absorbed the delay, and the final error did not change (0.0057 vs 0.0055 rad
-    held-out)."""
-    gain_grid: tuple[float, ...] = ()
-    """Factors on the start's position gain kp tried before the first step, each joint taking the factor of its own
-    least training error (forward only, every joint at one factor per rollout); empty = start from the file's kp.
-    Off by default. Where the file's kp is so stiff that the drive saturates on every move (the SO-101's servo
-    model: kp 998 N·m/rad against 3.35 N·m), the loss barely depends on kp and Adam cannot walk down to a soft
-    servo's: ``benchmarks/real/so101_real.sh`` uses it."""
-    effort_floor: float | None = None
-    """Least effort limit the fit may reach, as a fraction of the robot file's (gains config's) limit, 0-1: the grid
-    of ``effort_grid`` is raised to it and every step projected above it; ``None`` = down to 0.05 of it. Where the
-    file's limit is a servo's data-sheet stall torque, 1 keeps the fit from lowering the torque bound to flatten the
-    motor's torque-speed line, which shares it (:mod:`wresdyn.robot.servo`). Only when the effort limit is fitted."""
-    effort_after: float = 0.4
-    """Fraction of the iterations after which the effort limit joins the fit (until a plateau: at the start of the
-    horizon stage that holds this fraction of the curriculum, the second of four by default). Before, the drives keep the
-    file's limits: a low limit started from the file's other values mimics the friction and delay not yet
-    identified (a local minimum where saturation stands in for friction)."""
-    lr_scale: tuple[float, float, float] = (1.0, 5.0, 0.5)
-    """Learning-rate factors of the gain/armature log scales, the linear fields (damping, friction, effort,
-    delay: their coordinates run to a few units) and the link pseudo-inertia factors."""
-    grad_clip: float = 1.0
-    """Global gradient-norm clip."""
-    solver: SolverKind = "auto"
-    """Newton solver; must be differentiable (SolverReplay)."""
-    friction_kappa: float | None = None
-    """Dry-friction law of the replay solver, ``None`` (the soft default) or a damper-law rate [1/s]: as
-    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.learn.replay_env_config`)."""
-    device: str = "cpu"
-    """Warp / torch device."""
-    torch_threads: int | None = 1
-    """CPU threads for torch (``None``: torch's default); see :class:`wresdyn.learn.gradfit.GradFitConfig`."""
-    sim_threads: int = 1
-    """CPU threads the replay solver splits the windows over (``SolverReplay(threads=)``; the same results bit for
-    bit). On an idle 2-core machine 2 took the default identification from 27 to 17 s of training; 1 by default, so
-    that parallel jobs (``ablate --jobs``, the tests' workers) do not contend for the cores."""
-    seed: int = 0
-    """Seed of the window sampler."""
-    select_every: int | None = None
-    """Validate every this many iterations (``None``: ten times in a fixed count of ``iterations``, every
-    :data:`~wresdyn.learn.schedule.PLATEAU_CHECK_EVERY` until a plateau)."""
-    refine: int = 0
-    """L-BFGS steps after Adam (0: off), each up to 20 evaluations with a strong-Wolfe line search, on
-    ``refine_windows`` fixed training windows of the longest horizon, from the parameters selected so far; every
-    step is validated and the best kept. The fields of ``fit`` except the effort limit and the delay (both kept)."""
-    refine_windows: int = 64
-    """Fixed training windows of the refinement."""
-    share_effort_ratio: bool = True
-    """After the selection, give the effort limits the training data never reaches the ratio to the file's limit that
-    the saturating joints share, bounded below by the torque the data demands
-    (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`); kept only if validation is not worse. Only
-    when the effort limit is fitted."""
-    effort_reset: bool = False
-    """After the selection (and ``share_effort_ratio``), the selected parameters with every fitted effort limit put
-    back at the robot file's are replayed on validation and kept if better: a candidate of the selection, for a file
-    whose limit is a measured figure (a servo's data-sheet stall torque) that training windows trade against the other
-    fields. Only when the effort limit is fitted and there is a validation split."""
-    saturated_min: float = 0.01
-    """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
-    shooting: int = 1
-    """Consecutive windows per training sample (multiple shooting with state continuity, :mod:`.shooting`): each of
-    the ``windows`` samples is a chain of this many windows of the curriculum's length from one run, simulated side by
-    side, the later ones from free start states stitched by the defect penalty ``w_defect``; 1 = independent windows
-    from their recorded start. Above 1 every horizon must be a multiple of the shortest (the nodes' spacing)."""
-    w_defect: float = 1.0
-    """Weight of the shooting defects (what a window's end misses the next one's free start by, with ``w_q`` and
-    ``w_qd``) against the data term; only with ``shooting`` > 1."""
-    shooting_lr: float = 1e-3
-    """Adam learning rate of the free start states [rad, rad/s per step]; only with ``shooting`` > 1."""
-    shooting_pool: int = 0
-    """With ``shooting`` > 1: draw this many chains once per window length (seeded by ``seed`` and the length) and
-    each iteration's ``windows`` among them, so that every free start state is visited many times and can move to
-    where the chain is continuous; 0 = fresh chains anywhere every iteration (on the SO-101's 1.2 M training samples
-    a node is then drawn about once in a run: the free states stay the recorded ones)."""
-    identifiability: bool = True
-    """After the selection, write what the data can identify (``identifiability.json`` and ``.md`` in the run
-    folder, :mod:`wresdyn.learn.identifiability`): per-parameter standard errors and correlations from the
-    Gauss-Newton information of the validation loss, and the parameters the recordings never excite, each with
-    advice on the recording that would. One batched replay of every parameter's perturbation; needs a validation
-    split. On the shipped data a few seconds against the identification's minute or two."""
-    identifiability_windows: int = 16
-    """Validation windows (of the curriculum's longest length) the identifiability report replays."""
-
-    def __post_init__(self) -> None:
-        check_window_fit_config(self)
-        bad = sorted(set(self.fit) - set(FIT_FIELDS))
-        if bad:
-            raise ValueError(f"fit: unknown field(s) {bad}; choose from {list(FIT_FIELDS)}")
-        check_number(self.w_prior, "w_prior", ge=0)
-        for i, f in enumerate(self.effort_grid):
-            check_number(f, f"effort_grid[{i}]", gt=0)
-        for i, f in enumerate(self.gain_grid):
-            check_number(f, f"gain_grid[{i}]", gt=0)
-        if self.gain_grid and "kp" not in self.fit:
-            raise ValueError("gain_grid searches kp, which is not among the fitted fields (fit)")
-        if self.effort_floor is not None:
-            check_number(self.effort_floor, "effort_floor", ge=0, le=1)
-            if "effort" not in self.fit:
-                raise ValueError("effort_floor bounds the effort limit, which is not among the fitted fields (fit)")
-        if self.effort_reset and "effort" not in self.fit:
-            raise ValueError("effort_reset puts the effort limit back, which is not among the fitted fields (fit)")
-        check_number(self.effort_after, "effort_after", ge=0)
-        for i, f in enumerate(self.lr_scale):
-            check_number(f, f"lr_scale[{i}]", gt=0)
-        check_number(self.refine, "refine", integer=True, ge=0)
-        check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
-        check_number(self.saturated_min, "saturated_min", gt=0, le=1)
-        check_number(self.shooting, "shooting", integer=True, ge=1)
-        check_number(self.identifiability_windows, "identifiability_windows", integer=True, ge=1)
-        if self.fused is True and (self.grad_truncation is not None or self.shooting > 1):
-            raise ValueError("fused replays whole windows without truncation or shooting: set grad_truncation to "
-                             "none and shooting to 1, or fused to false")
-        check_number(self.w_defect, "w_defect", ge=0)
-        check_number(self.shooting_lr, "shooting_lr", gt=0)
-        check_number(self.shooting_pool, "shooting_pool", integer=True, ge=0)
-        spacing = min(self.horizon_curriculum or (64,))
-        if self.shooting > 1 and any(h % spacing for h in self.horizon_curriculum):
-            raise ValueError(f"shooting: every horizon of horizon_curriculum {list(self.horizon_curriculum)} must be a "
-                             f"multiple of the shortest ({spacing}), the shooting nodes' spacing")
-
-
-@dataclass(frozen=True)
-class GradFitConfig(WindowFitStop):
-    """Gradient fit settings (defaults: a small CPU run on the shipped data)."""
-
-    patience: int = 2
-    """Validation checks in a row without a ``min_improvement`` gain that end a stage; only with ``iterations``
-    ``None``. Two: on the shipped humanoid's identified model the residual's validation stays within 1 % over its six
-    horizons either way (3: 1040 iterations, 60 s; 2: 680 iterations, 34 s)."""
-
-    residual: ResidualConfig = ResidualConfig(fraction=0.25)
-    """Residual kind (torque / delta action), network (MLP / GRU) and authority: 0.25 of each effort limit,
-    chosen on validation (0.0282 rad against 0.0294 at 0.5, both with ``obs_noise`` 0.1;
-    ``benchmarks/results/validation_protocol/fit_sweep_summary.md``)."""
-    model: ModelKind = "network"
-    """``"network"`` (``residual``'s MLP or GRU) or ``"parametric"`` (per-joint gain scales, damping, friction,
-    armature: :class:`wresdyn.learn.parametric.ParametricResidual`, a torque residual)."""
-    horizon: int = 64
-    """Window length H [steps] (at 500 Hz, 64 steps = 128 ms) when there is no curriculum."""
-    horizon_curriculum: tuple[int, ...] = (2, 4, 8, 16, 32, 64)
-    """Window lengths stepped through in equal parts of training; empty = always ``horizon``. Doubling
-    matters: a residual fitted on 4-step windows can make the 16-step closed loop unstable, and training
-    does not recover from there."""
-    grad_truncation: int | None = 16
-    """Truncated backpropagation: gradients flow through at most this many steps [steps] (the state is
-    detached every ``grad_truncation`` steps; the rollout and its loss still span the whole window). Through
-    stiff PD dynamics, longer gradient paths explode; ``None`` = never truncate."""
-    windows: int = 32
-    """Parallel windows B (Newton worlds) per iteration."""
-    lr: float = 1e-3
-    """Adam learning rate at the start."""
-    lr_final: float = 1e-4
-    """Learning rate at the last iteration (cosine decay from ``lr``)."""
-    w_q: float = 1.0
-    """Weight of the joint position error [1/rad²]."""
-    w_qd: float = 0.01
-    """Weight of the joint velocity error [s²/rad²]."""
-    w_torque: float = 0.5e-5
-    """Weight of |τ_res|² [1/(N·m)²] (Table I joint torque)."""
-    w_action_rate: float = 0.5e-4
-    """Weight of |a_k − a_{k−1}|² in normalised action units (Table I action rate)."""
-    grad_clip: float = 1.0
-    """Global gradient-norm clip."""
-    obs_noise: float = 0.1
-    """Gaussian noise added to the policy's observation during training, in units of each channel's
-    normalising std (the simulation itself is not perturbed). A regulariser: with 16 training recordings the
-    network otherwise fits the training windows' states too closely. Chosen on validation among 0, 0.03, 0.1
-    and 0.3 (0.0316, 0.0301, 0.0294, 0.0302 rad at authority 0.5); 0 = off. Not applied to the parametric
-    model."""
-    solver: SolverKind = "auto"
-    """Newton solver (:data:`wresdyn.sim.solvers.SOLVERS`); must be differentiable."""
-    friction_kappa: float | None = None
-    """Dry-friction law of the replay solver, ``None`` (the soft default) or a damper-law rate [1/s]: as
-    ``ReplayEnvConfig.friction_kappa`` (:mod:`wresdyn.learn.replay_env_config`)."""
-    device: str = "cpu"
-    """Warp / torch device."""
-    torch_threads: int | None = 1
-    """CPU threads for torch (``None``: torch's default). One is fastest for these small networks, and an unpinned fit
-    ran 12x slower on a loaded 2-core machine (threads contending with the simulation and each other)."""
-    sim_threads: int = 1
-    """CPU threads the replay solver splits the windows over (the same results; see
-    :class:`~wresdyn.learn.sysid.SysIdConfig`). The fit launches one step at a time, so small batches gain nothing: at
-    the default 32 windows 2 threads took the residual stage on an idle 2-core machine from 26 to 30 s."""
-    seed: int = 0
-    """Seed of the window sampler and network initialisation."""
-    select_every: int | None = None
-    """Evaluate on the validation split every this many iterations and return the best residual (model
-    selection on validation); ``None`` = ten times in a fixed count of ``iterations``, every
-    :data:`~wresdyn.learn.schedule.PLATEAU_CHECK_EVERY` until a plateau."""
-    cuda_graph: bool = True
-    """On CUDA, replay each iteration (the rollout with the residual in the loop, the loss, the backward pass
-    through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
-    length, with no host synchronisation inside (:class:`GradFitIteration`). The CPU runs the same code eagerly; off,
-    CUDA does too. May change on resume."""
-    physics: str = ""
-    """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
-    identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
-    file's. :func:`fit` takes the parameters themselves (``physics``)."""
-
-    def __post_init__(self) -> None:
-        check_choice(self.model, ModelKind, "model")
-        check_window_fit_config(self)
-        check_number(self.horizon, "horizon", integer=True, ge=1)
-        for name in ("w_torque", "w_action_rate", "obs_noise"):
-            check_number(getattr(self, name), name, ge=0)

@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import RobotError
 from ..paths import DEFAULT_ROBOT
 from .contact import ContactSettings
-from .file_import import import_file, short_label
+from .file_import import SUFFIX_KIND, import_file, resolve_path, short_label
 from .gains import apply_overrides, read_gains
 from .packages import user_roots
 from .servo import ServoDrives, attach_servo, read_servo
@@ -33,7 +33,6 @@ from .servo import ServoDrives, attach_servo, read_servo
 __all__ = ["Robot", "RobotError", "load_robot", "resolve_path", "DEFAULT_ROBOT", "PLACEHOLDER_EFFORT"]
 
 
-_SUFFIX_KIND = {".usd": "usd", ".usda": "usd", ".usdc": "usd", ".usdz": "usd", ".urdf": "urdf", ".xml": "mjcf", ".mjcf": "mjcf"}
 _UNLIMITED = 1e5
 """Joint limits at or beyond this magnitude [rad or m] mean "no limit"."""
 PLACEHOLDER_EFFORT = 1e5
@@ -249,19 +248,6 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-
-
-def resolve_path(path: str | Path) -> Path:
-    """A robot path; ``newton:NAME`` names an asset bundled with newton (e.g. ``newton:quadruped.urdf``)."""
-    text = str(path)
-    if text.startswith("newton:"):
-        import importlib.util
-
-        spec = importlib.util.find_spec("newton")
-        return Path(spec.origin).parent / "examples" / "assets" / text.removeprefix("newton:")
-    return Path(path)
-
-
 def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed",
                package_path: list[str] | str | None = None) -> Robot:
     """Load a robot file into a :class:`Robot`.
@@ -291,7 +277,7 @@ def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: s
         raise RobotError(f"{path}: base must be 'fixed' or 'floating', not {base!r}")
     if not path.is_file():
         raise RobotError(f"{path}: robot file not found")
-    kind = _SUFFIX_KIND.get(path.suffix.lower())
+    kind = SUFFIX_KIND.get(path.suffix.lower())
     if kind is None:
         raise RobotError(f"{path}: unknown robot file type {path.suffix!r} (expected .usd/.usda/.usdc, .urdf or .xml)")
     roots = user_roots() if package_path is None else package_path

@@ -16,7 +16,22 @@ import numpy as np
 
 from .packages import resolved_urdf
 
-__all__ = ["import_file", "dof_by_label", "short_label"]
+__all__ = ["import_file", "dof_by_label", "short_label", "resolve_path", "SUFFIX_KIND"]
+
+SUFFIX_KIND = {".usd": "usd", ".usda": "usd", ".usdc": "usd", ".usdz": "usd", ".urdf": "urdf", ".xml": "mjcf",
+               ".mjcf": "mjcf"}
+"""The robot file's kind by its suffix (lower case)."""
+
+
+def resolve_path(path: str | Path) -> Path:
+    """A robot path; ``newton:NAME`` names an asset bundled with newton (e.g. ``newton:quadruped.urdf``)."""
+    text = str(path)
+    if text.startswith("newton:"):
+        import importlib.util
+
+        spec = importlib.util.find_spec("newton")
+        return Path(spec.origin).parent / "examples" / "assets" / text.removeprefix("newton:")
+    return Path(path)
 
 
 def short_label(label: str) -> str:

@@ -1,4 +1,4 @@
-"""Stage 3, the simulation: Newton replay of recorded commands under PD plus a residual, one layer for all.
+"""The simulation: Newton replay of recorded commands under PD plus a residual, one layer for all.
 
 - :mod:`.simulator`: :class:`Simulator`, N worlds of a robot stepped under PD with a residual (fast and
   differentiable paths, divergence limits, device stream, CUDA graphs);

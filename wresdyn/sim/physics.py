@@ -1,6 +1,6 @@
 """The simulator's own physical parameters as fitted quantities: per joint and per link, physically consistent.
 
-What the grey-box identification (:mod:`wresdyn.learn.sysid`) fits and what a calibrated robot carries, in the
+What the grey-box identification (:mod:`wresdyn.identify.sysid`) fits and what a calibrated robot carries, in the
 units of the Newton model arrays that :class:`~wresdyn.sim.solver_replay.SolverReplay` reads every launch:
 
 ========================  =========================  =====================================================

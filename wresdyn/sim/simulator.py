@@ -1,7 +1,7 @@
 """The one simulation layer: N Newton worlds of one robot under PD drives plus a residual, read and written as torch.
 
 Every consumer steps the robot through :class:`Simulator`: data collection's PD-only replay and evaluation
-(through :func:`wresdyn.sim.rollout.rollout`), the PPO environment (:class:`wresdyn.learn.replay_env.ReplayEnv`)
+(through :func:`wresdyn.sim.rollout.rollout`), the PPO environment (:class:`wresdyn.ppo.replay_env.ReplayEnv`)
 and the gradient fit (``rollout(..., grad=True)``). It owns the Newton model, the solver
 (:func:`wresdyn.sim.solvers.make_solver`), the states and the control, the torch views of them, the device
 stream, CUDA graphs of the solver steps and, for gradients, one state per step so each step's ``wp.Tape``
@@ -194,7 +194,7 @@ class Simulator:
         """Write different physical parameters into each world (no gradients): :meth:`set_physics` with tensors that
         carry a leading world axis, joint fields (W, n), body fields (W, nb), (W, nb, 3), (W, nb, 3, 3); fields not
         given keep what the worlds have. For a finite-difference Jacobian: one parameter perturbed per world, all
-        replayed in one batch (:mod:`wresdyn.learn.identifiability`)."""
+        replayed in one batch (:mod:`wresdyn.identify.identifiability`)."""
         for f, v in values.items():
             if v.shape[0] != self.n_worlds:
                 raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.n_worlds}")

@@ -1,4 +1,4 @@
-"""Stage 5, using the corrected simulator: skills trained in it and deployed zero-shot on the real robot.
+"""Using the corrected simulator: skills trained in it and deployed zero-shot on the real robot.
 
 - :mod:`.motions`: reference motions from keyframes (sole IK and arm joints): kick, squat, wave; march held out;
 - :mod:`.plants`: what a skill acts on: the simulators (nominal, calibrated, delta action; :class:`~.plants.SimPlant`

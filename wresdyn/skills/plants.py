@@ -22,8 +22,8 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
-from ..learn.ppo import load_policy
 from ..learn.runs import run_physics
+from ..learn.run_residual import load_policy
 from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 from ..sim import DivergenceLimits, Simulator
 from .floor_env import base_frame_imu

@@ -145,7 +145,7 @@ class SkillPPOConfig:
     """Torch threads (pinned: an unpinned learner runs many times slower on a loaded machine; ``None``: torch's
     default)."""
     one_sync_update: bool = False
-    """The PPO update with one host synchronisation per iteration (:class:`~wresdyn.learn.ppo_update.OneSyncPPO`)
+    """The PPO update with one host synchronisation per iteration (:class:`~wresdyn.ppo.update.OneSyncPPO`)
     instead of rsl-rl's several per mini-batch; the same update up to rounding."""
 
     def __post_init__(self) -> None:

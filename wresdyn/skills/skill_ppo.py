@@ -1,14 +1,14 @@
 """Train a tracking skill with PPO (rsl-rl) on a plant, or fine-tune one; checkpoints and resume.
 
 A run folder holds ``config.json`` (what it trains: task, PPO, setting, the policy it started from), rsl-rl
-checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.learn.ppo_runner.Runner`),
+checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn.ppo.runner.Runner`),
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
 changed (the folder is a :class:`wresdyn.learn.runs.RunnerFolder`). The rsl-rl glue (runner, checkpoints, progress)
-is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
+is the residual learner's, :mod:`wresdyn.ppo.runner`.
 
-Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.learn.ppo.train`): each process
+Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.ppo.trainer.train`): each process
 steps its share of the worlds on its own device (:func:`rank_share`), seeded ``seed + RANK``, rsl-rl averages the
 gradients, rank 0 alone writes the run folder, and every rank resumes from the same checkpoint.
 """
@@ -23,9 +23,9 @@ import numpy as np
 import torch
 
 from ..learn.network_file import load_program, save_program
-from ..learn.ppo_runner import (Ranks, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
-                                rsl_runner_cfg, seed_processes)
 from ..learn.runs import RunError, RunnerFolder
+from ..ppo.runner import (Ranks, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
+                          rsl_runner_cfg, seed_processes)
 from ..progress import bar
 from .skill_config import SkillPPOConfig
 

@@ -5,14 +5,14 @@ For each finished robot folder (``OUT/<robot>/`` of ``run.py``: ``data/dataset.n
 ``fit/``) it writes into that folder:
 
 * ``identifiability.json`` / ``.md``: the identifiability report of the fit's identified physics
-  (:func:`wresdyn.learn.identifiability.identifiability`, under the fit's stage-1 settings);
+  (:func:`wresdyn.identify.identifiability.identifiability`, under the fit's stage-1 settings);
 * ``diagnosis.json`` / ``.md``:
 
   - per split, trajectory and joint, the open-loop RMSE of PD only and of the fitted model (identified physics +
     residual), replayed as ``wresdyn eval`` does (``metrics.json`` has per-joint errors per split only);
   - per split and joint, the fraction of samples on which the REAL robot's drive saturates: the recorded
     (applied) torque |τ| at the true derated limit (within :data:`AT_LIMIT`), and the demanded PD torque of the
-    true gains and delay above it (:func:`wresdyn.learn.unexcited_limits.demanded_torque`); beside it the same
+    true gains and delay above it (:func:`wresdyn.identify.unexcited_limits.demanded_torque`); beside it the same
     fraction for the identified model (its demanded torque over its identified limit);
   - per joint, the effort limit of the file, the truth (the mismatch applied by ``collect``,
     :meth:`wresdyn.data.real_robot.RealRobot.physics`) and the identified one;
@@ -60,7 +60,7 @@ def load(robot_dir: Path, data_root: Path | None, fit_root: Path | None):
 
 def sysid_config(fit: Path):
     """The fit's stage-1 settings (``fit/identify/config.json``) as a :class:`SysIdConfig`, on the CPU."""
-    from wresdyn.learn.window_fit_config import SysIdConfig
+    from wresdyn.identify.sysid_config import SysIdConfig
 
     saved = json.loads((fit / "identify" / "config.json").read_text())["sysid"]
     known = {f.name: f for f in dataclasses.fields(SysIdConfig)}
@@ -95,7 +95,7 @@ def saturation(ds, robot, params, real) -> dict:
     static gravity torque's maximum; per trajectory the recorded fraction."""
     import mujoco
 
-    from wresdyn.learn.unexcited_limits import demanded_torque
+    from wresdyn.identify.unexcited_limits import demanded_torque
 
     truth, dt = real.physics(), 1.0 / ds.rate_hz
     m, d = real.model, mujoco.MjData(real.model)
@@ -171,7 +171,7 @@ def markdown(name, joints, errors, sat, limits, found) -> str:
 
 
 def diagnose(robot_dir: Path, data_root: Path | None = None, fit_root: Path | None = None) -> dict:
-    from wresdyn.learn.identifiability import identifiability, write_identifiability
+    from wresdyn.identify.identifiability import identifiability, write_identifiability
 
     ds, robot, params, real, fit = load(robot_dir, data_root, fit_root)
     truth = real.physics()

@@ -6,7 +6,7 @@ Variants (each a copy of ``fit/physics.json``):
 * ``fitted``: as identified (the zoo's result);
 * ``shared_ratio``: the effort limits of the joints that never saturate in training set to the saturating joints'
   median identified / file ratio times the file's, WITHOUT the lower bound of the largest demanded torque
-  (:mod:`wresdyn.learn.unexcited_limits` keeps the bound): the candidate default;
+  (:mod:`wresdyn.identify.unexcited_limits` keeps the bound): the candidate default;
 * ``true_effort``: every effort limit the truth's (oracle);
 * ``true_effort_kd_damping``: and kd, damping the truth's (oracle: the PD / viscous split that only shows while a
   drive saturates);
@@ -31,7 +31,7 @@ SPLITS = ("validation", "heldout", "ood")
 
 
 def variants(ds, robot, params, truth) -> dict:
-    from wresdyn.learn.unexcited_limits import limit_unexcited_efforts
+    from wresdyn.identify.unexcited_limits import limit_unexcited_efforts
 
     _, found = limit_unexcited_efforts(params, robot.effort, ds.split("train"), 1.0 / ds.rate_hz,
                                        fitted=ds.fit_weights() > 0)

@@ -10,23 +10,23 @@ to carry gradients.
 One world step (see :mod:`wresdyn.sim.solver_replay.solver` for the equation):
 
 1. FK, RNEA bias ``c(q, qd)``, CRBA ``M(q)`` (:func:`~.dynamics.dynamics`);
-2. drive (PD or servo, chosen per DoF: :func:`_servo_drive`), passive and limit torques, and the implicit diagonal;
+2. drive (PD or servo, chosen per DoF: :func:`~.step_terms.servo_drive`), passive and limit torques, and the
+   implicit diagonal;
 3. the frictionless velocity ``v* = qd + dt H^-1 rhs`` (:func:`~.dynamics.solve_ltdl`);
 4. dry friction: Gauss-Seidel sweeps on ``min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i)``
-   (:func:`_friction`);
+   (:func:`~.step_terms.friction_solve`);
 5. semi-implicit Euler: ``qd' = v``, ``q' = q + dt qd'``.
 """
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 
-from ...robot.servo import STARTUP_RAMP, STICTION_SPEED
+from ...robot.servo import STICTION_SPEED
 from .dynamics import dynamics, inertial_params, solve_ltdl
 from .emit import Emitter, branched, gate, indent, outline, unmarked
 from .split import split_lanes, split_pieces
+from .step_terms import friction_solve, servo_drive
 from .tree import ReplayTree
 
 __all__ = ["generate_source"]
@@ -70,94 +70,6 @@ def _friction_flag(dry: list[str]) -> str:
     return f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)"
 
 
-def _friction(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_star: list, mu: list, m0: list,
-              sweeps: int, qd: list) -> list:
-    """Dry friction as the velocity problem of one step, solved by ``sweeps`` Gauss-Seidel sweeps.
-
-    With the frictionless velocity ``v*`` (``H (v* - qd) = dt rhs``), friction torques ``tau_f`` change the
-    step to ``H (v - v*) = dt tau_f``, ``-tau_f in dg(v)``: the optimality condition of
-
-        min_v 1/2 (v - v*)^T (H / dt) (v - v*) + sum_i g_i(v_i).
-
-    ``g_i`` is a saturated damper on ``w_i = v_i - sigma qd_i`` (``qd`` the velocity before the step),
-    ``tau_i = -clamp(c_i H_ii w_i / dt, -mu_i, mu_i)`` with ``c_i = fric_c m0_i / H_ii + fric_k``
-    (``fric_*`` kernel arguments, ``m0`` the array ``fric_m0``): MuJoCo's soft ``frictionloss`` has
-    ``fric_c = d0 / (1 - d0)``, ``m0_i`` the DoF's effective inertia at the reference pose (MuJoCo's
-    ``1 / dof_invweight0``), ``fric_k = 0``, ``sigma = 1 - b dt`` (:mod:`.solver`); the plain damper on the new
-    velocity has ``fric_c = 0``, ``fric_k = kappa dt``, ``sigma = 0`` (Coulomb ``mu_i |v_i|`` for ``kappa = inf``).
-    Minimising over ``v_i`` alone, the others fixed, is in closed form: with the unconstrained
-    ``u = v*_i - sum_{j != i} (H_ij / H_ii) (v_j - v*_j)``,
-
-        v_i = u - clamp(beta_i (u - sigma qd_i), -mu_i dt / H_ii, mu_i dt / H_ii),   beta_i = 1 - 1 / (1 + c_i)
-
-    (``beta = 1``: a soft threshold that returns exactly 0 when the joint sticks; below the threshold the
-    implicit damper), written ``u - beta clamp(w, -t / beta, t / beta)`` so that the stuck case stays exact. ``H`` couples a
-    DoF only with its ancestors and descendants, so a sweep costs one multiply-add per such pair. Each
-    sweep visits the DoFs by depth (root to leaves, then back: symmetric Gauss-Seidel), which is the DoF
-    order up to swaps of DoFs of different branches, which do not couple (the same result). A DoF without
-    friction (``mu_i = 0``) still moves, as it answers the friction torques of the DoFs it is coupled to: its
-    bound is 0, so ``v_i = u`` exactly, and a world without friction gets ``v = v*`` exactly.
-    """
-    n = tree.n_dof
-    depth = [len(tree.ancestors(k)) for k in range(n)]
-    order = sorted(range(n), key=lambda k: (depth[k], k))
-    coupled: list[list[tuple[int, object]]] = [[] for _ in range(n)]
-    inv_h = [e.let(f"S(1.0) / {e.sym(h_diag[k])}") for k in range(n)]
-    for (k, j), h in h_off.items():
-        coupled[k].append((j, e.sp((h, inv_h[k]))))
-        coupled[j].append((k, e.sp((h, inv_h[j]))))
-    # clamp(beta w, -t, t) = beta clamp(w, -t / beta, t / beta), t = mu dt / H_ii
-    beta = [e.let(f"S(1.0) - S(1.0) / (S(1.0) + fric_c * {m0[k]} * {inv_h[k]} + fric_k)") for k in range(n)]
-    bound = [e.let(f"dt / {beta[k]} * {mu[k]} * {inv_h[k]}") for k in range(n)]
-    last: dict[int, tuple] = {}  # each DoF's latest (u, clamp); v is made from it at the end
-    delta: dict[int, object] = {}  # v_j - v*_j of the DoFs visited so far
-    stamp: dict[int, int] = {}  # when each delta was made: the newest is summed last, the rest need not wait
-    clock = itertools.count()
-    for s in range(sweeps):
-        e.mark(f"friction sweep {s}")
-        for i in (order if s % 2 == 0 else order[::-1]):
-            terms = sorted((stamp[j], h, delta[j]) for j, h in coupled[i] if j in delta)
-            coupling = e.sp(*[(h, d) for _, h, d in terms])
-            u = e.sym(e.sp((v_star[i],), (-1.0, coupling)))
-            # clamp(w, -b, b) as two selects: with wp.clamp (NaN-aware fmin/fmax) one sweep cost 20 % of
-            # the humanoid's fused step, with selects 4 %
-            b = bound[i]
-            w = e.let(f"{u} - fric_shift * {qd[i]}")
-            c = e.let(f"wp.where({w} > {b}, {b}, wp.where({w} < -{b}, -{b}, {w}))")
-            delta[i] = e.sp((-1.0, coupling), (-1.0, beta[i], c))
-            last[i] = (u, c)
-            stamp[i] = next(clock)
-    e.mark("friction result")
-    # u - beta c, not v* + delta: exactly 0 when the joint sticks with beta = 1
-    return [e.let(f"{u} - {beta[i]} * {c}") for i, (u, c) in sorted(last.items())]
-
-
-def _servo_drive(e: Emitter, ke, kd, eff, db, w0, u0, q, qd, tq, tqd) -> tuple[str, str, str]:
-    """The servo law of :mod:`wresdyn.robot.servo` for one DoF: (torque, its velocity derivative's magnitude
-    ``d``, its position derivative's magnitude ``k``), ``d``/``k`` 0 where a clamp is saturated (and ``k`` inside
-    the dead band)::
-
-        e_b = e - clamp(e, -b, b),  u = clamp(ke e_b + u0 clamp(e_b / r, -1, 1) + kd (qd* - qd), -U, U),
-        tau = clamp(u - (U / w0) qd, -U, U)
-
-    ``U`` the effort limit (here finite), ``w0 = 0``: no torque-speed line, ``u0`` the startup torque over the ramp
-    ``r`` (:data:`~wresdyn.robot.servo.STARTUP_RAMP`)."""
-    err = e.let(f"{tq} - {q}")
-    err_b = e.let(f"{err} - wp.clamp({err}, -{db}, {db})")
-    ramp = e.let(f"{err_b} * S({1.0 / STARTUP_RAMP!r})")
-    raw = e.let(f"{ke} * {err_b} + {u0} * wp.clamp({ramp}, S(-1.0), S(1.0)) + {kd} * ({tqd} - {qd})")
-    duty = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
-    w0_safe = e.let(f"wp.where({w0} > S(0.0), {w0}, S(1.0))")  # no division by 0 in the branch not taken
-    emf = e.let(f"wp.where({w0} > S(0.0), {eff} / {w0_safe}, S(0.0))")
-    out = e.let(f"{duty} - {emf} * {qd}")
-    tau = e.let(f"wp.clamp({out}, -{eff}, {eff})")
-    free_u = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")
-    free_t = e.let(f"wp.where(wp.abs({out}) < {eff}, S(1.0), S(0.0))")
-    outside = e.let(f"wp.where(wp.abs({err}) > {db}, S(1.0), S(0.0))")
-    stiff = e.let(f"{ke} + wp.where(wp.abs({ramp}) < S(1.0), {u0} * S({1.0 / STARTUP_RAMP!r}), S(0.0))")
-    return tau, e.let(f"{free_t} * ({free_u} * {kd} + {emf})"), e.let(f"{free_t} * {free_u} * {outside} * {stiff}")
-
-
 def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, jf, g,
           sweeps: int, servo: np.ndarray | None = None) -> tuple[list, list]:
     """Emit one world step; returns the new (q, qd) symbols. DoFs where ``servo`` get the servo law. The friction
@@ -171,7 +83,7 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
         ke, kd, arm, _, damp, eff, lo, hi, lke, lkd = (p[name][k] for name in _PARAMS)
         if servo is not None and servo[k]:
             eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")
-            pd, drive_d, drive_k = _servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], p["su0"][k], q[k], qd[k],
+            pd, drive_d, drive_k = servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], p["su0"][k], q[k], qd[k],
                                                 tq[k], tqd[k])
             free = None
         else:
@@ -203,7 +115,7 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
             if servo[k]:  # static friction at rest (wresdyn.robot.servo.friction_bound), on the previous velocity
                 ramp = f"wp.max(S(1.0) - wp.abs({qd[k]}) * S({1.0 / STICTION_SPEED!r}), S(0.0))"
                 mu[k] = e.let(f"{mu[k]} + {p['sfs'][k]} * {ramp}")
-        vf = _friction(e, tree, h_diag, m_off, v, mu, p["m0"], sweeps, qd)
+        vf = friction_solve(e, tree, h_diag, m_off, v, mu, p["m0"], sweeps, qd)
         e.lines[start:] = gate(e.lines[start:] + [f"{v[k]} = {vf[k]}" for k in range(n)], "fric_on")
     e.mark("semi-implicit Euler")
     return [e.let(f"{q[k]} + dt * {v[k]}") for k in range(n)], v
@@ -295,10 +207,10 @@ def generate_source(tree: ReplayTree, scalar: str = "float32", backward: bool = 
     adjoint is the step kernel's adjoint launched on rows ``t`` and ``t + 1``. ``replay_terms`` writes
     ``M(q)`` and ``c(q, qd)`` of one world for the parity tests. With ``backward`` the step kernel gets an
     adjoint; its code is cut into functions with the given ``inline`` hint (see :func:`~.emit.outline`).
-    ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`_friction`); 0 leaves the
+    ``friction_sweeps`` Gauss-Seidel sweeps solve the dry friction (:func:`~.step_terms.friction_solve`); 0 leaves the
     friction code out; the kernels skip the solve in a world without friction unless ``fric_grad[0]`` is non-zero
     (a run-time branch, so the same module serves any friction values). Every physical parameter is read from the
-    arrays: the source depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`_servo_drive`); the
+    arrays: the source depends on the robot's structure and the variant only, never on parameter values. ``servo`` (n_dof,) bool selects the servo law on those DoFs (:func:`~.step_terms.servo_drive`); the
     kernels then also take the servo arrays. ``None`` or none selected: the PD source, unchanged.
     ``pieces`` (with ``backward``): the adjoint comes as a chain of kernels ``replay_piece_<c>`` of about that many
     statements each (:mod:`.split`; listed in ``PIECES``, with ``PIECE_SLOTS`` scratch values per world), and

@@ -81,15 +81,13 @@ Not supported: floating bases, contacts, mimic joints, ``joint_target_mode`` (dr
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 import warp as wp
 from newton import ModelFlags
 from newton.solvers import SolverBase
 
-from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, deferring, lane_width, load_kernels
-from .launch import cpu_call, grad_of, launch_signature
+from .kernels import ADJOINT_PIECES, choose_pieces, compile_now, deferring, load_kernels
+from .launch import LaunchPlans, launch_signature
 from .tree import ReplayTree, tree_from_model
 
 __all__ = ["ADJOINT_PIECES", "FRICTION_KAPPA", "FRICTION_SWEEPS", "SolverReplay"]
@@ -113,7 +111,7 @@ _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 """Per-body model arrays the kernels read."""
 
 
-class SolverReplay(SolverBase):
+class SolverReplay(LaunchPlans, SolverBase):
     """Fused, differentiable reduced-coordinate solver for PD replay; a drop-in for ``SolverFeatherstone``.
 
     Example::
@@ -284,7 +282,7 @@ class SolverReplay(SolverBase):
     # ------------------------------------------------------------------ launching
     def _leading_args(self, dt: float) -> list:
         """The kernels' first arguments: ``dt``, the friction law's ``fric_c``, ``fric_k``, ``fric_shift``
-        (:func:`.codegen._friction`), ``kp_implicit`` and the arrays ``fric_m0`` and ``fric_grad``."""
+        (:func:`.step_terms.friction_solve`), ``kp_implicit`` and the arrays ``fric_m0`` and ``fric_grad``."""
         k = self.friction_kappa
         if k is None:  # MuJoCo's soft frictionloss: c_i = d0 / (1 - d0) m0_i / H_ii, shift = 1 - b dt
             c, kdt, shift = _MJ_D0 / (1.0 - _MJ_D0), 0.0, 1.0 - 2.0 / (_MJ_DMAX * _MJ_TIMECONST) * dt
@@ -292,67 +290,6 @@ class SolverReplay(SolverBase):
             c, kdt, shift = 0.0, k * dt, 0.0
         return [float(dt), c, kdt, shift, 1.0 if self.implicit_stiffness else 0.0, self._reference_inertia(),
                 self._fric_grad]
-
-    def _chunks(self) -> list[tuple[int, int]]:
-        w = self.tree.world_count
-        n = min(self.threads, w)
-        edges = np.linspace(0, w, n + 1).astype(int)
-        return [(int(a), int(b - a)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
-
-    def _plan(self, key: tuple, build):
-        """Per-chunk lists of launch callables, built once per argument signature ``key``.
-
-        A CPU ``wp.launch`` with ~30 arguments costs tens of microseconds of Python, more than a step of a
-        few worlds, so launches are recorded once (``record_cmd``) and replayed; the signature holds the
-        arrays' addresses, so new arrays get a new plan."""
-        plan = self._plans.get(key)
-        if plan is None:
-            if len(self._plans) >= 256:
-                self._plans.clear()
-            plan = self._plans[key] = [build(chunk) for chunk in self._chunks()]
-        return plan
-
-    def _command(self, kernel, chunk: tuple[int, int], args: list, outputs: list, adjoint: bool = False):
-        """A callable that launches ``kernel(world_start, *args, *outputs)`` (or its adjoint) on one chunk."""
-        laned = hasattr(self.kernels, "LANES")  # a thread per world and branch: kernel(world_start, world_end, ...)
-        inputs = [chunk[0], *((chunk[0] + chunk[1],) if laned else ()), *args]
-        extra = {"block_dim": self.kernels.BLOCK_DIM}  # CUDA: Warp launches at 256 unless told, whatever it built
-        if adjoint:
-            extra |= {"adj_inputs": [grad_of(a) for a in inputs], "adj_outputs": [grad_of(a) for a in outputs]}
-        dim = (self.kernels.LANES, lane_width(chunk[1], self.model.device.is_cuda)) if laned else chunk[1]
-        cmd = wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.model.device, adjoint=adjoint,
-                        record_cmd=True, **extra)
-        return cpu_call(cmd) or cmd.launch
-
-    def _execute(self, plan: list) -> None:
-        """Run each chunk's launches in order, the chunks concurrently (CPU threads)."""
-        if len(plan) == 1:
-            for call in plan[0]:
-                call()
-            return
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="replay")
-        list(self._pool.map(lambda calls: [call() for call in calls], plan))
-
-    def _adjoint(self, chunk: tuple[int, int], args: list, outputs: list) -> list:
-        """The launches of one step's adjoint on ``chunk``: the step kernel's, or with :attr:`adjoint_pieces` the
-        chain's (:mod:`.split`): its pieces but the last forward to refill the scratch (they write nothing else),
-        the chunk's scratch gradient zeroed, then every piece's adjoint, last to first."""
-        if not self.adjoint_pieces:
-            return [self._command(self.kernels.replay_step, chunk, args, outputs, adjoint=True)]
-        pieces, out = self.kernels.PIECES, [*outputs, self._scratch]
-        grad = self._scratch.grad[:, chunk[0]:chunk[0] + chunk[1]]  # this chunk's worlds: chunks run side by side
-        return ([self._command(k, chunk, args, out) for k in pieces[:-1]] + [grad.zero_]
-                + [self._command(k, chunk, args, out, adjoint=True) for k in reversed(pieces)])
-
-    def _record(self, backward, arrays: list) -> None:
-        """Under a recording ``wp.Tape``, register ``backward`` for the arrays that carry gradients."""
-        tape = wp._src.context.runtime.tape
-        if tape is None:
-            return
-        if not self.requires_grad:
-            raise RuntimeError("SolverReplay under a wp.Tape needs requires_grad=True (model or solver argument)")
-        tape.record_func(backward, [a for a in arrays if isinstance(a, wp.array) and a.requires_grad])
 
     # ------------------------------------------------------------------ Newton API
     def step(self, state_in, state_out, control, contacts, dt: float, *, observables=None) -> None:

@@ -1,4 +1,4 @@
-"""What the data can identify (:mod:`wresdyn.learn.identifiability`): a known-truth case where one effort limit and
+"""What the data can identify (:mod:`wresdyn.identify.identifiability`): a known-truth case where one effort limit and
 one joint are deliberately unexcited, the JSON written, and the identify / fit commands' run folders."""
 
 import dataclasses
@@ -11,8 +11,8 @@ from wresdyn.cli import main
 from wresdyn.data.dataset import Dataset, Trajectory, derive_qdd
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
-from wresdyn.learn.identifiability import identifiability, write_identifiability
-from wresdyn.learn.window_fit_config import SysIdConfig
+from wresdyn.identify.identifiability import identifiability, write_identifiability
+from wresdyn.identify.sysid_config import SysIdConfig
 from wresdyn.sim.parity import multisine_command
 from wresdyn.sim.physics import PhysicalParams
 

@@ -19,6 +19,9 @@ What the data does say about such a joint:
 samples the median ratio of those that do, times its own file limit, and never below its lower bound:
 ``effort_j = max(r̃ · effort_file_j, max_t |τ_j(t)|)``. It changes nothing where no joint saturates
 (no ratio to share), on joints excluded from fitting and on unlimited drives.
+
+After identification's selection, :func:`share_effort_ratio` and :func:`reset_effort_limits` are the candidates it
+keeps only where validation is no worse: the shared ratio, and the robot file's own limits put back.
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ import torch
 from ..robot.physical import PhysicalParams
 from ..sim.bank import delay_commands
 
-__all__ = ["UnexcitedLimits", "demanded_torque", "limit_unexcited_efforts"]
+__all__ = ["UnexcitedLimits", "demanded_torque", "limit_unexcited_efforts", "share_effort_ratio",
+           "reset_effort_limits"]
 
 
 @dataclass(frozen=True)
@@ -109,3 +113,37 @@ def limit_unexcited_efforts(params: PhysicalParams, file_effort, trajectories, d
     out.effort = after
     changed = tuple(name for name, u in zip(params.joint_names, unseen) if u)
     return out, UnexcitedLimits(saturated, bound, ratio, changed, before, after.copy())
+
+
+def share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log):
+    """Identification's selected ``params`` with the effort limits the training data never reaches set from the
+    saturating joints' ratio (:func:`limit_unexcited_efforts`, ``cfg.share_effort_ratio``), unless that is worse on
+    validation (``score(params) -> rad``, ``None``: no validation split; ``validation``: the selected parameters');
+    returns (parameters, their validation, or ``None`` where nothing was replayed)."""
+    shared, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=dataset.fit_weights() > 0,
+                                            saturated_min=cfg.saturated_min)
+    log(found.describe())
+    if not found.changed or score is None:
+        return shared, None
+    v = score(shared)
+    if v > validation:
+        log(f"  not kept: validation {v:.4f} rad against {validation:.4f} rad")
+        return params, None
+    log(f"  validation {v:.4f} rad (was {validation:.4f} rad)")
+    return shared, v
+
+
+def reset_effort_limits(robot, params, score, validation, fitted, log):
+    """The selected parameters with the fitted joints' effort limits put back at the robot file's, if that is better
+    on validation (:attr:`~wresdyn.identify.sysid_config.SysIdConfig.effort_reset`); returns (parameters, their
+    validation)."""
+    file = np.asarray(robot.effort, dtype=np.float64)
+    reset = params.copy()
+    reset.effort = np.where(fitted & np.isfinite(file), file, params.effort)
+    if score is None or np.array_equal(reset.effort, params.effort):
+        return params, validation
+    v = score(reset)
+    kept = v < validation
+    log(f"effort limits at the file's: validation {v:.4f} rad against {validation:.4f} rad, "
+        + ("kept" if kept else "not kept"))
+    return (reset, v) if kept else (params, validation)

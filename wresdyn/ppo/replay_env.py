@@ -23,11 +23,11 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from ..learn.residual import ResidualConfig, obs_stats
 from ..sim import DivergenceLimits, Simulator, TrajectoryBank
 from ..sim.bank import servo_goal_accel
 from ..sim.residual_kinds import apply_residual, observation, residual_scale
 from .replay_env_config import ReplayEnvConfig
-from .residual import ResidualConfig, obs_stats
 from .rewards import TERMS, RewardConfig, reward_terms
 
 __all__ = ["ReplayEnvConfig", "ReplayEnv"]

@@ -1,23 +1,22 @@
-"""The configuration of a residual-learning run (:func:`wresdyn.learn.ppo.train`) and how to change it by name.
+"""The configuration of a residual-learning run (:func:`wresdyn.ppo.trainer.train`).
 
-:class:`TrainConfig` gathers the replay environment, the residual, the Table I rewards and the PPO settings;
-:func:`set_fields` and :func:`parse_overrides` change nested fields by their dotted names, as ``wresdyn train --set
-SECTION.FIELD=VALUE`` does. This module imports neither torch nor rsl-rl itself: the command line reads its fields
-without building a learner.
+:class:`TrainConfig` gathers the replay environment, the residual, the Table I rewards and the PPO settings; its nested
+fields change by their dotted names through :mod:`wresdyn.config_fields`. This module imports neither torch nor
+rsl-rl itself: the command line reads its fields without building a learner.
 """
 
 from __future__ import annotations
 
-from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 
 from ..choices import check_device, check_number
 from ..errors import WresdynError
+from ..learn.residual_config import ResidualConfig
+from ..learn.runs import read_unset
 from .replay_env_config import ReplayEnvConfig, RewardConfig
-from .residual_config import ResidualConfig
-from .runs import read_unset
 
 __all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config",
-           "config_from_dict", "parse_overrides", "apply_overrides", "set_fields", "set_field"]
+           "config_from_dict"]
 
 
 COMPILE_MODES = ("", "default", "max-autotune-no-cudagraphs")
@@ -72,11 +71,11 @@ class PPOConfig:
     """Replay the validation split open loop every this many iterations and export the residual with the lowest
     validation error (model selection on validation); ``None`` = ten times per run."""
     cuda_graph: bool = True
-    """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.learn.replay_env.ReplayEnv`); the
+    """On CUDA, replay each environment step from a CUDA graph (:class:`~wresdyn.ppo.replay_env.ReplayEnv`); the
     runner's per-step NaN check (a host sync) is then off: the environment keeps non-finite states out of what it
     returns (diverged worlds are reset and counted)."""
     one_sync_update: bool = False
-    """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.learn.ppo_update.OneSyncPPO`:
+    """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.ppo.update.OneSyncPPO`:
     the adaptive learning rate on the device, gradients and KL in one all-reduce per mini-batch across processes)
     instead of rsl-rl's ~5 per mini-batch; the same update up to rounding."""
     mixed_precision: bool = False
@@ -166,80 +165,3 @@ def config_from_dict(d: dict) -> TrainConfig:
         return cls(**kw)
 
     return build(TrainConfig, read_unset(d))
-
-
-def parse_overrides(cfg: TrainConfig, items) -> dict:
-    """``SECTION.FIELD=VALUE`` items (as on ``wresdyn train --set``) as ``{"SECTION.FIELD": value}``.
-
-    SECTION is one of ``env``, ``residual``, ``rewards``, ``ppo``; VALUE is parsed as the field's type in ``cfg``
-    (tuples as comma-separated numbers, booleans as true/false); a later item for the same field wins. Raises
-    ``ValueError`` with a one-line message for an unknown key or a value of the wrong type.
-    """
-    sections = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
-    out = {}
-    for item in items:
-        key, sep, text = str(item).partition("=")
-        section, dot, name = key.strip().partition(".")
-        if not sep or not dot:
-            raise ValueError(f"override {item!r} is not SECTION.FIELD=VALUE (sections: {', '.join(sections)})")
-        if section not in sections:
-            raise ValueError(f"override {item!r}: unknown section {section!r}; choose from {', '.join(sections)}")
-        names = [f.name for f in fields(sections[section])]
-        if name not in names:
-            raise ValueError(f"override {item!r}: {section} has no field {name!r}; fields: {', '.join(names)}")
-        current = getattr(sections[section], name)
-        if current is None:  # an optional field at its None default: parse as its annotation's other type
-            current = _optional_example(type(sections[section]), name)
-        out[f"{section}.{name}"] = _parse_like(current, text.strip(), item)
-    return out
-
-
-def _optional_example(cls, name: str):
-    """A value of the non-None type of field ``name`` of dataclass ``cls`` (annotated ``X | None``), to parse as."""
-    hint = next(str(f.type) for f in fields(cls) if f.name == name)  # a string: the module postpones annotations
-    kind = next(t.strip() for t in hint.split("|") if t.strip() != "None")
-    return {"int": 0, "float": 0.0, "bool": False}.get(kind, "")
-
-
-def apply_overrides(cfg: TrainConfig, items) -> TrainConfig:
-    """``cfg`` with ``SECTION.FIELD=VALUE`` overrides applied, as on ``wresdyn train --set`` (see
-    :func:`parse_overrides`); a value the config refuses (:class:`WresdynError`) is a ``ValueError`` too."""
-    return set_fields(cfg, parse_overrides(cfg, items))
-
-
-def set_fields(cfg, values: dict):
-    """``cfg`` (a frozen dataclass) with the nested fields ``{"ppo.seed": 1, ...}`` set, all at once: each
-    config is rebuilt once, so checks across fields (:class:`TrainConfig`'s mini-batch check) see the final
-    values whatever the order. Unknown fields raise ``TypeError``, refused values :class:`WresdynError`."""
-    direct, nested = {}, {}
-    for dotted, value in values.items():
-        head, _, rest = dotted.partition(".")
-        if rest:
-            nested.setdefault(head, {})[rest] = value
-        else:
-            direct[head] = value
-    for head, sub in nested.items():
-        if not hasattr(cfg, head) or not is_dataclass(getattr(cfg, head)):
-            raise TypeError(f"{type(cfg).__name__} has no section {head!r}")
-        direct[head] = set_fields(getattr(cfg, head), sub)
-    return replace(cfg, **direct)
-
-
-def set_field(cfg, dotted: str, value):
-    """``cfg`` (a frozen dataclass) with the nested field at ``dotted`` (e.g. ``"ppo.seed"``) set to ``value``."""
-    return set_fields(cfg, {dotted: value})
-
-
-def _parse_like(current, text: str, item):
-    """``text`` parsed as the type of ``current`` (bool, int, float, str, tuple of numbers)."""
-    try:
-        if isinstance(current, bool):
-            if text.lower() not in ("true", "false", "1", "0"):
-                raise ValueError
-            return text.lower() in ("true", "1")
-        if isinstance(current, tuple):
-            kind = type(current[0]) if current else float
-            return tuple(kind(v) for v in text.split(",") if v.strip())
-        return type(current)(text)
-    except ValueError:
-        raise ValueError(f"override {item!r}: {text!r} is not a {type(current).__name__}") from None

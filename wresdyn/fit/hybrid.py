@@ -1,7 +1,7 @@
 """The hybrid model, the default of ``wresdyn fit``: identified physics with a residual network learned on top.
 
-Stage 1 identifies the simulator's own physical parameters (:func:`wresdyn.learn.sysid.identify`, grey box) into
-``OUT/identify/``; stage 2 learns the residual network by the gradient fit (:func:`wresdyn.learn.gradfit.fit`)
+Stage 1 identifies the simulator's own physical parameters (:func:`wresdyn.identify.sysid.identify`, grey box) into
+``OUT/identify/``; stage 2 learns the residual network by the gradient fit (:func:`wresdyn.fit.gradfit.fit`)
 on the calibrated model, into ``OUT/``. Both stages checkpoint and resume, both select on validation, and the
 residual's starting point (zero residual: the identified model alone) is one of its candidates, so the hybrid
 is never selected worse than the model it starts from.
@@ -13,10 +13,10 @@ import json
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from ..identify.sysid import identify
+from ..learn.schedule import describe_length
 from ..sim.warmup import compile_kernels
 from .gradfit import fit
-from .schedule import describe_length
-from .sysid import identify
 
 __all__ = ["fit_hybrid", "HybridFit", "save_identify_config"]
 
@@ -32,7 +32,7 @@ class HybridFit:
     curve: list
     """Stage 2's learning curve rows."""
     config: object
-    """The stage-2 :class:`~wresdyn.learn.gradfit.GradFitConfig` actually run."""
+    """The stage-2 :class:`~wresdyn.fit.gradfit.GradFitConfig` actually run."""
     identify_wall: float
     """Stage 1's training wall-clock [s]."""
 
@@ -49,9 +49,9 @@ def fit_hybrid(robot, dataset, sysid_cfg, fit_cfg, out: str | Path, data_path=No
     """Identify the physics, then fit the residual on top.
 
     Args:
-        robot, dataset: As for :func:`~wresdyn.learn.gradfit.fit`.
-        sysid_cfg: :class:`~wresdyn.learn.sysid.SysIdConfig` of stage 1.
-        fit_cfg: :class:`~wresdyn.learn.gradfit.GradFitConfig` of stage 2 (a network; its ``physics`` record is set
+        robot, dataset: As for :func:`~wresdyn.fit.gradfit.fit`.
+        sysid_cfg: :class:`~wresdyn.identify.sysid.SysIdConfig` of stage 1.
+        fit_cfg: :class:`~wresdyn.fit.gradfit.GradFitConfig` of stage 2 (a network; its ``physics`` record is set
             here).
         out: Run folder; stage 1 lives in ``out/identify``.
         data_path: Where the dataset was read from (recorded in the run's config).

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.learn.replay_env import ReplayEnv, ReplayEnvConfig
 from wresdyn.learn.residual import ResidualConfig
+from wresdyn.ppo.replay_env import ReplayEnv, ReplayEnvConfig
 
 
 def make_env(robot, data, n=4, physics=None, **cfg):

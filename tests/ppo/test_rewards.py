@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from wresdyn.learn import rewards as R
+from wresdyn.ppo import rewards as R
 
 
 def t(*rows):

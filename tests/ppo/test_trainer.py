@@ -8,16 +8,18 @@ import numpy as np
 import pytest
 import torch
 
+from wresdyn.config_fields import apply_overrides
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.errors import WresdynError
-from wresdyn.learn.ppo import RunError, load_policy, train
-from wresdyn.learn.ppo_config import PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config
-from wresdyn.learn.ppo_runner import latest_checkpoint
-from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
-from wresdyn.learn.rewards import RewardConfig
+from wresdyn.learn.run_residual import load_policy
 from wresdyn.learn.runs import load_checkpoint
 from wresdyn.learn.selection import ValidationScore
+from wresdyn.ppo.ppo_config import PPOConfig, TrainConfig, config_from_dict, default_config
+from wresdyn.ppo.replay_env import ReplayEnvConfig
+from wresdyn.ppo.rewards import RewardConfig
+from wresdyn.ppo.runner import latest_checkpoint
+from wresdyn.ppo.trainer import RunError, train
 
 from conftest import tiny_ppo_config as tiny
 

@@ -1,7 +1,7 @@
 """What the data can identify: the Gauss-Newton (Fisher) information of the validation loss at the identified
 parameters, and the parameters the recordings never excite, each with one line of advice.
 
-The identification loss (:func:`~wresdyn.learn.sysid.physics_window_loss`) is a sum of squares of weighted
+The identification loss (:func:`~wresdyn.identify.sysid.physics_window_loss`) is a sum of squares of weighted
 residuals r = [√w_q (q − q_r), √w_qd (q̇ − q̇_r)] over steps and fitted joints. Over B validation windows of H steps,
 with the parameters θ in relative coordinates (θ_i = log v_i, so a unit of θ is a factor e and a small step a
 fraction of the value; a parameter whose value is 0 moves in its reference unit instead, ``PhysicsModel.ref``):
@@ -18,7 +18,7 @@ a lower bound and best read as a ranking; groups with |ρ| > :data:`CORRELATED` 
 the members trade against each other.
 
 Beside the information, the excitation itself, read on the training split (the data identification learns from):
-effort limits whose drive never saturates (:func:`~wresdyn.learn.unexcited_limits.limit_unexcited_efforts`, the
+effort limits whose drive never saturates (:func:`~wresdyn.identify.unexcited_limits.limit_unexcited_efforts`, the
 rule identification applies: the validation windows of a robot on a stand rarely saturate a drive either, so the
 information there says nothing about the limit a probe's training trajectories do identify), joints that barely
 move, command delays below one sample period, and parameters with tiny sensitivity (|J_i| < σ: a 100 % error even
@@ -38,8 +38,8 @@ import torch
 
 from ..data.dataset import MOVING_SPEED
 from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.physics import PhysicsModel
 from ..sim.bank import servo_goal_accel
+from ..sim.physics import PhysicsModel
 from .unexcited_limits import limit_unexcited_efforts
 
 __all__ = ["Identifiability", "identifiability", "write_identifiability", "CORRELATED", "STEP", "RIDGE",
@@ -305,7 +305,7 @@ def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> list[dic
 
 def identifiability(robot, dataset, params, cfg) -> Identifiability | None:
     """The identifiability of ``params`` (the identified :class:`~wresdyn.robot.physical.PhysicalParams`) on
-    ``dataset`` under the identification settings ``cfg`` (:class:`~wresdyn.learn.window_fit_config.SysIdConfig`:
+    ``dataset`` under the identification settings ``cfg`` (:class:`~wresdyn.identify.sysid_config.SysIdConfig`:
     its fields, loss weights, solver and ``identifiability_windows``); ``None`` without a validation split."""
     t0 = time.perf_counter()
     validation, train = dataset.split("validation"), dataset.split("train")

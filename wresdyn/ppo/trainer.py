@@ -1,12 +1,13 @@
 """PPO for the residual (paper Sec. II-B) through rsl-rl's ``OnPolicyRunner``.
 
-A run folder holds everything: ``config.json`` (the :class:`~wresdyn.learn.ppo_config.TrainConfig`), rsl-rl
+A run folder holds everything: ``config.json`` (the :class:`~wresdyn.ppo.ppo_config.TrainConfig`), rsl-rl
 checkpoints ``model_<it>.pt`` (resumed from automatically after a kill), tensorboard event files, ``best.pt``
 (:class:`BestOnValidation`: the actor with the lowest validation error so far and the validation curve), and at the
-end the deterministic residual exported through ``torch.export`` (``policy.pt``, :mod:`wresdyn.learn.network_file`) and
-ONNX (``policy.onnx``) with its metadata (``residual.json``), plus ``train_summary.json`` (env-steps/s, s per
-iteration, the selected iteration) and ``train.log``: rsl-rl's networks and per-iteration tables (kept off the
-terminal, where a progress bar stands per iteration, :func:`~wresdyn.learn.ppo_runner.on_iteration`) and, from
+end the deterministic residual exported through ``torch.export`` (``policy.pt``, :mod:`wresdyn.learn.network_file`)
+and ONNX (``policy.onnx``) with its metadata (``residual.json``; read back by
+:func:`wresdyn.learn.run_residual.load_policy`), plus ``train_summary.json`` (env-steps/s, s per iteration, the
+selected iteration) and ``train.log``: rsl-rl's networks and per-iteration tables (kept off the terminal, where a
+progress bar stands per iteration, :func:`~wresdyn.ppo.runner.on_iteration`) and, from
 ``wresdyn train``, every line the command printed.
 
 Model selection is made on the dataset's validation split: every ``ppo.select_every`` iterations the current
@@ -14,31 +15,29 @@ residual replays the validation trajectories open loop (:class:`wresdyn.learn.se
 the residual with the lowest error is the one exported. Held-out and OOD data are never read in training.
 
 A resume is refused, naming the fields, when the configuration or the training data differ from what the folder
-(a :class:`~wresdyn.learn.runs.RunnerFolder`) was started with (:data:`~wresdyn.learn.ppo_config.RESUME_MAY_CHANGE`
-may differ), and checkpoints are read as weights only (:class:`~wresdyn.learn.ppo_runner.Runner`).
+(a :class:`~wresdyn.learn.runs.RunnerFolder`) was started with (:data:`~wresdyn.ppo.ppo_config.RESUME_MAY_CHANGE`
+may differ), and checkpoints are read as weights only (:class:`~wresdyn.ppo.runner.Runner`).
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..learn.residual import actor_critic_cfg, export_run_files, obs_stats, policy_from_actor
+from ..learn.runs import RunError, RunnerFolder, check_resume, load_checkpoint, save_checkpoint
+from ..learn.selection import ValidationScore
 from ..progress import bar
 from ..sim.physics import PhysicalParams
 from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig
-from .ppo_runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
-                         rsl_runner_cfg, seed_processes)
-from .network_file import load_residual
 from .replay_env import ReplayEnv
-from .residual import actor_critic_cfg, export_run_files, obs_stats, policy_from_actor
-from .runs import RunError, RunnerFolder, check_resume, load_checkpoint, save_checkpoint
-from .selection import ValidationScore
+from .runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
+                     rsl_runner_cfg, seed_processes)
 
-__all__ = ["train", "export", "load_policy", "runner_cfg", "BestOnValidation", "RunError"]
+__all__ = ["train", "export", "runner_cfg", "BestOnValidation", "RunError"]
 
 
 def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = True,
@@ -50,7 +49,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         dataset: A :class:`wresdyn.data.dataset.Dataset` (only ``q``, ``qd``, ``qdd``, ``q_cmd`` are read).
         robot: The nominal robot the simulator uses.
         cfg: The run configuration; must equal the saved one when resuming, except
-            :data:`~wresdyn.learn.ppo_config.RESUME_MAY_CHANGE`.
+            :data:`~wresdyn.ppo.ppo_config.RESUME_MAY_CHANGE`.
         run_dir: Run folder (created).
         resume: Continue from ``model_<it>.pt`` in ``run_dir``; with ``False`` an existing checkpoint is an error.
         data_path: Where ``dataset`` was read from, recorded in ``config.json`` for ``wresdyn eval``.
@@ -70,7 +69,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
 
     Raises:
         RunError: The run folder holds another configuration, other data
-            (:data:`~wresdyn.learn.ppo_config.DATASET_IDENTITY`) or a checkpoint that is not a weights-only rsl-rl
+            (:data:`~wresdyn.ppo.ppo_config.DATASET_IDENTITY`) or a checkpoint that is not a weights-only rsl-rl
             checkpoint of these networks.
     """
     run_dir, ranks = Path(run_dir), Ranks.from_env()
@@ -310,12 +309,3 @@ def export(actor, run_dir: Path, cfg: TrainConfig, mean, std, scale, dataset) ->
     policy = policy_from_actor(actor, mean, std, scale, cfg.residual.kind, cfg.residual.action_gain)
     export_run_files(policy, run_dir, dataset, arch=cfg.residual.arch, action_gain=cfg.residual.action_gain)
 
-
-def load_policy(run_dir: str | Path):
-    """The exported residual of a run: ``(policy, meta)`` with ``policy(obs) -> residual``
-    (:class:`~wresdyn.learn.network_file.ExportedResidual`, on the CPU) and ``meta`` its ``residual.json``."""
-    run_dir = Path(run_dir)
-    path, meta_path = run_dir / "policy.pt", run_dir / "residual.json"
-    if not path.is_file() or not meta_path.is_file():
-        raise RunError(f"{run_dir}: no exported residual (policy.pt, residual.json); train it first")
-    return load_residual(path), json.loads(meta_path.read_text())

@@ -1,4 +1,4 @@
-"""The PPO update with one host synchronisation (:class:`wresdyn.learn.ppo_update.OneSyncPPO`) against rsl-rl's own
+"""The PPO update with one host synchronisation (:class:`wresdyn.ppo.update.OneSyncPPO`) against rsl-rl's own
 on the same rollout, and a run trained with it, checkpointed and resumed by rsl-rl's update."""
 
 import copy
@@ -8,12 +8,12 @@ import json
 import pytest
 import torch
 
-from wresdyn.learn.ppo import runner_cfg, train
-from wresdyn.learn.ppo_config import set_fields
-from wresdyn.learn.ppo_runner import make_runner
-from wresdyn.learn.ppo_update import OneSyncPPO, adapt_learning_rate
-from wresdyn.learn.replay_env import ReplayEnv
+from wresdyn.config_fields import set_fields
 from wresdyn.learn.residual import obs_stats
+from wresdyn.ppo.replay_env import ReplayEnv
+from wresdyn.ppo.runner import make_runner
+from wresdyn.ppo.trainer import runner_cfg, train
+from wresdyn.ppo.update import OneSyncPPO, adapt_learning_rate
 
 from conftest import tiny_ppo_config as tiny
 
@@ -94,7 +94,7 @@ def test_rsl_rls_options_reach_its_runner_config():
     cfg = set_fields(tiny(), {"ppo.mixed_precision": True, "ppo.compile_mode": "default", "ppo.one_sync_update": True})
     rcfg = runner_cfg(cfg)
     assert rcfg["algorithm"]["use_mixed_precision"] is True and rcfg["torch_compile_mode"] == "default"
-    assert rcfg["algorithm"]["class_name"] == "wresdyn.learn.ppo_update:OneSyncPPO"
+    assert rcfg["algorithm"]["class_name"] == "wresdyn.ppo.update:OneSyncPPO"
     plain = runner_cfg(tiny())  # the defaults: rsl-rl's PPO as before
     assert plain["algorithm"]["class_name"] == "PPO" and plain["torch_compile_mode"] is None
     assert plain["algorithm"]["use_mixed_precision"] is False

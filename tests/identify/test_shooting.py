@@ -1,4 +1,4 @@
-"""Multiple shooting in identification (:mod:`wresdyn.learn.shooting`): a chain of windows whose free start states sit
+"""Multiple shooting in identification (:mod:`wresdyn.identify.shooting`): a chain of windows whose free start states sit
 on the simulated path is the single long window, and its gradient in the physics and the free states agrees with
 central differences. A 3-link servo robot (``tests/sim/test_servo.py``'s, goal profile on), tiny sizes."""
 
@@ -13,11 +13,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sim"))
 from test_servo import make_robot  # noqa: E402
 
 from conftest import check_directional_gradients  # noqa: E402
-from wresdyn.learn.shooting import ShootingNodes, chain_loss, draw_chains  # noqa: E402
-from wresdyn.learn.sysid import NonFiniteLoss, SysIdConfig, _non_finite  # noqa: E402
+from wresdyn.identify.shooting import ShootingNodes, chain_loss, draw_chains  # noqa: E402
+from wresdyn.identify.sysid import NonFiniteLoss, SysIdConfig, _non_finite  # noqa: E402
+from wresdyn.learn.window_fit import squared_error  # noqa: E402
 from wresdyn.sim import Simulator, TrajectoryBank, rollout  # noqa: E402
 from wresdyn.sim.physics import PhysicsModel  # noqa: E402
-from wresdyn.learn.window_fit import squared_error  # noqa: E402
 
 DT = 0.002
 B, K, H = 2, 3, 4
@@ -109,7 +109,7 @@ def test_shooting_config_checks_and_non_finite_error():
 
 def test_identify_with_a_shooting_pool_runs_and_moves_the_free_states(problem):
     """A few identification steps with chains from a pool: the free states of the drawn nodes move, the others stay."""
-    from wresdyn.learn.sysid import IdentifyLearner
+    from wresdyn.identify.sysid import IdentifyLearner
 
     robot, _, _, bank, _, _, _, _ = problem
     runs = recordings()

@@ -11,7 +11,7 @@ import torch
 
 from wresdyn.cli import main
 from wresdyn.data.mismatch import Mismatch
-from wresdyn.learn.sysid import PhysicsScore, SysIdConfig, identify
+from wresdyn.identify.sysid import PhysicsScore, SysIdConfig, identify
 from wresdyn.sim.physics import PhysicalParams, PhysicsModel
 
 FLOOR = 0.8

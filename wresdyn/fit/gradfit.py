@@ -27,16 +27,16 @@ from pathlib import Path
 
 import torch
 
+from ..learn.parametric import ParametricResidual
+from ..learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
+from ..learn.runs import RunFolder
+from ..learn.selection import ValidationScore
+from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
-from .parametric import ParametricResidual
-from .residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
-from .runs import RunFolder
-from .selection import ValidationScore
-from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from .window_fit_config import GradFitConfig
+from .gradfit_config import GradFitConfig
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
 

@@ -1,4 +1,4 @@
-"""rsl-rl glue shared by the PPO learners (the residual, :mod:`wresdyn.learn.ppo`; the skills,
+"""rsl-rl glue shared by the PPO learners (the residual, :mod:`wresdyn.ppo.trainer`; the skills,
 :mod:`wresdyn.skills.train`): the runner, its checkpoints, its progress and its processes.
 
 - :class:`Runner`: rsl-rl's ``OnPolicyRunner`` that reads and writes checkpoints ``model_<it>.pt`` as weights only
@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from rsl_rl.runners import OnPolicyRunner
 
+from ..learn.runs import RunError, load_checkpoint, save_checkpoint
 from ..progress import into_file
-from .runs import RunError, load_checkpoint, save_checkpoint
 
 __all__ = ["Ranks", "Runner", "CHECKPOINT_KEYS", "rsl_runner_cfg", "make_runner", "resume_runner", "learn",
            "on_iteration", "seed_processes", "latest_checkpoint"]
@@ -144,9 +144,9 @@ def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, c
     ``value_loss_coef``, ``entropy_coef``, ``learning_rate``, ``max_grad_norm``, ``desired_kl``,
     ``use_mixed_precision``), the ``actor`` and ``critic`` model configs, tensorboard logging. The actor sees the
     observation group ``policy``, the critic ``critic_groups`` (more than the actor's: an asymmetric actor-critic).
-    ``one_sync_update``: the update of :class:`~wresdyn.learn.ppo_update.OneSyncPPO` instead of rsl-rl's own;
+    ``one_sync_update``: the update of :class:`~wresdyn.ppo.update.OneSyncPPO` instead of rsl-rl's own;
     ``compile_mode``: rsl-rl's ``torch.compile`` of the actor and critic (``""``: none)."""
-    ppo = "wresdyn.learn.ppo_update:OneSyncPPO" if one_sync_update else "PPO"
+    ppo = "wresdyn.ppo.update:OneSyncPPO" if one_sync_update else "PPO"
     return {
         "num_steps_per_env": num_steps_per_env,
         "save_interval": save_interval,

@@ -35,12 +35,12 @@ class ReplayEnvConfig:
     """Runaway distance from the recording, max over joints [rad]."""
     obs_noise: float = 0.0
     """Gaussian noise on the policy's (normalised) observation [normalising stds], a regulariser as in the
-    gradient fit (:attr:`wresdyn.learn.gradfit.GradFitConfig.obs_noise`); the critic and the simulation see the
+    gradient fit (:attr:`wresdyn.fit.gradfit.GradFitConfig.obs_noise`); the critic and the simulation see the
     clean state. 0 = off."""
     physics: str = ""
     """Physical parameters of the simulator (``physics.json`` of ``wresdyn identify``): the residual is learned on
     top of the identified model (the hybrid), whose command delay then is ``physics.delay``. "" = the robot
-    file's values, no delay. The command line reads the file; :func:`~wresdyn.learn.ppo.train` takes the parameters
+    file's values, no delay. The command line reads the file; :func:`~wresdyn.ppo.trainer.train` takes the parameters
     themselves (``physics``) and this records where they came from."""
     critic_err_scale_q: float = 0.05
     """Scale of q − q_r in the critic's privileged observation [rad]."""

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from wresdyn.data.mismatch import Mismatch
-from wresdyn.learn.gradfit import GradFitConfig, build_policy, fit, window_loss
+from wresdyn.fit.gradfit import GradFitConfig, build_policy, fit, window_loss
 from wresdyn.learn.residual import ResidualConfig, obs_stats
 from wresdyn.learn.runs import RunError
 from wresdyn.sim import Simulator, TrajectoryBank, rollout
@@ -113,7 +113,7 @@ def test_interrupted_fit_resumes_to_the_same_policy(tmp_path, quadruped, record)
 def test_the_fit_takes_physics_as_parameters_and_refuses_a_path_alone(tmp_path, quadruped, record):
     """Physics travel as :class:`PhysicalParams`: the fit steps with them and the run carries them; ``cfg.physics``
     only records where they came from, so a config naming a file with no parameters given is refused, not ignored."""
-    from wresdyn.learn.gradfit import export_run
+    from wresdyn.fit.gradfit import export_run
     from wresdyn.sim.physics import PhysicalParams
 
     data = record(quadruped, REAL, {"train": 2, "validation": 1}, seconds=0.3, amplitude=0.4)

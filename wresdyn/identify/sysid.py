@@ -3,8 +3,8 @@
 The fitted quantities are the model arrays SolverReplay reads (per joint: PD gains, armature, viscous damping,
 dry friction with stiction, effort limit, command delay; per link: mass, centre of mass and inertia through the
 log-Cholesky pseudo-inertia), produced by :class:`~wresdyn.sim.physics.PhysicsModel`. As in the gradient fit of a
-residual (:mod:`.gradfit`), each iteration replays B windows of recorded commands open loop from their recorded
-start state and minimises
+residual (:mod:`wresdyn.fit.gradfit`), each iteration replays B windows of recorded commands open loop from their
+recorded start state and minimises
 
     L = mean_k [ w_q |q_k − q_r,k|² + w_qd |q̇_k − q̇_r,k|² ] + w_prior |u − u_0|²,
 
@@ -33,18 +33,18 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..learn.runs import RunFolder
+from ..learn.selection import ValidationScore
+from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.fused import can_fuse, fused_rollout
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .identifiability import identifiability, write_identifiability
-from .runs import RunFolder
-from .selection import ValidationScore
 from .shooting import ShootingNodes, chain_loss, draw_chains
-from .unexcited_limits import limit_unexcited_efforts
-from .window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from .window_fit_config import SysIdConfig
+from .sysid_config import SysIdConfig
+from .unexcited_limits import reset_effort_limits, share_effort_ratio
 
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]
@@ -81,38 +81,6 @@ class PhysicsScore(ValidationScore):
     def __call__(self, params: PhysicalParams) -> float:
         self.physics = params
         return super().__call__()
-
-
-def _share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log):
-    """The selected parameters with the effort limits the training data never reaches set from the saturating
-    joints' ratio (:mod:`.unexcited_limits`), unless that is worse on validation; returns (parameters, their
-    validation, or ``None`` where nothing was replayed)."""
-    shared, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=dataset.fit_weights() > 0,
-                                            saturated_min=cfg.saturated_min)
-    log(found.describe())
-    if not found.changed or score is None:
-        return shared, None
-    v = score(shared)
-    if v > validation:
-        log(f"  not kept: validation {v:.4f} rad against {validation:.4f} rad")
-        return params, None
-    log(f"  validation {v:.4f} rad (was {validation:.4f} rad)")
-    return shared, v
-
-
-def _effort_reset(robot, params, score, validation, fitted, log):
-    """The selected parameters with the fitted joints' effort limits put back at the robot file's, if that is better
-    on validation (:attr:`SysIdConfig.effort_reset`); returns (parameters, their validation)."""
-    file = np.asarray(robot.effort, dtype=np.float64)
-    reset = params.copy()
-    reset.effort = np.where(fitted & np.isfinite(file), file, params.effort)
-    if score is None or np.array_equal(reset.effort, params.effort):
-        return params, validation
-    v = score(reset)
-    kept = v < validation
-    log(f"effort limits at the file's: validation {v:.4f} rad against {validation:.4f} rad, "
-        + ("kept" if kept else "not kept"))
-    return (reset, v) if kept else (params, validation)
 
 
 def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = False):
@@ -216,11 +184,12 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     params = learner.model.values()
     validation, shared = run.best.value, None
     if cfg.share_effort_ratio and "effort" in cfg.fit:
-        params, shared = _share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score,
-                                             validation, log)
+        params, shared = share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score,
+                                            validation, log)
     if cfg.effort_reset and "effort" in cfg.fit:
-        params, validation = _effort_reset(robot, params, learner.physics_score,
-                                           validation if shared is None else shared, dataset.fit_weights() > 0, log)
+        params, validation = reset_effort_limits(robot, params, learner.physics_score,
+                                                  validation if shared is None else shared,
+                                                  dataset.fit_weights() > 0, log)
     if cfg.refine:
         params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
                          curve, log)

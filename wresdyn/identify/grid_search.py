@@ -1,4 +1,4 @@
-"""Identification's forward grid searches (:func:`wresdyn.learn.sysid.identify`): a field set to the grid point of least
+"""Identification's forward grid searches (:func:`wresdyn.identify.sysid.identify`): a field set to the grid point of least
 training loss on a few windows, for what the gradient alone cannot reach (a drive that never saturates in simulation
 has no gradient with respect to its effort limit; a servo far stiffer in the robot file than on the robot leaves the
 loss flat in kp)."""
@@ -10,16 +10,16 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..learn.window_fit import squared_error
 from ..sim import TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
-from .window_fit import squared_error
 
 __all__ = ["GridChoice", "grid_search"]
 
 
 @dataclass(frozen=True)
 class GridChoice:
-    """What one grid search of :func:`~wresdyn.learn.sysid.identify` chose (its ``on_search`` receives one per
+    """What one grid search of :func:`~wresdyn.identify.sysid.identify` chose (its ``on_search`` receives one per
     search)."""
 
     field: str

@@ -11,7 +11,7 @@ next one's start by::
         + w_defect mean_{b, k > 0} [ w_q |q_{k−1}(H) − s_k^q|² + w_qd |q̇_{k−1}(H) − s_k^q̇|² ]
 
 Where every defect is zero the chain is the single window of K H steps from the chain's recorded start, step for
-step, and its first term that window's loss (``tests/learn/test_shooting.py``). Adam (sparse: a node moves only
+step, and its first term that window's loss (``tests/identify/test_shooting.py``). Adam (sparse: a node moves only
 when it was drawn) descends the free states at ``shooting_lr``; the physical parameters take the rest of the
 identification's optimiser. What the servo carries across windows lives in the state and the command path: the goal
 profile runs over each whole run before it is cut into windows (:class:`~wresdyn.sim.bank.TrajectoryBank`), and
@@ -25,8 +25,8 @@ import dataclasses
 import numpy as np
 import torch
 
+from ..learn.window_fit import squared_error
 from ..sim import rollout
-from .window_fit import squared_error
 
 __all__ = ["ShootingNodes", "chain_loss"]
 

@@ -1,4 +1,4 @@
-"""Effort limits the data never reaches (:mod:`wresdyn.learn.unexcited_limits`): exact checks on small synthetic
+"""Effort limits the data never reaches (:mod:`wresdyn.identify.unexcited_limits`): exact checks on small synthetic
 recordings whose demanded torques are known in closed form, then the identification that uses it."""
 
 from types import SimpleNamespace
@@ -6,8 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from wresdyn.learn.sysid import SysIdConfig, identify
-from wresdyn.learn.unexcited_limits import demanded_torque, limit_unexcited_efforts
+from wresdyn.identify.sysid import SysIdConfig, identify
+from wresdyn.identify.unexcited_limits import demanded_torque, limit_unexcited_efforts
 from wresdyn.robot.physical import PhysicalParams
 
 DT = 0.002
@@ -76,7 +76,7 @@ def test_identification_shares_the_ratio_and_never_selects_worse(humanoid, recor
     # others: identification gives the others the saturating ones' ratio, exactly as the function does on the
     # parameters it would otherwise return (the two runs are the same up to that last step)
     from wresdyn.data.mismatch import Mismatch
-    from wresdyn.learn.sysid import PhysicsScore
+    from wresdyn.identify.sysid import PhysicsScore
 
     data = record(humanoid, Mismatch(torque_limit_scale=0.2), {"train": 2, "validation": 1}, seconds=0.3,
                   amplitude=0.3)

@@ -1,4 +1,4 @@
-"""Grey-box identification through the differentiable solver (:mod:`wresdyn.learn.sysid`), its CLI and report, and
+"""Grey-box identification through the differentiable solver (:mod:`wresdyn.identify.sysid`), its CLI and report, and
 the hybrid: a residual fitted and evaluated on top of identified physics."""
 
 import dataclasses
@@ -10,8 +10,8 @@ import pytest
 from wresdyn.cli import main
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
+from wresdyn.identify.sysid import PhysicsScore, SysIdConfig, identify
 from wresdyn.learn.runs import RunError, load_checkpoint
-from wresdyn.learn.sysid import PhysicsScore, SysIdConfig, identify
 from wresdyn.sim.physics import PhysicalParams
 
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, delay=0.004, torque_limit_scale=0.5)
