@@ -131,12 +131,10 @@ def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(record
 
 
 def test_train_flag_reaches_the_replay_environment(humanoid, recorded):
-    from wresdyn.cli import build_parser
-    from wresdyn.cli.train import config_from_args
+    from wresdyn.cli import parse_command
     from wresdyn.learn.replay_env import ReplayEnv
 
-    parser, _ = build_parser()
-    cfg = config_from_args(parser.parse_args(["train", "d.npz", "--friction-kappa", "inf"]))
+    cfg = parse_command(["train", "d.npz", "--env.friction-kappa", "inf"])[2].config
     assert cfg.env.friction_kappa == float("inf")
     env = ReplayEnv(humanoid, recorded.split("train"), recorded.rate_hz, 2, cfg.env)
     assert isinstance(env.sim.solver, SolverReplay) and env.sim.solver.friction_kappa == float("inf")

@@ -13,7 +13,7 @@ import gc
 import importlib
 import sys
 
-from .command import CommandLineError, ConfigRefused, parse
+from .command import CommandLineError, ConfigRefused, hidden_fields, list_flags, parse
 from .deprecated import rewrite
 
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -49,13 +49,18 @@ def top_help() -> str:
     """``wresdyn --help``: the commands and their one-line summaries."""
     width = max(map(len, COMMANDS))
     rows = "\n".join(f"  {name:{width}s}  {help_}" for name, (_, help_) in COMMANDS.items())
-    return (f"usage: wresdyn [-h] COMMAND ...\n\n{__doc__.splitlines()[0]}\n\ncommands:\n{rows}\n\n"
+    return (f"usage: wresdyn [-h] COMMAND ...\n\n{__doc__.splitlines()[0].replace('``', '')}\n\ncommands:\n{rows}\n\n"
             "wresdyn COMMAND --help lists a command's flags.\n")
 
 
-def command_class(name: str):
-    """The dataclass of command ``name`` (its module imported, nothing heavy)."""
-    return importlib.import_module(COMMANDS[name][0]).COMMAND
+def command_flags(name: str) -> dict[str, object]:
+    """``{flag: annotation}`` of every flag of command ``name`` (of each of its variants: deploy's ``--floor``);
+    its module is imported, nothing heavy."""
+    module = importlib.import_module(COMMANDS[name][0])
+    flags = {}
+    for cls in getattr(module, "VARIANTS", (module.COMMAND,)):
+        flags |= list_flags(cls, getattr(module, "HIDDEN", None))
+    return flags
 
 
 def _command_at(argv: list[str]) -> int | None:
@@ -89,12 +94,11 @@ def parse_command(argv: list[str]):
         raise CommandLineError(f"unknown command {name!r}; choose from {', '.join(COMMANDS)}")
     rest = argv[:i] + argv[i + 1:]  # options given before the command (the global --package-path of old) follow it
     module = importlib.import_module(COMMANDS[name][0])
-    rest = rewrite(name, getattr(module, "VARIANTS", (module.COMMAND,)), rest,
-                   say=lambda line: print(f"wresdyn {name}: {line}", file=sys.stderr))
+    rest = rewrite(name, command_flags(name), rest, say=lambda line: print(f"wresdyn {name}: {line}", file=sys.stderr))
     prepare = getattr(module, "prepare", None)  # a command whose defaults depend on a flag (deploy --floor)
-    cls, default, registry = prepare(rest) if prepare else (module.COMMAND, None, getattr(module, "REGISTRY", None))
+    cls, default = prepare(rest) if prepare else (module.COMMAND, None)
     args = parse(cls, rest, prog=f"wresdyn {name}", description=COMMANDS[name][1], default=default,
-                 registry=registry)
+                 registry=hidden_fields(getattr(module, "HIDDEN", None)))
     return name, module, args
 
 

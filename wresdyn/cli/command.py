@@ -100,23 +100,27 @@ def hidden_fields(hide: dict[type, tuple[str, ...]] | None = None) -> Constructo
     return registry
 
 
-_SEPARATOR = re.compile(r"^[─\s]+$")
+_SEPARATOR = re.compile(r"^[─\-\s]*$")
 _CHOICES = re.compile(r"Expected one of \((.*)\)\.?")
 _REFUSED = re.compile(r"^Error parsing ([^-\s][^:]*): (.*)$")
 
 
 def _message(text: str) -> str:
-    """tyro's framed error as one line: the first line of its message (two when the first ends in a colon)."""
+    """tyro's error (framed on a terminal, plain elsewhere) as one line: the first line of its message (two when the
+    first ends in a colon), after its title."""
     lines = [line.strip().strip("│╭╮╰╯").strip() for line in text.splitlines()]
-    title = next((line.strip("─ ") for line in lines if line.startswith("─")), "")
-    body = []
-    for line in lines:
-        if _SEPARATOR.match(line) and body:
-            break
-        if line and not line.startswith("─"):
-            body.append(line)
+    lines = lines[next((i for i, line in enumerate(lines) if line), len(lines)):]
+    if not lines:
+        return "could not read the command line"
+    title, body = lines[0].strip("─- "), []
+    for line in lines[1:]:
+        if _SEPARATOR.match(line):
+            if body:
+                break
+            continue
+        body.append(line)
     if not body:
-        return title or "could not read the command line"
+        return title
     message = " ".join(body[:2]) if body[0].endswith(":") and len(body) > 1 else body[0]
     message = _CHOICES.sub(lambda m: "choose from " + ",".join(x.strip(" '\"") for x in m.group(1).split(",")),
                            message)
@@ -173,16 +177,19 @@ def _strip(hint):
     return hint
 
 
-def list_flags(cls, prefix: str = "") -> dict[str, object]:
+def list_flags(cls, hide: dict[type, tuple[str, ...]] | None = None, prefix: str = "") -> dict[str, object]:
     """``{flag: annotation}`` of every field of the dataclass ``cls`` as tyro spells it (nested configs by their
-    dotted prefix, :data:`FLAT` ones without)."""
+    dotted prefix, :data:`FLAT` ones without), but the ``hide`` ones (as :func:`hidden_fields`) and dicts."""
+    hide = hide or {}
     hints = typing.get_type_hints(cls, include_extras=True)
     out = {}
     for f in dataclasses.fields(cls):
         hint = hints[f.name]
         tp = _strip(hint)
+        if f.name in hide.get(cls, ()) or tp is dict:
+            continue
         if dataclasses.is_dataclass(tp):
-            out |= list_flags(tp, prefix if _flat(hint) else f"{prefix}{f.name.replace('_', '-')}.")
+            out |= list_flags(tp, hide, prefix if _flat(hint) else f"{prefix}{f.name.replace('_', '-')}.")
         else:
             out[f"--{prefix}{f.name.replace('_', '-')}"] = tp
     return out

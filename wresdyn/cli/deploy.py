@@ -22,7 +22,7 @@ import tyro
 from ..experiments.deploy_config import DeployConfig, FloorDeployConfig
 from ..paths import DEFAULT_DATASET
 from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
-from .command import FLAT, Command, CommandLineError, hidden_fields, list_flags
+from .command import FLAT, Command, CommandLineError, list_flags
 
 PPO_FROM_SIZES = ("num_envs", "iterations", "restart_std", "seed", "device")
 """Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``envs``/``oracle_envs``, ``iterations``/
@@ -78,7 +78,10 @@ class FloorDeploy(Deploy):
 COMMAND = Deploy
 VARIANTS = (Deploy, FloorDeploy)
 """Every class the command line may be read as (deprecated spellings are rewritten against all of them)."""
-REGISTRY = hidden_fields({SkillPPOConfig: PPO_FROM_SIZES})
+VARIANT_FLAGS = ("--floor",)
+"""The flags that pick a variant (the CLI reference shows each one's help too)."""
+HIDDEN = {SkillPPOConfig: PPO_FROM_SIZES}
+"""Config fields without a flag of their own (the benchmark sets them from the sizes)."""
 
 
 def _last(argv: list[str], name: str) -> bool:
@@ -88,17 +91,17 @@ def _last(argv: list[str], name: str) -> bool:
 
 
 def prepare(argv: list[str]):
-    """``(class, default, registry)`` of a deploy command line: ``--floor`` picks :class:`FloorDeploy`, ``--full``
+    """``(class, default)`` of a deploy command line: ``--floor`` picks :class:`FloorDeploy`, ``--full``
     starts from the full sizes; a flag of the other setting is refused in one line."""
     floor, full = _last(argv, "floor"), _last(argv, "full")
     cls, other = (FloorDeploy, Deploy) if floor else (Deploy, FloorDeploy)
-    own = list_flags(cls)
+    own, theirs = list_flags(cls, HIDDEN), list_flags(other, HIDDEN)
     for flag in (a.partition("=")[0] for a in argv if a.startswith("--")):
-        if flag not in own and (flag in list_flags(other) or flag.replace(".no-", ".", 1) in list_flags(other)):
+        if flag not in own and (flag in theirs or flag.replace("--no-", "--", 1) in theirs):
             raise CommandLineError(f"{flag} sets the skills on the floor; it needs --floor" if not floor else
                                    f"{flag} sets the skills on the stand; it has no use with --floor")
     sizes = type(cls().sizes)
-    return cls, cls(floor=floor, full=full, sizes=sizes.full() if full else sizes()), REGISTRY
+    return cls, cls(floor=floor, full=full, sizes=sizes.full() if full else sizes())
 
 
 def run(args: Deploy) -> int:

@@ -17,8 +17,6 @@ import types
 import typing
 from typing import Callable
 
-from .command import list_flags
-
 __all__ = ["RENAMED", "rewrite"]
 
 _RESIDUAL = {"--residual": "--residual.kind", "--arch": "--residual.arch", "--fraction": "--residual.fraction"}
@@ -45,12 +43,10 @@ def _optional(tp) -> tuple[object, bool]:
     return tp, False
 
 
-def rewrite(command: str, classes, argv: list[str], say: Callable[[str], None]) -> list[str]:
+def rewrite(command: str, flags: dict[str, object], argv: list[str], say: Callable[[str], None]) -> list[str]:
     """``argv`` (the arguments after the command's name) with every spelling of earlier releases replaced by
-    today's flags of the command's dataclasses ``classes``; ``say`` gets one note per replacement."""
-    flags = {}
-    for cls in classes:
-        flags |= list_flags(cls)
+    today's, given the command's ``{flag: annotation}`` (:func:`~wresdyn.cli.command.list_flags`); ``say`` gets one
+    note per replacement."""
     renamed = RENAMED.get(command, {})
     out: list[str] = []
     i = 0
@@ -110,6 +106,8 @@ def rewrite(command: str, classes, argv: list[str], say: Callable[[str], None]) 
             items = [x.strip() for x in value.split(",") if x.strip()]
             say(f"note: comma lists are deprecated; write {flag} {' '.join(items)}".rstrip())
             out += items
+        elif eq and flag == token.partition("=")[0]:
+            out[-1] = token  # nothing to rewrite: as given
         else:
             out.append(value)
     return out

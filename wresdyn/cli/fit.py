@@ -22,7 +22,7 @@ import tyro
 
 from ..choices import FitModel
 from ..learn.window_fit_config import GradFitConfig, SysIdConfig
-from .command import FLAT, Command, hidden_fields
+from .command import FLAT, Command
 
 IDENTIFY_SHARED = ("device", "seed", "solver", "friction_kappa")
 """Fields of the hybrid's identification (``--identify.*``) that are the fit's own: both stages run alike."""
@@ -77,7 +77,8 @@ class Fit(Command):
 
 
 COMMAND = Fit
-REGISTRY = hidden_fields({GradFitConfig: ("model",), SysIdConfig: IDENTIFY_SHARED})
+HIDDEN = {GradFitConfig: ("model",), SysIdConfig: IDENTIFY_SHARED}
+"""Config fields without a flag of their own (the command sets them)."""
 
 
 def run(args: Fit) -> int:
