@@ -21,6 +21,7 @@ import dataclasses
 import io
 import os
 import re
+import types
 import typing
 from dataclasses import dataclass, field
 from typing import Annotated
@@ -30,6 +31,30 @@ from tyro.constructors import ConstructorRegistry, UnsupportedTypeAnnotationErro
 from tyro.constructors._struct_spec_dataclass import dataclass_rule
 
 __all__ = ["Command", "FLAT", "parse", "hidden_fields", "list_flags", "CommandLineError", "ConfigRefused"]
+
+_typeguard_is_instance = tyro._resolver.is_instance
+
+
+def _is_instance(typ, value) -> bool:
+    """tyro's check that a field's default matches its annotation (a warning if not), without typeguard for the
+    annotations of the configs (``X | None``, ``tuple[X, ...]``, literals): importing typeguard costs about 0.4 s of
+    every ``--help``. Any other annotation goes to tyro's own check."""
+    origin = typing.get_origin(typ)
+    if typ is type(None):
+        return value is None
+    if origin is types.UnionType:
+        return any(_is_instance(a, value) for a in typing.get_args(typ))
+    if origin is tuple:
+        if not isinstance(value, tuple):
+            return False
+        args = typing.get_args(typ)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(_is_instance(args[0], v) for v in value)
+        return len(args) == len(value) and all(_is_instance(a, v) for a, v in zip(args, value))
+    return _typeguard_is_instance(typ, value)
+
+
+tyro._resolver.is_instance = _is_instance
 
 FLAT = tyro.conf.arg(name="")
 """Marker (``Annotated[Config, FLAT]``) of a nested config whose flags carry no prefix."""
