@@ -142,6 +142,9 @@ def test_set_comma_lists_none_and_bare_optional_switches_are_rewritten():
                   notes.append)
     assert out == ["--oracle-beside", "True", "--finetune-std", "None", "--floor"] and len(notes) == 2
     assert rewrite("fit", command_flags("fit"), ["--curriculum", ""], notes.append)[-1] == "--horizon-curriculum"
+    assert rewrite("train", command_flags("train"), ["--set", "ppo.one_sync_update=true", "--set",
+                                                     "ppo.mixed_precision=false"], notes.append) == [
+        "--ppo.one-sync-update", "--ppo.no-mixed-precision"]
 
 
 def test_a_spelling_of_today_is_left_alone():

@@ -2,7 +2,7 @@
 
 Writes ``OUT/table.md`` (held-out and OOD mean |Δq|, mean ± std over seeds, wall-clock, simulated steps),
 ``OUT/results.json`` and ``OUT/curves.png`` (held-out error against wall-clock and against simulated steps).
-Each cell checkpoints; running the same command again resumes. ``--delays 0,0.005,0.01`` adds the delay sweep:
+Each cell checkpoints; running the same command again resumes. ``--delays 0 0.005 0.01`` adds the delay sweep:
 for each actuator delay the data are recorded again with the default mismatch (delay replaced) and MLP vs GRU
 are compared in ``OUT/delay_<ms>ms/``, summarised in ``OUT/delay_sweep.md``.
 """

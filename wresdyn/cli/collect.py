@@ -3,9 +3,9 @@
 Simulated: draws excitations (train / validation / held-out: the paper's ellipsoid foot paths, eq. 2;
 out-of-distribution: chirps and kicks), executes them under PD on the MuJoCo "real" robot with the mismatch
 config, and writes ``OUT/dataset.npz`` and ``OUT/spectrum.png`` (command spectrum per split). The foot paths
-track ``--frames`` (default: the sites ``left_sole,right_sole``); ``--excitation joint`` (the default for a robot
-without those sites, e.g. an arm) excites every joint in joint space instead (multisines; OOD: chirps and
-steps). The gains config (``--gains``) is stored in the dataset, so later commands load the same robot. It
+track ``--excitation.frames`` (default: the sites ``left_sole right_sole``); ``--excitation.mode joint`` (the
+default for a robot without those sites, e.g. an arm) excites every joint in joint space instead (multisines; OOD:
+chirps and steps). The gains config (``--gains``) is stored in the dataset, so later commands load the same robot. It
 then replays the validation, held-out and OOD commands PD-only in Newton and reports the gap (mean |Δq|),
 also stored in the dataset's meta.
 Logs: ``--logs A.csv B.npz RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, SAGE runs, LeRobot datasets;

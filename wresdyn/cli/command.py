@@ -192,6 +192,13 @@ def parse(cls, args: list[str], prog: str, description: str | None = None, defau
     raise CommandLineError(message)
 
 
+_POSITIONAL = typing.get_args(tyro.conf.Positional[int])[1:]
+
+
+def _positional(hint) -> bool:
+    return any(m in _POSITIONAL for m in getattr(hint, "__metadata__", ()))
+
+
 def _flat(hint) -> bool:
     return any(getattr(m, "name", None) == "" for m in getattr(hint, "__metadata__", ()))
 
@@ -204,14 +211,15 @@ def _strip(hint):
 
 def list_flags(cls, hide: dict[type, tuple[str, ...]] | None = None, prefix: str = "") -> dict[str, object]:
     """``{flag: annotation}`` of every field of the dataclass ``cls`` as tyro spells it (nested configs by their
-    dotted prefix, :data:`FLAT` ones without), but the ``hide`` ones (as :func:`hidden_fields`) and dicts."""
+    dotted prefix, :data:`FLAT` ones without), but the ``hide`` ones (as :func:`hidden_fields`), dicts and
+    positional arguments."""
     hide = hide or {}
     hints = typing.get_type_hints(cls, include_extras=True)
     out = {}
     for f in dataclasses.fields(cls):
         hint = hints[f.name]
         tp = _strip(hint)
-        if f.name in hide.get(cls, ()) or tp is dict:
+        if f.name in hide.get(cls, ()) or tp is dict or _positional(hint):
             continue
         if dataclasses.is_dataclass(tp):
             out |= list_flags(tp, hide, prefix if _flat(hint) else f"{prefix}{f.name.replace('_', '-')}.")

@@ -65,6 +65,13 @@ def rewrite(command: str, flags: dict[str, object], argv: list[str], say: Callab
             if not sep or new not in flags:
                 out.append(token)  # tyro names the unknown argument
                 continue
+            if flags[new] is bool:  # a switch: --x or --no-x
+                on = text.strip().lower() in ("true", "1", "yes", "on")
+                head, _, last = new[2:].rpartition(".")
+                switch = new if on else "--" + (f"{head}." if head else "") + "no-" + last
+                say(f"note: --set {item} is deprecated; write {switch}")
+                out.append(switch)
+                continue
             say(f"note: --set {item} is deprecated; write {new} {text.strip()}")
             flag, eq, inline = new, "=", text.strip()
         elif flag in renamed:

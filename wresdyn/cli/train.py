@@ -1,7 +1,7 @@
 """``wresdyn train DATA``: learn a residual with PPO on the dataset's training split (resumes a killed run).
 
-Several GPUs: ``torchrun --nproc_per_node N -m wresdyn train DATA --device cuda ...`` (one process per GPU,
-``--num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.learn.ppo.train`).
+Several GPUs: ``torchrun --nproc_per_node N -m wresdyn train DATA --ppo.device cuda ...`` (one process per GPU,
+``--ppo.num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.learn.ppo.train`).
 
 Every line printed, and rsl-rl's per-iteration tables, are in ``OUT/train.log``; on a terminal a progress bar shows
 the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing."""
