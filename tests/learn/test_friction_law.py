@@ -114,7 +114,7 @@ def test_identify_records_the_law_eval_replays_under_it_resume_refuses_another(h
 def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(recorded, tmp_path, capsys):
     data, run = tmp_path / "d.npz", tmp_path / "fit"
     recorded.save(data)
-    args = ["fit", str(data), "--out", str(run), "--iterations", "2", "--windows", "2", "--curriculum", "4",
+    args = ["fit", str(data), "--out", str(run), "--iterations", "2", "--windows", "2", "--horizon-curriculum", "4",
             "--identify.iterations", "2", "--identify.horizon-curriculum", "8", "--quiet"]
     assert main([*args, "--friction-kappa", "1e4"]) == 0
     assert run_friction_kappa(run) == KAPPA  # the residual's run, as wresdyn eval reads it
