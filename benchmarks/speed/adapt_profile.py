@@ -46,14 +46,15 @@ def main() -> None:
     from wresdyn.adapt.adapter import Adapter
     from wresdyn.adapt.config import AdaptConfig
     from wresdyn.adapt.stream import dataset_blocks
-    from wresdyn.cli import UserError
-    from wresdyn.cli.config_flags import build_config, parse_assignments
+    from wresdyn.cli.command import CommandLineError, ConfigRefused, parse
     from wresdyn.data.loading import load_data
     from wresdyn.learn.runs import run_physics
 
-    try:
-        cfg = build_config(AdaptConfig(), {**parse_assignments(AdaptConfig, args.set), "device": args.device})
-    except UserError as e:
+    flags = [t for item in args.set for t in ("--" + item.partition("=")[0].replace("_", "-"),
+                                               *item.partition("=")[2].split(","))]
+    try:  # NAME=VALUE items as AdaptConfig's flags (a list's items comma-separated)
+        cfg = parse(AdaptConfig, flags + ["--device", args.device], prog="adapt_profile.py --set")
+    except (CommandLineError, ConfigRefused) as e:
         p.error(str(e))
     ds, robot = load_data(args.data)
     adapter = Adapter(robot, run_physics(args.run, robot), ds.rate_hz, cfg)

@@ -1,14 +1,17 @@
 """Sphinx extension of the wresdyn docs.
 
 - ``{wresdyn-cli}`` directive: the CLI reference, one section per subcommand with its ``--help``, built from
-  the parser of :mod:`wresdyn.cli` at build time, so the page cannot drift from the code.
+  the command line of :mod:`wresdyn.cli` (each command's dataclass, read by tyro) at build time, so the page cannot
+  drift from the code.
 - ``{repo}`` role: a link to a file or folder of the repository (raw benchmark output, scripts) that warns,
   and so fails the strict build, when the path does not exist.
 """
 
 from __future__ import annotations
 
-import argparse
+import contextlib
+import importlib
+import io
 import os
 from pathlib import Path
 
@@ -16,26 +19,27 @@ from docutils import nodes
 from sphinx.util.docutils import SphinxDirective
 
 ROOT = Path(__file__).resolve().parents[2]
-HELP_COLUMNS = "100"  # a fixed width: argparse wraps to the terminal, and the page must not depend on it
+HELP_COLUMNS = "100"  # a fixed width: tyro wraps to the terminal, and the page must not depend on it
 
 
-def cli_parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
-    """The ``wresdyn`` parser and its subcommands' parsers, registered as :func:`wresdyn.cli.main` does."""
-    from wresdyn.cli import build_parser
+def command_help(argv: list[str]) -> str:
+    """What ``wresdyn ARGV`` prints (``--help``), at :data:`HELP_COLUMNS` columns."""
+    from wresdyn.cli import parse_command
 
-    return build_parser()
-
-
-def _help(parser: argparse.ArgumentParser) -> str:
     old = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = HELP_COLUMNS
+    out = io.StringIO()
     try:
-        return parser.format_help()
+        with contextlib.redirect_stdout(out):
+            parse_command(argv)
+    except SystemExit:
+        pass
     finally:
         if old is None:
             del os.environ["COLUMNS"]
         else:
             os.environ["COLUMNS"] = old
+    return out.getvalue()
 
 
 class CliDirective(SphinxDirective):
@@ -44,13 +48,17 @@ class CliDirective(SphinxDirective):
     has_content = False
 
     def run(self) -> list[nodes.Node]:
-        parser, subs = cli_parsers()
-        out: list[nodes.Node] = [nodes.literal_block(text=_help(parser), language="text")]
-        for name, p in subs.items():
+        from wresdyn.cli import COMMANDS, top_help
+
+        out: list[nodes.Node] = [nodes.literal_block(text=top_help(), language="text")]
+        for name, (module, summary) in COMMANDS.items():
             sec = nodes.section(ids=[f"wresdyn-{name}"], names=[f"wresdyn {name}"])
             sec += nodes.title(text=f"wresdyn {name}")
-            sec += nodes.paragraph(text=p.description[0].upper() + p.description[1:] + ".")
-            sec += nodes.literal_block(text=_help(p), language="text")
+            sec += nodes.paragraph(text=summary[0].upper() + summary[1:] + ".")
+            sec += nodes.literal_block(text=command_help([name, "--help"]), language="text")
+            for flag in getattr(importlib.import_module(module), "VARIANT_FLAGS", ()):  # deploy --floor's own flags
+                sec += nodes.paragraph(text=f"With {flag}:")
+                sec += nodes.literal_block(text=command_help([name, flag, "--help"]), language="text")
             self.env.note_dependency(str(ROOT / "wresdyn" / "cli" / f"{name}.py"))
             out.append(sec)
         return out

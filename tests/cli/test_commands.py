@@ -1,18 +1,19 @@
-"""Every command's flags: generated from its config (each field a flag, with its docstring and its true default),
-every flag of earlier releases still accepted with the same meaning, ``--help`` fast, bad values in one line."""
+"""Every command is its dataclass on the command line (tyro): each config field a flag with its docstring and its
+true default, every spelling of earlier releases rewritten to today's with a one-line note, ``--help`` light, bad
+values in one line and exit status 2."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
-from dataclasses import asdict, fields, replace
+from dataclasses import asdict, replace
 
 import pytest
 
 from wresdyn.adapt.config import AdaptConfig
-from wresdyn.cli import build_parser, main
+from wresdyn.cli import COMMANDS, command_flags, main, parse_command
 from wresdyn.cli.collect import CollectConfig
-from wresdyn.cli.config_flags import config_fields, plain_help
+from wresdyn.cli.deprecated import RENAMED, rewrite
 from wresdyn.data.signals import ExcitationConfig
 from wresdyn.experiments.ablation_config import AblationConfig
 from wresdyn.experiments.deploy_config import DeployConfig, FloorDeployConfig
@@ -54,68 +55,110 @@ OLD_FLAGS = {
 """The flags of every command before they were generated from the configs (``wresdyn CMD --help`` at edbe496; a
 command added since: its flags when it came)."""
 
-CONFIG_FLAGS = {
-    "collect": [(CollectConfig(), "", ())],
-    "identify": [(SysIdConfig(), "", ())],
-    "adapt": [(AdaptConfig(), "", ())],
-    "fit": [(GradFitConfig(), "", ("model",)),
-            (SysIdConfig(), "identify.", ("device", "seed", "solver", "friction_kappa"))],
-    "train": [(default_config(), "", ())],
-    "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig))),
-               (SkillConfig(), "task.", ()),
-               (FloorTaskConfig(), "task.", tuple(f.name for f in fields(SkillConfig))),
-               (SkillPPOConfig(), "ppo.", ("num_envs", "iterations", "restart_std", "seed", "device"))],
-    "ablate": [(AblationConfig(), "", ("ppo_overrides", "gradient_overrides"))],
-}
-"""Each command's configs: ``(defaults, flag prefix, fields without a flag)``."""
-
-PARSER, COMMANDS = build_parser()
+POSITIONAL = {"fit": ["d.npz"], "identify": ["d.npz"], "train": ["d.npz"], "eval": ["run"], "export": ["run"],
+              "view": ["run"], "adapt": ["run", "log"], "migrate": ["d.npz", "--out", "new.npz"]}
+"""What each command needs besides its defaults."""
 
 
-def _options(command: str) -> dict:
-    return {s: a for a in COMMANDS[command]._actions for s in a.option_strings}
+def _parse(argv: list[str]):
+    return parse_command(argv)[2]
 
 
-def _typed(value) -> str:
-    if isinstance(value, tuple):
-        return ",".join(map(str, value)) if value else "empty"
-    return "none" if value is None else str(value)
+def _config(argv: list[str]):
+    args = _parse(argv)
+    return args.sizes if argv[0] == "deploy" else args.config
 
 
-def test_every_command_helps_in_full(capsys):
-    assert set(COMMANDS) == set(OLD_FLAGS)
+def test_every_command_helps(capsys):
     for command in COMMANDS:
         with pytest.raises(SystemExit) as ex:
             main([command, "--help"])
         assert ex.value.code == 0
-        assert capsys.readouterr().out.startswith(f"usage: wresdyn {command}")
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: wresdyn {command}"), command
+        assert "--package-path" in out, command
+    with pytest.raises(SystemExit) as ex:
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert ex.value.code == 0 and all(c in out for c in COMMANDS)
 
 
-@pytest.mark.parametrize("command", sorted(CONFIG_FLAGS))
-def test_every_config_field_is_a_flag_with_its_docstring_and_true_default(command):
-    options = _options(command)
-    for defaults, prefix, skip in CONFIG_FLAGS[command]:
-        for dotted, _, doc in config_fields(type(defaults)):
-            if dotted in skip:
-                continue
-            head, _, name = (prefix + dotted).rpartition(".")
-            flag = "--" + (f"{head}." if head else "") + name.replace("_", "-")
-            assert flag in options, f"wresdyn {command}: no {flag}"
-            value = defaults
-            for part in dotted.split("."):
-                value = getattr(value, part)
-            assert doc and options[flag].help.startswith(plain_help(doc)), flag
-            assert f"(default: {_typed(value)}" in options[flag].help, flag
+DEFAULTS = {
+    "collect": CollectConfig(), "identify": SysIdConfig(), "adapt": AdaptConfig(), "fit": GradFitConfig(),
+    "train": default_config(), "deploy": DeployConfig(), "ablate": AblationConfig(),
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_command_parses_its_defaults(command):
+    args = _parse([command, *POSITIONAL.get(command, [])])
+    if command in DEFAULTS:
+        assert _config([command, *POSITIONAL.get(command, [])]) == DEFAULTS[command]
+    assert args.package_path == ()
+
+
+def test_every_config_field_is_a_flag_but_those_the_command_sets():
+    fit = command_flags("fit")
+    assert "--horizon-curriculum" in fit and "--residual.kind" in fit and "--identify.iterations" in fit
+    assert "--identify.device" not in fit and "--identify.seed" not in fit  # the fit's own
+    deploy = command_flags("deploy")
+    assert {"--task.action-scale", "--ppo.gamma", "--oracle-beside", "--task.w-fall"} <= set(deploy)
+    assert "--ppo.num-envs" not in deploy and "--ppo.seed" not in deploy  # from the sizes
+    assert "--ppo-overrides" not in command_flags("ablate")  # a dict: no command-line form
+
+
+def test_the_help_is_the_docstring_with_the_default(capsys):
+    with pytest.raises(SystemExit):
+        main(["identify", "--help"])
+    out = " ".join(capsys.readouterr().out.replace("│", " ").split())
+    assert "--windows INT Windows B (Newton worlds) per iteration. (default: 32)" in out
 
 
 @pytest.mark.parametrize("command", sorted(OLD_FLAGS))
-def test_every_flag_of_earlier_releases_is_still_accepted(command):
-    assert not set(OLD_FLAGS[command]) - set(_options(command))
+def test_every_flag_of_earlier_releases_is_still_read(command):
+    flags = command_flags(command)
+    for flag in OLD_FLAGS[command]:
+        known = flag in flags or flag in RENAMED.get(command, {}) or flag == "--set"
+        switch = flag.startswith("--no-") and f"--{flag[5:]}" in flags
+        assert known or switch, f"wresdyn {command} {flag}"
 
 
-def _config(argv: list[str]):
-    args = PARSER.parse_args(argv)
-    return sys.modules[args._module].config_from_args(args)
+@pytest.mark.parametrize("command,old,new", [(c, o, n) for c, table in RENAMED.items() for o, n in table.items()])
+def test_each_old_spelling_is_rewritten_with_a_note_naming_the_new_one(command, old, new):
+    notes = []
+    flags = command_flags(command)
+    assert new in flags
+    out = rewrite(command, flags, [old, "1"], notes.append)
+    assert out[0] == new and len(notes) == 1 and new in notes[0] and "deprecated" in notes[0]
+
+
+def test_set_comma_lists_none_and_bare_optional_switches_are_rewritten():
+    notes = []
+    out = rewrite("train", command_flags("train"), ["--set", "ppo.desired_kl=0.05", "--set=residual.hidden_dims=128,64",
+                                                    "--env.physics", "p.json"], notes.append)
+    assert out == ["--ppo.desired-kl", "0.05", "--residual.hidden-dims", "128", "64", "--env.physics", "p.json"]
+    assert len(notes) == 3 and "--ppo.desired-kl 0.05" in notes[0]
+    notes.clear()
+    out = rewrite("deploy", command_flags("deploy"), ["--oracle-beside", "--finetune-std", "none", "--floor"],
+                  notes.append)
+    assert out == ["--oracle-beside", "True", "--finetune-std", "None", "--floor"] and len(notes) == 2
+    assert rewrite("fit", command_flags("fit"), ["--curriculum", ""], notes.append)[-1] == "--horizon-curriculum"
+    assert rewrite("train", command_flags("train"), ["--set", "ppo.one_sync_update=true", "--set",
+                                                     "ppo.mixed_precision=false"], notes.append) == [
+        "--ppo.one-sync-update", "--ppo.no-mixed-precision"]
+
+
+def test_a_spelling_of_today_is_left_alone():
+    notes = []
+    argv = ["d.npz", "--horizon-curriculum", "2", "4", "--residual.kind", "torque", "--no-cuda-graph", "--lr=0.01"]
+    assert rewrite("fit", command_flags("fit"), argv, notes.append) == argv and not notes
+
+
+def test_an_old_spelling_prints_one_note_and_runs(capsys):
+    assert _config(["fit", "d.npz", "--curriculum", "2,4"]).horizon_curriculum == (2, 4)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["wresdyn fit: note: --curriculum is deprecated; write --horizon-curriculum",
+                   "wresdyn fit: note: comma lists are deprecated; write --horizon-curriculum 2 4"]
 
 
 # each line with the fields the code before generated flags built from it (the rest: the defaults)
@@ -170,6 +213,11 @@ def test_command_lines_of_earlier_releases_build_the_same_config(argv, expected)
     assert asdict(_config(argv)) == asdict(expected)
 
 
+def test_the_global_package_path_before_the_command_still_reaches_it(tmp_path):
+    args = _parse(["--package-path", str(tmp_path), "fit", "d.npz", "--package-path", "b"])
+    assert args.package_path == (str(tmp_path), "b")
+
+
 @pytest.mark.parametrize("floor", [False, True], ids=["stand", "floor"])
 def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_path):
     """``--task.*`` and ``--ppo.*`` build the task and PPO configs that ``wresdyn deploy`` hands the benchmark (stopped
@@ -192,8 +240,8 @@ def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_
     head = ["deploy", "d.npz", "--out", str(tmp_path), "--quiet", "--envs", "8"] + (["--floor"] if floor else [])
     task_cls = FloorTaskConfig if floor else SkillConfig
     own = ["--task.sigma-base", "0.2"] if floor else ["--task.fail-error", "0.7"]
-    assert main(head + ["--task.action-scale", "0.3", "--task.decimation", "5", *own, "--ppo.hidden-dims", "64,32",
-                        "--ppo.gamma", "0.99", "--ppo.torch-threads", "none", "--ppo.init-std", "0.5"]) == 0
+    assert main(head + ["--task.action-scale", "0.3", "--task.decimation", "5", *own, "--ppo.hidden-dims", "64", "32",
+                        "--ppo.gamma", "0.99", "--ppo.torch-threads", "None", "--ppo.init-std", "0.5"]) == 0
     cfg, kw = passed[-1]
     assert cfg == (FloorDeployConfig if floor else DeployConfig)(envs=8)
     task = task_cls(action_scale=0.3, decimation=5, **({"sigma_base": 0.2} if floor else {"fail_error": 0.7}))
@@ -204,20 +252,17 @@ def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_
 
 
 def test_the_hybrids_identification_shares_the_fits_device_seed_solver_and_windows():
-    from wresdyn.cli.fit import identify_config_from_args
-
-    args = PARSER.parse_args(["fit", "d.npz", "--identify-iterations", "6", "--gain-grid", "1,0.5", "--refine", "2",
-                              "--windows", "4", "--seed", "3", "--solver", "replay", "--device", "cuda:0"])
-    sysid = identify_config_from_args(args, _config(["fit", "d.npz", "--windows", "4", "--seed", "3", "--solver",
-                                                     "replay", "--device", "cuda:0"]))
-    assert sysid == replace(SysIdConfig(), iterations=6, gain_grid=(1.0, 0.5), refine=2, windows=4, seed=3,
-                            solver="replay", device="cuda:0")
-    args = PARSER.parse_args(["fit", "d.npz", "--windows", "4", "--identify.windows", "8"])
-    assert identify_config_from_args(args, _config(["fit", "d.npz", "--windows", "4"])).windows == 8
+    args = _parse(["fit", "d.npz", "--identify.iterations", "6", "--identify.gain-grid", "1", "0.5",
+                   "--identify.refine", "2", "--windows", "4", "--seed", "3", "--solver", "replay", "--device",
+                   "cuda:0"])
+    assert args.identify_config == replace(SysIdConfig(), iterations=6, gain_grid=(1.0, 0.5), refine=2, windows=4,
+                                           seed=3, solver="replay", device="cuda:0")
+    assert _parse(["fit", "d.npz", "--windows", "4", "--identify.windows", "8"]).identify_config.windows == 8
 
 
-def test_help_and_every_parser_import_no_heavy_library():
-    code = ("import sys\nfrom wresdyn.cli import build_parser, main\nbuild_parser()\n"
+def test_help_and_every_command_import_no_heavy_library():
+    code = ("import sys\nfrom wresdyn.cli import COMMANDS, command_flags, main\n"
+            "for c in COMMANDS: command_flags(c)\n"
             "try: main(['fit', '--help'])\nexcept SystemExit: pass\n"
             "heavy = [m for m in ('torch', 'warp', 'newton', 'mujoco', 'pxr', 'rsl_rl') if m in sys.modules]\n"
             "assert not heavy, heavy")
@@ -226,41 +271,51 @@ def test_help_and_every_parser_import_no_heavy_library():
 
 
 @pytest.mark.parametrize("argv,message", [
-    (["fit", "d.npz", "--iterations", "x"], "argument --iterations: invalid int value: 'x'"),
-    (["train", "d.npz", "--residual", "torqu"], "argument --residual.kind/--residual: invalid choice: 'torqu'"),
-    (["deploy", "--floor", "--motions", "1.5"], "argument --train-per-family/--motions: invalid int value: '1.5'"),
+    (["fit", "d.npz", "--iterations", "x"], "wresdyn fit: error: Error parsing --iterations:"),
+    (["train", "d.npz", "--residual.kind", "torqu"],
+     "wresdyn train: error: invalid choice 'torqu' for argument '--residual.kind'. choose from torque,delta_action"),
+    (["deploy", "--floor", "--train-per-family", "1.5"], "wresdyn deploy: error: Error parsing --train-per-family"),
+    (["fit", "d.npz", "--bogus", "3"], "wresdyn fit: error: Unrecognized options: --bogus"),
+    (["train", "none.npz", "--set", "ppo.gama=0.9"], "wresdyn train: error: Unrecognized options: --set"),
+    (["fit"], "wresdyn fit: error: required options: Missing from wresdyn fit: DATA"),
+    (["nothing"], "wresdyn: error: unknown command 'nothing'"),
+    (["deploy", "--oracle-beside", "True"],
+     "wresdyn deploy: error: --oracle-beside sets the skills on the floor; it needs --floor"),
+    (["deploy", "--beside-devices", "cuda:1"],
+     "wresdyn deploy: error: --beside-devices sets the skills on the floor; it needs --floor"),
+    (["deploy", "--task.w-fall", "3"], "wresdyn deploy: error: --task.w-fall sets the skills on the floor; it needs "
+                                       "--floor"),
+    (["deploy", "--floor", "--task.fail-error", "1"],
+     "wresdyn deploy: error: --task.fail-error sets the skills on the stand; it has no use with --floor"),
 ])
-def test_a_malformed_flag_is_one_line_and_exit_2(argv, message, capsys):
+def test_a_malformed_command_line_is_one_line_and_exit_2(argv, message, capsys):
     with pytest.raises(SystemExit) as ex:
         main(argv)
     err = capsys.readouterr().err.strip().splitlines()
-    assert ex.value.code == 2 and len(err) == 1 and message in err[0], err
+    assert ex.value.code == 2 and err and err[-1].startswith(message), err
+    assert not any("Traceback" in line for line in err)
 
 
 @pytest.mark.parametrize("argv,message", [
     (["collect", "--train", "0", "--validation", "0", "--heldout", "0", "--ood", "0"],
      "wresdyn collect: error: train/validation/heldout/ood are all 0: nothing to record"),
-    (["collect", "--frames", "gripperframe", "--excitation", "joint"], "wresdyn collect: error: --frames sets the IK "
-     "targets of the foot excitation; it has no use with --excitation joint"),
+    (["collect", "--excitation.frames", "gripperframe", "--excitation.mode", "joint"], "wresdyn collect: error: "
+     "--excitation.frames sets the IK targets of the foot excitation; it has no use with --excitation.mode joint"),
+    (["collect", "--excitation.frames"], "wresdyn collect: error: --excitation.frames names no frame"),
+    (["collect", "--max-velocity", "0"], "wresdyn collect: error: --max-velocity must be > 0, not 0.0"),
+    (["migrate", "d.npz", "--out", "n.npz", "--validation", "-1"],
+     "wresdyn migrate: error: --validation must be >= 0, not -1"),
     (["identify", "none.npz", "--windows", "0"], "wresdyn identify: error: windows = 0 must be >= 1"),
-    (["train", "none.npz", "--set", "ppo.num_envs=1", "--set", "ppo.num_steps_per_env=2"],
+    (["train", "none.npz", "--ppo.num-envs", "1", "--ppo.num-steps-per-env", "2"],
      "wresdyn train: error: ppo.num_mini_batches = 4 is more than the 2 samples per rollout"),
-    (["train", "none.npz", "--set", "ppo.gama=0.9"],
-     "wresdyn train: error: --set 'ppo.gama=0.9': no field 'ppo.gama' (sections: env, ppo, residual, rewards)"),
     (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_envs = 0 must be >= 1"),
-    (["deploy", "--oracle-beside"], "wresdyn deploy: error: --oracle-beside sets the benchmark on the floor; it needs "
-                                    "--floor"),
-    (["deploy", "--beside-devices", "cuda:1"],
-     "wresdyn deploy: error: --beside-devices sets the benchmark on the floor; it needs --floor"),
-    (["deploy", "--floor", "--beside-devices", "cuda:1,gpu2"],
+    (["deploy", "--floor", "--beside-devices", "cuda:1", "gpu2"],
      "wresdyn deploy: error: floor.beside_devices = 'gpu2' is not a device: cpu, cuda or cuda:N"),
-    (["deploy", "--task.w-fall", "3"],
-     "wresdyn deploy: error: --task.w-fall sets the task on the floor; it needs --floor"),
-    (["deploy", "--floor", "--task.fail-error", "1"],
-     "wresdyn deploy: error: --task.fail-error sets the task on the stand; it has no use with --floor"),
     (["deploy", "--ppo.torch-threads", "0"], "wresdyn deploy: error: ppo.torch_threads = 0 must be >= 1"),
     (["deploy", "--task.sigma-q", "0"], "wresdyn deploy: error: skill.sigma_q = 0.0 must be > 0"),
-    (["fit", "none.npz", "--gain-grid", "1,-0.5"], "wresdyn fit: error: gain_grid[1] = -0.5 must be > 0"),
+    (["fit", "none.npz", "--identify.gain-grid", "1", "-0.5"], "wresdyn fit: error: gain_grid[1] = -0.5 must be > 0"),
+    (["ablate", "--segments", "5", "--ppo-iterations", "2"],
+     "wresdyn ablate: error: ablation ppo_iterations = 2 must be >= 5"),
 ])
 def test_a_value_the_config_refuses_is_one_line_and_exit_2(argv, message, capsys):
     assert main(argv) == 2

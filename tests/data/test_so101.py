@@ -104,11 +104,13 @@ def test_bad_ik_frames_are_refused_in_one_line(so101, capsys):
         with pytest.raises(RobotError, match=text.replace("(", r"\(").replace(")", r"\)")) as e:
             FootIK(so101, frames)
         assert "\n" not in str(e.value)
-    assert main(["collect", "--robot", str(SO101), "--frames", "left_foot,right_foot", "--out", "/nonexistent/x"]) == 2
+    assert main(["collect", "--robot", str(SO101), "--excitation.frames", "left_foot", "right_foot", "--out",
+                 "/nonexistent/x"]) == 2
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and err[0].startswith("wresdyn collect: error:") and "left_foot, right_foot" in err[0]
-    assert main(["collect", "--robot", str(SO101), "--frames", "gripperframe", "--excitation", "joint"]) == 2
-    assert "no use with --excitation joint" in capsys.readouterr().err
+    assert main(["collect", "--robot", str(SO101), "--excitation.frames", "gripperframe", "--excitation.mode",
+                 "joint"]) == 2
+    assert "no use with --excitation.mode joint" in capsys.readouterr().err
 
 
 def test_collect_so101_end_to_end(tmp_path, capsys):

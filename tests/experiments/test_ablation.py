@@ -126,8 +126,8 @@ def test_ablation_config_refuses_bad_cells_at_construction(tmp_path, capsys):
     # the command line refuses the same in one line, before loading anything
     assert main(["ablate", "--out", str(tmp_path / "never"), "--segments", "5", "--ppo-iterations", "2"]) == 2
     assert capsys.readouterr().err.splitlines() == ["wresdyn ablate: error: ablation ppo_iterations = 2 must be >= 5"]
-    with pytest.raises(SystemExit) as ex:  # argparse's own refusal, in the same one-line form
-        main(["ablate", "--out", str(tmp_path / "never"), "--kinds", "torque,bogus"])
+    with pytest.raises(SystemExit) as ex:  # the command line's own refusal, in the same one-line form
+        main(["ablate", "--out", str(tmp_path / "never"), "--kinds", "torque", "bogus"])
     err = capsys.readouterr().err.splitlines()
     assert ex.value.code == 2 and len(err) == 1 and "--kinds" in err[0] and "torque,delta_action" in err[0]
     assert not (tmp_path / "never").exists()

@@ -145,8 +145,8 @@ def test_fit_passes_the_gain_grid_to_its_identification(humanoid, recorded, tmp_
 
 
 def test_identify_refuses_a_malformed_delay_grid(tmp_path, capsys):
-    with pytest.raises(SystemExit) as ex:  # argparse's refusal, in the same one-line form
-        main(["identify", str(tmp_path / "none.npz"), "--delay-grid", "0,ten"])
+    with pytest.raises(SystemExit) as ex:  # the command line's refusal, in the same one-line form
+        main(["identify", str(tmp_path / "none.npz"), "--delay-grid", "0", "ten"])
     err = capsys.readouterr().err
     assert ex.value.code == 2 and "--delay-grid" in err and len(err.strip().splitlines()) == 1
 
@@ -180,7 +180,7 @@ def test_gain_grid_starts_each_joint_at_its_own_kp(humanoid, record):
 
 def test_identify_refuses_a_malformed_gain_grid(tmp_path, capsys):
     with pytest.raises(SystemExit) as ex:
-        main(["identify", str(tmp_path / "none.npz"), "--gain-grid", "1,soft"])
+        main(["identify", str(tmp_path / "none.npz"), "--gain-grid", "1", "soft"])
     err = capsys.readouterr().err
     assert ex.value.code == 2 and "--gain-grid" in err and len(err.strip().splitlines()) == 1
     with pytest.raises(ValueError, match="gain_grid"):

@@ -115,7 +115,7 @@ def test_identify_records_the_law_eval_replays_under_it_resume_refuses_another(h
 def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(recorded, tmp_path, capsys):
     data, run = tmp_path / "d.npz", tmp_path / "fit"
     recorded.save(data)
-    args = ["fit", str(data), "--out", str(run), "--iterations", "2", "--windows", "2", "--curriculum", "4",
+    args = ["fit", str(data), "--out", str(run), "--iterations", "2", "--windows", "2", "--horizon-curriculum", "4",
             "--identify.iterations", "2", "--identify.horizon-curriculum", "8", "--quiet"]
     assert main([*args, "--friction-kappa", "1e4"]) == 0
     assert run_friction_kappa(run) == KAPPA  # the residual's run, as wresdyn eval reads it
@@ -132,12 +132,10 @@ def test_fit_carries_the_law_to_both_stages_and_refuses_another_on_resume(record
 
 
 def test_train_flag_reaches_the_replay_environment(humanoid, recorded):
-    from wresdyn.cli import build_parser
-    from wresdyn.cli.train import config_from_args
+    from wresdyn.cli import parse_command
     from wresdyn.ppo.replay_env import ReplayEnv
 
-    parser, _ = build_parser()
-    cfg = config_from_args(parser.parse_args(["train", "d.npz", "--friction-kappa", "inf"]))
+    cfg = parse_command(["train", "d.npz", "--env.friction-kappa", "inf"])[2].config
     assert cfg.env.friction_kappa == float("inf")
     env = ReplayEnv(humanoid, recorded.split("train"), recorded.rate_hz, 2, cfg.env)
     assert isinstance(env.sim.solver, SolverReplay) and env.sim.solver.friction_kappa == float("inf")

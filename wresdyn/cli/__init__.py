@@ -1,16 +1,20 @@
 """``wresdyn`` command line: one subcommand per pipeline stage.
 
-Each subcommand lives in its own module with ``add_arguments(parser)`` and ``run(args) -> int``; modules
-are imported only when their command runs, so ``wresdyn --help`` stays fast. Errors the user can fix
-(bad files, bad configs, a diverging simulation) print one line ``wresdyn <cmd>: error: ...`` and exit 2.
+Each subcommand lives in its own module: a frozen dataclass ``COMMAND`` (its flags, through ``tyro``:
+:mod:`wresdyn.cli.command`) and ``run(args) -> int``. Only the module of the command given is imported, and it
+imports torch, Warp, Newton or MuJoCo only inside ``run``, so ``wresdyn --help`` and ``wresdyn CMD --help`` stay
+fast. Errors the user can fix (bad flags, bad files, bad configs, a diverging simulation) print one line
+``wresdyn <cmd>: error: ...`` and exit 2.
 """
 
 from __future__ import annotations
 
-import argparse
 import gc
 import importlib
 import sys
+
+from .command import CommandLineError, ConfigRefused, hidden_fields, list_flags, parse
+from .deprecated import rewrite
 
 COMMANDS: dict[str, tuple[str, str]] = {
     # name: (module, one-line help)
@@ -35,47 +39,89 @@ class UserError(Exception):
     """An error caused by the user's input: reported in one line, exit code 2."""
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse, with its errors in the same one line as every other user error (no usage block)."""
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
 def _user_errors():
     from ..errors import SimulationDiverged, WresdynError
 
     return (UserError, WresdynError, SimulationDiverged, FileNotFoundError)
 
 
-def build_parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
-    """The ``wresdyn`` parser and each command's own (its module's ``add_arguments``), by command name."""
-    parser = _Parser(prog="wresdyn", description=__doc__.splitlines()[0])
-    parser.add_argument("--package-path", action="append", default=[], metavar="DIR",
-                        help="folder holding ROS packages that a URDF's package://NAME/... mesh URIs name (repeatable, "
-                             "or several joined by the path separator); searched before the URDF's own folder tree "
-                             "and ROS_PACKAGE_PATH")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    subs = {}
-    for name, (module, help_) in COMMANDS.items():
-        p = subs[name] = sub.add_parser(name, help=help_, description=help_)
-        p.set_defaults(_module=module)
-        # argument definitions are cheap; import the module lazily only for its parser hook
-        importlib.import_module(module).add_arguments(p)
-    return parser, subs
+def top_help() -> str:
+    """``wresdyn --help``: the commands and their one-line summaries."""
+    width = max(map(len, COMMANDS))
+    rows = "\n".join(f"  {name:{width}s}  {help_}" for name, (_, help_) in COMMANDS.items())
+    return (f"usage: wresdyn [-h] COMMAND ...\n\n{__doc__.splitlines()[0].replace('``', '')}\n\ncommands:\n{rows}\n\n"
+            "wresdyn COMMAND --help lists a command's flags.\n")
+
+
+def command_flags(name: str) -> dict[str, object]:
+    """``{flag: annotation}`` of every flag of command ``name`` (of each of its variants: deploy's ``--floor``);
+    its module is imported, nothing heavy."""
+    module = importlib.import_module(COMMANDS[name][0])
+    flags = {}
+    for cls in getattr(module, "VARIANTS", (module.COMMAND,)):
+        flags |= list_flags(cls, getattr(module, "HIDDEN", None))
+    return flags
+
+
+def _command_at(argv: list[str]) -> int | None:
+    """Index of the command's name in ``argv`` (past options given before it and their values)."""
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--package-path":
+            i += 2
+        elif argv[i].startswith("-"):
+            i += 1
+        else:
+            return i
+    return None
+
+
+def parse_command(argv: list[str]):
+    """``(name, module, args)`` of a command line (deprecated spellings rewritten first, with a note on stderr).
+
+    Raises:
+        CommandLineError: no such command, or its arguments do not parse (one line).
+        ConfigRefused: a config refuses a value given (one line).
+        SystemExit: ``--help`` was printed (status 0), or no command given (status 2).
+    """
+    argv = list(argv)
+    i = _command_at(argv)
+    if i is None:
+        print(top_help(), end="", file=sys.stdout if argv else sys.stderr)
+        raise SystemExit(0 if argv and argv[0] in ("-h", "--help") else 2)
+    name = argv[i]
+    if name not in COMMANDS:
+        raise CommandLineError(f"unknown command {name!r}; choose from {', '.join(COMMANDS)}")
+    rest = argv[:i] + argv[i + 1:]  # options given before the command (the global --package-path of old) follow it
+    module = importlib.import_module(COMMANDS[name][0])
+    rest = rewrite(name, command_flags(name), rest, say=lambda line: print(f"wresdyn {name}: {line}", file=sys.stderr))
+    prepare = getattr(module, "prepare", None)  # a command whose defaults depend on a flag (deploy --floor)
+    cls, default = prepare(rest) if prepare else (module.COMMAND, None)
+    args = parse(cls, rest, prog=f"wresdyn {name}", description=COMMANDS[name][1], default=default,
+                 registry=hidden_fields(getattr(module, "HIDDEN", None)))
+    return name, module, args
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser, _ = build_parser()
-    args = parser.parse_args(argv)
-    mod = importlib.import_module(args._module)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    i = _command_at(argv)
+    name = argv[i] if i is not None else ""
+    prog = f"wresdyn {name}" if name in COMMANDS else "wresdyn"
+    try:
+        name, module, args = parse_command(argv)
+    except CommandLineError as e:  # as argparse: the usage error ends the process with status 2
+        print(f"{prog}: error: {e} (see {prog} --help)", file=sys.stderr)
+        raise SystemExit(2) from None
+    except ConfigRefused as e:
+        print(f"{prog}: error: {e}", file=sys.stderr)
+        return 2
     from ..robot.packages import set_package_path
 
     try:
         set_package_path(args.package_path)
-        return int(mod.run(args) or 0)
+        return int(module.run(args) or 0)
     except _user_errors() as e:
-        print(f"wresdyn {args.command}: error: {e}", file=sys.stderr)
+        print(f"wresdyn {name}: error: {e}", file=sys.stderr)
         return 2
     finally:
         set_package_path([])  # the roots belong to this command, not to later calls in the same process

@@ -2,49 +2,64 @@
 
 Writes ``OUT/table.md`` (held-out and OOD mean |Δq|, mean ± std over seeds, wall-clock, simulated steps),
 ``OUT/results.json`` and ``OUT/curves.png`` (held-out error against wall-clock and against simulated steps).
-Each cell checkpoints; running the same command again resumes. ``--delays 0,0.005,0.01`` adds the delay sweep:
+Each cell checkpoints; running the same command again resumes. ``--delays 0 0.005 0.01`` adds the delay sweep:
 for each actuator delay the data are recorded again with the default mismatch (delay replaced) and MLP vs GRU
 are compared in ``OUT/delay_<ms>ms/``, summarised in ``OUT/delay_sweep.md``.
 """
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Annotated
 
-from ..choices import Learner, choices
+from ..choices import Learner
 from ..experiments.ablation_config import AblationConfig
-from .config_flags import add_config_flags, build_config, comma_list, given_fields
+from .command import FLAT, Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", default=None, help="dataset (.npz; default: data/dataset.npz)")
-    p.add_argument("--robot", default=None, help="robot file (default: scenes/humanoid.usda)")
-    p.add_argument("--out", default="runs/ablation", help="output folder")
-    p.add_argument("--ppo-envs", type=int, default=None, help="override PPO's number of parallel envs")
-    p.add_argument("--windows", type=int, default=None, help="override the gradient fit's parallel windows")
-    p.add_argument("--horizon", type=int, default=None, help="override the gradient fit's window length [steps]")
-    p.add_argument("--jobs", type=int, default=1,
-                   help="cells run in parallel worker processes, one core (or a share of a GPU) each (default 1)")
-    p.add_argument("--delays", type=comma_list(float), default=(), help="delay sweep [s], e.g. 0,0.005,0.01")
-    p.add_argument("--delays-only", action="store_true", help="run only the delay sweep, not the main grid")
-    p.add_argument("--delay-learner", choices=choices(Learner), default="gradient", help="learner of the delay sweep")
-    p.add_argument("--delay-trajectories", type=comma_list(int, 4), default=(16, 4, 4, 4),
-                   help="train,validation,heldout,ood trajectories recorded per delay")
-    add_config_flags(p, AblationConfig(), skip=("ppo_overrides", "gradient_overrides"),
-                     title="the grid (wresdyn.experiments.ablation.AblationConfig; device cuda spreads the cells over "
-                           "every GPU of the host, --jobs at a time)")
+@dataclass(frozen=True)
+class Ablate(Command):
+    """``wresdyn ablate``: the dataset, where the table goes, the grid (:class:`AblationConfig`, its fields as
+    flags; device cuda spreads the cells over every GPU of the host, --jobs at a time) and the delay sweep."""
+
+    data: str | None = None
+    """Dataset (.npz; default: data/dataset.npz)."""
+    robot: str | None = None
+    """Robot file (default: scenes/humanoid.usda)."""
+    out: str = "runs/ablation"
+    """Output folder."""
+    ppo_envs: int | None = None
+    """Override PPO's number of parallel envs."""
+    windows: int | None = None
+    """Override the gradient fit's parallel windows."""
+    horizon: int | None = None
+    """Override the gradient fit's window length [steps]."""
+    jobs: int = 1
+    """Cells run in parallel worker processes, one core (or a share of a GPU) each."""
+    delays: tuple[float, ...] = ()
+    """Delay sweep [s], e.g. 0 0.005 0.01."""
+    delays_only: bool = False
+    """Run only the delay sweep, not the main grid."""
+    delay_learner: Learner = "gradient"
+    """Learner of the delay sweep."""
+    delay_trajectories: tuple[int, int, int, int] = (16, 4, 4, 4)
+    """Train, validation, heldout, ood trajectories recorded per delay."""
+    grid: Annotated[AblationConfig, FLAT] = field(default_factory=AblationConfig)
+    """The grid."""
+
+    @property
+    def config(self) -> AblationConfig:
+        """The grid with ``--ppo-envs``, ``--windows`` and ``--horizon`` as its PPO and gradient overrides."""
+        grad = {k: v for k, v in {"windows": self.windows, "horizon": self.horizon}.items() if v is not None}
+        return replace(self.grid, ppo_overrides={"ppo.num_envs": self.ppo_envs} if self.ppo_envs is not None else {},
+                       gradient_overrides=grad)
 
 
-def config_from_args(args: argparse.Namespace) -> AblationConfig:
-    """The default :class:`~wresdyn.experiments.ablation.AblationConfig` with the flags given applied."""
-    grad = {k: v for k, v in {"windows": args.windows, "horizon": args.horizon}.items() if v is not None}
-    return build_config(AblationConfig(), given_fields(args) | {
-        "ppo_overrides": {"ppo.num_envs": args.ppo_envs} if args.ppo_envs is not None else {},
-        "gradient_overrides": grad})
+COMMAND = Ablate
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: Ablate) -> int:
     import dataclasses
 
     from ..data.dataset import load_dataset
@@ -53,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from ..robot.description import DEFAULT_ROBOT, load_robot
 
     # the config checks itself before the robot and data load: a bad flag fails at once
-    cfg = config_from_args(args)
+    cfg = args.config
     robot = load_robot(args.robot or DEFAULT_ROBOT)
     data_path = Path(args.data) if args.data else DEFAULT_DATASET
     dataset = load_dataset(data_path, robot=robot)

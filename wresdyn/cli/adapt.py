@@ -14,37 +14,47 @@ the calibrated robot exported there (:func:`wresdyn.export.usd.write_export`), r
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field
+from typing import Annotated
+
+import tyro
 
 from ..adapt.config import AdaptConfig
-from .config_flags import add_config_flags, build_config, comma_list, given_fields
+from .command import FLAT, Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", help="run folder with physics.json (the warm start)")
-    p.add_argument("log", help="dataset (.npz), text file of samples, or - for stdin; a text line is one sample: "
-                                   "t q1..qn qd1..qdn qcmd1..qcmdn (SI units, time increasing)")
-    p.add_argument("--out", default="runs/adapt", help="output folder (default: runs/adapt)")
-    p.add_argument("--robot", default=None,
-                   help="robot file (default: a dataset's own; for text, the one of the run's config.json data_path)")
-    p.add_argument("--rate-hz", type=float, default=None,
-                   help="sample rate of a text stream [Hz] (default: the run's config.json rate_hz, else 500)")
-    p.add_argument("--split", type=comma_list(str), default=(),
-                   help="a dataset's splits to stream, comma list (default: all, in the file's order)")
-    p.add_argument("--track", type=comma_list(str), default=(),
-                   help="parameters to print, FIELD:NAME comma list (fnmatch on joint/body names, e.g. "
-                        "friction:*knee,body_mass:torso); default: the three that moved most")
-    p.add_argument("--export", default=None, metavar="DIR",
-                   help="keep the calibrated robot exported in DIR as `wresdyn export --physics-only` writes it "
-                        "(robot.usda, actuated.usda, physics.json): the warm start first, rewritten atomically with "
-                        "each published update (a USD robot only)")
-    p.add_argument("--quiet", action="store_true", help="print nothing per update (OUT/adapt.log keeps every line)")
-    add_config_flags(p, AdaptConfig(), title="online identification (wresdyn.adapt.config.AdaptConfig)")
+@dataclass(frozen=True)
+class Adapt(Command):
+    """``wresdyn adapt``: the warm start, the stream, where the updates go and the online identification's config
+    (its fields as flags)."""
+
+    run: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
+    """Run folder with physics.json (the warm start)."""
+    log: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="LOG")]
+    """Dataset (.npz), text file of samples, or - for stdin; a text line is one sample: t q1..qn qd1..qdn
+    qcmd1..qcmdn (SI units, time increasing)."""
+    out: str = "runs/adapt"
+    """Output folder."""
+    robot: str | None = None
+    """Robot file (default: a dataset's own; for text, the one of the run's config.json data_path)."""
+    rate_hz: float | None = None
+    """Sample rate of a text stream [Hz] (default: the run's config.json rate_hz, else 500)."""
+    split: tuple[str, ...] = ()
+    """A dataset's splits to stream (default: all, in the file's order)."""
+    track: tuple[str, ...] = ()
+    """Parameters to print, FIELD:NAME (fnmatch on joint/body names, e.g. friction:*knee body_mass:torso); default:
+    the three that moved most."""
+    export: str | None = None
+    """Keep the calibrated robot exported in this folder as `wresdyn export --physics-only` writes it (robot.usda,
+    actuated.usda, physics.json): the warm start first, rewritten atomically with each published update (a USD
+    robot only)."""
+    quiet: bool = False
+    """Print nothing per update (OUT/adapt.log keeps every line)."""
+    config: Annotated[AdaptConfig, FLAT] = field(default_factory=AdaptConfig)
+    """The online identification."""
 
 
-def config_from_args(args: argparse.Namespace) -> AdaptConfig:
-    """The default :class:`~wresdyn.adapt.config.AdaptConfig` with the flags given applied."""
-    return build_config(AdaptConfig(), given_fields(args))
+COMMAND = Adapt
 
 
 def _source(args):
@@ -80,7 +90,7 @@ def _source(args):
     return robot, rate, text_blocks(open(args.log), robot.n_dof, where=args.log, block=500)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: Adapt) -> int:
     import dataclasses
     from pathlib import Path
 
@@ -88,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     from ..learn.runs import run_physics
     from . import UserError
 
-    cfg = config_from_args(args)
+    cfg = args.config
     if not Path(args.run).is_dir():
         raise UserError(f"{args.run}: no such run folder")
     if not Path(args.run, "physics.json").is_file():

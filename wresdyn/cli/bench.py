@@ -5,42 +5,55 @@ The benchmark itself is :mod:`wresdyn.sim.solver_benchmark` (its docstring lists
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, fields
+from typing import Literal
 
-_SOLVERS = ("replay", "featherstone", "mujoco-warp", "mujoco-c")  # solver_benchmark.SOLVERS, without importing warp
+from .command import Command
 
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--robot", default=None, help="robot file (default: the project humanoid)")
-    p.add_argument("--gains", default=None, help="gains override TOML (see wresdyn.robot.gains.apply_overrides)")
-    p.add_argument("--worlds", default=None,
-                   help="comma list of world counts (default 1,16,128 on CPU; 1024,4096,16384 on CUDA)")
-    p.add_argument("--device", default="cpu", help="Warp device: cpu or cuda:0")
-    p.add_argument("--steps", type=int, default=200, help="steps per forward measurement")
-    p.add_argument("--horizon", type=int, default=32, help="Tape horizon H of the forward+backward measurement")
-    p.add_argument("--slow-steps", type=int, default=16,
-                   help="steps per forward call for SolverFeatherstone (it is slow)")
-    p.add_argument("--slow-max-worlds", type=int, default=4096,
-                   help="skip SolverFeatherstone forward+backward above this many worlds (minutes per measurement)")
-    p.add_argument("--threads", type=int, default=2, help="CPU threads for the replay rollout and MuJoCo C")
-    p.add_argument("--solvers", default=",".join(_SOLVERS), type=_solver_list,
-                   help=f"comma list from {','.join(_SOLVERS)}")
-    p.add_argument("--dt", type=float, default=0.002, help="time step [s]")
-    p.add_argument("--min-time", type=float, default=0.5, help="seconds to time each measurement for (after a warm-up)")
-    p.add_argument("--json", default=None, help="also write the results to this JSON file")
+BenchSolver = Literal["replay", "featherstone", "mujoco-warp", "mujoco-c"]  # solver_benchmark.SOLVERS, no warp
 
 
+@dataclass(frozen=True)
+class Bench(Command):
+    """``wresdyn bench``: the robot, the world counts and how long to measure."""
+
+    robot: str | None = None
+    """Robot file (default: the project humanoid)."""
+    gains: str | None = None
+    """Gains override TOML (see wresdyn.robot.gains.apply_overrides)."""
+    worlds: tuple[int, ...] = ()
+    """World counts (empty: 1 16 128 on CPU; 1024 4096 16384 on CUDA)."""
+    device: str = "cpu"
+    """Warp device: cpu or cuda:0."""
+    steps: int = 200
+    """Steps per forward measurement."""
+    horizon: int = 32
+    """Tape horizon H of the forward+backward measurement."""
+    slow_steps: int = 16
+    """Steps per forward call for SolverFeatherstone (it is slow)."""
+    slow_max_worlds: int = 4096
+    """Skip SolverFeatherstone forward+backward above this many worlds (minutes per measurement)."""
+    threads: int = 2
+    """CPU threads for the replay rollout and MuJoCo C."""
+    solvers: tuple[BenchSolver, ...] = ("replay", "featherstone", "mujoco-warp", "mujoco-c")
+    """Solvers to measure."""
+    dt: float = 0.002
+    """Time step [s]."""
+    min_time: float = 0.5
+    """Seconds to time each measurement for (after a warm-up)."""
+    json: str | None = None
+    """Also write the results to this JSON file."""
 
 
-def _solver_list(text: str) -> list[str]:
-    solvers = [s.strip() for s in text.split(",") if s.strip()]
-    unknown = sorted(set(solvers) - set(_SOLVERS))
-    if unknown:
-        raise argparse.ArgumentTypeError(f"unknown solver(s) {unknown}; choose from {','.join(_SOLVERS)}")
-    return solvers
+COMMAND = Bench
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: Bench) -> int:
     from ..sim.solver_benchmark import run_bench
 
-    return run_bench(args)
+    from types import SimpleNamespace
+
+    # the benchmark reads its world counts as the comma list of old, its solvers as a list
+    given = {f.name: getattr(args, f.name) for f in fields(args)}
+    return run_bench(SimpleNamespace(**given | {"worlds": ",".join(map(str, args.worlds)) or None,
+                                                "solvers": list(args.solvers)}))

@@ -3,9 +3,9 @@
 Simulated: draws excitations (train / validation / held-out: the paper's ellipsoid foot paths, eq. 2;
 out-of-distribution: chirps and kicks), executes them under PD on the MuJoCo "real" robot with the mismatch
 config, and writes ``OUT/dataset.npz`` and ``OUT/spectrum.png`` (command spectrum per split). The foot paths
-track ``--frames`` (default: the sites ``left_sole,right_sole``); ``--excitation joint`` (the default for a robot
-without those sites, e.g. an arm) excites every joint in joint space instead (multisines; OOD: chirps and
-steps). The gains config (``--gains``) is stored in the dataset, so later commands load the same robot. It
+track ``--excitation.frames`` (default: the sites ``left_sole right_sole``); ``--excitation.mode joint`` (the
+default for a robot without those sites, e.g. an arm) excites every joint in joint space instead (multisines; OOD:
+chirps and steps). The gains config (``--gains``) is stored in the dataset, so later commands load the same robot. It
 then replays the validation, held-out and OOD commands PD-only in Newton and reports the gap (mean |Δq|),
 also stored in the dataset's meta.
 Logs: ``--logs A.csv B.npz RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, SAGE runs, LeRobot datasets;
@@ -19,17 +19,21 @@ elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing
 
 from __future__ import annotations
 
-import argparse
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
 
 from ..choices import check_number
 from ..data.dataset import SPLITS  # numpy only: cheap
 from ..data.probe import SaturationProbe
-from ..data.signals import ExcitationConfig
+from ..data.signals import SOLES, ExcitationConfig
 from ..errors import WresdynError
-from .config_flags import add_config_flags, build_config, given_fields
+from .command import FLAT, Command
+
+Split = Literal["train", "validation", "heldout", "ood"]  # data.dataset.SPLITS
 
 DEFAULT_MISMATCH = Path(__file__).resolve().parents[2] / "data" / "mismatch_default.toml"  # wresdyn.paths, no import
 
@@ -78,81 +82,92 @@ class CollectConfig:
         return {"train": self.train, "validation": self.validation, "heldout": self.heldout, "ood": self.ood}
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--robot", default=None, help="robot file (default: scenes/humanoid.usda)")
-    p.add_argument("--gains", default=None, help="TOML file of PD gains by joint-name pattern")
-    p.add_argument("--mismatch", default=str(DEFAULT_MISMATCH),
-                   help="mismatch config (TOML) of the real robot, or 'none' for the nominal robot "
-                        "(default: data/mismatch_default.toml)")
-    p.add_argument("--out", default="data", help="output folder (default: data)")
-    p.add_argument("--no-tau", action="store_true", help="do not store the measured (diagnostic) torque")
-    p.add_argument("--no-gap", action="store_true", help="skip the PD-only Newton replay that measures the gap")
-    p.add_argument("--quiet", action="store_true",
-                   help="print nothing while collecting (OUT/collect.log keeps every line; no progress bar)")
-    p.add_argument("--max-velocity", type=float, default=None, metavar="RAD_S",
-                   help="command speed bound [rad/s] of both modes: --excitation.max-velocity and "
-                        "--excitation.joint-max-velocity at once")
-    add_config_flags(p, CollectConfig(), aliases={"excitation.mode": ("--excitation",),
-                                                   "excitation.frames": ("--frames",)},
-                     title="recording (CollectConfig; --excitation.mode auto is foot when --excitation.frames is "
-                           "given or the robot has left_sole and right_sole sites, joint otherwise)")
-    logs = p.add_argument_group("importing real logs instead")
-    logs.add_argument("--logs", nargs="+", default=None, metavar="LOG",
-                      help="import these real logs instead of simulating: .csv/.npz files, SAGE run folders, LeRobot "
-                           "dataset folders (one trajectory per episode) or folders of runs (docs/dataset.md)")
-    logs.add_argument("--map", default=None, metavar="TOML",
-                      help="mapping file (log joint -> robot joint, units, excluded joints)")
-    logs.add_argument("--lerobot-units", default=None, choices=("degrees", "range"),
-                      help="LeRobot datasets of an SO-100/SO-101 follower read without --map: the arm joints were "
-                           "recorded in degrees (--robot.use_degrees=true) or in -100..100 range units (false) "
-                           "(default: the robot type's LeRobot default: so_follower degrees, so100_follower and "
-                           "so101_follower range)")
-    logs.add_argument("--lerobot-calibration", default=None, metavar="JSON",
-                      help="the follower's calibration file (~/.cache/huggingface/lerobot/calibration/robots/"
-                           "<robot_type>/<id>.json): converts range units to radians")
-    logs.add_argument("--split", default=None, choices=SPLITS,
-                      help="split of every run no --assign/--split-map pattern or fraction assigns (default: "
-                           "heldout; train when any of those is given)")
-    logs.add_argument("--assign", action="append", default=[], metavar="PATTERN=SPLIT",
-                      help="runs whose name matches the fnmatch PATTERN go to SPLIT (repeatable; first match wins)")
-    logs.add_argument("--split-map", default=None, metavar="TOML",
-                      help="file of '\"PATTERN\" = \"SPLIT\"' lines, tried after --assign")
-    logs.add_argument("--validation-fraction", type=float, default=0.0, metavar="F",
-                      help="this fraction of the unassigned runs goes to validation (whole runs, deterministic)")
-    logs.add_argument("--heldout-fraction", type=float, default=0.0, metavar="F",
-                      help="this fraction of the unassigned runs goes to heldout (whole runs, deterministic)")
+@dataclass(frozen=True)
+class Collect(Command):
+    """``wresdyn collect``: the robot, the real robot's mismatch, where the dataset goes, what is recorded
+    (:class:`CollectConfig`, its fields as flags; ``--excitation.mode auto`` is foot when ``--excitation.frames``
+    is given or the robot has left_sole and right_sole sites, joint otherwise), or the real logs imported
+    instead."""
+
+    robot: str | None = None
+    """Robot file (default: scenes/humanoid.usda)."""
+    gains: str | None = None
+    """TOML file of PD gains by joint-name pattern."""
+    mismatch: str = str(DEFAULT_MISMATCH)
+    """Mismatch config (TOML) of the real robot, or 'none' for the nominal robot (default:
+    data/mismatch_default.toml)."""
+    out: str = "data"
+    """Output folder."""
+    tau: bool = True
+    """Store the measured (diagnostic) torque."""
+    gap: bool = True
+    """Replay the evaluation splits PD-only in Newton and report the gap."""
+    quiet: bool = False
+    """Print nothing while collecting (OUT/collect.log keeps every line; no progress bar)."""
+    max_velocity: Annotated[float | None, tyro.conf.arg(metavar="RAD_S")] = None
+    """Command speed bound [rad/s] of both modes: --excitation.max-velocity and --excitation.joint-max-velocity at
+    once."""
+    recording: Annotated[CollectConfig, FLAT] = field(default_factory=CollectConfig)
+    """What is recorded."""
+    logs: Annotated[tuple[str, ...] | None, tyro.conf.arg(metavar="LOG")] = None
+    """Import these real logs instead of simulating: .csv/.npz files, SAGE run folders, LeRobot dataset folders (one
+    trajectory per episode) or folders of runs (docs/dataset.md)."""
+    map: Annotated[str | None, tyro.conf.arg(metavar="TOML")] = None
+    """Logs: mapping file (log joint -> robot joint, units, excluded joints)."""
+    lerobot_units: Literal["degrees", "range"] | None = None
+    """Logs: LeRobot datasets of an SO-100/SO-101 follower read without --map: the arm joints were recorded in
+    degrees (--robot.use_degrees=true) or in -100..100 range units (false) (None: the robot type's LeRobot default:
+    so_follower degrees, so100_follower and so101_follower range)."""
+    lerobot_calibration: Annotated[str | None, tyro.conf.arg(metavar="JSON")] = None
+    """Logs: the follower's calibration file (~/.cache/huggingface/lerobot/calibration/robots/<robot_type>/<id>.json):
+    converts range units to radians."""
+    split: Split | None = None
+    """Logs: split of every run no --assign/--split-map pattern or fraction assigns (None: heldout; train when any
+    of those is given)."""
+    assign: Annotated[tuple[str, ...], tyro.conf.UseAppendAction, tyro.conf.arg(metavar="PATTERN=SPLIT")] = ()
+    """Logs: runs whose name matches the fnmatch PATTERN go to SPLIT (repeatable; first match wins)."""
+    split_map: Annotated[str | None, tyro.conf.arg(metavar="TOML")] = None
+    """Logs: file of '"PATTERN" = "SPLIT"' lines, tried after --assign."""
+    validation_fraction: float = 0.0
+    """Logs: this fraction of the unassigned runs goes to validation (whole runs, deterministic)."""
+    heldout_fraction: float = 0.0
+    """Logs: this fraction of the unassigned runs goes to heldout (whole runs, deterministic)."""
+
+    def __post_init__(self) -> None:
+        ex = self.recording.excitation
+        if ex.frames != SOLES:
+            if ex.mode == "joint":
+                raise WresdynError("--excitation.frames sets the IK targets of the foot excitation; it has no use "
+                                   "with --excitation.mode joint")
+            if not ex.frames:
+                raise WresdynError("--excitation.frames names no frame")
+        if self.max_velocity is not None and not self.max_velocity > 0:
+            raise WresdynError(f"--max-velocity must be > 0, not {self.max_velocity}")
+
+    @property
+    def config(self) -> CollectConfig:
+        """What is recorded: frames of their own without a mode select the foot mode, ``--max-velocity`` bounds
+        both modes."""
+        ex = self.recording.excitation
+        given = {}
+        if ex.frames != SOLES and ex.mode == "auto":
+            given["mode"] = "foot"
+        if self.max_velocity is not None:
+            given["max_velocity"] = given["joint_max_velocity"] = self.max_velocity
+        return replace(self.recording, excitation=replace(ex, **given)) if given else self.recording
 
 
-def config_from_args(args: argparse.Namespace) -> CollectConfig:
-    """The default :class:`CollectConfig` with the flags given applied: frames without a mode select the foot mode,
-    ``--max-velocity`` bounds both modes."""
-    from . import UserError
-
-    given = given_fields(args)
-    frames = given.get("excitation.frames")
-    if frames is not None:
-        if given.get("excitation.mode") == "joint":
-            raise UserError("--frames sets the IK targets of the foot excitation; it has no use with "
-                            "--excitation joint")
-        if not frames:
-            raise UserError("--frames names no frame")
-        if given.get("excitation.mode", "auto") == "auto":
-            given["excitation.mode"] = "foot"
-    if args.max_velocity is not None:
-        if not args.max_velocity > 0:
-            raise UserError(f"--max-velocity must be > 0, not {args.max_velocity}")
-        given["excitation.max_velocity"] = given["excitation.joint_max_velocity"] = args.max_velocity
-    return build_config(CollectConfig(), given)
+COMMAND = Collect
 
 
-def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: Path, log) -> int:
+def _import_logs(args: Collect, rate: float, robot, out: Path, path: Path, log) -> int:
     """``--logs``: read every run, assign splits, report the sampling of each log and the PD-only gap, and only
     then write the dataset (an error anywhere leaves nothing behind)."""
     from ..data.importers import SplitRule, import_runs, load_split_map, parse_assign
     from ..data.lerobot import LeRobotUnits
     from ..data.logs import LogMap
 
-    if not args.no_gap:
+    if args.gap:
         robot.check_gains()  # only the PD-only replay needs gains: --no-gap imports onto a robot without them
     log_map = LogMap.load(args.map) if args.map else None
     patterns = [parse_assign(a) for a in args.assign] + (load_split_map(args.split_map) if args.split_map else [])
@@ -161,7 +176,7 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
                      args.heldout_fraction)
     lerobot = (LeRobotUnits.load(args.lerobot_calibration, args.lerobot_units)
                if args.lerobot_calibration or args.lerobot_units else None)
-    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=not args.no_tau, lerobot=lerobot)
+    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=args.tau, lerobot=lerobot)
     for p in rule.unused([tr.name for tr in ds.trajectories]):
         log(f"note: split pattern {p!r} matches no run")
     log(f"imported {len(ds.trajectories)} run(s) onto {rate:g} Hz:")
@@ -180,7 +195,7 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
     log(f"telemetry checks (docs/logs.md): {len(findings)} warning(s)" + (":" if findings else ""))
     for f in findings:
         log(f"warning: {f['message']}")
-    if not args.no_gap:
+    if args.gap:
         ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, rate, "run(s)", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)
@@ -191,14 +206,14 @@ def _import_logs(args: argparse.Namespace, rate: float, robot, out: Path, path: 
     return 0
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: Collect) -> int:
     from ..robot.description import DEFAULT_ROBOT, load_robot
     from . import UserError
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: --out must be a folder")
-    cfg = config_from_args(args)
+    cfg = args.config
     robot = load_robot(args.robot or DEFAULT_ROBOT, gains=args.gains)
     path = out / "dataset.npz"
     from ..progress import Log
@@ -220,8 +235,8 @@ def run(args: argparse.Namespace) -> int:
         f"{cfg.rate:g} Hz on {robot.source.name} with mismatch "
         f"{'none (nominal)' if mismatch.is_nominal() else args.mismatch}, seed {cfg.seed}")
     ds = collect(robot, mismatch, cfg.counts, cfg.duration, cfg.rate, cfg.seed, cfg.excitation,
-                 store_tau=not args.no_tau, progress=log, probe=cfg.probe_saturation, probe_config=cfg.probe)
-    if not args.no_gap:
+                 store_tau=args.tau, progress=log, probe=cfg.probe_saturation, probe_config=cfg.probe)
+    if args.gap:
         ds.meta["pd_only_gap"] = _pd_gaps(ds, robot, cfg.rate, "trajectories", log)
     out.mkdir(parents=True, exist_ok=True)
     ds.save(path)

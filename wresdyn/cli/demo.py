@@ -3,20 +3,31 @@
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
+
+from .command import Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
-    p.add_argument("--collect", action="store_true", help="record a fresh small dataset instead of the shipped one")
-    p.add_argument("--ppo-iterations", type=int, default=300,
-                   help="PPO iterations of the residual (0.3-0.5 s each on 2 CPU cores)")
-    p.add_argument("--skill-iterations", type=int, default=200,
-                   help="PPO iterations of the skill in the nominal simulator, and of each fine-tuning")
-    p.add_argument("--quick", action="store_true", help="tiny sizes: a smoke run of a minute")
+@dataclass(frozen=True)
+class Demo(Command):
+    """``wresdyn demo``: where, and how long."""
+
+    out: str = "runs/demo"
+    """Output folder."""
+    collect: bool = False
+    """Record a fresh small dataset instead of the shipped one."""
+    ppo_iterations: int = 300
+    """PPO iterations of the residual (0.3-0.5 s each on 2 CPU cores)."""
+    skill_iterations: int = 200
+    """PPO iterations of the skill in the nominal simulator, and of each fine-tuning."""
+    quick: bool = False
+    """Tiny sizes: a smoke run of a minute."""
 
 
-def run(args: argparse.Namespace) -> int:
+COMMAND = Demo
+
+
+def run(args: Demo) -> int:
     from ..experiments.demo_pipeline import run_demo
 
     run_demo(args.out, collect=args.collect, ppo_iterations=args.ppo_iterations,

@@ -14,98 +14,103 @@ The sizes are ``DeployConfig`` (``FloorDeployConfig`` with ``--floor``), the tas
 
 from __future__ import annotations
 
-import argparse
-from dataclasses import fields
+from dataclasses import dataclass, field
+from typing import Annotated
+
+import tyro
 
 from ..experiments.deploy_config import DeployConfig, FloorDeployConfig
+from ..paths import DEFAULT_DATASET
 from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
-from .config_flags import add_config_flags, build_config, given_fields
+from .command import FLAT, Command, CommandLineError, list_flags
 
 PPO_FROM_SIZES = ("num_envs", "iterations", "restart_std", "seed", "device")
 """Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``envs``/``oracle_envs``, ``iterations``/
 ``finetune``, ``finetune_std``, ``seed``, ``device``): no ``--ppo.*`` flag of their own."""
 
-_STAND, _FLOOR = {f.name for f in fields(SkillConfig)}, {f.name for f in fields(FloorTaskConfig)}
-STAND_ONLY = tuple(f.name for f in fields(SkillConfig) if f.name not in _FLOOR)
-"""Fields of the task on the stand that the task on the floor lacks."""
-FLOOR_ONLY = tuple(f.name for f in fields(FloorTaskConfig) if f.name not in _STAND)
-"""Fields of the task on the floor that the task on the stand lacks."""
+
+@dataclass(frozen=True)
+class Deploy(Command):
+    """``wresdyn deploy``: the corrections' dataset, where the benchmark goes, its sizes (:class:`DeployConfig`, its
+    fields as flags), the tracking task (``--task.*``, :class:`SkillConfig`) and the PPO of every policy
+    (``--ppo.*``, :class:`SkillPPOConfig`: worlds, iterations, restart noise, seed and device come from the
+    sizes)."""
+
+    data: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="DATA")] = str(DEFAULT_DATASET)
+    """Dataset the corrections are fitted on; its mismatch is the real robot (default: the shipped one)."""
+    out: str = "runs/deploy"
+    """Output folder; rerun to resume."""
+    calibrated: Annotated[str | None, tyro.conf.arg(metavar="RUN")] = None
+    """The calibrated robot: a hybrid `wresdyn fit` run (None: fitted into OUT/calibrated)."""
+    delta: Annotated[str | None, tyro.conf.arg(metavar="RUN")] = None
+    """A delta-action `wresdyn fit --model network --residual.kind delta_action` run (None: fitted into
+    OUT/delta_action)."""
+    mismatch: str | None = None
+    """Real robot's mismatch (TOML; None: the dataset's)."""
+    floor: bool = False
+    """Skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, kick, wave;
+    stepping held out), corrections still fitted on the stand (see wresdyn.experiments.floor_skills); the sizes
+    and the task are then FloorDeployConfig's and FloorTaskConfig's (wresdyn deploy --floor --help)."""
+    full: bool = False
+    """The full size, for a GPU (DeployConfig.full, FloorDeployConfig.full; the sizes given still apply)."""
+    animation: bool = True
+    """Write the USD animation."""
+    quiet: bool = False
+    """Print nothing while deploying (OUT/deploy.log keeps every line; no progress bars)."""
+    sizes: Annotated[DeployConfig, FLAT] = field(default_factory=DeployConfig)
+    """The benchmark's sizes."""
+    task: SkillConfig = field(default_factory=SkillConfig)
+    """The tracking task."""
+    ppo: SkillPPOConfig = field(default_factory=SkillPPOConfig)
+    """PPO of every policy."""
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..paths import DEFAULT_DATASET
+@dataclass(frozen=True)
+class FloorDeploy(Deploy):
+    """``wresdyn deploy --floor``: as :class:`Deploy`, with the sizes and the task of the skills on the floor."""
 
-    p.add_argument("data", nargs="?", default=str(DEFAULT_DATASET),
-                   help="dataset the corrections are fitted on; its mismatch is the real robot (default: the shipped one)")
-    p.add_argument("--out", default="runs/deploy", help="output folder; rerun to resume (default: runs/deploy)")
-    p.add_argument("--calibrated", default=None, metavar="RUN",
-                   help="the calibrated robot: a hybrid `wresdyn fit` run (default: fitted into OUT/calibrated)")
-    p.add_argument("--delta", default=None, metavar="RUN",
-                   help="a delta-action `wresdyn fit --model network --residual delta_action` run "
-                        "(default: fitted into OUT/delta_action)")
-    p.add_argument("--mismatch", default=None, help="real robot's mismatch (TOML; default: the dataset's)")
-    p.add_argument("--floor", action="store_true",
-                   help="skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, "
-                        "kick, wave; stepping held out), corrections still fitted on the stand (see "
-                        "wresdyn.experiments.floor_skills)")
-    p.add_argument("--full", action="store_true",
-                   help="the full size, for a GPU (DeployConfig.full, FloorDeployConfig.full; the options below "
-                        "still apply)")
-    p.add_argument("--no-animation", action="store_true", help="skip the USD animation")
-    p.add_argument("--quiet", action="store_true",
-                   help="print nothing while deploying (OUT/deploy.log keeps every line; no progress bars)")
-    sizes = dict(aliases={"train_per_family": ("--motions",), "heldout_per_family": ("--heldout",)},
-                 variants={"--floor": FloorDeployConfig(), "--full": DeployConfig.full(),
-                           "--floor --full": FloorDeployConfig.full()})
-    add_config_flags(p, DeployConfig(), **sizes,
-                     title="sizes (wresdyn.experiments.deploy_config.DeployConfig, FloorDeployConfig with --floor)")
-    add_config_flags(p, FloorDeployConfig(), skip=[f.name for f in fields(DeployConfig)],
-                     title="on the floor (--floor)")
-    add_config_flags(p, SkillConfig(), prefix="task.", skip=STAND_ONLY, variants={"--floor": FloorTaskConfig()},
-                     title="the tracking task (wresdyn.skills.skill_config.SkillConfig, FloorTaskConfig with --floor)")
-    shared = [f.name for f in fields(SkillConfig) if f.name in _FLOOR]
-    add_config_flags(p, SkillConfig(), prefix="task.", skip=shared, title="the task on the stand only (without --floor)")
-    add_config_flags(p, FloorTaskConfig(), prefix="task.", skip=shared, title="the task on the floor only (--floor)")
-    add_config_flags(p, SkillPPOConfig(), prefix="ppo.", skip=PPO_FROM_SIZES,
-                     title="PPO of every policy (wresdyn.skills.skill_config.SkillPPOConfig; worlds, iterations, "
-                           "restart noise, seed and device come from the sizes above)")
+    sizes: Annotated[FloorDeployConfig, FLAT] = field(default_factory=FloorDeployConfig)
+    """The benchmark's sizes."""
+    task: FloorTaskConfig = field(default_factory=FloorTaskConfig)
+    """The tracking task."""
 
 
-def config_from_args(args: argparse.Namespace) -> DeployConfig | FloorDeployConfig:
-    """The sizes of ``--floor`` and ``--full`` with the flags given applied."""
-    from . import UserError
-
-    given = given_fields(args)
-    stand = {f.name for f in fields(DeployConfig)}
-    for name in (f.name for f in fields(FloorDeployConfig) if f.name not in stand and f.name in given):
-        if not args.floor:
-            raise UserError(f"--{name.replace('_', '-')} sets the benchmark on the floor; it needs --floor")
-    cls = FloorDeployConfig if args.floor else DeployConfig
-    return build_config(cls.full() if args.full else cls(), given)
+COMMAND = Deploy
+VARIANTS = (Deploy, FloorDeploy)
+"""Every class the command line may be read as (deprecated spellings are rewritten against all of them)."""
+VARIANT_FLAGS = ("--floor",)
+"""The flags that pick a variant (the CLI reference shows each one's help too)."""
+HIDDEN = {SkillPPOConfig: PPO_FROM_SIZES}
+"""Config fields without a flag of their own (the benchmark sets them from the sizes)."""
 
 
-def skill_configs_from_args(args: argparse.Namespace) -> tuple[SkillConfig | FloorTaskConfig, SkillPPOConfig]:
-    """The task (:class:`SkillConfig`, :class:`FloorTaskConfig` with ``--floor``) and the PPO of the skills, with the
-    ``--task.*`` and ``--ppo.*`` flags given applied."""
-    from . import UserError
-
-    task = given_fields(args, "task.")
-    other, where = (STAND_ONLY, "on the stand; it has no use with --floor") if args.floor else \
-        (FLOOR_ONLY, "on the floor; it needs --floor")
-    for name in (n for n in other if n in task):
-        raise UserError(f"--task.{name.replace('_', '-')} sets the task {where}")
-    return (build_config(FloorTaskConfig() if args.floor else SkillConfig(), task),
-            build_config(SkillPPOConfig(), given_fields(args, "ppo.")))
+def _last(argv: list[str], name: str) -> bool:
+    """Whether the switch ``--name`` is on in ``argv`` (the last of ``--name`` and ``--no-name`` wins)."""
+    seen = [a for a in argv if a in (f"--{name}", f"--no-{name}")]
+    return bool(seen) and seen[-1] == f"--{name}"
 
 
-def run(args: argparse.Namespace) -> int:
+def prepare(argv: list[str]):
+    """``(class, default)`` of a deploy command line: ``--floor`` picks :class:`FloorDeploy`, ``--full``
+    starts from the full sizes; a flag of the other setting is refused in one line."""
+    floor, full = _last(argv, "floor"), _last(argv, "full")
+    cls, other = (FloorDeploy, Deploy) if floor else (Deploy, FloorDeploy)
+    own, theirs = list_flags(cls, HIDDEN), list_flags(other, HIDDEN)
+    for flag in (a.partition("=")[0] for a in argv if a.startswith("--")):
+        if flag not in own and (flag in theirs or flag.replace("--no-", "--", 1) in theirs):
+            raise CommandLineError(f"{flag} sets the skills on the floor; it needs --floor" if not floor else
+                                   f"{flag} sets the skills on the stand; it has no use with --floor")
+    sizes = type(cls().sizes)
+    return cls, cls(floor=floor, full=full, sizes=sizes.full() if full else sizes())
+
+
+def run(args: Deploy) -> int:
     from pathlib import Path
 
     from ..data.loading import load_data
     from ..data.mismatch import Mismatch
 
-    cfg = config_from_args(args)
-    task, ppo = skill_configs_from_args(args)
+    cfg, task, ppo = args.sizes, args.task, args.ppo
     if args.floor:
         from ..experiments.floor_skills import run_floor_benchmark as bench
     else:
@@ -123,5 +128,5 @@ def run(args: argparse.Namespace) -> int:
     variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
-          mismatch=mismatch, task=task, ppo=ppo, animation=not args.no_animation, log=log)
+          mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, log=log)
     return 0

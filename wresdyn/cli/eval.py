@@ -6,29 +6,45 @@ with ``--compare`` runs overlaid) into ``RUN/eval`` (or ``--out``).
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
+from typing import Annotated
 
-from ..choices import SolverKind, choices
+import tyro
 
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", help="run folder written by `wresdyn train`")
-    p.add_argument("--data", default=None, help="dataset file (default: the one the run was trained on)")
-    p.add_argument("--robot", default=None, help="robot file (default: the dataset's)")
-    p.add_argument("--gains", default=None,
-                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
-    p.add_argument("--splits", nargs="+", default=["validation", "heldout", "ood"],
-                   help="splits to evaluate (default: validation heldout ood; absent splits are skipped)")
-    p.add_argument("--out", default=None, help="output folder (default: RUN/eval)")
-    p.add_argument("--solver", choices=choices(SolverKind), default=None,
-                   help="Newton solver (default: the one the run was trained with)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda:0")
-    p.add_argument("--joints", type=int, default=6, help="joints in the Fig. 3 plot (largest PD-only error first)")
-    p.add_argument("--compare", nargs="*", default=[], metavar="RUN", help="other runs to overlay in the learning curves")
+from ..choices import SolverKind
+from .command import Command
 
 
+@dataclass(frozen=True)
+class Eval(Command):
+    """``wresdyn eval``: the run, its data and what to replay."""
 
-def run(args: argparse.Namespace) -> int:
+    run: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
+    """Run folder written by `wresdyn train` (or fit, identify)."""
+    data: str | None = None
+    """Dataset file (default: the one the run was trained on)."""
+    robot: str | None = None
+    """Robot file (default: the dataset's)."""
+    gains: str | None = None
+    """Gains config (TOML) by joint-name pattern; replaces the one stored in the dataset."""
+    splits: tuple[str, ...] = ("validation", "heldout", "ood")
+    """Splits to evaluate (absent splits are skipped)."""
+    out: str | None = None
+    """Output folder (default: RUN/eval)."""
+    solver: SolverKind | None = None
+    """Newton solver (default: the one the run was trained with)."""
+    device: str = "cpu"
+    """cpu or cuda:0."""
+    joints: int = 6
+    """Joints in the Fig. 3 plot (largest PD-only error first)."""
+    compare: tuple[str, ...] = ()
+    """Other runs to overlay in the learning curves."""
+
+
+COMMAND = Eval
+
+
+def run(args: Eval) -> int:
     import json
     from pathlib import Path
 
@@ -43,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     if not data:
         raise UserError(f"{args.run}: the run does not record its dataset; pass --data")
     ds, robot = load_data(data, args.robot, args.gains)
-    evaluate_run(args.run, ds, robot, args.splits, args.out, args.solver, args.device, args.joints, args.compare,
+    evaluate_run(args.run, ds, robot, list(args.splits), args.out, args.solver, args.device, args.joints,
+                 list(args.compare),
                  data_label=str(data))
     return 0

@@ -7,21 +7,36 @@ path as ``newton.actuators`` prims and the residual network), ``residual.pt2``/`
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
+from typing import Annotated
+
+import tyro
+
+from .command import Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", help="run folder written by `wresdyn fit` (the hybrid: identified physics + residual)")
-    p.add_argument("--out", default=None, help="output folder (default: RUN/export)")
-    p.add_argument("--force", action="store_true", help="replace an existing output folder")
-    p.add_argument("--physics-only", action="store_true",
-                   help="export the run's physics without a residual (e.g. a `wresdyn identify` run)")
-    p.add_argument("--data", default=None, help="dataset file (default: the one the run was trained on)")
-    p.add_argument("--gains", default=None,
-                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
+@dataclass(frozen=True)
+class Export(Command):
+    """``wresdyn export``: the run and where its calibrated robot goes."""
+
+    run: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
+    """Run folder written by `wresdyn fit` (the hybrid: identified physics + residual)."""
+    out: str | None = None
+    """Output folder (default: RUN/export)."""
+    force: bool = False
+    """Replace an existing output folder."""
+    physics_only: bool = False
+    """Export the run's physics without a residual (e.g. a `wresdyn identify` run)."""
+    data: str | None = None
+    """Dataset file (default: the one the run was trained on)."""
+    gains: str | None = None
+    """Gains config (TOML) by joint-name pattern; replaces the one stored in the dataset."""
 
 
-def run(args: argparse.Namespace) -> int:
+COMMAND = Export
+
+
+def run(args: Export) -> int:
     from ..export.usd import export_run
 
     out = export_run(args.run, args.out, force=args.force, physics_only=args.physics_only, data=args.data,

@@ -15,67 +15,74 @@ physics (the residual alone, nothing identified). ``--model parametric`` fits th
 
 from __future__ import annotations
 
-import argparse
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
+from typing import Annotated
 
-from ..choices import FitModel, choices
+import tyro
+
+from ..choices import FitModel
 from ..fit.gradfit_config import GradFitConfig
 from ..identify.sysid_config import SysIdConfig
-from .config_flags import add_config_flags, build_config, given_fields
-
-FIT_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
-               "horizon_curriculum": ("--curriculum",)}
-"""The short spellings of the gradient fit's flags, as in earlier releases."""
+from .command import FLAT, Command
 
 IDENTIFY_SHARED = ("device", "seed", "solver", "friction_kappa")
 """Fields of the hybrid's identification (``--identify.*``) that are the fit's own: both stages run alike."""
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
-    p.add_argument("--out", default="runs/fit", help="run folder; an existing checkpoint is resumed (default: runs/fit)")
-    p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
-    p.add_argument("--gains", default=None,
-                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
-    p.add_argument("--model", choices=choices(FitModel), default="hybrid",
-                   help="hybrid: identified physics + residual network (default); network: the residual alone; "
-                        "parametric: the residual-torque baseline")
-    p.add_argument("--eval", action="store_true",
-                   help="evaluate held-out and OOD afterwards, on the fit's device (like `wresdyn eval`)")
-    p.add_argument("--quiet", action="store_true",
-                   help="print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)")
-    add_config_flags(p, GradFitConfig(), skip=("model",), aliases=FIT_ALIASES,
-                     title="gradient fit (wresdyn.fit.gradfit_config.GradFitConfig; --horizon-curriculum "
-                           "without --horizon also sets the horizon to its last length)")
-    add_config_flags(p, SysIdConfig(), prefix="identify.", skip=IDENTIFY_SHARED,
-                     aliases={"iterations": ("--identify-iterations",), "gain_grid": ("--gain-grid",),
-                              "refine": ("--refine",)},
-                     title="the hybrid's identification (wresdyn.identify.sysid_config.SysIdConfig, as `wresdyn "
-                           "identify`; device, seed, solver and friction law are the fit's, --windows too unless "
-                           "--identify.windows is given)")
+@dataclass(frozen=True)
+class Fit(Command):
+    """``wresdyn fit``: the dataset, the run folder, the model, the gradient fit's config (its fields as flags at
+    the top, ``--horizon-curriculum``) and the hybrid's identification (``--identify.*``, as ``wresdyn identify``;
+    device, seed, solver and friction law are the fit's, ``--windows`` too unless ``--identify.windows`` is
+    given)."""
+
+    data: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="DATA")]
+    """Dataset file (.npz from `wresdyn collect`)."""
+    out: str = "runs/fit"
+    """Run folder; an existing checkpoint is resumed."""
+    robot: str | None = None
+    """Robot file (default: the one the dataset was recorded on)."""
+    gains: str | None = None
+    """Gains config (TOML) by joint-name pattern; replaces the one stored in the dataset."""
+    model: FitModel = "hybrid"
+    """hybrid: identified physics + residual network; network: the residual alone; parametric: the residual-torque
+    baseline."""
+    eval: bool = False
+    """Evaluate held-out and OOD afterwards, on the fit's device (like `wresdyn eval`)."""
+    quiet: bool = False
+    """Print nothing while fitting (OUT/fit.log keeps every line; the progress bar is not drawn)."""
+    fit: Annotated[GradFitConfig, FLAT] = field(default_factory=GradFitConfig)
+    """The gradient fit (a --horizon-curriculum without --horizon also sets the horizon to its last length)."""
+    identify: SysIdConfig = field(default_factory=SysIdConfig)
+    """The hybrid's identification."""
+
+    @property
+    def config(self) -> GradFitConfig:
+        """The gradient fit's config: ``--model``'s (hybrid and network: a network), the horizon the curriculum's
+        last length when left at its default."""
+        cfg = self.fit
+        given = {"model": "parametric" if self.model == "parametric" else "network"}
+        if cfg.horizon_curriculum and cfg.horizon == GradFitConfig.horizon:
+            given["horizon"] = cfg.horizon_curriculum[-1]
+        return replace(cfg, **given)
+
+    @property
+    def identify_config(self) -> SysIdConfig:
+        """The hybrid's identification on the fit's device, seed, solver and friction law, and the fit's windows
+        unless ``--identify.windows`` is set."""
+        cfg = self.fit
+        given = {name: getattr(cfg, name) for name in IDENTIFY_SHARED}
+        if self.identify.windows == SysIdConfig.windows:
+            given["windows"] = cfg.windows
+        return replace(self.identify, **given)
 
 
-def config_from_args(args: argparse.Namespace) -> GradFitConfig:
-    """The :class:`~wresdyn.fit.gradfit_config.GradFitConfig` of ``--model`` with the flags given applied."""
-    given = given_fields(args)
-    curriculum = given.get("horizon_curriculum")
-    if curriculum and "horizon" not in given:
-        given["horizon"] = curriculum[-1]
-    given["model"] = "parametric" if args.model == "parametric" else "network"
-    return build_config(GradFitConfig(), given)
+COMMAND = Fit
+HIDDEN = {GradFitConfig: ("model",), SysIdConfig: IDENTIFY_SHARED}
+"""Config fields without a flag of their own (the command sets them)."""
 
 
-def identify_config_from_args(args: argparse.Namespace, cfg: GradFitConfig) -> SysIdConfig:
-    """The hybrid's identification: :class:`~wresdyn.identify.sysid_config.SysIdConfig` with the ``--identify.*``
-    flags given, on the fit's device, seed, solver and friction law (and ``--windows`` unless ``--identify.windows``
-    is given)."""
-    given = {name: getattr(cfg, name) for name in IDENTIFY_SHARED} | given_fields(args, "identify.")
-    if "windows" in given_fields(args):
-        given.setdefault("windows", cfg.windows)
-    return build_config(SysIdConfig(), given)
-
-
-def run(args: argparse.Namespace) -> int:
+def run(args: Fit) -> int:
     import json
     from dataclasses import asdict
     from pathlib import Path
@@ -86,9 +93,9 @@ def run(args: argparse.Namespace) -> int:
     from ..fit.gradfit import export_run, fit
     from . import UserError
 
-    cfg = config_from_args(args)
+    cfg = args.config
     identify_first = args.model == "hybrid" and not cfg.physics
-    sysid = identify_config_from_args(args, cfg) if identify_first else None
+    sysid = args.identify_config if identify_first else None
     ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
     what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"

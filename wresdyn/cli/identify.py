@@ -13,30 +13,39 @@ then learns a residual on top (the hybrid model).
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field
+from typing import Annotated
+
+import tyro
 
 from ..identify.sysid_config import SysIdConfig
-from .config_flags import add_config_flags, build_config, given_fields
+from .command import FLAT, Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("data", help="dataset file (.npz from `wresdyn collect`)")
-    p.add_argument("--out", default="runs/identify", help="run folder (default: runs/identify)")
-    p.add_argument("--robot", default=None, help="robot file (default: the one the dataset was recorded on)")
-    p.add_argument("--gains", default=None,
-                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
-    p.add_argument("--eval", action="store_true", help="replay every split with the identified model and report")
-    p.add_argument("--quiet", action="store_true",
-                   help="print nothing while identifying (OUT/identify.log keeps every line; no progress bar)")
-    add_config_flags(p, SysIdConfig(), title="identification (wresdyn.identify.sysid_config.SysIdConfig)")
+@dataclass(frozen=True)
+class Identify(Command):
+    """``wresdyn identify``: the dataset, the run folder and the identification's config (its fields as flags)."""
+
+    data: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="DATA")]
+    """Dataset file (.npz from `wresdyn collect`)."""
+    out: str = "runs/identify"
+    """Run folder."""
+    robot: str | None = None
+    """Robot file (default: the one the dataset was recorded on)."""
+    gains: str | None = None
+    """Gains config (TOML) by joint-name pattern; replaces the one stored in the dataset."""
+    eval: bool = False
+    """Replay every split with the identified model and report."""
+    quiet: bool = False
+    """Print nothing while identifying (OUT/identify.log keeps every line; no progress bar)."""
+    config: Annotated[SysIdConfig, FLAT] = field(default_factory=SysIdConfig)
+    """The identification."""
 
 
-def config_from_args(args: argparse.Namespace) -> SysIdConfig:
-    """The default :class:`~wresdyn.identify.sysid_config.SysIdConfig` with the flags given applied."""
-    return build_config(SysIdConfig(), given_fields(args))
+COMMAND = Identify
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: Identify) -> int:
     from pathlib import Path
 
     from ..data.loading import load_data
@@ -44,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from ..identify.sysid import identify
     from . import UserError
 
-    cfg = config_from_args(args)
+    cfg = args.config
     ds, robot = load_data(args.data, args.robot, args.gains)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

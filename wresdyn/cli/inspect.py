@@ -7,21 +7,37 @@ listed with a warning line too; the PD check is skipped, as it has nothing to dr
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
+from typing import Annotated
 
-from ..choices import SolverKind, choices
+import tyro
 
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("robot", nargs="?", default=None, help="robot file: .usd/.usda/.usdc, .urdf or .xml (default: scenes/humanoid.usda)")
-    p.add_argument("--gains", default=None, help="TOML file of PD gains and joint parameters by joint-name pattern")
-    p.add_argument("--floating", action="store_true", help="load with a floating base (default: fixed, on a stand)")
-    p.add_argument("--seconds", type=float, default=1.0, help="length of the PD replay check [s]")
-    p.add_argument("--dt", type=float, default=0.002, help="time step [s]")
-    p.add_argument("--solver", choices=choices(SolverKind), default="auto", help="Newton solver (default: auto)")
+from ..choices import SolverKind
+from .command import Command
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class Inspect(Command):
+    """``wresdyn inspect``: the robot file and the PD replay check."""
+
+    robot: Annotated[str | None, tyro.conf.Positional, tyro.conf.arg(metavar="ROBOT")] = None
+    """Robot file: .usd/.usda/.usdc, .urdf or .xml (default: scenes/humanoid.usda)."""
+    gains: str | None = None
+    """TOML file of PD gains and joint parameters by joint-name pattern."""
+    floating: bool = False
+    """Load with a floating base (default: fixed, on a stand)."""
+    seconds: float = 1.0
+    """Length of the PD replay check [s]."""
+    dt: float = 0.002
+    """Time step [s]."""
+    solver: SolverKind = "auto"
+    """Newton solver."""
+
+
+COMMAND = Inspect
+
+
+def run(args: Inspect) -> int:
     from ..robot.description import DEFAULT_ROBOT, load_robot
     from ..sim.parity import joint_table, pd_agreement
 

@@ -8,27 +8,47 @@ others'); a dataset of real logs gets its last K training trajectories moved to 
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
+from typing import Annotated
+
+import tyro
+
+from .command import Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("data", help="schema-1 dataset file (.npz)")
-    p.add_argument("--out", required=True, help="the schema-2 file to write")
-    p.add_argument("--validation", type=int, default=0,
-                   help="validation trajectories: recorded on the simulated real robot, or moved from the end of "
-                        "train for real logs (default: 0)")
-    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    p.add_argument("--robot", default=None, help="robot file to record on (default: the dataset's)")
-    p.add_argument("--gains", default=None,
-                   help="gains config (TOML) by joint-name pattern; replaces the one stored in the dataset")
-    p.add_argument("--no-gap", action="store_true", help="skip the PD-only Newton replay of the new validation split")
+@dataclass(frozen=True)
+class Migrate(Command):
+    """``wresdyn migrate``: the old file, the new one, and the validation split to add."""
+
+    data: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="DATA")]
+    """Schema-1 dataset file (.npz)."""
+    out: str
+    """The schema-2 file to write."""
+    validation: int = 0
+    """Validation trajectories: recorded on the simulated real robot, or moved from the end of train for real
+    logs."""
+    force: bool = False
+    """Overwrite --out if it exists."""
+    robot: str | None = None
+    """Robot file to record on (default: the dataset's)."""
+    gains: str | None = None
+    """Gains config (TOML) by joint-name pattern; replaces the one stored in the dataset."""
+    gap: bool = True
+    """Replay the new validation split PD-only in Newton and store its gap (--no-gap skips it)."""
+
+    def __post_init__(self) -> None:
+        if self.validation < 0:
+            raise ValueError(f"--validation must be >= 0, not {self.validation}")
+
+
+COMMAND = Migrate
 
 
 def _say(line: str) -> None:
     print(line, flush=True)
 
 
-def run(args: argparse.Namespace) -> int:
+def run(args: Migrate) -> int:
     from pathlib import Path
 
     from ..data.dataset import SCHEMA_VERSION, SPLITS, read_header
@@ -41,8 +61,6 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{out}: --out is a folder; give the file to write")
     if out.exists() and not args.force:
         raise UserError(f"{out}: exists; pass --force to overwrite it")
-    if args.validation < 0:
-        raise UserError(f"--validation must be >= 0, not {args.validation}")
     robot = None
     if args.validation and (args.robot or args.gains):
         header = read_header(args.data)
@@ -56,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         _say(f"not recorded by `wresdyn collect` on the simulated robot: moved the last {len(m.names)} training "
              f"trajectories to validation ({', '.join(m.names)}); {len(ds.split('train'))} stay in train")
     gaps = ds.meta.get("pd_only_gap")
-    if m.names and isinstance(gaps, dict) and not args.no_gap:
+    if m.names and isinstance(gaps, dict) and args.gap:
         from ..evaluation.open_loop import pd_gap
 
         robot = m.robot or dataset_robot(ds.robot_file, args.robot,

@@ -7,24 +7,40 @@ calibrated robot, with a time slider and joint plots; a ``wresdyn deploy`` folde
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass
+from typing import Annotated
+
+import tyro
+
+from .command import Command
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run", help="run folder (`wresdyn fit`, `train`, `identify`), `wresdyn deploy` folder, or a USD "
-                               "animation it wrote")
-    p.add_argument("--split", default="heldout", help="split of the run's dataset to play (default: heldout)")
-    p.add_argument("--index", type=int, default=0, help="trajectory of the split to play (default: 0, the first)")
-    p.add_argument("--data", default=None, help="dataset file (default: the one the run was trained on)")
-    p.add_argument("--host", default="127.0.0.1",
-                   help="address to serve on (default: 127.0.0.1, this machine only; 0.0.0.0 shares the page)")
-    p.add_argument("--port", type=int, default=8080, help="port to serve on (default: 8080, or the next free one)")
-    p.add_argument("--seconds", type=float, default=None,
-                   help="stop serving after this many seconds (default: serve until Ctrl-C)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda:0, for the replays")
+@dataclass(frozen=True)
+class View(Command):
+    """``wresdyn view``: what to play, and where to serve it."""
+
+    run: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
+    """Run folder (`wresdyn fit`, `train`, `identify`), `wresdyn deploy` folder, or a USD animation it wrote."""
+    split: str = "heldout"
+    """Split of the run's dataset to play."""
+    index: int = 0
+    """Trajectory of the split to play (0: the first)."""
+    data: str | None = None
+    """Dataset file (default: the one the run was trained on)."""
+    host: str = "127.0.0.1"
+    """Address to serve on (127.0.0.1: this machine only; 0.0.0.0 shares the page)."""
+    port: int = 8080
+    """Port to serve on (or the next free one)."""
+    seconds: float | None = None
+    """Stop serving after this many seconds (None: serve until Ctrl-C)."""
+    device: str = "cpu"
+    """cpu or cuda:0, for the replays."""
 
 
-def run(args: argparse.Namespace) -> int:
+COMMAND = View
+
+
+def run(args: View) -> int:
     from ..evaluation.viewer import ViewerConfig, load_scene, serve
 
     cfg = ViewerConfig(host=args.host, port=args.port, seconds=args.seconds)
