@@ -16,7 +16,7 @@ K mini-batches, ``+epK`` K epochs.
 - ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.learn.ppo.runner_cfg`, 24 steps per
   world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph.
 - ``skill``: policy (a) of the floor benchmark (``wresdyn deploy --floor --full``'s sizes: 16 training motions per
-  family of 4 s; :class:`~wresdyn.skills.floor_env.FloorTrackingEnv` on the nominal simulator with a floor,
+  family of 4 s; :class:`~wresdyn.skills.env.TrackingEnv` on the nominal simulator with a floor,
   :func:`wresdyn.skills.skill_ppo.runner_cfg` with the default :class:`~wresdyn.skills.skill_config.SkillPPOConfig`).
   An env-step is a policy step (``decimation`` physics steps).
 
@@ -95,8 +95,8 @@ def _skill(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path, 
     from wresdyn.experiments.deploy_config import FloorDeployConfig
     from wresdyn.learn.ppo_runner import make_runner, seed_processes
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.env import FloorTaskConfig, TrackingEnv
+    from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import sim_plant
     from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, runner_cfg
 
@@ -107,11 +107,11 @@ def _skill(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path, 
     if "train" not in motions_cache:
         floating = load_robot(robot.source, gains=robot.gains, base="floating")
         counts = {"train": per_family or full.train_per_family}
-        motions = make_floor_motions(robot, floating, counts, full.duration, rate, full.seed)
+        motions = make_motions(robot, counts, full.duration, rate, full.seed, floating=floating)
         motions_cache.update(train=motions["train"], floating=floating)
     n, dev = rank_share(envs, device)
     plant = sim_plant("nominal", motions_cache["floating"], n, rate, task.decimation, None, dev, ground=True)
-    env = FloorTrackingEnv(plant, motions_cache["train"], task, seed=full.seed + ranks.rank, device=dev)
+    env = TrackingEnv(plant, motions_cache["train"], task, seed=full.seed + ranks.rank, device=dev)
     return env, make_runner(env, runner_cfg(cfg, env.critic_groups), tmp, ranks.main), cfg.num_steps_per_env
 
 

@@ -36,7 +36,7 @@ def main() -> None:
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
     from wresdyn.skills.env import SkillConfig, TrackingEnv
-    from wresdyn.skills.evaluate import deploy_skill, metrics
+    from wresdyn.skills.evaluate import deploy, metrics
     from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
     from wresdyn.skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
@@ -62,7 +62,7 @@ def main() -> None:
     print(f"{'policy':14s} {'MPJPE [mrad]':>13s} {'foot [mm]':>10s} {'success':>8s}")
     for name in ("reference", "a_nominal", "b_calibrated"):
         policy = None if name == "reference" else load_skill(out / name)
-        m = metrics(deploy_skill(policy, RealPlant(real, len(held), task.decimation), held, task), robot)["mean"]
+        m = metrics(deploy(policy, RealPlant(real, len(held), task.decimation), held, task), robot)["mean"]
         print(f"{name:14s} {1e3 * m['mpjpe']:13.2f} {1e3 * m['foot_error']:10.2f} {100 * m['success']:7.0f}%")
 
 

@@ -177,17 +177,15 @@ def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_
     from types import SimpleNamespace
 
     import wresdyn.data.loading
-    import wresdyn.experiments.floor_skills
-    import wresdyn.experiments.stand_skills
+    import wresdyn.experiments.skills
     import wresdyn.sim.warmup
 
     robot = SimpleNamespace(source=Path("humanoid.usda"), n_dof=3)
     monkeypatch.setattr(wresdyn.data.loading, "load_data", lambda path: (SimpleNamespace(rate_hz=500.0), robot))
     monkeypatch.setattr(wresdyn.sim.warmup, "compile_kernels", lambda *a, **k: None)
     passed = []
-    module, name = ((wresdyn.experiments.floor_skills, "run_floor_benchmark") if floor
-                    else (wresdyn.experiments.stand_skills, "run_benchmark"))
-    monkeypatch.setattr(module, name, lambda robot, ds, out, cfg, **kw: passed.append((cfg, kw)))
+    monkeypatch.setattr(wresdyn.experiments.skills, "run_benchmark",
+                        lambda robot, ds, out, cfg, **kw: passed.append((cfg, kw)))
     head = ["deploy", "d.npz", "--out", str(tmp_path), "--quiet", "--envs", "8"] + (["--floor"] if floor else [])
     task_cls = FloorTaskConfig if floor else SkillConfig
     own = ["--task.sigma-base", "0.2"] if floor else ["--task.fail-error", "0.7"]

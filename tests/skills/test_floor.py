@@ -12,9 +12,11 @@ import pytest
 import torch
 
 from wresdyn.cli import main
-from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv, base_frame_imu
-from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
-from wresdyn.skills.floor_motions import FLOOR_HELD_OUT_FAMILIES, FLOOR_TRAIN_FAMILIES, make_floor_motions
+from wresdyn.skills.env import TrackingEnv
+from wresdyn.skills.evaluate import deploy, metrics
+from wresdyn.skills.motions import TASK_FAMILIES, make_motions
+from wresdyn.skills.reference import base_frame_imu
+from wresdyn.skills.skill_config import SkillTaskConfig
 from wresdyn.skills.plants import RealPlant, SimPlant
 
 RATE = 500.0
@@ -22,8 +24,8 @@ RATE = 500.0
 
 @pytest.fixture(scope="module")
 def motions(humanoid, floating):
-    return make_floor_motions(humanoid, floating, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0,
-                              rate_hz=RATE, seed=3)
+    return make_motions(humanoid, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0, rate_hz=RATE, seed=3,
+                        floating=floating)
 
 
 @pytest.fixture(scope="module")
@@ -65,8 +67,9 @@ def test_threaded_mujoco_worlds_step_as_newtons_one_world_solver(floating):
 def test_floor_motions_keep_planted_soles_still_and_the_weight_over_them(humanoid, floating, motions):
     from wresdyn.sim.kinematics import BodyPositions
 
-    assert [m.family for m in motions["train"]] == list(FLOOR_TRAIN_FAMILIES)
-    assert [m.family for m in motions["heldout"]] == list(FLOOR_TRAIN_FAMILIES + FLOOR_HELD_OUT_FAMILIES)
+    fam = TASK_FAMILIES["floor"]
+    assert [m.family for m in motions["train"]] == list(fam.train)
+    assert [m.family for m in motions["heldout"]] == list(fam.train + fam.held_out)
     fk = BodyPositions(floating, 1)
     feet = [list(floating.body_names).index(b) for b in ("left_foot", "right_foot")]
     lifted = 0
@@ -117,15 +120,15 @@ def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions
     """The actor's observation is 6n + 6 (joints, reference, action, IMU), the critic's adds 11 privileged values;
     the reference played open loop on the real robot's floor (ankles weaker than gravity's toppling torque) fails,
     and the metrics count it and stay finite."""
-    cfg = FloorTaskConfig(decimation=5)
+    cfg = SkillTaskConfig.floor(decimation=5)
     mot = motions["validation"]
-    env = FloorTrackingEnv(SimPlant(floating, 2, RATE, 5, ground=True), mot[:2], cfg)
+    env = TrackingEnv(SimPlant(floating, 2, RATE, 5, ground=True), mot[:2], cfg)
     obs = env.get_observations()
     assert obs["policy"].shape == (2, 6 * floating.n_dof + 6) and obs["critic"].shape == (2, 11)
     _, rew, _, extras = env.step(torch.zeros(2, floating.n_dof))
     assert torch.isfinite(rew).all() and "Reward/slip" in extras["log"]
-    dep = deploy_floor(None, RealPlant(quiet_real, len(mot), 5), mot, cfg)
-    res = floor_metrics(dep)
+    dep = deploy(None, RealPlant(quiet_real, len(mot), 5), mot, cfg)
+    res = metrics(dep)
     assert res["mean"]["failures"] >= 1 and res["mean"]["success"] < 1.0
     failed = [p for p in res["motions"] if not p["success"]]
     assert all(np.isfinite(p["mpjpe"]) and np.isfinite(p["g_mpjpe"]) for p in failed)

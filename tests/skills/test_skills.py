@@ -16,7 +16,9 @@ import torch
 
 from wresdyn.cli import main
 from wresdyn.skills.env import SkillConfig, TrackingEnv
-from wresdyn.skills.motions import HELD_OUT_FAMILIES, TRAIN_FAMILIES, make_motions, stance
+from wresdyn.skills.motions import TASK_FAMILIES, make_motions, stance
+
+STAND = TASK_FAMILIES["stand"]
 from wresdyn.skills.plants import RealPlant, SimPlant, sim_plant
 
 RATE = 500.0
@@ -38,8 +40,8 @@ def quiet_real(humanoid, shipped_mismatch):
 
 
 def test_motions_start_and_end_in_the_stance_inside_the_limits(humanoid, motions):
-    assert [m.family for m in motions.split("train")] == list(TRAIN_FAMILIES)
-    assert {m.family for m in motions.split("heldout")} == set(TRAIN_FAMILIES + HELD_OUT_FAMILIES)
+    assert [m.family for m in motions.split("train")] == list(STAND.train)
+    assert {m.family for m in motions.split("heldout")} == set(STAND.train + STAND.held_out)
     home = stance(humanoid)
     for m in sum(motions.splits.values(), []):
         assert m.q.shape == (int(0.4 * RATE) + 1, humanoid.n_dof) and m.feet.shape == (len(m.q), 2, 3)
@@ -132,13 +134,13 @@ def test_tracking_env_zero_action_plays_the_reference_and_fails_far_from_it(huma
 
 
 def test_deploy_metrics_count_a_failure(humanoid, motions, quiet_real):
-    from wresdyn.skills.evaluate import deploy_skill, metrics
+    from wresdyn.skills.evaluate import deploy, metrics
 
     mot = motions.split("heldout")
     cfg = SkillConfig(decimation=5, fail_error=2.0)  # the 0.4 s test motions are fast: a loose bound tracks them
-    ok = metrics(deploy_skill(None, RealPlant(quiet_real, len(mot), 5), mot, cfg), humanoid)
+    ok = metrics(deploy(None, RealPlant(quiet_real, len(mot), 5), mot, cfg), humanoid)
     assert ok["mean"]["success"] == 1.0 and 0 < ok["mean"]["mpjpe"] < 0.2 and ok["mean"]["torque_rate"] > 0
-    bad = metrics(deploy_skill(None, RealPlant(quiet_real, len(mot), 5), mot, dataclasses.replace(cfg, fail_error=0.01)),
+    bad = metrics(deploy(None, RealPlant(quiet_real, len(mot), 5), mot, dataclasses.replace(cfg, fail_error=0.01)),
                   humanoid)
     assert bad["mean"]["failures"] >= 1 and bad["mean"]["success"] < 1.0
     assert all(np.isfinite(p["mpjpe"]) for p in bad["motions"] if p["failed_at"] != 1)

@@ -1,5 +1,5 @@
 """``wresdyn deploy [DATA]``: train tracking skills in the nominal and the corrected simulators and deploy each
-zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.experiments.stand_skills`.
+zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.experiments.skills`.
 
 Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tracking_heldout.png`` and
 ``OUT/deployed_heldout.usda``; the corrections (``OUT/calibrated``, ``OUT/delta_action``) are fitted on DATA unless
@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--floor", action="store_true",
                    help="skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, "
                         "kick, wave; stepping held out), corrections still fitted on the stand (see "
-                        "wresdyn.experiments.floor_skills)")
+                        "wresdyn.experiments.skills)")
     p.add_argument("--full", action="store_true",
                    help="the full size, for a GPU (DeployConfig.full, FloorDeployConfig.full; the options below "
                         "still apply)")
@@ -106,10 +106,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_from_args(args)
     task, ppo = skill_configs_from_args(args)
-    if args.floor:
-        from ..experiments.floor_skills import run_floor_benchmark as bench
-    else:
-        from ..experiments.stand_skills import run_benchmark as bench
+    from ..experiments.skills import run_benchmark as bench
     ds, robot = load_data(args.data)
     mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
     from ..progress import Log

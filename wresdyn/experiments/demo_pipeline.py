@@ -35,7 +35,7 @@ from ..paths import DEFAULT_DATASET, DEFAULT_MISMATCH, DEFAULT_ROBOT
 from ..robot.description import load_robot
 from ..sim.parity import pd_agreement
 from ..skills.skill_config import SkillPPOConfig
-from .stand_skills import DeployConfig, run_benchmark
+from .skills import DeployConfig, run_benchmark
 
 __all__ = ["run_demo"]
 

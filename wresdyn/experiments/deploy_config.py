@@ -1,5 +1,5 @@
-"""The sizes of the zero-shot deployment benchmarks, on the stand (:class:`DeployConfig`, :mod:`.stand_skills`) and on
-the floor (:class:`FloorDeployConfig`, :mod:`.floor_skills`), apart from them so that the command line reads them
+"""The sizes of the zero-shot deployment benchmark (:mod:`.skills`), on the stand (:class:`DeployConfig`) and on the
+floor (:class:`FloorDeployConfig`), apart from it so that the command line reads them
 without importing torch or Warp."""
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ class FloorDeployConfig(_BenchmarkSizes):
     extra_families: tuple[Literal["combo"], ...] = ()
     """Motion families the policies also train on, ``train_per_family`` each (validation draws them too, the held-out
     motions never): ``combo``, compositions of the weight shifts' and kicks' keyframes with transfers slow and too
-    fast to follow (:mod:`wresdyn.skills.floor_motions`)."""
+    fast to follow (:mod:`wresdyn.skills.families`)."""
     beside_devices: tuple[str, ...] = ()
     """More devices of the host (``cuda:1,cuda:2``): each simulated fine-tuning after (b) trains in a process of its
     own on the next one, beside (b) on ``device``, so that (b) and (c) take one fine-tuning's wall-clock. Empty:

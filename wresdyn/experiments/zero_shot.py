@@ -1,4 +1,4 @@
-"""What the two zero-shot skill benchmarks (:mod:`.stand_skills`, :mod:`.floor_skills`) share: the four policies and
+"""The pieces of the zero-shot skill benchmark (:mod:`.skills`), on the stand and on the floor: the four policies and
 the plant each trains on, the corrections fitted on the stand's dataset, and the results file."""
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ from ..learn.ppo import load_policy
 from ..learn.runs import run_physics
 from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 from ..sim import DivergenceLimits, Simulator
-from .floor_env import base_frame_imu
+from .reference import base_frame_imu
 
 __all__ = ["SimPlant", "RealPlant", "SETTINGS", "sim_plant"]
 
