@@ -48,8 +48,8 @@ class DriftingPlant:
     the step's first sample) and logs every sample of the stream; every other attribute is the plant's."""
 
     def __init__(self, plant, hook, rng: np.random.Generator) -> None:
-        if plant.n_worlds != 1:
-            raise ValueError(f"one robot drifts: the plant has {plant.n_worlds} worlds")
+        if plant.num_worlds != 1:
+            raise ValueError(f"one robot drifts: the plant has {plant.num_worlds} worlds")
         self.plant, self.hook, self.rng = plant, hook, rng
         self.k = 0
         """Samples logged so far."""

@@ -101,7 +101,7 @@ def _skill(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path, 
     from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, runner_cfg
 
     full, task = FloorDeployConfig.full(), FloorTaskConfig()
-    cfg = SkillPPOConfig(num_envs=envs, device=device, seed=full.seed, **fields)
+    cfg = SkillPPOConfig(device=device, seed=full.seed, **fields)
     seed_processes(cfg.seed + ranks.rank, cfg.torch_threads)
     rate = float(data.rate_hz)
     if "train" not in motions_cache:

@@ -46,7 +46,7 @@ def main() -> None:
 
     ds = load_dataset(args.data or DEFAULT_DATASET)
     stand, floor = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
-    task, ppo = SkillTaskConfig.floor(), replace(SkillPPOConfig(), num_envs=args.envs)
+    task, ppo = SkillTaskConfig.floor(), SkillPPOConfig()  # the worlds are the plants' (args.envs)
     motions = make_motions(stand, {"train": args.motions, "heldout": 1}, args.duration, ds.rate_hz, floating=floor)
     out = Path(args.out)
 

@@ -44,7 +44,7 @@ def main() -> None:
     ds = load_dataset(args.data or DEFAULT_DATASET)
     robot = load_robot(ds.robot_file)
     task = SkillConfig()
-    ppo = replace(SkillPPOConfig(), num_envs=args.envs)
+    ppo = SkillPPOConfig()  # the worlds are the plants' (args.envs)
     motions = make_motions(robot, {"train": args.motions, "heldout": 1}, duration=2.0, rate_hz=ds.rate_hz)
     out = Path(args.out)
 

@@ -63,7 +63,7 @@ CONFIG_FLAGS = {
     "deploy": [(DeployConfig(), "", ()), (FloorDeployConfig(), "", tuple(f.name for f in fields(DeployConfig))),
                (SkillConfig(), "task.", ()),
                (FloorTaskConfig(), "task.", tuple(f.name for f in fields(SkillConfig))),
-               (SkillPPOConfig(), "ppo.", ("num_envs", "iterations", "restart_std", "seed", "device"))],
+               (SkillPPOConfig(), "ppo.", ("iterations", "restart_std", "seed", "device"))],
     "ablate": [(AblationConfig(), "", ("ppo_overrides", "gradient_overrides"))],
 }
 """Each command's configs: ``(defaults, flag prefix, fields without a flag)``."""
@@ -152,7 +152,7 @@ SAME = [
                          seed=4, save_interval=5, desired_kl=0.05))),
     (["deploy", "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
       "--motions", "1", "--heldout", "1", "--duration", "0.5", "--seed", "2", "--device", "cuda:0"],
-     DeployConfig(iterations=2, finetune=1, envs=4, oracle_envs=3, finetune_std=0.6, train_per_family=1,
+     DeployConfig(iterations=2, finetune=1, num_worlds=4, oracle_num_worlds=3, finetune_std=0.6, train_per_family=1,
                   heldout_per_family=1, duration=0.5, seed=2, device="cuda:0")),
     (["deploy", "--floor", "--full", "--oracle-beside"], FloorDeployConfig.full(oracle_beside=True)),
     (["ablate", "--learners", "gradient,ppo", "--archs", "gru", "--kinds", "torque", "--seeds", "0,5", "--segments",
@@ -192,7 +192,7 @@ def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_
     assert main(head + ["--task.action-scale", "0.3", "--task.decimation", "5", *own, "--ppo.hidden-dims", "64,32",
                         "--ppo.gamma", "0.99", "--ppo.torch-threads", "none", "--ppo.init-std", "0.5"]) == 0
     cfg, kw = passed[-1]
-    assert cfg == (FloorDeployConfig if floor else DeployConfig)(envs=8)
+    assert cfg == (FloorDeployConfig if floor else DeployConfig)(num_worlds=8)
     task = task_cls(action_scale=0.3, decimation=5, **({"sigma_base": 0.2} if floor else {"fail_error": 0.7}))
     assert kw["task"] == task
     assert kw["ppo"] == SkillPPOConfig(hidden_dims=(64, 32), gamma=0.99, torch_threads=None, init_std=0.5)
@@ -244,7 +244,7 @@ def test_a_malformed_flag_is_one_line_and_exit_2(argv, message, capsys):
      "wresdyn train: error: ppo.num_mini_batches = 4 is more than the 2 samples per rollout"),
     (["train", "none.npz", "--set", "ppo.gama=0.9"],
      "wresdyn train: error: --set 'ppo.gama=0.9': no field 'ppo.gama' (sections: env, ppo, residual, rewards)"),
-    (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_envs = 0 must be >= 1"),
+    (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_num_worlds = 0 must be >= 1"),
     (["deploy", "--oracle-beside"], "wresdyn deploy: error: --oracle-beside sets the benchmark on the floor; it needs "
                                     "--floor"),
     (["deploy", "--beside-devices", "cuda:1"],

@@ -106,9 +106,9 @@ out, iterations, envs = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 robot = load_robot(DEFAULT_ROBOT)
 floating = load_robot(robot.source, base="floating")
 motions = make_motions(robot, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3, floating=floating)
-cfg = SkillPPOConfig(num_envs=envs, iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
+cfg = SkillPPOConfig(iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
                      num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
-n, device = rank_share(cfg.num_envs, cfg.device)
+n, device = rank_share(envs, cfg.device)
 for run in (out, out.with_name(out.name + "_second")):  # the second skill joins the first one's process group
     env = TrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
                       SkillTaskConfig.floor(decimation=5), seed=Ranks.from_env().rank, device=device)

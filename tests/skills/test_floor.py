@@ -185,7 +185,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
     assert cfg["motions"]["floor"] is True
     # the oracle trains on its own number of worlds, the others on --envs
-    assert json.loads((out / "skills" / "d_oracle" / "config.json").read_text())["ppo"]["num_envs"] == 3
+    assert json.loads((out / "skills" / "d_oracle" / "config.json").read_text())["num_worlds"] == 3
     before = (out / "skills" / "a_nominal" / "config.json").read_text()
     capsys.readouterr()
     assert main(args + ["--oracle-beside", "--seed", "5"]) == 2

@@ -178,6 +178,30 @@ def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
         sim_plant("calibrated", humanoid, 2, RATE, 5, str(delta))
 
 
+def test_a_skill_run_folder_keeping_its_world_count_in_ppo_still_resumes(tmp_path, humanoid, motions):
+    """The world count is the plant's (``num_worlds`` in ``config.json``); a record with it as ``ppo.num_envs`` resumes
+    the same, and still refuses another count."""
+    from wresdyn.learn.runs import RunError
+    from wresdyn.skills.skill_ppo import SkillPPOConfig, train_skill
+
+    cfg = SkillConfig(decimation=5)
+    ppo = SkillPPOConfig(iterations=1, num_steps_per_env=4, hidden_dims=(16,), num_mini_batches=1, torch_threads=1)
+
+    def env(worlds):
+        return TrackingEnv(SimPlant(humanoid, worlds, RATE, 5), motions.split("train"), cfg)
+
+    run = tmp_path / "skill"
+    train_skill(env(2), ppo, run, log=lambda *_: None)
+    record = json.loads((run / "config.json").read_text())
+    assert record["num_worlds"] == 2 and "num_envs" not in record["ppo"]
+    old = {**record, "ppo": {"num_envs": record.pop("num_worlds"), **record["ppo"]}}
+    (run / "config.json").write_text(json.dumps(old))
+    with pytest.raises(RunError, match="num_worlds"):
+        train_skill(env(3), dataclasses.replace(ppo, iterations=2), run, log=lambda *_: None)
+    assert train_skill(env(2), dataclasses.replace(ppo, iterations=2), run, log=lambda *_: None)["iterations"] == 2
+    assert json.loads((run / "config.json").read_text())["num_worlds"] == 2
+
+
 def load_skill_std(run) -> float:
     """Mean action noise std of a skill run's last checkpoint."""
     from wresdyn.learn.ppo_runner import latest_checkpoint
@@ -210,8 +234,8 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     for name in ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle"):
         assert (out / "skills" / name / "policy.pt").is_file()
         # the oracle trains on its own number of worlds (the real robot is MuJoCo C on the CPU)
-        ppo = json.loads((out / "skills" / name / "config.json").read_text())["ppo"]
-        assert ppo["num_envs"] == (3 if name == "d_oracle" else 4)
+        record = json.loads((out / "skills" / name / "config.json").read_text())
+        assert record["num_worlds"] == (3 if name == "d_oracle" else 4) and "num_envs" not in record["ppo"]
         # the fine-tunings restart their action noise at --finetune-std (one iteration moves it little); (a) keeps 0.3
         std = load_skill_std(out / "skills" / name)
         assert abs(std - (0.3 if name == "a_nominal" else 0.6)) < 0.05, (name, std)

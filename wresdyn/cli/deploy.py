@@ -21,9 +21,9 @@ from ..experiments.deploy_config import DeployConfig, FloorDeployConfig
 from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 from .config_flags import add_config_flags, build_config, given_fields
 
-PPO_FROM_SIZES = ("num_envs", "iterations", "restart_std", "seed", "device")
-"""Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``envs``/``oracle_envs``, ``iterations``/
-``finetune``, ``finetune_std``, ``seed``, ``device``): no ``--ppo.*`` flag of their own."""
+PPO_FROM_SIZES = ("iterations", "restart_std", "seed", "device")
+"""Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``iterations``/``finetune``, ``finetune_std``,
+``seed``, ``device``): no ``--ppo.*`` flag of their own (the worlds are the sizes' ``num_worlds``, the plants')."""
 
 _STAND, _FLOOR = {f.name for f in fields(SkillConfig)}, {f.name for f in fields(FloorTaskConfig)}
 STAND_ONLY = tuple(f.name for f in fields(SkillConfig) if f.name not in _FLOOR)
@@ -54,7 +54,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-animation", action="store_true", help="skip the USD animation")
     p.add_argument("--quiet", action="store_true",
                    help="print nothing while deploying (OUT/deploy.log keeps every line; no progress bars)")
-    sizes = dict(aliases={"train_per_family": ("--motions",), "heldout_per_family": ("--heldout",)},
+    sizes = dict(aliases={"train_per_family": ("--motions",), "heldout_per_family": ("--heldout",),
+                          "num_worlds": ("--envs",), "oracle_num_worlds": ("--oracle-envs",)},
                  variants={"--floor": FloorDeployConfig(), "--full": DeployConfig.full(),
                            "--floor --full": FloorDeployConfig.full()})
     add_config_flags(p, DeployConfig(), **sizes,

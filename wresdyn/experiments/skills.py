@@ -65,17 +65,17 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
     time [s]."""
     setting = POLICIES[name]
     t0 = time.perf_counter()
-    envs = cfg.oracle_worlds if setting == "real" else cfg.envs
+    worlds = cfg.oracle_worlds if setting == "real" else cfg.num_worlds
     real_plant, sim = _plants(task, real, robot, real.rate_hz, runs, cfg.device)
-    plant = real_plant(envs, cfg.seed + 1) if setting == "real" else sim(setting, envs)
+    plant = real_plant(worlds, cfg.seed + 1) if setting == "real" else sim(setting, worlds)
     env = TrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
     run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
     it = cfg.iterations if i == 0 else cfg.finetune
-    train_skill(env, replace(ppo, iterations=it, num_envs=envs, restart_std=None if i == 0 else cfg.finetune_std),
+    train_skill(env, replace(ppo, iterations=it, restart_std=None if i == 0 else cfg.finetune_std),
                 out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
     wall = time.perf_counter() - t0
     where = "on the floor of the" if task.floating else "in the"
-    log(f"[3/4] policy {name}: {it} PPO iterations x {envs} worlds {where} {setting} "
+    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} "
         f"{'robot' if setting == 'real' else 'simulator'} ({wall:.0f} s)")
     return wall
 
@@ -124,9 +124,10 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
         for other, job in jobs.items():
             wall[other] = job.get()
             setting = POLICIES[other]
-            envs, plant = (cfg.oracle_worlds, "real robot") if setting == "real" else (cfg.envs, f"{setting} simulator")
+            worlds, plant = ((cfg.oracle_worlds, "real robot") if setting == "real"
+                             else (cfg.num_worlds, f"{setting} simulator"))
             where = "" if setting == "real" else f" on {beside[other]}"
-            log(f"[3/4] policy {other}: {cfg.finetune} PPO iterations x {envs} worlds on the floor of the {plant} "
+            log(f"[3/4] policy {other}: {cfg.finetune} PPO iterations x {worlds} worlds on the floor of the {plant} "
                 f"({wall[other]:.0f} s{where}, beside the others)")
     finally:
         if pool is not None:

@@ -57,10 +57,10 @@ class Ranks:
         else ``device``."""
         return f"cuda:{self.local_rank}" if self.world > 1 and device.startswith("cuda") else device
 
-    def num_envs(self, total: int) -> int:
-        """This process's share of ``total`` environments."""
+    def num_worlds(self, total: int) -> int:
+        """This process's share of ``total`` simulated worlds (rsl-rl's environments)."""
         if total % self.world:
-            raise RunError(f"ppo.num_envs = {total} does not split over {self.world} processes; use a multiple of "
+            raise RunError(f"{total} worlds do not split over {self.world} processes; use a multiple of "
                            f"{self.world}")
         return total // self.world
 

@@ -118,8 +118,9 @@ class TrackingEnv(VecEnv):
 
     @property
     def num_envs(self) -> int:
-        """Parallel worlds, rsl-rl's name for the plant's ``n_worlds`` (the plant owns the count)."""
-        return self.plant.n_worlds
+        """Parallel worlds: the plant's ``num_worlds``, under the name rsl-rl's ``VecEnv`` reads (the plant owns the
+        count; nothing else stores it)."""
+        return self.plant.num_worlds
 
     # ------------------------------------------------------------------------------------------------ state
     def _true_q(self) -> torch.Tensor:

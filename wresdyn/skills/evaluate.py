@@ -88,11 +88,11 @@ class Deployment:
 
 
 def deploy(policy, plant, motions, cfg) -> Deployment:
-    """Play ``motions`` on ``plant`` (``n_worlds`` = number of motions) under ``policy`` (``None``: the reference
+    """Play ``motions`` on ``plant`` (``num_worlds`` = number of motions) under ``policy`` (``None``: the reference
     played open loop, zero action) with the task ``cfg`` (:class:`~wresdyn.skills.skill_config.SkillTaskConfig`)."""
 
-    if plant.n_worlds != len(motions):
-        raise ValueError(f"{len(motions)} motions need as many worlds, the plant has {plant.n_worlds}")
+    if plant.num_worlds != len(motions):
+        raise ValueError(f"{len(motions)} motions need as many worlds, the plant has {plant.num_worlds}")
     env = TrackingEnv(plant, motions, cfg, random_start=False)
     floor = env.floating
     k_len = env.ref_len.cpu().numpy()

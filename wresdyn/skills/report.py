@@ -115,7 +115,7 @@ Robot `{robot.source.name}` on its stand; the "real" robot is the MuJoCo model w
 motion-tracking policies (PPO, rsl-rl) at {policy_rate_hz:g} Hz, PD targets out. Motions per family: train
 {cfg['train_per_family']}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (families kick,
 squat, wave; the held-out set adds march, a family no policy trained on), {cfg['duration']:g} s each. (a): {cfg['iterations']}
-PPO iterations × {cfg['envs']} worlds in the nominal simulator; (b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations.
+PPO iterations × {cfg['num_worlds']} worlds in the nominal simulator; (b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations.
 Every policy is its last iterate; nothing was selected on the real robot or on held-out motions.
 
 ## Held-out motions, deployed on the real robot
@@ -238,8 +238,8 @@ dataset, with no floor data. Skills: motion-tracking policies (PPO, rsl-rl, asym
 joint states, the IMU, the reference and its last action) at {policy_rate_hz:g} Hz. Motions per family: train
 {cfg['train_per_family']}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (squat,
 weight shift, kick, wave{extra}; the held-out set adds stepping in place, a family no policy trained on),
-{cfg['duration']:g} s each. (a): {cfg['iterations']} PPO iterations × {cfg['envs']} worlds in the nominal simulator;
-(b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations ((d) on {cfg['oracle_envs'] or cfg['envs']} worlds). Every
+{cfg['duration']:g} s each. (a): {cfg['iterations']} PPO iterations × {cfg['num_worlds']} worlds in the nominal simulator;
+(b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations ((d) on {cfg['oracle_num_worlds'] or cfg['num_worlds']} worlds). Every
 policy is its last iterate; nothing was selected on the real robot or on held-out motions.
 
 ## Held-out motions, deployed on the real robot's floor

@@ -145,10 +145,9 @@ class FloorTaskConfig(SkillTaskConfig):
 
 @dataclass(frozen=True)
 class SkillPPOConfig:
-    """PPO of the skills (rsl-rl ``OnPolicyRunner``)."""
+    """PPO of the skills (rsl-rl ``OnPolicyRunner``). The number of worlds is not PPO's: it is the plant's
+    ``num_worlds``, which the runner reads as ``env.num_envs``."""
 
-    num_envs: int = 64
-    """Parallel worlds."""
     iterations: int = 300
     """PPO iterations (a resumed run may raise it)."""
     num_steps_per_env: int = 24
@@ -190,7 +189,7 @@ class SkillPPOConfig:
     instead of rsl-rl's several per mini-batch; the same update up to rounding."""
 
     def __post_init__(self) -> None:
-        for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
+        for k in ("iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
                   "save_interval"):
             check_number(getattr(self, k), f"ppo.{k}", integer=True, ge=1)
         if self.restart_std is not None:
