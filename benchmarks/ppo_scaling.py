@@ -81,7 +81,7 @@ def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Pat
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
-    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_envs(envs), cfg.env, cfg.residual, cfg.rewards,
+    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_worlds(envs), cfg.env, cfg.residual, cfg.rewards,
                     device=ranks.device(device), seed=cfg.ppo.seed + ranks.rank, obs_mean=mean, obs_std=std,
                     graph=cfg.ppo.cuda_graph, weights=data.fit_weights())
     rcfg = runner_cfg(cfg)

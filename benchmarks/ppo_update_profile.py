@@ -184,7 +184,7 @@ def main() -> None:
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
     device = ranks.device(cfg.ppo.device)
-    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_envs(cfg.ppo.num_envs), cfg.env, cfg.residual, cfg.rewards,
+    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_worlds(cfg.env.num_worlds), cfg.env, cfg.residual, cfg.rewards,
                     device=device, seed=cfg.ppo.seed + ranks.rank, obs_mean=mean, obs_std=std,
                     graph=cfg.ppo.cuda_graph, weights=data.fit_weights())
     sync = (lambda: torch.cuda.synchronize(device)) if str(device).startswith("cuda") else (lambda: None)

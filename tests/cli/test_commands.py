@@ -145,10 +145,11 @@ SAME = [
       "--device", "cuda:0", "--seed", "4", "--save-interval", "5", "--physics", "p.json",
       "--set", "ppo.desired_kl=0.05", "--set", "residual.hidden_dims=128,64", "--set", "ppo.iterations=9"],
      replace(default_config(),
-             env=replace(default_config().env, horizon=500, obs_noise=0.1, solver="replay", physics="p.json"),
+             env=replace(default_config().env, num_worlds=64, horizon=500, obs_noise=0.1, solver="replay",
+                         physics="p.json"),
              residual=replace(default_config().residual, kind="delta_action", arch="gru", fraction=0.25,
                               hidden_dims=(128, 64)),
-             ppo=replace(default_config().ppo, iterations=9, num_envs=64, num_steps_per_env=12, device="cuda:0",
+             ppo=replace(default_config().ppo, iterations=9, num_steps_per_env=12, device="cuda:0",
                          seed=4, save_interval=5, desired_kl=0.05))),
     (["deploy", "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
       "--motions", "1", "--heldout", "1", "--duration", "0.5", "--seed", "2", "--device", "cuda:0"],
@@ -160,7 +161,7 @@ SAME = [
       "--ppo-envs", "16", "--windows", "8", "--horizon", "16"],
      AblationConfig(learners=("gradient", "ppo"), archs=("gru",), kinds=("torque",), seeds=(0, 5), segments=2,
                     ppo_iterations=9, gradient_iterations=40, solver="replay", device="cuda",
-                    ppo_overrides={"ppo.num_envs": 16}, gradient_overrides={"windows": 8, "horizon": 16})),
+                    ppo_overrides={"env.num_worlds": 16}, gradient_overrides={"windows": 8, "horizon": 16})),
 ]
 
 

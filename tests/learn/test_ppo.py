@@ -9,7 +9,8 @@ import torch
 
 from wresdyn.errors import WresdynError
 from wresdyn.learn.ppo import RunError, load_policy, train
-from wresdyn.learn.ppo_config import PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config
+from wresdyn.learn.ppo_config import (PPOConfig, TrainConfig, apply_overrides, config_from_dict, default_config,
+                                      set_fields)
 from wresdyn.learn.ppo_runner import latest_checkpoint
 from wresdyn.learn.replay_env import ReplayEnvConfig
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
@@ -64,10 +65,13 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     # where and how a run goes on may change (a run started on a GPU goes on here), what it learns may not
     saved_cfg = json.loads((run / "config.json").read_text())
     saved_cfg["config"]["ppo"]["device"] = "cuda:3"
+    # and a config.json keeping the world count in the PPO config (ppo.num_envs) reads as the environment's num_worlds
+    saved_cfg["config"]["ppo"]["num_envs"] = saved_cfg["config"]["env"].pop("num_worlds")
     (run / "config.json").write_text(json.dumps(saved_cfg))
     moved = dataclasses.replace(tiny(iterations=4), ppo=dataclasses.replace(
         tiny(iterations=4).ppo, save_interval=2, torch_threads=2))
     assert train(data, robot, moved, run)["iterations_this_session"] == 1
+    assert json.loads((run / "config.json").read_text())["config"]["env"]["num_worlds"] == 4
     # a different configuration is refused rather than silently mixed in, naming what changed
     with pytest.raises(RunError, match=r"rewards\.sigma_q = 0\.1, now 0\.5"):
         train(data, robot, dataclasses.replace(tiny(iterations=3), rewards=dataclasses.replace(
@@ -146,9 +150,9 @@ def test_configs_check_their_values_at_construction():
         ResidualConfig(kind="torqu")
     with pytest.raises(WresdynError, match="residual.arch = 'lstm' is not one of: mlp, gru"):
         ResidualConfig(arch="lstm")
-    for bad, msg in (({"num_envs": 0}, "ppo.num_envs = 0 must be >= 1"),
+    for bad, msg in (({"num_steps_per_env": 0}, "ppo.num_steps_per_env = 0 must be >= 1"),
                      ({"gamma": 1.5}, "ppo.gamma = 1.5 must be <= 1"),
-                     ({"num_envs": 2.5}, "ppo.num_envs = 2.5 is not an integer"),
+                     ({"num_steps_per_env": 2.5}, "ppo.num_steps_per_env = 2.5 is not an integer"),
                      ({"learning_rate": float("nan")}, "ppo.learning_rate = nan is not a number"),
                      ({"device": "gpu"}, "ppo.device = 'gpu' is not a device")):
         with pytest.raises(WresdynError, match=msg):
@@ -159,12 +163,20 @@ def test_configs_check_their_values_at_construction():
         RewardConfig(sigma_q=0)
     with pytest.raises(WresdynError, match="env.solver = 'featherstne' is not one of: auto, replay"):
         TrainConfig(env=ReplayEnvConfig(solver="featherstne"))
+    with pytest.raises(WresdynError, match="env.num_worlds = 0 must be >= 1"):
+        ReplayEnvConfig(num_worlds=0)
     # a GRU is batched by world: 2 worlds cannot make 4 mini-batches, whatever the rollout length
     with pytest.raises(WresdynError, match="num_mini_batches = 4 is more than the 2 worlds"):
-        TrainConfig(residual=ResidualConfig(arch="gru"), ppo=PPOConfig(num_envs=2))
+        TrainConfig(residual=ResidualConfig(arch="gru"), env=ReplayEnvConfig(num_worlds=2))
     # overrides apply at once, so their order does not matter to checks across fields
-    cfg = apply_overrides(default_config(), ["residual.arch=gru", "ppo.num_envs=2", "ppo.num_mini_batches=2"])
-    assert (cfg.residual.arch, cfg.ppo.num_envs, cfg.ppo.num_mini_batches) == ("gru", 2, 2)
+    cfg = apply_overrides(default_config(), ["residual.arch=gru", "env.num_worlds=2", "ppo.num_mini_batches=2"])
+    assert (cfg.residual.arch, cfg.env.num_worlds, cfg.ppo.num_mini_batches) == ("gru", 2, 2)
+    # the world count is the environment's; its name in the PPO config still reads, as an override and in a run's
+    # config.json
+    assert apply_overrides(default_config(), ["ppo.num_envs=3"]).env.num_worlds == 3
+    old = dataclasses.asdict(default_config())
+    old["ppo"]["num_envs"] = old["env"].pop("num_worlds") + 1
+    assert config_from_dict(old) == set_fields(default_config(), {"env.num_worlds": 257})
     with pytest.raises(ValueError, match="residual.kind = 'torqu'"):
         apply_overrides(default_config(), ["residual.kind=torqu"])
 
@@ -173,7 +185,7 @@ def test_configs_check_their_values_at_construction():
     (["--residual", "bogus"], ["--residual", "'bogus'", "torque"]),
     (["--solver", "featherstne"], ["--solver", "featherstone"]),
     (["--set", "residual.kind=torqu"], ["residual.kind", "torque, delta_action"]),
-    (["--num-envs", "0"], ["ppo.num_envs = 0"]),
+    (["--num-envs", "0"], ["env.num_worlds = 0"]),
 ], ids=["residual", "solver", "set-kind", "num-envs"])
 def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
     import subprocess

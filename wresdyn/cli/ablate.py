@@ -40,7 +40,7 @@ def config_from_args(args: argparse.Namespace) -> AblationConfig:
     """The default :class:`~wresdyn.experiments.ablation.AblationConfig` with the flags given applied."""
     grad = {k: v for k, v in {"windows": args.windows, "horizon": args.horizon}.items() if v is not None}
     return build_config(AblationConfig(), given_fields(args) | {
-        "ppo_overrides": {"ppo.num_envs": args.ppo_envs} if args.ppo_envs is not None else {},
+        "ppo_overrides": {"env.num_worlds": args.ppo_envs} if args.ppo_envs is not None else {},
         "gradient_overrides": grad})
 
 

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import argparse
 
-from ..learn.ppo_config import TrainConfig, default_config
+from ..learn.ppo_config import TrainConfig, default_config, renamed
 from .config_flags import add_config_flags, build_config, given_fields, parse_assignments
 
 TRAIN_ALIASES = {"residual.kind": ("--residual",), "residual.arch": ("--arch",), "residual.fraction": ("--fraction",),
-                 "ppo.iterations": ("--iterations",), "ppo.num_envs": ("--num-envs",),
+                 "ppo.iterations": ("--iterations",), "env.num_worlds": ("--num-envs",),
                  "ppo.num_steps_per_env": ("--steps-per-env",), "env.horizon": ("--horizon",),
                  "env.obs_noise": ("--obs-noise",), "env.solver": ("--solver",),
                  "env.friction_kappa": ("--friction-kappa",), "ppo.device": ("--device",),
@@ -46,7 +46,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 
     Flags and ``--set`` items are applied in one step (``--set`` wins for the same field), so the config's own
     checks, across fields too, see what was asked for as a whole; a refused value is a one-line error."""
-    overrides = parse_assignments(TrainConfig, getattr(args, "overrides", []))
+    overrides = parse_assignments(TrainConfig, [renamed(i) for i in getattr(args, "overrides", [])])
     return build_config(default_config(), given_fields(args) | overrides)
 
 
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_from_args(args)
     try:  # worlds that do not split over torchrun's processes: refused on every rank before the data and kernels load
-        Ranks.from_env().num_envs(cfg.ppo.num_envs)
+        Ranks.from_env().num_worlds(cfg.env.num_worlds)
     except RunError as e:
         raise UserError(str(e)) from None
     from ..data.loading import load_data
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     main = Ranks.from_env().main  # torchrun: rank 0 reports and evaluates
     log = Log(Path(args.out) / "train.log" if main else None, quiet=args.quiet or not main)
     log(f"training a {cfg.residual.kind} residual ({cfg.residual.arch}) on {len(ds.split('train'))} trajectories of "
-          f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.ppo.num_envs} worlds x {cfg.ppo.num_steps_per_env} steps "
+          f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.env.num_worlds} worlds x {cfg.ppo.num_steps_per_env} steps "
           f"-> {args.out}")
     from ..sim.physics import PhysicalParams
     from ..sim.warmup import compile_kernels

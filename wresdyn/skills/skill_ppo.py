@@ -5,7 +5,7 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
-changed (the folder is a :class:`wresdyn.learn.runs.RunnerFolder`). The world count is the plant's, recorded as
+changed (the folder is a :class:`wresdyn.learn.ppo_runner.UpgradingRunnerFolder`). The world count is the plant's, recorded as
 ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the same (:func:`upgrade_record`). The
 rsl-rl glue (runner, checkpoints, progress) is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
 
@@ -16,7 +16,6 @@ gradients, rank 0 alone writes the run folder, and every rank resumes from the s
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -25,14 +24,13 @@ import numpy as np
 import torch
 
 from ..learn.network_file import load_program, save_program
-from ..learn.ppo_runner import (Ranks, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
-                                rsl_runner_cfg, seed_processes)
-from ..learn.runs import RunnerFolder, check_resume
+from ..learn.ppo_runner import (Ranks, UpgradingRunnerFolder, latest_checkpoint, learn, make_runner, on_iteration,
+                                resume_runner, rsl_runner_cfg, seed_processes)
 from ..progress import bar
 from .skill_config import SkillPPOConfig
 
 __all__ = ["SkillPPOConfig", "train_skill", "load_skill", "rank_share", "runner_cfg", "RESUME_MAY_CHANGE",
-           "SkillRunFolder", "upgrade_record"]
+           "upgrade_record"]
 
 RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads", "ppo.one_sync_update")
 """What a resumed skill run may change: a run may be extended, or moved to another device or machine."""
@@ -76,37 +74,6 @@ def upgrade_record(record: dict) -> dict:
     return {**record, "ppo": ppo, "num_worlds": record.get("num_worlds", num_worlds)}
 
 
-class SkillRunFolder(RunnerFolder):
-    """A skill's run folder: :class:`~wresdyn.learn.runs.RunnerFolder`, whose resume check reads a ``config.json``
-    of either shape (:func:`upgrade_record`)."""
-
-    def check(self, checkpoint) -> dict | None:
-        if checkpoint is None:
-            return None
-        path = self.path / "config.json"
-        if not path.is_file():
-            return super().check(checkpoint)  # refuses it, in the runner folder's words
-        try:
-            old = json.loads(path.read_text())
-        except ValueError:
-            old = None
-        if not isinstance(old, dict) or not isinstance(old.get("ppo"), dict):
-            return super().check(checkpoint)  # not a skill run's record: refused as the runner folder refuses it
-        old = upgrade_record(old)
-        check_resume(self.path, old, self.config, self.may_change)
-        return old
-
-
-def _set_std(actor, std: float) -> None:
-    """Set the Gaussian action noise of an rsl-rl actor to ``std`` on every action."""
-    dist = actor.distribution
-    with torch.no_grad():
-        if dist.std_type == "log":
-            dist.log_std_param.fill_(float(np.log(std)))
-        else:
-            dist.std_param.fill_(std)
-
-
 def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = None, meta: dict | None = None,
                 log=print) -> dict:
     """PPO on ``env`` (a :class:`~wresdyn.skills.env.TrackingEnv`) for ``cfg.iterations``; resumes ``run_dir``.
@@ -132,7 +99,7 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     run_dir, ranks = Path(run_dir), Ranks.from_env()
     record = {"ppo": asdict(cfg), "task": env.cfg_dict, "num_worlds": env.num_envs * ranks.world,
               "init": None if init is None else str(Path(init).resolve()), **(meta or {})}
-    run = SkillRunFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO")
+    run = UpgradingRunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO", upgrade=upgrade_record)
     ckpt = latest_checkpoint(run_dir)
     run.check(ckpt)
     seed_processes(cfg.seed + ranks.rank, cfg.torch_threads)
