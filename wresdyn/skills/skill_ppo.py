@@ -5,9 +5,10 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
-changed (the folder is a :class:`wresdyn.learn.ppo_runner.UpgradingRunnerFolder`). The world count is the plant's, recorded as
-``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the same (:func:`upgrade_record`). The
-rsl-rl glue (runner, checkpoints, progress) is the residual learner's, :mod:`wresdyn.learn.ppo_runner`.
+changed (the folder is a :class:`wresdyn.learn.ppo_runner.UpgradingRunnerFolder`). The world count is the plant's,
+recorded as ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the same
+(:func:`upgrade_record`). The rsl-rl glue (runner, checkpoints, progress) is the residual learner's,
+:mod:`wresdyn.learn.ppo_runner`.
 
 Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.learn.ppo.train`): each process
 steps its share of the worlds on its own device (:func:`rank_share`), seeded ``seed + RANK``, rsl-rl averages the
@@ -72,6 +73,16 @@ def upgrade_record(record: dict) -> dict:
     ppo = dict(ppo)
     num_worlds = ppo.pop("num_envs")
     return {**record, "ppo": ppo, "num_worlds": record.get("num_worlds", num_worlds)}
+
+
+def _set_std(actor, std: float) -> None:
+    """Set the Gaussian action noise of an rsl-rl actor to ``std`` on every action."""
+    dist = actor.distribution
+    with torch.no_grad():
+        if dist.std_type == "log":
+            dist.log_std_param.fill_(float(np.log(std)))
+        else:
+            dist.std_param.fill_(std)
 
 
 def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = None, meta: dict | None = None,
