@@ -4,7 +4,6 @@ real robot, rsl-rl's PPO)."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 
 import numpy as np
@@ -15,11 +14,14 @@ from wresdyn.cli import main
 from wresdyn.skills.env import TrackingEnv
 from wresdyn.skills.evaluate import deploy, metrics
 from wresdyn.skills.motions import TASK_FAMILIES, make_motions
+from wresdyn.skills.plants import RealPlant, SimPlant
 from wresdyn.skills.reference import base_frame_imu
 from wresdyn.skills.skill_config import SkillTaskConfig
-from wresdyn.skills.plants import RealPlant, SimPlant
 
-RATE = 500.0
+import skill_runs
+from skill_runs import fit_run
+
+RATE = skill_runs.RATE
 
 
 @pytest.fixture(scope="module")
@@ -30,11 +32,8 @@ def motions(humanoid, floating):
 
 @pytest.fixture(scope="module")
 def quiet_real(floating, shipped_mismatch):
-    from wresdyn.data.real_robot import RealRobot
-
-    mm = dataclasses.replace(shipped_mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
-                             velocity_resolution=0.0)
-    return RealRobot(floating, mm, RATE)
+    """The shipped real robot without sensor noise (exact comparisons)."""
+    return skill_runs.quiet_real(floating, shipped_mismatch)
 
 
 def test_threaded_mujoco_worlds_step_as_newtons_one_world_solver(floating):
@@ -136,29 +135,11 @@ def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions
     assert 0.0 < res["mean"]["g_mpjpe"] < 1.0
 
 
-def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
-    from wresdyn.learn.gradfit import build_policy
-    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
-    from wresdyn.sim.physics import PhysicalParams
-
-    run = tmp_path / kind
-    run.mkdir()
-    if physics:
-        p = PhysicalParams.nominal(robot)
-        p.kp *= 0.8
-        p.delay = np.full(robot.n_dof, 0.004)
-        p.save(run / "physics.json")
-    mean, std = obs_stats(data.split("train"))
-    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
-                     learner="gradient")
-    return run
-
-
 def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     data_path = tmp_path / "dataset.npz"
     data.save(data_path)
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
-    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     out = tmp_path / "floor"
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--motions", "1",
@@ -205,7 +186,7 @@ def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
 
     from wresdyn.paths import REPO
 
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_on_the_floor.py", str(cal), "--out", str(tmp_path / "skills"),
                           "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--duration", "1.0"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)

@@ -17,11 +17,13 @@ import torch
 from wresdyn.cli import main
 from wresdyn.skills.env import SkillConfig, TrackingEnv
 from wresdyn.skills.motions import TASK_FAMILIES, make_motions, stance
-
-STAND = TASK_FAMILIES["stand"]
 from wresdyn.skills.plants import RealPlant, SimPlant, sim_plant
 
-RATE = 500.0
+import skill_runs
+from skill_runs import fit_run
+
+RATE = skill_runs.RATE
+STAND = TASK_FAMILIES["stand"]
 
 
 @pytest.fixture(scope="module")
@@ -32,11 +34,7 @@ def motions(humanoid):
 @pytest.fixture(scope="module")
 def quiet_real(humanoid, shipped_mismatch):
     """The shipped real robot without sensor noise (exact comparisons)."""
-    from wresdyn.data.real_robot import RealRobot
-
-    mm = dataclasses.replace(shipped_mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
-                             velocity_resolution=0.0)
-    return RealRobot(humanoid, mm, RATE)
+    return skill_runs.quiet_real(humanoid, shipped_mismatch)
 
 
 def test_motions_start_and_end_in_the_stance_inside_the_limits(humanoid, motions):
@@ -146,30 +144,11 @@ def test_deploy_metrics_count_a_failure(humanoid, motions, quiet_real):
     assert all(np.isfinite(p["mpjpe"]) for p in bad["motions"] if p["failed_at"] != 1)
 
 
-def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
-    """A `wresdyn fit` run folder from the real writers: a (tiny, untrained) residual, identified physics or not."""
-    from wresdyn.learn.gradfit import build_policy
-    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
-    from wresdyn.sim.physics import PhysicalParams
-
-    run = tmp_path / kind
-    run.mkdir()
-    if physics:
-        p = PhysicalParams.nominal(robot)
-        p.kp *= 0.8
-        p.delay = np.full(robot.n_dof, 0.004)
-        p.save(run / "physics.json")
-    mean, std = obs_stats(data.split("train"))
-    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
-                     learner="gradient")
-    return run
-
-
 def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
     from wresdyn.errors import WresdynError
 
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
-    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     assert sim_plant("calibrated", humanoid, 2, RATE, 5, str(cal)).residual is not None
     assert sim_plant("delta_action", humanoid, 2, RATE, 5, str(delta)).kind == "delta_action"
     with pytest.raises(WresdynError, match="delta_action residual"):
@@ -213,8 +192,8 @@ def load_skill_std(run) -> float:
 def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     data_path = tmp_path / "dataset.npz"
     data.save(data_path)
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
-    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     out = tmp_path / "deploy"
     args = ["deploy", str(data_path), "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
@@ -259,7 +238,7 @@ def test_skill_zero_shot_example_runs(tmp_path, humanoid, data):
 
     from wresdyn.paths import REPO
 
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_zero_shot.py", str(cal), "--out", str(tmp_path / "skills"),
                           "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)

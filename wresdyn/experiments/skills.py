@@ -212,7 +212,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     if floor:
         log("[4/4] deployed on the real robot's floor (" + f"{n_held} held-out motions): " + "; ".join(
             f"{n} success {100 * r['mean']['success']:.0f} % ({r['mean']['falls']} falls), MPJPE "
-            f"{1e3 * r['mean'].get('mpjpe', float('nan')):.1f} mrad, g-MPJPE {1e3 * r['mean'].get('g_mpjpe', float('nan')):.0f} mm"
+            f"{1e3 * r['mean'].get('mpjpe', float('nan')):.1f} mrad, "
+            f"g-MPJPE {1e3 * r['mean'].get('g_mpjpe', float('nan')):.0f} mm"
             for n, r in held.items()) + "".join(
             f"; gap closed by {k[0]} {100 * v:.0f} % (MPJPE)" for k, v in results["gap_closed_mpjpe"].items()))
     else:

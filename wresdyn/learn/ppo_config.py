@@ -17,8 +17,8 @@ from .residual_config import ResidualConfig
 from .runs import read_unset
 
 __all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "RENAMED",
-           "default_config", "config_from_dict", "upgrade_config_dict", "renamed", "parse_overrides", "apply_overrides", "set_fields",
-           "set_field"]
+           "default_config", "config_from_dict", "upgrade_config_dict", "renamed", "parse_overrides", "apply_overrides",
+           "set_fields", "set_field"]
 
 
 COMPILE_MODES = ("", "default", "max-autotune-no-cudagraphs")

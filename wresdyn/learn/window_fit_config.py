@@ -84,7 +84,8 @@ class SysIdConfig(WindowFitStop):
     """Fields to identify (:data:`FIT_FIELDS`, default :data:`DEFAULT_FIT`); the others keep the robot file's
     values."""
     windows: int = 32
-    """Windows B (Newton worlds) per iteration."""
+    """Windows B (Newton worlds) per iteration: a batch of recorded windows, one world each, not an environment's world
+    count (``num_worlds`` of the replay environment and the skills' plants): a different quantity, so another name."""
     horizon_curriculum: tuple[int, ...] = (16, 32, 64, 128)
     """Window lengths [steps], one stage each: short windows first (a far-off start diverges over
     long ones), long windows last (delay, friction and saturation act over tens of steps)."""
@@ -264,7 +265,9 @@ class GradFitConfig(WindowFitStop):
     detached every ``grad_truncation`` steps; the rollout and its loss still span the whole window). Through
     stiff PD dynamics, longer gradient paths explode; ``None`` = never truncate."""
     windows: int = 32
-    """Parallel windows B (Newton worlds) per iteration."""
+    """Parallel windows B (Newton worlds) per iteration: a batch of recorded windows, one world each, not an
+    environment's world count (``num_worlds`` of the replay environment and the skills' plants): a different
+    quantity, so another name."""
     lr: float = 1e-3
     """Adam learning rate at the start."""
     lr_final: float = 1e-4

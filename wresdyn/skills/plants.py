@@ -171,8 +171,8 @@ def sim_plant(setting: str, robot, num_worlds: int, rate_hz: float, decimation: 
 
 
 class RealPlant:
-    """``num_worlds`` copies of the "real" robot, stepped in C threads by ``mujoco.rollout``: on its stand (a fixed base)
-    or, for a floating-base ``real``, standing on its floor.
+    """``num_worlds`` copies of the "real" robot, stepped in C threads by ``mujoco.rollout``: on its stand (a fixed
+    base) or, for a floating-base ``real``, standing on its floor.
 
     The command passes the real robot's delay line (its FIFO at the physics substep) and torque limits exactly as in
     :meth:`~wresdyn.data.real_robot.RealRobot.record`; :meth:`step` returns the sensed joint state (the mismatch's
