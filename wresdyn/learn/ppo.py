@@ -60,7 +60,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         physics: The identified physics the residual is learned on (the hybrid; ``cfg.env.physics`` records where
             they came from), or ``None``: the robot file's values, no delay.
 
-    Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``env.num_worlds / WORLD_SIZE`` worlds on its own device
+    Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``env.num_worlds / WORLD_SIZE`` worlds on its device
     (``cuda:<LOCAL_RANK>``, or the CPU over gloo) with seed ``seed + RANK``, and rsl-rl averages the gradients
     across processes; rank 0 alone writes the run folder and selects on validation, and every rank resumes from
     the same checkpoint.
