@@ -61,7 +61,7 @@ class Ranks:
     def num_worlds(self, total: int) -> int:
         """This process's share of ``total`` simulated worlds (rsl-rl's environments)."""
         if total % self.world:
-            raise RunError(f"{total} worlds do not split over {self.world} processes; use a multiple of "
+            raise RunError(f"num_worlds = {total} does not split over {self.world} processes; use a multiple of "
                            f"{self.world}")
         return total // self.world
 
