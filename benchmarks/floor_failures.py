@@ -26,7 +26,7 @@ def main() -> None:
     import torch
 
     from floor_run import held_out
-    from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
+    from wresdyn.skills.evaluate import deploy, metrics
     from wresdyn.skills.plants import RealPlant
     from wresdyn.skills.skill_ppo import load_skill
 
@@ -40,7 +40,7 @@ def main() -> None:
         policy = None if name == "reference" else load_skill(run / "skills" / name)
         plant = RealPlant(real, len(motions), task.decimation, seed=cfg["seed"] + 100,
                           imu_noise=(task.gyro_noise, task.gravity_noise))
-        per = floor_metrics(deploy_floor(policy, plant, motions, task))["motions"]
+        per = metrics(deploy(policy, plant, motions, task))["motions"]
         fam = defaultdict(list)
         for m, r in zip(motions, per):
             fam[m.family].append(r)

@@ -15,8 +15,8 @@ def held_out(run, data=None):
     from wresdyn.data.real_robot import RealRobot
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_env import FloorTaskConfig
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.motions import make_motions
+    from wresdyn.skills.skill_config import FloorTaskConfig
 
     res = json.loads((Path(run) / "results.json").read_text())
     cfg, task = res["config"], FloorTaskConfig(**res["task"])
@@ -24,6 +24,6 @@ def held_out(run, data=None):
     stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
     # each split draws from a stream of its own position: the run's held-out motions without drawing the others
     counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}
-    motions = make_floor_motions(stand, floating, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"])["heldout"]
+    motions = make_motions(stand, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"], floating=floating)["heldout"]
     real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
     return res, task, floating, motions, real

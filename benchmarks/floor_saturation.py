@@ -22,7 +22,7 @@ def main() -> None:
     import torch
 
     from floor_run import held_out
-    from wresdyn.skills.floor_env import FloorTrackingEnv
+    from wresdyn.skills.env import TrackingEnv
     from wresdyn.skills.plants import RealPlant
     from wresdyn.skills.skill_ppo import load_skill
 
@@ -36,7 +36,7 @@ def main() -> None:
         for name in res["policies"]:
             plant = RealPlant(real, len(fam), task.decimation, seed=cfg["seed"] + 100,
                               imu_noise=(task.gyro_noise, task.gravity_noise))
-            env = FloorTrackingEnv(plant, fam, task, random_start=False)
+            env = TrackingEnv(plant, fam, task, random_start=False)
             policy = load_skill(run / "skills" / name)
             obs, alive, share = env.get_observations()["policy"], np.ones(len(fam), bool), []
             limit = np.abs(plant.lim[:, 1])

@@ -16,8 +16,10 @@ def main(paths: list[str]) -> None:
     policies = ["reference"] + list(runs[0]["policies"])
     seeds = [r["config"]["seed"] for r in runs]
     cfg = runs[0]["config"]
-    print(f"{len(runs)} seeds {seeds}: {cfg['iterations']} + {cfg['finetune']} PPO iterations, {cfg['envs']} worlds "
-          f"(oracle {cfg['oracle_envs']}), held-out {len(runs[0]['real']['heldout']['reference']['motions'])} motions")
+    # results.json written before the world count was named num_worlds call it envs
+    worlds, oracle = cfg.get("num_worlds", cfg.get("envs")), cfg.get("oracle_num_worlds", cfg.get("oracle_envs"))
+    print(f"{len(runs)} seeds {seeds}: {cfg['iterations']} + {cfg['finetune']} PPO iterations, {worlds} worlds "
+          f"(oracle {oracle}), held-out {len(runs[0]['real']['heldout']['reference']['motions'])} motions")
     for split in ("heldout", "validation"):
         print(f"\n## {split} motions on the real robot's floor (per seed, then the mean)\n")
         print("| policy | success per seed | success mean | falls | MPJPE [mrad] mean | g-MPJPE [mm] mean |")

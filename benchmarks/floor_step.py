@@ -37,7 +37,7 @@ def _yaw_tilt(quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def drift_rows(dep, per) -> list[str]:
-    """One line per motion of a :class:`~wresdyn.skills.floor_evaluate.FloorDeployment`: see the module docstring."""
+    """One line per motion of a :class:`~wresdyn.skills.evaluate.Deployment` on the floor: see the module docstring."""
     rows = []
     for i, r in enumerate(per):
         end = r["failed_at"] if r["failed_at"] > 0 else int(np.isfinite(dep.base[i, :, 0]).sum()) - 1
@@ -95,8 +95,8 @@ def main() -> None:
 
     from floor_run import held_out
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.evaluate import deploy, metrics
+    from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
     from wresdyn.skills.skill_ppo import load_skill
 
@@ -107,15 +107,15 @@ def main() -> None:
     motions = [m for m in motions if m.family in fams]
     if args.combo:
         stand = load_robot(floating.source, gains=floating.gains)
-        motions = make_floor_motions(stand, floating, {"train": 0, "validation": args.combo}, res["config"]["duration"],
-                                     real.rate_hz, res["config"]["seed"], families=(), extra=("combo",))["validation"]
+        motions = make_motions(stand, {"train": 0, "validation": args.combo}, res["config"]["duration"], real.rate_hz,
+                               res["config"]["seed"], floating=floating, families=(), extra=("combo",))["validation"]
         fams = ["combo"]
     if args.slow:
-        from wresdyn.skills.floor_feasibility import floor_feasibility
+        from wresdyn.skills.feasibility import floor_feasibility
 
         stand = load_robot(floating.source, gains=floating.gains)
-        motions = make_floor_motions(stand, floating, {"heldout": 4}, args.slow, real.rate_hz,
-                                     res["config"]["seed"] + 1000, families=())["heldout"]
+        motions = make_motions(stand, {"heldout": 4}, args.slow, real.rate_hz, res["config"]["seed"] + 1000,
+                               floating=floating, families=())["heldout"]
         for m in motions:
             m.name = m.name.replace("heldout", "slow")
             margin = floor_feasibility(floating, m, real.rate_hz, every=5, skip=0.01).margin
@@ -139,8 +139,8 @@ def main() -> None:
                                   imu_noise=(task.gyro_noise, task.gravity_noise))
             else:
                 plant = sim_plant(s, floating, len(motions), real.rate_hz, task.decimation, runs.get(s), ground=True)
-            dep = deploy_floor(policy, plant, motions, task)
-            per = floor_metrics(dep)["motions"]
+            dep = deploy(policy, plant, motions, task)
+            per = metrics(dep)["motions"]
             ok = sum(r["success"] for r in per)
             print(f"{name} on the {s} plant ({label}): {ok}/{len(per)} succeed", flush=True)
             print("\n".join(drift_rows(dep, per)), flush=True)

@@ -1,5 +1,5 @@
 """Can the floor references be played at all: the zero-moment point against the planted soles' support polygon, and
-the joint torques each motion needs (Pinocchio, :mod:`wresdyn.skills.floor_feasibility`) against the robot file's
+the joint torques each motion needs (Pinocchio, :mod:`wresdyn.skills.feasibility`) against the robot file's
 effort limits (the nominal masses) and against the "real" robot's (its masses, limits, friction and damping), over
 a finished ``wresdyn deploy --floor`` run's held-out motions.
 
@@ -36,8 +36,8 @@ def main() -> None:
 
     from floor_run import held_out
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_feasibility import floor_feasibility
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.feasibility import floor_feasibility
+    from wresdyn.skills.motions import make_motions
 
     torch.set_num_threads(1)
     res, task, floating, motions, real = held_out(Path(args.run), args.data)
@@ -54,8 +54,8 @@ def main() -> None:
     stance = {k: defaultdict(list) for k in robots}
     if args.combo:
         stand = load_robot(floating.source, gains=floating.gains)
-        combos = make_floor_motions(stand, floating, {"train": args.combo}, res["config"]["duration"], real.rate_hz,
-                                    res["config"]["seed"], families=(), extra=("combo",))["train"]
+        combos = make_motions(stand, {"train": args.combo}, res["config"]["duration"], real.rate_hz,
+                              res["config"]["seed"], floating=floating, families=(), extra=("combo",))["train"]
         for m in combos:
             f = floor_feasibility(floating, m, real.rate_hz, every=args.every, skip=0.01)
             print(f"{m.name:24s} ZMP margin min {1e3 * f.margin.min():+6.0f} mm, outside the support on "

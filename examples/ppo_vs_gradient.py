@@ -33,7 +33,7 @@ def main() -> None:
         heldout = data.split("heldout")[:1]
         data = dataclasses.replace(data, trajectories=data.split("train")[:2] + heldout + data.split("ood")[:1])
         cfg = dataclasses.replace(cfg, ppo_iterations=2, gradient_iterations=4, segments=2,
-                                  ppo_overrides={"ppo.num_envs": 8, "ppo.num_steps_per_env": 8},
+                                  ppo_overrides={"env.num_worlds": 8, "ppo.num_steps_per_env": 8},
                                   gradient_overrides={"windows": 4, "horizon": 4, "horizon_curriculum": ()})
     run_ablation(robot, data, cfg, args.out)
     print(open(f"{args.out}/table.md").read())

@@ -2,7 +2,7 @@
 
 The calibrated robot is identified **on the stand** (``wresdyn fit`` on the shipped recordings); the skill runs on
 the floor, where the humanoid must keep its balance on its own feet. The library pieces of ``wresdyn deploy --floor``
-for two policies: floor motions drawn from keyframes (:mod:`wresdyn.skills.floor_motions`), a tracking policy that
+for two policies: floor motions drawn from keyframes (:mod:`wresdyn.skills.motions`), a tracking policy that
 sees joints, its IMU and the reference (PPO, rsl-rl, asymmetric actor-critic) trained in the nominal simulator on a
 floor, the same policy fine-tuned in the calibrated robot on the floor, and both deployed on the real robot (MuJoCo
 C with the dataset's mismatch, standing on its floor):
@@ -38,24 +38,24 @@ def main() -> None:
     from wresdyn.data.real_robot import RealRobot
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
-    from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.env import SkillTaskConfig, TrackingEnv
+    from wresdyn.skills.evaluate import deploy, metrics
+    from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
     from wresdyn.skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
 
     ds = load_dataset(args.data or DEFAULT_DATASET)
     stand, floor = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
-    task, ppo = FloorTaskConfig(), replace(SkillPPOConfig(), num_envs=args.envs)
-    motions = make_floor_motions(stand, floor, {"train": args.motions, "heldout": 1}, args.duration, ds.rate_hz)
+    task, ppo = SkillTaskConfig.floor(), SkillPPOConfig()  # the worlds are the plants' (args.envs)
+    motions = make_motions(stand, {"train": args.motions, "heldout": 1}, args.duration, ds.rate_hz, floating=floor)
     out = Path(args.out)
 
     # (a) the nominal simulator on a floor, (b) (a) fine-tuned in the calibrated robot (identified on the stand)
     nominal = sim_plant("nominal", floor, args.envs, ds.rate_hz, task.decimation, ground=True)
-    train_skill(FloorTrackingEnv(nominal, motions["train"], task), replace(ppo, iterations=args.iterations),
+    train_skill(TrackingEnv(nominal, motions["train"], task), replace(ppo, iterations=args.iterations),
                 out / "a_nominal")
     calibrated = sim_plant("calibrated", floor, args.envs, ds.rate_hz, task.decimation, args.run, ground=True)
-    train_skill(FloorTrackingEnv(calibrated, motions["train"], task, seed=1), replace(ppo, iterations=args.finetune),
+    train_skill(TrackingEnv(calibrated, motions["train"], task, seed=1), replace(ppo, iterations=args.finetune),
                 out / "b_calibrated", init=out / "a_nominal")
 
     # zero-shot on the real robot's floor: the robot the data was recorded on, with its IMU noise
@@ -65,7 +65,7 @@ def main() -> None:
     for name in ("reference", "a_nominal", "b_calibrated"):
         policy = None if name == "reference" else load_skill(out / name)
         plant = RealPlant(real, len(held), task.decimation, imu_noise=(task.gyro_noise, task.gravity_noise))
-        m = floor_metrics(deploy_floor(policy, plant, held, task))["mean"]
+        m = metrics(deploy(policy, plant, held, task))["mean"]
         print(f"{name:14s} {100 * m['success']:7.0f}% {m['falls']:6d} {1e3 * m['mpjpe']:13.1f} "
               f"{1e3 * m['g_mpjpe']:13.0f}")
 

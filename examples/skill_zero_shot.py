@@ -36,7 +36,7 @@ def main() -> None:
     from wresdyn.paths import DEFAULT_DATASET
     from wresdyn.robot.description import load_robot
     from wresdyn.skills.env import SkillConfig, TrackingEnv
-    from wresdyn.skills.evaluate import deploy_skill, metrics
+    from wresdyn.skills.evaluate import deploy, metrics
     from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import RealPlant, sim_plant
     from wresdyn.skills.skill_ppo import SkillPPOConfig, load_skill, train_skill
@@ -44,7 +44,7 @@ def main() -> None:
     ds = load_dataset(args.data or DEFAULT_DATASET)
     robot = load_robot(ds.robot_file)
     task = SkillConfig()
-    ppo = replace(SkillPPOConfig(), num_envs=args.envs)
+    ppo = SkillPPOConfig()  # the worlds are the plants' (args.envs)
     motions = make_motions(robot, {"train": args.motions, "heldout": 1}, duration=2.0, rate_hz=ds.rate_hz)
     out = Path(args.out)
 
@@ -62,7 +62,7 @@ def main() -> None:
     print(f"{'policy':14s} {'MPJPE [mrad]':>13s} {'foot [mm]':>10s} {'success':>8s}")
     for name in ("reference", "a_nominal", "b_calibrated"):
         policy = None if name == "reference" else load_skill(out / name)
-        m = metrics(deploy_skill(policy, RealPlant(real, len(held), task.decimation), held, task), robot)["mean"]
+        m = metrics(deploy(policy, RealPlant(real, len(held), task.decimation), held, task), robot)["mean"]
         print(f"{name:14s} {1e3 * m['mpjpe']:13.2f} {1e3 * m['foot_error']:10.2f} {100 * m['success']:7.0f}%")
 
 

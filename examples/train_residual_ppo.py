@@ -53,9 +53,9 @@ def main() -> None:
     if args.test:
         cfg = dataclasses.replace(
             cfg,
-            env=dataclasses.replace(cfg.env, horizon=16),
+            env=dataclasses.replace(cfg.env, num_worlds=4, horizon=16),
             residual=dataclasses.replace(cfg.residual, hidden_dims=(32, 32), critic_hidden_dims=(32, 32), gru_hidden_dim=32),
-            ppo=dataclasses.replace(cfg.ppo, num_envs=4, num_steps_per_env=8, iterations=2, save_interval=1),
+            ppo=dataclasses.replace(cfg.ppo, num_steps_per_env=8, iterations=2, save_interval=1),
         )
     if args.iterations:
         cfg = dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=args.iterations))

@@ -30,10 +30,10 @@ def tiny_ppo_config(arch="mlp", iterations=2, kind="torque"):
     from wresdyn.learn.residual import ResidualConfig
 
     return TrainConfig(
-        env=ReplayEnvConfig(horizon=8),
+        env=ReplayEnvConfig(num_worlds=4, horizon=8),
         residual=ResidualConfig(kind=kind, arch=arch, hidden_dims=(32, 32), critic_hidden_dims=(32, 32),
                                 gru_hidden_dim=32),
-        ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=iterations, save_interval=1, num_mini_batches=2,
+        ppo=PPOConfig(num_steps_per_env=8, iterations=iterations, save_interval=1, num_mini_batches=2,
                       num_learning_epochs=2),
     )
 
@@ -179,7 +179,7 @@ def ppo_best_actor(run_dir, dataset, robot, cfg):
 
     trajs = dataset.split("train")
     mean, std = obs_stats(trajs)
-    env = ReplayEnv(robot, trajs, dataset.rate_hz, cfg.ppo.num_envs, cfg.env, cfg.residual, cfg.rewards,
+    env = ReplayEnv(robot, trajs, dataset.rate_hz, cfg.env.num_worlds, cfg.env, cfg.residual, cfg.rewards,
                     seed=cfg.ppo.seed, obs_mean=mean, obs_std=std)
     actor = Runner(env, runner_cfg(cfg), log_dir=None).alg.get_policy()
     actor.load_state_dict(load_checkpoint(run_dir / "best.pt", keys=("actor", "meta"))["actor"])

@@ -2,7 +2,7 @@
 
 A stand tracking policy trained by ``wresdyn deploy`` (a ``skills/<name>/`` folder: ``policy.pt``, ``config.json``)
 runs closed loop on the drifting "real" robot with the skills' own deployment code
-(:func:`wresdyn.skills.evaluate.deploy_skill` on a :class:`wresdyn.skills.plants.RealPlant`, one world), tracking one
+(:func:`wresdyn.skills.evaluate.deploy` on a :class:`wresdyn.skills.plants.RealPlant`, one world), tracking one
 long reference (the skill motions in turn). :class:`DriftingPlant` sits between the two: before every policy step it
 calls the benchmark's hook with the step's first sample (the drift changes the plant's MuJoCo model there, as
 ``RealRobot.record``'s ``on_sample`` does at every sample), and it keeps the log a robot would write at the recording
@@ -48,8 +48,8 @@ class DriftingPlant:
     the step's first sample) and logs every sample of the stream; every other attribute is the plant's."""
 
     def __init__(self, plant, hook, rng: np.random.Generator) -> None:
-        if plant.n_worlds != 1:
-            raise ValueError(f"one robot drifts: the plant has {plant.n_worlds} worlds")
+        if plant.num_worlds != 1:
+            raise ValueError(f"one robot drifts: the plant has {plant.num_worlds} worlds")
         self.plant, self.hook, self.rng = plant, hook, rng
         self.k = 0
         """Samples logged so far."""
@@ -97,7 +97,7 @@ def policy_stream(skill_dir, real, hook, ref_q: np.ndarray, ref_feet: np.ndarray
     policy steps of samples; the task's failure rule does not stop the run (only a robot that runs away does)."""
     import torch
 
-    from wresdyn.skills.evaluate import deploy_skill
+    from wresdyn.skills.evaluate import deploy
     from wresdyn.skills.motions import Motion
     from wresdyn.skills.plants import RealPlant
     from wresdyn.skills.skill_ppo import load_skill
@@ -110,7 +110,7 @@ def policy_stream(skill_dir, real, hook, ref_q: np.ndarray, ref_feet: np.ndarray
     # a robot at work does not stop where a training episode would end: the run goes on past the task's failure
     # rule (a joint fail_error from its reference); where it would have fired is reported (PolicyRun.worst)
     with torch.no_grad():
-        dep = deploy_skill(policy, plant, [motion], replace(task, fail_error=NEVER))
+        dep = deploy(policy, plant, [motion], replace(task, fail_error=NEVER))
     if dep.failed_at[0] >= 0:
         raise SystemExit(f"{skill_dir}: the real robot ran away {dep.failed_at[0] * task.decimation / rate:.2f} s "
                          "into the run")

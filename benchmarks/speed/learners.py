@@ -36,8 +36,8 @@ def _ppo(robot, dataset, device: str, envs: int, iterations: int, solver: str, g
     from wresdyn.ppo.ppo_config import default_config
 
     cfg = default_config()
-    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver),
-                              ppo=dataclasses.replace(cfg.ppo, num_envs=envs, device=device, save_interval=10**6,
+    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, solver=solver, num_worlds=envs),
+                              ppo=dataclasses.replace(cfg.ppo, device=device, save_interval=10**6,
                                                       select_every=10**6, cuda_graph=graph))
     with tempfile.TemporaryDirectory() as tmp:
         train(dataset, robot, dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, iterations=2)), Path(tmp) / "warm")

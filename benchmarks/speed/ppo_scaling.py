@@ -16,7 +16,7 @@ K mini-batches, ``+epK`` K epochs.
 - ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
   world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph.
 - ``skill``: policy (a) of the floor benchmark (``wresdyn deploy --floor --full``'s sizes: 16 training motions per
-  family of 4 s; :class:`~wresdyn.skills.floor_env.FloorTrackingEnv` on the nominal simulator with a floor,
+  family of 4 s; :class:`~wresdyn.skills.env.TrackingEnv` on the nominal simulator with a floor,
   :func:`wresdyn.skills.skill_ppo.runner_cfg` with the default :class:`~wresdyn.skills.skill_config.SkillPPOConfig`).
   An env-step is a policy step (``decimation`` physics steps).
 
@@ -77,12 +77,12 @@ def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Pat
     from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
 
-    cfg = set_fields(default_config(), {"ppo.num_envs": envs, "ppo.device": device,
+    cfg = set_fields(default_config(), {"env.num_worlds": envs, "ppo.device": device,
                                         **{f"ppo.{k}": v for k, v in fields.items()}})
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
-    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_envs(envs), cfg.env, cfg.residual, cfg.rewards,
+    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_worlds(envs), cfg.env, cfg.residual, cfg.rewards,
                     device=ranks.device(device), seed=cfg.ppo.seed + ranks.rank, obs_mean=mean, obs_std=std,
                     graph=cfg.ppo.cuda_graph, weights=data.fit_weights())
     rcfg = runner_cfg(cfg)
@@ -96,23 +96,23 @@ def _skill(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path, 
     from wresdyn.experiments.deploy_config import FloorDeployConfig
     from wresdyn.ppo.runner import make_runner, seed_processes
     from wresdyn.robot.description import load_robot
-    from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
-    from wresdyn.skills.floor_motions import make_floor_motions
+    from wresdyn.skills.env import FloorTaskConfig, TrackingEnv
+    from wresdyn.skills.motions import make_motions
     from wresdyn.skills.plants import sim_plant
     from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, runner_cfg
 
     full, task = FloorDeployConfig.full(), FloorTaskConfig()
-    cfg = SkillPPOConfig(num_envs=envs, device=device, seed=full.seed, **fields)
+    cfg = SkillPPOConfig(device=device, seed=full.seed, **fields)
     seed_processes(cfg.seed + ranks.rank, cfg.torch_threads)
     rate = float(data.rate_hz)
     if "train" not in motions_cache:
         floating = load_robot(robot.source, gains=robot.gains, base="floating")
         counts = {"train": per_family or full.train_per_family}
-        motions = make_floor_motions(robot, floating, counts, full.duration, rate, full.seed)
+        motions = make_motions(robot, counts, full.duration, rate, full.seed, floating=floating)
         motions_cache.update(train=motions["train"], floating=floating)
     n, dev = rank_share(envs, device)
     plant = sim_plant("nominal", motions_cache["floating"], n, rate, task.decimation, None, dev, ground=True)
-    env = FloorTrackingEnv(plant, motions_cache["train"], task, seed=full.seed + ranks.rank, device=dev)
+    env = TrackingEnv(plant, motions_cache["train"], task, seed=full.seed + ranks.rank, device=dev)
     return env, make_runner(env, runner_cfg(cfg, env.critic_groups), tmp, ranks.main), cfg.num_steps_per_env
 
 
@@ -175,7 +175,7 @@ def _time_to_target(ranks, robot, data, args) -> dict:
     opts = "+".join(o for o in (["one_sync"] if args.one_sync else []) + args.ttf_options.split("+") if o)
     case = f"residual:{args.envs}" + (f"+{opts}" if opts else "")
     fields = {f"ppo.{k}": v for k, v in _parse_case(case)[2].items()}
-    cfg = set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
+    cfg = set_fields(default_config(), {"env.num_worlds": args.envs, "ppo.device": args.device,
                                         "ppo.iterations": args.max_iterations, "ppo.select_every": args.check,
                                         "ppo.save_interval": 10**6, **fields})
     out = Path(args.out) / f"ttf_{ranks.world}x{args.envs // ranks.world}_{opts or 'rsl_rl'}"

@@ -177,7 +177,7 @@ def main() -> None:
     args = p.parse_args()
     wp.config.quiet = True
     ranks = Ranks.from_env()
-    cfg = apply_overrides(set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
+    cfg = apply_overrides(set_fields(default_config(), {"env.num_worlds": args.envs, "ppo.device": args.device,
                                                         "ppo.save_interval": 10**6}), args.set)
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
     robot = load_robot(DEFAULT_ROBOT)
@@ -185,7 +185,7 @@ def main() -> None:
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
     device = ranks.device(cfg.ppo.device)
-    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_envs(cfg.ppo.num_envs), cfg.env, cfg.residual, cfg.rewards,
+    env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_worlds(cfg.env.num_worlds), cfg.env, cfg.residual, cfg.rewards,
                     device=device, seed=cfg.ppo.seed + ranks.rank, obs_mean=mean, obs_std=std,
                     graph=cfg.ppo.cuda_graph, weights=data.fit_weights())
     sync = (lambda: torch.cuda.synchronize(device)) if str(device).startswith("cuda") else (lambda: None)

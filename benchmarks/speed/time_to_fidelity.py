@@ -104,7 +104,7 @@ def run_ppo(robot, dataset, args, target: float, out: Path, graph: bool) -> dict
     from wresdyn.config_fields import set_fields
     from wresdyn.ppo.ppo_config import default_config
 
-    cfg = set_fields(default_config(), {"ppo.num_envs": args.envs, "ppo.device": args.device,
+    cfg = set_fields(default_config(), {"env.num_worlds": args.envs, "ppo.device": args.device,
                                         "ppo.iterations": args.ppo_iterations, "ppo.select_every": args.check,
                                         "ppo.save_interval": max(args.check, 50), "ppo.seed": args.seed,
                                         "ppo.cuda_graph": graph})

@@ -111,7 +111,8 @@ def test_the_help_is_the_docstring_with_the_default(capsys):
     with pytest.raises(SystemExit):
         main(["identify", "--help"])
     out = " ".join(capsys.readouterr().out.replace("│", " ").split())
-    assert "--windows INT Windows B (Newton worlds) per iteration. (default: 32)" in out
+    assert ("--windows INT Windows B (Newton worlds) per iteration: a batch of recorded windows, one world each, not an "
+            "environment's world count") in out and "(default: 32)" in out
 
 
 @pytest.mark.parametrize("command", sorted(OLD_FLAGS))
@@ -189,14 +190,15 @@ SAME = [
       "--device", "cuda:0", "--seed", "4", "--save-interval", "5", "--physics", "p.json",
       "--set", "ppo.desired_kl=0.05", "--set", "residual.hidden_dims=128,64", "--set", "ppo.iterations=9"],
      replace(default_config(),
-             env=replace(default_config().env, horizon=500, obs_noise=0.1, solver="replay", physics="p.json"),
+             env=replace(default_config().env, num_worlds=64, horizon=500, obs_noise=0.1, solver="replay",
+                         physics="p.json"),
              residual=replace(default_config().residual, kind="delta_action", arch="gru", fraction=0.25,
                               hidden_dims=(128, 64)),
-             ppo=replace(default_config().ppo, iterations=9, num_envs=64, num_steps_per_env=12, device="cuda:0",
+             ppo=replace(default_config().ppo, iterations=9, num_steps_per_env=12, device="cuda:0",
                          seed=4, save_interval=5, desired_kl=0.05))),
     (["deploy", "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
       "--motions", "1", "--heldout", "1", "--duration", "0.5", "--seed", "2", "--device", "cuda:0"],
-     DeployConfig(iterations=2, finetune=1, envs=4, oracle_envs=3, finetune_std=0.6, train_per_family=1,
+     DeployConfig(iterations=2, finetune=1, num_worlds=4, oracle_num_worlds=3, finetune_std=0.6, train_per_family=1,
                   heldout_per_family=1, duration=0.5, seed=2, device="cuda:0")),
     (["deploy", "--floor", "--full", "--oracle-beside"], FloorDeployConfig.full(oracle_beside=True)),
     (["ablate", "--learners", "gradient,ppo", "--archs", "gru", "--kinds", "torque", "--seeds", "0,5", "--segments",
@@ -204,7 +206,7 @@ SAME = [
       "--ppo-envs", "16", "--windows", "8", "--horizon", "16"],
      AblationConfig(learners=("gradient", "ppo"), archs=("gru",), kinds=("torque",), seeds=(0, 5), segments=2,
                     ppo_iterations=9, gradient_iterations=40, solver="replay", device="cuda",
-                    ppo_overrides={"ppo.num_envs": 16}, gradient_overrides={"windows": 8, "horizon": 16})),
+                    ppo_overrides={"env.num_worlds": 16}, gradient_overrides={"windows": 8, "horizon": 16})),
 ]
 
 
@@ -226,24 +228,22 @@ def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_
     from types import SimpleNamespace
 
     import wresdyn.data.loading
-    import wresdyn.experiments.floor_skills
-    import wresdyn.experiments.stand_skills
+    import wresdyn.experiments.skills
     import wresdyn.sim.warmup
 
     robot = SimpleNamespace(source=Path("humanoid.usda"), n_dof=3)
     monkeypatch.setattr(wresdyn.data.loading, "load_data", lambda path: (SimpleNamespace(rate_hz=500.0), robot))
     monkeypatch.setattr(wresdyn.sim.warmup, "compile_kernels", lambda *a, **k: None)
     passed = []
-    module, name = ((wresdyn.experiments.floor_skills, "run_floor_benchmark") if floor
-                    else (wresdyn.experiments.stand_skills, "run_benchmark"))
-    monkeypatch.setattr(module, name, lambda robot, ds, out, cfg, **kw: passed.append((cfg, kw)))
+    monkeypatch.setattr(wresdyn.experiments.skills, "run_benchmark",
+                        lambda robot, ds, out, cfg, **kw: passed.append((cfg, kw)))
     head = ["deploy", "d.npz", "--out", str(tmp_path), "--quiet", "--envs", "8"] + (["--floor"] if floor else [])
     task_cls = FloorTaskConfig if floor else SkillConfig
     own = ["--task.sigma-base", "0.2"] if floor else ["--task.fail-error", "0.7"]
     assert main(head + ["--task.action-scale", "0.3", "--task.decimation", "5", *own, "--ppo.hidden-dims", "64", "32",
                         "--ppo.gamma", "0.99", "--ppo.torch-threads", "None", "--ppo.init-std", "0.5"]) == 0
     cfg, kw = passed[-1]
-    assert cfg == (FloorDeployConfig if floor else DeployConfig)(envs=8)
+    assert cfg == (FloorDeployConfig if floor else DeployConfig)(num_worlds=8)
     task = task_cls(action_scale=0.3, decimation=5, **({"sigma_base": 0.2} if floor else {"fail_error": 0.7}))
     assert kw["task"] == task
     assert kw["ppo"] == SkillPPOConfig(hidden_dims=(64, 32), gamma=0.99, torch_threads=None, init_std=0.5)
@@ -306,9 +306,9 @@ def test_a_malformed_command_line_is_one_line_and_exit_2(argv, message, capsys):
     (["migrate", "d.npz", "--out", "n.npz", "--validation", "-1"],
      "wresdyn migrate: error: --validation must be >= 0, not -1"),
     (["identify", "none.npz", "--windows", "0"], "wresdyn identify: error: windows = 0 must be >= 1"),
-    (["train", "none.npz", "--ppo.num-envs", "1", "--ppo.num-steps-per-env", "2"],
+    (["train", "none.npz", "--env.num-worlds", "1", "--ppo.num-steps-per-env", "2"],
      "wresdyn train: error: ppo.num_mini_batches = 4 is more than the 2 samples per rollout"),
-    (["deploy", "--oracle-envs", "0"], "wresdyn deploy: error: deploy.oracle_envs = 0 must be >= 1"),
+    (["deploy", "--oracle-num-worlds", "0"], "wresdyn deploy: error: deploy.oracle_num_worlds = 0 must be >= 1"),
     (["deploy", "--floor", "--beside-devices", "cuda:1", "gpu2"],
      "wresdyn deploy: error: floor.beside_devices = 'gpu2' is not a device: cpu, cuda or cuda:N"),
     (["deploy", "--ppo.torch-threads", "0"], "wresdyn deploy: error: ppo.torch_threads = 0 must be >= 1"),

@@ -301,7 +301,7 @@ def test_a_skill_draws_a_line_per_iteration_named_after_its_policy(humanoid, tmp
 
     motions = make_motions(humanoid, {"train": 1}, duration=0.4, rate_hz=500.0, seed=3)
     env = TrackingEnv(SimPlant(humanoid, 3, 500.0, 5), motions.split("train"), SkillConfig(decimation=5))
-    cfg = SkillPPOConfig(num_envs=3, iterations=2, num_steps_per_env=8, hidden_dims=(32, 32), num_mini_batches=1,
+    cfg = SkillPPOConfig(iterations=2, num_steps_per_env=8, hidden_dims=(32, 32), num_mini_batches=1,
                          num_learning_epochs=1, torch_threads=1)
     out = io.StringIO()
     train_skill(env, cfg, tmp_path / "skills" / "a_nominal", log=Log(tmp_path / "deploy.log", stream=out, every=0.0))

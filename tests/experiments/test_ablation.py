@@ -69,7 +69,7 @@ def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
     data = load_dataset(tiny_data, robot=humanoid)
     cfg = AblationConfig(learners=("ppo", "gradient", "parametric"), archs=("mlp",), kinds=("torque",), seeds=(0,),
                          ppo_iterations=2, gradient_iterations=2, segments=2, solver="featherstone",
-                         ppo_overrides={"ppo.num_envs": 4, "ppo.num_steps_per_env": 4, "env.horizon": 8},
+                         ppo_overrides={"env.num_worlds": 4, "ppo.num_steps_per_env": 4, "env.horizon": 8},
                          gradient_overrides={"windows": 2, "horizon_curriculum": (2,)})
     results = run_ablation(humanoid, data, cfg, tmp_path, log=lambda *_: None)
     assert [r["learner"] for r in results] == ["ppo", "gradient", "parametric"]
@@ -118,7 +118,7 @@ def test_ablation_config_refuses_bad_cells_at_construction(tmp_path, capsys):
                     ({"segments": 4, "ppo_iterations": 3}, "ablation ppo_iterations = 3 must be >= 4"),
                     ({"seeds": ()}, "at least one seed"),
                     ({"ppo_overrides": {"ppo.num_env": 4}}, "ablation ppo_overrides: .*num_env"),
-                    ({"ppo_overrides": {"ppo.num_envs": 2}}, "num_mini_batches = 4 is more than the 2 worlds"),
+                    ({"ppo_overrides": {"env.num_worlds": 2}}, "num_mini_batches = 4 is more than the 2 worlds"),
                     ({"learners": ("gradient",), "gradient_overrides": {"windowz": 2}},
                      "gradient_overrides: .*windowz")):
         with pytest.raises(WresdynError, match=msg):

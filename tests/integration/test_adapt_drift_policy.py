@@ -40,7 +40,7 @@ def skill(humanoid, tmp_path_factory):
     task = SkillConfig()
     motions = make_motions(humanoid, {"train": 1}, duration=0.4, rate_hz=RATE, seed=3).split("train")
     env = TrackingEnv(SimPlant(humanoid, 4, RATE, task.decimation), motions, task)
-    ppo = SkillPPOConfig(num_envs=4, iterations=1, num_steps_per_env=4, hidden_dims=(16,), num_mini_batches=1,
+    ppo = SkillPPOConfig(iterations=1, num_steps_per_env=4, hidden_dims=(16,), num_mini_batches=1,
                          torch_threads=1)
     out = tmp_path_factory.mktemp("skill") / "tiny"
     train_skill(env, ppo, out, log=lambda *_: None)

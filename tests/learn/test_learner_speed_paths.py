@@ -97,8 +97,8 @@ import torch
 
 from wresdyn.ppo.runner import Ranks
 from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
-from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv
-from wresdyn.skills.floor_motions import make_floor_motions
+from wresdyn.skills.env import SkillTaskConfig, TrackingEnv
+from wresdyn.skills.motions import make_motions
 from wresdyn.skills.plants import SimPlant
 from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, train_skill
 
@@ -106,13 +106,13 @@ torch.set_num_threads(1)
 out, iterations, envs = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 robot = load_robot(DEFAULT_ROBOT)
 floating = load_robot(robot.source, base="floating")
-motions = make_floor_motions(robot, floating, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3)
-cfg = SkillPPOConfig(num_envs=envs, iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
+motions = make_motions(robot, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3, floating=floating)
+cfg = SkillPPOConfig(iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
                      num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
-n, device = rank_share(cfg.num_envs, cfg.device)
+n, device = rank_share(envs, cfg.device)
 for run in (out, out.with_name(out.name + "_second")):  # the second skill joins the first one's process group
-    env = FloorTrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
-                           FloorTaskConfig(decimation=5), seed=Ranks.from_env().rank, device=device)
+    env = TrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
+                      SkillTaskConfig.floor(decimation=5), seed=Ranks.from_env().rank, device=device)
     s = train_skill(env, cfg, run, log=lambda *_: None)
     print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
 Ranks.from_env().close()
@@ -147,7 +147,7 @@ def test_torchrun_trains_a_floor_skill_on_two_processes_and_resumes(tmp_path):
 
 def test_learners_stop_at_the_validation_target(robot, data, tmp_path):
     # a target every residual meets: each learner stops at its first validation check
-    cfg = set_fields(default_config(), {"ppo.num_envs": 4, "ppo.num_steps_per_env": 8, "ppo.iterations": 10,
+    cfg = set_fields(default_config(), {"env.num_worlds": 4, "ppo.num_steps_per_env": 8, "ppo.iterations": 10,
                                         "ppo.select_every": 2, "ppo.save_interval": 2})
     s = train(data, robot, cfg, tmp_path / "ppo", stop_below=10.0)
     assert s["stopped_at_target"] == 2 and s["iterations_this_session"] == 2

@@ -44,9 +44,9 @@ def test_gradient_fit_returns_the_residual_of_its_best_validation(quadruped, rec
 
 
 def test_ppo_exports_the_actor_of_its_best_validation(robot, data, tmp_path, best_actor):
-    cfg = TrainConfig(env=ReplayEnvConfig(horizon=8),
+    cfg = TrainConfig(env=ReplayEnvConfig(horizon=8, num_worlds=4),
                       residual=ResidualConfig(hidden_dims=(32, 32), critic_hidden_dims=(32, 32)),
-                      ppo=PPOConfig(num_envs=4, num_steps_per_env=8, iterations=3, save_interval=1, num_mini_batches=2,
+                      ppo=PPOConfig(num_steps_per_env=8, iterations=3, save_interval=1, num_mini_batches=2,
                                     num_learning_epochs=2, select_every=1))
     run = tmp_path / "run"
     summary = train(data, robot, cfg, run)

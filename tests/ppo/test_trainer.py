@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.config_fields import apply_overrides
+from wresdyn.config_fields import apply_overrides, set_fields
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.errors import WresdynError
 from wresdyn.learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_policy
@@ -41,14 +41,14 @@ def test_overrides_set_any_field_and_refuse_bad_ones(tmp_path):
     # an optional field at its None default parses as its annotation's other type
     assert default_config().ppo.select_every is None
     assert apply_overrides(default_config(), ["ppo.select_every=50"]).ppo.select_every == 50
-    for bad, msg in (("ppo.nope=1", "no field 'nope'"), ("net.x=1", "unknown section"), ("ppo.num_envs=1.5", "not a int"),
+    for bad, msg in (("ppo.nope=1", "no field 'nope'"), ("net.x=1", "unknown section"), ("env.num_worlds=1.5", "not a int"),
                      ("ppo.select_every=ten", "not a int"),
                      ("ppo.gamma", "SECTION.FIELD=VALUE")):
         with pytest.raises(ValueError, match=msg):
             apply_overrides(default_config(), [bad])
     out = tmp_path / "never"
     res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "train", "data/dataset.npz", "--out", str(out),
-                          "--set", "ppo.nope=1"], capture_output=True, text=True)
+                          "--ppo.nope", "1"], capture_output=True, text=True)
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn")]
     assert res.returncode == 2 and len(lines) == 1 and "nope" in lines[0] and not out.exists()
 
@@ -69,10 +69,13 @@ def test_train_checkpoints_and_resumes_after_a_kill(robot, data, tmp_path):
     # where and how a run goes on may change (a run started on a GPU goes on here), what it learns may not
     saved_cfg = json.loads((run / "config.json").read_text())
     saved_cfg["config"]["ppo"]["device"] = "cuda:3"
+    # and a config.json keeping the world count in the PPO config (ppo.num_envs) reads as the environment's num_worlds
+    saved_cfg["config"]["ppo"]["num_envs"] = saved_cfg["config"]["env"].pop("num_worlds")
     (run / "config.json").write_text(json.dumps(saved_cfg))
     moved = dataclasses.replace(tiny(iterations=4), ppo=dataclasses.replace(
         tiny(iterations=4).ppo, save_interval=2, torch_threads=2))
     assert train(data, robot, moved, run)["iterations_this_session"] == 1
+    assert json.loads((run / "config.json").read_text())["config"]["env"]["num_worlds"] == 4
     # a different configuration is refused rather than silently mixed in, naming what changed
     with pytest.raises(RunError, match=r"rewards\.sigma_q = 0\.1, now 0\.5"):
         train(data, robot, dataclasses.replace(tiny(iterations=3), rewards=dataclasses.replace(
@@ -151,9 +154,9 @@ def test_configs_check_their_values_at_construction():
         ResidualConfig(kind="torqu")
     with pytest.raises(WresdynError, match="residual.arch = 'lstm' is not one of: mlp, gru"):
         ResidualConfig(arch="lstm")
-    for bad, msg in (({"num_envs": 0}, "ppo.num_envs = 0 must be >= 1"),
+    for bad, msg in (({"num_steps_per_env": 0}, "ppo.num_steps_per_env = 0 must be >= 1"),
                      ({"gamma": 1.5}, "ppo.gamma = 1.5 must be <= 1"),
-                     ({"num_envs": 2.5}, "ppo.num_envs = 2.5 is not an integer"),
+                     ({"num_steps_per_env": 2.5}, "ppo.num_steps_per_env = 2.5 is not an integer"),
                      ({"learning_rate": float("nan")}, "ppo.learning_rate = nan is not a number"),
                      ({"device": "gpu"}, "ppo.device = 'gpu' is not a device")):
         with pytest.raises(WresdynError, match=msg):
@@ -164,22 +167,28 @@ def test_configs_check_their_values_at_construction():
         RewardConfig(sigma_q=0)
     with pytest.raises(WresdynError, match="env.solver = 'featherstne' is not one of: auto, replay"):
         TrainConfig(env=ReplayEnvConfig(solver="featherstne"))
+    with pytest.raises(WresdynError, match="env.num_worlds = 0 must be >= 1"):
+        ReplayEnvConfig(num_worlds=0)
     # a GRU is batched by world: 2 worlds cannot make 4 mini-batches, whatever the rollout length
     with pytest.raises(WresdynError, match="num_mini_batches = 4 is more than the 2 worlds"):
-        TrainConfig(residual=ResidualConfig(arch="gru"), ppo=PPOConfig(num_envs=2))
+        TrainConfig(residual=ResidualConfig(arch="gru"), env=ReplayEnvConfig(num_worlds=2))
     # overrides apply at once, so their order does not matter to checks across fields
-    cfg = apply_overrides(default_config(), ["residual.arch=gru", "ppo.num_envs=2", "ppo.num_mini_batches=2"])
-    assert (cfg.residual.arch, cfg.ppo.num_envs, cfg.ppo.num_mini_batches) == ("gru", 2, 2)
+    cfg = apply_overrides(default_config(), ["residual.arch=gru", "env.num_worlds=2", "ppo.num_mini_batches=2"])
+    assert (cfg.residual.arch, cfg.env.num_worlds, cfg.ppo.num_mini_batches) == ("gru", 2, 2)
+    # the world count is the environment's; its name in the PPO config still reads in a run's config.json (and on
+    # the command line, through the deprecated spellings: tests/cli)
+    old = dataclasses.asdict(default_config())
+    old["ppo"]["num_envs"] = old["env"].pop("num_worlds") + 1
+    assert config_from_dict(old) == set_fields(default_config(), {"env.num_worlds": 257})
     with pytest.raises(ValueError, match="residual.kind = 'torqu'"):
         apply_overrides(default_config(), ["residual.kind=torqu"])
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--residual", "bogus"], ["--residual", "'bogus'", "torque"]),
-    (["--solver", "featherstne"], ["--solver", "featherstone"]),
-    (["--set", "residual.kind=torqu"], ["residual.kind", "torque, delta_action"]),
-    (["--num-envs", "0"], ["ppo.num_envs = 0"]),
-], ids=["residual", "solver", "set-kind", "num-envs"])
+    (["--residual.kind", "bogus"], ["--residual.kind", "'bogus'", "torque"]),
+    (["--env.solver", "featherstne"], ["--env.solver", "featherstne"]),
+    (["--env.num-worlds", "0"], ["env.num_worlds = 0"]),
+], ids=["residual", "solver", "num-worlds"])
 def test_cli_refuses_bad_choices_in_one_line(tmp_path, argv, words):
     import subprocess
     import sys
@@ -306,9 +315,9 @@ def test_the_selected_residual_beats_pd_only(cartpole, record, tmp_path):
     # one held-out trajectory it missed by 9x PD's error)
     data = record(cartpole, Mismatch(friction=0.1, kp_scale=0.6), {"train": 2, "validation": 1}, seconds=0.1,
                   amplitude=0.4)
-    cfg = TrainConfig(env=ReplayEnvConfig(horizon=48), rewards=RewardConfig(sigma_q=1e-3),
+    cfg = TrainConfig(env=ReplayEnvConfig(horizon=48, num_worlds=64), rewards=RewardConfig(sigma_q=1e-3),
                       residual=ResidualConfig(hidden_dims=(32, 32), critic_hidden_dims=(32, 32), init_std=0.5),
-                      ppo=PPOConfig(num_envs=64, num_steps_per_env=48, iterations=12, save_interval=12,
+                      ppo=PPOConfig(num_steps_per_env=48, iterations=12, save_interval=12,
                                     num_mini_batches=2, num_learning_epochs=4, learning_rate=3e-4, desired_kl=0.01,
                                     select_every=1))
     summary = train(data, cartpole, cfg, tmp_path / "run")

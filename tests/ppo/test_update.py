@@ -30,7 +30,7 @@ def test_device_learning_rate_follows_rsl_rls_rule():
 def _rollout(robot, data, tmp_path, desired_kl):
     """A runner of the tiny residual run after one rollout (its storage full, the returns computed)."""
     torch.manual_seed(0)
-    cfg = set_fields(tiny(), {"ppo.num_envs": 8, "ppo.num_learning_epochs": 3, "ppo.desired_kl": desired_kl})
+    cfg = set_fields(tiny(), {"env.num_worlds": 8, "ppo.num_learning_epochs": 3, "ppo.desired_kl": desired_kl})
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
     env = ReplayEnv(robot, trajs, data.rate_hz, 8, cfg.env, cfg.residual, cfg.rewards, obs_mean=mean, obs_std=std)

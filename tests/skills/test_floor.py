@@ -4,7 +4,6 @@ real robot, rsl-rl's PPO)."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 
 import numpy as np
@@ -12,27 +11,29 @@ import pytest
 import torch
 
 from wresdyn.cli import main
-from wresdyn.skills.floor_env import FloorTaskConfig, FloorTrackingEnv, base_frame_imu
-from wresdyn.skills.floor_evaluate import deploy_floor, floor_metrics
-from wresdyn.skills.floor_motions import FLOOR_HELD_OUT_FAMILIES, FLOOR_TRAIN_FAMILIES, make_floor_motions
+from wresdyn.skills.env import TrackingEnv
+from wresdyn.skills.evaluate import deploy, metrics
+from wresdyn.skills.motions import TASK_FAMILIES, make_motions
 from wresdyn.skills.plants import RealPlant, SimPlant
+from wresdyn.skills.reference import base_frame_imu
+from wresdyn.skills.skill_config import SkillTaskConfig
 
-RATE = 500.0
+import skill_runs
+from skill_runs import fit_run
+
+RATE = skill_runs.RATE
 
 
 @pytest.fixture(scope="module")
 def motions(humanoid, floating):
-    return make_floor_motions(humanoid, floating, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0,
-                              rate_hz=RATE, seed=3)
+    return make_motions(humanoid, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0, rate_hz=RATE, seed=3,
+                        floating=floating)
 
 
 @pytest.fixture(scope="module")
 def quiet_real(floating, shipped_mismatch):
-    from wresdyn.data.real_robot import RealRobot
-
-    mm = dataclasses.replace(shipped_mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
-                             velocity_resolution=0.0)
-    return RealRobot(floating, mm, RATE)
+    """The shipped real robot without sensor noise (exact comparisons)."""
+    return skill_runs.quiet_real(floating, shipped_mismatch)
 
 
 def test_threaded_mujoco_worlds_step_as_newtons_one_world_solver(floating):
@@ -65,8 +66,9 @@ def test_threaded_mujoco_worlds_step_as_newtons_one_world_solver(floating):
 def test_floor_motions_keep_planted_soles_still_and_the_weight_over_them(humanoid, floating, motions):
     from wresdyn.sim.kinematics import BodyPositions
 
-    assert [m.family for m in motions["train"]] == list(FLOOR_TRAIN_FAMILIES)
-    assert [m.family for m in motions["heldout"]] == list(FLOOR_TRAIN_FAMILIES + FLOOR_HELD_OUT_FAMILIES)
+    fam = TASK_FAMILIES["floor"]
+    assert [m.family for m in motions["train"]] == list(fam.train)
+    assert [m.family for m in motions["heldout"]] == list(fam.train + fam.held_out)
     fk = BodyPositions(floating, 1)
     feet = [list(floating.body_names).index(b) for b in ("left_foot", "right_foot")]
     lifted = 0
@@ -117,15 +119,15 @@ def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions
     """The actor's observation is 6n + 6 (joints, reference, action, IMU), the critic's adds 11 privileged values;
     the reference played open loop on the real robot's floor (ankles weaker than gravity's toppling torque) fails,
     and the metrics count it and stay finite."""
-    cfg = FloorTaskConfig(decimation=5)
+    cfg = SkillTaskConfig.floor(decimation=5)
     mot = motions["validation"]
-    env = FloorTrackingEnv(SimPlant(floating, 2, RATE, 5, ground=True), mot[:2], cfg)
+    env = TrackingEnv(SimPlant(floating, 2, RATE, 5, ground=True), mot[:2], cfg)
     obs = env.get_observations()
     assert obs["policy"].shape == (2, 6 * floating.n_dof + 6) and obs["critic"].shape == (2, 11)
     _, rew, _, extras = env.step(torch.zeros(2, floating.n_dof))
     assert torch.isfinite(rew).all() and "Reward/slip" in extras["log"]
-    dep = deploy_floor(None, RealPlant(quiet_real, len(mot), 5), mot, cfg)
-    res = floor_metrics(dep)
+    dep = deploy(None, RealPlant(quiet_real, len(mot), 5), mot, cfg)
+    res = metrics(dep)
     assert res["mean"]["failures"] >= 1 and res["mean"]["success"] < 1.0
     failed = [p for p in res["motions"] if not p["success"]]
     assert all(np.isfinite(p["mpjpe"]) and np.isfinite(p["g_mpjpe"]) for p in failed)
@@ -133,35 +135,17 @@ def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions
     assert 0.0 < res["mean"]["g_mpjpe"] < 1.0
 
 
-def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
-    from wresdyn.fit.gradfit import build_policy
-    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
-    from wresdyn.sim.physics import PhysicalParams
-
-    run = tmp_path / kind
-    run.mkdir()
-    if physics:
-        p = PhysicalParams.nominal(robot)
-        p.kp *= 0.8
-        p.delay = np.full(robot.n_dof, 0.004)
-        p.save(run / "physics.json")
-    mean, std = obs_stats(data.split("train"))
-    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
-                     learner="gradient")
-    return run
-
-
 def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     data_path = tmp_path / "dataset.npz"
     data.save(data_path)
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
-    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     out = tmp_path / "floor"
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
-            "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--motions", "1",
-            "--heldout", "1", "--duration", "1.0", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
+            "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--oracle-num-worlds", "3", "--train-per-family", "1",
+            "--heldout-per-family", "1", "--duration", "1.0", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
     # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
-    assert main(args + ["--oracle-beside", "--beside-devices", "cpu"]) == 0
+    assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu"]) == 0
     res = json.loads((out / "results.json").read_text())
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
@@ -182,14 +166,14 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
     assert cfg["motions"]["floor"] is True
     # the oracle trains on its own number of worlds, the others on --envs
-    assert json.loads((out / "skills" / "d_oracle" / "config.json").read_text())["ppo"]["num_envs"] == 3
+    assert json.loads((out / "skills" / "d_oracle" / "config.json").read_text())["num_worlds"] == 3
     before = (out / "skills" / "a_nominal" / "config.json").read_text()
     capsys.readouterr()
-    assert main(args + ["--oracle-beside", "--seed", "5"]) == 2
+    assert main(args + ["--oracle-beside", "True", "--seed", "5"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     # another motion set (the combo family added) is refused as well
-    assert main(args + ["--oracle-beside", "--extra-families", "combo"]) == 2
+    assert main(args + ["--oracle-beside", "True", "--extra-families", "combo"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
@@ -202,9 +186,9 @@ def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
 
     from wresdyn.paths import REPO
 
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_on_the_floor.py", str(cal), "--out", str(tmp_path / "skills"),
-                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--duration", "1.0"],
+                          "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--train-per-family", "1", "--duration", "1.0"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     rows = {ln.split()[0]: ln.split() for ln in res.stdout.splitlines()

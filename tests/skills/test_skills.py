@@ -16,10 +16,14 @@ import torch
 
 from wresdyn.cli import main
 from wresdyn.skills.env import SkillConfig, TrackingEnv
-from wresdyn.skills.motions import HELD_OUT_FAMILIES, TRAIN_FAMILIES, make_motions, stance
+from wresdyn.skills.motions import TASK_FAMILIES, make_motions, stance
 from wresdyn.skills.plants import RealPlant, SimPlant, sim_plant
 
-RATE = 500.0
+import skill_runs
+from skill_runs import fit_run
+
+RATE = skill_runs.RATE
+STAND = TASK_FAMILIES["stand"]
 
 
 @pytest.fixture(scope="module")
@@ -30,16 +34,12 @@ def motions(humanoid):
 @pytest.fixture(scope="module")
 def quiet_real(humanoid, shipped_mismatch):
     """The shipped real robot without sensor noise (exact comparisons)."""
-    from wresdyn.data.real_robot import RealRobot
-
-    mm = dataclasses.replace(shipped_mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
-                             velocity_resolution=0.0)
-    return RealRobot(humanoid, mm, RATE)
+    return skill_runs.quiet_real(humanoid, shipped_mismatch)
 
 
 def test_motions_start_and_end_in_the_stance_inside_the_limits(humanoid, motions):
-    assert [m.family for m in motions.split("train")] == list(TRAIN_FAMILIES)
-    assert {m.family for m in motions.split("heldout")} == set(TRAIN_FAMILIES + HELD_OUT_FAMILIES)
+    assert [m.family for m in motions.split("train")] == list(STAND.train)
+    assert {m.family for m in motions.split("heldout")} == set(STAND.train + STAND.held_out)
     home = stance(humanoid)
     for m in sum(motions.splits.values(), []):
         assert m.q.shape == (int(0.4 * RATE) + 1, humanoid.n_dof) and m.feet.shape == (len(m.q), 2, 3)
@@ -132,48 +132,53 @@ def test_tracking_env_zero_action_plays_the_reference_and_fails_far_from_it(huma
 
 
 def test_deploy_metrics_count_a_failure(humanoid, motions, quiet_real):
-    from wresdyn.skills.evaluate import deploy_skill, metrics
+    from wresdyn.skills.evaluate import deploy, metrics
 
     mot = motions.split("heldout")
     cfg = SkillConfig(decimation=5, fail_error=2.0)  # the 0.4 s test motions are fast: a loose bound tracks them
-    ok = metrics(deploy_skill(None, RealPlant(quiet_real, len(mot), 5), mot, cfg), humanoid)
+    ok = metrics(deploy(None, RealPlant(quiet_real, len(mot), 5), mot, cfg), humanoid)
     assert ok["mean"]["success"] == 1.0 and 0 < ok["mean"]["mpjpe"] < 0.2 and ok["mean"]["torque_rate"] > 0
-    bad = metrics(deploy_skill(None, RealPlant(quiet_real, len(mot), 5), mot, dataclasses.replace(cfg, fail_error=0.01)),
+    bad = metrics(deploy(None, RealPlant(quiet_real, len(mot), 5), mot, dataclasses.replace(cfg, fail_error=0.01)),
                   humanoid)
     assert bad["mean"]["failures"] >= 1 and bad["mean"]["success"] < 1.0
     assert all(np.isfinite(p["mpjpe"]) for p in bad["motions"] if p["failed_at"] != 1)
 
 
-def _fit_run(tmp_path, robot, data, kind: str, physics: bool):
-    """A `wresdyn fit` run folder from the real writers: a (tiny, untrained) residual, identified physics or not."""
-    from wresdyn.fit.gradfit import build_policy
-    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
-    from wresdyn.sim.physics import PhysicalParams
-
-    run = tmp_path / kind
-    run.mkdir()
-    if physics:
-        p = PhysicalParams.nominal(robot)
-        p.kp *= 0.8
-        p.delay = np.full(robot.n_dof, 0.004)
-        p.save(run / "physics.json")
-    mean, std = obs_stats(data.split("train"))
-    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
-                     learner="gradient")
-    return run
-
-
 def test_sim_plant_settings_refuse_the_wrong_run(tmp_path, humanoid, data):
     from wresdyn.errors import WresdynError
 
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
-    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     assert sim_plant("calibrated", humanoid, 2, RATE, 5, str(cal)).residual is not None
     assert sim_plant("delta_action", humanoid, 2, RATE, 5, str(delta)).kind == "delta_action"
     with pytest.raises(WresdynError, match="delta_action residual"):
         sim_plant("delta_action", humanoid, 2, RATE, 5, str(cal))
     with pytest.raises(WresdynError, match="physics.json"):
         sim_plant("calibrated", humanoid, 2, RATE, 5, str(delta))
+
+
+def test_a_skill_run_folder_keeping_its_world_count_in_ppo_still_resumes(tmp_path, humanoid, motions):
+    """The world count is the plant's (``num_worlds`` in ``config.json``); a record with it as ``ppo.num_envs`` resumes
+    the same, and still refuses another count."""
+    from wresdyn.learn.runs import RunError
+    from wresdyn.skills.skill_ppo import SkillPPOConfig, train_skill
+
+    cfg = SkillConfig(decimation=5)
+    ppo = SkillPPOConfig(iterations=1, num_steps_per_env=4, hidden_dims=(16,), num_mini_batches=1, torch_threads=1)
+
+    def env(worlds):
+        return TrackingEnv(SimPlant(humanoid, worlds, RATE, 5), motions.split("train"), cfg)
+
+    run = tmp_path / "skill"
+    train_skill(env(2), ppo, run, log=lambda *_: None)
+    record = json.loads((run / "config.json").read_text())
+    assert record["num_worlds"] == 2 and "num_envs" not in record["ppo"]
+    old = {**record, "ppo": {"num_envs": record.pop("num_worlds"), **record["ppo"]}}
+    (run / "config.json").write_text(json.dumps(old))
+    with pytest.raises(RunError, match="num_worlds"):
+        train_skill(env(3), dataclasses.replace(ppo, iterations=2), run, log=lambda *_: None)
+    assert train_skill(env(2), dataclasses.replace(ppo, iterations=2), run, log=lambda *_: None)["iterations"] == 2
+    assert json.loads((run / "config.json").read_text())["num_worlds"] == 2
 
 
 def load_skill_std(run) -> float:
@@ -187,12 +192,12 @@ def load_skill_std(run) -> float:
 def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     data_path = tmp_path / "dataset.npz"
     data.save(data_path)
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
-    delta = _fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    delta = fit_run(tmp_path, humanoid, data, "delta_action", physics=False)
     out = tmp_path / "deploy"
     args = ["deploy", str(data_path), "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
-            "--iterations", "2", "--finetune", "1", "--envs", "4", "--oracle-envs", "3", "--finetune-std", "0.6",
-            "--ppo.torch-threads", "1", "--motions", "1", "--heldout", "1"]  # one thread: conftest.py says why
+            "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--oracle-num-worlds", "3", "--finetune-std", "0.6",
+            "--ppo.torch-threads", "1", "--train-per-family", "1", "--heldout-per-family", "1"]  # one thread: conftest.py says why
     assert main(args) == 0
     # the compile is announced, for what this run needs: both corrections given, so no fitting variants
     printed = capsys.readouterr().out
@@ -208,15 +213,15 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     for name in ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle"):
         assert (out / "skills" / name / "policy.pt").is_file()
         # the oracle trains on its own number of worlds (the real robot is MuJoCo C on the CPU)
-        ppo = json.loads((out / "skills" / name / "config.json").read_text())["ppo"]
-        assert ppo["num_envs"] == (3 if name == "d_oracle" else 4)
+        record = json.loads((out / "skills" / name / "config.json").read_text())
+        assert record["num_worlds"] == (3 if name == "d_oracle" else 4) and "num_envs" not in record["ppo"]
         # the fine-tunings restart their action noise at --finetune-std (one iteration moves it little); (a) keeps 0.3
         std = load_skill_std(out / "skills" / name)
         assert abs(std - (0.3 if name == "a_nominal" else 0.6)) < 0.05, (name, std)
     # a changed configuration on resume is refused in one line, and nothing is overwritten
     before = (out / "skills" / "a_nominal" / "config.json").read_text()
     capsys.readouterr()
-    assert main(args[:-2] + ["--heldout", "1", "--seed", "5"]) == 2
+    assert main(args[:-2] + ["--heldout-per-family", "1", "--seed", "5"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
@@ -233,9 +238,9 @@ def test_skill_zero_shot_example_runs(tmp_path, humanoid, data):
 
     from wresdyn.paths import REPO
 
-    cal = _fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_zero_shot.py", str(cal), "--out", str(tmp_path / "skills"),
-                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1"],
+                          "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--train-per-family", "1"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     rows = [ln.split() for ln in res.stdout.splitlines() if ln.split()[:1] in (["a_nominal"], ["b_calibrated"])]

@@ -52,7 +52,7 @@ class Ablate(Command):
     def config(self) -> AblationConfig:
         """The grid with ``--ppo-envs``, ``--windows`` and ``--horizon`` as its PPO and gradient overrides."""
         grad = {k: v for k, v in {"windows": self.windows, "horizon": self.horizon}.items() if v is not None}
-        return replace(self.grid, ppo_overrides={"ppo.num_envs": self.ppo_envs} if self.ppo_envs is not None else {},
+        return replace(self.grid, ppo_overrides={"env.num_worlds": self.ppo_envs} if self.ppo_envs is not None else {},
                        gradient_overrides=grad)
 
 

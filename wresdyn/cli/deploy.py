@@ -1,5 +1,5 @@
 """``wresdyn deploy [DATA]``: train tracking skills in the nominal and the corrected simulators and deploy each
-zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.experiments.stand_skills`.
+zero-shot on the "real" robot (the robot the data was recorded on); see :mod:`wresdyn.experiments.skills`.
 
 Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tracking_heldout.png`` and
 ``OUT/deployed_heldout.usda``; the corrections (``OUT/calibrated``, ``OUT/delta_action``) are fitted on DATA unless
@@ -24,9 +24,9 @@ from ..paths import DEFAULT_DATASET
 from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 from .command import FLAT, Command, CommandLineError, list_flags
 
-PPO_FROM_SIZES = ("num_envs", "iterations", "restart_std", "seed", "device")
-"""Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``envs``/``oracle_envs``, ``iterations``/
-``finetune``, ``finetune_std``, ``seed``, ``device``): no ``--ppo.*`` flag of their own."""
+PPO_FROM_SIZES = ("iterations", "restart_std", "seed", "device")
+"""Fields of :class:`SkillPPOConfig` the benchmark sets from the sizes (``iterations``/``finetune``, ``finetune_std``,
+``seed``, ``device``): no ``--ppo.*`` flag of their own (the worlds are the sizes' ``num_worlds``, the plants')."""
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ class Deploy(Command):
     """Real robot's mismatch (TOML; None: the dataset's)."""
     floor: bool = False
     """Skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, kick, wave;
-    stepping held out), corrections still fitted on the stand (see wresdyn.experiments.floor_skills); the sizes
+    stepping held out), corrections still fitted on the stand (see wresdyn.experiments.skills); the sizes
     and the task are then FloorDeployConfig's and FloorTaskConfig's (wresdyn deploy --floor --help)."""
     full: bool = False
     """The full size, for a GPU (DeployConfig.full, FloorDeployConfig.full; the sizes given still apply)."""
@@ -111,10 +111,7 @@ def run(args: Deploy) -> int:
     from ..data.mismatch import Mismatch
 
     cfg, task, ppo = args.sizes, args.task, args.ppo
-    if args.floor:
-        from ..experiments.floor_skills import run_floor_benchmark as bench
-    else:
-        from ..experiments.stand_skills import run_benchmark as bench
+    from ..experiments.skills import run_benchmark as bench
     ds, robot = load_data(args.data)
     mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
     from ..progress import Log

@@ -24,13 +24,15 @@ _RESIDUAL = {"--residual": "--residual.kind", "--arch": "--residual.arch", "--fr
 RENAMED: dict[str, dict[str, str]] = {
     "fit": {**_RESIDUAL, "--curriculum": "--horizon-curriculum", "--identify-iterations": "--identify.iterations",
             "--gain-grid": "--identify.gain-grid", "--refine": "--identify.refine"},
-    "train": {**_RESIDUAL, "--iterations": "--ppo.iterations", "--num-envs": "--ppo.num-envs",
+    "train": {**_RESIDUAL, "--iterations": "--ppo.iterations", "--num-envs": "--env.num-worlds",
+              "--ppo.num-envs": "--env.num-worlds",
               "--steps-per-env": "--ppo.num-steps-per-env", "--horizon": "--env.horizon",
               "--obs-noise": "--env.obs-noise", "--solver": "--env.solver", "--friction-kappa": "--env.friction-kappa",
               "--device": "--ppo.device", "--seed": "--ppo.seed", "--save-interval": "--ppo.save-interval",
               "--physics": "--env.physics"},
     "collect": {"--excitation": "--excitation.mode", "--frames": "--excitation.frames"},
-    "deploy": {"--motions": "--train-per-family", "--heldout": "--heldout-per-family"},
+    "deploy": {"--motions": "--train-per-family", "--heldout": "--heldout-per-family", "--envs": "--num-worlds",
+               "--oracle-envs": "--oracle-num-worlds"},
 }
 """``{command: {old flag: new flag}}``: the short spellings of earlier releases."""
 
@@ -62,6 +64,7 @@ def rewrite(command: str, flags: dict[str, object], argv: list[str], say: Callab
             i += 0 if eq else 1
             key, sep, text = item.partition("=")
             new = "--" + key.strip().replace("_", "-")
+            new = renamed.get(new, new)
             if not sep or new not in flags:
                 out.append(token)  # tyro names the unknown argument
                 continue

@@ -1,7 +1,7 @@
 """``wresdyn train DATA``: learn a residual with PPO on the dataset's training split (resumes a killed run).
 
 Several GPUs: ``torchrun --nproc_per_node N -m wresdyn train DATA --ppo.device cuda ...`` (one process per GPU,
-``--ppo.num-envs`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.ppo.trainer.train`).
+``--env.num-worlds`` split across them, rsl-rl's multi-GPU PPO; see :func:`wresdyn.ppo.trainer.train`).
 
 Every line printed, and rsl-rl's per-iteration tables, are in ``OUT/train.log``; on a terminal a progress bar shows
 the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing."""
@@ -53,7 +53,7 @@ def run(args: Train) -> int:
 
     cfg = args.config
     try:  # worlds that do not split over torchrun's processes: refused on every rank before the data and kernels load
-        Ranks.from_env().num_envs(cfg.ppo.num_envs)
+        Ranks.from_env().num_worlds(cfg.env.num_worlds)
     except RunError as e:
         raise UserError(str(e)) from None
     from ..data.loading import load_data
@@ -66,7 +66,7 @@ def run(args: Train) -> int:
     main = Ranks.from_env().main  # torchrun: rank 0 reports and evaluates
     log = Log(Path(args.out) / "train.log" if main else None, quiet=args.quiet or not main)
     log(f"training a {cfg.residual.kind} residual ({cfg.residual.arch}) on {len(ds.split('train'))} trajectories of "
-          f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.ppo.num_envs} worlds x {cfg.ppo.num_steps_per_env} steps "
+          f"{args.data}: {cfg.ppo.iterations} iterations x {cfg.env.num_worlds} worlds x {cfg.ppo.num_steps_per_env} steps "
           f"-> {args.out}")
     from ..sim.physics import PhysicalParams
     from ..sim.warmup import compile_kernels

@@ -40,7 +40,7 @@ class AblationConfig:
     device: str = "cpu"
     """Device for simulation and networks."""
     ppo_overrides: dict = field(default_factory=dict)
-    """Dotted overrides of :class:`wresdyn.ppo.ppo_config.TrainConfig` (e.g. ``{"ppo.num_envs": 64}``)."""
+    """Dotted overrides of :class:`wresdyn.ppo.ppo_config.TrainConfig` (e.g. ``{"env.num_worlds": 64}``)."""
     gradient_overrides: dict = field(default_factory=dict)
     """Overrides of :class:`wresdyn.fit.gradfit.GradFitConfig` fields (e.g. ``{"windows": 32}``)."""
 

@@ -35,7 +35,7 @@ from ..ppo.trainer import train
 from ..robot.description import load_robot
 from ..sim.parity import pd_agreement
 from ..skills.skill_config import SkillPPOConfig
-from .stand_skills import DeployConfig, run_benchmark
+from .skills import DeployConfig, run_benchmark
 
 __all__ = ["run_demo"]
 
@@ -85,8 +85,9 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
     if quick:
         gcfg = dataclasses.replace(gcfg, iterations=4, windows=4, horizon_curriculum=(2, 4))
         scfg = dataclasses.replace(scfg, iterations=4, windows=4)
-        tcfg = dataclasses.replace(tcfg, ppo=dataclasses.replace(tcfg.ppo, iterations=2, num_envs=8, num_steps_per_env=8))
-        dcfg = dataclasses.replace(dcfg, train_per_family=1, iterations=2, finetune=1, envs=8)
+        tcfg = dataclasses.replace(tcfg, env=dataclasses.replace(tcfg.env, num_worlds=8),
+                                   ppo=dataclasses.replace(tcfg.ppo, iterations=2, num_steps_per_env=8))
+        dcfg = dataclasses.replace(dcfg, train_per_family=1, iterations=2, finetune=1, num_worlds=8)
         skill_ppo = dataclasses.replace(skill_ppo, torch_threads=1)  # tiny networks: a second thread only waits
     print("[3/5] the calibrated robot: gradient fit through the simulation (identification, then a residual, each "
           "until validation plateaus, `wresdyn fit`) ..." if scfg.iterations is None else

@@ -1,5 +1,5 @@
-"""The sizes of the zero-shot deployment benchmarks, on the stand (:class:`DeployConfig`, :mod:`.stand_skills`) and on
-the floor (:class:`FloorDeployConfig`, :mod:`.floor_skills`), apart from them so that the command line reads them
+"""The sizes of the zero-shot deployment benchmark (:mod:`.skills`), on the stand (:class:`DeployConfig`) and on the
+floor (:class:`FloorDeployConfig`), apart from it so that the command line reads them
 without importing torch or Warp."""
 
 from __future__ import annotations
@@ -26,10 +26,11 @@ class _BenchmarkSizes:
     """Held-out motions per family (training families and the held-out one)."""
     duration: float = 2.0
     """Length of a motion [s]."""
-    envs: int = 64
-    """Parallel worlds of PPO."""
-    oracle_envs: int | None = None
-    """Parallel worlds of the oracle's PPO on the real robot, MuJoCo C on the CPU cores (``None``: ``envs``)."""
+    num_worlds: int = 64
+    """Parallel worlds of each simulated plant a policy trains on (PPO's environments; written here once: the plant
+    owns the count and PPO reads it from the environment)."""
+    oracle_num_worlds: int | None = None
+    """Parallel worlds of the oracle's real robot, MuJoCo C on the CPU cores (``None``: ``num_worlds``)."""
     finetune_std: float | None = None
     """Action noise the fine-tunings (b), (c), (d) restart from (``None``: (a)'s own; see
     ``SkillPPOConfig.restart_std``)."""
@@ -43,15 +44,16 @@ class _BenchmarkSizes:
 
     @property
     def oracle_worlds(self) -> int:
-        """Parallel worlds of the oracle: ``oracle_envs``, else ``envs``."""
-        return self.envs if self.oracle_envs is None else self.oracle_envs
+        """Parallel worlds of the oracle: ``oracle_num_worlds``, else ``num_worlds``."""
+        return self.num_worlds if self.oracle_num_worlds is None else self.oracle_num_worlds
 
     def __post_init__(self) -> None:
         p = self._prefix
-        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "envs", "iterations", "finetune"):
+        for k in ("train_per_family", "validation_per_family", "heldout_per_family", "num_worlds", "iterations",
+                  "finetune"):
             check_number(getattr(self, k), f"{p}.{k}", integer=True, ge=1)
-        if self.oracle_envs is not None:
-            check_number(self.oracle_envs, f"{p}.oracle_envs", integer=True, ge=1)
+        if self.oracle_num_worlds is not None:
+            check_number(self.oracle_num_worlds, f"{p}.oracle_num_worlds", integer=True, ge=1)
         if self.finetune_std is not None:
             check_number(self.finetune_std, f"{p}.finetune_std", gt=0)
         check_number(self.seed, f"{p}.seed", integer=True, ge=0)
@@ -73,8 +75,8 @@ class DeployConfig(_BenchmarkSizes):
         """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family
         (the same PPO iterations). The oracle trains on 1024 worlds: its real robot is MuJoCo C on the CPU cores
         (4-6 s per iteration at 4096 worlds on 16 cores, 10-15x the simulated plants on the GPU)."""
-        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
-                             oracle_envs=1024, finetune_std=0.3), **kw})
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, num_worlds=4096,
+                             oracle_num_worlds=1024, finetune_std=0.3), **kw})
 
 
 @dataclass(frozen=True)
@@ -99,7 +101,7 @@ class FloorDeployConfig(_BenchmarkSizes):
     extra_families: tuple[Literal["combo"], ...] = ()
     """Motion families the policies also train on, ``train_per_family`` each (validation draws them too, the held-out
     motions never): ``combo``, compositions of the weight shifts' and kicks' keyframes with transfers slow and too
-    fast to follow (:mod:`wresdyn.skills.floor_motions`)."""
+    fast to follow (:mod:`wresdyn.skills.families`)."""
     beside_devices: tuple[str, ...] = ()
     """More devices of the host (``cuda:1,cuda:2``): each simulated fine-tuning after (b) trains in a process of its
     own on the next one, beside (b) on ``device``, so that (b) and (c) take one fine-tuning's wall-clock. Empty:
@@ -122,5 +124,5 @@ class FloorDeployConfig(_BenchmarkSizes):
     def full(cls, **kw) -> "FloorDeployConfig":
         """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
         1000 + 300 iterations; the oracle on 256 worlds of MuJoCo C on the host's cores."""
-        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, envs=4096,
-                             oracle_envs=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})
+        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, num_worlds=4096,
+                             oracle_num_worlds=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})

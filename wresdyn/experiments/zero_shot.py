@@ -1,4 +1,4 @@
-"""What the two zero-shot skill benchmarks (:mod:`.stand_skills`, :mod:`.floor_skills`) share: the four policies and
+"""The pieces of the zero-shot skill benchmark (:mod:`.skills`), on the stand and on the floor: the four policies and
 the plant each trains on, the corrections fitted on the stand's dataset, and the results file."""
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ class BenchmarkStart(NamedTuple):
     policies: list[str]
     """The policies to train and deploy, in :data:`POLICIES` order (``a_nominal`` always)."""
     ppo: SkillPPOConfig
-    """The skills' PPO with the benchmark's sizes (``num_envs``, ``seed``, ``device``)."""
+    """The skills' PPO with the benchmark's ``seed`` and ``device`` (the worlds are the plants')."""
     mismatch: Mismatch
     """The real robot's mismatch."""
     counts: dict[str, int]
@@ -43,7 +43,7 @@ def start_benchmark(out: Path, cfg, ppo, mismatch, dataset, policies) -> Benchma
     :class:`~wresdyn.experiments.deploy_config.FloorDeployConfig`."""
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
     out.mkdir(parents=True, exist_ok=True)
-    ppo = replace(ppo or SkillPPOConfig(), num_envs=cfg.envs, seed=cfg.seed, device=cfg.device)
+    ppo = replace(ppo or SkillPPOConfig(), seed=cfg.seed, device=cfg.device)
     if ppo.torch_threads is not None:
         torch.set_num_threads(ppo.torch_threads)
     mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")

@@ -40,7 +40,9 @@ class GradFitConfig(WindowFitStop):
     detached every ``grad_truncation`` steps; the rollout and its loss still span the whole window). Through
     stiff PD dynamics, longer gradient paths explode; ``None`` = never truncate."""
     windows: int = 32
-    """Parallel windows B (Newton worlds) per iteration."""
+    """Parallel windows B (Newton worlds) per iteration: a batch of recorded windows, one world each, not an
+    environment's world count (``num_worlds`` of the replay environment and the skills' plants): a different
+    quantity, so another name."""
     lr: float = 1e-3
     """Adam learning rate at the start."""
     lr_final: float = 1e-4

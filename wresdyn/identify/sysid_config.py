@@ -35,7 +35,8 @@ class SysIdConfig(WindowFitStop):
     """Fields to identify (:data:`FIT_FIELDS`, default :data:`DEFAULT_FIT`); the others keep the robot file's
     values."""
     windows: int = 32
-    """Windows B (Newton worlds) per iteration."""
+    """Windows B (Newton worlds) per iteration: a batch of recorded windows, one world each, not an environment's world
+    count (``num_worlds`` of the replay environment and the skills' plants): a different quantity, so another name."""
     horizon_curriculum: tuple[int, ...] = (16, 32, 64, 128)
     """Window lengths [steps], one stage each: short windows first (a far-off start diverges over
     long ones), long windows last (delay, friction and saturation act over tens of steps)."""

@@ -15,8 +15,8 @@ from ..learn.residual_config import ResidualConfig
 from ..learn.runs import read_unset
 from .replay_env_config import ReplayEnvConfig, RewardConfig
 
-__all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "default_config",
-           "config_from_dict"]
+__all__ = ["PPOConfig", "COMPILE_MODES", "TrainConfig", "RESUME_MAY_CHANGE", "DATASET_IDENTITY", "RENAMED",
+           "default_config", "config_from_dict", "upgrade_config_dict"]
 
 
 COMPILE_MODES = ("", "default", "max-autotune-no-cudagraphs")
@@ -25,10 +25,9 @@ COMPILE_MODES = ("", "default", "max-autotune-no-cudagraphs")
 
 @dataclass(frozen=True)
 class PPOConfig:
-    """PPO and runner settings (rsl-rl ``PPO`` / ``OnPolicyRunner``)."""
+    """PPO and runner settings (rsl-rl ``PPO`` / ``OnPolicyRunner``). The number of worlds is the environment's
+    (``env.num_worlds``), which the runner reads as ``env.num_envs``."""
 
-    num_envs: int = 256
-    """Parallel replay worlds."""
     num_steps_per_env: int = 24
     """Rollout length per world per iteration [steps]."""
     iterations: int = 4000
@@ -85,7 +84,7 @@ class PPOConfig:
     ``"max-autotune-no-cudagraphs"`` (rsl-rl refuses the CUDA-graph modes)."""
 
     def __post_init__(self) -> None:
-        for name in ("num_envs", "num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
+        for name in ("num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
                      "num_mini_batches"):
             check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
         for name in ("learning_rate", "clip_param", "desired_kl", "max_grad_norm"):
@@ -134,8 +133,8 @@ class TrainConfig:
                 raise TypeError(f"TrainConfig.{name} must be a {cls.__name__}, not {type(value).__name__}")
         # rsl-rl splits a rollout into mini-batches by world for a recurrent policy, by sample otherwise, and
         # an empty mini-batch fails deep inside the update
-        p = self.ppo
-        per_batch = p.num_envs if self.residual.arch == "gru" else p.num_envs * p.num_steps_per_env
+        p, worlds = self.ppo, self.env.num_worlds
+        per_batch = worlds if self.residual.arch == "gru" else worlds * p.num_steps_per_env
         if p.num_mini_batches > per_batch:
             unit = "worlds (a GRU is batched by world)" if self.residual.arch == "gru" else "samples per rollout"
             raise WresdynError(f"ppo.num_mini_batches = {p.num_mini_batches} is more than the {per_batch} {unit}")
@@ -146,9 +145,32 @@ def default_config() -> TrainConfig:
     return TrainConfig()
 
 
+RENAMED = {"ppo.num_envs": "env.num_worlds"}
+"""Dotted names a :class:`TrainConfig` field is still read by (a run folder's ``config.json``, ``--set``), and the
+field each names: the world count is the environment's."""
+
+
+def renamed(item: str) -> str:
+    """A ``SECTION.FIELD=VALUE`` item (``--set``) with a name of :data:`RENAMED` written as the field's own."""
+    key, sep, text = str(item).partition("=")
+    return RENAMED.get(key.strip(), key.strip()) + sep + text if sep else item
+
+
+def upgrade_config_dict(d: dict) -> dict:
+    """An ``asdict`` of :class:`TrainConfig` with each field of :data:`RENAMED` moved to its name (a dict that has
+    them under their names is returned as it is)."""
+    d = {k: dict(v) if isinstance(v, dict) else v for k, v in d.items()}
+    for old, new in RENAMED.items():
+        (s_old, f_old), (s_new, f_new) = old.split("."), new.split(".")
+        if isinstance(d.get(s_old), dict) and f_old in d[s_old]:
+            value = d[s_old].pop(f_old)
+            d.setdefault(s_new, {}).setdefault(f_new, value)
+    return d
+
+
 def config_from_dict(d: dict) -> TrainConfig:
     """Inverse of ``dataclasses.asdict`` for :class:`TrainConfig` (lists back to tuples; a run folder's legacy 0 for
-    "unset" as ``None``, :func:`~wresdyn.learn.runs.read_unset`)."""
+    "unset" as ``None``, :func:`~wresdyn.learn.runs.read_unset`; the names of :data:`RENAMED` as their fields)."""
 
     def build(cls, values):
         kw = {}
@@ -164,4 +186,4 @@ def config_from_dict(d: dict) -> TrainConfig:
             kw[f.name] = v
         return cls(**kw)
 
-    return build(TrainConfig, read_unset(d))
+    return build(TrainConfig, read_unset(upgrade_config_dict(d)))

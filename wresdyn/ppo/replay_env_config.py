@@ -15,6 +15,9 @@ __all__ = ["ReplayEnvConfig", "RewardConfig"]
 class ReplayEnvConfig:
     """Episode and simulation settings of the replay environment."""
 
+    num_worlds: int = 256
+    """Parallel replay worlds (Newton's word, ``ModelBuilder.replicate``): the environment owns the count and PPO reads
+    it from there (rsl-rl's ``env.num_envs``); split evenly over the processes under torchrun."""
     horizon: int = 250
     """Episode length [steps] (shorter when the trajectory ends first)."""
     substeps: int = 1
@@ -50,6 +53,7 @@ class ReplayEnvConfig:
     def __post_init__(self) -> None:
         check_choice(self.solver, SolverKind, "env.solver")
         check_friction_kappa(self.friction_kappa, "env.friction_kappa", self.solver)
+        check_number(self.num_worlds, "env.num_worlds", integer=True, ge=1)
         check_number(self.horizon, "env.horizon", integer=True, ge=1)
         check_number(self.substeps, "env.substeps", integer=True, ge=1)
         check_number(self.obs_noise, "env.obs_noise", ge=0)

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from dataclasses import dataclass
@@ -20,11 +21,11 @@ from pathlib import Path
 import numpy as np
 from rsl_rl.runners import OnPolicyRunner
 
-from ..learn.runs import RunError, load_checkpoint, save_checkpoint
+from ..learn.runs import RunError, RunnerFolder, check_resume, load_checkpoint, save_checkpoint
 from ..progress import into_file
 
 __all__ = ["Ranks", "Runner", "CHECKPOINT_KEYS", "rsl_runner_cfg", "make_runner", "resume_runner", "learn",
-           "on_iteration", "seed_processes", "latest_checkpoint"]
+           "on_iteration", "seed_processes", "latest_checkpoint", "UpgradingRunnerFolder"]
 
 
 @dataclass(frozen=True)
@@ -57,10 +58,10 @@ class Ranks:
         else ``device``."""
         return f"cuda:{self.local_rank}" if self.world > 1 and device.startswith("cuda") else device
 
-    def num_envs(self, total: int) -> int:
-        """This process's share of ``total`` environments."""
+    def num_worlds(self, total: int) -> int:
+        """This process's share of ``total`` simulated worlds (rsl-rl's environments)."""
         if total % self.world:
-            raise RunError(f"ppo.num_envs = {total} does not split over {self.world} processes; use a multiple of "
+            raise RunError(f"num_worlds = {total} does not split over {self.world} processes; use a multiple of "
                            f"{self.world}")
         return total // self.world
 
@@ -226,3 +227,28 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
              if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
     return max(found)[1] if found else None
 
+
+class UpgradingRunnerFolder(RunnerFolder):
+    """A :class:`~wresdyn.learn.runs.RunnerFolder` whose resume check reads the saved ``config.json`` through
+    ``upgrade``: a record that keeps a field under another name (the world count as ``ppo.num_envs``) is compared as
+    the record it stands for."""
+
+    def __init__(self, path, record: dict, may_change=(), key: str | None = None, writer: str = "this learner",
+                 upgrade=lambda record: record) -> None:
+        super().__init__(path, record, may_change, key, writer)
+        self.upgrade = upgrade
+
+    def check(self, checkpoint) -> dict | None:
+        if checkpoint is None:
+            return None
+        path = self.path / "config.json"
+        try:
+            old = json.loads(path.read_text()) if path.is_file() else None
+        except ValueError:
+            old = None
+        saved = old.get(self.key) if isinstance(old, dict) and self.key else old
+        if not isinstance(saved, dict):
+            return super().check(checkpoint)  # refused, in the runner folder's words
+        old = self.upgrade(old)
+        check_resume(self.path, old[self.key] if self.key else old, self.config, self.may_change)
+        return old

@@ -32,10 +32,10 @@ from ..learn.runs import RunError, RunnerFolder, check_resume, load_checkpoint, 
 from ..learn.selection import ValidationScore
 from ..progress import bar
 from ..sim.physics import PhysicalParams
-from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig
+from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig, upgrade_config_dict
 from .replay_env import ReplayEnv
-from .runner import (Ranks, Runner, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
-                     rsl_runner_cfg, seed_processes)
+from .runner import (Ranks, Runner, UpgradingRunnerFolder, latest_checkpoint, learn, make_runner, on_iteration,
+                     resume_runner, rsl_runner_cfg, seed_processes)
 
 __all__ = ["train", "export", "runner_cfg", "BestOnValidation", "RunError"]
 
@@ -59,7 +59,7 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
         physics: The identified physics the residual is learned on (the hybrid; ``cfg.env.physics`` records where
             they came from), or ``None``: the robot file's values, no delay.
 
-    Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``num_envs / WORLD_SIZE`` worlds on its own device
+    Under ``torchrun`` (``WORLD_SIZE`` > 1) each process trains ``env.num_worlds / WORLD_SIZE`` worlds on its device
     (``cuda:<LOCAL_RANK>``, or the CPU over gloo) with seed ``seed + RANK``, and rsl-rl averages the gradients
     across processes; rank 0 alone writes the run folder and selects on validation, and every rank resumes from
     the same checkpoint.
@@ -73,8 +73,9 @@ def train(dataset, robot, cfg: TrainConfig, run_dir: str | Path, resume: bool = 
             checkpoint of these networks.
     """
     run_dir, ranks = Path(run_dir), Ranks.from_env()
-    run = RunnerFolder(run_dir, _run_record(dataset, robot, cfg, ranks, data_path),
-                       [f"ppo.{k}" for k in RESUME_MAY_CHANGE], key="config", writer="`wresdyn train`")
+    run = UpgradingRunnerFolder(run_dir, _run_record(dataset, robot, cfg, ranks, data_path),
+                                [f"ppo.{k}" for k in RESUME_MAY_CHANGE], key="config", writer="`wresdyn train`",
+                                upgrade=lambda record: {**record, "config": upgrade_config_dict(record["config"])})
     ckpt = _checkpoint_to_resume(run, resume)
     session = _start(dataset, robot, cfg, run_dir, ranks, log, physics)
     start = resume_runner(session.runner, ckpt, run_dir, log) if ckpt is not None else 0
@@ -153,7 +154,7 @@ def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
 def _run_record(dataset, robot, cfg: TrainConfig, ranks: Ranks, data_path) -> dict:
     """What ``config.json`` records of the run (configuration, data identity, data path), once the data and the
     processes are checked to fit: worlds that split over the ranks, training trajectories, the robot's joints."""
-    ranks.num_envs(cfg.ppo.num_envs)
+    ranks.num_worlds(cfg.env.num_worlds)
     if not dataset.split("train"):
         raise RunError("the dataset has no 'train' trajectories")
     if list(dataset.joint_names) != list(robot.joint_names):
@@ -190,14 +191,14 @@ def _start(dataset, robot, cfg: TrainConfig, run_dir: Path, ranks: Ranks, log, p
     seed = cfg.ppo.seed + ranks.rank
     seed_processes(seed, cfg.ppo.torch_threads)
     train_trajs = dataset.split("train")
-    num_envs = ranks.num_envs(cfg.ppo.num_envs)
+    num_worlds = ranks.num_worlds(cfg.env.num_worlds)
     mean, std = obs_stats(train_trajs)
-    env = ReplayEnv(robot, train_trajs, dataset.rate_hz, num_envs, cfg.env, cfg.residual, cfg.rewards,
+    env = ReplayEnv(robot, train_trajs, dataset.rate_hz, num_worlds, cfg.env, cfg.residual, cfg.rewards,
                     device=ranks.device(cfg.ppo.device), seed=seed, obs_mean=mean, obs_std=std,
                     graph=cfg.ppo.cuda_graph, weights=dataset.fit_weights(), physics=physics)
     if ranks.main:
         run_dir.mkdir(parents=True, exist_ok=True)
-    log(f"{num_envs} replay worlds on {env.device}, {type(env.sim.solver).__name__}")  # writes the waiting lines too
+    log(f"{num_worlds} replay worlds on {env.device}, {type(env.sim.solver).__name__}")  # writes the waiting lines too
     rcfg = runner_cfg(cfg, run_dir.name)
     rcfg["check_for_nan"] = not env.graph  # a graph-replayed step is not checked per step (a host sync each)
     runner = make_runner(env, rcfg, run_dir, ranks.main)

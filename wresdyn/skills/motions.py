@@ -1,16 +1,16 @@
-"""Reference motions of the skills: keyframes of the soles (solved by the foot IK) and of the arm joints.
+"""Reference motions of the skills, on the stand and on the floor: keyframes of the soles (solved by the foot IK) and
+of the arm joints, drawn from the families of :mod:`.families`; on the floor with the base that keeps the planted
+feet where they stand.
 
-No mocap: every motion is drawn from a family of keyframe sequences, the leg joints from the sole IK of
-:mod:`wresdyn.data.ik` (Pinocchio; the excitation's machinery), the arm and waist joints from joint-space
-keyframes by name pattern, minimum-jerk between keyframes (zero speed at each). Families:
+The leg joints come from the sole IK of :mod:`wresdyn.data.ik` (Pinocchio; the excitation's machinery), the arm and
+waist joints from joint-space keyframes by name pattern, minimum-jerk between keyframes. A motion starts and ends at
+rest in the neutral stance (:data:`~.families.STANCE`), the start state of every episode in :mod:`wresdyn.skills.env`.
 
-- ``kick``: one sole is pulled back and up, thrust forward and up, and returned;
-- ``squat``: both soles rise together (the legs fold, as a squat does relative to the pelvis), once or twice;
-- ``wave``: one arm is raised sideways and the forearm waves once or twice, the legs hold the stance;
-- ``march`` (held out from training by default): the soles lift in turn, knee up, two steps each.
-
-Each drawn motion varies its amplitudes, side and tempo (seeded). A motion starts and ends at rest in the
-neutral stance (:data:`STANCE`), the start state of every episode in :mod:`wresdyn.skills.env`.
+On the floor (:func:`make_motions` with ``floating``) each motion is drawn in the pelvis-fixed frame, then placed: a
+sole at the lowest height is *planted*, and the reference base moves so that every planted sole stays where it stood
+(the feet never slide in the reference), upright (the soles keep their stance orientation relative to the pelvis).
+Motions that lift a foot first shift the weight: the soles move sideways until the whole robot's centre of mass
+(Pinocchio, the pelvis included) is above the stance sole, so a quasi-static reference can stand on one foot.
 """
 
 from __future__ import annotations
@@ -21,23 +21,21 @@ import numpy as np
 
 from ..data.ik import FootIK
 from ..robot.description import Robot, RobotError
+from ..robot.ground import standing_state
+from ..robot.pinocchio_model import build_pinocchio
+from .families import FAMILIES, TASK_FAMILIES, arm_keys, keyframes, leg_keys, stance
 
-__all__ = ["FAMILIES", "TRAIN_FAMILIES", "HELD_OUT_FAMILIES", "STANCE", "Motion", "MotionSet", "make_motions",
-           "stance"]
+__all__ = ["TASK_FAMILIES", "FAMILIES", "Motion", "MotionSet", "make_motion", "make_motions", "stance", "PLANTED_TOL"]
 
-FAMILIES = ("kick", "squat", "wave", "march")
-"""Motion families."""
-TRAIN_FAMILIES = ("kick", "squat", "wave")
-"""Families the skill policies train on (other draws of them are the validation and held-out motions)."""
-HELD_OUT_FAMILIES = ("march",)
-"""The family no policy trains on: held-out motions of an unseen kind."""
-STANCE = {"hip_pitch": -0.3, "knee": 0.6, "ankle_pitch": -0.3}
-"""Neutral stance [rad] by joint-name suffix (knees slightly bent); every other joint 0."""
+PLANTED_TOL = 0.002
+"""A sole less than this above the lowest sole is planted [m]."""
+DURATION = {"stand": 2.0, "floor": 4.0}
+"""Default length of a motion of each task [s]."""
 
 
 @dataclass
 class Motion:
-    """One reference motion."""
+    """One reference motion, sampled at its set's ``rate_hz``."""
 
     name: str
     family: str
@@ -46,13 +44,19 @@ class Motion:
     qd: np.ndarray
     """Reference joint velocities [rad/s], shape (T, n_dof) (central differences)."""
     feet: np.ndarray
-    """Reference sole positions in the base frame [m], shape (T, n_feet, 3) (forward kinematics of ``q``)."""
+    """Reference sole positions in the pelvis (stand) frame [m], shape (T, n_feet, 3) (forward kinematics of ``q``)."""
     params: dict = field(default_factory=dict)
+    base: np.ndarray | None = None
+    """On the floor: the reference base pose in the world, [x y z qx qy qz qw] ([m], unit quaternion), shape (T, 7);
+    ``None`` on the stand."""
+    planted: np.ndarray | None = None
+    """On the floor: which soles (left, right) the reference keeps on the floor, bool, shape (T, 2)."""
 
 
 @dataclass
 class MotionSet:
-    """Motions of one robot at one rate, by split (``train``, ``validation``, ``heldout``)."""
+    """Motions of one robot at one rate, by split (``train``, ``validation``, ``heldout``); ``motions[split]`` is
+    :meth:`split`."""
 
     rate_hz: float
     splits: dict[str, list[Motion]]
@@ -60,159 +64,130 @@ class MotionSet:
     def split(self, name: str) -> list[Motion]:
         return self.splits.get(name, [])
 
-
-def stance(robot: Robot) -> np.ndarray:
-    """The neutral stance [rad], shape (n_dof,): :data:`STANCE` by joint-name suffix, clipped into the limits."""
-    q = np.zeros(robot.n_dof)
-    for i, name in enumerate(robot.joint_names):
-        for suffix, v in STANCE.items():
-            if name.endswith(suffix):
-                q[i] = v
-    return np.clip(q, robot.lower, robot.upper)
+    def __getitem__(self, name: str) -> list[Motion]:
+        return self.splits[name]
 
 
-def _min_jerk(s):
-    return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
+def _com(robot: Robot, model, data, q: np.ndarray) -> np.ndarray:
+    """Whole-robot centre of mass in the stand frame [m] (Pinocchio's fixed-base model leaves the pelvis out)."""
+    import pinocchio as pin
+
+    from scipy.spatial.transform import Rotation as R
+
+    c = pin.centerOfMass(model, data, q)
+    m = pin.computeTotalMass(model)
+    xp = robot.joint_X_p[0]
+    pelvis = xp[:3] + R.from_quat(xp[3:]).apply(robot.body_com[0])
+    m0 = float(robot.body_mass[0])
+    return (m * c + m0 * pelvis) / (m + m0)
 
 
-def _keyframes(t: np.ndarray, times, values) -> np.ndarray:
-    """Minimum-jerk interpolation through keyframes ``values[i]`` at ``times[i]`` (held outside); shape (T, ...)."""
-    values = np.asarray(values, dtype=np.float64)
-    out = np.broadcast_to(values[0], (len(t),) + values.shape[1:]).copy()
-    for i in range(1, len(times)):
-        s = np.clip((t - times[i - 1]) / (times[i] - times[i - 1]), 0.0, 1.0)
-        w = _min_jerk(s).reshape((-1,) + (1,) * (values.ndim - 1))
-        sel = t >= times[i - 1]
-        out[sel] = (values[i - 1] + w * (values[i] - values[i - 1]))[sel]
-    return out
+def _shift_over(robot: Robot, ik: FootIK, q0, home, rot, foot: int, iterations: int = 6) -> float:
+    """Sideways shift of both soles [m] that puts the centre of mass above sole ``foot`` (0 left, 1 right)."""
+
+    model = build_pinocchio(robot)
+    data = model.createData()
+    d, q = 0.0, q0
+    for _ in range(iterations):
+        pos = home.copy()
+        pos[:, 1] += d
+        q, _ = ik.solve(pos[None].reshape(1, 2, 3)[0], None if ik.position_only else rot, q)
+        d = d + (_com(robot, model, data, q)[1] - (home[foot, 1] + d))
+    return float(d)
 
 
-def _joint(robot: Robot, name: str) -> int:
-    return list(robot.joint_names).index(name)
+def _place(floating: Robot, feet: np.ndarray, q: np.ndarray):
+    """The reference base (T, 7) and planted soles (T, 2) of sole paths ``feet`` (T, 2, 3) in the stand frame."""
 
-
-def _leg_keys(rng, family: str, home: np.ndarray, duration: float):
-    """Sole keyframes (times [s], positions (K, 2, 3) [m]) of a leg family; ``home`` (2, 3) the stance soles."""
-    up, fwd = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
-    if family == "kick":
-        f = int(rng.integers(2))
-        back, out_x, out_z = rng.uniform(0.03, 0.06), rng.uniform(0.10, 0.17), rng.uniform(0.06, 0.11)
-        t1, t2, t3 = np.sort(rng.uniform([0.2, 0.45, 0.7], [0.35, 0.6, 0.85])) * duration
-        k1, k2 = home.copy(), home.copy()
-        k1[f] += -back * fwd + 0.6 * out_z * up
-        k2[f] += out_x * fwd + out_z * up
-        return [0.0, t1, t2, t3, duration], [home, k1, k2, home, home], {"foot": f, "forward_m": out_x, "up_m": out_z}
-    if family == "squat":
-        reps = int(rng.integers(1, 3))
-        depth, lean = rng.uniform(0.05, 0.11), rng.uniform(-0.02, 0.03)
-        low = home + depth * up + lean * fwd
-        times, keys = [0.0], [home]
-        span = 0.85 * duration / reps
-        for r in range(reps):
-            times += [0.1 * duration + r * span + 0.5 * span, 0.1 * duration + (r + 1) * span]
-            keys += [low, home]
-        return times + [duration], keys + [home], {"reps": reps, "depth_m": depth}
-    if family == "march":
-        lift, step = rng.uniform(0.05, 0.10), rng.uniform(0.0, 0.05)
-        times, keys, t0 = [0.0], [home], 0.08 * duration
-        seg = 0.88 * duration / 4
-        first = int(rng.integers(2))
-        for i in range(4):
-            f = (first + i) % 2
-            k = home.copy()
-            k[f] += lift * up + step * fwd
-            times += [t0 + (i + 0.5) * seg, t0 + (i + 1) * seg]
-            keys += [k, home]
-        return times + [duration], keys + [home], {"lift_m": lift, "first_foot": first}
-    return [0.0, duration], [home, home], {}
-
-
-def _arm_keys(rng, robot: Robot, family: str, duration: float, side: str | None = None):
-    """Arm joint offsets from the stance, (T-independent keyframes): times [s], values (K, n_dof) [rad].
-
-    ``side``: the waving arm (``"left"``/``"right"``); ``None`` draws it. The draw is made either way, so the other
-    amplitudes do not depend on whether the side was given.
-    """
-    n = robot.n_dof
-    if family != "wave":
-        return [0.0, duration], [np.zeros(n), np.zeros(n)], {}
-    drawn = ("left", "right")[int(rng.integers(2))]
-    side = drawn if side is None else side
-    sign = 1.0 if side == "left" else -1.0
-    names = list(robot.joint_names)
-    roll, elbow = f"{side}_shoulder_roll", f"{side}_elbow"
-    if roll not in names or elbow not in names:
-        raise RobotError(f"{robot.source}: the wave needs joints named {roll!r} and {elbow!r}")
-    raise_ = rng.uniform(0.8, 1.3)
-    bend, amp = rng.uniform(-1.3, -0.9), rng.uniform(0.25, 0.4)
-    waves = int(rng.integers(1, 3))
-    up = np.zeros(n)
-    up[_joint(robot, roll)] = sign * raise_
-    up[_joint(robot, elbow)] = bend
-    times, keys = [0.0, 0.3 * duration], [np.zeros(n), up]
-    seg = 0.4 * duration / (2 * waves)
-    for i in range(2 * waves):
-        k = up.copy()
-        k[_joint(robot, elbow)] = bend + (amp if i % 2 == 0 else -amp)
-        times.append(0.3 * duration + (i + 1) * seg)
-        keys.append(k)
-    times += [0.95 * duration, duration]
-    keys += [np.zeros(n), np.zeros(n)]
-    home = stance(robot)
-    keys = [np.clip(k, robot.lower - home, robot.upper - home) for k in keys]
-    return times, keys, {"arm": side, "raise_rad": raise_, "waves": waves}
+    low = feet[:, :, 2].min(axis=1)
+    planted = feet[:, :, 2] - low[:, None] < PLANTED_TOL
+    start = standing_state(floating, q[0]).base_pose
+    home = feet[0]
+    base = np.tile(start, (len(q), 1))
+    shift = np.where(planted[..., None], home[None] - feet, 0.0).sum(1) / planted.sum(1, keepdims=True)
+    base[:, :2] += shift[:, :2]
+    base[:, 2] -= low - low[0]
+    return base, planted
 
 
 def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz: float, rng: np.random.Generator,
-                name: str, ik_tol: float = 0.005, max_draws: int = 20, side: str | None = None) -> Motion:
+                name: str, ik_tol: float = 0.005, max_draws: int = 20, side: str | None = None, *,
+                floating: Robot | None = None, shift: tuple[float, float] | None = None) -> Motion:
     """Draw one motion of ``family`` (redrawn until the sole IK reaches every keyframe path within ``ik_tol`` [m]);
-    ``side`` fixes a wave's arm (default: drawn)."""
-    if family not in FAMILIES:
-        raise ValueError(f"unknown motion family {family!r}; choose from {FAMILIES}")
+    ``side`` fixes a wave's arm (default: drawn). ``floating``: the robot with a free base, to place the motion on
+    its floor (a floor family; ``shift``: the weight shifts over each sole)."""
+    task = "stand" if floating is None else "floor"
+    if family not in TASK_FAMILIES[task].all:
+        raise ValueError(f"unknown {task} motion family {family!r}; choose from {TASK_FAMILIES[task].all}")
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
     q0 = stance(robot)
     home, rot = ik.forward(q0)
     rots = np.broadcast_to(rot, (len(t),) + rot.shape)
     for _ in range(max_draws):
-        lt, lk, lp = _leg_keys(rng, family, home, duration)
-        at, ak, ap = _arm_keys(rng, robot, family, duration, side)
-        pos = _keyframes(t, lt, lk)
+        lt, lk, lp = leg_keys(rng, task, family, home, duration, shift)
+        at, ak, ap = arm_keys(rng, robot, family, duration, side)
+        pos = keyframes(t, lt, lk)
         q, err = ik.solve_path(pos, None if ik.position_only else rots, q0)
         if float(err[:, :, 0].max()) > ik_tol:
             continue
-        q = q + _keyframes(t, at, ak)
+        q = q + keyframes(t, at, ak)
         q = np.clip(q, robot.lower, robot.upper)
         qd = np.gradient(q, 1.0 / rate_hz, axis=0)
         feet = np.array([ik.forward(x)[0] for x in q])
-        return Motion(name, family, q, qd, feet, {**lp, **ap, "ik_max_error_m": float(err[:, :, 0].max())})
-    raise RobotError(f"{robot.source}: no {family} motion reached its sole keyframes within {ik_tol} m in "
+        params = {**lp, **ap, "ik_max_error_m": float(err[:, :, 0].max())}
+        if floating is None:
+            return Motion(name, family, q, qd, feet, params)
+        base, planted = _place(floating, feet, q)
+        return Motion(name, family, q, qd, feet, params, base=base, planted=planted)
+    raise RobotError(f"{robot.source}: no {family} {task} motion reached its sole keyframes within {ik_tol} m in "
                      f"{max_draws} draws")
 
 
-def make_motions(robot: Robot, counts: dict[str, int], duration: float = 2.0, rate_hz: float = 500.0, seed: int = 0,
-                 frames=None) -> MotionSet:
-    """Draw the motion set: ``counts`` maps a split to motions per family (training families for ``train`` and
-    ``validation``; ``heldout`` draws new motions of the training families and of :data:`HELD_OUT_FAMILIES`).
+def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = None, rate_hz: float = 500.0,
+                 seed: int = 0, frames=None, *, floating: Robot | None = None, families=None, held_out=None,
+                 extra=()) -> MotionSet:
+    """Draw the motion set of the task on the stand, or with ``floating`` on the floor: ``counts`` maps a split to
+    motions per family (``families`` for every split, ``held_out`` families in ``heldout`` only, ``extra`` families
+    in every other split, drawn after the others so that those are the same with or without them); each split draws
+    from its own stream.
 
     Args:
-        robot: Fixed-base robot with sole frames (``frames``, default the IK's ``left_sole``/``right_sole``).
+        robot: The robot on its stand (fixed base) with sole frames (``frames``, default the IK's
+            ``left_sole``/``right_sole``): the IK's frame.
         counts: Motions per family and split, e.g. ``{"train": 4, "validation": 1, "heldout": 2}``.
-        duration: Length of each motion [s].
+        duration: Length of each motion [s] (default: 2 s on the stand, 4 s on the floor).
         rate_hz: Sample rate [Hz] (the simulation's).
-        seed: Seed of the draws; each split draws from its own stream.
+        seed: Seed of the draws.
+        floating: The same robot with a free base (its standing height): the motions are placed on its floor.
+        families, held_out, extra: The task's families (default: its :data:`TASK_FAMILIES` train and held-out
+            ones, no extra).
 
     The waves of a split alternate between the arms (the first arm drawn per split), so a split of two or more waves
     has both: training on one arm's waves alone leaves a policy untaught for the other's.
     """
-    if robot.base != "fixed":
+    task = "stand" if floating is None else "floor"
+    if floating is None and robot.base != "fixed":
         raise RobotError(f"{robot.source}: the skill motions are drawn on the stand (a fixed base)")
+    if floating is not None and (robot.base != "fixed" or floating.base != "floating"):
+        raise RobotError(f"{robot.source}: floor motions need the robot on its stand and with a free base")
+    fam = TASK_FAMILIES[task]
+    families = fam.train if families is None else tuple(families)
+    held_out = fam.held_out if held_out is None else tuple(held_out)
+    duration = DURATION[task] if duration is None else duration
     ik = FootIK(robot) if frames is None else FootIK(robot, tuple(frames))
+    shift = None
+    if floating is not None:
+        q0 = stance(robot)
+        home, rot = ik.forward(q0)
+        shift = (_shift_over(robot, ik, q0, home, rot, 0), _shift_over(robot, ik, q0, home, rot, 1))
     splits = {}
     for s, (split, per) in enumerate(counts.items()):
-        rng = np.random.default_rng([seed, s])
+        # the floor's streams are seeded apart from the stand's: a floor motion is not a stand one placed
+        rng = np.random.default_rng([seed, s] if floating is None else [seed, s, 7])
         first = int(np.random.default_rng([seed, s, 1]).integers(2))
-        fams = TRAIN_FAMILIES + (HELD_OUT_FAMILIES if split == "heldout" else ())
+        fams = families + (held_out if split == "heldout" else tuple(extra))
         splits[split] = [make_motion(robot, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}",
-                                     side=("left", "right")[(first + i) % 2] if f == "wave" else None)
+                                     side=("left", "right")[(first + i) % 2] if f == "wave" else None,
+                                     floating=floating, shift=shift)
                          for f in fams for i in range(per)]
     return MotionSet(float(rate_hz), splits)

@@ -2,7 +2,7 @@
 
 Every plant has the same interface, so one environment (:mod:`wresdyn.skills.env`) trains and deploys on any of them:
 ``reset(ids, q, qd)``, ``step(cmd) -> (q, qd)`` (the command [rad], (N, n), held for ``decimation`` sample periods),
-``n_worlds``, ``device``.
+``num_worlds`` (the world count: the environment and PPO read it here), ``device``.
 
 - :class:`SimPlant`: the one simulation layer (:class:`wresdyn.sim.Simulator`), in three settings:
   *nominal* (the robot file), *calibrated* (``wresdyn fit``'s run: identified physics, its command delay and the torque
@@ -26,7 +26,7 @@ from ..learn.runs import run_physics
 from ..learn.run_residual import load_policy
 from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 from ..sim import DivergenceLimits, Simulator
-from .floor_env import base_frame_imu
+from .reference import base_frame_imu
 
 __all__ = ["SimPlant", "RealPlant", "SETTINGS", "sim_plant"]
 
@@ -35,12 +35,12 @@ SETTINGS = ("nominal", "calibrated", "delta_action")
 
 
 class SimPlant:
-    """``n_worlds`` Newton worlds of ``robot`` under PD, optionally with identified physics, a command delay and a
+    """``num_worlds`` Newton worlds of ``robot`` under PD, optionally with identified physics, a command delay and a
     residual network (torque or delta action) in the loop at the sample rate.
 
     Args:
         robot: The robot (fixed base).
-        n_worlds: Worlds.
+        num_worlds: Worlds.
         rate_hz: Sample rate [Hz] of the simulation (and of the residual).
         decimation: Sample periods per :meth:`step` (the policy period is ``decimation / rate_hz``).
         physics: :class:`~wresdyn.sim.physics.PhysicalParams` (identified) or ``None`` (the robot file's).
@@ -51,11 +51,11 @@ class SimPlant:
             :meth:`reset_full` places it, :attr:`base_pose` / :attr:`base_twist` read its base.
     """
 
-    def __init__(self, robot, n_worlds: int, rate_hz: float, decimation: int, *, physics=None, residual=None,
+    def __init__(self, robot, num_worlds: int, rate_hz: float, decimation: int, *, physics=None, residual=None,
                  kind: str | None = None, device: str = "cpu", solver: str = "auto", ground: bool = False) -> None:
-        self.robot, self.n_worlds, self.decimation = robot, int(n_worlds), int(decimation)
+        self.robot, self.num_worlds, self.decimation = robot, int(num_worlds), int(decimation)
         self.dt = 1.0 / rate_hz
-        self.sim = Simulator(robot, self.n_worlds, self.dt, solver=solver, device=device, ground=ground)
+        self.sim = Simulator(robot, self.num_worlds, self.dt, solver=solver, device=device, ground=ground)
         self.device = self.sim.device
         n = robot.n_dof
         delay = np.zeros(n)
@@ -66,14 +66,14 @@ class SimPlant:
         self._m = torch.as_tensor(whole, device=self.device)
         self._alpha = torch.as_tensor(delay - whole, dtype=torch.float32, device=self.device)
         self._cols = torch.arange(n, device=self.device)
-        self._hist = torch.zeros(self.n_worlds, int(whole.max()) + 2, n, device=self.device)
+        self._hist = torch.zeros(self.num_worlds, int(whole.max()) + 2, n, device=self.device)
         """Commands of the last sample periods [rad], newest first (N, H, n): the delay line."""
         self.residual = None if residual is None else residual.to(self.device)
         self.kind = kind
         if residual is not None and kind not in ("torque", "delta_action"):
             raise WresdynError(f"residual kind {kind!r}: need 'torque' or 'delta_action'")
         self.limits = DivergenceLimits()
-        self.q = torch.zeros(self.n_worlds, n, device=self.device)
+        self.q = torch.zeros(self.num_worlds, n, device=self.device)
         self.qd = torch.zeros_like(self.q)
         self._qdd = torch.zeros_like(self.q)
 
@@ -134,7 +134,7 @@ class SimPlant:
         return q, qd, bad
 
 
-def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: int, run: str | None = None,
+def sim_plant(setting: str, robot, num_worlds: int, rate_hz: float, decimation: int, run: str | None = None,
               device: str = "cpu", ground: bool = False) -> SimPlant:
     """The simulator of a training ``setting`` (:data:`SETTINGS`): ``nominal``; ``calibrated`` from a ``wresdyn fit``
     run (``physics.json`` and the torque residual ``policy.pt``; a run of identified physics alone works too);
@@ -146,7 +146,7 @@ def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: in
     if setting not in SETTINGS:
         raise WresdynError(f"unknown training setting {setting!r}; choose from {SETTINGS}")
     if setting == "nominal":
-        return SimPlant(robot, n_worlds, rate_hz, decimation, device=device, ground=ground)
+        return SimPlant(robot, num_worlds, rate_hz, decimation, device=device, ground=ground)
     if not run:
         raise WresdynError(f"the {setting} setting needs a run folder (wresdyn fit)")
     run = Path(run)
@@ -166,13 +166,13 @@ def sim_plant(setting: str, robot, n_worlds: int, rate_hz: float, decimation: in
     elif physics is not None or policy is None or meta["kind"] != "delta_action":
         raise WresdynError(f"{run}: the delta-action setting needs a delta_action residual on the robot file's physics "
                            "(wresdyn fit --model network --residual delta_action)")
-    return SimPlant(robot, n_worlds, rate_hz, decimation, physics=physics, residual=policy,
+    return SimPlant(robot, num_worlds, rate_hz, decimation, physics=physics, residual=policy,
                     kind=meta["kind"], device=device, ground=ground)
 
 
 class RealPlant:
-    """``n_worlds`` copies of the "real" robot, stepped in C threads by ``mujoco.rollout``: on its stand (a fixed base)
-    or, for a floating-base ``real``, standing on its floor.
+    """``num_worlds`` copies of the "real" robot, stepped in C threads by ``mujoco.rollout``: on its stand (a fixed
+    base) or, for a floating-base ``real``, standing on its floor.
 
     The command passes the real robot's delay line (its FIFO at the physics substep) and torque limits exactly as in
     :meth:`~wresdyn.data.real_robot.RealRobot.record`; :meth:`step` returns the sensed joint state (the mismatch's
@@ -189,12 +189,12 @@ class RealPlant:
             direction [-] (floor only).
     """
 
-    def __init__(self, real, n_worlds: int, decimation: int, seed: int = 0, threads: int | None = None,
+    def __init__(self, real, num_worlds: int, decimation: int, seed: int = 0, threads: int | None = None,
                  imu_noise: tuple[float, float] = (0.0, 0.0)) -> None:
         import mujoco
         from mujoco import rollout
 
-        self.real, self.n_worlds, self.decimation = real, int(n_worlds), int(decimation)
+        self.real, self.num_worlds, self.decimation = real, int(num_worlds), int(decimation)
         self.robot, self.device = real.robot, torch.device("cpu")
         self.floating = bool(real.floating)
         self.imu_noise = tuple(float(x) for x in imu_noise)
@@ -204,7 +204,7 @@ class RealPlant:
         self._nstate = mujoco.mj_stateSize(m, self._spec)
         if threads is None:  # every core this process may use
             threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        self._datas = [mujoco.MjData(m) for _ in range(max(1, min(int(threads), self.n_worlds)))]
+        self._datas = [mujoco.MjData(m) for _ in range(max(1, min(int(threads), self.num_worlds)))]
         self.n_sub = real.n_sub * self.decimation
         n = self.robot.n_dof
         d = self._datas[0]
@@ -219,13 +219,13 @@ class RealPlant:
         self.kp, self.kd = m.actuator_gainprm[:n, 0].copy(), -m.actuator_biasprm[:n, 2].copy()
         self.lim = m.actuator_forcerange[:n].copy()
         self.limited = m.actuator_forcelimited[:n].astype(bool)
-        self.state = np.zeros((self.n_worlds, self._nstate))
-        self._fifo = np.zeros((self.n_worlds, real.n_delay, n))
+        self.state = np.zeros((self.num_worlds, self._nstate))
+        self._fifo = np.zeros((self.num_worlds, real.n_delay, n))
         self.rng = np.random.default_rng(seed)
-        self.q_true = np.zeros((self.n_worlds, n))
-        self.qd_true = np.zeros((self.n_worlds, n))
-        self.tau = np.zeros((self.n_worlds, self.n_sub, n))
-        self.q_samples = np.zeros((self.n_worlds, self.decimation, n))
+        self.q_true = np.zeros((self.num_worlds, n))
+        self.qd_true = np.zeros((self.num_worlds, n))
+        self.tau = np.zeros((self.num_worlds, self.n_sub, n))
+        self.q_samples = np.zeros((self.num_worlds, self.decimation, n))
         """True joint positions [rad] at the start of every recording period of the last step (N, decimation, n),
         the first the state the step started from: what a log at the recording rate holds, before the sensors."""
         self.qd_samples = np.zeros_like(self.q_samples)

@@ -1,21 +1,43 @@
-"""The configs of the skills, apart from the environments and the learner so that the command line reads them
-without importing torch: the tracking task on the stand (:class:`SkillConfig`, :mod:`.env`) and on the floor
-(:class:`FloorTaskConfig`, :mod:`.floor_env`), and the PPO that trains a skill (:class:`SkillPPOConfig`,
-:mod:`.skill_ppo`). ``wresdyn deploy`` exposes them as ``--task.*`` and ``--ppo.*``."""
+"""The configs of the skills, apart from the environment and the learner so that the command line reads them
+without importing torch: the tracking task (:class:`SkillTaskConfig`, :mod:`.env`) in its two variants, on the stand
+(:class:`SkillConfig`, :meth:`SkillTaskConfig.stand`) and on the floor (:class:`FloorTaskConfig`,
+:meth:`SkillTaskConfig.floor`), and the PPO that trains a skill (:class:`SkillPPOConfig`, :mod:`.skill_ppo`).
+``wresdyn deploy`` exposes them as ``--task.*`` and ``--ppo.*``.
+
+A variant is a config over the one environment, as mjlab's task variants are: whether the base floats on a floor
+(:attr:`SkillTaskConfig.floating`), the reward terms (:attr:`SkillTaskConfig.reward_terms`, one method each in
+:class:`~.env.TrackingEnv`, weights here) and the termination rule (a joint's error on the stand, a fall or drift on
+the floor) are the config's; the environment, motion library, evaluation and report are shared. Each variant keeps
+its own fields, so that the ``task`` record of a run folder lists what that task uses."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from ..choices import check_number
 
-__all__ = ["SkillConfig", "FloorTaskConfig", "SkillPPOConfig"]
+__all__ = ["SkillTaskConfig", "SkillConfig", "FloorTaskConfig", "SkillPPOConfig"]
 
 
 @dataclass(frozen=True)
-class _TrackingTask:
-    """What both tracking tasks start with, in their order (the stand's defaults): timing, action and the widths of
-    the joint kernels. Each task adds its own fields after these."""
+class SkillTaskConfig:
+    """The tracking task of a skill: what both variants start with, in their order (the stand's defaults): timing,
+    action and the widths of the joint kernels. Each variant adds its own fields after these; :meth:`stand` and
+    :meth:`floor` are their defaults.
+
+    Example:
+        >>> SkillTaskConfig.floor().floating, SkillTaskConfig.stand(decimation=5).decimation
+        (True, 5)
+    """
+
+    floating: ClassVar[bool] = False
+    """The robot has a free base and stands on a floor (:class:`~.plants.SimPlant` ``ground=True``); the
+    environment then reads the base, an IMU and the feet (not a field: the variant's class fixes it)."""
+    reward_terms: ClassVar[tuple[str, ...]] = ()
+    """The reward terms of the variant, summed in this order (each a method ``_<term>`` of the environment)."""
+    name: ClassVar[str] = ""
+    """The variant's name: ``stand`` or ``floor``."""
 
     decimation: int = 10
     """Sample periods per policy step: 10 at 500 Hz is a 50 Hz policy."""
@@ -32,10 +54,24 @@ class _TrackingTask:
     sigma_qd: float = 1.5
     """Width of the joint-velocity kernel [rad/s]."""
 
+    @staticmethod
+    def stand(**kw) -> "SkillConfig":
+        """The task on the stand (a fixed base), ``kw`` changed."""
+        return SkillConfig(**kw)
+
+    @staticmethod
+    def floor(**kw) -> "FloorTaskConfig":
+        """The task on the floor (a free base keeping its balance), ``kw`` changed."""
+        return FloorTaskConfig(**kw)
+
 
 @dataclass(frozen=True)
-class SkillConfig(_TrackingTask):
-    """The tracking task: timing, action, rewards and termination."""
+class SkillConfig(SkillTaskConfig):
+    """The tracking task on the stand: timing, action, rewards and termination (a joint ``fail_error`` from its
+    reference)."""
+
+    name: ClassVar[str] = "stand"
+    reward_terms: ClassVar[tuple[str, ...]] = ("track_q", "track_q_fine", "track_qd", "action_rate")
 
     w_q: float = 1.0
     """Weight of the coarse joint-position kernel [-]."""
@@ -56,8 +92,13 @@ class SkillConfig(_TrackingTask):
 
 
 @dataclass(frozen=True)
-class FloorTaskConfig(_TrackingTask):
+class FloorTaskConfig(SkillTaskConfig):
     """The tracking task on the floor: timing, action, rewards and the fall rule."""
+
+    name: ClassVar[str] = "floor"
+    floating: ClassVar[bool] = True
+    reward_terms: ClassVar[tuple[str, ...]] = ("track_q", "track_q_fine", "track_qd", "orientation", "base", "slip",
+                                               "action_rate", "fall")
 
     action_scale: float = 0.25
     """PD-target offset per unit action [rad]."""
@@ -104,10 +145,9 @@ class FloorTaskConfig(_TrackingTask):
 
 @dataclass(frozen=True)
 class SkillPPOConfig:
-    """PPO of the skills (rsl-rl ``OnPolicyRunner``)."""
+    """PPO of the skills (rsl-rl ``OnPolicyRunner``). The number of worlds is not PPO's: it is the plant's
+    ``num_worlds``, which the runner reads as ``env.num_envs``."""
 
-    num_envs: int = 64
-    """Parallel worlds."""
     iterations: int = 300
     """PPO iterations (a resumed run may raise it)."""
     num_steps_per_env: int = 24
@@ -149,7 +189,7 @@ class SkillPPOConfig:
     instead of rsl-rl's several per mini-batch; the same update up to rounding."""
 
     def __post_init__(self) -> None:
-        for k in ("num_envs", "iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
+        for k in ("iterations", "num_steps_per_env", "num_learning_epochs", "num_mini_batches",
                   "save_interval"):
             check_number(getattr(self, k), f"ppo.{k}", integer=True, ge=1)
         if self.restart_std is not None:

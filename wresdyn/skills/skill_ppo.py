@@ -5,8 +5,10 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
-changed (the folder is a :class:`wresdyn.learn.runs.RunnerFolder`). The rsl-rl glue (runner, checkpoints, progress)
-is the residual learner's, :mod:`wresdyn.ppo.runner`.
+changed (the folder is a :class:`wresdyn.ppo.runner.UpgradingRunnerFolder`). The world count is the plant's,
+recorded as ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the same
+(:func:`upgrade_record`). The rsl-rl glue (runner, checkpoints, progress) is the residual learner's,
+:mod:`wresdyn.ppo.runner`.
 
 Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.ppo.trainer.train`): each process
 steps its share of the worlds on its own device (:func:`rank_share`), seeded ``seed + RANK``, rsl-rl averages the
@@ -23,13 +25,13 @@ import numpy as np
 import torch
 
 from ..learn.network_file import load_program, save_program
-from ..learn.runs import RunError, RunnerFolder
-from ..ppo.runner import (Ranks, latest_checkpoint, learn, make_runner, on_iteration, resume_runner,
-                          rsl_runner_cfg, seed_processes)
+from ..ppo.runner import (Ranks, UpgradingRunnerFolder, latest_checkpoint, learn, make_runner, on_iteration,
+                          resume_runner, rsl_runner_cfg, seed_processes)
 from ..progress import bar
 from .skill_config import SkillPPOConfig
 
-__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "rank_share", "runner_cfg", "RESUME_MAY_CHANGE"]
+__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "rank_share", "runner_cfg", "RESUME_MAY_CHANGE",
+           "upgrade_record"]
 
 RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads", "ppo.one_sync_update")
 """What a resumed skill run may change: a run may be extended, or moved to another device or machine."""
@@ -51,15 +53,26 @@ def runner_cfg(cfg: SkillPPOConfig, critic_groups=("policy",)) -> dict:
         one_sync_update=cfg.one_sync_update)
 
 
-def rank_share(num_envs: int, device: str) -> tuple[int, str]:
-    """This process's worlds and device for a skill of ``num_envs`` worlds on ``device``: all of them in one process,
-    ``num_envs / WORLD_SIZE`` on ``cuda:<LOCAL_RANK>`` (or the CPU) under torchrun, which becomes the process's current
-    CUDA device before its worlds are built (as rsl-rl's runner sets it later)."""
+def rank_share(num_worlds: int, device: str) -> tuple[int, str]:
+    """This process's worlds and device for a skill of ``num_worlds`` worlds on ``device``: all of them in one process,
+    ``num_worlds / WORLD_SIZE`` on ``cuda:<LOCAL_RANK>`` (or the CPU) under torchrun, which becomes the process's
+    current CUDA device before its worlds are built (as rsl-rl's runner sets it later)."""
     ranks = Ranks.from_env()
     here = ranks.device(device)
     if ranks.world > 1 and here.startswith("cuda"):
         torch.cuda.set_device(here)
-    return ranks.num_envs(num_envs), here
+    return ranks.num_worlds(num_worlds), here
+
+
+def upgrade_record(record: dict) -> dict:
+    """A skill run's ``config.json`` record with the world count as ``num_worlds``, moved there from ``ppo.num_envs``
+    where a record keeps it in the PPO config (a record without it is returned as it is)."""
+    ppo = record.get("ppo")
+    if not isinstance(ppo, dict) or "num_envs" not in ppo:
+        return record
+    ppo = dict(ppo)
+    num_worlds = ppo.pop("num_envs")
+    return {**record, "ppo": ppo, "num_worlds": record.get("num_worlds", num_worlds)}
 
 
 def _set_std(actor, std: float) -> None:
@@ -86,7 +99,8 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         log: Printer of the run's lines; a :class:`wresdyn.progress.Log` also draws a bar over the iterations,
             named after the run folder (the policy).
 
-    Under torchrun ``env`` holds this process's share of ``cfg.num_envs`` worlds on its device (:func:`rank_share`);
+    Under torchrun ``env`` holds this process's share of the worlds on its device (:func:`rank_share`), the run's
+    ``num_worlds`` all of them;
     the summary's counts are those of rank 0's worlds, its env-steps those of every process. The process group stays
     up for the next skill of the process; ``Ranks.from_env().close()`` ends it once the last is trained.
 
@@ -94,12 +108,9 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
         The summary written to ``train_summary.json``.
     """
     run_dir, ranks = Path(run_dir), Ranks.from_env()
-    if ranks.world > 1 and env.num_envs != ranks.num_envs(cfg.num_envs):
-        raise RunError(f"the environment has {env.num_envs} worlds; under torchrun each of the {ranks.world} "
-                       f"processes trains its share of ppo.num_envs = {cfg.num_envs} (rank_share)")
-    record = {"ppo": asdict(cfg), "task": env.cfg_dict, "init": None if init is None else str(Path(init).resolve()),
-              **(meta or {})}
-    run = RunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO")
+    record = {"ppo": asdict(cfg), "task": env.cfg_dict, "num_worlds": env.num_envs * ranks.world,
+              "init": None if init is None else str(Path(init).resolve()), **(meta or {})}
+    run = UpgradingRunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO", upgrade=upgrade_record)
     ckpt = latest_checkpoint(run_dir)
     run.check(ckpt)
     seed_processes(cfg.seed + ranks.rank, cfg.torch_threads)

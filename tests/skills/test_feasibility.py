@@ -7,16 +7,18 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.skills.floor_feasibility import floor_feasibility
-from wresdyn.skills.floor_motions import FLOOR_HELD_OUT_FAMILIES, FLOOR_TRAIN_FAMILIES, make_floor_motions
+from wresdyn.skills.feasibility import floor_feasibility
+from wresdyn.skills.motions import TASK_FAMILIES, make_motions
+
+FLOOR = TASK_FAMILIES["floor"]
 
 RATE = 500.0
 
 
 @pytest.fixture(scope="module")
 def motions(humanoid, floating):
-    return make_floor_motions(humanoid, floating, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0,
-                              rate_hz=RATE, seed=3, extra=("combo",))
+    return make_motions(humanoid, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0, rate_hz=RATE, seed=3,
+                        floating=floating, extra=("combo",))
 
 
 def _by_family(motions, family):
@@ -25,10 +27,10 @@ def _by_family(motions, family):
 
 def test_combo_motions_train_and_validate_never_held_out_and_leave_the_other_draws_alone(humanoid, floating,
                                                                                          motions):
-    assert [m.family for m in motions["train"]] == list(FLOOR_TRAIN_FAMILIES) + ["combo"]
-    assert [m.family for m in motions["validation"]] == list(FLOOR_TRAIN_FAMILIES) + ["combo"]
-    assert [m.family for m in motions["heldout"]] == list(FLOOR_TRAIN_FAMILIES + FLOOR_HELD_OUT_FAMILIES)
-    plain = make_floor_motions(humanoid, floating, {"train": 1}, duration=2.0, rate_hz=RATE, seed=3)["train"]
+    assert [m.family for m in motions["train"]] == list(FLOOR.train) + ["combo"]
+    assert [m.family for m in motions["validation"]] == list(FLOOR.train) + ["combo"]
+    assert [m.family for m in motions["heldout"]] == list(FLOOR.train + FLOOR.held_out)
+    plain = make_motions(humanoid, {"train": 1}, duration=2.0, rate_hz=RATE, seed=3, floating=floating)["train"]
     for a, b in zip(plain, motions["train"]):
         np.testing.assert_array_equal(a.q, b.q)
 
@@ -36,8 +38,8 @@ def test_combo_motions_train_and_validate_never_held_out_and_leave_the_other_dra
 def test_combo_motions_keep_planted_soles_still_and_stand_on_either_foot(humanoid, floating):
     from wresdyn.sim.kinematics import BodyPositions
 
-    combos = make_floor_motions(humanoid, floating, {"train": 4}, duration=4.0, rate_hz=RATE, seed=1, families=(),
-                                extra=("combo",))["train"]
+    combos = make_motions(humanoid, {"train": 4}, duration=4.0, rate_hz=RATE, seed=1, floating=floating, families=(),
+                          extra=("combo",))["train"]
     fk = BodyPositions(floating, 1)
     feet = [list(floating.body_names).index(b) for b in ("left_foot", "right_foot")]
     lifted = set()

@@ -28,12 +28,12 @@ import numpy as np
 
 from ..robot.ground import collision_shapes
 from ..robot.pinocchio_model import build_pinocchio
-from .floor_env import FOOT_BODIES
+from .env import FOOT_BODIES
 
 __all__ = ["FloorFeasibility", "floor_feasibility", "SOLE_FRAMES"]
 
 SOLE_FRAMES = ("left_sole", "right_sole")
-"""The sole frames the contact wrenches act at (left, right), in :data:`~.floor_env.FOOT_BODIES` order."""
+"""The sole frames the contact wrenches act at (left, right), in :data:`~.env.FOOT_BODIES` order."""
 
 
 @dataclass
@@ -55,7 +55,7 @@ class FloorFeasibility:
 
 def _foot_boxes(robot) -> list[np.ndarray]:
     """The corners of each foot's collision boxes in the foot's frame [m], (8 k, 3) per foot of
-    :data:`~.floor_env.FOOT_BODIES`."""
+    :data:`~.env.FOOT_BODIES`."""
     from scipy.spatial.transform import Rotation as R
 
     shapes = collision_shapes(robot)
@@ -83,7 +83,7 @@ def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None =
                       friction: np.ndarray | None = None, damping: np.ndarray | None = None, every: int = 1,
                       skip: float = 0.0) -> FloorFeasibility:
     """Zero-moment point, its margin in the support polygon and the joint torques of ``motion`` (a
-    :class:`~wresdyn.skills.floor_motions.FloorMotion`) on ``robot`` (a floating base; its masses and inertias are the
+    :class:`~wresdyn.skills.motions.Motion` on the floor) on ``robot`` (a floating base; its masses and inertias are the
     ones used).
 
     Args:

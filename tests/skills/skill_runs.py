@@ -1,0 +1,40 @@
+"""What the skills' tests share: the sample rate, a quiet real robot and `wresdyn fit` run folders from the real
+writers."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+RATE = 500.0
+"""Sample rate of every skill test [Hz]."""
+
+
+def quiet_real(robot, mismatch):
+    """The real robot of ``mismatch`` without sensor noise (exact comparisons), on its stand or, for a floating
+    ``robot``, on its floor."""
+    from wresdyn.data.real_robot import RealRobot
+
+    mm = dataclasses.replace(mismatch, position_noise=0.0, velocity_noise=0.0, encoder_resolution=0.0,
+                             velocity_resolution=0.0)
+    return RealRobot(robot, mm, RATE)
+
+
+def fit_run(tmp_path, robot, data, kind: str, physics: bool):
+    """A `wresdyn fit` run folder from the real writers: a (tiny, untrained) residual, identified physics or not."""
+    from wresdyn.fit.gradfit import build_policy
+    from wresdyn.learn.residual import ResidualConfig, export_run_files, obs_stats
+    from wresdyn.sim.physics import PhysicalParams
+
+    run = tmp_path / kind
+    run.mkdir()
+    if physics:
+        p = PhysicalParams.nominal(robot)
+        p.kp *= 0.8
+        p.delay = np.full(robot.n_dof, 0.004)
+        p.save(run / "physics.json")
+    mean, std = obs_stats(data.split("train"))
+    export_run_files(build_policy(robot, ResidualConfig(kind=kind, fraction=0.1), mean, std), run, data, arch="mlp",
+                     learner="gradient")
+    return run

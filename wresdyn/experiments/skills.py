@@ -1,0 +1,240 @@
+"""The zero-shot skill benchmark (``wresdyn deploy``, ``wresdyn deploy --floor``): four skill policies, each deployed on
+the "real" robot, on its stand or standing on its floor (the task config's variant,
+:class:`~wresdyn.skills.skill_config.SkillTaskConfig`).
+
+1. Motions (:mod:`wresdyn.skills.motions`): training, validation and held-out draws of the task's training families,
+   plus a held-out family (the stand's march; on the floor squat, weight shift, kick on one leg and arm waves, with
+   stepping in place held out).
+2. The corrections, fitted **on the stand** from the dataset (no floor data; on the floor they apply unchanged to the
+   same joints and links): the calibrated robot (a hybrid ``wresdyn fit`` run: identified physics + torque residual)
+   and the ASAP-style delta-action residual alone (``wresdyn fit --model network --residual delta_action``); both
+   fitted here when not given (:mod:`.zero_shot`).
+3. Policies (PPO, rsl-rl, :mod:`wresdyn.skills.skill_ppo`; on the floor an asymmetric actor-critic): (a) trained in the
+   nominal simulator; (b) (a) fine-tuned in the calibrated one; (c) (a) fine-tuned with the delta-action residual;
+   (d) the oracle, (a) fine-tuned on the "real" robot itself (:class:`~wresdyn.skills.plants.RealPlant`). (b), (c)
+   and (d) get the same number of fine-tuning iterations.
+4. Deployment (:mod:`wresdyn.skills.evaluate`): every policy, and the reference played open loop, on the "real" robot
+   (the dataset's mismatch; on the floor its IMU's noise too) over the validation and held-out motions; each policy
+   also in the simulator it was trained in. Gap closed = (a − b) / (a − d) on held-out MPJPE (on the floor also on
+   g-MPJPE). ``report.md``, ``results.json``, tracking plots and a USD animation of the held-out rollouts side by side.
+
+No choice here looks at held-out motions: the task and PPO settings were set on validation motions, and every policy
+is its last iterate (no checkpoint selection on the real robot, which a user could not do before deploying).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+from ..data.mismatch import Mismatch
+from ..data.real_robot import RealRobot
+from ..robot import load_robot
+from ..skills.env import TrackingEnv
+from ..skills.evaluate import deploy, gap_closed, metrics
+from ..skills.motions import make_motions
+from ..skills.plants import RealPlant, sim_plant
+from ..skills.report import write_report
+from ..skills.skill_config import FloorTaskConfig, SkillConfig
+from ..skills.skill_ppo import load_skill, train_skill
+from .deploy_config import DeployConfig, FloorDeployConfig
+from .zero_shot import POLICIES, fit_corrections, start_benchmark, write_results
+
+__all__ = ["DeployConfig", "FloorDeployConfig", "run_benchmark"]
+
+
+def _plants(task, real, robot, rate: float, runs: dict, device: str):
+    """The plant makers of a task: ``real(worlds, seed)`` (with the IMU's noise on the floor) and
+    ``sim(setting, worlds)`` (on the floor with ``ground``)."""
+    imu = (task.gyro_noise, task.gravity_noise) if task.floating else (0.0, 0.0)
+
+    def real_plant(worlds: int, seed: int) -> RealPlant:
+        return RealPlant(real, worlds, task.decimation, seed=seed, imu_noise=imu)
+
+    def sim(setting: str, worlds: int):
+        return sim_plant(setting, robot, worlds, rate, task.decimation, runs.get(setting), device, ground=task.floating)
+
+    return real_plant, sim
+
+
+def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs: dict, meta: dict, out: Path,
+                  log) -> float:
+    """Train policy ``name`` (the ``i``-th of the benchmark: ``a_nominal`` from scratch, the others fine-tuned from it)
+    on its plant (``robot``: the one the task acts on, on its stand or with its free base); returns the wall-clock
+    time [s]."""
+    setting = POLICIES[name]
+    t0 = time.perf_counter()
+    worlds = cfg.oracle_worlds if setting == "real" else cfg.num_worlds
+    real_plant, sim = _plants(task, real, robot, real.rate_hz, runs, cfg.device)
+    plant = real_plant(worlds, cfg.seed + 1) if setting == "real" else sim(setting, worlds)
+    env = TrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
+    run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
+    it = cfg.iterations if i == 0 else cfg.finetune
+    train_skill(env, replace(ppo, iterations=it, restart_std=None if i == 0 else cfg.finetune_std),
+                out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
+    wall = time.perf_counter() - t0
+    where = "on the floor of the" if task.floating else "in the"
+    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} "
+        f"{'robot' if setting == 'real' else 'simulator'} ({wall:.0f} s)")
+    return wall
+
+
+def _train_beside(source: str, gains, mismatch: dict, rate: float, i: int, name: str, device: str, motions, task,
+                  ppo, cfg, runs, meta, out: Path) -> float:
+    """:func:`_train_policy` on the floor in a process of its own, its PPO and simulated plant on ``device`` (its lines
+    go to its ``train.log`` only)."""
+    import torch
+
+    if ppo.torch_threads is not None:
+        torch.set_num_threads(ppo.torch_threads)
+    floating = load_robot(source, gains=gains, base="floating")
+    real = RealRobot(floating, Mismatch.from_dict(mismatch, "the benchmark's mismatch"), rate)
+    return _train_policy(i, name, floating, real, motions, task, replace(ppo, device=device),
+                         replace(cfg, device=device), runs, meta, out, lambda s: None)
+
+
+def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: Path, mismatch, log) -> dict:
+    """Train every policy; returns the wall-clock of each [s]. On the floor with PPO on a GPU the oracle's real robot
+    (MuJoCo C on the host's cores) trains beside (b) and (c), and with more GPUs the simulated fine-tunings after (b)
+    each on one of them: all start as soon as (a), which they are fine-tuned from, is done."""
+    wall, beside = {}, {}
+    if task.floating:
+        oracle_beside = cfg.device != "cpu" if cfg.oracle_beside is None else cfg.oracle_beside
+        beside = {"d_oracle": cfg.device} if oracle_beside and "d_oracle" in policies[2:] else {}
+        beside.update(zip([p for p in policies[2:] if POLICIES[p] != "real"], cfg.beside_devices))
+    index = {name: i for i, name in enumerate(policies)}
+    pool, jobs = None, {}
+    try:
+        for name in policies:
+            if name in beside:
+                continue
+            wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out, log)
+            if name == "a_nominal" and beside:
+                import multiprocessing as mp
+
+                pool = mp.get_context("spawn").Pool(len(beside))
+                for other, device in beside.items():
+                    jobs[other] = pool.apply_async(_train_beside, (
+                        str(robot.source), robot.gains, mismatch.to_dict(), real.rate_hz, index[other], other, device,
+                        motions, task, ppo, cfg, runs, meta, out))
+                    where = "on the real robot" if other == "d_oracle" else f"on {device}"
+                    log(f"[3/4] policy {other}: training {where} beside the others "
+                        f"({out / 'skills' / other / 'train.log'})")
+        for other, job in jobs.items():
+            wall[other] = job.get()
+            setting = POLICIES[other]
+            worlds, plant = ((cfg.oracle_worlds, "real robot") if setting == "real"
+                             else (cfg.num_worlds, f"{setting} simulator"))
+            where = "" if setting == "real" else f" on {beside[other]}"
+            log(f"[3/4] policy {other}: {cfg.finetune} PPO iterations x {worlds} worlds on the floor of the {plant} "
+                f"({wall[other]:.0f} s{where}, beside the others)")
+    finally:
+        if pool is not None:
+            pool.terminate()
+    return wall
+
+
+def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | None = None, *, data_path=None,
+                  calibrated=None, delta=None, mismatch=None, task=None, ppo=None, animation: bool = True,
+                  policies=tuple(POLICIES), log=print) -> dict:
+    """Run the benchmark into ``out`` (resumable: finished fits and policies are reused, PPO resumes).
+
+    Args:
+        robot: The nominal robot on its stand (fixed base); on the floor its floating twin is loaded from the same
+            file.
+        dataset: The stand recordings the corrections are fitted on (:class:`~wresdyn.data.dataset.Dataset`).
+        out: Output folder.
+        cfg: Sizes: :class:`DeployConfig` on the stand, :class:`FloorDeployConfig` on the floor (default: the
+            task's).
+        data_path: Where ``dataset`` was read from (recorded in the fitted runs).
+        calibrated, delta: Existing run folders of the two corrections (default: fitted into ``out``).
+        mismatch: The "real" robot's :class:`~wresdyn.data.mismatch.Mismatch` (default: the dataset's).
+        task: The task, :class:`~wresdyn.skills.skill_config.SkillTaskConfig`'s ``stand()`` or ``floor()`` (default:
+            the one of ``cfg``'s kind, the stand's without ``cfg``).
+        ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
+        policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
+            ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``).
+
+    Returns:
+        The results written to ``results.json``.
+    """
+    t_start = time.perf_counter()
+    out = Path(out)
+    task = task or (FloorTaskConfig() if isinstance(cfg, FloorDeployConfig) else SkillConfig())
+    cfg = cfg or (FloorDeployConfig() if task.floating else DeployConfig())
+    floor = task.floating
+    policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
+    plant_robot = load_robot(robot.source, gains=robot.gains, base="floating") if floor else robot
+    rate = float(dataset.rate_hz)
+    if floor:
+        motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed, floating=plant_robot,
+                               extra=cfg.extra_families)
+    else:
+        motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
+    log(f"[1/4] {'floor ' if floor else ''}motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
+        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
+    t0 = time.perf_counter()
+    calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
+                                         need_delta="c_delta_action" in policies)
+    fit_s = time.perf_counter() - t0
+    log(f"[2/4] corrections{' fitted on the stand' if floor else ''}: calibrated {calibrated}, delta action {delta} "
+        f"({fit_s:.0f} s)")
+    real = RealRobot(plant_robot, mismatch, rate)
+    runs = {"calibrated": calibrated, "delta_action": delta}
+    meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration}}
+    if floor:
+        meta["motions"]["floor"] = True
+        if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
+            meta["motions"]["extra"] = list(cfg.extra_families)
+    wall = _train_all(policies, plant_robot, real, motions.split("train"), task, ppo, cfg, runs, meta, out, mismatch,
+                      log)
+    results = {"config": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo), "mismatch": mismatch.to_dict(),
+               "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None},
+               "train_wall_s": wall, "fit_wall_s": fit_s, "real": {}, "sim": {}}
+    real_plant, sim = _plants(task, real, plant_robot, rate, runs, cfg.device)
+    rollouts = {}
+    for split in ("validation", "heldout"):
+        mot = motions.split(split)
+        results["real"][split], results["sim"][split] = {}, {}
+        for name in ("reference", *policies):
+            policy = None if name == "reference" else load_skill(out / "skills" / name)
+            dep = deploy(policy, real_plant(len(mot), cfg.seed + 100), mot, task)
+            results["real"][split][name] = metrics(dep, robot)
+            if split == "heldout":
+                rollouts[name] = dep
+            setting = POLICIES.get(name, "nominal")
+            if setting != "real":
+                results["sim"][split][name] = metrics(deploy(policy, sim(setting, len(mot)), mot, task), robot)["mean"]
+    _gaps(results, floor)
+    held = results["real"]["heldout"]
+    n_held = len(motions.split("heldout"))
+    if floor:
+        log("[4/4] deployed on the real robot's floor (" + f"{n_held} held-out motions): " + "; ".join(
+            f"{n} success {100 * r['mean']['success']:.0f} % ({r['mean']['falls']} falls), MPJPE "
+            f"{1e3 * r['mean'].get('mpjpe', float('nan')):.1f} mrad, "
+            f"g-MPJPE {1e3 * r['mean'].get('g_mpjpe', float('nan')):.0f} mm"
+            for n, r in held.items()) + "".join(
+            f"; gap closed by {k[0]} {100 * v:.0f} % (MPJPE)" for k, v in results["gap_closed_mpjpe"].items()))
+    else:
+        log(f"[4/4] deployed on the real robot ({n_held} held-out motions), MPJPE: " + ", ".join(
+            f"{n} {1e3 * r['mean']['mpjpe']:.1f} mrad" for n, r in held.items()) + "".join(
+            f"; gap closed by {k[0]} {100 * v:.0f} %" for k, v in results["gap_closed"].items()))
+    results["wall_s"] = time.perf_counter() - t_start
+    write_report(out, plant_robot, results, rollouts, motions.split("heldout"), rate / task.decimation,
+                 animation=animation)
+    write_results(out, results)
+    log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
+    return results
+
+
+def _gaps(results: dict, floor: bool) -> None:
+    """The gaps closed by (b) and (c) on the real robot, into ``results``: on held-out MPJPE ``gap_closed`` and on
+    validation ``gap_closed_validation``; on the floor ``gap_closed[_validation]_{mpjpe,g_mpjpe}``."""
+    for split, suffix in (("heldout", ""), ("validation", "_validation")):
+        for metric in ("mpjpe", "g_mpjpe") if floor else ("mpjpe",):
+            mean = {n: r["mean"].get(metric, float("nan")) if floor else r["mean"][metric]
+                    for n, r in results["real"][split].items()}
+            results[f"gap_closed{suffix}_{metric}" if floor else f"gap_closed{suffix}"] = {
+                k: gap_closed(mean["a_nominal"], mean[k], mean["d_oracle"])
+                for k in ("b_calibrated", "c_delta_action") if k in mean and "d_oracle" in mean}
