@@ -9,7 +9,7 @@ import sys,time
 t0=time.time()
 for l in sys.stdin: sys.stdout.write(f"{time.time()-t0:8.2f} {l}")'; }
 cd $PWD
-( CUDA_VISIBLE_DEVICES=0,1 bash benchmarks/floor_gpu.sh /root/runs/probe_seed2 /root/corr/calibrated /root/corr/delta_action /root/corr/data/dataset.npz --seed 2 --beside-devices cuda:1 > /root/res/seed2.out 2>&1 ) &
+( CUDA_VISIBLE_DEVICES=0,1 bash benchmarks/skills/floor_gpu.sh /root/runs/probe_seed2 /root/corr/calibrated /root/corr/delta_action /root/corr/data/dataset.npz --seed 2 --beside-devices cuda:1 > /root/res/seed2.out 2>&1 ) &
 fitpair() {  # GPU FUSEDFLAG NAME
   export CUDA_VISIBLE_DEVICES=$1 WARP_CACHE_PATH=/root/wc_$3
   for pass in cold warm; do

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Several seeds of the full-size floor benchmark side by side on one GPU (each a `benchmarks/floor_gpu.sh` run;
+# Several seeds of the full-size floor benchmark side by side on one GPU (each a `benchmarks/skills/floor_gpu.sh` run;
 # 4096 worlds leave most of an H100/H200 idle, so seeds share it), corrections fitted on the stand on the CPU:
-#   bash benchmarks/floor_gpu_seeds.sh OUT CALIBRATED DELTA "0 1 2" [more deploy flags]
+#   bash benchmarks/skills/floor_gpu_seeds.sh OUT CALIBRATED DELTA "0 1 2" [more deploy flags]
 # Resumable like floor_gpu.sh: rerun the same command. Writes OUT/seedS/{report.md,results.json} and OUT/seedS.log.
 set -euo pipefail
-OUT=${1:?usage: bash benchmarks/floor_gpu_seeds.sh OUT CALIBRATED DELTA "SEEDS" [flags]}
+OUT=${1:?usage: bash benchmarks/skills/floor_gpu_seeds.sh OUT CALIBRATED DELTA "SEEDS" [flags]}
 CAL=${2:?calibrated run}
 DEL=${3:?delta-action run}
 SEEDS=${4:?seeds, e.g. "0 1 2"}

@@ -3,7 +3,7 @@ the joint torques each motion needs (Pinocchio, :mod:`wresdyn.skills.feasibility
 effort limits (the nominal masses) and against the "real" robot's (its masses, limits, friction and damping), over
 a finished ``wresdyn deploy --floor`` run's held-out motions.
 
-    python benchmarks/floor_step_feasibility.py RUN [--data DATASET] [--every 2] [--combo N]
+    python benchmarks/skills/floor_step_feasibility.py RUN [--data DATASET] [--every 2] [--combo N]
 
 Per motion: the zero-moment point's smallest margin inside the support [mm] (negative: outside) and the share of the
 samples it is outside, with the samples within 10 ms of a change of the planted soles left out (the reference's base

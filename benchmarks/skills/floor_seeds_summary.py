@@ -2,7 +2,7 @@
 policy and seed, their mean, success per motion family, and the gap closed on g-MPJPE and MPJPE, from each run's
 ``results.json`` (``wresdyn deploy --floor``).
 
-    python benchmarks/floor_seeds_summary.py RUN0/results.json RUN1/results.json ...
+    python benchmarks/skills/floor_seeds_summary.py RUN0/results.json RUN1/results.json ...
 """
 
 import json

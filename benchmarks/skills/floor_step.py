@@ -2,7 +2,7 @@
 plant it trained on and on the "real" robot, with how its base drifts, over the run's held-out motions of the
 families that stand on one foot (stepping in place, kick).
 
-    python benchmarks/floor_step.py RUN --data DATASET --calibrated CAL --delta DELTA [--families step,kick]
+    python benchmarks/skills/floor_step.py RUN --data DATASET --calibrated CAL --delta DELTA [--families step,kick]
         [--series] [--combo N] [--slow D]
 
 RUN is the deploy folder (``results.json``, ``skills/*/policy.pt``); CAL and DELTA the corrections it trained (b) and

@@ -1,7 +1,7 @@
 """Why floor skills fail on the "real" robot: redeploy a finished ``wresdyn deploy --floor`` run's policies on its
 held-out motions and print, per policy and family, the successes and each failure's cause and step.
 
-    python benchmarks/floor_failures.py RUN [--data DATASET]
+    python benchmarks/skills/floor_failures.py RUN [--data DATASET]
 
 RUN is the deploy folder (its ``results.json`` gives the sizes, seed and task; ``skills/*/policy.pt`` the policies).
 The motions are drawn again from the run's seed, and the real robot is the dataset's mismatch with the benchmark's

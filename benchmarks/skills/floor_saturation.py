@@ -2,7 +2,7 @@
 run's policies on its held-out stepping and kick motions and print, per policy, the four joints whose drive torque
 sat at the real robot's torque limit for the largest share of physics substeps (over the motions still running).
 
-    python benchmarks/floor_saturation.py RUN [--data DATASET]
+    python benchmarks/skills/floor_saturation.py RUN [--data DATASET]
 """
 
 from __future__ import annotations
