@@ -188,12 +188,14 @@ def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
 
     cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_on_the_floor.py", str(cal), "--out", str(tmp_path / "skills"),
-                          "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--train-per-family", "1", "--duration", "1.0"],
+                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--duration", "1.0"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     rows = {ln.split()[0]: ln.split() for ln in res.stdout.splitlines()
             if ln.split()[:1] in (["reference"], ["a_nominal"], ["b_calibrated"])}
     assert set(rows) == {"reference", "a_nominal", "b_calibrated"}
     # success is a percentage of the held-out motions; MPJPE in mrad and g-MPJPE in mm of a standing robot
+    # measured on 2 CPU cores after 2 + 1 iterations on one motion: every row 100 %, MPJPE 40.0-40.1 mrad, g-MPJPE
+    # 51 mm; the bounds leave 25 % for other CPUs' float rounding
     for r in rows.values():
-        assert 0 <= float(r[1].rstrip("%")) <= 100 and 0 < float(r[3]) < 300 and 0 < float(r[4]) < 500
+        assert r[1] == "100%" and 30 < float(r[3]) < 50 and 38 < float(r[4]) < 64, rows

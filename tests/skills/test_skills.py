@@ -240,8 +240,11 @@ def test_skill_zero_shot_example_runs(tmp_path, humanoid, data):
 
     cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_zero_shot.py", str(cal), "--out", str(tmp_path / "skills"),
-                          "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--train-per-family", "1"],
+                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     rows = [ln.split() for ln in res.stdout.splitlines() if ln.split()[:1] in (["a_nominal"], ["b_calibrated"])]
-    assert len(rows) == 2 and all(0 < float(r[1]) < 500 for r in rows)
+    # MPJPE [mrad] and foot error [mm] of the two policies after 2 + 1 iterations on one motion: measured 22.1 / 17.4
+    # (a) and 22.4 / 17.9 (b) on 2 CPU cores; the bounds leave 25 % for other CPUs' float rounding
+    assert len(rows) == 2 and all(r[3] == "100%" for r in rows), rows
+    assert all(16.5 < float(r[1]) < 28 and 13 < float(r[2]) < 22.5 for r in rows), rows
