@@ -64,8 +64,8 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parents[1]), str(HERE)]  # this checkout, this folder (peer_adapter, host)
 import host  # noqa: E402
 import peer_adapter as peer  # noqa: E402
+from peer_adapter import SPLITS, param_errors  # noqa: E402
 
-SPLITS = ("validation", "heldout", "ood")
 STAGES = (peer.JOINT_FIELDS, ("bodies",))
 """The fields each stage fits: the joints' own, then the links' inertias."""
 MAX_ITERS = 1_000_000
@@ -135,24 +135,6 @@ def write_json(path: Path, obj) -> None:
 
 
 # --- scoring -------------------------------------------------------------------------------------------------------
-
-def param_errors(ident, truth, train) -> dict:
-    """Identifiable (joint, field) pairs within 10 % of the truth, median |ratio − 1| per field, and the links'
-    median relative mass error and centre-of-mass error [m]."""
-    from wresdyn.evaluation.identification import excitation_coverage, identification_table
-
-    rows = identification_table(ident, truth, excitation_coverage(train, truth))
-    counted = [r for r in rows if r["identifiable"] and np.isfinite(r["ratio"])]
-    out = {"within_10pct": sum(abs(r["ratio"] - 1) <= 0.1 for r in counted), "identifiable": len(counted)}
-    for f in peer.JOINT_FIELDS:
-        rs = [abs(r["ratio"] - 1) for r in counted if r["field"] == f]
-        out[f"median_err_{f}"] = float(np.median(rs)) if rs else float("nan")
-    moving = truth.body_mass > 0
-    moving[0] = False  # the stand holds the root
-    out["median_err_mass"] = float(np.median(np.abs(ident.body_mass[moving] / truth.body_mass[moving] - 1)))
-    out["median_err_com_m"] = float(np.median(np.linalg.norm(ident.body_com[moving] - truth.body_com[moving], axis=1)))
-    return out
-
 
 def best_so_far(points):
     out, best = [], np.inf

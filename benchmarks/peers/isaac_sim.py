@@ -283,7 +283,7 @@ def write_score_stage(out: Path, layer: str) -> Path:
 def score(args) -> None:
     """Open-loop mean |Δq| of the peer's written-back robot on every split, in wresdyn's simulator, next to the
     robot file's own values (the peer's starting point), and its parameters against the truth."""
-    from humanoid import SPLITS, param_errors  # this folder: the script's own, first on sys.path
+    from peer_adapter import SPLITS, param_errors  # this folder: the script's own, first on sys.path
 
     from wresdyn.data.loading import load_data
     from wresdyn.data.real_robot import Mismatch, RealRobot

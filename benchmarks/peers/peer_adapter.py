@@ -423,3 +423,25 @@ def identify_peer(robot, trajectories, rate_hz: float, fields=(*JOINT_FIELDS, "b
     except _Budget:
         stopped = "budget"
     return PeerRun(spec, params, evaluations, iters[0], stopped)
+
+
+SPLITS = ("validation", "heldout", "ood")
+"""The splits every fight scores, after selection on validation."""
+
+
+def param_errors(ident, truth, train) -> dict:
+    """Identifiable (joint, field) pairs within 10 % of the truth, median |ratio − 1| per field, and the links'
+    median relative mass error and centre-of-mass error [m]."""
+    from wresdyn.evaluation.identification import excitation_coverage, identification_table
+
+    rows = identification_table(ident, truth, excitation_coverage(train, truth))
+    counted = [r for r in rows if r["identifiable"] and np.isfinite(r["ratio"])]
+    out = {"within_10pct": sum(abs(r["ratio"] - 1) <= 0.1 for r in counted), "identifiable": len(counted)}
+    for f in JOINT_FIELDS:
+        rs = [abs(r["ratio"] - 1) for r in counted if r["field"] == f]
+        out[f"median_err_{f}"] = float(np.median(rs)) if rs else float("nan")
+    moving = truth.body_mass > 0
+    moving[0] = False  # the stand holds the root
+    out["median_err_mass"] = float(np.median(np.abs(ident.body_mass[moving] / truth.body_mass[moving] - 1)))
+    out["median_err_com_m"] = float(np.median(np.linalg.norm(ident.body_com[moving] - truth.body_com[moving], axis=1)))
+    return out
