@@ -220,7 +220,7 @@ def test_exported_policy_is_the_residual_the_env_applies(robot, data, tmp_path, 
     actor, env = best_actor(run, data, robot, cfg)
     assert actor.obs_normalization and float(actor.obs_normalizer.count) > 0  # trained running statistics
     scale = torch.tensor(meta["scale"])
-    n_worlds, qd_index = env.num_envs, torch.as_tensor(robot.qd_index)
+    num_worlds, qd_index = env.num_envs, torch.as_tensor(robot.qd_index)
     clipped = inside = 0
     for _ in range(4):
         g0 = env.g.clone()
@@ -230,9 +230,10 @@ def test_exported_policy_is_the_residual_the_env_applies(robot, data, tmp_path, 
             expect = policy(raw)
         env.step(a)
         if kind == "torque":
-            applied = wp.to_torch(env.sim.control.joint_f).view(n_worlds, -1)[:, qd_index]
+            applied = wp.to_torch(env.sim.control.joint_f).view(num_worlds, -1)[:, qd_index]
         else:
-            applied = wp.to_torch(env.sim.control.joint_target_q).view(n_worlds, -1)[:, qd_index] - env.bank.target(g0)
+            applied = wp.to_torch(env.sim.control.joint_target_q).view(num_worlds, -1)[:, qd_index]
+            applied = applied - env.bank.target(g0)
         torch.testing.assert_close(applied, expect, rtol=1e-5, atol=1e-6 * float(scale.max()))
         on_clip = (expect.abs() >= scale * (1 - 1e-6))
         clipped, inside = clipped + int(on_clip.sum()), inside + int((~on_clip).sum())

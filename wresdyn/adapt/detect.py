@@ -156,9 +156,9 @@ def replay_limits(sim, window, physics, candidates, fused: bool) -> tuple[list, 
         m = physics.copy()
         m.effort[j] = limit
         models.append(m)
-    for w in range(sim.n_worlds):
+    for w in range(sim.num_worlds):
         sim.set_physics(models[min(w, len(models) - 1)], worlds=slice(w, w + 1))
-    window = window.repeat(sim.n_worlds)
+    window = window.repeat(sim.num_worlds)
     with torch.no_grad():
         q = fused_rollout(sim, window)[0] if fused else rollout(sim, window).q
     err = (q[:, 1:] - window.q[:, 1:]).abs().mean(1).cpu().numpy()[:len(models)]

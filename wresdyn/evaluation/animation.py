@@ -130,13 +130,13 @@ def _hold_finite(q: np.ndarray, neutral: np.ndarray) -> np.ndarray:
 
 
 def _write(robot: Robot, poses: np.ndarray, names: list[str], out: Path, fps: float, spacing: float) -> None:
-    """Play ``poses`` (joint positions [rad or m], shape (n_frames, n_worlds, n_dof), frame ``f`` at ``f / fps``
-    [s]) on ``n_worlds`` copies of the robot and save the animation to ``out``."""
+    """Play ``poses`` (joint positions [rad or m], shape (n_frames, num_worlds, n_dof), frame ``f`` at ``f / fps``
+    [s]) on ``num_worlds`` copies of the robot and save the animation to ``out``."""
     import newton
     from pxr import Sdf
 
-    n_frames, n_worlds, _ = poses.shape
-    row = RobotRow(robot, n_worlds)
+    n_frames, num_worlds, _ = poses.shape
+    row = RobotRow(robot, num_worlds)
     viewer = newton.viewer.ViewerUSD(output_path=str(out), fps=fps, num_frames=None)
     row.attach(viewer, spacing)
     root = viewer.stage.GetDefaultPrim()
@@ -158,20 +158,20 @@ def _write(robot: Robot, poses: np.ndarray, names: list[str], out: Path, fps: fl
 
 
 class RobotRow:
-    """``n_worlds`` copies of ``robot`` (one Newton world each, on the CPU), posed by joint positions through
+    """``num_worlds`` copies of ``robot`` (one Newton world each, on the CPU), posed by joint positions through
     forward kinematics (``newton.eval_fk``), for a Newton viewer to draw side by side: the USD animation here and
     the browser viewer (:mod:`wresdyn.evaluation.viewer`) share it.
 
     A floating base gets a ground plane; ``pose`` then takes the base pose [x y z qx qy qz qw] before the joints.
     """
 
-    def __init__(self, robot: Robot, n_worlds: int) -> None:
-        self.robot, self.n_worlds = robot, int(n_worlds)
+    def __init__(self, robot: Robot, num_worlds: int) -> None:
+        self.robot, self.num_worlds = robot, int(num_worlds)
         self.floating = robot.base == "floating"
-        self.model = robot.build_model(self.n_worlds, device="cpu", ground=self.floating)
+        self.model = robot.build_model(self.num_worlds, device="cpu", ground=self.floating)
         self.state = self.model.state()
         # per-world joint_q: the default coordinates of every joint, the robot's own written over them per pose
-        self._q = self.model.joint_q.numpy().reshape(self.n_worlds, -1).copy()
+        self._q = self.model.joint_q.numpy().reshape(self.num_worlds, -1).copy()
 
     def attach(self, viewer, spacing: float) -> None:
         """Give ``viewer`` the model, the worlds ``spacing`` [m] apart along +y (centred on the origin), and the
@@ -188,7 +188,7 @@ class RobotRow:
 
     def pose(self, rows: np.ndarray):
         """The state (body poses filled by forward kinematics) of world ``i`` at ``rows[i]``: joint positions
-        [rad or m] in ``robot.joint_names`` order, shape (n_worlds, n_dof) (floating base: (n_worlds, 7 + n_dof),
+        [rad or m] in ``robot.joint_names`` order, shape (num_worlds, n_dof) (floating base: (num_worlds, 7 + n_dof),
         the base pose first)."""
         import newton
 

@@ -160,10 +160,10 @@ def _aim_camera(viewer, row, spacing: float) -> None:
     if int(row.model.up_axis) != 2:
         return
     body = row.state.body_q.numpy()[:, :3]
-    body = body[: max(1, len(body) // row.n_worlds)]  # world 0's bodies, the row's offsets not applied
+    body = body[: max(1, len(body) // row.num_worlds)]  # world 0's bodies, the row's offsets not applied
     lo, hi = body.min(axis=0), body.max(axis=0)
     centre = 0.5 * (lo + hi)
-    width = (row.n_worlds - 1) * spacing + float(hi[1] - lo[1])
+    width = (row.num_worlds - 1) * spacing + float(hi[1] - lo[1])
     extent = max(float(np.max(hi - lo)), width, 0.2)
     distance, height = 1.5 * extent, 0.4 * extent
     pos = centre + np.array([distance, 0.15 * extent, height])
@@ -179,9 +179,9 @@ def serve(scene: Scene, cfg: ViewerConfig = ViewerConfig(), say=print) -> None:
         raise WresdynError("the viewer needs viser: pip install 'wresdyn[view]' (or pip install viser)") from None
     import newton
 
-    n_frames, n_worlds, width = scene.poses.shape
+    n_frames, num_worlds, width = scene.poses.shape
     spacing = scene.spacing if scene.spacing is not None else cfg.spacing
-    row = RobotRow(scene.robot, n_worlds)
+    row = RobotRow(scene.robot, num_worlds)
     _tint(row.model, scene.colours)
     viewer = newton.viewer.ViewerViser(host=cfg.host, port=cfg.port, label="wresdyn", verbose=False)
     try:
@@ -206,7 +206,7 @@ def serve(scene: Scene, cfg: ViewerConfig = ViewerConfig(), say=print) -> None:
         with gui.add_folder("joint positions [rad]", order=-1):
             for j in joints:
                 gui.add_uplot(
-                    data=(t, *(scene.poses[:, i, offset + j] for i in range(n_worlds))),
+                    data=(t, *(scene.poses[:, i, offset + j] for i in range(num_worlds))),
                     series=(uplot.Series(label="t [s]"), *(
                         uplot.Series(label=name, stroke="#%02x%02x%02x" % tuple(int(255 * c) for c in col), width=1.5)
                         for name, col in zip(scene.names, scene.colours))),

@@ -51,17 +51,17 @@ class ReplayEnv(VecEnv):
     ones, their delay on the commands), or ``None``: the robot file's values, no delay.
     """
 
-    def __init__(self, robot, trajectories, rate_hz: float, num_envs: int, cfg: ReplayEnvConfig = ReplayEnvConfig(),
+    def __init__(self, robot, trajectories, rate_hz: float, num_worlds: int, cfg: ReplayEnvConfig = ReplayEnvConfig(),
                  residual: ResidualConfig = ResidualConfig(), rewards: RewardConfig = RewardConfig(),
                  device: str | None = "cpu", seed: int = 0, obs_mean=None, obs_std=None, graph: bool = True,
                  weights=None, physics=None) -> None:
         self.robot, self.env_cfg, self.residual_cfg, self.reward_cfg = robot, cfg, residual, rewards
         self.dt = 1.0 / rate_hz
-        self.sim = Simulator(robot, num_envs, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device,
+        self.sim = Simulator(robot, num_worlds, self.dt, solver=cfg.solver, substeps=cfg.substeps, device=device,
                              friction_kappa=cfg.friction_kappa)
         self.limits = DivergenceLimits(cfg.max_qd, cfg.limit_margin, cfg.max_error)
         self.device = self.sim.device
-        self.num_envs, self.num_actions = num_envs, robot.n_dof
+        self.num_actions = robot.n_dof
         self.max_episode_length = cfg.horizon
         self.cfg = {"env": asdict(cfg), "residual": asdict(residual), "rewards": asdict(rewards), "rate_hz": rate_hz}
         self.physics = physics
@@ -91,10 +91,10 @@ class ReplayEnv(VecEnv):
         n, z = robot.n_dof, torch.zeros
         # every piece of episode state below is updated in place, so a captured step (CUDA graph) reads and writes
         # the same memory as an eager one
-        self.q, self.qd, self.qdd = z(num_envs, n, device=dev), z(num_envs, n, device=dev), z(num_envs, n, device=dev)
-        self.a1, self.a2 = z(num_envs, n, device=dev), z(num_envs, n, device=dev)
+        self.q, self.qd, self.qdd = (z(num_worlds, n, device=dev) for _ in range(3))
+        self.a1, self.a2 = z(num_worlds, n, device=dev), z(num_worlds, n, device=dev)
         """Network actions at t−1 and t−2, clipped as in :meth:`step`."""
-        self.g = torch.zeros(num_envs, dtype=torch.long, device=dev)
+        self.g = torch.zeros(num_worlds, dtype=torch.long, device=dev)
         """Current row in the trajectory bank, per world."""
         self.end = torch.zeros_like(self.g)
         """Last row of the current episode, per world."""
@@ -110,8 +110,18 @@ class ReplayEnv(VecEnv):
         """Replay :meth:`step` from CUDA graphs (on CUDA unless ``graph=False``): one launch per step, no host sync."""
         self._graphs: dict[int, tuple] = {}
         self._warm: set[int] = set()
-        self._act_in = z(num_envs, n, device=dev)
+        self._act_in = z(num_worlds, n, device=dev)
         self.reset_all(random_length=True)
+
+    @property
+    def num_worlds(self) -> int:
+        """Parallel worlds: the simulator's ``num_worlds`` (the simulator owns the count; nothing else stores it)."""
+        return self.sim.num_worlds
+
+    @property
+    def num_envs(self) -> int:
+        """:attr:`num_worlds` under the name rsl-rl's ``VecEnv`` reads."""
+        return self.sim.num_worlds
 
     @property
     def diverged_total(self) -> int:

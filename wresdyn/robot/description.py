@@ -199,12 +199,12 @@ class Robot:
             return None
         return {"file": self.gains_file, "config": copy.deepcopy(self.gains)}
 
-    def build_model(self, n_worlds: int = 1, device: str | None = None, requires_grad: bool = False,
+    def build_model(self, num_worlds: int = 1, device: str | None = None, requires_grad: bool = False,
                     ground: bool = False, contact=None):
-        """Finalize a Newton :class:`~newton.Model` with ``n_worlds`` copies of the robot.
+        """Finalize a Newton :class:`~newton.Model` with ``num_worlds`` copies of the robot.
 
         Args:
-            n_worlds: Number of independent worlds (one robot each).
+            num_worlds: Number of independent worlds (one robot each).
             device: Warp device (``"cpu"``, ``"cuda:0"``); ``None`` takes Warp's default.
             requires_grad: Allocate gradients for Warp autodiff.
             ground: Add a floor through the origin, normal to the up axis: one plane shared by every world (Newton's
@@ -216,7 +216,7 @@ class Robot:
         import newton
 
         scene = newton.ModelBuilder(up_axis=self.builder.up_axis, gravity=tuple(float(g) for g in self.gravity))
-        scene.replicate(self.builder, n_worlds)
+        scene.replicate(self.builder, num_worlds)
         if ground:
             c = contact or ContactSettings()
             material = {"shape_material_mu": c.friction, "shape_material_mu_torsional": c.torsional_friction,
@@ -236,7 +236,7 @@ class Robot:
             raise ValueError("contact settings without a ground: pass ground=True")
         model = scene.finalize(device=device, requires_grad=requires_grad)
         if self.servo is not None:
-            attach_servo(model, self.servo, self.qd_index, n_worlds)
+            attach_servo(model, self.servo, self.qd_index, num_worlds)
         return model
 
 

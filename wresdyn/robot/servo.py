@@ -146,18 +146,18 @@ def read_servo(config: dict | None, joint_names, effort, where: str = "gains con
     return ServoDrives(drive, *(np.where(drive, values[k], 0.0) for k in SERVO_KEYS[1:]))
 
 
-def attach_servo(model, servo: ServoDrives, qd_index, n_worlds: int) -> None:
+def attach_servo(model, servo: ServoDrives, qd_index, num_worlds: int) -> None:
     """Give a finalized Newton model the servo arrays :class:`~wresdyn.sim.solver_replay.SolverReplay` reads, per
     DoF of every world (Newton's flat layout, zeros on the DoFs of other joints): ``joint_servo`` (int32, 1 on a
     servo), ``joint_servo_deadband`` [rad], ``joint_servo_noload_speed`` [rad/s], ``joint_servo_startup_torque`` and
     ``joint_servo_stiction`` [N*m] (float32, gradients as the model's)."""
     import warp as wp
 
-    width = model.joint_dof_count // n_worlds
+    width = model.joint_dof_count // num_worlds
     idx = np.asarray(qd_index, dtype=np.int64)
 
     def per_dof(values, dtype):
-        full = np.zeros((n_worlds, width))
+        full = np.zeros((num_worlds, width))
         full[:, idx] = values
         return wp.array(full.reshape(-1).astype(dtype), device=model.device,
                         requires_grad=bool(model.requires_grad) and dtype == np.float32)

@@ -40,8 +40,8 @@ def fused_rollout(sim: Simulator, window: Window) -> tuple[torch.Tensor, torch.T
     if sim.solver_kind != "replay" or sim.substeps != 1:
         raise ValueError(f"fused_rollout needs the replay solver at one substep (got {sim.solver_kind}, "
                          f"{sim.substeps} substeps)")
-    if window.cmd.shape[0] != sim.n_worlds:
-        raise ValueError(f"window batch {window.cmd.shape[0]} != simulator worlds {sim.n_worlds}")
+    if window.cmd.shape[0] != sim.num_worlds:
+        raise ValueError(f"window batch {window.cmd.shape[0]} != simulator worlds {sim.num_worlds}")
     names = tuple(sim._physics) if torch.is_grad_enabled() else ()
     q, qd = _Fused.apply(window.q[:, 0], window.qd[:, 0], window.target, sim, names,
                          *(sim._physics[f] for f in names))
@@ -65,7 +65,7 @@ def _buffers(sim: Simulator, steps: int, grad: bool, grad_target: bool) -> tuple
     free = sim.__dict__.setdefault("_fused_free", {}).get(key)
     if free:
         return free.pop()
-    w, dev = sim.n_worlds, sim.model.device
+    w, dev = sim.num_worlds, sim.model.device
     return (wp.zeros((steps + 1, w, sim.nq), dtype=wp.float32, device=dev, requires_grad=grad),
             wp.zeros((steps + 1, w, sim.nqd), dtype=wp.float32, device=dev, requires_grad=grad),
             wp.zeros((steps, w, sim.nq), dtype=wp.float32, device=dev, requires_grad=grad_target))

@@ -14,20 +14,20 @@ __all__ = ["BodyPositions"]
 
 
 class BodyPositions:
-    """Forward kinematics of ``n_worlds`` copies of a floating-base ``robot`` on ``device``.
+    """Forward kinematics of ``num_worlds`` copies of a floating-base ``robot`` on ``device``.
 
     ``__call__(base_pose (N, 7), q (N, n)) -> (N, n_bodies, 3)``: body-frame origins in the world [m]
-    (Newton's free-joint convention, :mod:`wresdyn.robot.ground`; ``N <= n_worlds``).
+    (Newton's free-joint convention, :mod:`wresdyn.robot.ground`; ``N <= num_worlds``).
     """
 
-    def __init__(self, robot, n_worlds: int, device: str = "cpu") -> None:
+    def __init__(self, robot, num_worlds: int, device: str = "cpu") -> None:
         import warp as wp
 
-        self.robot, self.n_worlds = robot, int(n_worlds)
-        self.model = robot.build_model(self.n_worlds, device)
+        self.robot, self.num_worlds = robot, int(num_worlds)
+        self.model = robot.build_model(self.num_worlds, device)
         self.state = self.model.state()
         self.device = torch.device(str(wp.device_to_torch(self.model.device)))
-        w = self.n_worlds
+        w = self.num_worlds
         self.nq = self.model.joint_coord_count // w
         self.nb = self.model.body_count // w
         q0 = base_index(robot)[0]
@@ -40,8 +40,8 @@ class BodyPositions:
         import newton
 
         k = len(q)
-        if k > self.n_worlds:
-            raise ValueError(f"{k} states, BodyPositions holds {self.n_worlds} worlds")
+        if k > self.num_worlds:
+            raise ValueError(f"{k} states, BodyPositions holds {self.num_worlds} worlds")
         self._joint_q[:k, self._base] = base_pose.to(self.device, torch.float32)
         self._joint_q[:k, self._q_index] = q.to(self.device, torch.float32)
         newton.eval_fk(self.model, self.state.joint_q, self.state.joint_qd, self.state)

@@ -67,7 +67,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
-        sim: The simulator, ``sim.n_worlds`` equal to the window batch B.
+        sim: The simulator, ``sim.num_worlds`` equal to the window batch B.
         window: Start states, commands and PD targets (:meth:`~wresdyn.sim.bank.TrajectoryBank.window`).
         policy: Residual ``policy(obs (N, 4n)) -> residual (N, n)`` [N*m or rad] (attributes ``kind`` or a
             ``residual_kind()`` of an exported one, optional ``reset()``, ``scale``, ``obs_std``), or ``None``.
@@ -86,8 +86,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             (:class:`~wresdyn.errors.SimulationDiverged`).
     """
     b, steps = window.cmd.shape[0], window.steps
-    if b != sim.n_worlds:
-        raise ValueError(f"window batch {b} != simulator worlds {sim.n_worlds}")
+    if b != sim.num_worlds:
+        raise ValueError(f"window batch {b} != simulator worlds {sim.num_worlds}")
     pw = slice(None) if policy_worlds is None else policy_worlds
     active = policy is not None or residual is not None
     kind = _policy_kind(policy, kind) if policy is not None else (kind or "torque")
@@ -226,7 +226,7 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
     model = policy is not None or physics is not None
     groups = (["pd"] if with_baseline or not model else []) + (["residual"] if model else [])
     w = len(trajectories)
-    if sim is None or sim.n_worlds != w * len(groups):
+    if sim is None or sim.num_worlds != w * len(groups):
         sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device,
                         friction_kappa=friction_kappa)
     pw = slice(groups.index("residual") * w, (groups.index("residual") + 1) * w) if len(groups) == 2 else None

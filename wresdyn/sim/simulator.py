@@ -65,11 +65,11 @@ def _index(idx: np.ndarray, device) -> slice | torch.Tensor:
 
 
 class Simulator:
-    """``n_worlds`` copies of a fixed- or floating-base robot in Newton, stepped under PD with a residual.
+    """``num_worlds`` copies of a fixed- or floating-base robot in Newton, stepped under PD with a residual.
 
     Args:
         robot: The robot (:class:`wresdyn.robot.Robot`).
-        n_worlds: Number of worlds (one robot each).
+        num_worlds: Number of worlds (one robot each).
         dt: Sample period [s]: one :meth:`step` holds its target and torque for ``dt``.
         solver: Solver kind (:data:`wresdyn.sim.solvers.SOLVERS`).
         substeps: Solver steps per sample period.
@@ -85,19 +85,19 @@ class Simulator:
         solver_threads: CPU host threads the replay solver splits the worlds over (its ``threads``).
 
     Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
-    shape (n_worlds, n_dof), float32 on :attr:`device`. A floating base adds ``base_pose`` and ``base_twist``
+    shape (num_worlds, n_dof), float32 on :attr:`device`. A floating base adds ``base_pose`` and ``base_twist``
     (Newton's free-joint convention, :mod:`wresdyn.robot.ground`) and :meth:`set_full_state`.
     """
 
-    def __init__(self, robot, n_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
+    def __init__(self, robot, num_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
                  device: str | None = "cpu", requires_grad: bool = False, param_grads: bool = False,
                  graph: bool | None = None, ground: bool = False, contact=None, friction_kappa=None,
                  solver_threads: int = 1) -> None:
         import warp as wp
 
-        if n_worlds < 1 or substeps < 1 or not dt > 0:
-            raise ValueError(f"need n_worlds >= 1, substeps >= 1 and dt > 0 (got {n_worlds}, {substeps}, {dt})")
-        self.robot, self.n_worlds, self.dt, self.substeps = robot, int(n_worlds), float(dt), int(substeps)
+        if num_worlds < 1 or substeps < 1 or not dt > 0:
+            raise ValueError(f"need num_worlds >= 1, substeps >= 1 and dt > 0 (got {num_worlds}, {substeps}, {dt})")
+        self.robot, self.num_worlds, self.dt, self.substeps = robot, int(num_worlds), float(dt), int(substeps)
         self.dt_sub = self.dt / self.substeps
         self.ground = bool(ground)
         self.solver_kind = resolve_solver(robot, self.dt_sub, solver, self.ground)
@@ -109,7 +109,7 @@ class Simulator:
             raise ValueError(f"{robot.source.name}: servo drives (drive = \"servo\") run on the replay solver only, "
                              f"not {self.solver_kind}")
         self.requires_grad = bool(requires_grad)
-        self.model = robot.build_model(self.n_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
+        self.model = robot.build_model(self.num_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
                                        contact=contact)
         self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, ground=self.ground,
                                   contact=contact, friction_kappa=friction_kappa, threads=solver_threads)
@@ -120,7 +120,7 @@ class Simulator:
         self.graph = self._cuda if graph is None else bool(graph) and self._cuda
         self.states = [self.model.state(), self.model.state()]
         self.control = self.model.control()
-        w = self.n_worlds
+        w = self.num_worlds
         self.nq, self.nqd = self.model.joint_coord_count // w, self.model.joint_dof_count // w
         """Joint coordinates and DoFs per world (a floating base adds 7 and 6)."""
         self._q = [wp.to_torch(s.joint_q, requires_grad=False).view(w, self.nq) for s in self.states]
@@ -149,7 +149,7 @@ class Simulator:
 
         a = getattr(self.model, MODEL_ARRAYS.get(field) or SERVO_ARRAYS[field])
         t = wp.to_torch(a.grad if grad else a, requires_grad=False)
-        return t.view(self.n_worlds, -1, *t.shape[1:]) if field.startswith("body_") else t.view(self.n_worlds, -1)
+        return t.view(self.num_worlds, -1, *t.shape[1:]) if field.startswith("body_") else t.view(self.num_worlds, -1)
 
     def set_physics(self, values, worlds: slice | None = None) -> None:
         """Write physical parameters into every world's model arrays (:mod:`wresdyn.sim.physics`).
@@ -196,8 +196,8 @@ class Simulator:
         given keep what the worlds have. For a finite-difference Jacobian: one parameter perturbed per world, all
         replayed in one batch (:mod:`wresdyn.identify.identifiability`)."""
         for f, v in values.items():
-            if v.shape[0] != self.n_worlds:
-                raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.n_worlds}")
+            if v.shape[0] != self.num_worlds:
+                raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.num_worlds}")
         self.set_physics({f: v.detach() for f, v in values.items()})
 
     def _physics_changed(self) -> None:
@@ -224,7 +224,7 @@ class Simulator:
         self._refresh_fk()
 
     def set_state_where(self, mask: torch.Tensor, q: torch.Tensor, qd: torch.Tensor) -> None:
-        """Overwrite the joint state of the worlds where ``mask`` (n_worlds,) bool with q, qd (n_worlds, n); the
+        """Overwrite the joint state of the worlds where ``mask`` (num_worlds,) bool with q, qd (num_worlds, n); the
         others keep theirs. Fixed shapes and no host sync: safe inside a CUDA graph."""
         m = mask[:, None]
         cq = self._q[self._cur][:, self.q_index]
@@ -251,13 +251,13 @@ class Simulator:
     @property
     def base_pose(self) -> torch.Tensor:
         """Base pose per world, [x y z qx qy qz qw] (position [m], unit quaternion, world frame), shape
-        (n_worlds, 7); a floating base only."""
+        (num_worlds, 7); a floating base only."""
         return self._q[self._cur][:, self._base_slices()[0]].clone()
 
     @property
     def base_twist(self) -> torch.Tensor:
         """Base centre-of-mass velocity [m/s] and angular velocity [rad/s] per world, world axes, shape
-        (n_worlds, 6); a floating base only."""
+        (num_worlds, 6); a floating base only."""
         return self._qd[self._cur][:, self._base_slices()[1]].clone()
 
     def set_full_state(self, ids, base_pose: torch.Tensor, base_twist: torch.Tensor, q: torch.Tensor,
@@ -372,7 +372,7 @@ class Simulator:
         if tau is None:
             tau = torch.zeros_like(target)
         while len(self._tape_buffers) <= k:
-            self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.n_worlds, self.nq, self.nqd,
+            self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.num_worlds, self.nq, self.nqd,
                                                   self.q_index, self.qd_index))
         names = tuple(self._physics)
         return TapeStep.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))

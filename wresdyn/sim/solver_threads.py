@@ -27,10 +27,10 @@ from .physics import MODEL_ARRAYS
 __all__ = ["SolverMuJoCoThreads"]
 
 
-def _threads(n_worlds: int, threads: int | None) -> int:
+def _threads(num_worlds: int, threads: int | None) -> int:
     if threads is None:
         threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, min(int(threads), n_worlds))
+    return max(1, min(int(threads), num_worlds))
 
 
 class SolverMuJoCoThreads:
@@ -50,7 +50,7 @@ class SolverMuJoCoThreads:
 
         c = contact or ContactSettings()
         self.model, self.robot = model, robot
-        self.n_worlds = int(model.world_count)
+        self.num_worlds = int(model.world_count)
         self._template = robot.build_model(1, "cpu", ground=True, contact=contact)
         self._inner = newton.solvers.SolverMuJoCo(
             self._template, use_mujoco_cpu=True, disable_contacts=False, integrator="implicitfast", solver=c.solver,
@@ -67,7 +67,7 @@ class SolverMuJoCoThreads:
         self._mj, self._rollout, self._newton = mujoco, rollout, newton
         self._spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
         self._ctrl_spec = int(mujoco.mjtState.mjSTATE_CTRL) | int(mujoco.mjtState.mjSTATE_QFRC_APPLIED)
-        self._datas = [mujoco.MjData(m) for _ in range(_threads(self.n_worlds, threads))]
+        self._datas = [mujoco.MjData(m) for _ in range(_threads(self.num_worlds, threads))]
         d = self._datas[0]
         d.qpos[:], d.qvel[:] = np.arange(1, m.nq + 1), -np.arange(1, m.nv + 1)
         s = np.empty(mujoco.mj_stateSize(m, self._spec))
@@ -75,10 +75,10 @@ class SolverMuJoCoThreads:
         self._iq, self._iv = int(np.flatnonzero(s == 1.0)[0]), int(np.flatnonzero(s == -1.0)[0])
         mujoco.mj_resetData(m, d)
         mujoco.mj_getState(m, d, s, self._spec)
-        self._state = np.tile(s, (self.n_worlds, 1))
+        self._state = np.tile(s, (self.num_worlds, 1))
         """Full physics state of every world (nbatch, nstate): MuJoCo's qpos/qvel with activations and time."""
         q0, qd0 = base_index(robot)
-        self._nq, self._nqd = model.joint_coord_count // self.n_worlds, model.joint_dof_count // self.n_worlds
+        self._nq, self._nqd = model.joint_coord_count // self.num_worlds, model.joint_dof_count // self.num_worlds
         self._base_q, self._base_qd = slice(q0, q0 + 7), slice(qd0, qd0 + 6)
         self._q_index, self._qd_index = np.asarray(robot.q_index), np.asarray(robot.qd_index)
 
@@ -94,7 +94,7 @@ class SolverMuJoCoThreads:
         """One step of ``dt`` [s] for every world: PD targets ``control.joint_target_q`` and joint forces
         ``control.joint_f`` (actuated DoFs) held over it."""
 
-        w, n, m = self.n_worlds, self.robot.n_dof, self.mj_model
+        w, n, m = self.num_worlds, self.robot.n_dof, self.mj_model
         jq = state_in.joint_q.numpy().reshape(w, self._nq).astype(np.float64)
         jqd = state_in.joint_qd.numpy().reshape(w, self._nqd).astype(np.float64)
         qpos_b, qvel_b = free_to_mujoco(self.robot, jq[:, self._base_q], jqd[:, self._base_qd])

@@ -20,7 +20,7 @@ class TapeBuffers:
     ``index``: where the actuated joints' values sit in each of the four (``Simulator.q_index``/``qd_index``). The
     entries outside it are never written (zeros, as allocated)."""
 
-    def __init__(self, model, substeps: int, n_worlds: int, nq: int, nqd: int, q_index, qd_index) -> None:
+    def __init__(self, model, substeps: int, num_worlds: int, nq: int, nqd: int, q_index, qd_index) -> None:
         import warp as wp
 
         self.states = [model.state(requires_grad=True) for _ in range(substeps + 1)]
@@ -31,7 +31,7 @@ class TapeBuffers:
         self.index = (q_index, qd_index, q_index, qd_index)
 
         def view(a, width):
-            return wp.to_torch(a, requires_grad=False).view(n_worlds, width)
+            return wp.to_torch(a, requires_grad=False).view(num_worlds, width)
 
         self.inputs = [view(a, w) for a, w in zip(inputs, widths)]
         self.input_grads = [view(a.grad, w) for a, w in zip(inputs, widths)]
