@@ -1,0 +1,50 @@
+"""The floor benchmark's summary over seeds (``benchmarks/skills/floor_fair.py``) on results written by hand."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _run(folder: Path, seed: int, success: list[int], falls: int, oracle_g: float) -> None:
+    def policy(ok, g):
+        motions = [{"motion": f"heldout_step_{i}", "success": float(s)} for i, s in enumerate(ok)]
+        return {"mean": {"success": sum(ok) / len(ok), "falls": falls, "drifts": 1, "diverged": 0, "mpjpe": 0.02,
+                         "g_mpjpe": g}, "motions": motions}
+
+    heldout = {"a_nominal": policy([0, 1, 0, 0], 0.050), "b_calibrated": policy(success, 0.030),
+               "d_oracle": policy([1, 1, 1, 1], oracle_g)}
+    results = {"config": {"num_worlds": 4096, "oracle_num_worlds": 4096, "iterations": 1000, "finetune": 300,
+                          "seed": seed},
+               "policies": list(heldout), "real": {"heldout": heldout}}
+    folder.mkdir(parents=True)
+    (folder / "results.json").write_text(json.dumps(results))
+
+
+def _summary(tmp_path: Path, oracle_g: float) -> tuple[dict, str]:
+    for seed in (0, 1):
+        _run(tmp_path / f"s{seed}", seed, [1, 1, 1, seed], 2 * seed, oracle_g)
+    subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair.py"), str(tmp_path / "out"),
+                    "--default", str(tmp_path / "s0"), str(tmp_path / "s1")], check=True, capture_output=True)
+    return (json.loads((tmp_path / "out/summary.json").read_text()),
+            (tmp_path / "out/table.md").read_text())
+
+
+def test_summary_fields_means_and_interval(tmp_path):
+    summary, table = _summary(tmp_path, oracle_g=0.020)
+    b = summary["default"]["b"]
+    assert list(b) == ["success", "falls", "mpjpe_mrad", "gmpjpe_mm", "worlds", "iterations", "seeds"]
+    assert b["success"] == pytest.approx(0.875) and b["falls"] == pytest.approx(1.0)
+    assert b["gmpjpe_mm"] == pytest.approx(30.0) and b["seeds"] == [0, 1]
+    assert (b["worlds"], b["iterations"]) == (4096, 1300) and summary["default"]["a"]["iterations"] == 1000
+    # Wilson's interval of 7/8 and the gap closed on g-MPJPE, (50 - 30) / (50 - 20)
+    assert "88 % (7/8; 53–98 %)" in table and "| 67 % |" in table
+
+
+def test_no_gap_ratio_when_the_oracle_does_not_beat_a(tmp_path):
+    _, table = _summary(tmp_path, oracle_g=0.060)
+    assert "no gap ratio" in table and "%" not in table.split("(b) b_calibrated")[1].split("|")[7]
