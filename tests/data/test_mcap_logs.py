@@ -86,10 +86,12 @@ def _signals(n: int, seconds: float = 1.0, state_hz: float = STATE_HZ, cmd_hz: f
 
 
 def _write(path, names, sig, command="sensor_msgs/msg/JointState", state_topic="/joint_states",
-           cmd_topic="/joint_commands", header_stamps=True, cmd_names=None, extra=None, state_log_t=None):
+           cmd_topic="/joint_commands", header_stamps=True, cmd_names=None, extra=None, state_log_t=None,
+           header_clock_ns=T0_NS):
     """An MCAP file as rosbag2 writes it: ``names`` the state's joint order (the commands' unless ``cmd_names``);
-    log time = stamp + 1 ms of transport (states: ``state_log_t`` + 1 ms where given); ``extra(writer, schemas)``
-    adds messages of its own."""
+    log time = stamp + 1 ms of transport (states: ``state_log_t`` + 1 ms where given); header stamps count from
+    ``header_clock_ns`` (another clock than the recorder's where it differs from ``T0_NS``); ``extra(writer,
+    schemas)`` adds messages of its own."""
     from mcap_ros2.writer import Writer
 
     t, q, qd, tau, t_cmd, q_cmd = sig
@@ -101,13 +103,14 @@ def _write(path, names, sig, command="sensor_msgs/msg/JointState", state_topic="
         msgs = []
         for k in range(len(t)):
             ns = T0_NS + round(t[k] * 1e9)
-            msg = {"header": {"stamp": _stamp(ns if header_stamps else 0), "frame_id": ""}, "name": names,
+            stamp = ns - T0_NS + header_clock_ns if header_stamps else 0
+            msg = {"header": {"stamp": _stamp(stamp), "frame_id": ""}, "name": names,
                    "position": q[k].tolist(), "velocity": qd[k].tolist(), "effort": tau[k].tolist()}
             log_ns = ns if state_log_t is None else T0_NS + round(state_log_t[k] * 1e9)
             msgs.append((log_ns, state_topic, schemas["sensor_msgs/msg/JointState"], msg))
         for k in range(len(t_cmd)):
             ns = T0_NS + round(t_cmd[k] * 1e9)
-            header = {"stamp": _stamp(ns if header_stamps else 0), "frame_id": ""}
+            header = {"stamp": _stamp(ns - T0_NS + header_clock_ns if header_stamps else 0), "frame_id": ""}
             values = q_cmd[k][perm].tolist()
             if command == "sensor_msgs/msg/JointState":
                 msg = {"header": header, "name": cmd_names, "position": values, "velocity": [], "effort": []}
@@ -247,9 +250,19 @@ def test_errors_are_one_line(tmp_path, so101):
     p = _write(tmp_path / "late.mcap", names, (t_bad, *rest), state_log_t=t)
     _expect(p, so101, r"topic '/joint_states': decreasing time stamp at message 7")
 
+    p = _write(tmp_path / "unstamped.mcap", names, sig, header_stamps=False)
+    assert read_mcap(p, names)[1]["topics"]["state"]["stamps"] == "log"  # auto: log time where headers are 0
+    _expect(p, so101, r"topic '/joint_states', message 0 has no header stamp \(0\)", McapTopics(stamps="header"))
+    # states stamped on a simulated clock (100 s), commands without header (the recorder's epoch log time)
+    p = _write(tmp_path / "clocks.mcap", names, sig, command="std_msgs/msg/Float64MultiArray",
+               header_clock_ns=100_000_000_000)
+    _expect(p, so101, r"the first command \(t = 1\.76\d+e\+09 s\) does not come before the last state \(t = 0\.3 s; "
+            r"stamps: state header, command log; other clocks\? try --topic-stamps log\)")
+    assert read_mcap(p, names, topics=McapTopics(stamps="log"))[1]["topics"]["state"]["stamps"] == "log"
+
     good = (tmp_path / "ok.mcap").read_bytes()
     (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
     _expect(tmp_path / "junk.mcap", so101, r"not a readable MCAP file \(InvalidMagic")
     (tmp_path / "cut.mcap").write_bytes(good[: len(good) // 2])
-    _expect(tmp_path / "cut.mcap", so101, "not a readable MCAP file")
+    _expect(tmp_path / "cut.mcap", so101, "not a readable MCAP file .*'mcap recover'")
     _expect(tmp_path / "absent.mcap", so101, "log file not found")

@@ -26,7 +26,7 @@ import numpy as np
 from .dataset import DatasetError
 from .log_files import IDENTITY, LogMap, check_finite, check_stamps, map_joints
 
-__all__ = ["McapTopics", "STATE_TYPE", "COMMAND_TYPES", "is_mcap", "mcap_files", "read_mcap"]
+__all__ = ["McapTopics", "STATE_TYPE", "COMMAND_TYPES", "STAMPS", "is_mcap", "mcap_files", "read_mcap"]
 
 STATE_TYPE = "sensor_msgs/msg/JointState"
 """ROS 2 type of the measured-state topic."""
@@ -35,6 +35,8 @@ COMMAND_TYPES = ("sensor_msgs/msg/JointState", "trajectory_msgs/msg/JointTraject
 STAMPS = ("auto", "header", "log")
 """Which time stamps are read: header stamps where every message has one (else log time), header only, log only."""
 NS = 1e-9
+MAGIC = b"\x89MCAP0\r\n"
+"""The first bytes of every MCAP file."""
 """Seconds per nanosecond (ROS and MCAP stamps are integer nanoseconds)."""
 
 
@@ -64,6 +66,7 @@ def _short(schema_name: str) -> str:
 
 
 def is_mcap(path) -> bool:
+    """Whether ``path`` names an MCAP file (by its suffix)."""
     return Path(path).suffix.lower() == ".mcap"
 
 
@@ -101,7 +104,11 @@ def _scan(path: Path, topics: McapTopics) -> tuple[dict[str, str], str, dict[str
     except DatasetError:
         raise
     except Exception as e:  # the mcap reader raises many types on a truncated or corrupt file; report one line
-        raise DatasetError(f"{path}: not a readable MCAP file ({type(e).__name__}: {_first_line(e)})") from None
+        with open(path, "rb") as f:
+            cut = f.read(len(MAGIC)) == MAGIC
+        hint = ("; a file cut short (a recorder killed before closing it) is repaired by the mcap CLI's "
+                "'mcap recover'") if cut else ""
+        raise DatasetError(f"{path}: not a readable MCAP file ({type(e).__name__}: {_first_line(e)}){hint}") from None
     for topic in (topics.state, command):
         if topic not in raw:
             raise DatasetError(f"{path}: topic {topic!r} has no messages")
@@ -211,7 +218,7 @@ def _trajectory(path: Path, topic: str, msgs: list, base: np.ndarray) -> tuple[n
     """Command stamps [ns] (M,), positions (M, n) and joint names (n,) of JointTrajectory messages: each point at its
     message's stamp + ``time_from_start``; a message drops the earlier messages' points from its own stamp on."""
     where = f"{path}: topic {topic!r}"
-    check_stamps(where, base * NS, np.arange(len(base)), "message")
+    check_stamps(where, (base - base[0]) * NS, np.arange(len(base)), "message")
     names = list(msgs[0].joint_names)
     if len(set(names)) != len(names):
         raise DatasetError(f"{where}, message 0: duplicated joint names in joint_names {names}")
@@ -260,7 +267,7 @@ def read_mcap(path, joint_names: list[str], log_map: LogMap | None = None, topic
     _, states, state_log = _decode(path, topics.state, raw[topics.state], (STATE_TYPE,))
     t_state, state_stamps = _stamps(path, topics.state, states, state_log, topics.stamps, True)
     where = f"{path}: topic {topics.state!r}"
-    check_stamps(where, t_state * NS, np.arange(len(t_state)), "message")
+    check_stamps(where, (t_state - t_state[0]) * NS, np.arange(len(t_state)), "message")
     if len(states) < 2:
         raise DatasetError(f"{where}: needs at least two messages, has {len(states)}")
     names, st = _rows(path, topics.state, "name", states, [(k, [getattr(m, k) for m in states])
@@ -272,7 +279,7 @@ def read_mcap(path, joint_names: list[str], log_map: LogMap | None = None, topic
                            f"topic carries {types[command]}, which names its joints itself")
     if kind == "std_msgs/Float64MultiArray":
         t_cmd, cmd_stamps = _stamps(path, command, cmds, cmd_log, topics.stamps, False)
-        check_stamps(cwhere, t_cmd * NS, np.arange(len(t_cmd)), "message")
+        check_stamps(cwhere, (t_cmd - t_cmd[0]) * NS, np.arange(len(t_cmd)), "message")
         cnames = list(topics.command_joints) or names
         bad = next((k for k, m in enumerate(cmds) if len(m.data) != len(cnames)), None)
         if bad is not None:
@@ -286,7 +293,7 @@ def read_mcap(path, joint_names: list[str], log_map: LogMap | None = None, topic
         t_cmd, q_cmd, cnames = _trajectory(path, command, cmds, base)
     else:
         t_cmd, cmd_stamps = _stamps(path, command, cmds, cmd_log, topics.stamps, True)
-        check_stamps(cwhere, t_cmd * NS, np.arange(len(t_cmd)), "message")
+        check_stamps(cwhere, (t_cmd - t_cmd[0]) * NS, np.arange(len(t_cmd)), "message")
         cnames, c = _rows(path, command, "name", cmds, [("position", [m.position for m in cmds])])
         q_cmd = c["position"]
     for key in ("position", "velocity", "effort"):
