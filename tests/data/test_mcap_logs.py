@@ -28,7 +28,12 @@ MSG: builtin_interfaces/Time
 int32 sec
 uint32 nanosec
 """
-JOINT_STATE = "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n" + _HEADER
+JOINT_STATE = f"""std_msgs/Header header
+string[] name
+float64[] position
+float64[] velocity
+float64[] effort
+{_HEADER}"""
 JOINT_TRAJECTORY = f"""std_msgs/Header header
 string[] joint_names
 JointTrajectoryPoint[] points
@@ -234,8 +239,8 @@ def test_errors_are_one_line(tmp_path, so101):
     def twist(w, schemas):
         s = w.register_msgdef("geometry_msgs/msg/Vector3", "float64 x\nfloat64 y\nfloat64 z\n")
         w.write_message("/cmd_vel", s, {"x": 1.0, "y": 0.0, "z": 0.0}, log_time=T0_NS)
-        w.write_message("/joint_trajectory", schemas["trajectory_msgs/msg/JointTrajectory"],
-                        {"header": {"stamp": _stamp(T0_NS), "frame_id": ""}, "joint_names": names, "points": []}, log_time=T0_NS)
+        empty = {"header": {"stamp": _stamp(T0_NS), "frame_id": ""}, "joint_names": names, "points": []}
+        w.write_message("/joint_trajectory", schemas["trajectory_msgs/msg/JointTrajectory"], empty, log_time=T0_NS)
     p = _write(tmp_path / "twist.mcap", names, sig, extra=twist)
     _expect(p, so101, r"several \(/joint_commands, /joint_trajectory\)")
     _expect(p, so101, "topic '/cmd_vel' carries geometry_msgs/msg/Vector3, which is not supported",

@@ -9,9 +9,9 @@ chirps and steps). The gains config (``--gains``) is stored in the dataset, so l
 then replays the validation, held-out and OOD commands PD-only in Newton and reports the gap (mean |Δq|),
 also stored in the dataset's meta.
 Logs: ``--logs A.csv B.npz C.mcap RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, MCAP / ROS 2 bags with
-``--topic-*`` options, SAGE runs, LeRobot datasets; docs/dataset.md) onto the ``--rate`` grid instead, with a ``--map`` file and splits by ``--assign`` / ``--split-map``
-patterns or fractions, prints the telemetry checks' warnings (:mod:`wresdyn.data.telemetry`; also in
-``OUT/telemetry.json``) and reports the same PD-only gap.
+``--topic-*`` options, SAGE runs, LeRobot datasets; docs/dataset.md) onto the ``--rate`` grid instead, with a
+``--map`` file and splits by ``--assign`` / ``--split-map`` patterns or fractions, prints the telemetry checks'
+warnings (:mod:`wresdyn.data.telemetry`; also in ``OUT/telemetry.json``) and reports the same PD-only gap.
 
 Every line printed is also in ``OUT/collect.log``; on a terminal a progress bar over the trajectories shows the
 elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.

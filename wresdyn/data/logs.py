@@ -1,7 +1,8 @@
 """Import real-robot logs of any format into :class:`~wresdyn.data.dataset.Trajectory` on the simulation step.
 
 A log is a CSV or NPZ file (:mod:`wresdyn.data.log_files`, which also maps its joints and resamples it), an MCAP
-file of ROS 2 messages (:mod:`wresdyn.data.mcap_logs`) or a SAGE run (:mod:`wresdyn.data.importers`, which also reads LeRobot datasets and assigns the runs of many logs to splits).
+file of ROS 2 messages (:mod:`wresdyn.data.mcap_logs`) or a SAGE run (:mod:`wresdyn.data.importers`, which also
+reads LeRobot datasets and assigns the runs of many logs to splits).
 Column conventions and the mapping file: docs/dataset.md.
 """
 

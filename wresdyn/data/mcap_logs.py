@@ -312,7 +312,7 @@ def read_mcap(path, joint_names: list[str], log_map: LogMap | None = None, topic
     log = {"t": t, "q": mapped["q"], "qd": None if log_map.velocity == "derived" else mapped["qd"],
            "q_cmd": cmd["q_cmd"], "tau": mapped["tau"], "t_cmd": tc}
     info = {"format": "mcap", "t0_ns": t0,
-            "topics": {"state": {"topic": topics.state, "type": STATE_TYPE, "stamps": state_stamps,
+            "topics": {"state": {"topic": topics.state, "type": types[topics.state], "stamps": state_stamps,
                                  "messages": len(states)},
                        "command": {"topic": command, "type": types[command], "stamps": cmd_stamps,
                                    "messages": len(cmds)}}}
