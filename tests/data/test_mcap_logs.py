@@ -7,6 +7,7 @@ import pytest
 
 from wresdyn.data.dataset import DatasetError, load_dataset
 from wresdyn.data.importers import import_runs, read_runs
+from wresdyn.data.logs import import_log
 from wresdyn.data.mcap_logs import McapTopics, read_mcap
 
 pytest.importorskip("mcap_ros2")  # a dependency of the package; its absence is an install error, reported here
@@ -168,6 +169,9 @@ def test_each_command_type_imports_to_the_written_values(tmp_path, so101, comman
     held = np.searchsorted(t_cmd + shift - t_cmd[0], grid + 1e-9, side="right") - 1
     np.testing.assert_array_equal(tr.q_cmd, q_cmd[held])
     assert len(tr.t) == int((t[-1] - shift) * RATE + 1e-6) + 1
+    one = import_log(path, so101, RATE)  # the one-log library call reads the same
+    assert one.name == "arm"
+    np.testing.assert_array_equal(one.q_cmd, tr.q_cmd)
 
 
 def test_folder_of_bags_via_cli(tmp_path, so101, capsys):
@@ -216,6 +220,27 @@ def test_folder_of_bags_via_cli(tmp_path, so101, capsys):
     assert [tr.name for tr in ds.trajectories] == ["a_first", "b_second"]
 
 
+def _copy(src, dst, extra=None, **options):
+    """``src``'s messages rewritten by the plain MCAP writer with ``options``; ``extra(writer)`` adds records."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = Writer(g, **options)
+        w.start(profile="ros2", library="test")
+        schemas, channels = {}, {}
+        for schema, channel, m in make_reader(f).iter_messages(log_time_order=False):
+            if schema.id not in schemas:
+                schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding, schemas[schema.id])
+            w.add_message(channels[channel.id], m.log_time, m.data, m.publish_time)
+        if extra:
+            extra(w)
+        w.finish()
+    return dst
+
+
 def _expect(path, so101, match, topics=None):
     with pytest.raises(DatasetError, match=match) as e:
         read_runs(path, list(so101.joint_names), topics=topics)
@@ -246,6 +271,14 @@ def test_errors_are_one_line(tmp_path, so101):
     _expect(p, so101, "topic '/cmd_vel' carries geometry_msgs/msg/Vector3, which is not supported",
             McapTopics(command="/cmd_vel"))
 
+    # a file without chunks, indexes or channels in its summary (a streaming recorder's): read in one pass
+    from mcap.writer import IndexType
+
+    p = _copy(tmp_path / "ok.mcap", tmp_path / "stream.mcap", use_chunking=False, index_types=IndexType.NONE,
+              repeat_channels=False, repeat_schemas=False, use_statistics=False, use_summary_offsets=False)
+    log, info = read_mcap(p, names)
+    np.testing.assert_array_equal(log["q_cmd"], read_mcap(tmp_path / "ok.mcap", names)[0]["q_cmd"])
+
     p = _write(tmp_path / "arm.mcap", names[:5] + ["jaw"], sig)
     _expect(p, so101, r"topic '/joint_states': joint\(s\) \['jaw'\] are neither joints of the robot")
 
@@ -264,6 +297,18 @@ def test_errors_are_one_line(tmp_path, so101):
     _expect(p, so101, r"the first command \(t = 1\.76\d+e\+09 s\) does not come before the last state \(t = 0\.3 s; "
             r"stamps: state header, command log; other clocks\? try --topic-stamps log\)")
     assert read_mcap(p, names, topics=McapTopics(stamps="log"))[1]["topics"]["state"]["stamps"] == "log"
+
+    def broken(definition: bytes, data: bytes):
+        def extra(w):
+            sid = w.register_schema("std_msgs/msg/Float64MultiArray", "ros2msg", definition)
+            w.add_message(w.register_channel("/cmd", "cdr", sid), T0_NS, data, T0_NS)
+        return extra
+    p = _copy(tmp_path / "ok.mcap", tmp_path / "nodef.mcap", broken(b"float64[ data", b""))
+    _expect(p, so101, r"topic '/cmd': the file's definition of std_msgs/msg/Float64MultiArray does not parse "
+            r"\(InvalidResourceName", McapTopics(command="/cmd"))
+    p = _copy(tmp_path / "ok.mcap", tmp_path / "body.mcap", broken(FLOAT64_MULTI_ARRAY.encode(), b"\0\1"))
+    _expect(p, so101, r"topic '/cmd', message 0: cannot decode a std_msgs/msg/Float64MultiArray",
+            McapTopics(command="/cmd"))
 
     good = (tmp_path / "ok.mcap").read_bytes()
     (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")

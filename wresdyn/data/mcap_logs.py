@@ -18,6 +18,8 @@ Messages are taken in log-time order; stamps that then do not increase are an er
 
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -85,10 +87,10 @@ def _scan(path: Path, topics: McapTopics) -> tuple[dict[str, str], str, dict[str
         with open(path, "rb") as f:
             reader = make_reader(f)
             summary = reader.get_summary()
-            if summary is not None:
+            if summary is not None and summary.channels:
                 types = {c.topic: summary.schemas[c.schema_id].name if c.schema_id in summary.schemas else "(no schema)"
                          for c in summary.channels.values()}
-            else:  # a file without summary section (a recorder that was killed): one pass to list its topics
+            else:  # a file written without summary section (or without channels in it): one pass lists its topics
                 types = {c.topic: s.name if s is not None else "(no schema)" for s, c, _ in reader.iter_messages()}
             if topics.state not in types:
                 raise DatasetError(f"{path}: no topic {topics.state!r} (topics: {_listing(types)}); choose the "
@@ -143,7 +145,12 @@ def _decode(path: Path, topic: str, entry: tuple, allowed: tuple[str, ...]) -> t
     if _short(name) not in map(_short, allowed):
         raise DatasetError(f"{path}: topic {topic!r} carries {name}, which is not supported here (expected "
                            f"{' or '.join(allowed)})")
-    decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):  # the vendored rosidl parser prints each bad line there
+            decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
+    except Exception as e:  # the stored message definition does not parse (empty, or a dependency missing)
+        raise DatasetError(f"{path}: topic {topic!r}: the file's definition of {name} does not parse "
+                           f"({type(e).__name__}: {_first_line(e)})") from None
     if decoder is None:
         raise DatasetError(f"{path}: topic {topic!r}: messages encoded {channel.message_encoding!r} with a "
                            f"{schema.encoding!r} schema; only ROS 2 CDR messages with ros2msg schemas are read")
