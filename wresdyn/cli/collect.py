@@ -8,10 +8,10 @@ default for a robot without those sites, e.g. an arm) excites every joint in joi
 chirps and steps). The gains config (``--gains``) is stored in the dataset, so later commands load the same robot. It
 then replays the validation, held-out and OOD commands PD-only in Newton and reports the gap (mean |Δq|),
 also stored in the dataset's meta.
-Logs: ``--logs A.csv B.npz RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, SAGE runs, LeRobot datasets;
-docs/dataset.md) onto the ``--rate`` grid instead, with a ``--map`` file and splits by ``--assign`` / ``--split-map``
-patterns or fractions, prints the telemetry checks' warnings (:mod:`wresdyn.data.telemetry`; also in
-``OUT/telemetry.json``) and reports the same PD-only gap.
+Logs: ``--logs A.csv B.npz C.mcap RUN_DIR LEROBOT_DIR ...`` imports real logs (CSV, NPZ, MCAP / ROS 2 bags with
+``--topic-*`` options, SAGE runs, LeRobot datasets; docs/dataset.md) onto the ``--rate`` grid instead, with a
+``--map`` file and splits by ``--assign`` / ``--split-map`` patterns or fractions, prints the telemetry checks'
+warnings (:mod:`wresdyn.data.telemetry`; also in ``OUT/telemetry.json``) and reports the same PD-only gap.
 
 Every line printed is also in ``OUT/collect.log``; on a terminal a progress bar over the trajectories shows the
 elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
@@ -110,8 +110,8 @@ class Collect(Command):
     recording: Annotated[CollectConfig, FLAT] = field(default_factory=CollectConfig)
     """What is recorded."""
     logs: Annotated[tuple[str, ...] | None, tyro.conf.arg(metavar="LOG")] = None
-    """Import these real logs instead of simulating: .csv/.npz files, SAGE run folders, LeRobot dataset folders (one
-    trajectory per episode) or folders of runs (docs/dataset.md)."""
+    """Import these real logs instead of simulating: .csv/.npz/.mcap files, SAGE run folders, LeRobot dataset folders
+    (one trajectory per episode) or folders of runs (docs/dataset.md)."""
     map: Annotated[str | None, tyro.conf.arg(metavar="TOML")] = None
     """Logs: mapping file (log joint -> robot joint, units, excluded joints)."""
     lerobot_units: Literal["degrees", "range"] | None = None
@@ -121,6 +121,17 @@ class Collect(Command):
     lerobot_calibration: Annotated[str | None, tyro.conf.arg(metavar="JSON")] = None
     """Logs: the follower's calibration file (~/.cache/huggingface/lerobot/calibration/robots/<robot_type>/<id>.json):
     converts range units to radians."""
+    topic_state: str = "/joint_states"
+    """Logs: MCAP topic of the measured state (sensor_msgs/msg/JointState: position, velocity and effort)."""
+    topic_command: str | None = None
+    """Logs: MCAP topic of the commands (JointState, trajectory_msgs/msg/JointTrajectory or
+    std_msgs/msg/Float64MultiArray; None: the one other topic of those types in the file)."""
+    topic_command_joints: Annotated[tuple[str, ...], tyro.conf.arg(metavar="JOINT")] = ()
+    """Logs: the joint of each entry of Float64MultiArray commands, in order (the controller's 'joints' parameter;
+    empty: the state topic's joint order)."""
+    topic_stamps: Literal["auto", "header", "log"] = "auto"
+    """Logs: MCAP time stamps: header stamps where every message of a topic has one, else the recorder's log time
+    (auto), header stamps only, or log time only."""
     split: Split | None = None
     """Logs: split of every run no --assign/--split-map pattern or fraction assigns (None: heldout; train when any
     of those is given)."""
@@ -166,6 +177,7 @@ def _import_logs(args: Collect, rate: float, robot, out: Path, path: Path, log) 
     from ..data.importers import SplitRule, import_runs, load_split_map, parse_assign
     from ..data.lerobot import LeRobotUnits
     from ..data.logs import LogMap
+    from ..data.mcap_logs import McapTopics
 
     if args.gap:
         robot.check_gains()  # only the PD-only replay needs gains: --no-gap imports onto a robot without them
@@ -176,7 +188,8 @@ def _import_logs(args: Collect, rate: float, robot, out: Path, path: Path, log) 
                      args.heldout_fraction)
     lerobot = (LeRobotUnits.load(args.lerobot_calibration, args.lerobot_units)
                if args.lerobot_calibration or args.lerobot_units else None)
-    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=args.tau, lerobot=lerobot)
+    topics = McapTopics(args.topic_state, args.topic_command, args.topic_command_joints, args.topic_stamps)
+    ds = import_runs(args.logs, robot, rate, log_map, rule, store_tau=args.tau, lerobot=lerobot, topics=topics)
     for p in rule.unused([tr.name for tr in ds.trajectories]):
         log(f"note: split pattern {p!r} matches no run")
     log(f"imported {len(ds.trajectories)} run(s) onto {rate:g} Hz:")
@@ -188,6 +201,11 @@ def _import_logs(args: Collect, rate: float, robot, out: Path, path: Path, log) 
         calibration = f" (calibration {u['calibration']})" if u["calibration"] else ""
         log(f"{file}: LeRobot {u['robot_type']}, no map: joints by motor name, arm in {u['arm_units']} units"
             f"{calibration} -> rad about the robot file's zero, gripper 0..100 -> its joint range")
+    for s in ds.meta["source_logs"]:
+        if s["format"] == "mcap":
+            st, cm = s["topics"]["state"], s["topics"]["command"]
+            log(f"{s['file']}: state {st['topic']} ({st['messages']} messages, {st['stamps']} stamps), command "
+                f"{cm['topic']} ({cm['type']}, {cm['messages']} messages, {cm['stamps']} stamps)")
     excluded = ds.meta["excluded_joints"]
     if excluded:
         log(f"excluded from fitting (recorded values kept): {', '.join(excluded)}")

@@ -9,6 +9,8 @@
   ``observation.state`` = measured positions, ``action`` = commands, ``timestamp`` [s]; one trajectory per
   episode, named ``<dataset>_ep<k>``. Without a mapping file, a follower arm whose ``robot_type`` is known
   (:mod:`wresdyn.data.lerobot`) is mapped from its own metadata and LeRobot's units.
+* **MCAP** (ROS 2 bags, :mod:`wresdyn.data.mcap_logs`): one ``.mcap`` file per run, a JointState topic and a
+  command topic.
 
 :func:`import_runs` reads any mix of these and of CSV / NPZ logs (:mod:`wresdyn.data.log_files`) into one
 :class:`~wresdyn.data.dataset.Dataset`, assigning each run a split by name pattern or by a deterministic fraction
@@ -40,6 +42,7 @@ from .log_files import (
     read_toml,
 )
 from .log_resample import log_stats, to_trajectory
+from .mcap_logs import McapTopics, is_mcap, mcap_files, read_mcap
 from .telemetry import check_runs
 
 __all__ = ["Run", "SplitRule", "sage_run", "lerobot_root", "read_sage", "read_lerobot", "read_runs", "import_runs",
@@ -176,12 +179,13 @@ def _sage_events(path: Path) -> tuple[float | None, float | None]:
 
 # ------------------------------------------------------------------------------------------------ many runs, splits
 
-def read_runs(path, joint_names: list[str], log_map: LogMap | None = None, lerobot: LeRobotUnits | None = None
-              ) -> list[Run]:
+def read_runs(path, joint_names: list[str], log_map: LogMap | None = None, lerobot: LeRobotUnits | None = None,
+              topics: McapTopics | None = None) -> list[Run]:
     """The runs at ``path``, format detected: a SAGE run (folder with control.csv and state_motor.csv, or one of
     those files), a LeRobot dataset folder (meta/info.json: one run per episode; ``lerobot``: its units where no
-    ``log_map`` is given, :func:`read_lerobot`), a ``.csv`` / ``.npz`` log, or a folder whose sub-folders are SAGE
-    runs or LeRobot datasets (each of them, in name order)."""
+    ``log_map`` is given, :func:`read_lerobot`), a ``.csv`` / ``.npz`` log, an ``.mcap`` file (``topics``:
+    :func:`~wresdyn.data.mcap_logs.read_mcap`), a folder of ``.mcap`` files (one run each), or a folder whose
+    sub-folders are any of these folders (each of them, in name order)."""
     log_map = log_map or IDENTITY
     p = Path(path)
     run = sage_run(p)
@@ -193,12 +197,17 @@ def read_runs(path, joint_names: list[str], log_map: LogMap | None = None, lerob
         return [Run(name, "sage", str(run), log, info)]
     if lerobot_root(p) is not None:
         return read_lerobot_runs(p, joint_names, log_map, lerobot)
+    if mcap_files(p):
+        return [r for f in mcap_files(p) for r in read_runs(f, joint_names, log_map, lerobot, topics)]
     if p.is_dir():
-        subs = sorted(c for c in p.iterdir() if c.is_dir() and (sage_run(c) or lerobot_root(c)))
+        subs = sorted(c for c in p.iterdir() if c.is_dir() and (sage_run(c) or lerobot_root(c) or mcap_files(c)))
         if not subs:
             raise DatasetError(f"{p}: neither a SAGE run (control.csv, state_motor.csv), a LeRobot dataset "
-                               "(meta/info.json) nor a folder of them")
-        return [r for s in subs for r in read_runs(s, joint_names, log_map, lerobot)]
+                               "(meta/info.json), a folder of .mcap files nor a folder of them")
+        return [r for s in subs for r in read_runs(s, joint_names, log_map, lerobot, topics)]
+    if is_mcap(p):
+        log, info = read_mcap(p, joint_names, log_map, topics)
+        return [Run(p.stem, "mcap", str(p), log, info)]
     log = read_file(p, joint_names, log_map)
     return [Run(p.stem, p.suffix.lower().lstrip("."), str(p), log, {"format": p.suffix.lower().lstrip(".")})]
 
@@ -269,14 +278,16 @@ class SplitRule:
 
 
 def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = None, splits: SplitRule | None = None,
-                store_tau: bool = True, lerobot: LeRobotUnits | None = None) -> Dataset:
+                store_tau: bool = True, lerobot: LeRobotUnits | None = None, topics: McapTopics | None = None
+                ) -> Dataset:
     """A :class:`~wresdyn.data.dataset.Dataset` of real logs (no mismatch, no seed): every run of every path
     (:func:`read_runs`), resampled onto ``rate_hz``, its split from ``splits``. Names are made unique with the
     run's index when two runs share one. ``meta`` gets ``source_logs`` (per run: name, split, file, format,
     samples, duration, median rate, jitter, max gap; LeRobot followers read without a map: their ``units``),
     ``excluded_joints``, ``log_map`` and ``telemetry`` (the :mod:`wresdyn.data.telemetry` findings of every run,
     as dicts; a run those checks find unusable is an error). ``lerobot``: calibration and units of LeRobot
-    datasets read without a ``log_map`` (a map sets the units itself: giving both is an error)."""
+    datasets read without a ``log_map`` (a map sets the units itself: giving both is an error). ``topics``: the
+    topics and stamps of MCAP logs (:class:`~wresdyn.data.mcap_logs.McapTopics`)."""
     joint_names = list(robot.joint_names)
     if log_map is not None and lerobot is not None:
         raise DatasetError(f"{log_map.source}: a mapping file sets the units itself; give it or LeRobot's "
@@ -286,7 +297,7 @@ def import_runs(paths, robot, rate_hz: float = 500.0, log_map: LogMap | None = N
     splits = splits or SplitRule()
     ranges = {j: (float(lo), float(hi)) for j, lo, hi in zip(joint_names, robot.lower, robot.upper)}
     lerobot = replace(lerobot or LeRobotUnits(), ranges=ranges)
-    runs = [r for p in paths for r in read_runs(p, joint_names, log_map, lerobot)]
+    runs = [r for p in paths for r in read_runs(p, joint_names, log_map, lerobot, topics)]
     if not runs:
         raise DatasetError("no logs given")
     maps = [r.log_map or log_map for r in runs]

@@ -167,7 +167,7 @@ class Run:
     name: str
     """Trajectory name: the file stem, the SAGE run folder, or ``<dataset>_ep<k>``."""
     format: str
-    """``"csv"``, ``"npz"``, ``"sage"`` or ``"lerobot"``."""
+    """``"csv"``, ``"npz"``, ``"mcap"``, ``"sage"`` or ``"lerobot"``."""
     file: str
     """File or folder it was read from."""
     log: dict
@@ -288,8 +288,8 @@ def read_file(path, joint_names: list[str], log_map: LogMap | None = None) -> di
     elif path.suffix.lower() == ".npz":
         out, labels = _from_npz(path, joint_names, log_map)
     else:
-        raise DatasetError(f"{path}: unknown log type {path.suffix!r} (expected .csv or .npz, a SAGE run folder "
-                           "or a LeRobot dataset folder)")
+        raise DatasetError(f"{path}: unknown log type {path.suffix!r} (expected .csv, .npz or .mcap, a SAGE run "
+                           "folder or a LeRobot dataset folder)")
     t = out["t"]
     check_finite(str(path), "time", t, ["time"])
     for key, a in out.items():
