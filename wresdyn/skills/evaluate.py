@@ -43,7 +43,7 @@ from ..sim.kinematics import BodyPositions
 from .env import FAILURE_CAUSES, FALLS, TrackingEnv
 from .reference import plant_dt
 
-__all__ = ["Deployment", "deploy", "metrics", "METRICS", "gap_closed"]
+__all__ = ["Deployment", "deploy", "metrics", "METRICS", "gap_closed", "gaps_or_why_not"]
 
 METRICS = {"stand": ("mpjpe", "foot_error", "success", "action_rate", "torque_rate"),
            "floor": ("success", "falls", "drifts", "diverged", "mpjpe", "g_mpjpe", "orientation_error", "foot_slip",
@@ -243,3 +243,30 @@ def _floor_metrics(dep: Deployment) -> dict:
 def gap_closed(a: float, b: float, d: float) -> float:
     """(a − b) / (a − d): the fraction of the nominal-to-oracle tracking gap that ``b`` closes (NaN if a = d)."""
     return float((a - b) / (a - d)) if a != d else float("nan")
+
+
+_SHOWN = {"mpjpe": ("MPJPE", 1e3, "mrad"), "g_mpjpe": ("g-MPJPE", 1e3, "mm")}
+"""How a metric is named and scaled in a reason."""
+
+
+def gaps_or_why_not(split: dict, metric: str = "mpjpe") -> tuple[dict, str]:
+    """The gaps closed by (b) and (c) on ``metric`` of one split's deployments (``{policy: metrics(...)}``), or none
+    and the reason, so that no ratio is quoted whose oracle does not beat (a): ``({}, why)`` when no policy succeeded
+    on any motion (``why`` = ``"no policy succeeded"``), when (a) or the oracle (d) is missing, or when (d) does not
+    beat (a) (a ``metric`` no lower, or a lower success: a policy that fails early also stops its errors early);
+    else ``({policy: fraction}, "")``."""
+    runs = {k: v["mean"] for k, v in split.items() if k != "reference"}
+    if not runs or all(m["success"] == 0.0 for m in runs.values()):
+        return {}, "no policy succeeded"
+    if "a_nominal" not in runs or "d_oracle" not in runs:
+        return {}, "needs (a) and the oracle (d)"
+    a, d = runs["a_nominal"], runs["d_oracle"]
+    ea, ed = a.get(metric, float("nan")), d.get(metric, float("nan"))
+    if not ed < ea:
+        name, scale, unit = _SHOWN.get(metric, (metric, 1.0, ""))
+        return {}, f"the oracle (d) does not beat (a) on {name} ({scale * ed:.1f} against {scale * ea:.1f} {unit})"
+    if d["success"] < a["success"]:
+        return {}, (f"the oracle (d) does not beat (a): it succeeds less ({100 * d['success']:.0f} % against "
+                    f"{100 * a['success']:.0f} %)")
+    return {k: gap_closed(ea, runs[k].get(metric, float("nan")), ed) for k in ("b_calibrated", "c_delta_action")
+            if k in runs}, ""
