@@ -12,10 +12,11 @@ import torch
 
 from wresdyn.cli import main
 from wresdyn.skills.env import TrackingEnv
-from wresdyn.skills.evaluate import deploy, metrics
+from wresdyn.skills.evaluate import deploy, gaps_or_why_not, metrics
 from wresdyn.skills.motions import TASK_FAMILIES, make_motions
 from wresdyn.skills.plants import RealPlant, SimPlant
 from wresdyn.skills.reference import base_frame_imu
+from wresdyn.skills.report import gaps_text
 from wresdyn.skills.skill_config import SkillTaskConfig
 
 import skill_runs
@@ -163,6 +164,10 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
     assert "g-MPJPE" in report and "step" in report
+    # failures by kind, the fall rule stated, and a gap ratio only where the oracle beats (a)
+    assert "| falls | drifts | diverged |" in report and "tilted more than 0.8 rad\n(46°) from upright" in report
+    g, why = gaps_or_why_not(res["real"]["heldout"])
+    assert (f"MPJPE no gap ratio: {why};" in report) if why else (f"MPJPE {gaps_text(g)};" in report)
     cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
     assert cfg["motions"]["floor"] is True
     # the oracle trains on its own number of worlds, the others on --envs
