@@ -285,8 +285,9 @@ Metrics: success = the motion ran to its end with no fall, no runaway and the ba
 {task['fall_height']:g} m below its reference height or tilted more than {task['fall_tilt']:g} rad
 ({np.degrees(task['fall_tilt']):.0f}°) from upright, whichever came first; a **drift** = the base more than
 {task['max_base_error']:g} m from the reference's with no fall after it: a drifted robot has failed, but plays on to its
-motion's end, and a topple before then counts it as a fall; **diverged** = the simulation ran away. MPJPE = mean |q − q_ref| of the true joints; g-MPJPE = mean distance of every link's world position from
-the reference's; base orientation = mean angle to the reference's; foot slip = mean horizontal speed of the soles
+motion's end, and a topple before then counts it as a fall; **diverged** = the simulation ran away. MPJPE = mean
+|q − q_ref| of the true joints; g-MPJPE = mean distance of every link's world position from the reference's; base
+orientation = mean angle to the reference's; foot slip = mean horizontal speed of the soles
 the reference plants; action rate = mean |Δ q_cmd| per policy step. A failed motion's errors count up to its failure;
 its cause in the per-motion table: fell_low (base below its reference by the fall height), tilted (both falls),
 drifted (base beyond the success radius, no fall after) or diverged. A gap ratio is printed only where the oracle (d)
