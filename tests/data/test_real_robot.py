@@ -208,3 +208,49 @@ def test_per_joint_and_per_link_mismatch_by_name_pattern(humanoid, tmp_path):
         Mismatch.from_dict({"link": [{"match": "torso", "com_offset": [0.1]}]})
     with pytest.raises(MismatchError, match="matches no joint"):
         RealRobot(humanoid, Mismatch.from_dict({"joint": [{"match": "tail_*", "friction": 0.1}]}))
+
+
+def test_the_real_floor_differs_and_the_stand_does_not(humanoid, floating):
+    """The shipped mismatches give the real robot a floor of their own friction and contact time constant (every
+    geom: MuJoCo takes the larger friction and the mean solref of a pair); a mismatch without floor keys (an older
+    file or dataset header) keeps the nominal floor; a robot on its stand has no floor, and its model does not change.
+    A softer floor lets a 3 cm drop sink deeper (measured 5.7 mm nominal, 8.9 mm default, 12.0 mm uneven)."""
+    import dataclasses
+    from operator import attrgetter
+
+    from wresdyn.robot.contact import ContactSettings
+    from wresdyn.robot.ground import standing_state
+
+    nominal = ContactSettings()
+    uneven = Mismatch.load(DEFAULT_TOML.parent / "mismatch_uneven.toml")
+    default = Mismatch.load(DEFAULT_TOML)
+    for mm, friction, timeconst in ((default, 0.7, 0.03), (uneven, 0.6, 0.04)):
+        assert friction < nominal.friction and timeconst > nominal.timeconst
+        real = RealRobot(floating, mm, RATE)
+        assert real.contact.friction == pytest.approx(friction) and real.contact.timeconst == pytest.approx(timeconst)
+        np.testing.assert_allclose(real.model.geom_friction[:, 0], friction)
+        np.testing.assert_allclose(real.model.geom_solref[:, 0], timeconst)
+        np.testing.assert_allclose(real.model.geom_solref[:, 1], nominal.dampratio)
+    old = {k: v for k, v in default.to_dict().items() if not k.startswith("floor_")}
+    assert RealRobot(floating, Mismatch.from_dict(old), RATE).contact == nominal
+    # the stand: the floor keys change nothing
+    stand, stand_old = RealRobot(humanoid, default, RATE), RealRobot(humanoid, Mismatch.from_dict(old), RATE)
+    assert stand.contact is None
+    for f in ("geom_friction", "geom_solref", "body_mass", "dof_frictionloss", "actuator_gainprm", "opt.timestep"):
+        np.testing.assert_array_equal(attrgetter(f)(stand.model), attrgetter(f)(stand_old.model))
+    with pytest.raises(MismatchError, match="floor_timeconst_scale = 0.0 must be > 0"):
+        Mismatch.from_dict({"floor_timeconst_scale": 0.0})
+    # softer: a drop from 3 cm sinks deeper into it
+    st = standing_state(floating)
+    drop = dataclasses.replace(st, base_pose=st.base_pose + np.array([0, 0, 0.03, 0, 0, 0, 0]))
+    deepest = []
+    for scale in (1.0, 2.0):
+        real = RealRobot(floating, Mismatch(floor_timeconst_scale=scale, substep=0.001), RATE)
+        real.reset(drop)
+        low = 0.0
+        for _ in range(100):
+            real.step(st.q)
+            d = real._data
+            low = min(low, float(d.contact.dist[:d.ncon].min(initial=0.0)))
+        deepest.append(-low)
+    assert 4e-3 < deepest[0] < 8e-3 and deepest[1] > 1.6 * deepest[0]

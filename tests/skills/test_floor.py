@@ -12,10 +12,11 @@ import torch
 
 from wresdyn.cli import main
 from wresdyn.skills.env import TrackingEnv
-from wresdyn.skills.evaluate import deploy, metrics
+from wresdyn.skills.evaluate import deploy, gaps_or_why_not, metrics
 from wresdyn.skills.motions import TASK_FAMILIES, make_motions
 from wresdyn.skills.plants import RealPlant, SimPlant
 from wresdyn.skills.reference import base_frame_imu
+from wresdyn.skills.report import gaps_text
 from wresdyn.skills.skill_config import SkillTaskConfig
 
 import skill_runs
@@ -163,6 +164,10 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
     assert "g-MPJPE" in report and "step" in report
+    # failures by kind, the fall rule stated, and a gap ratio only where the oracle beats (a)
+    assert "| falls | drifts | diverged |" in report and "tilted more than 0.8 rad\n(46°) from upright" in report
+    g, why = gaps_or_why_not(res["real"]["heldout"])
+    assert (f"MPJPE no gap ratio: {why};" in report) if why else (f"MPJPE {gaps_text(g)};" in report)
     cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
     assert cfg["motions"]["floor"] is True
     # the oracle trains on its own number of worlds, the others on --envs
@@ -199,3 +204,43 @@ def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
     # 51 mm; the bounds leave 25 % for other CPUs' float rounding
     for r in rows.values():
         assert r[1] == "100%" and 30 < float(r[3]) < 50 and 38 < float(r[4]) < 64, rows
+
+
+def _still(floating, name: str, seconds: float = 1.5):
+    """A floor motion that stands still in the standing pose (the real code path's Motion, built by hand)."""
+    from wresdyn.robot.ground import standing_state
+    from wresdyn.skills.motions import Motion
+
+    st, t = standing_state(floating), int(seconds * RATE) + 1
+    return Motion(name, "still", np.tile(st.q, (t, 1)), np.zeros((t, floating.n_dof)), np.zeros((t, 2, 3)),
+                  base=np.tile(st.base_pose, (t, 1)), planted=np.ones((t, 2), dtype=bool))
+
+
+def test_a_topple_that_drifts_first_counts_as_a_fall_and_an_upright_drift_as_a_drift(floating):
+    """Deployed on the real robot's floor (nominal drives, the task's default limits): a robot pushed sideways at
+    2 m/s drifts past max_base_error while tilted ~26 deg, well short of fall_tilt, and topples after; it plays on and
+    is counted a fall (tilted). A robot standing upright while its reference jumps 1 m away stays a drift."""
+    from wresdyn.data.mismatch import Mismatch
+    from wresdyn.data.real_robot import RealRobot
+    from wresdyn.skills.report import _tilt
+
+    push, away = _still(floating, "push"), _still(floating, "away")
+    push.base[0, 1] -= 2.0 / RATE  # the reference's base velocity at the start is the push: 2 m/s along +y
+    away.base[100:, 0] += 1.0
+    cfg = SkillTaskConfig.floor(decimation=5)
+    dep = deploy(None, RealPlant(RealRobot(floating, Mismatch(), RATE), 2, 5), [push, away], cfg)
+    res = metrics(dep)
+    p, a = res["motions"]
+    tilt_at_failure = np.degrees(_tilt(dep.base[[0, 1], dep.failed_at, 3:]))
+    # the push: the drift rule fires first (measured at step 27, 26 deg), the topple past fall_tilt 12 steps later
+    assert p["cause"] == "tilted" and p["fell"] and not p["success"]
+    assert 0 < p["failed_at"] < p["fell_at"] <= p["failed_at"] + 25
+    assert 15.0 < tilt_at_failure[0] < np.degrees(cfg.fall_tilt) - 10.0
+    assert p["base_error_max"] > cfg.max_base_error
+    # the steps it played on after the drift count in no error mean
+    assert np.isfinite(dep.q[0, :p["failed_at"] + 1]).all() and np.isnan(dep.q[0, p["failed_at"] + 1:]).all()
+    # the upright drift: 1 m from its reference, untilted, never a fall
+    assert a["cause"] == "drifted" and not a["fell"] and a["fell_at"] == -1 and tilt_at_failure[1] < 1.0
+    assert 0.95 < a["base_error_max"] < 1.05
+    m = res["mean"]
+    assert (m["falls"], m["drifts"], m["diverged"], m["failures"], m["success"]) == (1, 1, 0, 2, 0.0)

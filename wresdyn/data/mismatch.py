@@ -1,7 +1,7 @@
 """The mismatch config: how the simulated "real" robot (:class:`~wresdyn.data.real_robot.RealRobot`) differs from
-the nominal model (physics, PD gains, delay, torque limits, sensors), as global scalars and per-joint / per-link
-entries, read from TOML with its keys, types and signs checked, and applied to the robot's MuJoCo model
-(:func:`perturb_mujoco`)."""
+the nominal model (physics, PD gains, delay, torque limits, sensors and, standing on a floor, the floor's friction and
+softness), as global scalars and per-joint / per-link entries, read from TOML with its keys, types and signs checked,
+and applied to the robot's MuJoCo model (:func:`perturb_mujoco`, :func:`floor_contact`)."""
 
 from __future__ import annotations
 
@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import tomllib
 
+from ..robot.contact import ContactSettings
 from ..robot.description import RobotError
 
-__all__ = ["Mismatch", "MismatchError", "JOINT_KEYS", "LINK_KEYS", "perturb_mujoco"]
+__all__ = ["Mismatch", "MismatchError", "JOINT_KEYS", "LINK_KEYS", "perturb_mujoco", "floor_contact"]
 
 
 class MismatchError(RobotError):
@@ -61,6 +62,13 @@ class Mismatch:
     """Recorded (diagnostic) torques are rounded to multiples of this [N*m]; 0 = off."""
     substep: float = 0.0
     """Physics step of the real robot [s], must divide the recording step; 0 = the recording step."""
+    floor_friction_scale: float = 1.0
+    """Factor on the floor's sliding friction coefficient (:attr:`~wresdyn.robot.contact.ContactSettings.friction`,
+    nominally 1) [-]; a robot on a floor only (a stand has none)."""
+    floor_timeconst_scale: float = 1.0
+    """Factor on the floor contact's time constant (:attr:`~wresdyn.robot.contact.ContactSettings.timeconst`, MuJoCo
+    ``solref[0]``, nominally 0.02 s) [-]: above 1 a softer floor, which the feet sink into further (the static
+    deflection grows with its square); a robot on a floor only."""
     seed: int = 0
     """Seed of the per-link and per-joint errors (one fixed "physical" robot)."""
     joint: tuple = ()
@@ -104,7 +112,7 @@ class Mismatch:
             if want is float and not (np.isfinite(value) and value >= 0.0):
                 raise MismatchError(f"{where}: {key} = {value} must be finite and >= 0")
             values[key] = value
-        for key in ("armature_scale", "kp_scale", "torque_limit_scale"):
+        for key in ("armature_scale", "kp_scale", "torque_limit_scale", "floor_timeconst_scale"):
             if key in values and values[key] <= 0.0:
                 raise MismatchError(f"{where}: {key} = {values[key]} must be > 0")
         return cls(**values)
@@ -195,3 +203,12 @@ def perturb_mujoco(m, mm: Mismatch, r, v0: int, rng: np.random.Generator) -> Non
     m.actuator_biasprm[:n, 1] = -kp
     m.actuator_biasprm[:n, 2] = -kd
     m.actuator_forcerange[:n] *= jv["torque_limit_scale"][:, None]
+
+
+def floor_contact(mm: Mismatch, contact: ContactSettings | None = None) -> ContactSettings:
+    """The real floor: ``contact`` (default ``ContactSettings()``, the nominal floor both simulators share) with the
+    mismatch's friction and softness. A mismatch without floor fields (an older file or dataset header) gives the
+    nominal floor."""
+    c = contact or ContactSettings()
+    return dataclasses.replace(c, friction=c.friction * mm.floor_friction_scale,
+                               timeconst=c.timeconst * mm.floor_timeconst_scale)

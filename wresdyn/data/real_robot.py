@@ -9,7 +9,8 @@ mismatch off and ``substep`` equal to the recording step it is exactly :func:`~w
 
 A fixed-base robot records on a stand (:meth:`RealRobot.record`, :func:`collect`). A floating-base robot stands on
 a floor (:func:`~wresdyn.robot.mujoco_model.build_mujoco` with ``ground=True``, the contact of
-:class:`~wresdyn.robot.ground.ContactSettings`) and is driven step by step, as a deployed skill drives hardware:
+:class:`~wresdyn.robot.ground.ContactSettings` with the mismatch's floor friction and softness,
+:func:`~wresdyn.data.mismatch.floor_contact`) and is driven step by step, as a deployed skill drives hardware:
 :meth:`RealRobot.reset` to a :class:`~wresdyn.robot.ground.FloatingState`, :meth:`RealRobot.step` under PD
 commands, with the same mismatch (physics, delay, saturation, sensors) as a recording.
 """
@@ -32,7 +33,7 @@ from ..robot.physical import SERVO_FIELDS, PhysicalParams
 from ..robot.servo import STARTUP_RAMP, GoalProfile, friction_bound
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
-from .mismatch import Mismatch, MismatchError, perturb_mujoco
+from .mismatch import Mismatch, MismatchError, floor_contact, perturb_mujoco
 from .probe import PROBE_FAMILY, SaturationProbe, saturation_probe
 
 __all__ = ["RealRobot", "SPAWN_KEYS", "PROBE_SPAWN_KEY", "collect"]
@@ -46,8 +47,9 @@ class RealRobot:
             :meth:`reset` / :meth:`step`).
         mismatch: How the real robot differs.
         rate_hz: Recording (and command) rate [Hz].
-        contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (floating base only; default
-            ``ContactSettings()``).
+        contact: :class:`~wresdyn.robot.ground.ContactSettings` of the nominal floor (floating base only; default
+            ``ContactSettings()``); the real floor is it with the mismatch's friction and softness
+            (:func:`~wresdyn.data.mismatch.floor_contact`).
     """
 
     def __init__(self, robot: Robot, mismatch: Mismatch | None = None, rate_hz: float = 500.0, contact=None):
@@ -68,7 +70,9 @@ class RealRobot:
             raise MismatchError(f"substep {sub} s does not divide the recording step {dt} s")
         self.substep = dt / self.n_sub
         self.n_delay = int(round(self.mismatch.delay / self.substep))
-        self.model = build_mujoco(robot, self.substep, "implicitfast", ground=floating, contact=contact)
+        self.contact = floor_contact(self.mismatch, contact) if floating else None
+        """The real floor's :class:`~wresdyn.robot.ground.ContactSettings` (floating base), ``None`` on a stand."""
+        self.model = build_mujoco(robot, self.substep, "implicitfast", ground=floating, contact=self.contact)
         perturb_mujoco(self.model, self.mismatch, robot, self._v0, np.random.default_rng(self.mismatch.seed))
         self._servo = self._servo_motors()
         self._mujoco = mujoco

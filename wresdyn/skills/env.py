@@ -21,7 +21,9 @@ floor also base orientation and position kernels, the slip of the soles the refe
 An episode ends at the motion's end (a time-out) or fails: on the stand a joint more than ``fail_error`` from its
 reference or a plant that runs away; on the floor a fall (the base more than ``fall_height`` below its reference or
 tilted past ``fall_tilt``), the base more than ``max_base_error`` from the reference (ASAP's success rule) or a
-runaway (:data:`FAILURE_CAUSES`).
+runaway (:data:`FAILURE_CAUSES`). In training a drift ends the episode as a fall does (the episode is lost either
+way); in deployment (``drift_ends=False``, :func:`wresdyn.skills.evaluate.deploy`) a drifted world plays on, so that
+a topple that follows it is seen and counted as the fall it is.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from .reference import base_frame_imu, motion_tensors, plant_dt, quat_angle, qua
 from .skill_config import FloorTaskConfig, SkillConfig, SkillTaskConfig
 
 __all__ = ["SkillTaskConfig", "SkillConfig", "FloorTaskConfig", "TrackingEnv", "OBS_TERMS", "IMU_TERMS",
-           "CRITIC_TERMS", "FOOT_BODIES", "FAILURE_CAUSES"]
+           "CRITIC_TERMS", "FOOT_BODIES", "FAILURE_CAUSES", "FALLS"]
 
 OBS_TERMS = ("error", "qd", "ref_next", "ref_ahead", "ref", "last_action")
 """The policy's observation, n values each, in this order."""
@@ -49,8 +51,10 @@ CRITIC_TERMS = ("base_error", "base_velocity", "true_gyro", "planted")
 """What the critic sees on the floor besides the actor's observation: 3, 3, 3 and 2 values."""
 FAILURE_CAUSES = ("fell_low", "tilted", "drifted", "diverged")
 """Why an episode on the floor fails: the base fell below its reference by ``fall_height``, tilted past
-``fall_tilt``, drifted more than ``max_base_error`` from the reference, or the simulation diverged (the first that
-holds, in this order)."""
+``fall_tilt``, drifted more than ``max_base_error`` from the reference, or the simulation diverged. The first two are
+falls; a step that sees several causes reports the first in this order (a topple that also drifts is a fall)."""
+FALLS = FAILURE_CAUSES[:2]
+"""The causes that are falls."""
 FOOT_BODIES = ("left_foot", "right_foot")
 """The bodies whose slip is penalised where the reference plants them."""
 
@@ -72,6 +76,8 @@ class TrackingEnv(VecEnv):
             ``i mod M`` from its start once (deployment, :mod:`wresdyn.skills.evaluate`).
         device: Torch device of the observations, rewards and the policy (default: the plant's). The real robot
             steps on CPU threads while its policy may learn on a GPU.
+        drift_ends: On the floor, a base more than ``max_base_error`` from the reference ends the episode
+            (training); ``False``: the world plays on (deployment watches it for a fall), :attr:`drifted` says so.
 
     Example:
         >>> env = TrackingEnv(SimPlant(robot, 4, 500.0, 10), motions.split("train"), SkillTaskConfig.stand())
@@ -79,7 +85,7 @@ class TrackingEnv(VecEnv):
     """
 
     def __init__(self, plant, motions, cfg: SkillTaskConfig = SkillConfig(), seed: int = 0, random_start: bool = True,
-                 device=None):
+                 device=None, drift_ends: bool = True):
         if plant.decimation != cfg.decimation:
             raise ValueError(f"plant decimation {plant.decimation} != task decimation {cfg.decimation}")
         self.plant, self.cfg, self.motions = plant, cfg, list(motions)
@@ -89,7 +95,7 @@ class TrackingEnv(VecEnv):
         self.ref_data, self.ref_len = motion_tensors(self.motions, cfg.decimation, cfg.ahead, self.device)
         self.ref_q, self.ref_qd = self.ref_data["q"], self.ref_data["qd"]
         self.max_episode_length = int(self.ref_len.max())
-        self.random_start = random_start
+        self.random_start, self.drift_ends = random_start, drift_ends
         self.critic_groups = ("policy", "critic") if self.floating else ("policy",)
         """What the critic sees (:func:`wresdyn.skills.skill_ppo.train_skill`)."""
         self.gen = torch.Generator(device=self.device)
@@ -232,18 +238,21 @@ class TrackingEnv(VecEnv):
         planted = self.ref(key="planted") & self.ref(-1, "planted")
         slide = ((self.feet_pos - feet_before)[..., :2].norm(dim=-1) / self.policy_dt) ** 2
         x["slip2"] = (slide * planted).sum(-1) / planted.sum(-1).clamp(min=1)
-        fell = ((self.base_pose[:, 2] < base_r[:, 2] - c.fall_height) | (tilt(self.base_pose[:, 3:]) > c.fall_tilt)
-                | ~torch.isfinite(self.base_pose).all(-1))
+        low = self.base_pose[:, 2] < base_r[:, 2] - c.fall_height
+        tilted = tilt(self.base_pose[:, 3:]) > c.fall_tilt
+        fell = low | tilted | ~torch.isfinite(self.base_pose).all(-1)
         drifted = x["dist"] > c.max_base_error
-        # why a world failed, first cause first: 0 none, then the indices of FAILURE_CAUSES
+        # why a world failed, first cause first (a fall before a drift, both before a runaway): 0 none, then
+        # 1 + the index in FAILURE_CAUSES
         cause = torch.zeros_like(self.t)
-        for code, hit in ((4, bad), (3, drifted), (2, tilt(self.base_pose[:, 3:]) > c.fall_tilt),
-                          (1, self.base_pose[:, 2] < base_r[:, 2] - c.fall_height)):
+        for code, hit in ((4, bad), (3, drifted), (2, tilted), (1, low)):
             cause = torch.where(hit, torch.full_like(cause, code), cause)
         self.failure_cause = cause
         """Why each world failed this step (N,): 0 it did not, else 1 + the index in :data:`FAILURE_CAUSES`."""
         self.fell, self.slip2, self.base_error, self.orientation_error = fell, x["slip2"], x["dist"], x["ang"]
-        return fell | drifted | bad
+        self.drifted = drifted
+        """The base is more than ``max_base_error`` from the reference after this step (N,) bool (floor)."""
+        return fell | bad | (drifted if self.drift_ends else torch.zeros_like(drifted))
 
     def step(self, actions: torch.Tensor):
         t0 = time.perf_counter()

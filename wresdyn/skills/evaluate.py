@@ -5,7 +5,7 @@
 
 - ``mpjpe``: mean per-joint position error |q − q_ref| of the true joint state over joints and policy steps [rad];
 - ``success``: the episode ran to the motion's end without failing (the task's rule: on the stand no joint more than
-  ``fail_error`` from its reference and no runaway; on the floor no fall and the base never more than
+  ``fail_error`` from its reference and no runaway; on the floor no fall, no runaway and the base never more than
   ``max_base_error`` (0.5 m) from the reference's);
 - ``action_rate``: mean |a_t − a_{t−1}| of the commanded PD targets [rad per policy step].
 
@@ -17,13 +17,18 @@ On the stand also:
 
 On the floor also:
 
-- ``falls``: motions that ended in a fall (base height or tilt past the task's limits);
+- ``falls``, ``drifts``, ``diverged``: how many motions failed by each kind of failure (:data:`~.env.FAILURE_CAUSES`).
+  A fall is the base dropping ``fall_height`` below its reference or tilting past ``fall_tilt``. A world whose base
+  drifts more than ``max_base_error`` from the reference has failed there, but it plays on to its motion's end: a
+  fall before then makes the failure a fall (a topple that drifts first is a fall), none leaves it a drift; a
+  runaway (the simulation diverged) is its own class (a drifted world that runs away later stays a drift);
 - ``g_mpjpe``: mean distance of every link's world position from the reference's (the reference base carrying the
   reference joints) [m];
 - ``orientation_error``: mean angle between the base's orientation and the reference's [rad];
 - ``foot_slip``: mean horizontal speed of the soles over the steps the reference keeps them planted [m/s].
 
-A failed motion's errors count up to its failure (a failure never improves a mean); success (and falls) count it.
+A failed motion's errors count up to its failure (a failure never improves a mean), the steps a drifted world plays
+on included in none of them; success and the failure counts count it.
 """
 
 from __future__ import annotations
@@ -35,13 +40,14 @@ import torch
 
 from ..data.ik import FootIK
 from ..sim.kinematics import BodyPositions
-from .env import FAILURE_CAUSES, TrackingEnv
+from .env import FAILURE_CAUSES, FALLS, TrackingEnv
 from .reference import plant_dt
 
-__all__ = ["Deployment", "deploy", "metrics", "METRICS", "gap_closed"]
+__all__ = ["Deployment", "deploy", "metrics", "METRICS", "gap_closed", "gaps_or_why_not"]
 
 METRICS = {"stand": ("mpjpe", "foot_error", "success", "action_rate", "torque_rate"),
-           "floor": ("success", "falls", "mpjpe", "g_mpjpe", "orientation_error", "foot_slip", "action_rate")}
+           "floor": ("success", "falls", "drifts", "diverged", "mpjpe", "g_mpjpe", "orientation_error", "foot_slip",
+                     "action_rate")}
 """What :func:`metrics` reports, by task."""
 
 
@@ -80,9 +86,12 @@ class Deployment:
     feet: np.ndarray | None = None
     """Floor: indices of the two foot bodies in ``bodies``."""
     fell: np.ndarray | None = None
-    """Floor: whether the failure was a fall (M,) bool."""
+    """Floor: whether the failure was a fall (M,) bool, seen at the failure or after a drift."""
     cause: np.ndarray | None = None
-    """Floor: why each motion failed (M,): ``""`` if it did not, else one of :data:`~.env.FAILURE_CAUSES`."""
+    """Floor: why each motion failed (M,): ``""`` if it did not, else one of :data:`~.env.FAILURE_CAUSES` (a fall
+    after a drift is the fall's cause)."""
+    fell_at: np.ndarray | None = None
+    """Floor: policy step of the fall, −1 if none (M,); later than ``failed_at`` where the base drifted first."""
     base_error_max: np.ndarray | None = None
     """Floor: largest distance of the base from the reference's over the rollout [m] (M,)."""
 
@@ -93,7 +102,7 @@ def deploy(policy, plant, motions, cfg) -> Deployment:
 
     if plant.num_worlds != len(motions):
         raise ValueError(f"{len(motions)} motions need as many worlds, the plant has {plant.num_worlds}")
-    env = TrackingEnv(plant, motions, cfg, random_start=False)
+    env = TrackingEnv(plant, motions, cfg, random_start=False, drift_ends=False)
     floor = env.floating
     k_len = env.ref_len.cpu().numpy()
     steps = int(k_len.max())
@@ -107,6 +116,7 @@ def deploy(policy, plant, motions, cfg) -> Deployment:
         base, bodies = np.full((m_n, steps + 1, 7), np.nan), np.full((m_n, steps + 1, nb, 3), np.nan)
         q[:, 0], base[:, 0], bodies[:, 0] = env.true_q.cpu(), env.base_pose.cpu(), env.bodies.cpu()
         fell, cause, base_error_max = np.zeros(m_n, dtype=bool), np.full(m_n, "", dtype=object), np.zeros(m_n)
+        fell_at = np.full(m_n, -1)
     else:
         q[:, 0] = env.ref_q[:, 0].cpu().numpy()  # every motion starts in its reference state
     has_tau = not floor and getattr(plant, "tau", None) is not None
@@ -120,19 +130,28 @@ def deploy(policy, plant, motions, cfg) -> Deployment:
             done = dones.cpu().numpy().astype(bool)
             timeout = extras["time_outs"].cpu().numpy().astype(bool)
             live = alive & (k < k_len)
-            cmd[live, k] = env.cmd.cpu().numpy()[live]
-            q[live, k + 1] = env.step_true_q.cpu().numpy()[live]
-            fail = live & done & ~timeout
-            failed_at[fail] = k + 1
+            ended = live & done & ~timeout  # a fall or a runaway (on the floor a drift plays on)
+            # what the metrics read: up to and including the step of the failure
+            rec = live & (failed_at < 0) if floor else live
+            cmd[rec, k] = env.cmd.cpu().numpy()[rec]
+            q[rec, k + 1] = env.step_true_q.cpu().numpy()[rec]
             if floor:
-                base[live, k + 1] = env.step_base_pose.cpu().numpy()[live]
-                bodies[live, k + 1] = env.step_bodies.cpu().numpy()[live]
-                fell[fail] = env.fell.cpu().numpy()[fail]
+                base[rec, k + 1] = env.step_base_pose.cpu().numpy()[rec]
+                bodies[rec, k + 1] = env.step_bodies.cpu().numpy()[rec]
+                base_error_max[rec] = np.maximum(base_error_max[rec], env.base_error.cpu().numpy()[rec])
                 code = env.failure_cause.cpu().numpy()
-                cause[fail] = [FAILURE_CAUSES[c - 1] for c in code[fail]]
-                base_error_max[live] = np.maximum(base_error_max[live], env.base_error.cpu().numpy()[live])
+                fall = ended & np.isin(code, [1 + FAILURE_CAUSES.index(c) for c in FALLS])
+                drift = rec & env.drifted.cpu().numpy() & ~fall
+                first = (fall | drift | ended) & (failed_at < 0)
+                failed_at[first] = k + 1
+                # a fall outranks the drift before it; otherwise the first failure names the cause
+                cause[drift & first] = "drifted"
+                cause[ended & first & ~fall & ~drift] = "diverged"
+                cause[fall] = [FAILURE_CAUSES[c - 1] for c in code[fall]]
+                fell[fall], fell_at[fall] = True, k + 1
             else:
-                q[fail, k + 1] = np.nan
+                failed_at[ended] = k + 1
+                q[ended, k + 1] = np.nan
             if has_tau:
                 tau = plant.tau
                 seq = tau if tau_last is None else np.concatenate([tau_last[:, None], tau], axis=1)
@@ -154,7 +173,8 @@ def deploy(policy, plant, motions, cfg) -> Deployment:
                            for k in range(steps + 1)], axis=1)
     return Deployment(q, q_ref, cmd, failed_at, names, env.policy_dt, floating=True, base=base, bodies=bodies,
                       base_ref=base_ref, bodies_ref=bodies_ref, planted=r["planted"][:, :steps + 1].cpu().numpy(),
-                      feet=env.feet.cpu().numpy(), fell=fell, cause=cause, base_error_max=base_error_max)
+                      feet=env.feet.cpu().numpy(), fell=fell, cause=cause, base_error_max=base_error_max,
+                      fell_at=fell_at)
 
 
 def _angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
@@ -203,7 +223,7 @@ def _floor_metrics(dep: Deployment) -> dict:
         c = dep.cmd[i][np.isfinite(dep.cmd[i]).all(-1)]
         nan = float("nan")
         per.append({"motion": name, "success": bool(dep.failed_at[i] < 0), "fell": bool(dep.fell[i]),
-                    "failed_at": int(dep.failed_at[i]), "cause": str(dep.cause[i]),
+                    "failed_at": int(dep.failed_at[i]), "cause": str(dep.cause[i]), "fell_at": int(dep.fell_at[i]),
                     "base_error_max": float(dep.base_error_max[i]),
                     "mpjpe": float(np.abs(q - qr).mean()) if len(q) else nan,
                     "g_mpjpe": float(np.linalg.norm(b - br, axis=-1).mean()) if len(b) else nan,
@@ -214,11 +234,39 @@ def _floor_metrics(dep: Deployment) -> dict:
     mean = {k: float(np.nanmean([p[k] for p in per])) for k in keys if np.isfinite([p[k] for p in per]).any()}
     mean["success"] = float(np.mean([p["success"] for p in per]))
     mean["failures"] = int(sum(not p["success"] for p in per))
+    mean["causes"] = {c: int(sum(p["cause"] == c for p in per)) for c in FAILURE_CAUSES}
     mean["falls"] = int(sum(p["fell"] for p in per))
-    mean["causes"] = {c: sum(p["cause"] == c for p in per) for c in FAILURE_CAUSES}
+    mean["drifts"], mean["diverged"] = mean["causes"]["drifted"], mean["causes"]["diverged"]
     return {"mean": mean, "motions": per}
 
 
 def gap_closed(a: float, b: float, d: float) -> float:
     """(a − b) / (a − d): the fraction of the nominal-to-oracle tracking gap that ``b`` closes (NaN if a = d)."""
     return float((a - b) / (a - d)) if a != d else float("nan")
+
+
+_SHOWN = {"mpjpe": ("MPJPE", 1e3, "mrad"), "g_mpjpe": ("g-MPJPE", 1e3, "mm")}
+"""How a metric is named and scaled in a reason."""
+
+
+def gaps_or_why_not(split: dict, metric: str = "mpjpe") -> tuple[dict, str]:
+    """The gaps closed by (b) and (c) on ``metric`` of one split's deployments (``{policy: metrics(...)}``), or none
+    and the reason, so that no ratio is quoted whose oracle does not beat (a): ``({}, why)`` when no policy succeeded
+    on any motion (``why`` = ``"no policy succeeded"``), when (a) or the oracle (d) is missing, or when (d) does not
+    beat (a) (a ``metric`` no lower, or a lower success: a policy that fails early also stops its errors early);
+    else ``({policy: fraction}, "")``."""
+    runs = {k: v["mean"] for k, v in split.items() if k != "reference"}
+    if not runs or all(m["success"] == 0.0 for m in runs.values()):
+        return {}, "no policy succeeded"
+    if "a_nominal" not in runs or "d_oracle" not in runs:
+        return {}, "needs (a) and the oracle (d)"
+    a, d = runs["a_nominal"], runs["d_oracle"]
+    ea, ed = a.get(metric, float("nan")), d.get(metric, float("nan"))
+    if not ed < ea:
+        name, scale, unit = _SHOWN.get(metric, (metric, 1.0, ""))
+        return {}, f"the oracle (d) does not beat (a) on {name} ({scale * ed:.1f} against {scale * ea:.1f} {unit})"
+    if d["success"] < a["success"]:
+        return {}, (f"the oracle (d) does not beat (a): it succeeds less ({100 * d['success']:.0f} % against "
+                    f"{100 * a['success']:.0f} %)")
+    return {k: gap_closed(ea, runs[k].get(metric, float("nan")), ed) for k in ("b_calibrated", "c_delta_action")
+            if k in runs}, ""
