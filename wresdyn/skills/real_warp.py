@@ -17,13 +17,15 @@ at construction (a later change of ``real.model`` is not seen); the noise comes 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 
 from ..errors import WresdynError
 from .reference import base_frame_imu, quat_rotate_inv
 
-__all__ = ["RealWarpPlant"]
+__all__ = ["RealWarpPlant", "free_from_mujoco_t", "free_to_mujoco_t", "sense"]
 
 MAX_CONTACTS = 4
 """Contacts a box touching the floor plane makes at most (its corners): what :class:`RealWarpPlant` allocates per
@@ -33,6 +35,55 @@ collision geom, so a robot lying on the floor with every link down still fits.""
 def _quat_rotate(quat_xyzw: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     """Rotate vectors ``v`` (N, 3) of the frames ``quat_xyzw`` (N, 4) into world axes."""
     return quat_rotate_inv(torch.cat([-quat_xyzw[:, :3], quat_xyzw[:, 3:]], -1), v)
+
+
+def free_to_mujoco_t(com: torch.Tensor, base_pose: torch.Tensor, base_twist: torch.Tensor
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`wresdyn.robot.mujoco_model.free_to_mujoco` on the device: Newton's base pose [x y z qx qy qz qw]
+    (N, 7) and twist [centre-of-mass velocity, angular velocity] in world axes (N, 6) -> MuJoCo's free joint
+    ``qpos`` [x y z qw qx qy qz] (N, 7) and ``qvel`` [body-origin velocity in world axes, angular velocity in body
+    axes] (N, 6). ``com``: the base's centre of mass in its body frame [m] (N, 3)."""
+    quat, w = base_pose[:, 3:], base_twist[:, 3:]
+    v_origin = base_twist[:, :3] - torch.cross(w, _quat_rotate(quat, com), dim=-1)
+    qpos = torch.cat([base_pose[:, :3], quat[:, 3:], quat[:, :3]], -1)
+    return qpos, torch.cat([v_origin, quat_rotate_inv(quat, w)], -1)
+
+
+def free_from_mujoco_t(com: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The inverse of :func:`free_to_mujoco_t` (:func:`wresdyn.robot.mujoco_model.free_from_mujoco` on the
+    device): MuJoCo's ``qpos[:, :7]``, ``qvel[:, :6]`` -> Newton's ``(base_pose (N, 7), base_twist (N, 6))``."""
+    quat = torch.cat([qpos[:, 4:7], qpos[:, 3:4]], -1)
+    w = _quat_rotate(quat, qvel[:, 3:6])
+    v_com = qvel[:, :3] + torch.cross(w, _quat_rotate(quat, com), dim=-1)
+    return torch.cat([qpos[:, :3], quat], -1), torch.cat([v_com, w], -1)
+
+
+def sense(mismatch, q: torch.Tensor, qd: torch.Tensor, gen: torch.Generator | None
+          ) -> tuple[torch.Tensor, torch.Tensor]:
+    """What the encoders report for the true ``q``, ``qd`` [rad, rad/s] (..., n): the law of
+    :meth:`~wresdyn.data.real_robot.RealRobot.sense` (the ``mismatch``'s white noise, drawn from ``gen``, then its
+    quantisation) on torch tensors."""
+    out = []
+    for x, noise, res in ((q, mismatch.position_noise, mismatch.encoder_resolution),
+                          (qd, mismatch.velocity_noise, mismatch.velocity_resolution)):
+        if noise > 0:
+            x = x + noise * torch.randn(x.shape, generator=gen, device=x.device, dtype=x.dtype)
+        out.append(torch.round(x / res) * res if res > 0 else x.clone())
+    return out[0], out[1]
+
+
+@functools.cache
+def _command_kernel():
+    """The Warp kernel that sets every world's ctrl to column ``j`` of the delay line (a launch a graph can hold)."""
+    import warp as wp
+
+    @wp.kernel
+    def command_at(line_in: wp.array3d(dtype=float), j: int, ctrl_out: wp.array2d(dtype=float)):
+        w, i = wp.tid()
+        ctrl_out[w, i] = line_in[w, j, i]
+
+    return command_at
 
 
 class RealWarpPlant:
@@ -50,6 +101,8 @@ class RealWarpPlant:
         imu_noise: Standard deviations of the IMU's white noise: angular velocity [rad/s] and the measured gravity
             direction [-] (floor only).
         device: Warp / torch device (``None``: ``cuda:0`` when a GPU is visible, else ``cpu``).
+        graph: Replay a step's physics substeps as one CUDA graph, captured at the first step (``None``: on a GPU;
+            the solver's iterations then stop at convergence inside the graph, without a host round trip).
 
     Example:
         >>> plant = RealWarpPlant(RealRobot(floating, mismatch), 4096, 10, device="cuda:0")
@@ -58,7 +111,8 @@ class RealWarpPlant:
     """
 
     def __init__(self, real, num_worlds: int, decimation: int, seed: int = 0,
-                 imu_noise: tuple[float, float] = (0.0, 0.0), device: str | None = None) -> None:
+                 imu_noise: tuple[float, float] = (0.0, 0.0), device: str | None = None,
+                 graph: bool | None = None) -> None:
         import mujoco_warp as mjw
         import warp as wp
 
@@ -88,15 +142,20 @@ class RealWarpPlant:
         view = wp.to_torch
         self._qpos, self._qvel = view(self.data.qpos), view(self.data.qvel)
         """MuJoCo's state (N, nq), (N, nv) float32, the device's memory: base (floor) then joints."""
-        self._ctrl, self._warm = view(self.data.ctrl), view(self.data.qacc_warmstart)
         self._b = 7 if self.floating else 0  # the joints' first qpos
         self._bv = 6 if self.floating else 0
         self.n_sub = real.n_sub * self.decimation
         """Physics substeps per :meth:`step`."""
         self._fifo = torch.zeros(self.num_worlds, real.n_delay, n, device=self.device)
         """The commands on their way to the motors [rad] (N, n_delay, n), oldest first: the delay line."""
+        self._line = wp.zeros((self.num_worlds, self.n_sub, n), dtype=float, device=self._wp_device)
+        """What reaches the motors at each physics substep of a step [rad] (N, n_sub, n)."""
+        self._line_t = view(self._line)
         self._com = torch.as_tensor(np.asarray(self.robot.body_com[0]), dtype=torch.float32,
                                     device=self.device).expand(self.num_worlds, 3)
+        self.graph = self.device.type == "cuda" if graph is None else bool(graph)
+        self._graph = None
+        self._stream = wp.get_stream(self._wp_device) if self.device.type == "cuda" else None
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(int(seed))
         self.q_true = torch.zeros(self.num_worlds, n, device=self.device)
@@ -104,15 +163,37 @@ class RealWarpPlant:
         self.qd_true = torch.zeros_like(self.q_true)
         """True joint velocities [rad/s] (N, n)."""
 
-    def _scope(self):
-        """Warp launches on the device, on torch's current stream there (torch and mujoco_warp share the arrays)."""
-        from contextlib import ExitStack
+    def _substeps(self) -> None:
+        """The physics of one step: every substep's command from the delay line, then mujoco_warp's step; the
+        constraint solver starts cold, as RealPlant's rollout does at every step."""
+        wp, kernel = self._wp, _command_kernel()
+        self.data.qacc_warmstart.zero_()
+        for j in range(self.n_sub):
+            wp.launch(kernel, dim=(self.num_worlds, self.robot.n_dof), inputs=[self._line, j],
+                      outputs=[self.data.ctrl], device=self._wp_device)
+            self._mjw.step(self.model, self.data)
 
-        stack = ExitStack()
-        stack.enter_context(self._wp.ScopedDevice(self._wp_device))
-        if self.device.type == "cuda":
-            stack.enter_context(self._wp.ScopedStream(self._wp.stream_from_torch(self.device)))
-        return stack
+    def _physics(self) -> None:
+        """Run :meth:`_substeps` on the device: on Warp's stream, ordered after torch's work on the shared arrays
+        and before torch's next; as a CUDA graph when :attr:`graph` (captured at the first call, after an eager
+        one that loads the kernels)."""
+        wp = self._wp
+        with wp.ScopedDevice(self._wp_device):
+            if self._stream is None:
+                self._substeps()
+                return
+            torch_stream = wp.stream_from_torch(self.device)
+            self._stream.wait_stream(torch_stream)
+            with wp.ScopedStream(self._stream):
+                if self._graph is not None:
+                    wp.capture_launch(self._graph)
+                else:
+                    self._substeps()
+                    if self.graph:
+                        with wp.ScopedCapture(self._wp_device) as capture:
+                            self._substeps()
+                        self._graph = capture.graph
+            torch_stream.wait_stream(self._stream)
 
     def _t(self, x) -> torch.Tensor:
         return torch.as_tensor(x).to(self.device, torch.float32)
@@ -128,12 +209,8 @@ class RealWarpPlant:
         convention (:mod:`wresdyn.robot.ground`), joints ``q``, ``qd`` (k, n); the delay line holds ``q``."""
         if len(ids) == 0:
             return
-        pose, twist = self._t(base_pose), self._t(base_twist)
-        quat = pose[:, 3:]
-        w = twist[:, 3:]
-        v_origin = twist[:, :3] - torch.cross(w, _quat_rotate(quat, self._com[:len(quat)]), dim=-1)
-        base_qpos = torch.cat([pose[:, :3], quat[:, 3:], quat[:, :3]], -1)  # MuJoCo: [x y z qw qx qy qz]
-        base_qvel = torch.cat([v_origin, quat_rotate_inv(quat, w)], -1)  # angular velocity in body axes
+        pose = self._t(base_pose)
+        base_qpos, base_qvel = free_to_mujoco_t(self._com[:len(pose)], pose, self._t(base_twist))
         self._reset(ids, q, qd, base_qpos, base_qvel)
 
     def _reset(self, ids, q, qd, base_qpos=None, base_qvel=None) -> None:
@@ -158,11 +235,7 @@ class RealWarpPlant:
         return self._base()[1]
 
     def _base(self) -> tuple[torch.Tensor, torch.Tensor]:
-        qpos, qvel = self._qpos[:, :7], self._qvel[:, :6]
-        quat = torch.cat([qpos[:, 4:7], qpos[:, 3:4]], -1)
-        w = _quat_rotate(quat, qvel[:, 3:6])
-        v_com = qvel[:, :3] + torch.cross(w, _quat_rotate(quat, self._com), dim=-1)
-        return torch.cat([qpos[:, :3], quat], -1), torch.cat([v_com, w], -1)
+        return free_from_mujoco_t(self._com, self._qpos[:, :7], self._qvel[:, :6])
 
     def imu(self) -> tuple[torch.Tensor, torch.Tensor]:
         """What the base IMU reports: angular velocity [rad/s] and the unit gravity direction, both in base axes,
@@ -176,34 +249,19 @@ class RealWarpPlant:
             grav = grav / grav.norm(dim=-1, keepdim=True)
         return gyro, grav
 
-    def sense(self, q: torch.Tensor, qd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """What the encoders report for the true ``q``, ``qd`` [rad, rad/s] (N, n): the law of
-        :meth:`~wresdyn.data.real_robot.RealRobot.sense` (white noise, then quantisation), drawn from :attr:`gen`."""
-        mm = self.real.mismatch
-        out = []
-        for x, noise, res in ((q, mm.position_noise, mm.encoder_resolution),
-                              (qd, mm.velocity_noise, mm.velocity_resolution)):
-            if noise > 0:
-                x = x + noise * torch.randn(x.shape, generator=self.gen, device=self.device)
-            out.append(torch.round(x / res) * res if res > 0 else x.clone())
-        return out[0], out[1]
-
     def step(self, cmd) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Hold ``cmd`` [rad] (N, n) for ``decimation`` recording periods; returns the sensed ``(q, qd)`` and
         ``diverged`` (bool (N,), a non-finite state: those worlds are left as before the step)."""
         cmd = self._t(cmd)
         line = torch.cat([self._fifo, cmd[:, None].expand(-1, self.n_sub, -1)], 1)  # reaching the motors, oldest first
         qpos0, qvel0 = self._qpos.clone(), self._qvel.clone()
-        with self._scope():
-            self._warm.zero_()  # RealPlant's rollout starts each step cold
-            for j in range(self.n_sub):
-                self._ctrl.copy_(line[:, j])
-                self._mjw.step(self.model, self.data)
+        self._line_t.copy_(line[:, :self.n_sub])
+        self._physics()
         self._fifo = line[:, self.n_sub:].clone()
         bad = ~(torch.isfinite(self._qpos).all(-1) & torch.isfinite(self._qvel).all(-1))
         self._qpos.copy_(torch.where(bad[:, None], qpos0, self._qpos))
         self._qvel.copy_(torch.where(bad[:, None], qvel0, self._qvel))
         self.q_true = self._qpos[:, self._b:].clone()
         self.qd_true = self._qvel[:, self._bv:].clone()
-        q, qd = self.sense(self.q_true, self.qd_true)
+        q, qd = sense(self.real.mismatch, self.q_true, self.qd_true, self.gen)
         return q, qd, bad
