@@ -12,7 +12,9 @@ actuator force ranges, the floor's contact), the integrator (``implicitfast``) a
 (a FIFO of ``n_delay`` commands at the substep), a cold constraint-solver warm start at every step, the sensors (noise
 and quantisation of the mismatch) and the IMU. What differs: mujoco_warp computes in float32 (MuJoCo C in float64), so
 trajectories drift apart where the dynamics amplify round-off (contact, stiction); the model is copied to the device
-at construction (a later change of ``real.model`` is not seen); the noise comes from torch's generator, not numpy's.
+at construction (a later change of ``real.model`` is not seen); the noise comes from torch's generator, not numpy's;
+no record of the drive torques and states within a step (RealPlant's ``tau``, ``q_samples``: deployment metrics, not
+read in training); PD drives only (a servo drive's law changes the model every substep).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ __all__ = ["RealWarpPlant", "free_from_mujoco_t", "free_to_mujoco_t", "sense"]
 
 MAX_CONTACTS = 4
 """Contacts a box touching the floor plane makes at most (its corners): what :class:`RealWarpPlant` allocates per
-collision geom, so a robot lying on the floor with every link down still fits."""
+collision geom, so a robot of boxes lying on the floor with every link down still fits (a robot of other collision
+shapes may need more: mujoco_warp then sets the world's ``data.overflow`` flags)."""
 
 
 def _quat_rotate(quat_xyzw: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
