@@ -87,8 +87,8 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
                 out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
     wall = time.perf_counter() - t0
     where = "on the floor of the" if task.floating else "in the"
-    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} "
-        f"{'robot' if setting == 'real' else 'simulator'} ({wall:.0f} s)")
+    what = f"robot ({cfg.oracle_plant})" if setting == "real" else "simulator"
+    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} {what} ({wall:.0f} s)")
     return wall
 
 
