@@ -122,6 +122,25 @@ def test_deploy_configs_choose_the_oracles_plant():
 
 
 @pytest.mark.slow
+def test_the_captured_graph_replays_the_launched_step(floating, quiet_floor):
+    """A step replayed from its captured graph is the step launched kernel by kernel, bit for bit (the same kernels
+    in the same order, the solver's early exit included), from a standing start with a different target per joint."""
+    from wresdyn.robot.ground import standing_state
+
+    st = standing_state(floating)
+    tile = lambda a: torch.as_tensor(np.tile(a, (2, 1)))  # noqa: E731
+    plants = [RealWarpPlant(quiet_floor, 2, DEC, device=DEVICE, graph=g) for g in (True, False)]
+    target = tile(st.q + 0.2 * np.sin(np.arange(floating.n_dof)))
+    for p in plants:
+        p.reset_full(torch.arange(2), tile(st.base_pose), tile(st.base_twist), tile(st.q), tile(st.qd))
+    for _ in range(4):
+        (qg, qdg, _), (qe, qde, _) = (p.step(target) for p in plants)
+        assert torch.equal(qg, qe) and torch.equal(qdg, qde)
+    assert plants[0]._graph is not None and plants[1]._graph is None
+    assert (qg.cpu() - tile(st.q)).abs().max() > 1e-3  # the joints moved towards their targets
+
+
+@pytest.mark.slow
 def test_on_the_floor_it_follows_the_mujoco_c_real_robot(quiet_floor, kick):
     """A held-out kick, noise off: the same model, delay line, torque limits and floor in float32. Measured over the
     0.6 s on Warp's CPU device: joints 6e-5 rad, base 3e-5 m apart (float32 round-off, largest at the first step,
