@@ -30,7 +30,11 @@ class _BenchmarkSizes:
     """Parallel worlds of each simulated plant a policy trains on (PPO's environments; written here once: the plant
     owns the count and PPO reads it from the environment)."""
     oracle_num_worlds: int | None = None
-    """Parallel worlds of the oracle's real robot, MuJoCo C on the CPU cores (``None``: ``num_worlds``)."""
+    """Parallel worlds of the oracle's real robot (``None``: ``num_worlds``, the same budget as the others)."""
+    oracle_plant: Literal["mujoco", "mujoco_warp"] = "mujoco"
+    """What steps the real robot the oracle trains on: ``mujoco`` (MuJoCo C in the host's threads,
+    :class:`~wresdyn.skills.plants.RealPlant`) or ``mujoco_warp`` (the same model batched on ``device``,
+    :class:`~wresdyn.skills.real_warp.RealWarpPlant`, float32). Deployment is always on MuJoCo C."""
     finetune_std: float | None = None
     """Action noise the fine-tunings (b), (c), (d) restart from (``None``: (a)'s own; see
     ``SkillPPOConfig.restart_std``)."""
@@ -54,6 +58,7 @@ class _BenchmarkSizes:
             check_number(getattr(self, k), f"{p}.{k}", integer=True, ge=1)
         if self.oracle_num_worlds is not None:
             check_number(self.oracle_num_worlds, f"{p}.oracle_num_worlds", integer=True, ge=1)
+        check_choice(self.oracle_plant, Literal["mujoco", "mujoco_warp"], f"{p}.oracle_plant")
         if self.finetune_std is not None:
             check_number(self.finetune_std, f"{p}.finetune_std", gt=0)
         check_number(self.seed, f"{p}.seed", integer=True, ge=0)
@@ -68,15 +73,16 @@ class DeployConfig(_BenchmarkSizes):
     seed: int = 0
     """Seed of the motions and of PPO."""
     device: str = "cpu"
-    """Device of PPO and the simulated plants (the real robot always steps on the CPU)."""
+    """Device of PPO, the simulated plants and the oracle's ``mujoco_warp`` real robot (the deployments' real robot
+    steps on the CPU)."""
 
     @classmethod
     def full(cls, **kw) -> "DeployConfig":
         """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family
-        (the same PPO iterations). The oracle trains on 1024 worlds: its real robot is MuJoCo C on the CPU cores
-        (4-6 s per iteration at 4096 worlds on 16 cores, 10-15x the simulated plants on the GPU)."""
+        (the same PPO iterations); the oracle on 4096 worlds of the real robot in mujoco_warp, as many as the
+        others."""
         return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, num_worlds=4096,
-                             oracle_num_worlds=1024, finetune_std=0.3), **kw})
+                             oracle_plant="mujoco_warp", finetune_std=0.3), **kw})
 
 
 @dataclass(frozen=True)
@@ -96,8 +102,8 @@ class FloorDeployConfig(_BenchmarkSizes):
     finetune: int = 60
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
     oracle_beside: bool | None = None
-    """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU, where the
-    oracle's real robot steps on otherwise idle host cores)."""
+    """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU and the oracle's
+    real robot is MuJoCo C, which steps on otherwise idle host cores)."""
     extra_families: tuple[Literal["combo"], ...] = ()
     """Motion families the policies also train on, ``train_per_family`` each (validation draws them too, the held-out
     motions never): ``combo``, compositions of the weight shifts' and kicks' keyframes with transfers slow and too
@@ -109,7 +115,8 @@ class FloorDeployConfig(_BenchmarkSizes):
     seed: int = 0
     """Seed of the motions and of PPO."""
     device: str = "cpu"
-    """Device of PPO and the simulated plants (the real robot always steps on the CPU)."""
+    """Device of PPO, the simulated plants and the oracle's ``mujoco_warp`` real robot (the deployments' real robot
+    steps on the CPU)."""
 
     _prefix = "floor"
 
@@ -123,6 +130,7 @@ class FloorDeployConfig(_BenchmarkSizes):
     @classmethod
     def full(cls, **kw) -> "FloorDeployConfig":
         """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
-        1000 + 300 iterations; the oracle on 256 worlds of MuJoCo C on the host's cores."""
+        1000 + 300 iterations; the oracle on 4096 worlds of the real robot's floor in mujoco_warp, as many as the
+        others."""
         return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, num_worlds=4096,
-                             oracle_num_worlds=256, iterations=1000, finetune=300, finetune_std=0.3), **kw})
+                             oracle_plant="mujoco_warp", iterations=1000, finetune=300, finetune_std=0.3), **kw})

@@ -11,8 +11,9 @@ the "real" robot, on its stand or standing on its floor (the task config's varia
    fitted here when not given (:mod:`.zero_shot`).
 3. Policies (PPO, rsl-rl, :mod:`wresdyn.skills.skill_ppo`; on the floor an asymmetric actor-critic): (a) trained in the
    nominal simulator; (b) (a) fine-tuned in the calibrated one; (c) (a) fine-tuned with the delta-action residual;
-   (d) the oracle, (a) fine-tuned on the "real" robot itself (:class:`~wresdyn.skills.plants.RealPlant`). (b), (c)
-   and (d) get the same number of fine-tuning iterations.
+   (d) the oracle, (a) fine-tuned on the "real" robot itself (:class:`~wresdyn.skills.plants.RealPlant`, or the same
+   robot batched on the GPU, :class:`~wresdyn.skills.real_warp.RealWarpPlant`). (b), (c) and (d) get the same number
+   of fine-tuning iterations.
 4. Deployment (:mod:`wresdyn.skills.evaluate`): every policy, and the reference played open loop, on the "real" robot
    (the dataset's mismatch; on the floor its IMU's noise too) over the validation and held-out motions; each policy
    also in the simulator it was trained in. Gap closed = (a − b) / (a − d) on held-out MPJPE (on the floor also on
@@ -35,6 +36,7 @@ from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, metrics
 from ..skills.motions import make_motions
 from ..skills.plants import RealPlant, sim_plant
+from ..skills.real_warp import RealWarpPlant
 from ..skills.report import write_report
 from ..skills.skill_config import FloorTaskConfig, SkillConfig
 from ..skills.skill_ppo import load_skill, train_skill
@@ -47,15 +49,19 @@ __all__ = ["DeployConfig", "FloorDeployConfig", "run_benchmark"]
 def _plants(task, real, robot, rate: float, runs: dict, device: str):
     """The plant makers of a task: ``real(worlds, seed)`` (with the IMU's noise on the floor) and
     ``sim(setting, worlds)`` (on the floor with ``ground``)."""
-    imu = (task.gyro_noise, task.gravity_noise) if task.floating else (0.0, 0.0)
 
     def real_plant(worlds: int, seed: int) -> RealPlant:
-        return RealPlant(real, worlds, task.decimation, seed=seed, imu_noise=imu)
+        return RealPlant(real, worlds, task.decimation, seed=seed, imu_noise=_imu_noise(task))
 
     def sim(setting: str, worlds: int):
         return sim_plant(setting, robot, worlds, rate, task.decimation, runs.get(setting), device, ground=task.floating)
 
     return real_plant, sim
+
+
+def _imu_noise(task) -> tuple[float, float]:
+    """The real robot's IMU noise (floor), off on the stand."""
+    return (task.gyro_noise, task.gravity_noise) if task.floating else (0.0, 0.0)
 
 
 def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs: dict, meta: dict, out: Path,
@@ -67,7 +73,13 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
     t0 = time.perf_counter()
     worlds = cfg.oracle_worlds if setting == "real" else cfg.num_worlds
     real_plant, sim = _plants(task, real, robot, real.rate_hz, runs, cfg.device)
-    plant = real_plant(worlds, cfg.seed + 1) if setting == "real" else sim(setting, worlds)
+    if setting != "real":
+        plant = sim(setting, worlds)
+    elif cfg.oracle_plant == "mujoco_warp":  # the same real robot batched on the device, float32
+        plant = RealWarpPlant(real, worlds, task.decimation, seed=cfg.seed + 1, imu_noise=_imu_noise(task),
+                              device=cfg.device)
+    else:
+        plant = real_plant(worlds, cfg.seed + 1)
     env = TrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
     run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
     it = cfg.iterations if i == 0 else cfg.finetune
@@ -75,8 +87,8 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
                 out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
     wall = time.perf_counter() - t0
     where = "on the floor of the" if task.floating else "in the"
-    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} "
-        f"{'robot' if setting == 'real' else 'simulator'} ({wall:.0f} s)")
+    what = f"robot ({cfg.oracle_plant})" if setting == "real" else "simulator"
+    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} {what} ({wall:.0f} s)")
     return wall
 
 
@@ -100,7 +112,8 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
     each on one of them: all start as soon as (a), which they are fine-tuned from, is done."""
     wall, beside = {}, {}
     if task.floating:
-        oracle_beside = cfg.device != "cpu" if cfg.oracle_beside is None else cfg.oracle_beside
+        oracle_beside = (cfg.device != "cpu" and cfg.oracle_plant == "mujoco" if cfg.oracle_beside is None
+                         else cfg.oracle_beside)
         beside = {"d_oracle": cfg.device} if oracle_beside and "d_oracle" in policies[2:] else {}
         beside.update(zip([p for p in policies[2:] if POLICIES[p] != "real"], cfg.beside_devices))
     index = {name: i for i, name in enumerate(policies)}

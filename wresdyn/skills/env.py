@@ -31,7 +31,6 @@ from __future__ import annotations
 import time
 from dataclasses import asdict
 
-import numpy as np
 import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
@@ -131,9 +130,8 @@ class TrackingEnv(VecEnv):
     # ------------------------------------------------------------------------------------------------ state
     def _true_q(self) -> torch.Tensor:
         """The true joint positions [rad] (N, n): the real robot's (not its sensors'), else the plant's."""
-        true = getattr(self.plant, "q_true", None)
-        return self.q.clone() if true is None else torch.as_tensor(np.array(true), dtype=torch.float32,
-                                                                     device=self.device)
+        true = getattr(self.plant, "q_true", None)  # numpy (MuJoCo C) or a tensor on the plant's device (mujoco_warp)
+        return self.q.clone() if true is None else torch.as_tensor(true).to(self.device, torch.float32, copy=True)
 
     def _read_plant(self, q, qd) -> None:
         """Take the plant's state after a step or a full reset: joints and, on the floor, base, IMU and feet."""
