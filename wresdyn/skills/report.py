@@ -13,9 +13,11 @@ __all__ = ["write_report", "plot_tracking", "table", "one_per_family", "plot_rol
 
 LABELS = {"reference": "reference played open loop (no policy)", "a_nominal": "(a) nominal simulator",
           "b_calibrated": "(b) (a) fine-tuned, calibrated robot", "c_delta_action": "(c) (a) fine-tuned, delta action",
-          "d_oracle": "(d) oracle: (a) fine-tuned on the real robot"}
+          "d_oracle": "(d) oracle: (a) fine-tuned on the real robot",
+          "e_randomized": "(e) (a) fine-tuned, nominal + wide domain randomisation",
+          "f_calibrated_narrow": "(f) (a) fine-tuned, calibrated + narrow randomisation"}
 COLOURS = {"a_nominal": "tab:orange", "b_calibrated": "tab:blue", "c_delta_action": "tab:purple",
-           "d_oracle": "tab:green"}
+           "d_oracle": "tab:green", "e_randomized": "tab:red", "f_calibrated_narrow": "tab:cyan"}
 
 
 def table(split: dict, sim: dict | None = None, floor: bool = False) -> str:
