@@ -151,8 +151,7 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
         half[f] = np.maximum(h, math.log1p(NARROW_FLOOR))
     for f in SCALED:  # never wider than (e)
         lo, hi = wide.scale[f]
-        h = np.minimum(half[f], np.maximum(np.log(hi), -np.log(lo)))
-        scale[f] = (np.exp(-h), np.exp(h))
+        scale[f] = (np.maximum(np.exp(-half[f]), lo), np.minimum(np.exp(half[f]), hi))
     fr, de = np.asarray(centre.friction, float), np.asarray(centre.delay, float)
     friction = (fr * np.exp(-half["friction"]), np.minimum(fr * np.exp(half["friction"]), wide.friction[1] + fr))
     delay = (de * np.exp(-half["delay"]), np.minimum(de * np.exp(half["delay"]), de + wide.delay[1][0]))
