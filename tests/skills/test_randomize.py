@@ -120,6 +120,27 @@ def test_a_randomised_delay_line_delays_each_world_by_its_own_draw(humanoid):
             assert torch.allclose(ref.step(cmd[:1])[0][0], qs[k][w], atol=1e-6), (w, k)
 
 
+def test_on_the_floor_a_draw_reaches_the_mujoco_model(floating):
+    """On the floor the robot's collision shapes carry each world's drawn friction and the shared floor the range's
+    low end (MuJoCo takes the larger of two geoms'); the drawn masses reach the MuJoCo model the solver steps. The
+    threaded CPU worlds, which share world 0's physics, are refused."""
+    from wresdyn.errors import WresdynError
+
+    torch.set_num_threads(1)
+    cfg = Randomization(seed=1)
+    plant = SimPlant(floating, 1, RATE, 5, ground=True, randomization=cfg)
+    mj, mu = plant.sim.solver.mj_model, plant.randomizer.floor_friction[0]
+    assert cfg.floor_friction[0] < mu < cfg.floor_friction[1]
+    floor = mj.geom_bodyid == 0
+    assert np.allclose(mj.geom_friction[floor, 0], cfg.floor_friction[0])
+    assert np.allclose(mj.geom_friction[~floor, 0], mu, atol=1e-6)
+    drawn = plant.randomizer.values["body_mass"][0].numpy()
+    assert np.allclose(mj.body_mass[1:], drawn, rtol=1e-6) and not np.allclose(
+        drawn, PhysicalParams.nominal(floating).body_mass)
+    with pytest.raises(WresdynError, match="per-world physics"):
+        SimPlant(floating, 2, RATE, 5, ground=True, randomization=cfg)
+
+
 def test_narrow_ranges_follow_the_identified_errors(tmp_path, humanoid):
     """(f)'s half-widths: 2 SE of a parameter the report covers (at least the floor, at most (e)'s), ±10 % of one it
     does not, and ±10 % of everything without a report."""

@@ -17,7 +17,8 @@ from ..fit.hybrid import fit_hybrid
 from ..identify.sysid import SysIdConfig
 from ..skills.skill_config import SkillPPOConfig
 
-__all__ = ["POLICIES", "BASE_POLICIES", "RANDOMIZED", "BenchmarkStart", "start_benchmark", "fit_corrections", "write_results"]
+__all__ = ["POLICIES", "BASE_POLICIES", "RANDOMIZED", "BenchmarkStart", "start_benchmark", "fit_corrections",
+           "write_results"]
 
 POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real",
             "e_randomized": "randomized", "f_calibrated_narrow": "calibrated_narrow"}

@@ -52,7 +52,8 @@ class Randomization:
     com_offset: tuple[float, float, float] = (0.025, 0.05, 0.05)
     """Half-ranges of the offset of ``com_body``'s centre of mass along x, y, z [m]. Source: ``mujocolab/mjlab``
     ``src/mjlab/tasks/tracking/tracking_env_cfg.py`` ``base_com`` (``torso_link`` ``body_ipos`` add
-    x ±0.025, y ±0.05, z ±0.05 m, startup); IsaacLab ``velocity_env_cfg.py`` ``base_com``: x, y ±0.05, z ±0.01 m."""
+    x ±0.025, y ±0.05, z ±0.05 m, startup); IsaacLab ``velocity_env_cfg.py`` ``base_com``: x, y ±0.05,
+    z ±0.01 m."""
     com_body: str = "torso"
     """The link whose centre of mass moves (mjlab's ``torso_link``)."""
     kp_scale: tuple[float, float] = (0.8, 1.2)
@@ -247,7 +248,10 @@ class Randomizer:
             if self.sim.solver_kind == "mujoco":
                 from newton import ModelFlags
 
-                self.sim.solver.notify_model_changed(ModelFlags.SHAPE_PROPERTIES)
+                solver = self.sim.solver
+                solver.notify_model_changed(ModelFlags.SHAPE_PROPERTIES)
+                if getattr(solver, "use_mujoco_cpu", False):  # Newton refreshes MuJoCo C's inertias, not its friction
+                    solver.mj_model.geom_friction[:] = solver.mjw_model.geom_friction.numpy()[0]
         return self.delay[ids]
 
     def _inverse_inertia(self) -> None:
