@@ -186,7 +186,18 @@ def test_a_skill_trains_on_a_randomised_plant(tmp_path, humanoid):
     assert (np.abs(model_fields(plant)["kp"] - first) > 1e-4).all(axis=1).any()
 
 
-@pytest.mark.slow  # ~40 s: the whole benchmark (fit runs given) with (a), (e), (f) deployed on the real robot
+def test_the_floor_benchmark_refuses_randomised_policies_on_the_cpu_before_it_starts(tmp_path, humanoid):
+    from wresdyn.errors import WresdynError
+    from wresdyn.experiments.deploy_config import FloorDeployConfig
+    from wresdyn.experiments.skills import run_benchmark
+
+    out = tmp_path / "floor"
+    with pytest.raises(WresdynError, match="per-world physics"):
+        run_benchmark(humanoid, None, out, FloorDeployConfig(), policies=("a_nominal", "e_randomized"))
+    assert not out.exists()
+
+
+@pytest.mark.slow  # ~45 s: the whole benchmark (fit runs given) with (a), (e), (f) deployed on the real robot
 def test_randomised_baselines_train_and_deploy_through_the_benchmark(tmp_path, humanoid, data):
     """(e) and (f) fine-tuned from (a) on randomised plants and deployed on the real robot, at the smallest size."""
     from wresdyn.experiments.deploy_config import DeployConfig

@@ -33,11 +33,12 @@ from pathlib import Path
 
 from ..data.mismatch import Mismatch
 from ..data.real_robot import RealRobot
+from ..errors import WresdynError
+from ..learn.runs import run_physics
 from ..robot import load_robot
 from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, metrics
 from ..skills.motions import make_motions
-from ..learn.runs import run_physics
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.randomize import Randomization, narrow_ranges
 from ..skills.report import write_report
@@ -184,6 +185,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     task = task or (FloorTaskConfig() if isinstance(cfg, FloorDeployConfig) else SkillConfig())
     cfg = cfg or (FloorDeployConfig() if task.floating else DeployConfig())
     floor = task.floating
+    if floor and cfg.device == "cpu" and any(POLICIES.get(p) in RANDOMIZED for p in policies):
+        raise WresdynError("the randomised policies on the floor need per-world physics, which the floor's threaded "
+                           "CPU worlds do not have: run them with --device cuda")
     policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     plant_robot = load_robot(robot.source, gains=robot.gains, base="floating") if floor else robot
     rate = float(dataset.rate_hz)
