@@ -12,8 +12,11 @@ the "real" robot, on its stand or standing on its floor (the task config's varia
 3. Policies (PPO, rsl-rl, :mod:`wresdyn.skills.skill_ppo`; on the floor an asymmetric actor-critic): (a) trained in the
    nominal simulator; (b) (a) fine-tuned in the calibrated one; (c) (a) fine-tuned with the delta-action residual;
    (d) the oracle, (a) fine-tuned on the "real" robot itself (:class:`~wresdyn.skills.plants.RealPlant`, or the same
-   robot batched on the GPU, :class:`~wresdyn.skills.real_warp.RealWarpPlant`). (b), (c) and (d) get the same number
-   of fine-tuning iterations.
+   robot batched on the GPU, :class:`~wresdyn.skills.real_warp.RealWarpPlant`); asked for by name, the
+   domain-randomised baselines (:mod:`wresdyn.skills.randomize`): (e) (a) fine-tuned in the nominal simulator over the
+   peers' wide ranges, (f) (a) fine-tuned in the calibrated one over narrow ranges from its identification. (b)-(f) get
+   the same number of fine-tuning iterations on the same worlds ((e) fine-tuned rather than trained from scratch: it
+   then differs from (b) in the simulator alone).
 4. Deployment (:mod:`wresdyn.skills.evaluate`): every policy, and the reference played open loop, on the "real" robot
    (the dataset's mismatch; on the floor its IMU's noise too) over the validation and held-out motions; each policy
    also in the simulator it was trained in. Gap closed = (a − b) / (a − d) on held-out MPJPE (on the floor also on
@@ -31,30 +34,41 @@ from pathlib import Path
 
 from ..data.mismatch import Mismatch
 from ..data.real_robot import RealRobot
+from ..errors import WresdynError
+from ..learn.runs import run_physics
 from ..robot import load_robot
 from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, metrics
 from ..skills.motions import make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.real_warp import RealWarpPlant
+from ..skills.randomize import Randomization, narrow_ranges
 from ..skills.report import write_report
 from ..skills.skill_config import FloorTaskConfig, SkillConfig
 from ..skills.skill_ppo import load_skill, train_skill
 from .deploy_config import DeployConfig, FloorDeployConfig
-from .zero_shot import POLICIES, fit_corrections, start_benchmark, write_results
+from .zero_shot import BASE_POLICIES, POLICIES, RANDOMIZED, fit_corrections, start_benchmark, write_results
 
 __all__ = ["DeployConfig", "FloorDeployConfig", "run_benchmark"]
 
 
-def _plants(task, real, robot, rate: float, runs: dict, device: str):
+def _plants(task, real, robot, rate: float, runs: dict, device: str, dr: Randomization | None = None):
     """The plant makers of a task: ``real(worlds, seed)`` (with the IMU's noise on the floor) and
-    ``sim(setting, worlds)`` (on the floor with ``ground``)."""
+    ``sim(setting, worlds)`` (on the floor with ``ground``; a :data:`~.zero_shot.RANDOMIZED` setting with ``dr``)."""
 
     def real_plant(worlds: int, seed: int) -> RealPlant:
         return RealPlant(real, worlds, task.decimation, seed=seed, imu_noise=_imu_noise(task))
 
     def sim(setting: str, worlds: int):
-        return sim_plant(setting, robot, worlds, rate, task.decimation, runs.get(setting), device, ground=task.floating)
+        randomization = None
+        if setting in RANDOMIZED:
+            setting, cfg = RANDOMIZED[setting], dr or Randomization()
+            randomization = cfg
+            if setting == "calibrated":
+                run = runs.get(setting)
+                randomization = (cfg, narrow_ranges(cfg, robot, run_physics(run, robot), run)[0])
+        return sim_plant(setting, robot, worlds, rate, task.decimation, runs.get(setting), device, ground=task.floating,
+                         randomization=randomization)
 
     return real_plant, sim
 
@@ -65,14 +79,14 @@ def _imu_noise(task) -> tuple[float, float]:
 
 
 def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs: dict, meta: dict, out: Path,
-                  log) -> float:
+                  log, dr: Randomization | None = None) -> float:
     """Train policy ``name`` (the ``i``-th of the benchmark: ``a_nominal`` from scratch, the others fine-tuned from it)
     on its plant (``robot``: the one the task acts on, on its stand or with its free base); returns the wall-clock
     time [s]."""
     setting = POLICIES[name]
     t0 = time.perf_counter()
     worlds = cfg.oracle_worlds if setting == "real" else cfg.num_worlds
-    real_plant, sim = _plants(task, real, robot, real.rate_hz, runs, cfg.device)
+    real_plant, sim = _plants(task, real, robot, real.rate_hz, runs, cfg.device, dr)
     if setting != "real":
         plant = sim(setting, worlds)
     elif cfg.oracle_plant == "mujoco_warp":  # the same real robot batched on the device, float32
@@ -81,7 +95,9 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
     else:
         plant = real_plant(worlds, cfg.seed + 1)
     env = TrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
-    run_meta = {**meta, "setting": setting, "correction": str(runs.get(setting, ""))}
+    run_meta = {**meta, "setting": setting, "correction": str(runs.get(RANDOMIZED.get(setting, setting), ""))}
+    if setting in RANDOMIZED:
+        run_meta["randomization"] = asdict(dr or Randomization())
     it = cfg.iterations if i == 0 else cfg.finetune
     train_skill(env, replace(ppo, iterations=it, restart_std=None if i == 0 else cfg.finetune_std),
                 out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
@@ -93,7 +109,7 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
 
 
 def _train_beside(source: str, gains, mismatch: dict, rate: float, i: int, name: str, device: str, motions, task,
-                  ppo, cfg, runs, meta, out: Path) -> float:
+                  ppo, cfg, runs, meta, out: Path, dr: Randomization | None = None) -> float:
     """:func:`_train_policy` on the floor in a process of its own, its PPO and simulated plant on ``device`` (its lines
     go to its ``train.log`` only)."""
     import torch
@@ -103,10 +119,10 @@ def _train_beside(source: str, gains, mismatch: dict, rate: float, i: int, name:
     floating = load_robot(source, gains=gains, base="floating")
     real = RealRobot(floating, Mismatch.from_dict(mismatch, "the benchmark's mismatch"), rate)
     return _train_policy(i, name, floating, real, motions, task, replace(ppo, device=device),
-                         replace(cfg, device=device), runs, meta, out, lambda s: None)
+                         replace(cfg, device=device), runs, meta, out, lambda s: None, dr)
 
 
-def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: Path, mismatch, log) -> dict:
+def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: Path, mismatch, log, dr=None) -> dict:
     """Train every policy; returns the wall-clock of each [s]. On the floor with PPO on a GPU the oracle's real robot
     (MuJoCo C on the host's cores) trains beside (b) and (c), and with more GPUs the simulated fine-tunings after (b)
     each on one of them: all start as soon as (a), which they are fine-tuned from, is done."""
@@ -122,7 +138,8 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
         for name in policies:
             if name in beside:
                 continue
-            wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out, log)
+            wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out, log,
+                                       dr)
             if name == "a_nominal" and beside:
                 import multiprocessing as mp
 
@@ -130,7 +147,7 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
                 for other, device in beside.items():
                     jobs[other] = pool.apply_async(_train_beside, (
                         str(robot.source), robot.gains, mismatch.to_dict(), real.rate_hz, index[other], other, device,
-                        motions, task, ppo, cfg, runs, meta, out))
+                        motions, task, ppo, cfg, runs, meta, out, dr))
                     where = "on the real robot" if other == "d_oracle" else f"on {device}"
                     log(f"[3/4] policy {other}: training {where} beside the others "
                         f"({out / 'skills' / other / 'train.log'})")
@@ -150,7 +167,7 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
 
 def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | None = None, *, data_path=None,
                   calibrated=None, delta=None, mismatch=None, task=None, ppo=None, animation: bool = True,
-                  policies=tuple(POLICIES), log=print) -> dict:
+                  policies=BASE_POLICIES, randomization: Randomization | None = None, log=print) -> dict:
     """Run the benchmark into ``out`` (resumable: finished fits and policies are reused, PPO resumes).
 
     Args:
@@ -167,7 +184,11 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             the one of ``cfg``'s kind, the stand's without ``cfg``).
         ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
-            ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``).
+            ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``; default
+            :data:`~.zero_shot.BASE_POLICIES`, the domain-randomised ``e_randomized`` and ``f_calibrated_narrow`` by
+            name).
+        randomization: The ranges of (e) and the seed of (e)'s and (f)'s draws
+            (:class:`~wresdyn.skills.randomize.Randomization`; default its own, seeded with ``cfg.seed``).
 
     Returns:
         The results written to ``results.json``.
@@ -177,6 +198,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     task = task or (FloorTaskConfig() if isinstance(cfg, FloorDeployConfig) else SkillConfig())
     cfg = cfg or (FloorDeployConfig() if task.floating else DeployConfig())
     floor = task.floating
+    if floor and cfg.device == "cpu" and any(POLICIES.get(p) in RANDOMIZED for p in policies):
+        raise WresdynError("the randomised policies on the floor need per-world physics, which the floor's threaded "
+                           "CPU worlds do not have: run them with --device cuda")
     policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     plant_robot = load_robot(robot.source, gains=robot.gains, base="floating") if floor else robot
     rate = float(dataset.rate_hz)
@@ -200,12 +224,18 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         meta["motions"]["floor"] = True
         if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
             meta["motions"]["extra"] = list(cfg.extra_families)
+    dr = randomization or Randomization(seed=cfg.seed)
     wall = _train_all(policies, plant_robot, real, motions.split("train"), task, ppo, cfg, runs, meta, out, mismatch,
-                      log)
+                      log, dr)
     results = {"config": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo), "mismatch": mismatch.to_dict(),
                "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None},
                "train_wall_s": wall, "fit_wall_s": fit_s, "real": {}, "sim": {}}
-    real_plant, sim = _plants(task, real, plant_robot, rate, runs, cfg.device)
+    if any(POLICIES[p] in RANDOMIZED for p in policies):
+        results["randomization"] = asdict(dr)
+        if "f_calibrated_narrow" in policies:
+            results["randomization"]["narrow"] = narrow_ranges(dr, plant_robot, run_physics(calibrated, plant_robot),
+                                                               calibrated)[1]
+    real_plant, sim = _plants(task, real, plant_robot, rate, runs, cfg.device, dr)
     rollouts = {}
     for split in ("validation", "heldout"):
         mot = motions.split(split)
@@ -250,4 +280,5 @@ def _gaps(results: dict, floor: bool) -> None:
                     for n, r in results["real"][split].items()}
             results[f"gap_closed{suffix}_{metric}" if floor else f"gap_closed{suffix}"] = {
                 k: gap_closed(mean["a_nominal"], mean[k], mean["d_oracle"])
-                for k in ("b_calibrated", "c_delta_action") if k in mean and "d_oracle" in mean}
+                for k in ("b_calibrated", "c_delta_action", "e_randomized", "f_calibrated_narrow")
+                if k in mean and "d_oracle" in mean}

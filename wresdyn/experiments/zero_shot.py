@@ -17,10 +17,17 @@ from ..fit.hybrid import fit_hybrid
 from ..identify.sysid import SysIdConfig
 from ..skills.skill_config import SkillPPOConfig
 
-__all__ = ["POLICIES", "BenchmarkStart", "start_benchmark", "fit_corrections", "write_results"]
+__all__ = ["POLICIES", "BASE_POLICIES", "RANDOMIZED", "BenchmarkStart", "start_benchmark", "fit_corrections",
+           "write_results"]
 
-POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real"}
+POLICIES = {"a_nominal": "nominal", "b_calibrated": "calibrated", "c_delta_action": "delta_action", "d_oracle": "real",
+            "e_randomized": "randomized", "f_calibrated_narrow": "calibrated_narrow"}
 """Policy run folders and the plant each trains on."""
+BASE_POLICIES = ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle")
+"""What a benchmark trains unless told: the domain-randomised baselines (e), (f) are asked for by name."""
+RANDOMIZED = {"randomized": "nominal", "calibrated_narrow": "calibrated"}
+"""The domain-randomised settings and the simulator each randomises (:mod:`wresdyn.skills.randomize`): (e) the
+nominal one over the peers' wide ranges, (f) the calibrated one over narrow ranges from the identification."""
 
 
 class BenchmarkStart(NamedTuple):

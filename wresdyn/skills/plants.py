@@ -26,6 +26,8 @@ from ..learn.runs import run_physics
 from ..learn.run_residual import load_policy
 from ..robot.mujoco_model import free_from_mujoco, free_to_mujoco
 from ..sim import DivergenceLimits, Simulator
+from ..sim.physics import PhysicalParams
+from .randomize import Randomization, Randomizer, wide_ranges
 from .reference import base_frame_imu
 
 __all__ = ["SimPlant", "RealPlant", "SETTINGS", "sim_plant"]
@@ -49,10 +51,14 @@ class SimPlant:
         device: Warp device.
         ground: The robot (a floating base) stands on a floor (:class:`~wresdyn.sim.Simulator` ``ground=True``):
             :meth:`reset_full` places it, :attr:`base_pose` / :attr:`base_twist` read its base.
+        randomization: Domain randomisation (:mod:`wresdyn.skills.randomize`): a
+            :class:`~wresdyn.skills.randomize.Randomization` (its wide ranges around ``physics``), or one with the
+            :class:`~wresdyn.skills.randomize.Ranges` to draw, ``(cfg, ranges)``; ``None``: every world the same.
     """
 
     def __init__(self, robot, num_worlds: int, rate_hz: float, decimation: int, *, physics=None, residual=None,
-                 kind: str | None = None, device: str = "cpu", solver: str = "auto", ground: bool = False) -> None:
+                 kind: str | None = None, device: str = "cpu", solver: str = "auto", ground: bool = False,
+                 randomization=None) -> None:
         self.robot, self.num_worlds, self.decimation = robot, int(num_worlds), int(decimation)
         self.dt = 1.0 / rate_hz
         self.sim = Simulator(robot, self.num_worlds, self.dt, solver=solver, device=device, ground=ground)
@@ -62,12 +68,27 @@ class SimPlant:
         if physics is not None:
             self.sim.set_physics(physics)
             delay = np.asarray(physics.delay, dtype=np.float64) * rate_hz  # [samples]
-        whole = np.floor(delay).astype(np.int64)
-        self._m = torch.as_tensor(whole, device=self.device)
-        self._alpha = torch.as_tensor(delay - whole, dtype=torch.float32, device=self.device)
-        self._cols = torch.arange(n, device=self.device)
-        self._hist = torch.zeros(self.num_worlds, int(whole.max()) + 2, n, device=self.device)
+        self.rate_hz = float(rate_hz)
+        self.randomizer = None
+        longest = float(delay.max())  # [samples]
+        if randomization is not None:
+            cfg, ranges = randomization if isinstance(randomization, tuple) else (randomization, None)
+            if not isinstance(cfg, Randomization):
+                raise WresdynError(f"randomization: need a Randomization, got {type(cfg).__name__}")
+            centre = physics if physics is not None else PhysicalParams.nominal(robot)
+            ranges = ranges or wide_ranges(cfg, robot, centre)
+            self.randomizer = Randomizer(self.sim, centre, ranges, seed=cfg.seed)
+            self._redraw = cfg.redraw == "reset"
+            longest = max(longest, float(np.max(ranges.delay[1])) * rate_hz)
+        self._m = torch.as_tensor(np.tile(np.floor(delay), (self.num_worlds, 1)).astype(np.int64),
+                                  device=self.device)
+        self._alpha = torch.as_tensor(np.tile(delay - np.floor(delay), (self.num_worlds, 1)),
+                                      dtype=torch.float32, device=self.device)
+        """Per world and joint, the delay's whole sample periods (N, n) and the fraction of one (N, n)."""
+        self._hist = torch.zeros(self.num_worlds, int(np.floor(longest)) + 2, n, device=self.device)
         """Commands of the last sample periods [rad], newest first (N, H, n): the delay line."""
+        if self.randomizer is not None:
+            self._set_delay(torch.arange(self.num_worlds), self.randomizer.draw())
         self.residual = None if residual is None else residual.to(self.device)
         self.kind = kind
         if residual is not None and kind not in ("torque", "delta_action"):
@@ -81,6 +102,8 @@ class SimPlant:
         """Place worlds ``ids`` (long (k,)) at rest-held state ``q``, ``qd`` (k, n); the delay line holds ``q``."""
         if len(ids) == 0:
             return
+        if self.randomizer is not None and self._redraw:
+            self._set_delay(ids, self.randomizer.draw(ids))
         self.sim.set_state(ids, q, qd)
         self.q[ids], self.qd[ids], self._qdd[ids] = q, qd, 0.0
         self._hist[ids] = q[:, None, :]
@@ -93,6 +116,13 @@ class SimPlant:
             return
         self.sim.set_full_state(ids, base_pose, base_twist, q, qd)
         self.reset(ids, q, qd)
+
+    def _set_delay(self, ids, seconds: np.ndarray) -> None:
+        """Worlds ``ids``' command delay [s] (k, n) into the delay line."""
+        d = torch.as_tensor(np.asarray(seconds) * self.rate_hz, dtype=torch.float32, device=self.device)
+        whole = torch.floor(d)
+        ids = torch.as_tensor(ids, device=self.device)
+        self._m[ids], self._alpha[ids] = whole.long(), d - whole
 
     @property
     def base_pose(self) -> torch.Tensor:
@@ -112,7 +142,8 @@ class SimPlant:
             self._hist = torch.roll(self._hist, 1, dims=1)
             self._hist[:, 0] = cmd
             a = self._alpha
-            target = (1 - a) * self._hist[:, self._m, self._cols] + a * self._hist[:, self._m + 1, self._cols]
+            m = self._m[:, None, :]
+            target = (1 - a) * self._hist.gather(1, m)[:, 0] + a * self._hist.gather(1, m + 1)[:, 0]
             tau = None
             if self.residual is not None:
                 with torch.no_grad():
@@ -135,18 +166,19 @@ class SimPlant:
 
 
 def sim_plant(setting: str, robot, num_worlds: int, rate_hz: float, decimation: int, run: str | None = None,
-              device: str = "cpu", ground: bool = False) -> SimPlant:
+              device: str = "cpu", ground: bool = False, randomization=None) -> SimPlant:
     """The simulator of a training ``setting`` (:data:`SETTINGS`): ``nominal``; ``calibrated`` from a ``wresdyn fit``
     run (``physics.json`` and the torque residual ``policy.pt``; a run of identified physics alone works too);
     ``delta_action`` from a ``wresdyn fit --model network --residual delta_action`` run. ``ground``: ``robot`` has
     a free base and stands on a floor; the corrections fitted on the stand apply unchanged (the same joints and
-    links)."""
+    links). ``randomization``: domain randomisation around the setting's physics (:class:`SimPlant`)."""
     from pathlib import Path
 
     if setting not in SETTINGS:
         raise WresdynError(f"unknown training setting {setting!r}; choose from {SETTINGS}")
     if setting == "nominal":
-        return SimPlant(robot, num_worlds, rate_hz, decimation, device=device, ground=ground)
+        return SimPlant(robot, num_worlds, rate_hz, decimation, device=device, ground=ground,
+                        randomization=randomization)
     if not run:
         raise WresdynError(f"the {setting} setting needs a run folder (wresdyn fit)")
     run = Path(run)
@@ -167,7 +199,7 @@ def sim_plant(setting: str, robot, num_worlds: int, rate_hz: float, decimation: 
         raise WresdynError(f"{run}: the delta-action setting needs a delta_action residual on the robot file's physics "
                            "(wresdyn fit --model network --residual delta_action)")
     return SimPlant(robot, num_worlds, rate_hz, decimation, physics=physics, residual=policy,
-                    kind=meta["kind"], device=device, ground=ground)
+                    kind=meta["kind"], device=device, ground=ground, randomization=randomization)
 
 
 class RealPlant:

@@ -10,13 +10,16 @@ import numpy as np
 from ..evaluation.animation import write_animation
 from .evaluate import gaps_or_why_not
 
-__all__ = ["write_report", "plot_tracking", "table", "one_per_family", "plot_rollouts", "gaps_text", "gap_line"]
+__all__ = ["write_report", "plot_tracking", "table", "one_per_family", "plot_rollouts", "gaps_text", "gap_line",
+           "randomization_text"]
 
 LABELS = {"reference": "reference played open loop (no policy)", "a_nominal": "(a) nominal simulator",
           "b_calibrated": "(b) (a) fine-tuned, calibrated robot", "c_delta_action": "(c) (a) fine-tuned, delta action",
-          "d_oracle": "(d) oracle: (a) fine-tuned on the real robot"}
+          "d_oracle": "(d) oracle: (a) fine-tuned on the real robot",
+          "e_randomized": "(e) (a) fine-tuned, nominal + wide domain randomisation",
+          "f_calibrated_narrow": "(f) (a) fine-tuned, calibrated + narrow randomisation"}
 COLOURS = {"a_nominal": "tab:orange", "b_calibrated": "tab:blue", "c_delta_action": "tab:purple",
-           "d_oracle": "tab:green"}
+           "d_oracle": "tab:green", "e_randomized": "tab:red", "f_calibrated_narrow": "tab:cyan"}
 
 
 def table(split: dict, sim: dict | None = None, floor: bool = False) -> str:
@@ -86,6 +89,24 @@ def plot_tracking(rollouts: dict, motions, robot, path, rate_hz: float, max_moti
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def randomization_text(results: dict) -> str:
+    """The report's paragraph on the domain-randomised policies (e), (f): their ranges (empty without them)."""
+    r = results.get("randomization")
+    if not r:
+        return ""
+    text = ("\nDomain randomisation (`wresdyn.skills.randomize`, each world drawn anew at its episode's reset"
+            if r["redraw"] == "reset" else "\nDomain randomisation (`wresdyn.skills.randomize`, drawn once per world")
+    text += (f", seed {r['seed']}): (e) link masses and inertias ×{r['mass_scale'][0]:g}–{r['mass_scale'][1]:g}, "
+             f"{r['com_body']} centre of mass ±{', ±'.join(f'{x:g}' for x in r['com_offset'])} m, kp "
+             f"×{r['kp_scale'][0]:g}–{r['kp_scale'][1]:g}, kd ×{r['kd_scale'][0]:g}–{r['kd_scale'][1]:g}, dry friction "
+             f"{r['friction'][0]:g}–{r['friction'][1]:g} of the effort limit, armature "
+             f"×{r['armature_scale'][0]:g}–{r['armature_scale'][1]:g}, effort limits "
+             f"×{r['effort_scale'][0]:g}–{r['effort_scale'][1]:g}, command delay {1e3 * r['delay'][0]:g}–"
+             f"{1e3 * r['delay'][1]:g} ms, floor friction {r['floor_friction'][0]:g}–{r['floor_friction'][1]:g} on "
+             "the floor (the sources in `Randomization`'s docstrings)")
+    return text + (f"; (f) around the identified values, {r['narrow']}.\n" if "narrow" in r else ".\n")
 
 
 def gaps_text(g: dict) -> str:
@@ -159,7 +180,7 @@ where the oracle (d) beats (a): a lower MPJPE and no lower success.
 Corrections: {', '.join(f'{k} `{v}`' for k, v in results['corrections'].items())}. Wall clock: {results['wall_s']:.0f} s (fits {results['fit_wall_s']:.0f} s;
 policies {', '.join(f'{k} {v:.0f} s' for k, v in results['train_wall_s'].items())}).
 """
-    (out / "report.md").write_text(text)
+    (out / "report.md").write_text(text + randomization_text(results))
 
 
 def _floor_table(split: dict, sim: dict | None = None) -> str:
@@ -296,4 +317,4 @@ beats (a): a lower error and no lower success.
 Corrections: {', '.join(f'{k} `{v}`' for k, v in results['corrections'].items())}. Wall clock: {results['wall_s']:.0f} s
 (fits {results['fit_wall_s']:.0f} s; policies {', '.join(f'{k} {v:.0f} s' for k, v in results['train_wall_s'].items())}).
 """
-    (out / "report.md").write_text(text)
+    (out / "report.md").write_text(text + randomization_text(results))

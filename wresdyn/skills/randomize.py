@@ -1,0 +1,269 @@
+"""Domain randomisation of a simulated plant: the physics of every world drawn around a centre, redrawn per episode.
+
+Two baselines users run instead of (or on top of) calibration: (e) the nominal simulator with the wide ranges the
+peers' humanoid tasks randomise (:class:`Randomization`, each range with its source) and (f) the calibrated simulator
+with narrow ranges around the identified values, their widths from the identification's standard errors
+(:func:`narrow_ranges`).
+
+A draw writes, per world, into the Newton model of :class:`~wresdyn.skills.plants.SimPlant`'s simulator (through
+:meth:`wresdyn.sim.Simulator.set_world_physics`, the per-world path identifiability uses): PD gains
+(``joint_target_ke/kd``, what every solver reads), dry friction, armature, effort limits, link masses with their
+inertias scaled alike (uniform density: the inverse mass and inertia follow), the centre of mass of one link, and
+on the floor the friction of the robot's collision shapes (``shape_material_mu``). The command delay is the plant's
+own delay line, per world. Draws are uniform in each range (log-uniform for scale factors, so ×0.8 and ×1.25 are
+equally likely), seeded: the same seed gives the same draws.
+
+When: ``redraw="reset"`` draws again for every world an episode resets (IsaacLab's ``mode="reset"``), ``"startup"``
+once at construction (IsaacLab's and mjlab's ``mode="startup"``, their choice for masses and materials).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+
+from ..errors import WresdynError
+
+__all__ = ["Randomization", "Ranges", "Randomizer", "wide_ranges", "narrow_ranges", "NARROW_SIGMAS", "NARROW_FLOOR",
+           "NARROW_DEFAULT"]
+
+SCALED = ("kp", "kd", "armature", "effort", "body_mass")
+"""Fields drawn as a factor on the centre value (log-uniform)."""
+
+
+@dataclass(frozen=True)
+class Randomization:
+    """Wide domain randomisation, the ranges of the peers' humanoid tasks (scaled to this humanoid: 35 kg, as the
+    Unitree G1 those tasks drive). Scale ranges multiply the centre (the robot file's value); absolute ones replace
+    or offset it."""
+
+    mass_scale: tuple[float, float] = (0.8, 1.2)
+    """Factor on every moving link's mass, its inertia scaled alike [-]. Source: ``zengliangjun/IGL``
+    ``humanoidverse/simulator/isaacsim45/event_cfg.py`` (IsaacLab ``randomize_rigid_body_mass``,
+    ``mass_distribution_params (0.8, 1.2)``, ``operation "scale"``); IsaacLab's own
+    ``locomotion/velocity/velocity_env_cfg.py`` adds (-5, 5) kg to the base (disabled there: NaNs), 14 % of a
+    35 kg robot."""
+    com_offset: tuple[float, float, float] = (0.025, 0.05, 0.05)
+    """Half-ranges of the offset of ``com_body``'s centre of mass along x, y, z [m]. Source: ``mujocolab/mjlab``
+    ``src/mjlab/tasks/tracking/tracking_env_cfg.py`` ``base_com`` (``torso_link`` ``body_ipos`` add
+    x ±0.025, y ±0.05, z ±0.05 m, startup); IsaacLab ``velocity_env_cfg.py`` ``base_com``: x, y ±0.05,
+    z ±0.01 m."""
+    com_body: str = "torso"
+    """The link whose centre of mass moves (mjlab's ``torso_link``)."""
+    kp_scale: tuple[float, float] = (0.8, 1.2)
+    """Factor on the PD stiffness [-]: IsaacLab ``randomize_actuator_gains`` ``stiffness_distribution_params``,
+    (0.8, 1.2) and (0.9, 1.1) the recurring humanoid settings of IsaacLab-based task configs (the IsaacLab
+    locomotion configs themselves leave the gains alone)."""
+    kd_scale: tuple[float, float] = (0.8, 1.2)
+    """Factor on the PD damping [-]: ``damping_distribution_params``, as ``kp_scale``."""
+    friction: tuple[float, float] = (0.0, 0.05)
+    """Dry joint friction as a fraction of the joint's effort limit [-] (absolute, not a factor: the robot file's
+    friction is 0, which IsaacLab's ``randomize_joint_parameters`` ``friction_distribution_params (0.5, 1.25)``
+    ``"scale"`` would leave at 0). 0.05 of the limit is the identification's friction unit
+    (:class:`~wresdyn.sim.physics.PhysicsModel` ``ref``)."""
+    armature_scale: tuple[float, float] = (0.8, 1.2)
+    """Factor on the joint armature [-]: IsaacLab ``randomize_joint_parameters`` ``armature_distribution_params``
+    (0.8, 1.2), the recurring humanoid setting of IsaacLab-based task configs."""
+    effort_scale: tuple[float, float] = (0.9, 1.1)
+    """Factor on the effort limits [-]: mjlab's ``dr`` module randomises ``effort_limits``; no humanoid task config
+    read here sets a range, so ±10 % (a stated rule)."""
+    delay: tuple[float, float] = (0.0, 0.02)
+    """Command delay [s], per world (all joints alike): up to one policy period at 50 Hz (a stated rule: the
+    peers' tracking configs read here add no delay; humanoid sim-to-real work randomises 0-20 ms)."""
+    floor_friction: tuple[float, float] = (0.3, 1.2)
+    """Robot-floor sliding friction [-] (floor only). Source: mjlab ``tracking_env_cfg.py`` ``foot_friction``
+    (``geom_friction`` abs (0.3, 1.2), startup); IsaacLab's static friction 0.8 / dynamic 0.6 (disabled there)."""
+    redraw: Literal["reset", "startup"] = "reset"
+    """Draw again for every world an episode resets, or once at construction."""
+    seed: int = 0
+    """Seed of the draws."""
+
+
+@dataclass
+class Ranges:
+    """Per-parameter ranges of one plant: ``scale[field] = (lo, hi)`` factors on the centre value ((n,) joint fields,
+    (nb,) ``body_mass``), the rest absolute."""
+
+    scale: dict
+    """Factor ranges of :data:`SCALED` fields, each ``(lo, hi)`` arrays."""
+    friction: tuple[np.ndarray, np.ndarray]
+    """Dry friction range [N·m], (n,) each."""
+    delay: tuple[np.ndarray, np.ndarray]
+    """Command delay range [s], (n,) each."""
+    com_offset: np.ndarray
+    """Half-range of the CoM offset of ``com_body`` [m], (3,)."""
+    com_body: str
+    floor_friction: tuple[float, float]
+    """Robot-floor friction range [-]."""
+
+
+def _pair(r, n) -> tuple[np.ndarray, np.ndarray]:
+    return np.full(n, float(r[0])), np.full(n, float(r[1]))
+
+
+def wide_ranges(cfg: Randomization, robot, centre) -> Ranges:
+    """(e)'s ranges: ``cfg``'s, around ``centre`` (:class:`~wresdyn.sim.physics.PhysicalParams`)."""
+    n, nb = robot.n_dof, len(centre.body_mass)
+    eff = np.asarray(centre.effort, dtype=np.float64)
+    eff = np.where(np.isfinite(eff), eff, 0.0)
+    scale = {"kp": _pair(cfg.kp_scale, n), "kd": _pair(cfg.kd_scale, n), "armature": _pair(cfg.armature_scale, n),
+             "effort": _pair(cfg.effort_scale, n), "body_mass": _pair(cfg.mass_scale, nb)}
+    return Ranges(scale, (cfg.friction[0] * eff, cfg.friction[1] * eff), _pair(cfg.delay, n),
+                  np.asarray(cfg.com_offset, dtype=np.float64), cfg.com_body, tuple(cfg.floor_friction))
+
+
+NARROW_SIGMAS = 2.0
+"""(f): a factor range exp(±NARROW_SIGMAS · SE) around the identified value (SE of its log, the identifiability
+report's relative standard error): the 95 % band of a log-normal estimate."""
+NARROW_FLOOR = 0.02
+"""(f): the least half-width of a factor range (the report's errors are lower bounds)."""
+NARROW_DEFAULT = 0.10
+"""(f): the half-width of a parameter the report does not cover (not fitted, no finite error, no report): ±10 %."""
+
+
+def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
+    """(f)'s ranges around the identified ``centre``: each identified parameter's factor range
+    exp(±:data:`NARROW_SIGMAS` · SE) from ``run``'s ``identify/identifiability.json`` (or ``identifiability.json``),
+    at least ±:data:`NARROW_FLOOR` and never wider than (e)'s; a parameter without a finite error
+    ±:data:`NARROW_DEFAULT`. Dry friction and delay the same way around their identified values; the CoM offsets
+    :data:`NARROW_DEFAULT` of (e)'s (the report does not cover them); the floor friction (e)'s (the stand's data say
+    nothing of the floor). Returns the ranges and one line saying where the widths came from."""
+    wide = wide_ranges(cfg, robot, centre)
+    run = Path(run)
+    path = next((p for p in (run / "identify" / "identifiability.json", run / "identifiability.json")
+                 if p.is_file()), None)
+    se = {}
+    if path is not None:
+        for p in json.loads(path.read_text())["parameters"]:
+            if p.get("se") is not None and p.get("se_pct") is not None and math.isfinite(p["se"]):
+                se[p["name"]] = float(p["se"])
+    names = {"body_mass": list(robot.body_names)}
+    scale, half = {}, {}
+    for f in (*SCALED, "friction", "delay"):
+        labels = names.get(f, list(robot.joint_names))
+        h = np.array([NARROW_SIGMAS * se[f"{f}:{x}"] if f"{f}:{x}" in se else math.log1p(NARROW_DEFAULT)
+                      for x in labels])
+        half[f] = np.maximum(h, math.log1p(NARROW_FLOOR))
+    for f in SCALED:  # never wider than (e)
+        lo, hi = wide.scale[f]
+        scale[f] = (np.maximum(np.exp(-half[f]), lo), np.minimum(np.exp(half[f]), hi))
+    fr, de = np.asarray(centre.friction, float), np.asarray(centre.delay, float)
+    friction = (fr * np.exp(-half["friction"]), np.minimum(fr * np.exp(half["friction"]), wide.friction[1] + fr))
+    delay = (de * np.exp(-half["delay"]), np.minimum(de * np.exp(half["delay"]), de + wide.delay[1][0]))
+    source = (f"widths from {path} ({len(se)} parameters with a finite error, ±{NARROW_SIGMAS:g} SE, at least "
+              f"±{100 * NARROW_FLOOR:g} %, others ±{100 * NARROW_DEFAULT:g} %)" if path is not None else
+              f"no identifiability report in {run}: ±{100 * NARROW_DEFAULT:g} % of every identified value")
+    return Ranges(scale, friction, delay, NARROW_DEFAULT * wide.com_offset, wide.com_body,
+                  wide.floor_friction), source
+
+
+class Randomizer:
+    """Draws :class:`Ranges` around ``centre`` for the worlds of a :class:`~wresdyn.sim.Simulator` and writes them
+    into its model; :meth:`draw` returns each world's command delay [s] (k, n) for the plant's delay line.
+
+    Args:
+        sim: The simulator (its ``robot``, ``num_worlds``, ``ground``).
+        centre: :class:`~wresdyn.sim.physics.PhysicalParams` the draws are centred on (the robot file's or the
+            identified ones).
+        ranges: The ranges (:func:`wide_ranges`, :func:`narrow_ranges`).
+        seed: Seed of the draws.
+    """
+
+    def __init__(self, sim, centre, ranges: Ranges, seed: int = 0) -> None:
+        if type(sim.solver).__name__ == "SolverMuJoCoThreads":
+            raise WresdynError("domain randomisation needs per-world physics; the floor's threaded MuJoCo C worlds "
+                               "share world 0's: run the floor's plants on a GPU (mujoco_warp) or with one world")
+        self.sim, self.ranges = sim, ranges
+        self.rng = np.random.default_rng(seed)
+        robot = sim.robot
+        f32 = dict(dtype=torch.float32, device=sim.device)
+        self.centre = {f: torch.as_tensor(np.asarray(getattr(centre, f), dtype=np.float64), **f32)
+                       for f in ("kp", "kd", "armature", "friction", "effort", "body_mass", "body_com",
+                                 "body_inertia")}
+        self.centre["effort"] = torch.where(torch.isfinite(self.centre["effort"]), self.centre["effort"],
+                                            torch.zeros_like(self.centre["effort"]))  # 0: Newton's "unlimited"
+        if ranges.com_body not in robot.body_names:
+            raise WresdynError(f"randomisation: no link {ranges.com_body!r} in {robot.source.name}")
+        self.com_body = list(robot.body_names).index(ranges.com_body)
+        w = sim.num_worlds
+        self.values = {f: v.expand(w, *v.shape).clone() for f, v in self.centre.items()}
+        """Each world's physics as drawn: joint fields (W, n), body fields (W, nb[, 3[, 3]])."""
+        self.delay = np.zeros((w, robot.n_dof))
+        """Each world's command delay [s] (W, n)."""
+        self.floor_friction = np.zeros(w)
+        """Each world's robot-floor friction [-] (W,) (floor only)."""
+        self._shapes = None
+        if sim.ground:
+            import warp as wp
+
+            per_world = np.asarray(sim.model.shape_world.numpy())
+            self._mu = wp.to_torch(sim.model.shape_material_mu, requires_grad=False)
+            # MuJoCo takes the larger of two geoms' friction: the shared floor at the range's low end lets each
+            # world's robot shapes set its own robot-floor friction
+            self._mu[torch.as_tensor(np.flatnonzero(per_world < 0), device=self._mu.device)] = \
+                float(ranges.floor_friction[0])
+            self._shapes = torch.as_tensor(np.flatnonzero(per_world >= 0), device=self._mu.device)
+            self._shape_world = torch.as_tensor(per_world[per_world >= 0], device=self._mu.device)
+
+    def _uniform(self, lo, hi, k: int, log: bool = False) -> np.ndarray:
+        lo, hi = np.broadcast_to(lo, np.shape(hi)), np.asarray(hi)
+        u = self.rng.random((k, *hi.shape))
+        if log:
+            return np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))
+        return lo + u * (hi - lo)
+
+    def draw(self, ids=None) -> np.ndarray:
+        """Draw new physics for worlds ``ids`` (long (k,), ``None``: all) and write every world's into the model;
+        returns the drawn worlds' command delays [s] (k, n)."""
+        w = self.sim.num_worlds
+        ids = np.arange(w) if ids is None else np.asarray(torch.as_tensor(ids).cpu(), dtype=np.int64)
+        k = len(ids)
+        if k == 0:
+            return np.zeros((0, self.sim.robot.n_dof))
+        r, dev = self.ranges, self.sim.device
+        t = lambda a: torch.as_tensor(a, dtype=torch.float32, device=dev)  # noqa: E731
+        idx = torch.as_tensor(ids, device=dev)
+        for f in ("kp", "kd", "armature", "effort"):
+            self.values[f][idx] = self.centre[f] * t(self._uniform(*r.scale[f], k, log=True))
+        self.values["friction"][idx] = t(self._uniform(*r.friction, k))
+        s = t(self._uniform(*r.scale["body_mass"], k, log=True))
+        self.values["body_mass"][idx] = self.centre["body_mass"] * s
+        self.values["body_inertia"][idx] = self.centre["body_inertia"] * s[..., None, None]
+        com = self.centre["body_com"].expand(k, *self.centre["body_com"].shape).clone()
+        com[:, self.com_body] += t(self._uniform(-r.com_offset, r.com_offset, k))
+        self.values["body_com"][idx] = com
+        lo, hi = r.delay  # one quantile for every joint of a world: one command bus
+        self.delay[ids] = lo + self.rng.random((k, 1)) * (hi - lo)
+        self.sim.set_world_physics(self.values)
+        self._inverse_inertia()
+        if self._shapes is not None:
+            self.floor_friction[ids] = self._uniform(*r.floor_friction, k)
+            self._mu[self._shapes] = t(self.floor_friction)[self._shape_world]
+            if self.sim.solver_kind == "mujoco":
+                from newton import ModelFlags
+
+                solver = self.sim.solver
+                solver.notify_model_changed(ModelFlags.SHAPE_PROPERTIES)
+                if getattr(solver, "use_mujoco_cpu", False):  # Newton refreshes MuJoCo C's inertias, not its friction
+                    solver.mj_model.geom_friction[:] = solver.mjw_model.geom_friction.numpy()[0]
+        return self.delay[ids]
+
+    def _inverse_inertia(self) -> None:
+        """Keep the model's inverse mass and inertia those of the drawn masses and inertias (a static body: 0)."""
+        import warp as wp
+
+        model, w = self.sim.model, self.sim.num_worlds
+        m, inertia = self.values["body_mass"], self.values["body_inertia"]
+        inv_m = wp.to_torch(model.body_inv_mass, requires_grad=False).view(w, -1)
+        inv_i = wp.to_torch(model.body_inv_inertia, requires_grad=False).view(w, -1, 3, 3)
+        moving = m > 0
+        inv_m.copy_(torch.where(moving, 1.0 / torch.where(moving, m, torch.ones_like(m)), torch.zeros_like(m)))
+        eye = torch.eye(3, dtype=inertia.dtype, device=inertia.device)
+        safe = torch.where(moving[..., None, None], inertia, eye)
+        inv_i.copy_(torch.where(moving[..., None, None], torch.linalg.inv(safe), torch.zeros_like(inertia)))
