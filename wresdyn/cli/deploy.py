@@ -15,7 +15,7 @@ The sizes are ``DeployConfig`` (``FloorDeployConfig`` with ``--floor``), the tas
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
@@ -53,6 +53,10 @@ class Deploy(Command):
     and the task are then FloorDeployConfig's and FloorTaskConfig's (wresdyn deploy --floor --help)."""
     full: bool = False
     """The full size, for a GPU (DeployConfig.full, FloorDeployConfig.full; the sizes given still apply)."""
+    policies: tuple[Literal["a_nominal", "b_calibrated", "c_delta_action", "d_oracle", "e_randomized",
+                            "f_calibrated_narrow"], ...] = ()
+    """The policies to train and deploy (a_nominal always); empty: a-d. The domain-randomised baselines (e), (f)
+    need per-world physics: on the floor a GPU."""
     animation: bool = True
     """Write the USD animation."""
     quiet: bool = False
@@ -125,5 +129,6 @@ def run(args: Deploy) -> int:
     variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
-          mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, log=log)
+          mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, log=log,
+          **({"policies": args.policies} if args.policies else {}))
     return 0

@@ -43,6 +43,10 @@ class _BenchmarkSizes:
     finetune: int = 300
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
 
+    nominal: str | None = None
+    """(a) not trained here but taken as it is: a shipped policy's name (``floor_nominal``, trained at full size on a
+    GPU; :mod:`wresdyn.skills.shipped`) or a finished skill run folder. ``None``: (a) is trained."""
+
     _prefix = "deploy"
     """How the fields are named in a message (not a field: no annotation)."""
 

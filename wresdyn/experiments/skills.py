@@ -45,6 +45,7 @@ from ..skills.real_warp import RealWarpPlant
 from ..skills.randomize import Randomization, narrow_ranges
 from ..skills.report import write_report
 from ..skills.skill_config import FloorTaskConfig, SkillConfig
+from ..skills.shipped import install_policy
 from ..skills.skill_ppo import load_skill, train_skill
 from .deploy_config import DeployConfig, FloorDeployConfig
 from .zero_shot import BASE_POLICIES, POLICIES, RANDOMIZED, fit_corrections, start_benchmark, write_results
@@ -138,8 +139,13 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
         for name in policies:
             if name in beside:
                 continue
-            wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out, log,
-                                       dr)
+            if name == "a_nominal" and cfg.nominal:  # trained elsewhere (a shipped policy): fine-tuned from here
+                install_policy(cfg.nominal, out / "skills" / name)
+                wall[name] = 0.0
+                log(f"[3/4] policy {name}: {cfg.nominal} (not trained here: {out / 'skills' / name})")
+            else:
+                wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out,
+                                           log, dr)
             if name == "a_nominal" and beside:
                 import multiprocessing as mp
 
