@@ -66,19 +66,23 @@ def mjcf_spec(robot, physics, rate_hz: float) -> tuple[object, list[str]]:
     servo = getattr(robot, "servo", None)
     for i, name in enumerate(robot.joint_names):
         j = spec.joint(name)
+        effort, damping = float(physics.effort[i]), float(physics.damping[i])
+        if servo is not None and servo.mask[i]:
+            w0 = float(physics.noload_speed[i])
+            emf = effort / w0 if w0 > 0 else 0.0
+            damping += emf  # the back-EMF U / w0 acts on the joint whether the PD saturates or not: not clamped
+            dropped = [f"{f} {float(getattr(physics, f)[i]):.4g}" for f in ("deadband", "stiction", "startup_torque")
+                       if getattr(physics, f)[i] > 0]
+            notes.append(f"{name}: servo drive as a position actuator (kp, kv = kd, force range +-{effort:.4g} N m) "
+                         f"and its back-EMF U/w0 = {emf:.4g} N m s/rad in the joint damping"
+                         + (f"; goal profile {float(physics.goal_accel[i]):.4g} rad/s^2 in servo.json (play_mujoco.py "
+                            "applies it to the commands)" if physics.goal_accel[i] > 0 else "")
+                         + f"; without a MuJoCo counterpart: {', '.join(dropped) or 'nothing'}")
         j.armature = float(physics.armature[i])
-        j.damping = [float(physics.damping[i]), *list(j.damping)[1:]]  # [linear, higher-order terms]
+        j.damping = [damping, *list(j.damping)[1:]]  # [linear, higher-order terms]
         j.frictionloss = float(physics.friction[i])
         act = spec.actuator(name)
         kv = float(physics.kd[i])
-        effort = float(physics.effort[i])
-        if servo is not None and servo.mask[i]:
-            w0 = float(physics.noload_speed[i])
-            kv += effort / w0 if w0 > 0 else 0.0  # back-EMF: the torque-speed line's slope U / w0
-            dropped = [f"{f} {float(getattr(physics, f)[i]):.4g}" for f in
-                       ("deadband", "goal_accel", "stiction", "startup_torque") if getattr(physics, f)[i] > 0]
-            notes.append(f"{name}: servo drive as a position actuator (kv = kd + U/w0 = {kv:.4g}, force range "
-                         f"+-{effort:.4g} N m); without a MuJoCo counterpart: {', '.join(dropped) or 'nothing'}")
         act.set_to_position(kp=float(physics.kp[i]), kv=kv)
         if np.isfinite(effort):
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
@@ -153,10 +157,19 @@ def export_mjcf(run: str | Path, out: str | Path | None = None, *, force: bool =
                              friction_kappa=kappa, heldout=held, policy=policy)
 
 
+def servo_goal_accel(robot, physics) -> np.ndarray | None:
+    """Goal acceleration [rad/s²] per joint for ``servo.json`` (0 on PD joints), ``None`` without a servo profile."""
+    servo = getattr(robot, "servo", None)
+    if servo is None or physics.goal_accel is None:
+        return None
+    accel = np.where(servo.mask, physics.goal_accel, 0.0)
+    return accel if (accel > 0).any() else None
+
+
 def round_trip(xml: str | Path, robot, physics, trajectories, rate_hz: float, policy=None, onnx=None,
-               friction_kappa: float | None = None) -> dict:
-    """Replay ``trajectories`` open loop in wresdyn (``physics`` + ``policy``) and in MuJoCo (``xml`` + ``onnx``
-    through :mod:`play_mujoco`); returns mean |q − q_recorded| [rad] of each (``"wresdyn"``, ``"mujoco"``) and of
+               friction_kappa: float | None = None, goal_accel=None) -> dict:
+    """Replay ``trajectories`` open loop in wresdyn (``physics`` + ``policy``) and in MuJoCo (``xml`` + ``onnx``,
+    with the servo goal profile ``goal_accel`` on the commands, through :mod:`play_mujoco`); returns mean |q − q_recorded| [rad] of each (``"wresdyn"``, ``"mujoco"``) and of
     the two replays against each other (``"between"``), over every joint and sample."""
     import mujoco
 
@@ -166,7 +179,7 @@ def round_trip(xml: str | Path, robot, physics, trajectories, rate_hz: float, po
                               friction_kappa=friction_kappa)["residual"].q
     model = mujoco.MjModel.from_xml_path(str(xml))
     res = None if onnx is None else play_mujoco.Residual(str(onnx), 1.0 / rate_hz)
-    mj = [play_mujoco.replay(model, t.q_cmd, t.q[0], t.qd[0], res, t.qdd[0])[0] for t in trajectories]
+    mj = [play_mujoco.replay(model, t.q_cmd, t.q[0], t.qd[0], res, t.qdd[0], goal_accel)[0] for t in trajectories]
     err = lambda qs: float(np.mean(np.concatenate([np.abs(q - t.q) for q, t in zip(qs, trajectories)])))  # noqa: E731
     between = float(np.mean(np.concatenate([np.abs(a - b) for a, b in zip(mj, ref)])))
     return {"wresdyn": err(ref), "mujoco": err(mj), "between": between, "trajectories": len(trajectories),
@@ -198,13 +211,22 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
             shutil.copyfile(src, tmp / name)
         if residual is not None:
             (tmp / "residual.json").write_text(json.dumps(residual, indent=2))
-            shutil.copyfile(play_mujoco.__file__, tmp / "play_mujoco.py")
+        shutil.copyfile(play_mujoco.__file__, tmp / "play_mujoco.py")
+        accel = servo_goal_accel(robot, physics)
+        if accel is not None:
+            (tmp / "servo.json").write_text(json.dumps({
+                "goal_accel": accel.tolist(), "joints": list(robot.joint_names),
+                "about": "goal-acceleration profile [rad/s^2] of the servo joints (0: none), applied to the commands "
+                         "by play_mujoco.py --servo"}, indent=2))
         report = {"format": "wresdyn.mjcf_report/1", "rate_hz": rate_hz, "friction_kappa": friction_kappa,
                   "notes": notes, "mapping": _mapping()}
         if len(heldout):
             onnx = tmp / "residual.onnx" if residual is not None else None
             report["round_trip"] = round_trip(tmp / "robot.xml", robot, physics, list(heldout), rate_hz, policy,
-                                              onnx, friction_kappa)
+                                              onnx, friction_kappa, accel)
+            if accel is not None:  # what the plain MJCF loses without the profile
+                report["round_trip_without_goal_profile"] = round_trip(
+                    tmp / "robot.xml", robot, physics, list(heldout), rate_hz, policy, onnx, friction_kappa)
         (tmp / "mjcf_report.json").write_text(json.dumps(report, indent=2))
         (tmp / "export.json").write_text(json.dumps({
             "format": "wresdyn.export/1", "kind": "mjcf", **record, "robot_file": str(robot.source),
