@@ -51,7 +51,8 @@ def test_the_mjcf_carries_the_identified_physics(mjcf_export, humanoid):
     rot = Rotation.from_quat(m.body_iquat[1:], scalar_first=True).as_matrix()
     inertia = rot @ (m.body_inertia[1:, :, None] * np.eye(3)) @ rot.transpose(0, 2, 1)
     heavy = p.body_mass > 0
-    np.testing.assert_allclose(inertia[heavy], p.body_inertia[heavy], atol=1e-6 * np.abs(p.body_inertia).max())
+    # MuJoCo's writer keeps about 6 significant digits of the principal moments and axes
+    np.testing.assert_allclose(inertia[heavy], p.body_inertia[heavy], atol=1e-5 * np.abs(p.body_inertia).max())
     report = json.loads((out / "mjcf_report.json").read_text())
     assert report["notes"] == [] and report["friction_kappa"] is None
     assert {"residual.onnx", "residual.json", "play_mujoco.py", "physics.json", "export.json"} <= {

@@ -42,9 +42,11 @@ import numpy as np
 from ..data.dataset import load_dataset
 from ..data.loading import dataset_robot
 from ..evaluation.evaluate_run import run_friction_kappa
+from ..learn.network_file import load_residual
 from ..learn.runs import run_physics
 from ..robot.mujoco_model import mujoco_body_names, mujoco_spec
 from ..sim.physics import PhysicalParams
+from ..sim.rollout import replay_trajectories
 from . import play_mujoco
 from .usd import ExportError, _swap, inertia_principal
 
@@ -147,8 +149,6 @@ def export_mjcf(run: str | Path, out: str | Path | None = None, *, force: bool =
     kappa = run_friction_kappa(run)
     policy = None
     if residual is not None and verify:
-        from ..learn.network_file import load_residual
-
         policy = load_residual(run / "policy.pt")
     held = ds.split("heldout")[:ROUND_TRIP_TRAJECTORIES] if verify and robot.base != "floating" else []
     files = {"residual.onnx": run / "policy.onnx"} if residual is not None else {}
@@ -173,8 +173,6 @@ def round_trip(xml: str | Path, robot, physics, trajectories, rate_hz: float, po
     the two replays against each other (``"between"``), over every joint and sample; ``reference``: wresdyn's
     replays (``"q"`` of an earlier result, list of (T, n)) instead of replaying again."""
     import mujoco
-
-    from ..sim.rollout import replay_trajectories
 
     ref = reference if reference is not None else replay_trajectories(
         robot, trajectories, rate_hz, policy, physics=physics, friction_kappa=friction_kappa)["residual"].q
