@@ -2,7 +2,9 @@
 
 Writes ``robot.usda`` (identified physics as the attributes Newton's importer reads), ``actuated.usda`` (the drive
 path as ``newton.actuators`` prims and the residual network), ``residual.pt2``/``.onnx``, ``physics.json`` into
-``RUN/export`` (or ``--out``); see :mod:`wresdyn.export.usd`.
+``RUN/export`` (or ``--out``); see :mod:`wresdyn.export.usd`. ``--format mjcf`` (the default for MJCF and URDF
+robots) writes ``robot.xml`` for plain MuJoCo, ``residual.onnx`` and ``play_mujoco.py`` instead; see
+:mod:`wresdyn.export.mjcf`.
 """
 
 from __future__ import annotations
@@ -51,7 +53,8 @@ def run(args: Export) -> int:
         out = export_mjcf(args.run, args.out, force=args.force, physics_only=args.physics_only, data=args.data,
                           gains=args.gains)
         trip = json.loads((out / "mjcf_report.json").read_text()).get("round_trip")
-        print(f"wrote {out}/robot.xml (identified physics as MuJoCo actuators){' + residual.onnx' if (out / 'residual.onnx').exists() else ''}"
+        extra = " + residual.onnx" if (out / "residual.onnx").exists() else ""
+        print(f"wrote {out}/robot.xml (identified physics as MuJoCo actuators){extra}"
               + ("" if trip is None else f"; held-out mean |dq| wresdyn {trip['wresdyn']:.3e} rad, MuJoCo "
                  f"{trip['mujoco']:.3e} rad"))
         return 0

@@ -14,8 +14,9 @@ The robot (from an MJCF, URDF or USD file) is rebuilt as a :class:`mujoco.MjSpec
                        limit, ``delay`` the identified command delay [s] (MuJoCo's actuator delay, linear
                        interpolation between the stored commands, which is wresdyn's fractional delay exactly).
                        No visual meshes: the model carries the dynamics only.
-``residual.onnx``      the residual network (``residual.json``: kind, joints, rate); ``play_mujoco.py`` replays
-                       commands in MuJoCo with it (mujoco, numpy, onnxruntime only).
+``residual.onnx``      the residual network (``residual.json``: kind, joints, rate), with a residual;
+``play_mujoco.py``     replays commands in MuJoCo with the residual and the servo goal profile (mujoco, numpy,
+                       onnxruntime only); ``servo.json`` the servo joints' goal acceleration [rad/s²].
 ``mjcf_report.json``   what each identified term became, what has no MuJoCo counterpart, and the round trip on
                        held-out data: mean |q − q_recorded| of the wresdyn model and of the MJCF in MuJoCo.
 ``physics.json``       the identified parameters, ``export.json`` where they came from.
@@ -140,7 +141,8 @@ def export_mjcf(run: str | Path, out: str | Path | None = None, *, force: bool =
     robot = dataset_robot(ds.robot_file, None, gains if gains is not None else ds.gains_config)
     if robot.source_sha256 != ds.robot_sha256:
         raise ExportError(f"{robot.source}: the robot file changed since the run's data were recorded (sha256 "
-                          f"{robot.source_sha256[:12]} != {ds.robot_sha256[:12]}); the export would describe another robot")
+                          f"{robot.source_sha256[:12]} != {ds.robot_sha256[:12]}); the export would describe another "
+                          "robot")
     if residual is not None and list(residual["joint_names"]) != list(robot.joint_names):
         raise ExportError(f"{run}: the residual's joints do not match {robot.source.name}'s")
     physics = run_physics(run, robot)
@@ -169,9 +171,10 @@ def servo_goal_accel(robot, physics) -> np.ndarray | None:
 def round_trip(xml: str | Path, robot, physics, trajectories, rate_hz: float, policy=None, onnx=None,
                friction_kappa: float | None = None, goal_accel=None, reference=None) -> dict:
     """Replay ``trajectories`` open loop in wresdyn (``physics`` + ``policy``) and in MuJoCo (``xml`` + ``onnx``,
-    with the servo goal profile ``goal_accel`` on the commands, through :mod:`play_mujoco`); returns mean |q − q_recorded| [rad] of each (``"wresdyn"``, ``"mujoco"``) and of
-    the two replays against each other (``"between"``), over every joint and sample; ``reference``: wresdyn's
-    replays (``"q"`` of an earlier result, list of (T, n)) instead of replaying again."""
+    with the servo goal profile ``goal_accel`` on the commands, through :mod:`play_mujoco`); returns mean
+    |q − q_recorded| [rad] of each (``"wresdyn"``, ``"mujoco"``) and of the two replays against each other
+    (``"between"``), over every joint and sample, and wresdyn's replays (``"q"``, list of (T, n) [rad]);
+    ``reference``: such a ``"q"``, used instead of replaying in wresdyn again."""
     import mujoco
 
     ref = reference if reference is not None else replay_trajectories(
@@ -200,10 +203,9 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
-        xml = spec.to_xml()
-        (tmp / "robot.xml").write_text(xml)
         import mujoco
 
+        (tmp / "robot.xml").write_text(spec.to_xml())
         mujoco.MjModel.from_xml_path(str(tmp / "robot.xml"))  # what a fresh process will load
         physics.save(tmp / "physics.json")
         for name, src in (files or {}).items():
