@@ -266,7 +266,7 @@ def test_a_servo_robot_from_mjcf_names_the_conversion_step(tmp_path, capsys):
     run = tmp_path / "run"
     run.mkdir()
     (run / "config.json").write_text(json.dumps({"data_path": str(tmp_path / "so101.npz")}))
-    assert main(["export", str(run), "--out", str(tmp_path / "out"), "--physics-only"]) == 2
+    assert main(["export", str(run), "--out", str(tmp_path / "out"), "--physics-only", "--format", "usd"]) == 2
     err = capsys.readouterr().err.strip()
     assert "mujoco-usd-converter" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "out").exists()

@@ -9,6 +9,9 @@
 - the residual network is written in the format every learner saves its networks in
   (:mod:`wresdyn.learn.network_file`: a ``torch.export`` archive and the same program as ONNX; loaded back with
   torch alone).
+- :mod:`wresdyn.export.mjcf`: ``wresdyn export RUN --format mjcf`` writes ``robot.xml`` (the identified physics
+  as MuJoCo's own joints and actuators, for any robot file) and the residual as ONNX;
+  :mod:`wresdyn.export.play_mujoco` is the self-contained MuJoCo + onnxruntime loop shipped beside it.
 - :mod:`wresdyn.export.residual_torque`: the small component a plain Newton script imports to run the exported
   residual every step (torch and warp only; it does not import the rest of wresdyn).
 """

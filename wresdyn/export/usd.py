@@ -297,7 +297,7 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     if kappa is not None:
         raise ExportError(f"{run}: the run was identified under the replay's damper friction law (friction_kappa = "
                           f"{kappa:g} /s), which Newton's joints do not model; identify without --friction-kappa to "
-                          "export")
+                          "export as USD, or export --format mjcf (MuJoCo's frictionloss)")
     data = data or json.loads(cfg_path.read_text()).get("data_path")
     if not data:
         raise ExportError(f"{run}: the run does not record its dataset; pass --data")
@@ -326,7 +326,7 @@ def check_usd_robot(robot) -> None:
     if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
         raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
                           f"{Path(robot.source).suffix} to USD first (for MJCF: mujoco-usd-converter), then record "
-                          "or import the data and identify against the .usd file")
+                          "or import the data and identify against the .usd file; or export --format mjcf")
 
 
 def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, residual: dict | None = None,
