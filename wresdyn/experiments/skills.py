@@ -33,6 +33,7 @@ from ..data.real_robot import RealRobot
 from ..robot import load_robot
 from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, metrics
+from ..skills.ledger import LEDGER, ledger_table, record_heldout
 from ..skills.motions import make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.report import write_report
@@ -137,7 +138,7 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
 
 def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | None = None, *, data_path=None,
                   calibrated=None, delta=None, mismatch=None, task=None, ppo=None, animation: bool = True,
-                  policies=tuple(POLICIES), log=print) -> dict:
+                  policies=tuple(POLICIES), ledger=None, log=print) -> dict:
     """Run the benchmark into ``out`` (resumable: finished fits and policies are reused, PPO resumes).
 
     Args:
@@ -155,6 +156,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         ppo: :class:`~wresdyn.skills.skill_config.SkillPPOConfig` (its size fields are set from ``cfg``).
         policies: Which of :data:`~.zero_shot.POLICIES` to train and deploy (``a_nominal`` always; without
             ``c_delta_action`` no delta-action residual is fitted; the gap closed needs ``d_oracle``).
+        ledger: A second held-out ledger (``.jsonl``, e.g. a benchmark folder's) besides ``out``'s own
+            (:mod:`~wresdyn.skills.ledger`): each scoring of the held-out motions appends a line to both, and the
+            report lists every configuration either holds.
 
     Returns:
         The results written to ``results.json``.
@@ -207,6 +211,10 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             if setting != "real":
                 results["sim"][split][name] = metrics(deploy(policy, sim(setting, len(mot)), mot, task), robot)["mean"]
     _gaps(results, floor)
+    ledgers = [out / LEDGER] + ([Path(ledger)] if ledger else [])
+    record_heldout(ledgers, {"benchmark": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo),
+                             "mismatch": mismatch.to_dict()}, cfg.seed,
+                   {n: r["mean"] for n, r in results["real"]["heldout"].items()}, len(motions.split("heldout")))
     held = results["real"]["heldout"]
     n_held = len(motions.split("heldout"))
     if floor:
@@ -224,6 +232,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     write_report(out, plant_robot, results, rollouts, motions.split("heldout"), rate / task.decimation,
                  animation=animation)
     write_results(out, results)
+    with open(out / "report.md", "a") as f:  # what else was ever scored on these held-out motions
+        f.write("\n## Held-out ledger\n\n" + "\n".join(ledger_table(p) for p in ledgers))
     log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
     return results
 
