@@ -18,7 +18,7 @@ RATE = 500.0
 @pytest.fixture(scope="module")
 def motions(humanoid, floating):
     return make_motions(humanoid, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0, rate_hz=RATE, seed=3,
-                        floating=floating, extra=("combo",))
+                        floating=floating, extra=("combo",), screen=False)  # 2 s: too short to screen
 
 
 def _by_family(motions, family):
@@ -30,7 +30,8 @@ def test_combo_motions_train_and_validate_never_held_out_and_leave_the_other_dra
     assert [m.family for m in motions["train"]] == list(FLOOR.train) + ["combo"]
     assert [m.family for m in motions["validation"]] == list(FLOOR.train) + ["combo"]
     assert [m.family for m in motions["heldout"]] == list(FLOOR.train + FLOOR.held_out)
-    plain = make_motions(humanoid, {"train": 1}, duration=2.0, rate_hz=RATE, seed=3, floating=floating)["train"]
+    plain = make_motions(humanoid, {"train": 1}, duration=2.0, rate_hz=RATE, seed=3, floating=floating,
+                         screen=False)["train"]
     for a, b in zip(plain, motions["train"]):
         np.testing.assert_array_equal(a.q, b.q)
 

@@ -171,13 +171,15 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     plant_robot = load_robot(robot.source, gains=robot.gains, base="floating") if floor else robot
     rate = float(dataset.rate_hz)
+    t0 = time.perf_counter()
     if floor:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed, floating=plant_robot,
-                               extra=cfg.extra_families)
+                               extra=cfg.extra_families, screen=cfg.screen)
     else:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
     log(f"[1/4] {'floor ' if floor else ''}motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
-        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
+        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)" + _screened(motions)
+        + f" ({time.perf_counter() - t0:.0f} s)")
     t0 = time.perf_counter()
     calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
                                          need_delta="c_delta_action" in policies)
@@ -189,6 +191,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration}}
     if floor:
         meta["motions"]["floor"] = True
+        meta["motions"]["screened"] = cfg.screen  # other draws: a run trained on the others is not resumed
         if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
             meta["motions"]["extra"] = list(cfg.extra_families)
     wall = _train_all(policies, plant_robot, real, motions.split("train"), task, ppo, cfg, runs, meta, out, mismatch,
@@ -236,6 +239,13 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         f.write("\n## Held-out ledger\n\n" + "\n".join(ledger_table(p) for p in ledgers))
     log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
     return results
+
+
+def _screened(motions) -> str:
+    """What the floor's feasibility screening did to the motion set, for the log (empty where it did not run)."""
+    done = [m.screen for ms in motions.splits.values() for m in ms if m.screen]
+    slowed = sum("slowed" in s for s in done)
+    return f"; screened {len(done)}: {len(done) - slowed} as drawn, {slowed} slowed" if done else ""
 
 
 def _gaps(results: dict, floor: bool) -> None:

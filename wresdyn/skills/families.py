@@ -14,15 +14,20 @@ shift of both soles that puts the centre of mass above sole f):
 
 - ``squat`` and ``wave``: as on the stand;
 - ``weight_shift``: the centre of mass moves over one sole, then over the other, and back;
-- ``kick``: weight onto one foot, the other sole pulled back and up, thrust forward and returned, weight back;
-- ``step`` (held out): stepping in place, weight over one foot, the other lifted and set down, then the other side;
+- ``kick``: weight onto one foot, the other sole pulled back and up, thrust forward and returned, weight back, each
+  phase of its own drawn duration;
+- ``step`` (held out): stepping in place: the weight over one foot, the other lifted (knee up, its own height and
+  reach) and set down where it stood, once or twice, sometimes then the weight across and the other foot lifted;
+  every transfer and every phase of a lift of its own drawn duration;
 - ``combo`` (an optional training family): compositions of the weight shifts' and kicks' keyframes, as many as fit
   the motion (up to three) in a random order with random durations: single-leg support on either foot, the weight
   carried straight across from one foot to the other, transfers slow enough to follow and too fast for any robot to
   follow (the floor would have to pull), where a policy must give up tracking to keep its balance. The lifted foot
   only ever kicks (back, then forward); it is never just lifted and set down.
 
-Each drawn motion varies its amplitudes, side and tempo (seeded).
+Each drawn motion varies its amplitudes, side and tempo (seeded). On the floor a transfer of the weight takes about a
+second at the least (:data:`FLOOR_TRANSFER_S`): faster, the zero-moment point leaves the soles, and the screening of
+:func:`~.motions.make_motions` slows or redraws the motion.
 """
 
 from __future__ import annotations
@@ -267,15 +272,15 @@ def _step_keys(rng, home, duration: float, over):
     feet = [first] * int(rng.integers(1, 3)) + ([1 - first] if rng.random() < 0.5 else [])
     frac = rng.uniform(0.8, 0.95, size=2)  # how far the weight goes over each sole
     back = rng.uniform(*FLOOR_TRANSFER_S)  # the weight back to the stance at the end
-    t, times, keys, plan, lifts, stance = rng.uniform(0.05, 0.3), [0.0], [home], [], [], None
+    t, times, keys, plan, lifts, stance = rng.uniform(0.05, 0.2), [0.0], [home], [], [], None
     for f in feet:
         w = over(1 - f, frac[1 - f])
         k = w.copy()
         height, reach = rng.uniform(0.03, 0.07), rng.uniform(-0.02, 0.04)
         k[f] += height * up + reach * fwd
         move = rng.uniform(*(FLOOR_ACROSS_S if stance is not None else FLOOR_TRANSFER_S))
-        swing = np.concatenate([rng.uniform(0.2, 0.4, size=1), rng.uniform(0.0, 0.2, size=1),
-                                rng.uniform(0.2, 0.4, size=1), rng.uniform(0.05, 0.2, size=1)])
+        swing = np.concatenate([rng.uniform(0.2, 0.35, size=1), rng.uniform(0.0, 0.15, size=1),
+                                rng.uniform(0.2, 0.35, size=1), rng.uniform(0.05, 0.15, size=1)])
         gaps, event = swing, [k, k, w, w]
         if stance != 1 - f:
             gaps, event = np.concatenate([[move], swing]), [w] + event

@@ -203,7 +203,7 @@ def _key(name: str) -> int:
 
 def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = None, rate_hz: float = 500.0,
                  seed: int = 0, frames=None, *, floating: Robot | None = None, families=None, held_out=None,
-                 extra=(), screen: bool = True) -> MotionSet:
+                 extra=(), screen: bool = True, max_draws: int = 20) -> MotionSet:
     """Draw the motion set of the task on the stand, or with ``floating`` on the floor: ``counts`` maps a split to
     motions per family (``families`` for every split, ``held_out`` families in ``heldout`` only, ``extra`` families
     in every other split, drawn after the others so that those are the same with or without them); each split draws
@@ -221,6 +221,7 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
             ones, no extra).
         screen: On the floor, keep only draws the flat soles can carry, slowed where needed (:func:`make_motion`;
             ``False``: every draw as drawn, for studies of infeasible references).
+        max_draws: Draws of each motion before it is given up (a one-line error).
 
     The waves of a split alternate between the arms (the first arm drawn per split), so a split of two or more waves
     has both: training on one arm's waves alone leaves a policy untaught for the other's.
@@ -247,7 +248,8 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
             rng = np.random.default_rng([seed, s])
             first = int(np.random.default_rng([seed, s, 1]).integers(2))
             splits[split] = [make_motion(robot, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}",
-                                         side=("left", "right")[(first + i) % 2] if f == "wave" else None)
+                                         side=("left", "right")[(first + i) % 2] if f == "wave" else None,
+                                         max_draws=max_draws)
                              for f in fams for i in range(per)]
             continue
         # on the floor one stream per motion, by the split's and the family's names: a split's draws never repeat
@@ -256,6 +258,6 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
         splits[split] = [make_motion(robot, ik, f, duration, rate_hz,
                                      np.random.default_rng([seed, _key(split), 7, _key(f), i]), f"{split}_{f}_{i}",
                                      side=("left", "right")[(first + i) % 2] if f == "wave" else None,
-                                     floating=floating, shift=shift, screen=screen)
+                                     max_draws=max_draws, floating=floating, shift=shift, screen=screen)
                          for f in fams for i in range(per)]
     return MotionSet(float(rate_hz), splits)
