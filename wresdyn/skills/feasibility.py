@@ -40,7 +40,8 @@ SCREEN_EVERY_S = 0.01
 second)."""
 SCREEN_SKIP_S = 0.01
 """Time [s] :func:`screen` leaves out around each change of the planted soles (the base step of the reference there,
-see ``skip``)."""
+see ``skip``), and at least two samples: the central differences of the velocity and of the acceleration spread the
+step over two samples either side."""
 
 
 @dataclass
@@ -168,7 +169,7 @@ def screen(robot, motion, rate_hz: float) -> dict:
     :data:`SCREEN_EVERY_S`. Returns ``feasible``, ``zmp_margin_m`` (the smallest margin [m], negative: outside) and
     ``effort_ratio`` (the largest |τ| / τ_max)."""
     f = floor_feasibility(robot, motion, rate_hz, every=max(1, int(round(SCREEN_EVERY_S * rate_hz))),
-                          skip=SCREEN_SKIP_S)
+                          skip=max(SCREEN_SKIP_S, 2.0 / rate_hz))
     effort = np.asarray(robot.effort, dtype=np.float64)
     limited = np.isfinite(effort) & (effort > 0)
     ratio = float((np.abs(f.tau[:, limited]) / effort[limited]).max())
