@@ -63,6 +63,14 @@ def test_an_infeasible_draw_is_slowed_or_refused(humanoid, floating):
                        screen=False)["heldout"][0]
     # measured -16 mm: the zero-moment point outside the soles
     assert raw.screen == "" and floor_feasibility(floating, raw, RATE, skip=0.02).margin.min() < -0.01
+    # the third validation weight shift of seed 0, as drawn, asks the floor to pull; played 1.3x slower the soles carry
+    # it, and it still ends at rest in the stance within the same 4 s
+    shifts = make_motions(humanoid, {"validation": 3}, 4.0, RATE, seed=0, floating=floating,
+                          families=("weight_shift",))["validation"]
+    assert [m.screen for m in shifts] == ["ok", "ok", "slowed x1.3"]
+    slow = shifts[2]
+    assert slow.params["slowed"] == 1.3 and len(slow.q) == len(shifts[0].q)
+    np.testing.assert_allclose(slow.q[-1], shifts[0].q[0], atol=1e-5)  # the IK's residual: 4e-6 rad
     # a stepping motion squeezed into 2 s has no time left to be slowed in: every draw is refused
     with pytest.raises(RobotError, match="no step floor motion the flat soles carry in 3 draws"):
         make_motions(humanoid, {"heldout": 1}, 2.0, RATE, seed=0, floating=floating, families=(), max_draws=3)
