@@ -25,6 +25,7 @@ from ..robot.description import Robot, RobotError
 from ..robot.ground import standing_state
 from ..robot.pinocchio_model import build_pinocchio
 from .families import FAMILIES, TASK_FAMILIES, arm_keys, keyframes, leg_keys, stance
+from .feasibility import screen as screen_feasibility
 
 __all__ = ["TASK_FAMILIES", "FAMILIES", "Motion", "MotionSet", "make_motion", "make_motions", "stance", "PLANTED_TOL"]
 
@@ -181,9 +182,7 @@ def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz:
                 break
             if not screen:
                 return m
-            from .feasibility import screen as check
-
-            m.params.update(check(floating, m, rate_hz), slowed=factor, redraws=draw)
+            m.params.update(screen_feasibility(floating, m, rate_hz), slowed=factor, redraws=draw)
             if m.params["feasible"]:
                 m.screen = ("ok" if factor == 1.0 else f"slowed x{factor:g}") + (f", {draw} redraws" if draw else "")
                 return m
