@@ -190,7 +190,8 @@ def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz:
     if worst is not None:
         raise RobotError(f"{robot.source}: no {family} floor motion the flat soles carry in {max_draws} draws, each "
                          f"slowed up to x{SLOWER[-1]:g} (last: zero-moment point {1e3 * worst['zmp_margin_m']:+.0f} "
-                         f"mm inside the soles, torque {worst['effort_ratio']:.2f} of the limit)")
+                         f"mm inside the soles, torque {worst['effort_ratio']:.2f} of the limit; longer motions "
+                         f"leave time to slow it)")
     raise RobotError(f"{robot.source}: no {family} {task} motion reached its sole keyframes within {ik_tol} m in "
                      f"{max_draws} draws")
 
