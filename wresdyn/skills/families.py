@@ -17,8 +17,8 @@ shift of both soles that puts the centre of mass above sole f):
 - ``kick``: weight onto one foot, the other sole pulled back and up, thrust forward and returned, weight back, each
   phase of its own drawn duration;
 - ``step`` (held out): stepping in place: the weight over one foot, the other lifted (knee up, its own height and
-  reach) and set down where it stood, once or twice, sometimes then the weight across and the other foot lifted;
-  every transfer and every phase of a lift of its own drawn duration;
+  reach) and set down where it stood, once or twice, in longer motions sometimes then the weight across and the
+  other foot lifted; every transfer and every phase of a lift of its own drawn duration;
 - ``combo`` (an optional training family): compositions of the weight shifts' and kicks' keyframes, as many as fit
   the motion (up to three) in a random order with random durations: single-leg support on either foot, the weight
   carried straight across from one foot to the other, transfers slow enough to follow and too fast for any robot to
@@ -265,8 +265,9 @@ def _fit(times: np.ndarray, duration: float) -> tuple[list[float], float]:
 def _step_keys(rng, home, duration: float, over):
     """Keyframes of a ``step`` motion: the weight over one sole, the other foot lifted (knee up, the sole ahead or
     behind at the top) and set down where it stood, once or twice; then, drawn half the time, the weight across and
-    the first foot lifted once; the weight back to the stance. Every lift draws its height, reach and tempo, every
-    transfer its duration; lifts are drawn until the next would leave no time to return (at least one)."""
+    the other foot lifted once (in motions of 5 s or more: in 4 s no transfer across leaves time to return); the
+    weight back to the stance. Every lift draws its height, reach and tempo, every transfer its duration; lifts are
+    drawn until the next would leave no time to return (at least one)."""
     up, fwd = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     first = int(rng.integers(2))  # the first foot lifted
     feet = [first] * int(rng.integers(1, 3)) + ([1 - first] if rng.random() < 0.5 else [])
