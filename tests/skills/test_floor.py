@@ -145,8 +145,13 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
             "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--oracle-num-worlds", "3", "--train-per-family", "1",
             "--heldout-per-family", "1", "--duration", "1.0", "--no-screen", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
     # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
-    assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu"]) == 0
+    ledger = tmp_path / "bench" / "heldout_ledger.jsonl"
+    assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu", "--heldout-ledger", str(ledger)]) == 0
     res = json.loads((out / "results.json").read_text())
+    # the held-out scoring went into the run's ledger and the one given, and the report lists it
+    for path in (out / "heldout_ledger.jsonl", ledger):
+        (line,) = path.read_text().splitlines()
+        assert set(json.loads(line)["figures"]) == set(res["real"]["heldout"])
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
         for r in res["real"][split].values():
@@ -162,7 +167,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert set(res["gap_closed_mpjpe"]) == set(res["gap_closed_g_mpjpe"]) == {"b_calibrated", "c_delta_action"}
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
-    assert "g-MPJPE" in report and "step" in report
+    assert "g-MPJPE" in report and "step" in report and "## Held-out ledger" in report
     cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
     assert cfg["motions"]["floor"] is True
     # the oracle trains on its own number of worlds, the others on --envs

@@ -38,8 +38,8 @@ import numpy as np
 
 from ..robot.description import Robot, RobotError
 
-__all__ = ["MotionFamilies", "TASK_FAMILIES", "FAMILIES", "STANCE", "COMBO_TRANSFER_S", "FLOOR_TRANSFER_S", "stance", "leg_keys",
-           "arm_keys", "keyframes"]
+__all__ = ["MotionFamilies", "TASK_FAMILIES", "FAMILIES", "STANCE", "COMBO_TRANSFER_S", "FLOOR_TRANSFER_S",
+           "FLOOR_ACROSS_S", "FLOOR_SWING_S", "stance", "leg_keys", "arm_keys", "keyframes"]
 
 
 @dataclass(frozen=True)
