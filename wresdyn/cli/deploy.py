@@ -47,6 +47,9 @@ class Deploy(Command):
     OUT/delta_action)."""
     mismatch: str | None = None
     """Real robot's mismatch (TOML; None: the dataset's)."""
+    heldout_ledger: Annotated[str | None, tyro.conf.arg(metavar="JSONL")] = None
+    """A ledger besides OUT/heldout_ledger.jsonl (e.g. a benchmark folder's): each scoring of the held-out motions
+    appends a line to both, and the report lists every configuration scored (None: OUT's only)."""
     floor: bool = False
     """Skills on the floor: the humanoid keeps its balance with a free base (squat, weight shift, kick, wave;
     stepping held out), corrections still fitted on the stand (see wresdyn.experiments.skills); the sizes
@@ -129,6 +132,6 @@ def run(args: Deploy) -> int:
     variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
-          mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, log=log,
+          mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, ledger=args.heldout_ledger, log=log,
           **({"policies": args.policies} if args.policies else {}))
     return 0

@@ -99,6 +99,10 @@ class FloorDeployConfig(_BenchmarkSizes):
     """Held-out motions per family (training families and the held-out one)."""
     duration: float = 4.0
     """Length of a motion [s]."""
+    screen: bool = True
+    """Keep only floor references the flat soles can carry, each draw slowed or redrawn where they cannot
+    (:func:`~wresdyn.skills.motions.make_motion`); ``False``: every draw as drawn (test runs of motions too short to
+    carry)."""
     finetune_std: float | None = None
     """Action noise the fine-tunings restart from (``None``: (a)'s own; ``SkillPPOConfig.restart_std``)."""
     iterations: int = 200
@@ -133,8 +137,8 @@ class FloorDeployConfig(_BenchmarkSizes):
 
     @classmethod
     def full(cls, **kw) -> "FloorDeployConfig":
-        """The full size, for one GPU: 4096 worlds, 16 training, 2 validation and 4 held-out motions per family,
-        1000 + 300 iterations; the oracle on 4096 worlds of the real robot's floor in mujoco_warp, as many as the
-        others."""
-        return cls(**{**dict(train_per_family=16, validation_per_family=2, heldout_per_family=4, num_worlds=4096,
+        """The full size, for one GPU: 4096 worlds, 16 training, 4 validation and 10 held-out motions per family
+        (independent draws, screened: :func:`~wresdyn.skills.motions.make_motions`), 1000 + 300 iterations; the
+        oracle on 4096 worlds of the real robot's floor in mujoco_warp, as many as the others."""
+        return cls(**{**dict(train_per_family=16, validation_per_family=4, heldout_per_family=10, num_worlds=4096,
                              oracle_plant="mujoco_warp", iterations=1000, finetune=300, finetune_std=0.3), **kw})

@@ -39,6 +39,7 @@ from ..learn.runs import run_physics
 from ..robot import load_robot
 from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, metrics
+from ..skills.ledger import LEDGER, ledger_table, record_heldout
 from ..skills.motions import make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.real_warp import RealWarpPlant
@@ -173,7 +174,8 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
 
 def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | None = None, *, data_path=None,
                   calibrated=None, delta=None, mismatch=None, task=None, ppo=None, animation: bool = True,
-                  policies=BASE_POLICIES, randomization: Randomization | None = None, log=print) -> dict:
+                  policies=BASE_POLICIES, randomization: Randomization | None = None, ledger=None,
+                  log=print) -> dict:
     """Run the benchmark into ``out`` (resumable: finished fits and policies are reused, PPO resumes).
 
     Args:
@@ -195,6 +197,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             name).
         randomization: The ranges of (e) and the seed of (e)'s and (f)'s draws
             (:class:`~wresdyn.skills.randomize.Randomization`; default its own, seeded with ``cfg.seed``).
+        ledger: A second held-out ledger (``.jsonl``, e.g. a benchmark folder's) besides ``out``'s own
+            (:mod:`~wresdyn.skills.ledger`): each scoring of the held-out motions appends a line to both, and the
+            report lists every configuration either holds.
 
     Returns:
         The results written to ``results.json``.
@@ -210,13 +215,15 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     plant_robot = load_robot(robot.source, gains=robot.gains, base="floating") if floor else robot
     rate = float(dataset.rate_hz)
+    t0 = time.perf_counter()
     if floor:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed, floating=plant_robot,
-                               extra=cfg.extra_families)
+                               extra=cfg.extra_families, screen=cfg.screen)
     else:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
     log(f"[1/4] {'floor ' if floor else ''}motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
-        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)")
+        + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)" + _screened(motions)
+        + f" ({time.perf_counter() - t0:.0f} s)")
     t0 = time.perf_counter()
     calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
                                          need_delta="c_delta_action" in policies)
@@ -228,6 +235,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration}}
     if floor:
         meta["motions"]["floor"] = True
+        meta["motions"]["screened"] = cfg.screen  # other draws: a run trained on the others is not resumed
         if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
             meta["motions"]["extra"] = list(cfg.extra_families)
     dr = randomization or Randomization(seed=cfg.seed)
@@ -256,6 +264,10 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             if setting != "real":
                 results["sim"][split][name] = metrics(deploy(policy, sim(setting, len(mot)), mot, task), robot)["mean"]
     _gaps(results, floor)
+    ledgers = [out / LEDGER] + ([Path(ledger)] if ledger else [])
+    record_heldout(ledgers, {"benchmark": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo),
+                             "mismatch": mismatch.to_dict()}, cfg.seed,
+                   {n: r["mean"] for n, r in results["real"]["heldout"].items()}, len(motions.split("heldout")))
     held = results["real"]["heldout"]
     n_held = len(motions.split("heldout"))
     if floor:
@@ -273,8 +285,17 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     write_report(out, plant_robot, results, rollouts, motions.split("heldout"), rate / task.decimation,
                  animation=animation)
     write_results(out, results)
+    with open(out / "report.md", "a") as f:  # what else was ever scored on these held-out motions
+        f.write("\n## Held-out ledger\n\n" + "\n".join(ledger_table(p) for p in ledgers))
     log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
     return results
+
+
+def _screened(motions) -> str:
+    """What the floor's feasibility screening did to the motion set, for the log (empty where it did not run)."""
+    done = [m.screen for ms in motions.splits.values() for m in ms if m.screen]
+    slowed = sum("slowed" in s for s in done)
+    return f"; screened {len(done)}: {len(done) - slowed} as drawn, {slowed} slowed" if done else ""
 
 
 def _gaps(results: dict, floor: bool) -> None:

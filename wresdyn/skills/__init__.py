@@ -12,7 +12,9 @@ or on the floor (two task configurations of one pipeline, :class:`~.skill_config
 - :mod:`.env`: the tracking environment (rsl-rl ``VecEnv``) on any plant, either task;
 - :mod:`.skill_ppo`: PPO and fine-tuning of a skill (rsl-rl), checkpoints and resume;
 - :mod:`.evaluate`: deployment and its metrics (MPJPE, foot error or g-MPJPE, success, smoothness, the gap closed);
-- :mod:`.feasibility`: what a floor motion asks of the robot (zero-moment point, joint torques);
+- :mod:`.feasibility`: what a floor motion asks of the robot (zero-moment point, joint torques), the screening of
+  every floor motion drawn;
+- :mod:`.ledger`: the held-out ledger, every configuration scored on held-out motions;
 - :mod:`.report`: the report of a zero-shot benchmark, with its USD animation (:mod:`wresdyn.evaluation.animation`).
   The benchmark itself, which trains every policy, is :mod:`wresdyn.experiments.skills`.
 """

@@ -14,15 +14,20 @@ shift of both soles that puts the centre of mass above sole f):
 
 - ``squat`` and ``wave``: as on the stand;
 - ``weight_shift``: the centre of mass moves over one sole, then over the other, and back;
-- ``kick``: weight onto one foot, the other sole pulled back and up, thrust forward and returned, weight back;
-- ``step`` (held out): stepping in place, weight over one foot, the other lifted and set down, then the other side;
+- ``kick``: weight onto one foot, the other sole pulled back and up, thrust forward and returned, weight back, each
+  phase of its own drawn duration;
+- ``step`` (held out): stepping in place: the weight over one foot, the other lifted (knee up, its own height and
+  reach) and set down where it stood, once or twice, in longer motions sometimes then the weight across and the
+  other foot lifted; every transfer and every phase of a lift of its own drawn duration;
 - ``combo`` (an optional training family): compositions of the weight shifts' and kicks' keyframes, as many as fit
   the motion (up to three) in a random order with random durations: single-leg support on either foot, the weight
   carried straight across from one foot to the other, transfers slow enough to follow and too fast for any robot to
   follow (the floor would have to pull), where a policy must give up tracking to keep its balance. The lifted foot
   only ever kicks (back, then forward); it is never just lifted and set down.
 
-Each drawn motion varies its amplitudes, side and tempo (seeded).
+Each drawn motion varies its amplitudes, side and tempo (seeded). On the floor a transfer of the weight takes about a
+second at the least (:data:`FLOOR_TRANSFER_S`): faster, the zero-moment point leaves the soles, and the screening of
+:func:`~.motions.make_motions` slows or redraws the motion.
 """
 
 from __future__ import annotations
@@ -33,8 +38,8 @@ import numpy as np
 
 from ..robot.description import Robot, RobotError
 
-__all__ = ["MotionFamilies", "TASK_FAMILIES", "FAMILIES", "STANCE", "COMBO_TRANSFER_S", "stance", "leg_keys",
-           "arm_keys", "keyframes"]
+__all__ = ["MotionFamilies", "TASK_FAMILIES", "FAMILIES", "STANCE", "COMBO_TRANSFER_S", "FLOOR_TRANSFER_S",
+           "FLOOR_ACROSS_S", "FLOOR_SWING_S", "stance", "leg_keys", "arm_keys", "keyframes"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +66,13 @@ FAMILIES = tuple(dict.fromkeys(f for t in TASK_FAMILIES.values() for f in t.all)
 """Every motion family of either task."""
 STANCE = {"hip_pitch": -0.3, "knee": 0.6, "ankle_pitch": -0.3}
 """Neutral stance [rad] by joint-name suffix (knees slightly bent); every other joint 0."""
+FLOOR_TRANSFER_S = (1.0, 1.4)
+"""Range of a kick's or a step's weight transfer [s] between the stance and one sole (the screening of
+:func:`~.motions.make_motions` slows the draws the soles cannot carry)."""
+FLOOR_ACROSS_S = (1.4, 2.0)
+"""Range of a step's weight transfer [s] from one sole across to the other (twice the distance)."""
+FLOOR_SWING_S = (0.3, 0.5)
+"""Range of each of a kick's swings [s]: back, forward, set down."""
 COMBO_TRANSFER_S = (0.4, 1.0)
 """Range of a combo motion's weight transfers [s]: the slowest ask of the floor what the weight shifts and kicks do
 (the zero-moment point up to about 0.1 m outside the soles), the fastest across the stance some 0.5 m (stepping in
@@ -185,10 +197,11 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
     def over(f, frac=1.0):
         return home + frac * shift[f] * side
 
-    def kick(f):
-        """Sole f's kick from the other sole: (weight over it, back key, forward key, forward [m], up [m])."""
+    def kick(f, frac=1.0):
+        """Sole f's kick from the other sole, the weight ``frac`` of the way over it: (weight over it, back key,
+        forward key, forward [m], up [m])."""
         back, out_x, out_z = rng.uniform(0.02, 0.05), rng.uniform(0.06, 0.12), rng.uniform(0.04, 0.08)
-        w = over(1 - f)
+        w = over(1 - f, frac)
         k1, k2 = w.copy(), w.copy()
         k1[f] += -back * fwd + 0.6 * out_z * up
         k2[f] += out_x * fwd + out_z * up
@@ -202,23 +215,15 @@ def _floor_leg_keys(rng, family: str, home: np.ndarray, duration: float, shift: 
         return [0.0, t[0], t[1], t[2], duration], keys, {"first_foot": first, "fraction": frac.tolist()}
     if family == "kick":
         f = int(rng.integers(2))  # the kicking foot; the other carries the weight
-        w, k1, k2, out_x, out_z = kick(f)
-        times = np.array([0.0, 0.2, 0.3, 0.45, 0.6, 0.72, 0.85, 1.0]) * duration
-        return list(times), [home, w, w, k1, k2, w, home, home], {"foot": f, "forward_m": out_x, "up_m": out_z}
+        w, k1, k2, out_x, out_z = kick(f, rng.uniform(0.8, 0.95))
+        gaps = np.concatenate([rng.uniform(*FLOOR_TRANSFER_S, size=1), rng.uniform(0.05, 0.25, size=1),
+                               rng.uniform(*FLOOR_SWING_S, size=3), rng.uniform(0.05, 0.2, size=1),
+                               rng.uniform(*FLOOR_TRANSFER_S, size=1)])
+        times, scale = _fit(rng.uniform(0.05, 0.2) + np.cumsum(gaps), duration)
+        return [0.0] + times + [duration], [home, w, w, k1, k2, w, w, home, home], {
+            "foot": f, "forward_m": out_x, "up_m": out_z, "time_scale": scale}
     if family == "step":
-        first = int(rng.integers(2))  # the first foot lifted
-        lift = rng.uniform(0.03, 0.06)
-        times, keys = [0.0], [home]
-        seg = 0.9 * duration / 2
-        for i in range(2):
-            f = (first + i) % 2
-            w = over(1 - f)
-            k = w.copy()
-            k[f] += lift * up
-            t0 = 0.05 * duration + i * seg
-            times += [t0 + 0.3 * seg, t0 + 0.5 * seg, t0 + 0.7 * seg, t0 + 0.85 * seg]
-            keys += [w, k, w, w]
-        return times + [0.97 * duration, duration], keys + [home, home], {"lift_m": lift, "first_foot": first}
+        return _step_keys(rng, home, duration, over)
     if family == "combo":
         return _combo_keys(rng, home, duration, over, kick)
     raise ValueError(family)
@@ -248,3 +253,45 @@ def _combo_keys(rng, home, duration: float, over, kick):
     times, keys = times + [t], keys + [home]
     scale = min(1.0, 0.95 * duration / t)
     return [x * scale for x in times] + [duration], keys + [home], {"plan": plan, "time_scale": scale}
+
+
+def _fit(times: np.ndarray, duration: float) -> tuple[list[float], float]:
+    """Keyframe times [s] played faster where they overrun 97 % of the motion (the rest a hold in the stance), and
+    the factor."""
+    scale = min(1.0, 0.97 * duration / float(times[-1]))
+    return [float(x) * scale for x in times], scale
+
+
+def _step_keys(rng, home, duration: float, over):
+    """Keyframes of a ``step`` motion: the weight over one sole, the other foot lifted (knee up, the sole ahead or
+    behind at the top) and set down where it stood, once or twice; then, drawn half the time, the weight across and
+    the other foot lifted once (in motions of 5 s or more: in 4 s no transfer across leaves time to return); the
+    weight back to the stance. Every lift draws its height, reach and tempo, every transfer its duration; lifts are
+    drawn until the next would leave no time to return (at least one)."""
+    up, fwd = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    first = int(rng.integers(2))  # the first foot lifted
+    feet = [first] * int(rng.integers(1, 3)) + ([1 - first] if rng.random() < 0.5 else [])
+    frac = rng.uniform(0.8, 0.95, size=2)  # how far the weight goes over each sole
+    back = rng.uniform(*FLOOR_TRANSFER_S)  # the weight back to the stance at the end
+    t, times, keys, plan, lifts, stance = rng.uniform(0.05, 0.2), [0.0], [home], [], [], None
+    for f in feet:
+        w = over(1 - f, frac[1 - f])
+        k = w.copy()
+        height, reach = rng.uniform(0.03, 0.07), rng.uniform(-0.02, 0.04)
+        k[f] += height * up + reach * fwd
+        move = rng.uniform(*(FLOOR_ACROSS_S if stance is not None else FLOOR_TRANSFER_S))
+        swing = np.concatenate([rng.uniform(0.2, 0.35, size=1), rng.uniform(0.0, 0.15, size=1),
+                                rng.uniform(0.2, 0.35, size=1), rng.uniform(0.05, 0.15, size=1)])
+        gaps, event = swing, [k, k, w, w]
+        if stance != 1 - f:
+            gaps, event = np.concatenate([[move], swing]), [w] + event
+        if plan and t + gaps.sum() + back > 0.97 * duration:
+            break
+        times += list(t + np.cumsum(gaps))
+        keys += event
+        t, stance = times[-1], 1 - f
+        plan.append("LR"[f])
+        lifts.append({"height_m": float(height), "reach_m": float(reach)})
+    times, scale = _fit(np.array(times[1:] + [t + back]), duration)
+    return [0.0] + times + [duration], keys + [home, home], {
+        "first_foot": first, "plan": "".join(plan), "lifts": lifts, "time_scale": scale}

@@ -30,10 +30,18 @@ from ..robot.ground import collision_shapes
 from ..robot.pinocchio_model import build_pinocchio
 from .env import FOOT_BODIES
 
-__all__ = ["FloorFeasibility", "floor_feasibility", "SOLE_FRAMES"]
+__all__ = ["FloorFeasibility", "floor_feasibility", "screen", "SOLE_FRAMES", "SCREEN_EVERY_S", "SCREEN_SKIP_S"]
 
 SOLE_FRAMES = ("left_sole", "right_sole")
 """The sole frames the contact wrenches act at (left, right), in :data:`~.env.FOOT_BODIES` order."""
+
+SCREEN_EVERY_S = 0.01
+"""Sample spacing [s] of :func:`screen` (the zero-moment point of a minimum-jerk reference changes over tenths of a
+second)."""
+SCREEN_SKIP_S = 0.01
+"""Time [s] :func:`screen` leaves out around each change of the planted soles (the base step of the reference there,
+see ``skip``), and at least two samples: the central differences of the velocity and of the acceleration spread the
+step over two samples either side."""
 
 
 @dataclass
@@ -153,3 +161,17 @@ def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None =
         tau[row] = rnea[6:] - joint_rows @ lam + friction * np.sign(qd) + damping * qd
     return FloorFeasibility(index, zmp, margin, tau, motion.planted[index])
 
+
+
+def screen(robot, motion, rate_hz: float) -> dict:
+    """Whether flat soles can carry ``motion`` on ``robot`` (a floating base, its nominal masses and limits): the
+    zero-moment point never leaves the planted soles and no joint torque passes its effort limit, sampled every
+    :data:`SCREEN_EVERY_S`. Returns ``feasible``, ``zmp_margin_m`` (the smallest margin [m], negative: outside) and
+    ``effort_ratio`` (the largest |τ| / τ_max)."""
+    f = floor_feasibility(robot, motion, rate_hz, every=max(1, int(round(SCREEN_EVERY_S * rate_hz))),
+                          skip=max(SCREEN_SKIP_S, 2.0 / rate_hz))
+    effort = np.asarray(robot.effort, dtype=np.float64)
+    limited = np.isfinite(effort) & (effort > 0)
+    ratio = float((np.abs(f.tau[:, limited]) / effort[limited]).max())
+    margin = float(f.margin.min())
+    return {"feasible": bool(margin >= 0.0 and ratio <= 1.0), "zmp_margin_m": margin, "effort_ratio": ratio}

@@ -15,6 +15,7 @@ Motions that lift a foot first shift the weight: the soles move sideways until t
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +25,7 @@ from ..robot.description import Robot, RobotError
 from ..robot.ground import standing_state
 from ..robot.pinocchio_model import build_pinocchio
 from .families import FAMILIES, TASK_FAMILIES, arm_keys, keyframes, leg_keys, stance
+from .feasibility import screen as screen_feasibility
 
 __all__ = ["TASK_FAMILIES", "FAMILIES", "Motion", "MotionSet", "make_motion", "make_motions", "stance", "PLANTED_TOL"]
 
@@ -51,6 +53,9 @@ class Motion:
     ``None`` on the stand."""
     planted: np.ndarray | None = None
     """On the floor: which soles (left, right) the reference keeps on the floor, bool, shape (T, 2)."""
+    screen: str = ""
+    """What the feasibility screening did (:func:`make_motion`): ``"ok"``, ``"slowed x1.3"``, with ``", 2 redraws"``
+    when earlier draws failed; empty where not screened (the stand, ``combo``)."""
 
 
 @dataclass
@@ -110,42 +115,95 @@ def _place(floating: Robot, feet: np.ndarray, q: np.ndarray):
     return base, planted
 
 
+SLOWER = (1.0, 1.15, 1.3, 1.5, 1.75, 2.0)
+"""Time stretches the screening tries on a floor draw the flat soles cannot carry, in this order: the keyframe
+times [s] times the factor, the motion's length kept (the end a longer hold in the stance); a factor that would
+push the last keyframe past the end is not tried, and a draw no factor makes feasible is redrawn."""
+UNSCREENED = ("combo",)
+"""Floor families drawn without screening: ``combo`` asks for transfers too fast to follow on purpose."""
+
+
+def _play(robot: Robot, ik: FootIK, leg, arm, t: np.ndarray, rate_hz: float, ik_tol: float, floating, family: str,
+          name: str, params: dict) -> Motion | None:
+    """The motion of keyframes ``leg`` (times, sole positions) and ``arm`` (times, joint offsets) sampled at ``t``;
+    ``None`` where the sole IK misses a keyframe path by more than ``ik_tol`` [m]."""
+    q0 = stance(robot)
+    home, rot = ik.forward(q0)
+    pos = keyframes(t, *leg)
+    q, err = ik.solve_path(pos, None if ik.position_only else np.broadcast_to(rot, (len(t),) + rot.shape), q0)
+    if float(err[:, :, 0].max()) > ik_tol:
+        return None
+    q = np.clip(q + keyframes(t, *arm), robot.lower, robot.upper)
+    qd = np.gradient(q, 1.0 / rate_hz, axis=0)
+    feet = np.array([ik.forward(x)[0] for x in q])
+    params = {**params, "ik_max_error_m": float(err[:, :, 0].max())}
+    if floating is None:
+        return Motion(name, family, q, qd, feet, params)
+    base, planted = _place(floating, feet, q)
+    return Motion(name, family, q, qd, feet, params, base=base, planted=planted)
+
+
+def _stretch(keys, factor: float, duration: float):
+    """Keyframes ``keys`` (times [s], values) played ``factor`` times slower, the last keyframe kept at ``duration``
+    (the hold it ends with); ``None`` where the one before would pass it."""
+    times, values = keys
+    if factor > 1.0 and times[-2] * factor > duration:
+        return None
+    return [x * factor for x in times[:-1]] + [duration], values
+
+
 def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz: float, rng: np.random.Generator,
                 name: str, ik_tol: float = 0.005, max_draws: int = 20, side: str | None = None, *,
-                floating: Robot | None = None, shift: tuple[float, float] | None = None) -> Motion:
+                floating: Robot | None = None, shift: tuple[float, float] | None = None,
+                screen: bool = False) -> Motion:
     """Draw one motion of ``family`` (redrawn until the sole IK reaches every keyframe path within ``ik_tol`` [m]);
     ``side`` fixes a wave's arm (default: drawn). ``floating``: the robot with a free base, to place the motion on
-    its floor (a floor family; ``shift``: the weight shifts over each sole)."""
+    its floor (a floor family; ``shift``: the weight shifts over each sole).
+
+    ``screen`` (the floor): a draw must pass :func:`~.feasibility.screen` (the zero-moment point inside the planted
+    soles, every joint torque within its effort limit); one that does not is slowed by the first factor of
+    :data:`SLOWER` that passes, else redrawn. :attr:`Motion.screen` says which; ``params`` keeps the measure."""
     task = "stand" if floating is None else "floor"
     if family not in TASK_FAMILIES[task].all:
         raise ValueError(f"unknown {task} motion family {family!r}; choose from {TASK_FAMILIES[task].all}")
+    screen = screen and floating is not None and family not in UNSCREENED
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
-    q0 = stance(robot)
-    home, rot = ik.forward(q0)
-    rots = np.broadcast_to(rot, (len(t),) + rot.shape)
-    for _ in range(max_draws):
+    home, _ = ik.forward(stance(robot))
+    worst = None
+    for draw in range(max_draws):
         lt, lk, lp = leg_keys(rng, task, family, home, duration, shift)
         at, ak, ap = arm_keys(rng, robot, family, duration, side)
-        pos = keyframes(t, lt, lk)
-        q, err = ik.solve_path(pos, None if ik.position_only else rots, q0)
-        if float(err[:, :, 0].max()) > ik_tol:
-            continue
-        q = q + keyframes(t, at, ak)
-        q = np.clip(q, robot.lower, robot.upper)
-        qd = np.gradient(q, 1.0 / rate_hz, axis=0)
-        feet = np.array([ik.forward(x)[0] for x in q])
-        params = {**lp, **ap, "ik_max_error_m": float(err[:, :, 0].max())}
-        if floating is None:
-            return Motion(name, family, q, qd, feet, params)
-        base, planted = _place(floating, feet, q)
-        return Motion(name, family, q, qd, feet, params, base=base, planted=planted)
+        for factor in SLOWER if screen else (1.0,):
+            leg, arm = _stretch((lt, lk), factor, duration), _stretch((at, ak), factor, duration)
+            if leg is None or arm is None:
+                break
+            m = _play(robot, ik, leg, arm, t, rate_hz, ik_tol, floating, family, name, {**lp, **ap})
+            if m is None:  # the IK missed a keyframe path: redraw
+                break
+            if not screen:
+                return m
+            m.params.update(screen_feasibility(floating, m, rate_hz), slowed=factor, redraws=draw)
+            if m.params["feasible"]:
+                m.screen = ("ok" if factor == 1.0 else f"slowed x{factor:g}") + (f", {draw} redraws" if draw else "")
+                return m
+            worst = m.params
+    if worst is not None:
+        raise RobotError(f"{robot.source}: no {family} floor motion the flat soles carry in {max_draws} draws, each "
+                         f"slowed up to x{SLOWER[-1]:g} (last: zero-moment point {1e3 * worst['zmp_margin_m']:+.0f} "
+                         f"mm inside the soles, torque {worst['effort_ratio']:.2f} of the limit; longer motions "
+                         f"leave time to slow it)")
     raise RobotError(f"{robot.source}: no {family} {task} motion reached its sole keyframes within {ik_tol} m in "
                      f"{max_draws} draws")
 
 
+def _key(name: str) -> int:
+    """A stable integer of a split's or a family's name, for the seed streams."""
+    return zlib.crc32(name.encode())
+
+
 def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = None, rate_hz: float = 500.0,
                  seed: int = 0, frames=None, *, floating: Robot | None = None, families=None, held_out=None,
-                 extra=()) -> MotionSet:
+                 extra=(), screen: bool = True, max_draws: int = 20) -> MotionSet:
     """Draw the motion set of the task on the stand, or with ``floating`` on the floor: ``counts`` maps a split to
     motions per family (``families`` for every split, ``held_out`` families in ``heldout`` only, ``extra`` families
     in every other split, drawn after the others so that those are the same with or without them); each split draws
@@ -161,6 +219,9 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
         floating: The same robot with a free base (its standing height): the motions are placed on its floor.
         families, held_out, extra: The task's families (default: its :data:`TASK_FAMILIES` train and held-out
             ones, no extra).
+        screen: On the floor, keep only draws the flat soles can carry, slowed where needed (:func:`make_motion`;
+            ``False``: every draw as drawn, for studies of infeasible references).
+        max_draws: Draws of each motion before it is given up (a one-line error).
 
     The waves of a split alternate between the arms (the first arm drawn per split), so a split of two or more waves
     has both: training on one arm's waves alone leaves a policy untaught for the other's.
@@ -182,12 +243,21 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
         shift = (_shift_over(robot, ik, q0, home, rot, 0), _shift_over(robot, ik, q0, home, rot, 1))
     splits = {}
     for s, (split, per) in enumerate(counts.items()):
-        # the floor's streams are seeded apart from the stand's: a floor motion is not a stand one placed
-        rng = np.random.default_rng([seed, s] if floating is None else [seed, s, 7])
-        first = int(np.random.default_rng([seed, s, 1]).integers(2))
         fams = families + (held_out if split == "heldout" else tuple(extra))
-        splits[split] = [make_motion(robot, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}",
+        if floating is None:  # one stream per split, by its place in ``counts``
+            rng = np.random.default_rng([seed, s])
+            first = int(np.random.default_rng([seed, s, 1]).integers(2))
+            splits[split] = [make_motion(robot, ik, f, duration, rate_hz, rng, f"{split}_{f}_{i}",
+                                         side=("left", "right")[(first + i) % 2] if f == "wave" else None,
+                                         max_draws=max_draws)
+                             for f in fams for i in range(per)]
+            continue
+        # on the floor one stream per motion, by the split's and the family's names: a split's draws never repeat
+        # another's whatever ``counts`` holds, and the first n of a family are the same at any larger count
+        first = int(np.random.default_rng([seed, _key(split), 1]).integers(2))
+        splits[split] = [make_motion(robot, ik, f, duration, rate_hz,
+                                     np.random.default_rng([seed, _key(split), 7, _key(f), i]), f"{split}_{f}_{i}",
                                      side=("left", "right")[(first + i) % 2] if f == "wave" else None,
-                                     floating=floating, shift=shift)
+                                     max_draws=max_draws, floating=floating, shift=shift, screen=screen)
                          for f in fams for i in range(per)]
     return MotionSet(float(rate_hz), splits)
