@@ -129,7 +129,10 @@ def run(args: Deploy) -> int:
     from ..sim.warmup import compile_kernels
 
     # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
-    variants = ("forward",) + (() if args.calibrated else ("param_grads", "grad")) + (() if args.delta else ("grad",))
+    wanted = set(args.policies or ("b_calibrated", "c_delta_action"))
+    fit_cal = not args.calibrated and bool(wanted & {"b_calibrated", "f_calibrated_narrow"})
+    fit_delta = not args.delta and "c_delta_action" in wanted
+    variants = ("forward",) + (("param_grads", "grad") if fit_cal else ()) + (("grad",) if fit_delta else ())
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
           mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, ledger=args.heldout_ledger, log=log,

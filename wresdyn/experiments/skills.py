@@ -226,7 +226,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         + f" ({time.perf_counter() - t0:.0f} s)")
     t0 = time.perf_counter()
     calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
-                                         need_delta="c_delta_action" in policies)
+                                         need_delta="c_delta_action" in policies,
+                                         need_calibrated=any(POLICIES[p] in ("calibrated", "calibrated_narrow")
+                                                             for p in policies))
     fit_s = time.perf_counter() - t0
     log(f"[2/4] corrections{' fitted on the stand' if floor else ''}: calibrated {calibrated}, delta action {delta} "
         f"({fit_s:.0f} s)")

@@ -59,9 +59,11 @@ def start_benchmark(out: Path, cfg, ppo, mismatch, dataset, policies) -> Benchma
     return BenchmarkStart(policies, ppo, mismatch, counts)
 
 
-def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, device, log, need_delta=True):
-    """Run folders of the calibrated robot and the delta-action residual, fitted into ``out`` when not given."""
-    if calibrated is None:
+def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, device, log, need_delta=True,
+                    need_calibrated=True):
+    """Run folders of the calibrated robot and the delta-action residual, fitted into ``out`` when not given (and
+    needed: ``None`` for one that is not)."""
+    if calibrated is None and need_calibrated:
         calibrated = out / "calibrated"
         if not (calibrated / "policy.pt").is_file():
             log(f"fitting the calibrated robot (hybrid, `wresdyn fit`) -> {calibrated}")
@@ -78,7 +80,7 @@ def fit_corrections(dataset, data_path, robot, out: Path, calibrated, delta, dev
             cfg = replace(cfg, model="network", device=device, residual=replace(cfg.residual, kind="delta_action"))
             policy, _ = fit(robot, dataset, cfg, out=delta, log=lambda s: None)
             export_run(policy, delta, cfg, dataset, data_path)
-    return Path(calibrated), None if delta is None else Path(delta)
+    return None if calibrated is None else Path(calibrated), None if delta is None else Path(delta)
 
 
 def write_results(out: Path, results: dict) -> Path:
