@@ -29,6 +29,8 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=64)
     p.add_argument("--motions", type=int, default=3, help="training motions per family")
     p.add_argument("--duration", type=float, default=4.0, help="length of a motion [s]")
+    p.add_argument("--no-screen", action="store_true",
+                   help="keep every motion as drawn (motions too short for the flat soles to carry)")
     args = p.parse_args()
 
     from dataclasses import replace
@@ -47,7 +49,8 @@ def main() -> None:
     ds = load_dataset(args.data or DEFAULT_DATASET)
     stand, floor = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
     task, ppo = SkillTaskConfig.floor(), SkillPPOConfig()  # the worlds are the plants' (args.envs)
-    motions = make_motions(stand, {"train": args.motions, "heldout": 1}, args.duration, ds.rate_hz, floating=floor)
+    motions = make_motions(stand, {"train": args.motions, "heldout": 1}, args.duration, ds.rate_hz, floating=floor,
+                           screen=not args.no_screen)
     out = Path(args.out)
 
     # (a) the nominal simulator on a floor, (b) (a) fine-tuned in the calibrated robot (identified on the stand)

@@ -198,7 +198,8 @@ def test_skill_on_the_floor_example_runs(tmp_path, humanoid, data):
 
     cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
     res = subprocess.run([sys.executable, "examples/skill_on_the_floor.py", str(cal), "--out", str(tmp_path / "skills"),
-                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--duration", "1.0"],
+                          "--iterations", "2", "--finetune", "1", "--envs", "4", "--motions", "1", "--duration", "1.0",
+                          "--no-screen"],
                          capture_output=True, text=True, cwd=REPO, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     rows = {ln.split()[0]: ln.split() for ln in res.stdout.splitlines()
