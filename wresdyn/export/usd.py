@@ -160,6 +160,8 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         prismatic = bool(robot.is_prismatic()[i])
         axis = "linear" if prismatic else "angular"
         per = 1.0 if prismatic else deg  # USD angular drive gains are per degree
+        if not prim.HasAPI(UsdPhysics.DriveAPI, axis):  # a converted joint's drive may be a MuJoCo actuator prim
+            UsdPhysics.DriveAPI.Apply(prim, axis)
         _set(prim, f"drive:{axis}:physics:stiffness", Sdf.ValueTypeNames.Float, physics.kp[i] * per)
         _set(prim, f"drive:{axis}:physics:damping", Sdf.ValueTypeNames.Float, physics.kd[i] * per)
         if np.isfinite(physics.effort[i]):
@@ -185,6 +187,10 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         _set(prim, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*map(float, physics.body_com[b])))
         _set(prim, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*map(float, moments)))
         _set(prim, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(*map(float, quat)))
+        if "NewtonMassAPI" in prim.GetAppliedSchemas():  # its newton:inertia tensor overrides the principal form
+            i = physics.body_inertia[b]
+            _set(prim, "newton:inertia", Sdf.ValueTypeNames.DoubleArray,
+                 [float(i[0, 0]), float(i[1, 1]), float(i[2, 2]), float(i[0, 1]), float(i[0, 2]), float(i[1, 2])])
     stage.GetRootLayer().Save()
 
     act = Usd.Stage.CreateNew(str(out / "actuated.usda"))
