@@ -36,11 +36,8 @@ together are the servo law. ``robot.usda`` records ``wresdyn:drive = "servo"`` a
 does not read them: loaded as it is, the joint runs its PD drive). The folder then also holds
 ``servo_actuator.py`` (newton, warp and pxr only) and ``wresdyn_servo_schema/``, the codeless USD schema plugin
 Newton's importer needs to see the custom schema; ``export.json`` names them under ``"servo"``. A plain script
-calls ``servo_actuator.register()`` before it opens any USD stage.
-
-MJCF and URDF robots are converted to USD first (:mod:`wresdyn.export.convert`: ``mujoco-usd-converter``,
-``urdf-usd-converter``) into the folder's ``source/`` (the converted root layer and its ``Payload/``); the layers go
-over that file, and ``export.json`` names it under ``"converted"`` next to the original robot file.
+calls ``servo_actuator.register()`` before it opens any USD stage. MJCF and URDF robots are converted to USD in
+``source/`` first (:mod:`wresdyn.export.convert`), the layers go over it; ``export.json`` names it ``"converted"``.
 
 :mod:`wresdyn.export.residual_torque` runs the residual in a plain Newton loop.
 """
@@ -188,9 +185,8 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         _set(prim, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*map(float, moments)))
         _set(prim, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(*map(float, quat)))
         if "NewtonMassAPI" in prim.GetAppliedSchemas():  # its newton:inertia tensor overrides the principal form
-            i = physics.body_inertia[b]
-            _set(prim, "newton:inertia", Sdf.ValueTypeNames.DoubleArray,
-                 [float(i[0, 0]), float(i[1, 1]), float(i[2, 2]), float(i[0, 1]), float(i[0, 2]), float(i[1, 2])])
+            t = physics.body_inertia[b][[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]  # xx, yy, zz, xy, xz, yz
+            _set(prim, "newton:inertia", Sdf.ValueTypeNames.DoubleArray, [float(x) for x in t])
     stage.GetRootLayer().Save()
 
     act = Usd.Stage.CreateNew(str(out / "actuated.usda"))
@@ -332,12 +328,10 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
 
 
 def check_usd_robot(robot) -> None:
-    """Raise :class:`ExportError` unless ``robot`` was loaded from a USD file (the layers go over it) or from MJCF or
-    URDF (converted to USD first, :mod:`wresdyn.export.convert`)."""
-    suffix = Path(robot.source).suffix.lower()
-    if not is_usd(robot.source) and suffix not in CONVERTERS:
+    """Raise :class:`ExportError` unless ``robot`` was loaded from USD, or from MJCF or URDF (converted first)."""
+    if not is_usd(robot.source) and Path(robot.source).suffix.lower() not in CONVERTERS:
         raise ExportError(f"{robot.source}: export writes USD layers over a USD robot file, or over one converted "
-                          f"from MJCF (.xml) or URDF (.urdf); {suffix or 'this file'} is neither")
+                          f"from MJCF (.xml) or URDF (.urdf); {Path(robot.source).suffix or 'this file'} is neither")
 
 
 def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, residual: dict | None = None,
