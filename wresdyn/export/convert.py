@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import WresdynError
 from ..paths import REPO
+from ..robot.description import load_robot
 
 __all__ = ["CONVERTERS", "converter_python", "convert_robot_file", "converted_robot", "is_usd"]
 
@@ -95,8 +96,6 @@ def converted_robot(robot, physics, dest: str | Path):
     Raises:
         ConvertError: the conversion failed, or lost a joint, a body with mass, or the joints' limits.
     """
-    from ..robot.description import load_robot
-
     root = convert_robot_file(robot.source, dest)
     usd = load_robot(root, gains=robot.gains, base=robot.base)
     if sorted(usd.joint_names) != sorted(robot.joint_names):
