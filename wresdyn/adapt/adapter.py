@@ -63,7 +63,7 @@ class Adapter:
         publish: Folder the accepted updates are written to (:meth:`publish`); ``None``: not written.
         export: Export folder of the calibrated robot (:func:`wresdyn.export.usd.write_export`, as ``wresdyn
             export --physics-only`` writes it), written with the warm start here and rewritten with each published
-            update; ``None``: none. Needs a robot loaded from USD.
+            update; ``None``: none. An MJCF or URDF robot is converted at each write.
     """
 
     def __init__(self, robot, start: PhysicalParams, rate_hz: float, cfg: AdaptConfig = AdaptConfig(),

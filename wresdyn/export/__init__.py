@@ -3,6 +3,8 @@
 - :mod:`wresdyn.export.usd`: ``wresdyn export RUN`` writes ``robot.usda`` (a layer over the robot file with the
   identified physical parameters as the attributes Newton's USD importer reads) and ``actuated.usda`` (the drive
   path as ``newton.actuators`` prims: ``DrivePD``, ``Delay``, ``ClampingMaxEffort``; and the residual network).
+- :mod:`wresdyn.export.convert`: an MJCF or URDF robot converted to USD first (``mujoco-usd-converter``,
+  ``urdf-usd-converter``, run from their own ``.venv-usd``), the layers then written over the converted file.
 - :mod:`wresdyn.export.servo_actuator`: the drive servo joints export to (dead band, goal profile, back-EMF) beside
   Newton's ``Delay`` and ``ClampingDCMotor``, registered with ``newton.actuators.register_actuator_component`` and a
   codeless USD schema; the export ships it as a self-contained file next to the layers.

@@ -36,8 +36,8 @@ together are the servo law. ``robot.usda`` records ``wresdyn:drive = "servo"`` a
 does not read them: loaded as it is, the joint runs its PD drive). The folder then also holds
 ``servo_actuator.py`` (newton, warp and pxr only) and ``wresdyn_servo_schema/``, the codeless USD schema plugin
 Newton's importer needs to see the custom schema; ``export.json`` names them under ``"servo"``. A plain script
-calls ``servo_actuator.register()`` before it opens any USD stage. Robot files other than USD (MJCF, URDF) are
-refused with the conversion step named.
+calls ``servo_actuator.register()`` before it opens any USD stage. MJCF and URDF robots are converted to USD in
+``source/`` first (:mod:`wresdyn.export.convert`), the layers go over it; ``export.json`` names it ``"converted"``.
 
 :mod:`wresdyn.export.residual_torque` runs the residual in a plain Newton loop.
 """
@@ -60,6 +60,7 @@ from ..evaluation.evaluate_run import run_friction_kappa
 from ..learn.runs import run_physics
 from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
+from .convert import CONVERTERS, converted_robot, is_usd
 
 __all__ = ["ExportError", "check_usd_robot", "export_run", "write_export", "write_layers", "inertia_principal"]
 
@@ -156,6 +157,8 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         prismatic = bool(robot.is_prismatic()[i])
         axis = "linear" if prismatic else "angular"
         per = 1.0 if prismatic else deg  # USD angular drive gains are per degree
+        if not prim.HasAPI(UsdPhysics.DriveAPI, axis):  # a converted joint's drive may be a MuJoCo actuator prim
+            UsdPhysics.DriveAPI.Apply(prim, axis)
         _set(prim, f"drive:{axis}:physics:stiffness", Sdf.ValueTypeNames.Float, physics.kp[i] * per)
         _set(prim, f"drive:{axis}:physics:damping", Sdf.ValueTypeNames.Float, physics.kd[i] * per)
         if np.isfinite(physics.effort[i]):
@@ -181,6 +184,9 @@ def write_layers(robot, physics, out: Path, rate_hz: float, residual: dict | Non
         _set(prim, "physics:centerOfMass", Sdf.ValueTypeNames.Point3f, Gf.Vec3f(*map(float, physics.body_com[b])))
         _set(prim, "physics:diagonalInertia", Sdf.ValueTypeNames.Float3, Gf.Vec3f(*map(float, moments)))
         _set(prim, "physics:principalAxes", Sdf.ValueTypeNames.Quatf, Gf.Quatf(*map(float, quat)))
+        if "NewtonMassAPI" in prim.GetAppliedSchemas():  # its newton:inertia tensor overrides the principal form
+            t = physics.body_inertia[b][[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]  # xx, yy, zz, xy, xz, yz
+            _set(prim, "newton:inertia", Sdf.ValueTypeNames.DoubleArray, [float(x) for x in t])
     stage.GetRootLayer().Save()
 
     act = Usd.Stage.CreateNew(str(out / "actuated.usda"))
@@ -322,11 +328,10 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
 
 
 def check_usd_robot(robot) -> None:
-    """Raise :class:`ExportError` unless ``robot`` was loaded from a USD file (the layers go over it)."""
-    if Path(robot.source).suffix.lower() not in (".usd", ".usda", ".usdc"):
-        raise ExportError(f"{robot.source}: export writes a USD layer over a USD robot file; convert "
-                          f"{Path(robot.source).suffix} to USD first (for MJCF: mujoco-usd-converter), then record "
-                          "or import the data and identify against the .usd file; or export --format mjcf")
+    """Raise :class:`ExportError` unless ``robot`` was loaded from USD, or from MJCF or URDF (converted first)."""
+    if not is_usd(robot.source) and Path(robot.source).suffix.lower() not in CONVERTERS:
+        raise ExportError(f"{robot.source}: export writes USD layers over a USD robot file, or over one converted "
+                          f"from MJCF (.xml) or URDF (.urdf); {Path(robot.source).suffix or 'this file'} is neither")
 
 
 def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, residual: dict | None = None,
@@ -358,6 +363,10 @@ def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, 
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
+        source = {"robot_file": str(robot.source), "robot_sha256": robot.source_sha256}
+        if not is_usd(robot.source):  # the layers go over the converted file, kept in the folder
+            robot, physics = converted_robot(robot, physics, tmp / "source")
+            source["converted"] = str(Path(robot.source).resolve().relative_to(tmp.resolve()))
         write_layers(robot, physics, tmp, rate_hz, residual)
         physics.save(tmp / "physics.json")
         servo = _write_servo_component(robot, tmp)
@@ -366,8 +375,7 @@ def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, 
         if residual is not None:
             (tmp / "residual.json").write_text(json.dumps(residual, indent=2))
         (tmp / "export.json").write_text(json.dumps({
-            "format": "wresdyn.export/1", **record, "robot_file": str(robot.source),
-            "robot_sha256": robot.source_sha256, "rate_hz": rate_hz, "residual": residual is not None,
+            "format": "wresdyn.export/1", **record, **source, "rate_hz": rate_hz, "residual": residual is not None,
             "servo": servo}, indent=2))
         _swap(tmp, out)
     except BaseException:
