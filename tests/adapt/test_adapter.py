@@ -191,10 +191,12 @@ def test_each_update_rewrites_the_exported_robot(humanoid, stream, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["calibrated"]
 
 
-def test_an_export_needs_a_usd_robot(cartpole, tmp_path):
+def test_an_export_needs_a_usd_robot_or_its_converter(cartpole, tmp_path, monkeypatch):
+    """A URDF robot exports through its conversion to USD: without the converter the adapter stops before it starts."""
     from wresdyn.export.usd import ExportError
 
-    with pytest.raises(ExportError, match="USD"):
+    monkeypatch.setenv("WRESDYN_USD_CONVERTER_PYTHON", str(tmp_path / "no-python"))
+    with pytest.raises(ExportError, match="to USD needs urdf-usd-converter"):
         Adapter(cartpole, PhysicalParams.nominal(cartpole), 500.0, TINY, export=tmp_path / "calibrated")
     assert not (tmp_path / "calibrated").exists()
 
@@ -290,7 +292,9 @@ def test_cli_replays_a_dataset_and_writes_every_update(humanoid, stream, tmp_pat
     assert (tmp_path / "calibrated" / "robot.usda").is_file()
 
 
-def test_cli_export_of_a_robot_that_is_not_usd_is_one_line_and_writes_nothing(cartpole, tmp_path, capsys):
+def test_cli_export_of_a_robot_without_its_converter_is_one_line_and_writes_nothing(cartpole, tmp_path, capsys,
+                                                                                     monkeypatch):
+    monkeypatch.setenv("WRESDYN_USD_CONVERTER_PYTHON", str(tmp_path / "no-python"))
     run = tmp_path / "run"
     run.mkdir()
     PhysicalParams.nominal(cartpole).save(run / "physics.json")

@@ -59,7 +59,7 @@ def _export(tmp: Path, robot, q0: np.ndarray, steps: int = 40, rc: int = 0):
     (run / "config.json").write_text(json.dumps({"data_path": str(tmp / "data.npz")}))
     physics = _moved(robot)
     physics.save(run / "physics.json")
-    assert main(["export", str(run), "--out", str(tmp / "out"), "--physics-only"]) == rc
+    assert main(["export", str(run), "--out", str(tmp / "out"), "--physics-only", "--format", "usd"]) == rc
     return physics, tr, tmp / "out"
 
 

@@ -106,7 +106,7 @@ torch.set_num_threads(1)
 out, iterations, envs = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 robot = load_robot(DEFAULT_ROBOT)
 floating = load_robot(robot.source, base="floating")
-motions = make_motions(robot, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3, floating=floating)
+motions = make_motions(robot, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3, floating=floating, screen=False)
 cfg = SkillPPOConfig(iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
                      num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
 n, device = rank_share(envs, cfg.device)

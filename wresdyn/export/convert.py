@@ -19,6 +19,7 @@ conversion lost is an error (massless links that the converter folds into their 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -55,6 +56,20 @@ def converter_python() -> str | None:
         return env
     default = REPO / ".venv-usd" / "bin" / "python"
     return str(default) if default.is_file() else None
+
+
+def converter_missing(src: str | Path) -> str | None:
+    """Why the robot file ``src`` cannot be exported as USD here, in one line (not MJCF/URDF, or no interpreter with
+    its converter), else ``None``: checked before anything is written."""
+    suffix = Path(src).suffix.lower()
+    if suffix not in CONVERTERS:
+        return (f"{src}: export writes USD layers over a USD robot file, or over one converted from MJCF (.xml) or "
+                f"URDF (.urdf); {suffix or 'this file'} is neither")
+    py = converter_python()
+    if py is not None and (Path(py).is_file() or shutil.which(py)):
+        return None
+    return (f"{src}: exporting a {suffix} robot to USD needs {_PACKAGES[suffix]}: run `scripts/setup.sh usd` (a "
+            f"separate .venv-usd) or set {ENV} to a Python that has it")
 
 
 def convert_robot_file(src: str | Path, dest: str | Path) -> Path:

@@ -60,7 +60,7 @@ from ..evaluation.evaluate_run import run_friction_kappa
 from ..learn.runs import run_physics
 from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
-from .convert import CONVERTERS, converted_robot, is_usd
+from .convert import converted_robot, converter_missing, is_usd
 
 __all__ = ["ExportError", "check_usd_robot", "export_run", "write_export", "write_layers", "inertia_principal"]
 
@@ -329,9 +329,9 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
 
 def check_usd_robot(robot) -> None:
     """Raise :class:`ExportError` unless ``robot`` was loaded from USD, or from MJCF or URDF (converted first)."""
-    if not is_usd(robot.source) and Path(robot.source).suffix.lower() not in CONVERTERS:
-        raise ExportError(f"{robot.source}: export writes USD layers over a USD robot file, or over one converted "
-                          f"from MJCF (.xml) or URDF (.urdf); {Path(robot.source).suffix or 'this file'} is neither")
+    why = None if is_usd(robot.source) else converter_missing(robot.source)
+    if why:
+        raise ExportError(why)
 
 
 def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, residual: dict | None = None,
