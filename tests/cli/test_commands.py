@@ -320,3 +320,13 @@ def test_a_malformed_command_line_is_one_line_and_exit_2(argv, message, capsys):
 def test_a_value_the_config_refuses_is_one_line_and_exit_2(argv, message, capsys):
     assert main(argv) == 2
     assert capsys.readouterr().err.strip().splitlines() == [message]
+
+
+def test_an_unknown_export_format_is_one_line_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as stop:
+        main(["export", str(tmp_path / "run"), "--format", "obj", "--out", str(out)])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'obj'" in err and "mjcf" in err and "usd" in err, err
+    assert not out.exists()
