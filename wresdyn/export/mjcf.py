@@ -49,7 +49,8 @@ from ..robot.mujoco_model import mujoco_body_names, mujoco_spec
 from ..sim.physics import PhysicalParams
 from ..sim.rollout import replay_trajectories
 from . import play_mujoco
-from .usd import ExportError, _swap, inertia_principal
+from .run_folder import ExportError, open_run
+from .usd import _swap, inertia_principal
 
 __all__ = ["export_mjcf", "mjcf_spec", "round_trip", "write_mjcf_export"]
 
@@ -119,19 +120,7 @@ def export_mjcf(run: str | Path, out: str | Path | None = None, *, force: bool =
     """
     run = Path(run)
     out = Path(out) if out is not None else run / "export"
-    cfg_path = run / "config.json"
-    if not cfg_path.is_file():
-        raise ExportError(f"{run}: not a run folder (no config.json)")
-    if out.exists() and not force:
-        raise ExportError(f"{out}: already exists; pass --force to replace it")
-    has_residual = (run / "policy.pt").is_file() and (run / "residual.json").is_file()
-    if not has_residual and not physics_only:
-        raise ExportError(f"{run}: the run has no residual (policy.pt, residual.json); export a `wresdyn fit` run, "
-                          "or pass --physics-only for the identified physics alone")
-    residual = json.loads((run / "residual.json").read_text()) if has_residual and not physics_only else None
-    if residual is not None and residual.get("kind") != "torque":
-        raise ExportError(f"{run}: a {residual.get('kind')} residual cannot be exported yet (only torque residuals "
-                          "act outside the delayed command path)")
+    cfg_path, residual = open_run(run, out, force, physics_only)
     if residual is not None and not (run / "policy.onnx").is_file():
         raise ExportError(f"{run}: the run has no policy.onnx; MuJoCo runs the residual as ONNX")
     data = data or json.loads(cfg_path.read_text()).get("data_path")

@@ -55,12 +55,12 @@ import numpy as np
 
 from ..data.dataset import load_dataset
 from ..data.loading import dataset_robot
-from ..errors import WresdynError
 from ..evaluation.evaluate_run import run_friction_kappa
 from ..learn.runs import run_physics
 from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
 from .convert import converted_robot, converter_missing, is_usd
+from .run_folder import ExportError, open_run
 
 __all__ = ["ExportError", "check_usd_robot", "export_run", "write_export", "write_layers", "inertia_principal"]
 
@@ -76,10 +76,6 @@ _SERVO_FILES = (Path(__file__).with_name("servo_actuator.py"), Path(__file__).wi
 _SERVO_ATTRS = {"wresdyn:servo:deadband": "deadband", "wresdyn:servo:noloadSpeed": "noload_speed",
                 "wresdyn:servo:goalAccel": "goal_accel"}
 """Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s²], by PhysicalParams field."""
-
-
-class ExportError(WresdynError):
-    """A run that cannot be exported; the message is one line."""
 
 
 def inertia_principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -286,19 +282,7 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
 
     run = Path(run)
     out = Path(out) if out is not None else run / "export"
-    cfg_path = run / "config.json"
-    if not cfg_path.is_file():
-        raise ExportError(f"{run}: not a run folder (no config.json)")
-    if out.exists() and not force:
-        raise ExportError(f"{out}: already exists; pass --force to replace it")
-    has_residual = (run / "policy.pt").is_file() and (run / "residual.json").is_file()
-    if not has_residual and not physics_only:
-        raise ExportError(f"{run}: the run has no residual (policy.pt, residual.json); export a `wresdyn fit` run, "
-                          "or pass --physics-only for the identified physics alone")
-    residual = json.loads((run / "residual.json").read_text()) if has_residual and not physics_only else None
-    if residual is not None and residual.get("kind") != "torque":
-        raise ExportError(f"{run}: a {residual.get('kind')} residual cannot be exported yet (only torque residuals "
-                          "act outside the delayed command path)")
+    cfg_path, residual = open_run(run, out, force, physics_only)
     kappa = run_friction_kappa(run)
     if kappa is not None:
         raise ExportError(f"{run}: the run was identified under the replay's damper friction law (friction_kappa = "
