@@ -190,15 +190,14 @@ class Simulator:
             return  # every parameter is read live from the arrays just written: nothing to recompile
         self._physics_changed()
 
-    def set_world_physics(self, values: dict[str, torch.Tensor]) -> None:
-        """Write different physical parameters into each world (no gradients): :meth:`set_physics` with tensors that
-        carry a leading world axis, joint fields (W, n), body fields (W, nb), (W, nb, 3), (W, nb, 3, 3); fields not
-        given keep what the worlds have. For a finite-difference Jacobian: one parameter perturbed per world, all
-        replayed in one batch (:mod:`wresdyn.identify.identifiability`)."""
-        for f, v in values.items():
-            if v.shape[0] != self.num_worlds:
-                raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.num_worlds}")
-        self.set_physics({f: v.detach() for f, v in values.items()})
+    def set_world_physics(self, values: dict[str, torch.Tensor], ids=None) -> None:
+        """Write different physical parameters into each world (no gradients): tensors with a leading world axis,
+        joint fields (k, n), body fields (k, nb), (k, nb, 3), (k, nb, 3, 3), one row per world of ``ids`` (long (k,);
+        ``None``: every world); other fields and worlds keep theirs. In place, the solver told only what changed, CUDA
+        graphs kept (:mod:`wresdyn.sim.world_physics`): a redraw on reset, a finite-difference Jacobian."""
+        from .world_physics import model_flags, refresh, write_world_physics
+
+        refresh(self, model_flags(write_world_physics(self, values, ids)))
 
     def _physics_changed(self) -> None:
         """Tell a solver that caches model properties that they changed."""
