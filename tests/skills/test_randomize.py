@@ -220,3 +220,68 @@ def test_randomised_baselines_train_and_deploy_through_the_benchmark(tmp_path, h
         assert record["randomization"]["kp_scale"] == [0.8, 1.2]
         assert math.isfinite(res["real"]["heldout"][name]["mean"]["mpjpe"])
     assert "(e) (a) fine-tuned" in (out / "report.md").read_text()
+
+
+def warp_pointers(*objects) -> dict:
+    """Device address of every Warp array of ``objects`` (a Newton model, a MuJoCo Warp model or data): what a
+    captured CUDA graph holds."""
+    import warp as wp
+
+    return {(i, k): v.ptr for i, o in enumerate(objects) for k, v in vars(o).items() if isinstance(v, wp.array)}
+
+
+def test_the_draws_of_a_seed_are_those_the_smoke_figures_were_run_with(humanoid):
+    """Seed 3, four worlds, worlds 1 and 2 redrawn on reset: the values the draws gave before redraws wrote in place
+    (float32 model values, read back to 1e-6)."""
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 5, randomization=Randomization(seed=3))
+    q = torch.zeros(2, humanoid.n_dof)
+    plant.reset(torch.tensor([1, 2]), q, q)
+    v = {k: t.numpy() for k, t in plant.randomizer.values.items()}
+    kp = [[82.827026367, 88.062347412], [99.204872131, 88.634475708], [80.967636108, 103.861045837],
+          [100.676895142, 116.220855713]]
+    mass = [[1.039174318, 0.982882202], [0.913201869, 1.296197534], [0.818135619, 1.026046872],
+            [0.931586683, 1.326187372]]
+    assert np.allclose(v["kp"][:, :2], kp, rtol=1e-6, atol=0)
+    assert np.allclose(v["body_mass"][:, 1:3], mass, rtol=1e-6, atol=0)
+    assert np.allclose(v["friction"][:, 0], [1.337236047, 4.243315697, 1.827716708, 1.294463634], rtol=1e-6)
+    assert np.allclose(v["body_com"].reshape(WORLDS, -1).sum(1), [-0.885374263, -0.872034815, -0.837009476,
+                                                                  -0.802855948], rtol=1e-6)
+    assert np.allclose(plant.randomizer.delay[:, 0], [0.002918555, 0.019272541, 0.007987468, 0.003604118], rtol=1e-6)
+
+
+def _fresh_params(humanoid, values: dict, w: int) -> PhysicalParams:
+    """World ``w``'s drawn physics as :class:`PhysicalParams` (float64 of the float32 draws)."""
+    p = PhysicalParams.nominal(humanoid)
+    for f, v in values.items():
+        setattr(p, f, v[w].numpy().astype(np.float64))
+    return p
+
+
+def test_a_redraw_writes_in_place_and_each_world_steps_as_a_simulator_built_with_its_draw(humanoid):
+    """After a reset redraws worlds 1 and 2 (every randomised quantity at once), no model array moved (a captured
+    graph stays valid, and is kept), and each world steps as a one-world simulator given that world's draw through
+    the whole-model path (set_physics)."""
+    from wresdyn.sim import Simulator
+
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 1, randomization=Randomization(seed=4))
+    sim = plant.sim
+    before, sentinel = warp_pointers(sim.model), object()
+    sim._graphs[7] = sentinel
+    q0 = torch.zeros(2, humanoid.n_dof)
+    plant.reset(torch.tensor([1, 2]), q0, q0)
+    assert warp_pointers(sim.model) == before and sim._graphs[7] is sentinel
+    del sim._graphs[7]
+    values = {f: v.clone() for f, v in plant.randomizer.values.items()}
+    target = torch.full((WORLDS, humanoid.n_dof), 0.2)
+    sim.set_state(None, torch.zeros(WORLDS, humanoid.n_dof), torch.zeros(WORLDS, humanoid.n_dof))
+    qs = [sim.step(target)[0] for _ in range(30)]
+    for w in range(WORLDS):
+        alone = Simulator(humanoid, 1, 1.0 / RATE)
+        alone.set_physics(_fresh_params(humanoid, values, w))
+        alone.set_state(None, torch.zeros(1, humanoid.n_dof), torch.zeros(1, humanoid.n_dof))
+        for k in range(30):
+            q = alone.step(target[:1])[0]
+        assert torch.allclose(q[0], qs[-1][w], atol=1e-6), w  # float32, the same kernel
+    assert (qs[-1][1] - qs[-1][0]).abs().max() > 1e-3  # the draws differ enough to be seen
