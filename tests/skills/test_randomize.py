@@ -285,3 +285,47 @@ def test_a_redraw_writes_in_place_and_each_world_steps_as_a_simulator_built_with
             q = alone.step(target[:1])[0]
         assert torch.allclose(q[0], qs[-1][w], atol=1e-6), w  # float32, the same kernel
     assert (qs[-1][1] - qs[-1][0]).abs().max() > 1e-3  # the draws differ enough to be seen
+
+
+MJW_DERIVED = ("body_mass", "body_inertia", "body_ipos", "body_subtreemass", "body_invweight0", "dof_armature",
+               "dof_invweight0", "dof_frictionloss", "actuator_gainprm", "actuator_biasprm", "actuator_forcerange")
+"""What Newton's SolverMuJoCo derives per world from the randomised model arrays (mujoco_warp's model)."""
+
+
+def test_a_redraw_on_mujoco_warp_equals_a_solver_built_on_the_drawn_model(humanoid):
+    """mujoco_warp (the GPU plants' solver, here on Warp's CPU device): after worlds 1 and 2 are redrawn, nothing
+    the solver holds moved (Newton model, mujoco_warp model and data: a captured graph stays valid), what it
+    derives per world (masses, inertias, subtree masses, inverse weights, armature, friction loss, gains, force
+    ranges) equals what a solver built on the drawn model derives, and the worlds step alike."""
+    import warp as wp
+
+    from wresdyn.sim import Simulator
+    from wresdyn.sim.solvers import make_solver
+
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 1, solver="mujoco", randomization=Randomization(seed=4))
+    sim = plant.sim
+    holds = lambda s: warp_pointers(s.model, s.solver.mjw_model, s.solver.mjw_data)  # noqa: E731
+    before = holds(sim)
+    q0 = torch.zeros(2, humanoid.n_dof)
+    plant.reset(torch.tensor([1, 2]), q0, q0)
+    assert holds(sim) == before
+    fresh = Simulator(humanoid, WORLDS, 1.0 / RATE, solver="mujoco")
+    for name in ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_effort_limit",
+                 "body_mass", "body_com", "body_inertia", "body_inv_mass", "body_inv_inertia"):
+        wp.copy(getattr(fresh.model, name), getattr(sim.model, name))
+    fresh.solver = make_solver(fresh.model, humanoid, fresh.dt_sub, "mujoco")
+    for name in MJW_DERIVED:
+        a, b = (getattr(s.solver.mjw_model, name).numpy() for s in (sim, fresh))
+        assert a.shape[0] == WORLDS, name
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-7), (name, np.abs(a - b).max())
+    drawn = sim.solver.mjw_model.body_mass.numpy()
+    assert np.abs(drawn[1] - drawn[0]).max() > 1e-3  # per world
+    target = torch.full((WORLDS, humanoid.n_dof), 0.2)
+    z = torch.zeros(WORLDS, humanoid.n_dof)
+    runs = []
+    for s in (sim, fresh):
+        s.set_state(None, z, z)
+        runs.append(torch.stack([s.step(target)[0] for _ in range(20)]))
+    err = (runs[0] - runs[1]).abs().max().item()
+    assert err < 1e-5, err  # float32, the same kernels on the same values
