@@ -292,40 +292,71 @@ MJW_DERIVED = ("body_mass", "body_inertia", "body_ipos", "body_subtreemass", "bo
 """What Newton's SolverMuJoCo derives per world from the randomised model arrays (mujoco_warp's model)."""
 
 
-def test_a_redraw_on_mujoco_warp_equals_a_solver_built_on_the_drawn_model(humanoid):
-    """mujoco_warp (the GPU plants' solver, here on Warp's CPU device): after worlds 1 and 2 are redrawn, nothing
-    the solver holds moved (Newton model, mujoco_warp model and data: a captured graph stays valid), what it
-    derives per world (masses, inertias, subtree masses, inverse weights, armature, friction loss, gains, force
-    ranges) equals what a solver built on the drawn model derives, and the worlds step alike."""
+def _equals_a_solver_built_on_the_drawn_model(plant, robot, redraws, ground: bool = False) -> None:
+    """Redraw ``redraws`` (lists of worlds, one reset each) on a mujoco_warp plant: nothing the solver holds moves
+    (Newton model, mujoco_warp model and data: a captured graph stays valid), what it derives per world equals what
+    a solver built on the drawn model derives, and the worlds step alike."""
     import warp as wp
 
     from wresdyn.sim import Simulator
     from wresdyn.sim.solvers import make_solver
 
-    torch.set_num_threads(1)
-    plant = SimPlant(humanoid, WORLDS, RATE, 1, solver="mujoco", randomization=Randomization(seed=4))
-    sim = plant.sim
+    sim, w = plant.sim, plant.num_worlds
     holds = lambda s: warp_pointers(s.model, s.solver.mjw_model, s.solver.mjw_data)  # noqa: E731
     before = holds(sim)
-    q0 = torch.zeros(2, humanoid.n_dof)
-    plant.reset(torch.tensor([1, 2]), q0, q0)
+    for ids in redraws:
+        z = torch.zeros(len(ids), robot.n_dof, device=plant.device)
+        if ground:
+            pose = plant.base_pose[ids]
+            plant.reset_full(torch.tensor(ids), pose, torch.zeros(len(ids), 6, device=plant.device), z, z)
+        else:
+            plant.reset(torch.tensor(ids), z, z)
     assert holds(sim) == before
-    fresh = Simulator(humanoid, WORLDS, 1.0 / RATE, solver="mujoco")
-    for name in ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_effort_limit",
-                 "body_mass", "body_com", "body_inertia", "body_inv_mass", "body_inv_inertia"):
+    fresh = Simulator(robot, w, 1.0 / RATE, solver="mujoco", ground=ground, device=str(plant.device))
+    names = ["joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_effort_limit",
+             "body_mass", "body_com", "body_inertia", "body_inv_mass", "body_inv_inertia"]
+    for name in names + (["shape_material_mu"] if ground else []):
         wp.copy(getattr(fresh.model, name), getattr(sim.model, name))
-    fresh.solver = make_solver(fresh.model, humanoid, fresh.dt_sub, "mujoco")
-    for name in MJW_DERIVED:
+    fresh.solver = make_solver(fresh.model, robot, fresh.dt_sub, "mujoco", ground=ground)
+    for name in MJW_DERIVED + (("geom_friction",) if ground else ()):
         a, b = (getattr(s.solver.mjw_model, name).numpy() for s in (sim, fresh))
-        assert a.shape[0] == WORLDS, name
+        assert a.shape[0] == w, name
         assert np.allclose(a, b, rtol=1e-5, atol=1e-7), (name, np.abs(a - b).max())
     drawn = sim.solver.mjw_model.body_mass.numpy()
     assert np.abs(drawn[1] - drawn[0]).max() > 1e-3  # per world
-    target = torch.full((WORLDS, humanoid.n_dof), 0.2)
-    z = torch.zeros(WORLDS, humanoid.n_dof)
+    target = torch.full((w, robot.n_dof), 0.2, device=plant.device)
+    z = torch.zeros(w, robot.n_dof, device=plant.device)
     runs = []
+    pose, twist = (plant.base_pose, plant.base_twist) if ground else (None, None)
     for s in (sim, fresh):
-        s.set_state(None, z, z)
+        if ground:
+            s.set_full_state(None, pose, twist, z, z)
+        else:
+            s.set_state(None, z, z)
         runs.append(torch.stack([s.step(target)[0] for _ in range(20)]))
     err = (runs[0] - runs[1]).abs().max().item()
     assert err < 1e-5, err  # float32, the same kernels on the same values
+
+
+def test_a_redraw_on_mujoco_warp_equals_a_solver_built_on_the_drawn_model(humanoid):
+    """mujoco_warp (the GPU plants' solver, here on Warp's CPU device, on the stand): every randomised quantity but
+    the floor's friction (the CPU's floor worlds are MuJoCo C threads; the GPU test below has it)."""
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 1, solver="mujoco", randomization=Randomization(seed=4))
+    _equals_a_solver_built_on_the_drawn_model(plant, humanoid, [[1, 2]])
+
+
+def _cuda() -> bool:
+    import warp as wp
+
+    return wp.is_cuda_available()
+
+
+@pytest.mark.skipif(not _cuda(), reason="CUDA graphs and the floor's batched mujoco_warp worlds need a GPU")
+def test_on_a_gpu_a_captured_refresh_equals_a_solver_built_on_the_drawn_model(floating):
+    """On the floor on a GPU with the solver's refresh replayed from a CUDA graph (the first redraw captures it, the
+    second replays it) and the steps from theirs: the floor friction too."""
+    plant = SimPlant(floating, 16, RATE, 1, ground=True, device="cuda:0", randomization=Randomization(seed=4))
+    plant.sim.refresh_graph = True
+    _equals_a_solver_built_on_the_drawn_model(plant, floating, [[1, 2], [3, 5, 9]], ground=True)
+    assert len(plant.sim._refresh_graphs) == 1

@@ -134,6 +134,7 @@ class Simulator:
         self.upper = torch.as_tensor(robot.upper, **f32)
         self._cur = 0
         self._graphs: dict[int, object] = {}
+        self.refresh_graph, self._refresh_graphs = False, {}  # CUDA: replay the solver's refresh (world_physics)
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._wp_streams: dict[int, tuple] = {}  # torch stream handle -> (torch stream, Warp stream): _tape_stream
         self._tape_buffers: list = []

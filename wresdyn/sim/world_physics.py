@@ -16,6 +16,8 @@ worlds costs a few small kernels instead of a new capture:
   so the graphs are kept.
 - Solvers that keep host-side state of the model (Featherstone's mass-matrix flag, the threaded MuJoCo C worlds'
   template) are notified as well and their captured graphs dropped.
+
+On CUDA, ``Simulator.refresh_graph`` replays mujoco_warp's refresh from a CUDA graph (:func:`refresh`).
 """
 
 from __future__ import annotations
@@ -105,16 +107,46 @@ def write_world_physics(sim, values: dict, ids=None) -> list[str]:
 def refresh(sim, flags: int) -> None:
     """Let ``sim``'s solver refresh what it derives from the model arrays that ``flags`` name, on the simulator's
     stream (after torch's writes, before its next step); the captured graphs are kept where the solver refreshes in
-    place (module docstring)."""
+    place (module docstring). With ``sim.refresh_graph`` (CUDA), mujoco_warp's refresh of each ``flags`` runs once
+    eagerly, is captured as a CUDA graph and replayed afterwards: one launch instead of the hundreds of small
+    kernels of ``set_const_0`` (one solve per DoF, six per link)."""
     if not flags or sim.solver_kind == "replay":
         return
     from newton import ModelFlags
     from newton.solvers import SolverMuJoCo
 
     solver = sim.solver
+    mujoco_warp = type(solver) is SolverMuJoCo and not solver.use_mujoco_cpu
+    captured = mujoco_warp and sim.refresh_graph and sim._cuda
     with sim._stream():
-        solver.notify_model_changed(flags)
+        graph = sim._refresh_graphs.get(flags) if captured else None
+        if graph is not None:
+            import warp as wp
+
+            wp.capture_launch(graph)
+        else:
+            solver.notify_model_changed(flags)
+            if captured:
+                _capture(sim, flags)
     if getattr(solver, "use_mujoco_cpu", False) and flags & ModelFlags.SHAPE_PROPERTIES:
         solver.mj_model.geom_friction[:] = solver.mjw_model.geom_friction.numpy()[0]  # Newton leaves MuJoCo C's
     if type(solver) is not SolverMuJoCo:
         sim._graphs.clear()
+
+
+def _capture(sim, flags: int) -> None:
+    """Capture the solver's refresh of ``flags`` (already run eagerly: the kernels are compiled) on the current
+    stream; a refresh that cannot be captured stays eager."""
+    import warp as wp
+
+    try:
+        with wp.ScopedCapture(device=sim.model.device) as cap:
+            sim.solver.notify_model_changed(flags)
+    except Exception as e:  # noqa: BLE001 - any failure to capture leaves the eager refresh, which is correct
+        import warnings
+
+        warnings.warn(f"the solver's refresh after a redraw could not be captured ({e}); it stays eager",
+                      stacklevel=3)
+        sim.refresh_graph = False
+        return
+    sim._refresh_graphs[flags] = cap.graph
