@@ -7,7 +7,8 @@
 - ``recapture``: as the redraws were before they wrote in place: each followed by the broad model-changed notice
   and a new capture of the solver's CUDA graphs;
 
-plus the cost of one redraw of a twentieth of the worlds alone.
+plus the cost of one redraw of a twentieth of the worlds alone, and of the solver's refresh per Newton ``ModelFlags``
+member (``redraw``: the eager refresh, where mujoco_warp's ``set_const_0`` dominates).
 
 Usage:
     python benchmarks/skills/randomize_speed.py OUT [--device cuda:0] [--worlds 4096] [--iterations 5] [--floor]
@@ -87,6 +88,27 @@ def redraw_seconds(p: SimPlant, device: str, repeats: int = 10) -> float:
     return mean(True) - mean(False)
 
 
+def refresh_ms(p: SimPlant, device: str, repeats: int = 5) -> dict:
+    """Mean wall time [ms] of the solver's refresh after a change of each kind of field, and of all at once."""
+    from newton import ModelFlags as F
+
+    from wresdyn.sim.world_physics import refresh
+
+    kinds = {"force": F.JOINT_DOF_FORCE_PROPERTIES, "armature": F.JOINT_DOF_INERTIAL_PROPERTIES,
+             "bodies": F.BODY_INERTIAL_PROPERTIES, "shapes": F.SHAPE_PROPERTIES}
+    kinds["all"] = sum((int(f) for f in kinds.values()), 0)
+    out = {}
+    for name, flags in kinds.items():
+        refresh(p.sim, int(flags))
+        sync(device)
+        t0 = time.perf_counter()
+        for _ in range(repeats):
+            refresh(p.sim, int(flags))
+        sync(device)
+        out[name] = 1e3 * (time.perf_counter() - t0) / repeats
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path)
@@ -113,9 +135,13 @@ def main() -> None:
                       "collect_s_per_iteration": s["collect_s_per_iteration"], "episodes": s["episodes"],
                       "redraw_s": None if mode in ("fixed", "startup") else redraw_seconds(p, a.device)}
         r = rows[mode]
+        if mode in ("redraw", "redraw_graph"):
+            r["refresh_ms"] = refresh_ms(p, a.device)
         print(f"{mode:10s} {r['s_per_iteration']:.3f} s/iteration (collect {r['collect_s_per_iteration']:.3f} s), "
               f"{r['episodes']} episodes" + ("" if r["redraw_s"] is None else f", one redraw {1e3 * r['redraw_s']:.1f} ms"
                                               f" ({max(1, a.worlds // 20)} worlds)"), flush=True)
+        if "refresh_ms" in r:
+            print("  refresh [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in r["refresh_ms"].items()), flush=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     record = {"command": " ".join(["python", *sys.argv]),
               "commit": commit, "machine": platform.node(), "device": a.device, "worlds": a.worlds,
