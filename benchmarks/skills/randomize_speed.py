@@ -137,9 +137,10 @@ def main() -> None:
         r = rows[mode]
         if mode in ("redraw", "redraw_graph"):
             r["refresh_ms"] = refresh_ms(p, a.device)
+        k = max(1, a.worlds // 20)
+        redraw = "" if r["redraw_s"] is None else f", one redraw {1e3 * r['redraw_s']:.1f} ms ({k} worlds)"
         print(f"{mode:10s} {r['s_per_iteration']:.3f} s/iteration (collect {r['collect_s_per_iteration']:.3f} s), "
-              f"{r['episodes']} episodes" + ("" if r["redraw_s"] is None else f", one redraw {1e3 * r['redraw_s']:.1f} ms"
-                                              f" ({max(1, a.worlds // 20)} worlds)"), flush=True)
+              f"{r['episodes']} episodes{redraw}", flush=True)
         if "refresh_ms" in r:
             print("  refresh [ms]: " + ", ".join(f"{k} {v:.1f}" for k, v in r["refresh_ms"].items()), flush=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
