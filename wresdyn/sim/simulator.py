@@ -34,6 +34,7 @@ from ..robot.ground import base_index
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 from .tape_step import TapeBuffers, TapeStep
+from .world_physics import model_flags, refresh, write_world_physics
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
 
@@ -196,8 +197,6 @@ class Simulator:
         joint fields (k, n), body fields (k, nb), (k, nb, 3), (k, nb, 3, 3), one row per world of ``ids`` (long (k,);
         ``None``: every world); other fields and worlds keep theirs. In place, the solver told only what changed, CUDA
         graphs kept (:mod:`wresdyn.sim.world_physics`): a redraw on reset, a finite-difference Jacobian."""
-        from .world_physics import model_flags, refresh, write_world_physics
-
         refresh(self, model_flags(write_world_physics(self, values, ids)))
 
     def _physics_changed(self) -> None:
