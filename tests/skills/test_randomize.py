@@ -220,3 +220,144 @@ def test_randomised_baselines_train_and_deploy_through_the_benchmark(tmp_path, h
         assert record["randomization"]["kp_scale"] == [0.8, 1.2]
         assert math.isfinite(res["real"]["heldout"][name]["mean"]["mpjpe"])
     assert "(e) (a) fine-tuned" in (out / "report.md").read_text()
+
+
+def warp_pointers(*objects) -> dict:
+    """Device address of every Warp array of ``objects`` (a Newton model, a MuJoCo Warp model or data): what a
+    captured CUDA graph holds."""
+    import warp as wp
+
+    return {(i, k): v.ptr for i, o in enumerate(objects) for k, v in vars(o).items() if isinstance(v, wp.array)}
+
+
+def test_the_draws_of_a_seed_are_those_the_smoke_figures_were_run_with(humanoid):
+    """Seed 3, four worlds, worlds 1 and 2 redrawn on reset: the values the draws gave before redraws wrote in place
+    (float32 model values, read back to 1e-6)."""
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 5, randomization=Randomization(seed=3))
+    q = torch.zeros(2, humanoid.n_dof)
+    plant.reset(torch.tensor([1, 2]), q, q)
+    v = {k: t.numpy() for k, t in plant.randomizer.values.items()}
+    kp = [[82.827026367, 88.062347412], [99.204872131, 88.634475708], [80.967636108, 103.861045837],
+          [100.676895142, 116.220855713]]
+    mass = [[1.039174318, 0.982882202], [0.913201869, 1.296197534], [0.818135619, 1.026046872],
+            [0.931586683, 1.326187372]]
+    assert np.allclose(v["kp"][:, :2], kp, rtol=1e-6, atol=0)
+    assert np.allclose(v["body_mass"][:, 1:3], mass, rtol=1e-6, atol=0)
+    assert np.allclose(v["friction"][:, 0], [1.337236047, 4.243315697, 1.827716708, 1.294463634], rtol=1e-6)
+    assert np.allclose(v["body_com"].reshape(WORLDS, -1).sum(1), [-0.885374263, -0.872034815, -0.837009476,
+                                                                  -0.802855948], rtol=1e-6)
+    assert np.allclose(plant.randomizer.delay[:, 0], [0.002918555, 0.019272541, 0.007987468, 0.003604118], rtol=1e-6)
+
+
+def _fresh_params(humanoid, values: dict, w: int) -> PhysicalParams:
+    """World ``w``'s drawn physics as :class:`PhysicalParams` (float64 of the float32 draws)."""
+    p = PhysicalParams.nominal(humanoid)
+    for f, v in values.items():
+        setattr(p, f, v[w].numpy().astype(np.float64))
+    return p
+
+
+def test_a_redraw_writes_in_place_and_each_world_steps_as_a_simulator_built_with_its_draw(humanoid):
+    """After a reset redraws worlds 1 and 2 (every randomised quantity at once), no model array moved (a captured
+    graph stays valid, and is kept), and each world steps as a one-world simulator given that world's draw through
+    the whole-model path (set_physics)."""
+    from wresdyn.sim import Simulator
+
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 1, randomization=Randomization(seed=4))
+    sim = plant.sim
+    before, sentinel = warp_pointers(sim.model), object()
+    sim._graphs[7] = sentinel
+    q0 = torch.zeros(2, humanoid.n_dof)
+    plant.reset(torch.tensor([1, 2]), q0, q0)
+    assert warp_pointers(sim.model) == before and sim._graphs[7] is sentinel
+    del sim._graphs[7]
+    values = {f: v.clone() for f, v in plant.randomizer.values.items()}
+    target = torch.full((WORLDS, humanoid.n_dof), 0.2)
+    sim.set_state(None, torch.zeros(WORLDS, humanoid.n_dof), torch.zeros(WORLDS, humanoid.n_dof))
+    qs = [sim.step(target)[0] for _ in range(30)]
+    for w in range(WORLDS):
+        alone = Simulator(humanoid, 1, 1.0 / RATE)
+        alone.set_physics(_fresh_params(humanoid, values, w))
+        alone.set_state(None, torch.zeros(1, humanoid.n_dof), torch.zeros(1, humanoid.n_dof))
+        for k in range(30):
+            q = alone.step(target[:1])[0]
+        assert torch.allclose(q[0], qs[-1][w], atol=1e-6), w  # float32, the same kernel
+    assert (qs[-1][1] - qs[-1][0]).abs().max() > 1e-3  # the draws differ enough to be seen
+
+
+MJW_DERIVED = ("body_mass", "body_inertia", "body_ipos", "body_subtreemass", "body_invweight0", "dof_armature",
+               "dof_invweight0", "dof_frictionloss", "actuator_gainprm", "actuator_biasprm", "actuator_forcerange")
+"""What Newton's SolverMuJoCo derives per world from the randomised model arrays (mujoco_warp's model)."""
+
+
+def _equals_a_solver_built_on_the_drawn_model(plant, robot, redraws, ground: bool = False, tol: float = 1e-5) -> None:
+    """Redraw ``redraws`` (lists of worlds, one reset each) on a mujoco_warp plant: nothing the solver holds moves
+    (Newton model, mujoco_warp model and data: a captured graph stays valid), what it derives per world equals what
+    a solver built on the drawn model derives, and the worlds step alike."""
+    import warp as wp
+
+    from wresdyn.sim import Simulator
+    from wresdyn.sim.solvers import make_solver
+
+    sim, w = plant.sim, plant.num_worlds
+    holds = lambda s: warp_pointers(s.model, s.solver.mjw_model, s.solver.mjw_data)  # noqa: E731
+    before = holds(sim)
+    for ids in redraws:
+        z = torch.zeros(len(ids), robot.n_dof, device=plant.device)
+        if ground:
+            pose = plant.base_pose[ids]
+            plant.reset_full(torch.tensor(ids), pose, torch.zeros(len(ids), 6, device=plant.device), z, z)
+        else:
+            plant.reset(torch.tensor(ids), z, z)
+    assert holds(sim) == before
+    fresh = Simulator(robot, w, 1.0 / RATE, solver="mujoco", ground=ground, device=str(plant.device))
+    names = ["joint_target_ke", "joint_target_kd", "joint_armature", "joint_friction", "joint_effort_limit",
+             "body_mass", "body_com", "body_inertia", "body_inv_mass", "body_inv_inertia"]
+    for name in names + (["shape_material_mu"] if ground else []):
+        wp.copy(getattr(fresh.model, name), getattr(sim.model, name))
+    fresh.solver = make_solver(fresh.model, robot, fresh.dt_sub, "mujoco", ground=ground)
+    for name in MJW_DERIVED + (("geom_friction",) if ground else ()):
+        a, b = (getattr(s.solver.mjw_model, name).numpy() for s in (sim, fresh))
+        assert a.shape[0] == w, name
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-7), (name, np.abs(a - b).max())
+    drawn = sim.solver.mjw_model.body_mass.numpy()
+    assert np.abs(drawn[1] - drawn[0]).max() > 1e-3  # per world
+    target = torch.full((w, robot.n_dof), 0.2, device=plant.device)
+    z = torch.zeros(w, robot.n_dof, device=plant.device)
+    runs = []
+    pose, twist = (plant.base_pose, plant.base_twist) if ground else (None, None)
+    for s in (sim, fresh):
+        if ground:
+            s.set_full_state(None, pose, twist, z, z)
+        else:
+            s.set_state(None, z, z)
+        runs.append(torch.stack([s.step(target)[0] for _ in range(20)]))
+    err = (runs[0] - runs[1]).abs().max().item()
+    assert err < tol, err  # float32, the same kernels on the same values
+
+
+def test_a_redraw_on_mujoco_warp_equals_a_solver_built_on_the_drawn_model(humanoid):
+    """mujoco_warp (the GPU plants' solver, here on Warp's CPU device, on the stand): every randomised quantity but
+    the floor's friction (the CPU's floor worlds are MuJoCo C threads; the GPU test below has it)."""
+    torch.set_num_threads(1)
+    plant = SimPlant(humanoid, WORLDS, RATE, 1, solver="mujoco", randomization=Randomization(seed=4))
+    _equals_a_solver_built_on_the_drawn_model(plant, humanoid, [[1, 2]])
+
+
+def _cuda() -> bool:
+    import warp as wp
+
+    return wp.is_cuda_available()
+
+
+@pytest.mark.skipif(not _cuda(), reason="CUDA graphs and the floor's batched mujoco_warp worlds need a GPU")
+def test_on_a_gpu_a_captured_refresh_equals_a_solver_built_on_the_drawn_model(floating):
+    """On the floor on a GPU with the solver's refresh replayed from a CUDA graph (the first redraw captures it, the
+    second replays it) and the steps from theirs: the floor friction too."""
+    plant = SimPlant(floating, 16, RATE, 1, ground=True, device="cuda:0", randomization=Randomization(seed=4))
+    plant.sim.refresh_graph = True
+    # contacts found in another order by the GPU's atomics may round differently: a wider bound (not yet measured)
+    _equals_a_solver_built_on_the_drawn_model(plant, floating, [[1, 2], [3, 5, 9]], ground=True, tol=1e-4)
+    assert len(plant.sim._refresh_graphs) == 1

@@ -34,6 +34,7 @@ from ..robot.ground import base_index
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 from .tape_step import TapeBuffers, TapeStep
+from .world_physics import model_flags, refresh, write_world_physics
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
 
@@ -134,6 +135,7 @@ class Simulator:
         self.upper = torch.as_tensor(robot.upper, **f32)
         self._cur = 0
         self._graphs: dict[int, object] = {}
+        self.refresh_graph, self._refresh_graphs = False, {}  # CUDA: replay the solver's refresh (world_physics)
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._wp_streams: dict[int, tuple] = {}  # torch stream handle -> (torch stream, Warp stream): _tape_stream
         self._tape_buffers: list = []
@@ -190,15 +192,12 @@ class Simulator:
             return  # every parameter is read live from the arrays just written: nothing to recompile
         self._physics_changed()
 
-    def set_world_physics(self, values: dict[str, torch.Tensor]) -> None:
-        """Write different physical parameters into each world (no gradients): :meth:`set_physics` with tensors that
-        carry a leading world axis, joint fields (W, n), body fields (W, nb), (W, nb, 3), (W, nb, 3, 3); fields not
-        given keep what the worlds have. For a finite-difference Jacobian: one parameter perturbed per world, all
-        replayed in one batch (:mod:`wresdyn.identify.identifiability`)."""
-        for f, v in values.items():
-            if v.shape[0] != self.num_worlds:
-                raise ValueError(f"set_world_physics: {f} has {v.shape[0]} worlds, the simulator {self.num_worlds}")
-        self.set_physics({f: v.detach() for f, v in values.items()})
+    def set_world_physics(self, values: dict[str, torch.Tensor], ids=None) -> None:
+        """Write different physical parameters into each world (no gradients): tensors with a leading world axis,
+        joint fields (k, n), body fields (k, nb), (k, nb, 3), (k, nb, 3, 3), one row per world of ``ids`` (long (k,);
+        ``None``: every world); other fields and worlds keep theirs. In place, the solver told only what changed, CUDA
+        graphs kept (:mod:`wresdyn.sim.world_physics`): a redraw on reset, a finite-difference Jacobian."""
+        refresh(self, model_flags(write_world_physics(self, values, ids)))
 
     def _physics_changed(self) -> None:
         """Tell a solver that caches model properties that they changed."""

@@ -5,8 +5,9 @@ peers' humanoid tasks randomise (:class:`Randomization`, each range with its sou
 with narrow ranges around the identified values, their widths from the identification's standard errors
 (:func:`narrow_ranges`).
 
-A draw writes, per world, into the Newton model of :class:`~wresdyn.skills.plants.SimPlant`'s simulator (through
-:meth:`wresdyn.sim.Simulator.set_world_physics`, the per-world path identifiability uses): PD gains
+A draw writes the drawn worlds' rows into the Newton model of :class:`~wresdyn.skills.plants.SimPlant`'s simulator,
+in place (:func:`wresdyn.sim.world_physics.write_world_physics`, the per-world path identifiability uses, then one
+notice to the solver of what changed, so a CUDA graph captured of its steps stays valid): PD gains
 (``joint_target_ke/kd``, what every solver reads), dry friction, armature, effort limits, link masses with their
 inertias scaled alike (uniform density: the inverse mass and inertia follow), the centre of mass of one link, and
 on the floor the friction of the robot's collision shapes (``shape_material_mu``). The command delay is the plant's
@@ -29,6 +30,7 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..sim.world_physics import model_flags, refresh, write_world_physics
 
 __all__ = ["Randomization", "Ranges", "Randomizer", "wide_ranges", "narrow_ranges", "NARROW_SIGMAS", "NARROW_FLOOR",
            "NARROW_DEFAULT"]
@@ -219,7 +221,7 @@ class Randomizer:
         return lo + u * (hi - lo)
 
     def draw(self, ids=None) -> np.ndarray:
-        """Draw new physics for worlds ``ids`` (long (k,), ``None``: all) and write every world's into the model;
+        """Draw new physics for worlds ``ids`` (long (k,), ``None``: all) and write theirs into the model (in place);
         returns the drawn worlds' command delays [s] (k, n)."""
         w = self.sim.num_worlds
         ids = np.arange(w) if ids is None else np.asarray(torch.as_tensor(ids).cpu(), dtype=np.int64)
@@ -229,6 +231,7 @@ class Randomizer:
         r, dev = self.ranges, self.sim.device
         t = lambda a: torch.as_tensor(a, dtype=torch.float32, device=dev)  # noqa: E731
         idx = torch.as_tensor(ids, device=dev)
+        # the draws in one fixed order (the seed's stream): gains, armature, effort, friction, masses, CoM, delay, floor
         for f in ("kp", "kd", "armature", "effort"):
             self.values[f][idx] = self.centre[f] * t(self._uniform(*r.scale[f], k, log=True))
         self.values["friction"][idx] = t(self._uniform(*r.friction, k))
@@ -240,30 +243,10 @@ class Randomizer:
         self.values["body_com"][idx] = com
         lo, hi = r.delay  # one quantile for every joint of a world: one command bus
         self.delay[ids] = lo + self.rng.random((k, 1)) * (hi - lo)
-        self.sim.set_world_physics(self.values)
-        self._inverse_inertia()
+        # only the drawn worlds' rows, in place: the solver's captured graph stays valid (wresdyn.sim.world_physics)
+        written = write_world_physics(self.sim, {f: v[idx] for f, v in self.values.items()}, ids)
         if self._shapes is not None:
             self.floor_friction[ids] = self._uniform(*r.floor_friction, k)
             self._mu[self._shapes] = t(self.floor_friction)[self._shape_world]
-            if self.sim.solver_kind == "mujoco":
-                from newton import ModelFlags
-
-                solver = self.sim.solver
-                solver.notify_model_changed(ModelFlags.SHAPE_PROPERTIES)
-                if getattr(solver, "use_mujoco_cpu", False):  # Newton refreshes MuJoCo C's inertias, not its friction
-                    solver.mj_model.geom_friction[:] = solver.mjw_model.geom_friction.numpy()[0]
+        refresh(self.sim, model_flags(written, shapes=self._shapes is not None))
         return self.delay[ids]
-
-    def _inverse_inertia(self) -> None:
-        """Keep the model's inverse mass and inertia those of the drawn masses and inertias (a static body: 0)."""
-        import warp as wp
-
-        model, w = self.sim.model, self.sim.num_worlds
-        m, inertia = self.values["body_mass"], self.values["body_inertia"]
-        inv_m = wp.to_torch(model.body_inv_mass, requires_grad=False).view(w, -1)
-        inv_i = wp.to_torch(model.body_inv_inertia, requires_grad=False).view(w, -1, 3, 3)
-        moving = m > 0
-        inv_m.copy_(torch.where(moving, 1.0 / torch.where(moving, m, torch.ones_like(m)), torch.zeros_like(m)))
-        eye = torch.eye(3, dtype=inertia.dtype, device=inertia.device)
-        safe = torch.where(moving[..., None, None], inertia, eye)
-        inv_i.copy_(torch.where(moving[..., None, None], torch.linalg.inv(safe), torch.zeros_like(inertia)))
