@@ -10,8 +10,9 @@ JointState``: measured ``position`` and ``velocity``, ``effort`` where the datas
 in epoch nanoseconds (each run 60 s after the previous one), written by ``mcap-ros2-support``'s own writer. Then
 imports the folder with ``wresdyn collect --logs BAGS --rate RATE --split-map SPLITS.toml`` (each run's split as
 recorded), compares every array of the two datasets, and runs ``wresdyn fit DATA --eval`` (or ``identify``; with
-``--args``) on both, comparing their open-loop figures. Prints everything it checks; exits 1 when a difference passes its bound.
-Run folders go under ``--out`` (default: a temporary folder).
+``--args``) on both, comparing every identified parameter, every training and validation figure of their curves and
+their open-loop figures. Prints everything it checks and writes it to ``OUT/roundtrip.json``; exits 1 when a
+difference passes its bound. Run folders go under ``--out`` (default: a temporary folder).
 """
 
 from __future__ import annotations
@@ -99,8 +100,8 @@ def write_bag(path: Path, tr, joint_names: list[str], rate_hz: float, t0_ns: int
 
 
 def write_bags(ds: Dataset, folder: Path) -> Path:
-    """Every trajectory of ``ds`` as ``folder/<name>.mcap`` and the split of each in ``folder/splits.toml``
-    (``--split-map``: exact run names, so the splits are the recorded ones); returns the split map's path."""
+    """Every trajectory of ``ds`` as ``folder/<name>.mcap`` and the split of each in ``splits.toml`` beside
+    ``folder`` (``--split-map``: exact run names, so the splits are the recorded ones); returns the split map's path."""
     folder.mkdir(parents=True, exist_ok=True)
     for i, tr in enumerate(ds.trajectories):
         write_bag(folder / f"{tr.name}.mcap", tr, ds.joint_names, ds.rate_hz, T0_NS + i * RUN_GAP_NS)
@@ -110,8 +111,8 @@ def write_bags(ds: Dataset, folder: Path) -> Path:
 
 
 def compare_data(a: Dataset, b: Dataset) -> tuple[dict, list[str]]:
-    """Largest |Δ| per array [SI] over all trajectories, matched by name (``None``: absent in both), and the list of what
-    differs in structure or metadata (names, splits, each split's order, rate, joints, robot, gains) or passes
+    """Largest |Δ| per array [SI] over all trajectories, matched by name (``None``: absent in both), and the list of
+    what differs in structure or metadata (names, splits, each split's order, rate, joints, robot, gains) or passes
     :data:`ARRAY_BOUND`. The order across splits is not compared: an import lists runs in file-name order, and
     every reader of a dataset takes one split at a time."""
     bad = []

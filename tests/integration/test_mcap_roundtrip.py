@@ -20,7 +20,8 @@ DATA = REPO / "data" / "dataset.npz"
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("mcap_roundtrip", REPO / "benchmarks" / "fidelity" / "mcap_roundtrip.py")
+    path = REPO / "benchmarks" / "fidelity" / "mcap_roundtrip.py"
+    spec = importlib.util.spec_from_file_location("mcap_roundtrip", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules["mcap_roundtrip"] = module
     spec.loader.exec_module(module)
