@@ -41,9 +41,10 @@ ARRAY_BOUND = 1e-12
 1 [SI]): positions, velocities and commands travel as float64 and stamps as integer nanoseconds, but the grid the
 import resamples onto is k / rate in float64 seconds, so interpolation weights differ from 0 or 1 by float64 rounding
 (~1e-16), and q̈ is q̇'s derivative (Savitzky-Golay over 1 / rate), which scales that rounding by about the rate."""
-FIT_BOUND = 1e-9
-"""Largest relative difference allowed between the two fits' figures: the same data to ``ARRAY_BOUND`` and the same
-seeds make the same fit up to that noise."""
+FIT_BOUND = 1e-12
+"""Largest relative difference allowed between the two runs' numbers: the same data to ``ARRAY_BOUND`` and the same
+seeds make the same run up to that rounding carried through training (measured on the whole shipped dataset: 7.4e-15
+after 1840 identification iterations)."""
 FIELDS = ("t", "q", "qd", "qdd", "q_cmd", "tau")
 
 _RULE = "=" * 80
