@@ -106,10 +106,10 @@ def _physics_only_run(tmp_path, data, physics, config=None):
 
 def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, record):
     """The SO-101 (MJCF, STS3215 servo drives) recorded on its bench real robot (scenes/so101/mismatch.toml), the
-    servo model's physics exported by default as MJCF: position actuators with the back-EMF in the joint damping
-    and the goal profile in servo.json. Held-out error of MuJoCo within 10 % of the wresdyn model's (measured
-    0.0471 against 0.0466 rad, 1.1 %); without the goal profile it is far larger (measured 0.0681 rad), so the
-    report's loss is real."""
+    servo model's physics (with encoder offsets of up to 30 mrad, the actuators' bias) exported by default as MJCF:
+    position actuators with the back-EMF in the joint damping and the goal profile in servo.json. Held-out error of
+    MuJoCo within 10 % of the wresdyn model's (measured 0.0461 against 0.0456 rad, 1.1 %); without the goal profile
+    it is far larger (measured 0.0677 rad), so the report's loss is real."""
     from wresdyn.data.mismatch import Mismatch
     from wresdyn.paths import REPO
     from wresdyn.robot.description import load_robot
