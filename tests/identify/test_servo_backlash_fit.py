@@ -34,7 +34,7 @@ def test_identify_recovers_backlash_and_encoder_offsets(record):
     (measured at most 4.6 mrad, 0.1 mrad on the shoulder lift). The backlash comes back within 25 % on the shoulder
     pan, elbow and wrist roll (measured 16 %, 2 %, 7 %); on the shoulder lift and the wrist flex, which gravity holds
     against one flank of the play for most of the runs, the fit left it at 0 (measured): there the play is mostly a
-    constant shift the encoder offset can take. 6 min on a loaded 2-core machine, hence slow."""
+    constant shift the encoder offset can take. 40 s on two idle cores, 6 min beside five other jobs: slow."""
     gains = _gains(backlash=BACKLASH)
     names = load_robot(SO101 / "so101.xml", gains=gains).joint_names
     gains["joint"] += [{"match": n, "encoder_offset": float(o)} for n, o in zip(names, OFFSETS)]
