@@ -106,10 +106,10 @@ def _physics_only_run(tmp_path, data, physics, config=None):
 
 def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, record):
     """The SO-101 (MJCF, STS3215 servo drives) recorded on its bench real robot (scenes/so101/mismatch.toml), the
-    servo model's physics exported by default as MJCF: position actuators with the back-EMF in the joint damping
-    and the goal profile in servo.json. Held-out error of MuJoCo within 10 % of the wresdyn model's (measured
-    0.0471 against 0.0466 rad, 1.1 %); without the goal profile it is far larger (measured 0.0681 rad), so the
-    report's loss is real."""
+    servo model's physics (with encoder offsets of up to 30 mrad, the actuators' bias) exported by default as MJCF:
+    position actuators with the back-EMF in the joint damping and the goal profile in servo.json. Held-out error of
+    MuJoCo within 10 % of the wresdyn model's (measured 0.0461 against 0.0456 rad, 1.1 %); without the goal profile
+    it is far larger (measured 0.0677 rad), so the report's loss is real."""
     from wresdyn.data.mismatch import Mismatch
     from wresdyn.paths import REPO
     from wresdyn.robot.description import load_robot
@@ -119,7 +119,9 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     robot = load_robot(so101 / "so101.xml", gains=so101 / "servo.toml")
     data = record(robot, Mismatch.load(so101 / "mismatch.toml"), {"heldout": 2}, 0.6, amplitude=0.3)
     data.gains = robot.gains_record()
-    run = _physics_only_run(tmp_path, data, PhysicalParams.nominal(robot))
+    physics = PhysicalParams.nominal(robot)
+    physics.encoder_offset = np.array([0.02, -0.03, 0.01, 0.0, -0.02, 0.03])  # the actuators' bias carries it
+    run = _physics_only_run(tmp_path, data, physics)
     assert main(["export", str(run), "--physics-only"]) == 0  # an MJCF robot: mjcf by default
     out = run / "export"
     report = json.loads((out / "mjcf_report.json").read_text())
@@ -131,6 +133,32 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     accel = json.loads((out / "servo.json").read_text())["goal_accel"]
     np.testing.assert_allclose(accel, robot.servo.goal_accel)
     assert not (out / "residual.onnx").exists()
+
+
+def test_servo_encoder_offset_and_backlash_in_the_mjcf(tmp_path):
+    """The encoder offset o as the position actuator's bias ``-kp o`` (its force ``kp (ctrl - q - o)``, checked on
+    the compiled model), the backlash named in the report's notes as dropped (MuJoCo has no gear play)."""
+    import mujoco
+
+    from wresdyn.export.mjcf import _mapping, mjcf_spec
+    from wresdyn.paths import REPO
+    from wresdyn.robot.description import load_robot
+    from wresdyn.sim.physics import PhysicalParams
+
+    so101 = REPO / "scenes" / "so101"
+    robot = load_robot(so101 / "so101.xml", gains=so101 / "servo.toml")
+    physics = PhysicalParams.nominal(robot)
+    physics.encoder_offset = np.linspace(-0.03, 0.03, robot.n_dof)
+    physics.backlash = np.full(robot.n_dof, 0.009)
+    spec, notes = mjcf_spec(robot, physics, 50.0)
+    model = spec.compile()
+    d = mujoco.MjData(model)
+    d.qpos[:] = 0.1
+    d.ctrl[:] = 0.3
+    mujoco.mj_forward(model, d)
+    want = np.clip(physics.kp * (0.3 - 0.1 - physics.encoder_offset), -physics.effort, physics.effort)
+    np.testing.assert_allclose(d.actuator_force, want, rtol=1e-9, atol=1e-12)
+    assert all("backlash 0.009" in n for n in notes) and "backlash" in _mapping() and "encoder_offset" in _mapping()
 
 
 def test_a_damper_law_run_exports_with_frictionloss_and_says_so(tmp_path, humanoid, data):

@@ -30,7 +30,7 @@ from ..robot.description import Robot, RobotError
 from ..robot.ground import FloatingState, check_floating
 from ..robot.mujoco_model import build_mujoco, free_from_mujoco, free_to_mujoco
 from ..robot.physical import SERVO_FIELDS, PhysicalParams
-from ..robot.servo import STARTUP_RAMP, GoalProfile, friction_bound
+from ..robot.servo import STARTUP_RAMP, GoalProfile, friction_bound, play
 from . import excitation as ex
 from .dataset import SPLITS, Dataset, Trajectory, derive_qdd
 from .mismatch import Mismatch, MismatchError, floor_contact, perturb_mujoco
@@ -92,7 +92,8 @@ class RealRobot:
         law = {"mask": s, "kp": m.actuator_gainprm[:n, 0].copy(), "kd": -m.actuator_biasprm[:n, 2].copy(),
                "effort": m.actuator_forcerange[:n, 1].copy(), "deadband": servo.deadband,
                "noload_speed": servo.noload_speed, "goal_accel": servo.goal_accel,
-               "startup_torque": servo.startup_torque, "stiction": servo.stiction,
+               "startup_torque": servo.startup_torque, "stiction": servo.stiction, "backlash": servo.backlash,
+               "encoder_offset": servo.encoder_offset,
                "friction": m.dof_frictionloss[:n].copy()}
         idx = np.flatnonzero(s)
         m.actuator_gainprm[idx, 0] = 1.0
@@ -107,15 +108,16 @@ class RealRobot:
         law, m = self._servo, self.model
         n = len(command)
         goal = profile(command)
-        e = goal - d.qpos[:n]
-        e_b = e - np.clip(e, -law["deadband"], law["deadband"])
+        e_m, contact = play(goal - (d.qpos[:n] + law["encoder_offset"]), law["backlash"])
+        e_b = e_m - np.clip(e_m, -law["deadband"], law["deadband"])
         position = law["kp"] * e_b + law["startup_torque"] * np.clip(e_b / STARTUP_RAMP, -1.0, 1.0)
         raw = position - law["kd"] * d.qvel[:n]
         free = np.abs(raw) < law["effort"]
         emf = np.divide(law["effort"], law["noload_speed"], out=np.zeros(n), where=law["noload_speed"] > 0)
-        ctrl = np.where(free, position, np.sign(raw) * law["effort"])
+        # out of mesh the whole drive scales down (the force range then clamps what SolverReplay scales, within a tick)
+        ctrl = contact * np.where(free, position, np.sign(raw) * law["effort"])
         s = law["mask"]
-        m.actuator_biasprm[:n, 2] = np.where(s, -(free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
+        m.actuator_biasprm[:n, 2] = np.where(s, -contact * (free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
         if law["stiction"].any():  # the static friction on the velocity before the step, as SolverReplay's
             m.dof_frictionloss[:n] = np.where(s, friction_bound(d.qvel[:n], law["friction"], law["stiction"]),
                                               m.dof_frictionloss[:n])

@@ -26,8 +26,9 @@ What changes: a run identified under the damper friction law (``friction_kappa``
 as MuJoCo's ``frictionloss`` (a soft constraint, the replay's default law); a servo joint
 (:mod:`wresdyn.robot.servo`) becomes the closest plain actuator, a position actuator with ``kv = kd + U / w0``
 (its back-EMF damping) clamped at the stall torque U, without the dead band and the goal-acceleration profile;
-stiction and startup torque have no actuator and are dropped. The report names each of these, and the round
-trip measures what they cost.
+its encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the drive ``kp (ctrl - q - o)``, exact);
+stiction, startup torque and backlash (MuJoCo has no gear play) have no actuator and are dropped. The report names
+each of these, and the round trip measures what they cost.
 """
 
 from __future__ import annotations
@@ -75,8 +76,8 @@ def mjcf_spec(robot, physics, rate_hz: float) -> tuple[object, list[str]]:
             w0 = float(physics.noload_speed[i])
             emf = effort / w0 if w0 > 0 else 0.0
             damping += emf  # the back-EMF U / w0 acts on the joint whether the PD saturates or not: not clamped
-            dropped = [f"{f} {float(getattr(physics, f)[i]):.4g}" for f in ("deadband", "stiction", "startup_torque")
-                       if getattr(physics, f)[i] > 0]
+            dropped = [f"{f} {float(getattr(physics, f)[i]):.4g}" for f in ("deadband", "stiction", "startup_torque",
+                                                                            "backlash") if getattr(physics, f)[i] > 0]
             notes.append(f"{name}: servo drive as a position actuator (kp, kv = kd, force range +-{effort:.4g} N m) "
                          f"and its back-EMF U/w0 = {emf:.4g} N m s/rad in the joint damping"
                          + (f"; goal profile {float(physics.goal_accel[i]):.4g} rad/s^2 in servo.json (play_mujoco.py "
@@ -88,6 +89,8 @@ def mjcf_spec(robot, physics, rate_hz: float) -> tuple[object, list[str]]:
         act = spec.actuator(name)
         kv = float(physics.kd[i])
         act.set_to_position(kp=float(physics.kp[i]), kv=kv)
+        if servo is not None and servo.mask[i] and physics.encoder_offset[i] != 0:  # kp (ctrl - q - o)
+            act.biasprm = [-float(physics.kp[i]) * float(physics.encoder_offset[i]), *list(act.biasprm)[1:]]
         if np.isfinite(effort):
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange = [-effort, effort]
@@ -236,7 +239,8 @@ def _mapping() -> dict:
     return {"kp": "actuator/position kp [N m/rad]", "kd": "actuator/position kv [N m s/rad]",
             "effort": "actuator forcerange [N m]", "delay": "actuator delay [s] (interp linear, nsample)",
             "armature": "joint armature [kg m^2]", "damping": "joint damping [N m s/rad]",
-            "friction": "joint frictionloss [N m]", "body_mass": "body inertial mass [kg]",
+            "friction": "joint frictionloss [N m]", "encoder_offset": "actuator biasprm[0] = -kp o [N m]",
+            "backlash": "none (no gear play in MuJoCo; named in notes)", "body_mass": "body inertial mass [kg]",
             "body_com": "body inertial pos [m]", "body_inertia": "body inertial diaginertia + quat [kg m^2]",
             "residual": "residual.onnx, applied through qfrc_applied by play_mujoco.py"}
 

@@ -8,19 +8,24 @@ units::
 
     g, v  <- profile(g, v, q*)                       internal goal g [rad] toward the delayed command q* with at
                                                      most a_max [rad/s²], braking in time to stop on it
-    e     =  g - q                                    position error [rad]
-    e_b   =  e - clamp(e, -b, b)                      dead band of half-width b [rad] (soft threshold)
-    x     =  kp e_b + kd (qd* - qd) - (U / w0) qd     this drive's output [N m]
+    e     =  g - (q + o)                              position error [rad], o the encoder's zero offset
+    e_m   =  e - clamp(e, -beta, beta)                the motor's error across the gear play beta [rad]
+    e_b   =  e_m - clamp(e_m, -b, b)                  dead band of half-width b [rad] (soft threshold)
+    x     =  c (kp e_b + kd (qd* - qd) - (U / w0) qd) this drive's output [N m], c = min(|e_m| / tick, 1)
+                                                     the gear contact where beta > 0 (else 1)
     tau   =  clamp(x, -U (1 + qd / w0), U (1 - qd / w0)) within [-U, U]      ClampingDCMotor(U, w0, U)
 
 which is the servo law ``tau = clamp(clamp(kp e_b + kd (qd* - qd), -U, U) - (U / w0) qd, -U, U)`` (a duty
 clamped to the stall torque U, minus the back-EMF of a motor whose torque falls to zero at the no-load speed
-w0): subtracting ``(U / w0) qd`` before the DC motor's clamp shifts its bounds by the same amount.
+w0): subtracting ``(U / w0) qd`` before the DC motor's clamp shifts its bounds by the same amount. With a backlash
+the contact scales the drive before the clamp (wresdyn's law scales the clamped torque): they differ only while the
+drive saturates within one encoder tick of the play's edge.
 
 USD attributes of ``WresdynServoControlAPI`` (Newton's parser reads an actuator schema's attributes from the
 ``newton:`` namespace only, so they live there): ``newton:kp`` [N m/rad], ``newton:kd`` [N m s/rad],
 ``newton:servoDeadband`` b [rad], ``newton:servoGoalAccel`` a_max [rad/s²] (0: the goal is the command) and
-``newton:servoBackEmf`` U / w0 [N m s/rad] (0: no torque–speed line).
+``newton:servoBackEmf`` U / w0 [N m s/rad] (0: no torque–speed line), ``newton:servoBacklash`` beta [rad] and
+``newton:servoEncoderOffset`` o [rad] (signed; both 0: none).
 
 Use it in a plain Newton script (before the first USD stage is opened: USD builds its schema registry once)::
 
@@ -35,6 +40,7 @@ starts at rest on the first command an actuator sees; reset the state (``state.r
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,7 +63,11 @@ _ATTRS = {  # USD name: (kwarg, doc in the schema)
     "newton:servoGoalAccel": ("servo_goal_accel",
                               "Goal acceleration limit a_max [rad/s^2]; 0: the goal is the command"),
     "newton:servoBackEmf": ("servo_back_emf", "Back-EMF damping U / w0 [N m s/rad]; 0: no torque-speed line"),
+    "newton:servoBacklash": ("servo_backlash", "Gear play half-width beta [rad]; 0: none"),
+    "newton:servoEncoderOffset": ("servo_encoder_offset", "Encoder zero offset o [rad], signed: the loop sees q + o"),
 }
+_TICK = wp.constant(2.0 * math.pi / 4096.0)
+"""One encoder tick of a 12-bit servo [rad]: the ramp over which the gear contact sets in past the play."""
 
 
 def register() -> None:
@@ -97,6 +107,8 @@ def _servo_kernel(
     deadband: wp.array[float],
     goal_accel: wp.array[float],
     back_emf: wp.array[float],
+    backlash: wp.array[float],
+    encoder_offset: wp.array[float],
     goal_in: wp.array[float],
     goal_vel_in: wp.array[float],
     started_in: wp.array[wp.int32],
@@ -129,9 +141,13 @@ def _servo_kernel(
     goal_vel_out[i] = speed
 
     qd = current_vel[vel_indices[i]]
-    err = goal - current_pos[pos_indices[i]]
-    err_b = err - wp.clamp(err, -deadband[i], deadband[i])
-    efforts[i] = kp[i] * err_b + kd[i] * (target_vel[target_vel_indices[i]] - qd) - back_emf[i] * qd
+    err = goal - (current_pos[pos_indices[i]] + encoder_offset[i])
+    err_m = err - wp.clamp(err, -backlash[i], backlash[i])
+    contact = float(1.0)
+    if backlash[i] > 0.0:
+        contact = wp.min(wp.abs(err_m) / _TICK, 1.0)
+    err_b = err_m - wp.clamp(err_m, -deadband[i], deadband[i])
+    efforts[i] = contact * (kp[i] * err_b + kd[i] * (target_vel[target_vel_indices[i]] - qd) - back_emf[i] * qd)
 
 
 @wp.kernel
@@ -176,20 +192,25 @@ class DriveServo(DriveBase):
     @classmethod
     def resolve_arguments(cls, args: dict[str, Any]) -> dict[str, Any]:
         out = {kw: float(args.get(kw, 0.0)) for kw, _ in _ATTRS.values()}
-        bad = [k for k, v in out.items() if not v >= 0.0]
+        bad = [k for k, v in out.items() if not (v >= 0.0 or (k == "servo_encoder_offset" and math.isfinite(v)))]
         if bad:
             raise ValueError(f"DriveServo: {', '.join(bad)} must be >= 0")
         return out
 
     def __init__(self, kp: wp.array[float], kd: wp.array[float], servo_deadband: wp.array[float],
-                 servo_goal_accel: wp.array[float], servo_back_emf: wp.array[float]):
+                 servo_goal_accel: wp.array[float], servo_back_emf: wp.array[float],
+                 servo_backlash: wp.array[float] | None = None, servo_encoder_offset: wp.array[float] | None = None):
         """Per-actuator parameter arrays, shape (N,): kp [N m/rad], kd [N m s/rad], dead band [rad], goal
-        acceleration [rad/s²], back-EMF damping [N m s/rad]."""
-        for a in (kd, servo_deadband, servo_goal_accel, servo_back_emf):
+        acceleration [rad/s²], back-EMF damping [N m s/rad], backlash and encoder offset [rad] (default 0)."""
+        zero = lambda: wp.zeros(kp.shape, dtype=kp.dtype, device=kp.device)  # noqa: E731
+        servo_backlash = zero() if servo_backlash is None else servo_backlash
+        servo_encoder_offset = zero() if servo_encoder_offset is None else servo_encoder_offset
+        for a in (kd, servo_deadband, servo_goal_accel, servo_back_emf, servo_backlash, servo_encoder_offset):
             if a.shape != kp.shape:
                 raise ValueError(f"DriveServo: parameter shapes differ ({a.shape} and {kp.shape})")
         self.kp, self.kd = kp, kd
         self.deadband, self.goal_accel, self.back_emf = servo_deadband, servo_goal_accel, servo_back_emf
+        self.backlash, self.encoder_offset = servo_backlash, servo_encoder_offset
         self._goal = self._goal_vel = None
 
     def finalize(self, device, num_actuators: int) -> None:
@@ -212,7 +233,7 @@ class DriveServo(DriveBase):
         wp.launch(_servo_kernel, dim=len(forces),
                   inputs=[positions, velocities, target_pos, target_vel, pos_indices, vel_indices, target_pos_indices,
                           target_vel_indices, self.kp, self.kd, self.deadband, self.goal_accel, self.back_emf,
-                          state.goal, state.goal_vel, state.started, float(dt)],
+                          self.backlash, self.encoder_offset, state.goal, state.goal_vel, state.started, float(dt)],
                   outputs=[forces, self._goal, self._goal_vel], device=device)
 
     def update_state(self, current_state: DriveServo.State, next_state: DriveServo.State) -> None:

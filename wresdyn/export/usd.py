@@ -29,10 +29,11 @@ nothing behind):
 
 Servo joints (``drive = "servo"``, :mod:`wresdyn.robot.servo`): their ``NewtonActuator`` prim in ``actuated.usda``
 applies ``WresdynServoControlAPI`` in place of the PD (the drive of :mod:`wresdyn.export.servo_actuator`: dead band,
-goal-acceleration profile, back-EMF damping U / w0) with Newton's ``NewtonActuatorDelayAPI`` and
+goal-acceleration profile, back-EMF damping U / w0, backlash, encoder offset) with Newton's ``NewtonActuatorDelayAPI`` and
 ``NewtonDCMotorClampingAPI`` (stall torque U, no-load speed w0; ``NewtonMaxEffortClampingAPI`` where w0 = 0), which
 together are the servo law. ``robot.usda`` records ``wresdyn:drive = "servo"`` and ``wresdyn:servo:deadband``
-[rad], ``wresdyn:servo:noloadSpeed`` [rad/s], ``wresdyn:servo:goalAccel`` [rad/s²] on the joint (Newton's importer
+[rad], ``wresdyn:servo:noloadSpeed`` [rad/s], ``wresdyn:servo:goalAccel`` [rad/s²], ``wresdyn:servo:backlash`` and
+``wresdyn:servo:encoderOffset`` [rad] on the joint (Newton's importer
 does not read them: loaded as it is, the joint runs its PD drive). The folder then also holds
 ``servo_actuator.py`` (newton, warp and pxr only) and ``wresdyn_servo_schema/``, the codeless USD schema plugin
 Newton's importer needs to see the custom schema; ``export.json`` names them under ``"servo"``. A plain script
@@ -74,8 +75,10 @@ imports newton: the export copies its file and schema plugin without importing i
 _SERVO_FILES = (Path(__file__).with_name("servo_actuator.py"), Path(__file__).with_name("wresdyn_servo_schema"))
 """The drive's file and its USD schema plugin folder, shipped next to the layers."""
 _SERVO_ATTRS = {"wresdyn:servo:deadband": "deadband", "wresdyn:servo:noloadSpeed": "noload_speed",
-                "wresdyn:servo:goalAccel": "goal_accel"}
-"""Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s²], by PhysicalParams field."""
+                "wresdyn:servo:goalAccel": "goal_accel", "wresdyn:servo:backlash": "backlash",
+                "wresdyn:servo:encoderOffset": "encoder_offset"}
+"""Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s², rad, rad], by PhysicalParams
+field."""
 
 
 def inertia_principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -240,6 +243,8 @@ def _servo_prim(prim, physics, i: int) -> str:
     _set(prim, "newton:servoDeadband", Sdf.ValueTypeNames.Float, physics.deadband[i])
     _set(prim, "newton:servoGoalAccel", Sdf.ValueTypeNames.Float, physics.goal_accel[i])
     _set(prim, "newton:servoBackEmf", Sdf.ValueTypeNames.Float, effort / w0 if w0 > 0 else 0.0)
+    _set(prim, "newton:servoBacklash", Sdf.ValueTypeNames.Float, physics.backlash[i])
+    _set(prim, "newton:servoEncoderOffset", Sdf.ValueTypeNames.Float, physics.encoder_offset[i])
     if w0 > 0:
         _set(prim, "newton:saturationEffort", Sdf.ValueTypeNames.Float, effort)
         _set(prim, "newton:velocityLimit", Sdf.ValueTypeNames.Float, w0)

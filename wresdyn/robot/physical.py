@@ -21,7 +21,7 @@ __all__ = ["JOINT_FIELDS", "SERVO_FIELDS", "BODY_FIELDS", "PhysicalParams", "Phy
 
 JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
 """Per-joint fields of :class:`PhysicalParams`, each (n_dof,)."""
-SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel", "startup_torque", "stiction")
+SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel", "startup_torque", "stiction", "backlash", "encoder_offset")
 """Per-joint fields of the servo drive law (:mod:`wresdyn.robot.servo`), each (n_dof,); read only on joints whose
 drive is a servo, 0 elsewhere. Files written before they existed load with zeros."""
 BODY_FIELDS = ("body_mass", "body_com", "body_inertia")
@@ -60,6 +60,10 @@ class PhysicalParams:
     """Servo's least drive torque outside its dead band [N·m] (0: none)."""
     stiction: np.ndarray | None = None
     """Servo joint's static friction above ``friction`` at rest [N·m] (0: none)."""
+    backlash: np.ndarray | None = None
+    """Servo gear train's play, half-width [rad] (0: none)."""
+    encoder_offset: np.ndarray | None = None
+    """Servo encoder's zero offset [rad], signed: its loop sees q + offset (0: none)."""
 
     def __post_init__(self) -> None:
         for f in SERVO_FIELDS:
@@ -98,7 +102,7 @@ class PhysicalParams:
             if np.isnan(a).any() or (f != "effort" and not np.isfinite(a).all()):
                 raise PhysicsError(f"{where}: {f} is not finite")
             if f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "body_mass", *SERVO_FIELDS) \
-                    and (a < 0).any():
+                    and f != "encoder_offset" and (a < 0).any():
                 raise PhysicsError(f"{where}: {f} must be >= 0")
 
     # ------------------------------------------------------------------------------------------------ JSON

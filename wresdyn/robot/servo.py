@@ -4,11 +4,13 @@ A servo joint is selected per joint in the gains config (``drive = "servo"``, :f
 PD drive of eq. (1) by the servo law, in SI units, per joint (the same law in
 :mod:`wresdyn.sim.solver_replay` and in the MuJoCo "real" robot, :func:`servo_torque`)::
 
-    e    = q*_s - q                                   position error against the profiled goal [rad]
-    e_b  = e - clamp(e, -b, b)                        dead band of half-width b [rad] (soft threshold)
+    e    = q*_s - (q + o)                             position error against the profiled goal [rad]
+    e_m  = e - clamp(e, -beta, beta)                  the motor's error across the backlash's play [rad]
+    e_b  = e_m - clamp(e_m, -b, b)                    dead band of half-width b [rad] (soft threshold)
     u    = clamp(kp e_b + u0 clamp(e_b / r, -1, 1)    duty in torque units [N*m], U = effort (stall torque),
                  + kd (qd* - qd), -U, U)              u0 startup torque over a ramp of r = one encoder tick
-    tau  = clamp(u - (U / w0) qd, -U, U)              DC motor torque-speed line, no-load speed w0 [rad/s]
+    tau  = g clamp(u - (U / w0) qd, -U, U)            DC motor torque-speed line, no-load speed w0 [rad/s]
+    g    = min(|e_m| / r, 1) if beta > 0 else 1      the gear train's contact (0 inside the play)
 
 Inside the band the position loop is off (the joint rests where friction, gravity and its history leave it, so
 the hysteresis lives in the mechanical state) and the soft threshold keeps a gradient in ``b``. Outside it the
@@ -21,6 +23,21 @@ the dry one while the joint rests (a Stribeck curve, linear in the speed, over t
 
 so a joint at rest breaks away at ``friction + stiction`` and slides against ``friction`` once it moves faster than
 ``v_s``; ``stiction = 0`` leaves it out.
+
+Two optional fields (0 by default, the law then exactly the one without them) describe the transmission and the
+encoder:
+
+- ``encoder_offset`` o [rad] (signed): the servo's encoder reads the joint's position (the recorded q and the
+  model's coordinate) plus o, so its loop holds every goal o short (a per-unit calibration error of the zero).
+- ``backlash`` beta [rad]: the half-width of the gear train's play between motor and link. The motor's own
+  inertia is small against the link's, so the motor is taken as quasi-static: inside the play (|e| <= beta) it has
+  reached the goal and transmits nothing (g = 0: the link swings freely, no loop, no back-EMF damping); once the
+  link is further than beta from the goal the motor presses on it from beta away, so the drive acts on the error
+  ``e_m`` the motor sees (and the dead band on that). The contact ``g`` ramps in over one encoder tick, which keeps
+  the law continuous and its gradient in beta (through ``e_m``) defined. The firmware dead band differs: inside it
+  the loop is off but the motor stays in mesh, damping the link through its back-EMF. IsaacLab's backlash actuator
+  is a dead zone on the position error (this law's ``e_m``); its ``DriveBam`` adds a play hinge with its own state,
+  which a stateless law of one step does not have, hence the quasi-static motor.
 
 The goal q*_s is the command after the servo's acceleration profile (:class:`GoalProfile`): the internal goal
 moves toward the command with at most ``a_max`` [rad/s²], braking in time to stop on it (``a_max = 0``: the
@@ -38,9 +55,10 @@ import numpy as np
 from ..errors import RobotError
 
 __all__ = ["SERVO_KEYS", "STARTUP_RAMP", "STICTION_SPEED", "STS3215", "GoalProfile", "ServoDrives", "attach_servo",
-           "friction_bound", "profile_step", "read_servo", "servo_torque"]
+           "friction_bound", "play", "profile_step", "read_servo", "servo_torque"]
 
-SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel", "startup_torque", "stiction")
+SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel", "startup_torque", "stiction", "backlash",
+              "encoder_offset")
 """Keys of a gains config's ``[[joint]]`` table that set the drive law (the others are
 :func:`wresdyn.robot.description.apply_overrides`')."""
 
@@ -101,14 +119,18 @@ class ServoDrives:
     """Least drive torque u0 outside the dead band [N*m] (0: none), shape (n_dof,)."""
     stiction: np.ndarray
     """Static friction above the dry friction at rest [N*m] (0: none), shape (n_dof,)."""
+    backlash: np.ndarray
+    """Half-width beta of the gear train's play between motor and link [rad] (0: none), shape (n_dof,)."""
+    encoder_offset: np.ndarray
+    """Encoder zero offset o [rad], signed: the servo's loop sees q + o (0: none), shape (n_dof,)."""
 
 
 def read_servo(config: dict | None, joint_names, effort, where: str = "gains config") -> ServoDrives | None:
     """The servo drives a gains config selects (``drive = "servo"`` in ``[[joint]]`` tables, later ones winning),
     or ``None`` when it selects none.
 
-    ``deadband`` [rad], ``noload_speed`` [rad/s], ``goal_accel`` [rad/s²], ``startup_torque`` and ``stiction``
-    [N*m] may be set in any entry; a servo
+    ``deadband``, ``backlash``, ``encoder_offset`` (signed) [rad], ``noload_speed`` [rad/s], ``goal_accel``
+    [rad/s²], ``startup_torque`` and ``stiction`` [N*m] may be set in any entry; a servo
     joint not given one takes zero (no band, no torque-speed line, no profile). A servo needs a finite effort
     limit (its stall torque).
 
@@ -134,7 +156,7 @@ def read_servo(config: dict | None, joint_names, effort, where: str = "gains con
                     v = float(e[k])
                 except (TypeError, ValueError):
                     raise RobotError(f"{where}: {k} = {e[k]!r} for {e.get('match')!r} is not a number") from None
-                if not (math.isfinite(v) and v >= 0.0):
+                if not (math.isfinite(v) and (v >= 0.0 or k == "encoder_offset")):
                     raise RobotError(f"{where}: {k} = {v} for {e.get('match')!r} must be finite and >= 0")
                 values[k][hits] = v
     if not drive.any():
@@ -150,7 +172,8 @@ def attach_servo(model, servo: ServoDrives, qd_index, num_worlds: int) -> None:
     """Give a finalized Newton model the servo arrays :class:`~wresdyn.sim.solver_replay.SolverReplay` reads, per
     DoF of every world (Newton's flat layout, zeros on the DoFs of other joints): ``joint_servo`` (int32, 1 on a
     servo), ``joint_servo_deadband`` [rad], ``joint_servo_noload_speed`` [rad/s], ``joint_servo_startup_torque`` and
-    ``joint_servo_stiction`` [N*m] (float32, gradients as the model's)."""
+    ``joint_servo_stiction`` [N*m], ``joint_servo_backlash`` and ``joint_servo_encoder_offset`` [rad] (float32,
+    gradients as the model's)."""
     import warp as wp
 
     width = model.joint_dof_count // num_worlds
@@ -167,17 +190,27 @@ def attach_servo(model, servo: ServoDrives, qd_index, num_worlds: int) -> None:
     model.joint_servo_noload_speed = per_dof(servo.noload_speed, np.float32)
     model.joint_servo_startup_torque = per_dof(servo.startup_torque, np.float32)
     model.joint_servo_stiction = per_dof(servo.stiction, np.float32)
+    model.joint_servo_backlash = per_dof(servo.backlash, np.float32)
+    model.joint_servo_encoder_offset = per_dof(servo.encoder_offset, np.float32)
 
 
-def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0, startup_torque=0.0):
+def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0, startup_torque=0.0,
+                 backlash=0.0, encoder_offset=0.0):
     """The servo law of the module docstring (numpy, any broadcastable shapes): the drive torque [N*m]."""
-    e = q_goal - q
-    e_b = e - np.clip(e, -deadband, deadband)
+    e_m, gate = play(q_goal - (q + encoder_offset), backlash)
+    e_b = e_m - np.clip(e_m, -deadband, deadband)
     u = np.clip(kp * e_b + startup_torque * np.clip(e_b / STARTUP_RAMP, -1.0, 1.0) + kd * (qd_goal - qd), -effort,
                 effort)
     emf = np.divide(effort, noload_speed, out=np.zeros(np.broadcast(effort, noload_speed).shape),
                     where=np.asarray(noload_speed) > 0)
-    return np.clip(u - emf * qd, -effort, effort)
+    return gate * np.clip(u - emf * qd, -effort, effort)
+
+
+def play(e, backlash):
+    """The backlash of the module docstring (numpy, broadcastable): the motor's error ``e_m`` [rad] across the play
+    of half-width ``backlash`` and the gear train's contact ``g`` in [0, 1] (1 where ``backlash`` is 0)."""
+    e_m = e - np.clip(e, -backlash, backlash)
+    return e_m, np.where(np.asarray(backlash) > 0, np.minimum(np.abs(e_m) / STARTUP_RAMP, 1.0), 1.0)
 
 
 def friction_bound(qd, friction, stiction):

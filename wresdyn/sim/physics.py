@@ -17,6 +17,8 @@ field                     shape, unit                model array (per world)
 ``goal_accel``            (n,) rad/s²                the command path (servo joints: goal profile a_max)
 ``startup_torque``        (n,) N·m                   ``joint_servo_startup_torque`` (servo joints: least drive u0)
 ``stiction``              (n,) N·m                   ``joint_servo_stiction`` (servo joints: static friction above dry)
+``backlash``              (n,) rad                   ``joint_servo_backlash`` (servo joints: gear play beta)
+``encoder_offset``        (n,) rad                   ``joint_servo_encoder_offset`` (servo joints: encoder zero o)
 ``body_mass``             (nb,) kg                   ``body_mass``
 ``body_com``              (nb, 3) m, body frame      ``body_com``
 ``body_inertia``          (nb, 3, 3) kg·m², at com   ``body_inertia``
@@ -30,8 +32,9 @@ On a servo joint (:mod:`wresdyn.robot.servo`) ``kp``, ``kd`` are the servo's pos
 
 - gains, armature, mass, no-load speed, goal acceleration: ``nominal · exp(u)`` (positive, scale-free steps; a
   nominal 0 stays 0: no torque-speed line, no profile);
-- damping, friction, effort, delay, dead band, startup torque and stiction: ``reference · u`` with ``u`` projected onto
-  ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
+- damping, friction, effort, delay, dead band, startup torque, stiction and backlash: ``reference · u`` with ``u``
+  projected onto ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
+- the encoder offset: ``reference · u``, signed (not projected);
 - each link's mass, centre of mass and inertia through the log-Cholesky factor of its 4×4 pseudo-inertia
   ``J = [[Σ, h], [hᵀ, m]] = U Uᵀ`` (Rucker & Wensing 2022), ``Σ = ∫ r rᵀ dm`` about the body origin and
   ``h = m c``: every ``U`` with a positive diagonal gives a physically realisable body (positive mass, the
@@ -53,7 +56,8 @@ MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "j
                 "body_mass": "body_mass", "body_com": "body_com", "body_inertia": "body_inertia"}
 """Newton model array of each field (``delay`` is the command path's, not the model's)."""
 SERVO_ARRAYS = {"deadband": "joint_servo_deadband", "noload_speed": "joint_servo_noload_speed",
-                "startup_torque": "joint_servo_startup_torque", "stiction": "joint_servo_stiction"}
+                "startup_torque": "joint_servo_startup_torque", "stiction": "joint_servo_stiction",
+                "backlash": "joint_servo_backlash", "encoder_offset": "joint_servo_encoder_offset"}
 """Model array of each servo field, present on models of robots with servo joints
 (:func:`wresdyn.robot.servo.attach_servo`; ``goal_accel`` is the command path's)."""
 DEADBAND_REF = 0.01
@@ -168,12 +172,17 @@ class PhysicsModel(torch.nn.Module):
         self.register_buffer("ref_stiction", torch.as_tensor(self.ref["stiction"], **f64))
         self.register_parameter("u_stiction", torch.nn.Parameter(
             torch.as_tensor(start.stiction / self.ref["stiction"], **f64), "stiction" in self.fit))
+        for f in ("backlash", "encoder_offset"):  # angles in the dead band's unit
+            self.ref[f] = np.full(n, DEADBAND_REF)
+            self.register_buffer(f"ref_{f}", torch.as_tensor(self.ref[f], **f64))
+            self.register_parameter(f"u_{f}", torch.nn.Parameter(
+                torch.as_tensor(getattr(start, f) / DEADBAND_REF, **f64), f in self.fit))
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
-        """As torch's; a state saved before the startup torque or the stiction existed takes this module's (the
-        start's)."""
+        """As torch's; a state saved before the startup torque, the stiction, the backlash or the encoder offset
+        existed takes this module's (the start's)."""
         state_dict = dict(state_dict)
-        for k in ("u_startup_torque", "ref_startup_torque", "u_stiction", "ref_stiction"):
+        for k in (f"{p}_{f}" for f in ("startup_torque", "stiction", "backlash", "encoder_offset") for p in ("u", "ref")):
             state_dict.setdefault(k, getattr(self, k).detach().clone())
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
@@ -194,11 +203,14 @@ class PhysicsModel(torch.nn.Module):
 
     @torch.no_grad()
     def project(self) -> None:
-        """Keep the linear fields' coordinates >= 0 (call after each optimiser step); the effort limit gets a
+        """Keep the linear fields' coordinates >= 0 but the encoder offset's (call after each optimiser step); the
+        effort limit gets a
         positive floor (a drive with no torque is not physical), 0.05 of the robot's limit or the ``effort_floor``
         asked for."""
         for f in self.ref:
             u = getattr(self, f"u_{f}")
+            if f == "encoder_offset":
+                continue
             if f == "effort" and self.effort_floor is not None:
                 u.copy_(torch.maximum(u, self.effort_floor.to(u.device)))
             else:

@@ -34,9 +34,9 @@ __all__ = ["generate_source"]
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
-_SERVO_PARAMS = ("sdb", "sw0", "su0", "sfs")
+_SERVO_PARAMS = ("sdb", "sw0", "su0", "sfs", "sbl", "sof")
 """Per-DoF arrays the kernels of a robot with servo drives also read: dead band, no-load speed, startup torque,
-stiction."""
+stiction, backlash, encoder offset."""
 _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
@@ -84,7 +84,7 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
         if servo is not None and servo[k]:
             eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")
             pd, drive_d, drive_k = servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], p["su0"][k], q[k], qd[k],
-                                                tq[k], tqd[k])
+                                                tq[k], tqd[k], p["sbl"][k], p["sof"][k])
             free = None
         else:
             raw = e.let(f"{ke} * ({tq[k]} - {q[k]}) + {kd} * ({tqd[k]} - {qd[k]})")

@@ -30,7 +30,8 @@ semi-implicit Euler, all differentiable by Warp's Tape. One step, with ``H`` the
       tau = clamp(u - (U / w0) qd, -U, U)                           DC motor line, no-load speed w0 [rad/s]
 
   (``b = Model.joint_servo_deadband``, ``u0 = Model.joint_servo_startup_torque``, ``w0 =
-  Model.joint_servo_noload_speed``, 0: no line; ``q*`` is the goal
+  Model.joint_servo_noload_speed``, 0: no line; the backlash ``joint_servo_backlash`` and the encoder offset
+  ``joint_servo_encoder_offset`` enter as :mod:`wresdyn.robot.servo` states; ``q*`` is the goal
   after the servo's acceleration profile, which the command path applies: :mod:`wresdyn.sim.bank`).
 - ``D``: velocity derivatives treated implicitly, as MuJoCo's ``implicitfast`` integrator does:
   drive ``kd`` while the drive is not saturated (a clamped force has no velocity derivative; a servo's
@@ -105,7 +106,7 @@ _JOINT_PARAMS = ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_
                  "joint_effort_limit", "joint_limit_lower", "joint_limit_upper", "joint_limit_ke", "joint_limit_kd")
 """Per-DoF model arrays the kernels read, in the order of their arguments."""
 _SERVO_PARAMS = ("joint_servo_deadband", "joint_servo_noload_speed", "joint_servo_startup_torque",
-                 "joint_servo_stiction")
+                 "joint_servo_stiction", "joint_servo_backlash", "joint_servo_encoder_offset")
 """Per-DoF model arrays the kernels of a model with servo drives also read."""
 _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 """Per-body model arrays the kernels read."""

@@ -75,27 +75,31 @@ def friction_solve(e: Emitter, tree: ReplayTree, h_diag: list, h_off: dict, v_st
     return [e.let(f"{u} - {beta[i]} * {c}") for i, (u, c) in sorted(last.items())]
 
 
-def servo_drive(e: Emitter, ke, kd, eff, db, w0, u0, q, qd, tq, tqd) -> tuple[str, str, str]:
+def servo_drive(e: Emitter, ke, kd, eff, db, w0, u0, q, qd, tq, tqd, bl, off) -> tuple[str, str, str]:
     """The servo law of :mod:`wresdyn.robot.servo` for one DoF: (torque, its velocity derivative's magnitude
     ``d``, its position derivative's magnitude ``k``), ``d``/``k`` 0 where a clamp is saturated (and ``k`` inside
     the dead band)::
 
-        e_b = e - clamp(e, -b, b),  u = clamp(ke e_b + u0 clamp(e_b / r, -1, 1) + kd (qd* - qd), -U, U),
-        tau = clamp(u - (U / w0) qd, -U, U)
+        e = q* - (q + o),  e_m = e - clamp(e, -beta, beta),  e_b = e_m - clamp(e_m, -b, b),
+        u = clamp(ke e_b + u0 clamp(e_b / r, -1, 1) + kd (qd* - qd), -U, U),
+        tau = g clamp(u - (U / w0) qd, -U, U),  g = min(|e_m| / r, 1) if beta > 0 else 1
 
     ``U`` the effort limit (here finite), ``w0 = 0``: no torque-speed line, ``u0`` the startup torque over the ramp
-    ``r`` (:data:`~wresdyn.robot.servo.STARTUP_RAMP`)."""
-    err = e.let(f"{tq} - {q}")
-    err_b = e.let(f"{err} - wp.clamp({err}, -{db}, {db})")
+    ``r`` (:data:`~wresdyn.robot.servo.STARTUP_RAMP`), ``beta`` the backlash, ``o`` the encoder offset (both 0:
+    the same values as without them, bit for bit)."""
+    err = e.let(f"{tq} - ({q} + {off})")
+    err_m = e.let(f"{err} - wp.clamp({err}, -{bl}, {bl})")
+    contact = e.let(f"wp.where({bl} > S(0.0), wp.min(wp.abs({err_m}) * S({1.0 / STARTUP_RAMP!r}), S(1.0)), S(1.0))")
+    err_b = e.let(f"{err_m} - wp.clamp({err_m}, -{db}, {db})")
     ramp = e.let(f"{err_b} * S({1.0 / STARTUP_RAMP!r})")
     raw = e.let(f"{ke} * {err_b} + {u0} * wp.clamp({ramp}, S(-1.0), S(1.0)) + {kd} * ({tqd} - {qd})")
     duty = e.let(f"wp.clamp({raw}, -{eff}, {eff})")
     w0_safe = e.let(f"wp.where({w0} > S(0.0), {w0}, S(1.0))")  # no division by 0 in the branch not taken
     emf = e.let(f"wp.where({w0} > S(0.0), {eff} / {w0_safe}, S(0.0))")
     out = e.let(f"{duty} - {emf} * {qd}")
-    tau = e.let(f"wp.clamp({out}, -{eff}, {eff})")
+    tau = e.let(f"{contact} * wp.clamp({out}, -{eff}, {eff})")
     free_u = e.let(f"wp.where(wp.abs({raw}) < {eff}, S(1.0), S(0.0))")
-    free_t = e.let(f"wp.where(wp.abs({out}) < {eff}, S(1.0), S(0.0))")
-    outside = e.let(f"wp.where(wp.abs({err}) > {db}, S(1.0), S(0.0))")
+    free_t = e.let(f"{contact} * wp.where(wp.abs({out}) < {eff}, S(1.0), S(0.0))")  # out of mesh: no derivative
+    outside = e.let(f"wp.where(wp.abs({err_m}) > {db}, S(1.0), S(0.0))")
     stiff = e.let(f"{ke} + wp.where(wp.abs({ramp}) < S(1.0), {u0} * S({1.0 / STARTUP_RAMP!r}), S(0.0))")
     return tau, e.let(f"{free_t} * ({free_u} * {kd} + {emf})"), e.let(f"{free_t} * {free_u} * {outside} * {stiff}")
