@@ -26,7 +26,7 @@ from ..errors import WresdynError
 from .simulator import Simulator
 from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
-__all__ = ["MODULES", "VARIANTS", "compile_kernels"]
+__all__ = ["MODULES", "SHIPPED", "VARIANTS", "compile_kernels", "warm_up"]
 
 VARIANTS = {"forward": (False, False), "grad": (True, False), "param_grads": (True, True)}
 """Kernel variants, name -> (``requires_grad``, ``param_grads``) of :class:`~wresdyn.sim.Simulator`: replay
@@ -132,3 +132,81 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
              "in the background" if grad and background_compiles() else "")
     say(f"... done in {seconds:.1f} s ({', '.join(parts)}{later})")
     return seconds
+
+
+SHIPPED = (("scenes/humanoid.usda", None), ("scenes/so101/so101.xml", None),
+           ("scenes/so101/so101.xml", "scenes/so101/servo.toml"))
+"""The shipped robots ``wresdyn warmup`` compiles for: (robot file, gains config or None) relative to the repository;
+the SO-101 twice, its file's position actuators and the STS3215 servo drives, which generate code of their own."""
+
+
+def _solver_modules(sims) -> list:
+    """Every Warp module of the replay kernels of these simulators: the step, the fused rollout (identification and
+    the validation replays), the dynamics terms and, on CUDA, the adjoint's pieces."""
+    mods = []
+    for sim in sims:
+        k = getattr(sim.solver, "kernels", None)
+        for kernel in () if k is None else (k.replay_step, k.replay_rollout, k.replay_terms, *getattr(k, "PIECES", ())):
+            if kernel.module not in mods:
+                mods.append(kernel.module)
+    return mods
+
+
+def _cache_entries() -> set[str]:
+    import warp as wp
+
+    root = Path(wp.config.kernel_cache_dir)
+    return {p.name for p in root.iterdir()} if root.is_dir() else set()
+
+
+def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -> int:
+    """Compile into Warp's cache every kernel module the default ``fit``, ``identify``, ``train`` (PPO) and ``eval``
+    of each robot in ``targets`` use on ``device``, without training (``wresdyn warmup``): the forward and the
+    adjoint variant of its replay solver, each with its step, fused rollout and dynamics-terms kernels, and Newton's
+    own kernels that building and stepping a model loads. On CUDA the adjoint is compiled as the one kernel (not the
+    pieces a fresh machine starts on; :mod:`~wresdyn.sim.solver_replay.kernels`), in parallel worker processes.
+
+    Args:
+        targets: ``(robot file, gains config or None)`` pairs.
+        device: Warp device, ``cpu`` or ``cuda:N``.
+        rate_hz: Sample rate of the warm-up world [Hz]; the compiled code does not depend on it.
+        say: Progress printer (default: ``print``, flushed).
+
+    Returns:
+        The number of cache entries this call added (0: everything was compiled already).
+    """
+    import os
+
+    import warp as wp
+
+    from ..robot.description import load_robot
+    from .first_steps import check_newton
+
+    say = say or (lambda line: print(line, flush=True))
+    wp.config.quiet = True  # no banner: the lines below say what happens
+    wp.init()
+    dev = wp.get_device(device)
+    before = _cache_entries()
+    t0 = time.perf_counter()
+    given = os.environ.get("WRESDYN_ADJOINT_PIECES")
+    if dev.is_cuda and not given:  # the one kernel: what every later run takes once the cache holds it
+        os.environ["WRESDYN_ADJOINT_PIECES"] = "0"
+    try:
+        for path, gains in targets:
+            robot = load_robot(path, gains=gains)
+            compile_kernels(robot, rate_hz, ("forward", "param_grads"), device=device, say=say)
+            sims = [Simulator(robot, 1, 1.0 / rate_hz, device=device, requires_grad=g, param_grads=g)
+                    for g in (False, True)]
+            t1 = time.perf_counter()
+            compile_batch(_solver_modules(sims), dev)
+            # the check every fit runs first: one world stepped under the data's commands, Newton's kernels with it
+            check_newton(robot, rate_hz, robot.q0, device=device)
+            say(f"... rollout and dynamics-terms kernels of {Path(str(robot.source)).name} in "
+                f"{time.perf_counter() - t1:.1f} s")
+    finally:
+        if dev.is_cuda and not given:
+            os.environ.pop("WRESDYN_ADJOINT_PIECES", None)
+    added = len(_cache_entries() - before)
+    say(f"warmup: {added} new entries in {_home(str(wp.config.kernel_cache_dir))} in "
+        f"{time.perf_counter() - t0:.1f} s" + ("" if added else " (all compiled already)"))
+    return added
