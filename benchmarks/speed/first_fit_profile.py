@@ -106,7 +106,8 @@ def patch_warp() -> None:
         finally:
             compiled = any(e[2].startswith(f"  compile {self.name} ") for e in EVENTS[before:])
             if compiled or now() - t > 0.05:
-                EVENTS.append((t, now() - t, f"warp load {self.name} on {device} ({'compiled' if compiled else 'cached'})"))
+                how = "compiled" if compiled else "cached"
+                EVENTS.append((t, now() - t, f"warp load {self.name} on {device} ({how})"))
 
     def timed_compile(self, device, *a, **k):
         t = now()
@@ -183,9 +184,10 @@ def main() -> None:
     compiles = [e for e in EVENTS if e[2].startswith("  compile")]
     loads = [e for e in EVENTS if e[2].startswith("warp load")]
     first = next((e[0] for e in EVENTS if e[2].startswith("FIRST")), None)
-    print(f"\nWarp modules compiled: {len(compiles)}, {sum(e[1] for e in compiles):.1f} s in all "
-          f"(slowest: {', '.join(f'{e[2].split()[1]} {e[1]:.1f} s' for e in sorted(compiles, key=lambda e: -e[1])[:4])})")
-    print(f"Warp module loads listed: {len(loads)}; imports {sum(e[1] for e in EVENTS if e[2].startswith('import')):.1f} s")
+    slowest = ", ".join(f"{e[2].split()[1]} {e[1]:.1f} s" for e in sorted(compiles, key=lambda e: -e[1])[:4])
+    imports = sum(e[1] for e in EVENTS if e[2].startswith("import"))
+    print(f"\nWarp modules compiled: {len(compiles)}, {sum(e[1] for e in compiles):.1f} s in all (slowest: {slowest})")
+    print(f"Warp module loads listed: {len(loads)}; imports {imports:.1f} s")
     print(f"first iteration done at {first:.1f} s after the script started" if first else "no iteration reached")
     for s in skipped:
         print(f"not timed: {s}")

@@ -30,6 +30,7 @@ import time
 
 from ..robot.description import DEFAULT_ROBOT, load_robot
 from ..robot.mujoco_model import build_mujoco
+from .solver_replay.kernels import ADJOINT_PIECES, background_compiles, branch_lanes, cuda_launch
 
 __all__ = ["SOLVERS", "run_bench"]
 
@@ -83,14 +84,14 @@ class _Bench:
         """SolverReplay as the fits' Simulator builds it, the adjoint in the form ``--adjoint`` asks for; records the
         form for the row."""
         from .solver_replay import SolverReplay
-        from .solver_replay.kernels import ADJOINT_PIECES, background_compiles
 
         pieces = {"auto": None, "one": 0, "pieces": ADJOINT_PIECES}[getattr(self.args, "adjoint", "auto")]
         solver = SolverReplay(model, threads=self.args.threads, friction_grad=False, adjoint_pieces=pieces)
         if solver.requires_grad:
             n = len(getattr(solver.kernels, "PIECES", ()))
             form = f"{n} kernels of ~{solver.adjoint_pieces} statements" if solver.adjoint_pieces else "one kernel"
-            self.forms[(row, w)] = form + (" (one kernel compiling in the background)" if background_compiles() else "")
+            later = " (one kernel compiling in the background)" if background_compiles() else ""
+            self.forms[(row, w)] = form + later
         return solver
 
     def sync(self):
@@ -303,8 +304,6 @@ def run_bench(args) -> int:
 
 def _replay_config(cuda: bool) -> dict:
     """The replay kernels' launch settings on this device, as the fits get them."""
-    from .solver_replay.kernels import branch_lanes, cuda_launch
-
     lanes = branch_lanes(cuda)
     return {"lanes": lanes, "block_dim": cuda_launch()[0] if cuda else None,
             "threads_per_world": "one thread per world and branch of the base" if lanes else "one thread per world"}

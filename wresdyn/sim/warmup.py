@@ -23,6 +23,8 @@ import weakref
 from pathlib import Path
 
 from ..errors import WresdynError
+from ..robot.description import load_robot
+from .first_steps import check_newton
 from .simulator import Simulator
 from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
@@ -178,9 +180,6 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -
     import os
 
     import warp as wp
-
-    from ..robot.description import load_robot
-    from .first_steps import check_newton
 
     say = say or (lambda line: print(line, flush=True))
     wp.config.quiet = True  # no banner: the lines below say what happens
