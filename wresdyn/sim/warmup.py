@@ -50,15 +50,17 @@ def _done(robot, solver, device, module) -> bool:
     return ref is not None and ref() is robot
 
 
-def _step_modules(sims) -> list:
-    """The Warp modules of the replay step kernels these simulators launch (none for other solvers): what the
-    warm-up step would compile; the fused rollout and the dynamics-terms kernels are their own modules, compiled
-    when first used."""
+def _first_modules(sims, rollout: bool) -> list:
+    """The Warp modules of the replay kernels these simulators launch first (none for other solvers): the step and
+    the dynamics terms (each solver's friction scale ``fric_m0`` at its first launch) and, with ``rollout``, the fused
+    rollout that identification replays its windows with. Compiled in one batch, side by side, rather than one after
+    another as each is first launched."""
     mods = []
     for sim in sims:
-        step = getattr(getattr(sim.solver, "kernels", None), "replay_step", None)
-        if step is not None and step.module not in mods:
-            mods.append(step.module)
+        k = getattr(sim.solver, "kernels", None)
+        for kernel in () if k is None else (k.replay_step, k.replay_terms, *((k.replay_rollout,) if rollout else ())):
+            if kernel.module not in mods:
+                mods.append(kernel.module)
     return mods
 
 
@@ -112,7 +114,7 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     built = time.perf_counter()
     # The modules are independent: Warp compiles them in parallel threads (NVRTC or Clang release the GIL), so a
     # first run waits for the largest one (on CUDA a piece of the adjoint, on the CPU the adjoint) instead of the sum.
-    mods = _step_modules(sims.values())
+    mods = _first_modules(sims.values(), rollout="param_grads" in todo.values())
     mods += [m for m in cuda_mods if m not in mods]
     if len(mods) > 1:
         compile_batch(mods, sims[next(iter(sims))].model.device)
