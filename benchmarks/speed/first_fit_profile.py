@@ -12,7 +12,8 @@ generated-kernel folder (both temporary unless ``--cache DIR`` names a Warp cach
 - every Warp module loaded, with the seconds spent compiling it (``compiled``) or loading it from the cache.
 
 It stops after the first iteration of the first training loop (the hybrid fit's identification) unless ``--full``,
-which runs the whole fit and marks each loop's first iteration. Flags after ``--`` go to ``wresdyn fit``.
+which runs the whole fit and marks each loop's first iteration (Ctrl-C ends it with the timeline so far). Flags after
+``--`` go to ``wresdyn fit``.
 """
 
 from __future__ import annotations
@@ -177,6 +178,8 @@ def main() -> None:
         rc = cli(cmd)
     except Stop:
         rc = "stopped after the first iteration"
+    except KeyboardInterrupt:  # Ctrl-C (SIGINT) ends a long --full run with the timeline so far
+        rc = "interrupted"
     EVENTS.append((t, now() - t, f"wresdyn fit returned {rc}"))
     print("\ntimeline (start s, seconds, what); 'compile' lines are inside the 'warp load' above them:")
     for start, dur, what in sorted(EVENTS, key=lambda e: (e[0], -e[1])):
