@@ -51,16 +51,22 @@ def _done(robot, solver, device, module) -> bool:
 
 
 def _first_modules(sims, rollout: bool) -> list:
-    """The Warp modules of the replay kernels these simulators launch first (none for other solvers): the step and
-    the dynamics terms (each solver's friction scale ``fric_m0`` at its first launch) and, with ``rollout``, the fused
-    rollout that identification replays its windows with. Compiled in one batch, side by side, rather than one after
-    another as each is first launched."""
-    mods = []
-    for sim in sims:
-        k = getattr(sim.solver, "kernels", None)
-        for kernel in () if k is None else (k.replay_step, k.replay_terms, *((k.replay_rollout,) if rollout else ())):
-            if kernel.module not in mods:
-                mods.append(kernel.module)
+    """The Warp modules of the replay kernels these simulators launch first (none for other solvers), to compile in
+    one batch rather than one after another as each is first launched: the steps, the dynamics terms (each solver's
+    friction scale ``fric_m0`` at its first launch) and, with ``rollout``, the fused rollout that identification
+    replays its windows with. The adjoint's step comes first, so that the longest compile starts at once (a batch
+    runs as many at a time as there are cores); a module the variants share (same code, same cache entry) is listed
+    once, so that it is not compiled twice side by side."""
+    solvers = sorted((s.solver for s in sims if hasattr(s.solver, "kernels")), key=lambda s: not s.requires_grad)
+    names = ("replay_step", "replay_terms", *(("replay_rollout",) if rollout else ()))
+    mods, seen = [], set()
+    for name in names:
+        for solver in solvers:
+            module = getattr(solver.kernels, name).module
+            key = module.get_module_identifier()
+            if key not in seen:
+                seen.add(key)
+                mods.append(module)
     return mods
 
 
