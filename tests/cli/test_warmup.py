@@ -35,11 +35,13 @@ def _wresdyn(env: dict, *argv: str) -> tuple[subprocess.CompletedProcess, float]
     return res, after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
 
 
-def test_warmup_refuses_an_empty_list_and_gains_without_a_robot(capsys):
+def test_warmup_refuses_an_empty_list_gains_without_a_robot_and_a_bad_device(capsys):
     assert main(["warmup", "--no-shipped"]) == 2
     assert "nothing to compile" in capsys.readouterr().err
     assert main(["warmup", "--gains", "scenes/so101/servo.toml"]) == 2
     assert "--gains applies to --robot" in capsys.readouterr().err
+    assert main(["warmup", "--device", "gpu"]) == 2
+    assert capsys.readouterr().err.strip() == "wresdyn warmup: error: --device = 'gpu' is not a device: cpu, cuda or cuda:N"
 
 
 @pytest.mark.slow  # three fresh processes and a robot's first compile: ~35 CPU-seconds

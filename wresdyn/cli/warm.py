@@ -36,10 +36,15 @@ COMMAND = Warmup
 def run(args: Warmup) -> int:
     import warp as wp
 
-    wp.config.quiet = True  # before Newton initialises Warp: no banner, the warm-up's own lines say what happens
+    # before Newton initialises Warp: no banner, the warm-up's own lines say what happens
+    wp.config.quiet = True
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    from ..choices import check_device
     from ..paths import REPO
     from ..sim.warmup import SHIPPED, warm_up
     from . import UserError
+
+    check_device(args.device, "--device")
 
     targets = [(str(REPO / path), None if gains is None else str(REPO / gains)) for path, gains in SHIPPED]
     if not args.shipped:

@@ -189,8 +189,12 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -
 
     say = say or (lambda line: print(line, flush=True))
     wp.config.quiet = True  # no banner: the lines below say what happens
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     wp.init()
-    dev = wp.get_device(device)
+    try:
+        dev = wp.get_device(device)
+    except (RuntimeError, ValueError) as e:
+        raise WresdynError(f"device {device!r}: {str(e).splitlines()[0]}") from None
     before = _cache_entries()
     t0 = time.perf_counter()
     given = os.environ.get("WRESDYN_ADJOINT_PIECES")
@@ -206,7 +210,7 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -
             compile_batch(_solver_modules(sims), dev)
             # the check every fit runs first: one world stepped under the data's commands, Newton's kernels with it
             check_newton(robot, rate_hz, robot.q0, device=device)
-            say(f"... rollout and dynamics-terms kernels of {Path(str(robot.source)).name} in "
+            say(f"... every replay kernel of {Path(str(robot.source)).name} and the check a fit starts with in "
                 f"{time.perf_counter() - t1:.1f} s")
     finally:
         if dev.is_cuda and not given:
