@@ -25,6 +25,7 @@ from pathlib import Path
 from ..errors import WresdynError
 from ..robot.description import load_robot
 from .first_steps import check_newton
+from .goal_profile import profile_modules
 from .simulator import Simulator
 from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
@@ -207,7 +208,9 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -
             sims = [Simulator(robot, 1, 1.0 / rate_hz, device=device, requires_grad=g, param_grads=g)
                     for g in (False, True)]
             t1 = time.perf_counter()
-            compile_batch(_solver_modules(sims), dev)
+            # a servo robot's commands pass through the goal profile's kernels first
+            servo = getattr(sims[0].solver, "servo", None) is not None
+            compile_batch(_solver_modules(sims) + (profile_modules() if servo else []), dev)
             # the check every fit runs first: one world stepped under the data's commands, Newton's kernels with it
             check_newton(robot, rate_hz, robot.q0, device=device)
             say(f"... every replay kernel of {Path(str(robot.source)).name} and the check a fit starts with in "
