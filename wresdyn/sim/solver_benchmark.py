@@ -272,10 +272,12 @@ def run_bench(args) -> int:
     print(f"\n{robot.source.name} ({robot.n_dof} DoF), dt {args.dt} s, device {device.alias} ({device.name}), "
           f"CPU threads {args.threads}, forward {args.steps} steps, fwd+bwd Tape horizon {args.horizon}, "
           f"CUDA graphs {'on' if cuda else 'n/a'}; env-steps/s")
-    print(f"SolverReplay as the fits build it: {config['threads_per_world']}"
-          + (f", blocks of {config['block_dim']} threads" if cuda else "")
-          + f"; adjoint ({getattr(args, 'adjoint', 'auto')}): "
-          + "; ".join(f"{name} at {w}: {form}" for (name, w), form in b.forms.items()) + "\n")
+    if "replay" in solvers:
+        print(f"SolverReplay as the fits build it: {config['threads_per_world']}"
+              + (f", blocks of {config['block_dim']} threads" if cuda else "")
+              + f"; adjoint ({getattr(args, 'adjoint', 'auto')}): "
+              + "; ".join(f"{name} at {w}: {form}" for (name, w), form in b.forms.items()))
+    print()
     head = "| solver | " + " | ".join(f"{w} fwd | {w} fwd+bwd" for w in worlds) + " |"
     print(head)
     print("|" + "---|" * (1 + 2 * len(worlds)))
