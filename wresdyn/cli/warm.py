@@ -15,6 +15,11 @@ from dataclasses import dataclass
 
 from .command import Command
 
+SHIPPED = (("scenes/humanoid.usda", None), ("scenes/so101/so101.xml", None),
+           ("scenes/so101/so101.xml", "scenes/so101/servo.toml"))
+"""The shipped robots it compiles for: (robot file, gains config or None) relative to the repository; the SO-101 twice,
+its file's position actuators and the STS3215 servo drives, which generate code of their own."""
+
 
 @dataclass(frozen=True)
 class Warmup(Command):
@@ -34,18 +39,11 @@ COMMAND = Warmup
 
 
 def run(args: Warmup) -> int:
-    import warp as wp
-
-    # before Newton initialises Warp: no banner, the warm-up's own lines say what happens
-    wp.config.quiet = True
-    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     from ..choices import check_device
     from ..paths import REPO
-    from ..sim.warmup import SHIPPED, warm_up
     from . import UserError
 
     check_device(args.device, "--device")
-
     targets = [(str(REPO / path), None if gains is None else str(REPO / gains)) for path, gains in SHIPPED]
     if not args.shipped:
         targets = []
@@ -55,5 +53,12 @@ def run(args: Warmup) -> int:
         raise UserError("--gains applies to --robot: give the robot file too")
     if not targets:
         raise UserError("nothing to compile: --no-shipped needs --robot")
+    import warp as wp
+
+    # before Newton initialises Warp: no banner, the warm-up's own lines say what happens
+    wp.config.quiet = True
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    from ..sim.warmup import warm_up
+
     warm_up(targets, device=args.device)
     return 0

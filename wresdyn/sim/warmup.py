@@ -29,7 +29,7 @@ from .goal_profile import profile_modules
 from .simulator import Simulator
 from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
-__all__ = ["MODULES", "SHIPPED", "VARIANTS", "compile_kernels", "warm_up"]
+__all__ = ["MODULES", "VARIANTS", "compile_kernels", "warm_up"]
 
 VARIANTS = {"forward": (False, False), "grad": (True, False), "param_grads": (True, True)}
 """Kernel variants, name -> (``requires_grad``, ``param_grads``) of :class:`~wresdyn.sim.Simulator`: replay
@@ -141,12 +141,6 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
              "in the background" if grad and background_compiles() else "")
     say(f"... done in {seconds:.1f} s ({', '.join(parts)}{later})")
     return seconds
-
-
-SHIPPED = (("scenes/humanoid.usda", None), ("scenes/so101/so101.xml", None),
-           ("scenes/so101/so101.xml", "scenes/so101/servo.toml"))
-"""The shipped robots ``wresdyn warmup`` compiles for: (robot file, gains config or None) relative to the repository;
-the SO-101 twice, its file's position actuators and the STS3215 servo drives, which generate code of their own."""
 
 
 def _solver_modules(sims) -> list:
