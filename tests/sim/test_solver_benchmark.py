@@ -41,3 +41,20 @@ def test_bench_measures_every_row_for_every_world_count(tmp_path, capsys):
         assert re.search(rf"^\| {row} \| {ratio} \| {ratio} \| {ratio} \| n/a \|$", table, re.M), table
     for row in ("replay rollout / mujoco-c", "replay step / mujoco-c"):  # MuJoCo C has no fwd+bwd
         assert re.search(rf"^\| {row} \| {ratio} \| n/a \| {ratio} \| n/a \|$", table, re.M), table
+    # the replay rows name the kernels they timed: on the CPU one thread per world, the adjoint as one kernel
+    assert res["replay"] == {"lanes": False, "block_dim": None, "threads_per_world": "one thread per world"}
+    assert res["adjoint"] == {f"{r} {w}": "one kernel" for r in ("replay rollout", "replay step") for w in (1, 3)}
+    assert "SolverReplay as the fits build it: one thread per world; adjoint (auto): replay rollout at 1: one kernel" \
+        in text
+
+
+def test_bench_times_the_adjoint_in_pieces_when_asked_and_says_so(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    assert main(["bench", "--robot", "newton:cartpole.urdf", "--gains", "examples/gains/cartpole.toml",
+                 "--solvers", "replay", "--worlds", "2", "--steps", "4", "--horizon", "2", "--threads", "1",
+                 "--min-time", "0.01", "--adjoint", "pieces", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    forms = json.loads(out.read_text())["adjoint"]
+    assert set(forms) == {"replay rollout 2", "replay step 2"}
+    assert all(re.fullmatch(r"\d+ kernels of ~400 statements", f) for f in forms.values()), forms
+    assert f"(adjoint: {forms['replay step 2']})" in text

@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("wresdyn.cli.export", "write the calibrated robot: USD layers, Newton actuators and the residual"),
     "deploy": ("wresdyn.cli.deploy", "train tracking skills in nominal and corrected simulators, deploy them on the real robot"),
     "ablate": ("wresdyn.cli.ablate", "PPO vs gradient vs parametric x MLP/GRU x torque/delta action x seeds"),
+    "warmup": ("wresdyn.cli.warm", "compile the fit, identify and PPO kernels of the shipped robots (and --robot) ahead"),
 }
 
 

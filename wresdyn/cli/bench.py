@@ -41,6 +41,10 @@ class Bench(Command):
     """Time step [s]."""
     min_time: float = 0.5
     """Seconds to time each measurement for (after a warm-up)."""
+    adjoint: Literal["auto", "one", "pieces"] = "auto"
+    """SolverReplay's adjoint in the forward+backward rows: auto, the form a fit takes on this machine now (on CUDA the
+    one kernel once Warp's cache holds it, the pieces until then); one: the one kernel (compiled first if need be);
+    pieces: the chain of smaller kernels a fresh machine starts on."""
     json: str | None = None
     """Also write the results to this JSON file."""
 

@@ -13,7 +13,7 @@ import functools
 
 import torch
 
-__all__ = ["profile_goals"]
+__all__ = ["profile_goals", "profile_modules"]
 
 _FLOOR = 1e-30
 """Floor of ``2 a |e|`` under the square root, as :func:`~wresdyn.robot.servo.profile_step`'s."""
@@ -115,6 +115,12 @@ def _kernels(dtype: torch.dtype):
         adj_accel_out[j, i] = adj_a
 
     return forward, adjoint
+
+
+def profile_modules(dtype: torch.dtype = torch.float32) -> list:
+    """The Warp modules of the goal profile's forward and adjoint kernels (a robot with servo drives loads them), for
+    compiling ahead (:func:`wresdyn.sim.warmup.warm_up`)."""
+    return [k.module for k in _kernels(dtype)]
 
 
 def _launch(kernel, dim, device: torch.device, *tensors) -> None:

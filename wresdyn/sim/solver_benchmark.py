@@ -14,6 +14,12 @@ advanced by one ``dt``. Rows (each where the device allows):
 On CUDA every loop is captured once in a CUDA graph and replayed. Ratios are against ``featherstone``
 and ``mujoco-c`` in the same run. Targets: a sinusoid per joint for the rollouts, held fixed in the step
 loops (the state still moves: it starts away from the target).
+
+The replay rows run the kernels the fits run: SolverReplay with the settings :class:`~wresdyn.sim.Simulator` gives it
+(friction law and sweeps, no friction gradient, branch lanes and block size of
+:mod:`~wresdyn.sim.solver_replay.kernels`), and by default (``--adjoint auto``) the adjoint form a fit would take on
+this machine now: on CUDA the one kernel where Warp's cache holds it, else the pieces, with the one kernel compiling
+in the background (a later row may then switch to it). Each forward + backward row prints the form it timed.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ import time
 
 from ..robot.description import DEFAULT_ROBOT, load_robot
 from ..robot.mujoco_model import build_mujoco
+from .solver_replay.kernels import ADJOINT_PIECES, background_compiles, branch_lanes, cuda_launch
 
 __all__ = ["SOLVERS", "run_bench"]
 
@@ -71,6 +78,21 @@ class _Bench:
         hi = np.where(np.isfinite(robot.upper), robot.upper, 1.0)
         self.q0 = np.clip(np.zeros(self.n), lo + 0.3 * span, hi - 0.3 * span)
         self.amp = np.minimum(0.2, 0.12 * span)
+        self.forms: dict[tuple[str, int], str] = {}  # (row, worlds) -> the adjoint form a backward row timed
+
+    def replay(self, model, row: str, w: int):
+        """SolverReplay as the fits' Simulator builds it, the adjoint in the form ``--adjoint`` asks for; records the
+        form for the row."""
+        from .solver_replay import SolverReplay
+
+        pieces = {"auto": None, "one": 0, "pieces": ADJOINT_PIECES}[getattr(self.args, "adjoint", "auto")]
+        solver = SolverReplay(model, threads=self.args.threads, friction_grad=False, adjoint_pieces=pieces)
+        if solver.requires_grad:
+            n = len(getattr(solver.kernels, "PIECES", ()))
+            form = f"{n} kernels of ~{solver.adjoint_pieces} statements" if solver.adjoint_pieces else "one kernel"
+            later = " (one kernel compiling in the background)" if background_compiles() else ""
+            self.forms[(row, w)] = form + later
+        return solver
 
     def sync(self):
         self.wp.synchronize_device(self.args.device)
@@ -144,12 +166,10 @@ class _Bench:
 
     # -------------------------------------------------------------- SolverReplay rollout
     def rollout(self, w: int, backward: bool):
-        from .solver_replay import SolverReplay
-
         wp, args, n = self.wp, self.args, self.n
         model = self.robot.build_model(w, args.device, requires_grad=backward)
         # gradients to states and controls, as residual learning takes them (Simulator(param_grads=False))
-        solver = SolverReplay(model, threads=args.threads, friction_grad=False)
+        solver = self.replay(model, "replay rollout", w)
         t_len = args.horizon if backward else args.steps
         tr = solver.tree
         if tr.coords_per_world != n or tr.dofs_per_world != n:
@@ -213,10 +233,8 @@ def run_bench(args) -> int:
     solvers = args.solvers
     b = _Bench(args, robot)
 
-    def replay_solver(model):
-        from .solver_replay import SolverReplay
-
-        return SolverReplay(model, threads=args.threads, friction_grad=False)
+    def replay_solver(w):
+        return lambda model: b.replay(model, "replay step", w)
 
     def featherstone(model):
         import newton
@@ -233,12 +251,14 @@ def run_bench(args) -> int:
     for w in worlds:
         def put(name, fwd, bwd):
             rows.setdefault(name, {})[w] = (fwd, bwd)
-            print(f"  {name:<16} worlds {w:>6}: fwd {_fmt(fwd):>9}  fwd+bwd {_fmt(bwd):>9}", flush=True)
+            form = b.forms.get((name, w))
+            print(f"  {name:<16} worlds {w:>6}: fwd {_fmt(fwd):>9}  fwd+bwd {_fmt(bwd):>9}"
+                  + (f"  (adjoint: {form})" if form else ""), flush=True)
 
         if "replay" in solvers:
             put("replay rollout", b.rollout(w, False), b.rollout(w, True))
-            put("replay step", b.step_api(replay_solver, w, args.steps, False),
-                b.step_api(replay_solver, w, args.horizon, True))
+            put("replay step", b.step_api(replay_solver(w), w, args.steps, False),
+                b.step_api(replay_solver(w), w, args.horizon, True))
         if "featherstone" in solvers:
             bwd = b.step_api(featherstone, w, args.horizon, True) if w <= args.slow_max_worlds else None
             put("featherstone", b.step_api(featherstone, w, args.slow_steps, False), bwd)
@@ -248,9 +268,16 @@ def run_bench(args) -> int:
             put("mujoco-c", b.mujoco_c(w), None)
 
     device = wp.get_device(args.device)
+    config = _replay_config(cuda)
     print(f"\n{robot.source.name} ({robot.n_dof} DoF), dt {args.dt} s, device {device.alias} ({device.name}), "
           f"CPU threads {args.threads}, forward {args.steps} steps, fwd+bwd Tape horizon {args.horizon}, "
-          f"CUDA graphs {'on' if cuda else 'n/a'}; env-steps/s\n")
+          f"CUDA graphs {'on' if cuda else 'n/a'}; env-steps/s")
+    if "replay" in solvers:
+        print(f"SolverReplay as the fits build it: {config['threads_per_world']}"
+              + (f", blocks of {config['block_dim']} threads" if cuda else "")
+              + f"; adjoint ({getattr(args, 'adjoint', 'auto')}): "
+              + "; ".join(f"{name} at {w}: {form}" for (name, w), form in b.forms.items()))
+    print()
     head = "| solver | " + " | ".join(f"{w} fwd | {w} fwd+bwd" for w in worlds) + " |"
     print(head)
     print("|" + "---|" * (1 + 2 * len(worlds)))
@@ -271,9 +298,17 @@ def run_bench(args) -> int:
         with open(args.json, "w") as fh:
             json.dump({"robot": robot.source.name, "robot_sha256": robot.source_sha256, "device": str(device),
                        "device_name": device.name, "dt": args.dt, "threads": args.threads,
-                       "steps": args.steps, "horizon": args.horizon,
+                       "steps": args.steps, "horizon": args.horizon, "replay": config,
+                       "adjoint": {f"{name} {w}": form for (name, w), form in b.forms.items()},
                        "rows": {k: {str(w): v for w, v in per.items()} for k, per in rows.items()}}, fh, indent=1)
     return 0
+
+
+def _replay_config(cuda: bool) -> dict:
+    """The replay kernels' launch settings on this device, as the fits get them."""
+    lanes = branch_lanes(cuda)
+    return {"lanes": lanes, "block_dim": cuda_launch()[0] if cuda else None,
+            "threads_per_world": "one thread per world and branch of the base" if lanes else "one thread per world"}
 
 
 def _fmt(x: float | None) -> str:

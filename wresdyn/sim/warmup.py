@@ -23,10 +23,13 @@ import weakref
 from pathlib import Path
 
 from ..errors import WresdynError
+from ..robot.description import load_robot
+from .first_steps import check_newton
+from .goal_profile import profile_modules
 from .simulator import Simulator
 from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
-__all__ = ["MODULES", "VARIANTS", "compile_kernels"]
+__all__ = ["MODULES", "VARIANTS", "compile_kernels", "warm_up"]
 
 VARIANTS = {"forward": (False, False), "grad": (True, False), "param_grads": (True, True)}
 """Kernel variants, name -> (``requires_grad``, ``param_grads``) of :class:`~wresdyn.sim.Simulator`: replay
@@ -48,15 +51,23 @@ def _done(robot, solver, device, module) -> bool:
     return ref is not None and ref() is robot
 
 
-def _step_modules(sims) -> list:
-    """The Warp modules of the replay step kernels these simulators launch (none for other solvers): what the
-    warm-up step would compile; the fused rollout and the dynamics-terms kernels are their own modules, compiled
-    when first used."""
-    mods = []
-    for sim in sims:
-        step = getattr(getattr(sim.solver, "kernels", None), "replay_step", None)
-        if step is not None and step.module not in mods:
-            mods.append(step.module)
+def _first_modules(sims, rollout: bool) -> list:
+    """The Warp modules of the replay kernels these simulators launch first (none for other solvers), to compile in
+    one batch rather than one after another as each is first launched: the steps, the dynamics terms (each solver's
+    friction scale ``fric_m0`` at its first launch) and, with ``rollout``, the fused rollout that identification
+    replays its windows with. The adjoint's step comes first, so that the longest compile starts at once (a batch
+    runs as many at a time as there are cores); a module the variants share (same code, same cache entry) is listed
+    once, so that it is not compiled twice side by side."""
+    solvers = sorted((s.solver for s in sims if hasattr(s.solver, "kernels")), key=lambda s: not s.requires_grad)
+    names = ("replay_step", "replay_terms", *(("replay_rollout",) if rollout else ()))
+    mods, seen = [], set()
+    for name in names:
+        for solver in solvers:
+            module = getattr(solver.kernels, name).module
+            key = module.get_module_identifier()
+            if key not in seen:
+                seen.add(key)
+                mods.append(module)
     return mods
 
 
@@ -110,25 +121,98 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
     built = time.perf_counter()
     # The modules are independent: Warp compiles them in parallel threads (NVRTC or Clang release the GIL), so a
     # first run waits for the largest one (on CUDA a piece of the adjoint, on the CPU the adjoint) instead of the sum.
-    mods = _step_modules(sims.values())
+    mods = _first_modules(sims.values(), rollout="param_grads" in todo.values())
     mods += [m for m in cuda_mods if m not in mods]
     if len(mods) > 1:
         compile_batch(mods, sims[next(iter(sims))].model.device)
     start_background_compiles()
     parts = []
     for module, v in todo.items():
-        t1 = time.perf_counter()
         with torch.no_grad():
             sims[module].step(sims[module].q)  # hold the start pose for one step: the first launch loads the module
         _DONE[(id(robot), solver, str(device), module)] = weakref.ref(robot)
         shared = [u for u in VARIANTS if MODULES[u] == module and u != v and u in variants]
-        parts.append(f"{v}{'' if not shared else ' = ' + ' = '.join(shared)}"
-                     + (f" {time.perf_counter() - t1:.1f} s" if len(mods) <= 1 else ""))
-    if len(mods) > 1:
-        parts = [f"{' and '.join(parts)} in parallel {time.perf_counter() - built:.1f} s"]
+        parts.append(f"{v}{'' if not shared else ' = ' + ' = '.join(shared)}")
+    # one batch compiled every variant's modules: one time covers them all
+    parts = [f"{' and '.join(parts)}{' in parallel' if len(todo) > 1 else ''} {time.perf_counter() - built:.1f} s"]
     seconds = time.perf_counter() - t0
     grad = any(VARIANTS[v][0] for v in todo.values())
     later = ("; the adjoint runs in pieces this time, as one kernel (1.3-1.5x faster) from the next run: it compiles "
              "in the background" if grad and background_compiles() else "")
     say(f"... done in {seconds:.1f} s ({', '.join(parts)}{later})")
     return seconds
+
+
+def _solver_modules(sims) -> list:
+    """Every Warp module of the replay kernels of these simulators: the step, the fused rollout (identification and
+    the validation replays), the dynamics terms and, on CUDA, the adjoint's pieces."""
+    mods = []
+    for sim in sims:
+        k = getattr(sim.solver, "kernels", None)
+        for kernel in () if k is None else (k.replay_step, k.replay_rollout, k.replay_terms, *getattr(k, "PIECES", ())):
+            if kernel.module not in mods:
+                mods.append(kernel.module)
+    return mods
+
+
+def _cache_entries() -> set[str]:
+    import warp as wp
+
+    root = Path(wp.config.kernel_cache_dir)
+    return {p.name for p in root.iterdir()} if root.is_dir() else set()
+
+
+def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -> int:
+    """Compile into Warp's cache every kernel module the default ``fit``, ``identify``, ``train`` (PPO) and ``eval``
+    of each robot in ``targets`` use on ``device``, without training (``wresdyn warmup``): the forward and the
+    adjoint variant of its replay solver, each with its step, fused rollout and dynamics-terms kernels, and Newton's
+    own kernels that building and stepping a model loads. On CUDA the adjoint is compiled as the one kernel (not the
+    pieces a fresh machine starts on; :mod:`~wresdyn.sim.solver_replay.kernels`), in parallel worker processes.
+
+    Args:
+        targets: ``(robot file, gains config or None)`` pairs.
+        device: Warp device, ``cpu`` or ``cuda:N``.
+        rate_hz: Sample rate of the warm-up world [Hz]; the compiled code does not depend on it.
+        say: Progress printer (default: ``print``, flushed).
+
+    Returns:
+        The number of cache entries this call added (0: everything was compiled already).
+    """
+    import os
+
+    import warp as wp
+
+    say = say or (lambda line: print(line, flush=True))
+    wp.config.quiet = True  # no banner: the lines below say what happens
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    wp.init()
+    try:
+        dev = wp.get_device(device)
+    except (RuntimeError, ValueError) as e:
+        raise WresdynError(f"device {device!r}: {str(e).splitlines()[0]}") from None
+    before = _cache_entries()
+    t0 = time.perf_counter()
+    given = os.environ.get("WRESDYN_ADJOINT_PIECES")
+    if dev.is_cuda and not given:  # the one kernel: what every later run takes once the cache holds it
+        os.environ["WRESDYN_ADJOINT_PIECES"] = "0"
+    try:
+        for path, gains in targets:
+            robot = load_robot(path, gains=gains)
+            compile_kernels(robot, rate_hz, ("forward", "param_grads"), device=device, say=say)
+            sims = [Simulator(robot, 1, 1.0 / rate_hz, device=device, requires_grad=g, param_grads=g)
+                    for g in (False, True)]
+            t1 = time.perf_counter()
+            # a servo robot's commands pass through the goal profile's kernels first
+            servo = getattr(sims[0].solver, "servo", None) is not None
+            compile_batch(_solver_modules(sims) + (profile_modules() if servo else []), dev)
+            # the check every fit runs first: one world stepped under the data's commands, Newton's kernels with it
+            check_newton(robot, rate_hz, robot.q0, device=device)
+            say(f"... every replay kernel of {Path(str(robot.source)).name} and the check a fit starts with in "
+                f"{time.perf_counter() - t1:.1f} s")
+    finally:
+        if dev.is_cuda and not given:
+            os.environ.pop("WRESDYN_ADJOINT_PIECES", None)
+    added = len(_cache_entries() - before)
+    say(f"warmup: {added} new entries in {_home(str(wp.config.kernel_cache_dir))} in "
+        f"{time.perf_counter() - t0:.1f} s" + ("" if added else " (all compiled already)"))
+    return added
