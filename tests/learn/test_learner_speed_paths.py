@@ -82,10 +82,18 @@ def test_torchrun_one_sync_update_trains_as_rsl_rls(tmp_path):
     assert lr[1] == pytest.approx(lr[0], rel=1e-6) and lr[0] != 1e-3
 
 
-def test_torchrun_refuses_worlds_that_do_not_split(tmp_path):
-    res = _torchrun("--out", str(tmp_path / "odd"), "--iterations", "1", "--num-envs", "15")
-    assert res.returncode != 0
-    assert any("does not split over 2 processes" in ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn"))
+@pytest.mark.parametrize("rank", [0, 1])
+def test_train_refuses_worlds_that_do_not_split_on_every_rank(tmp_path, monkeypatch, capsys, rank):
+    """Each rank of a torchrun launch (its environment as torchrun sets it: the torchrun tests above) refuses a world
+    count that does not split, in one line, before anything is loaded or written."""
+    from wresdyn.cli import main
+
+    for name, value in (("WORLD_SIZE", "2"), ("RANK", str(rank)), ("LOCAL_RANK", str(rank))):
+        monkeypatch.setenv(name, value)
+    argv = ["train", "data/dataset.npz", "--out", str(tmp_path / "odd"), "--ppo.iterations", "1", "--ppo.device", "cpu"]
+    assert main([*argv, "--env.num-worlds", "15"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("wresdyn train: error:") and "does not split over 2 processes" in err[0]
     assert not (tmp_path / "odd").exists()
 
 
