@@ -18,7 +18,7 @@ REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, delay=0.
 """Uneven enough to matter, no noise: gains, friction, damping, a 2-step delay and saturation."""
 SMALL = SysIdConfig(iterations=40, windows=4, horizon_curriculum=(8, 16), select_every=10, effort_grid=(0.3, 1.0),
                     identifiability=False)
-"""The identifiability report is test_identify_cli_report_and_hybrid_fit's and tests/identify/test_identifiability.py's."""
+"""Without the identifiability report: test_identify_cli_report_and_hybrid_fit and test_identifiability.py check it."""
 
 
 @pytest.fixture(scope="module")

@@ -79,7 +79,7 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
     data = load_dataset(data_path, robot=robot)
     if quick:  # the first QUICK_SECONDS of a trajectory per split, two for training: every replay is one of these
         n = int(round(QUICK_SECONDS * data.rate_hz))
-        trajs = data.split("train")[:2] + data.split("validation")[:1] + data.split("heldout")[:1] + data.split("ood")[:1]
+        trajs = [t for s, k in (("train", 2), ("validation", 1), ("heldout", 1), ("ood", 1)) for t in data.split(s)[:k]]
         data = dataclasses.replace(data, trajectories=[_head(t, n) for t in trajs])
     splits = ", ".join(f"{s} {len(data.split(s))}" for s in ("train", "validation", "heldout", "ood"))
     print(f"[2/5] data: {data_path} ({splits}"
