@@ -16,7 +16,9 @@ from wresdyn.sim.physics import PhysicalParams
 
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, delay=0.004, torque_limit_scale=0.5)
 """Uneven enough to matter, no noise: gains, friction, damping, a 2-step delay and saturation."""
-SMALL = SysIdConfig(iterations=40, windows=4, horizon_curriculum=(8, 16), select_every=10, effort_grid=(0.3, 1.0))
+SMALL = SysIdConfig(iterations=40, windows=4, horizon_curriculum=(8, 16), select_every=10, effort_grid=(0.3, 1.0),
+                    identifiability=False)
+"""Without the identifiability report: test_identify_cli_report_and_hybrid_fit and test_identifiability.py check it."""
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +71,8 @@ def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys
     data = tmp_path / "d.npz"
     recorded.save(data)
     run = tmp_path / "id"
-    assert main(["identify", str(data), "--out", str(run), "--iterations", "8", "--windows", "2", "--eval"]) == 0
+    assert main(["identify", str(data), "--out", str(run), "--iterations", "8", "--windows", "2", "--eval",
+                 "--identifiability-windows", "4"]) == 0
     report = (run / "identification.md").read_text()
     assert "left_knee" in report and "Within 10 %" in report
     assert "## What the data can identify" in report and (run / "identifiability.json").exists()
@@ -103,7 +106,7 @@ def test_fit_default_is_the_hybrid_and_resumes_both_stages(humanoid, recorded, t
     recorded.save(data)
     out = tmp_path / "hybrid"
     args = ["fit", str(data), "--out", str(out), "--identify-iterations", "6", "--iterations", "4", "--windows", "2",
-            "--curriculum", "4"]
+            "--curriculum", "4", "--identify.identifiability-windows", "2"]
     assert main(args) == 0
     out_text = capsys.readouterr().out
     assert "identification" in out_text
@@ -126,8 +129,10 @@ def test_fit_passes_refine_to_its_identification(humanoid, recorded, tmp_path, c
     data = tmp_path / "d.npz"
     recorded.save(data)
     out = tmp_path / "hybrid"
+    # the refinement on 2 windows and no identifiability report: the flag's way through is the property here
     assert main(["fit", str(data), "--out", str(out), "--identify-iterations", "4", "--refine", "1", "--iterations",
-                 "2", "--windows", "2", "--curriculum", "4"]) == 0
+                 "2", "--windows", "2", "--curriculum", "4", "--identify.refine-windows", "2",
+                 "--identify.no-identifiability"]) == 0
     assert "refine   1/1" in capsys.readouterr().out
     curve = json.loads((out / "identify" / "curve.json").read_text())
     assert [r.get("stage") for r in curve][-1] == "refine"
@@ -138,7 +143,7 @@ def test_fit_passes_the_gain_grid_to_its_identification(humanoid, recorded, tmp_
     recorded.save(data)
     out = tmp_path / "hybrid"
     assert main(["fit", str(data), "--out", str(out), "--identify-iterations", "2", "--gain-grid", "1,0.5",
-                 "--iterations", "2", "--windows", "2", "--curriculum", "4"]) == 0
+                 "--iterations", "2", "--windows", "2", "--curriculum", "4", "--identify.no-identifiability"]) == 0
     assert "kp search, per joint:" in capsys.readouterr().out
     assert main(["fit", str(data), "--out", str(tmp_path / "bad"), "--gain-grid", "1,-0.5"]) == 2
     assert "gain_grid" in capsys.readouterr().err and not (tmp_path / "bad").exists()

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from wresdyn.cli import main
 from wresdyn.config_fields import set_fields
 from wresdyn.experiments.ablation import cell_devices
 from wresdyn.fit.gradfit import GradFitConfig, fit
@@ -37,7 +38,7 @@ def _failure(res) -> str:
     return "\n".join(own[:60]) + "\n--- launcher:\n" + res.stderr[-1500:]
 
 
-def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(tmp_path):
+def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(tmp_path, monkeypatch, capsys):
     run = tmp_path / "run"
     res = _torchrun("--out", str(run), "--iterations", "2")
     assert res.returncode == 0, _failure(res)
@@ -54,12 +55,21 @@ def test_torchrun_trains_on_two_processes_resumes_and_refuses_a_changed_config(t
     assert res.returncode == 0, _failure(res)
     assert json.loads((run / "train_summary.json").read_text())["iterations_this_session"] == 2
     assert (run / "model_2.pt").is_file()
-    # a changed configuration is refused in one line per process, nothing written
-    saved = (run / "config.json").read_text()
-    res = _torchrun("--out", str(run), "--iterations", "4", "--set", "ppo.gamma=0.95")
-    assert res.returncode != 0
-    refusals = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn") and "ppo.gamma" in ln]
-    assert refusals and (run / "config.json").read_text() == saved and not (run / "model_3.pt").exists()
+    # a changed configuration is refused in one line by each rank (here in this process, in the environment torchrun
+    # gives it) before the process group forms, and nothing of the run is rewritten
+    saved = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    for rank in (0, 1):
+        for name in ("RANK", "LOCAL_RANK"):
+            monkeypatch.setenv(name, str(rank))
+        monkeypatch.setenv("WORLD_SIZE", "2")
+        capsys.readouterr()
+        assert main([*TORCHRUN[TORCHRUN.index("train"):], "--out", str(run), "--iterations", "4",
+                     "--set", "ppo.gamma=0.95"]) == 2
+        errors = [ln for ln in capsys.readouterr().err.splitlines() if ": error:" in ln]
+        assert len(errors) == 1 and "ppo.gamma" in errors[0], (rank, errors)
+    now = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    assert now["train.log"].startswith(saved.pop("train.log"))  # the refused commands' lines appended to its log
+    assert {k: v for k, v in now.items() if k != "train.log"} == saved
 
 
 @pytest.mark.slow  # an option off by default; tests/ppo/test_update.py checks it against rsl-rl's update in one process
@@ -82,10 +92,16 @@ def test_torchrun_one_sync_update_trains_as_rsl_rls(tmp_path):
     assert lr[1] == pytest.approx(lr[0], rel=1e-6) and lr[0] != 1e-3
 
 
-def test_torchrun_refuses_worlds_that_do_not_split(tmp_path):
-    res = _torchrun("--out", str(tmp_path / "odd"), "--iterations", "1", "--num-envs", "15")
-    assert res.returncode != 0
-    assert any("does not split over 2 processes" in ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn"))
+@pytest.mark.parametrize("rank", [0, 1])
+def test_train_refuses_worlds_that_do_not_split_on_every_rank(tmp_path, monkeypatch, capsys, rank):
+    """Each rank of a torchrun launch (its environment as torchrun sets it: the torchrun tests above) refuses a world
+    count that does not split, in one line, before anything is loaded or written."""
+    for name, value in (("WORLD_SIZE", "2"), ("RANK", str(rank)), ("LOCAL_RANK", str(rank))):
+        monkeypatch.setenv(name, value)
+    argv = ["train", "data/dataset.npz", "--out", str(tmp_path / "odd"), "--ppo.iterations", "1", "--ppo.device", "cpu"]
+    assert main([*argv, "--env.num-worlds", "15"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("wresdyn train: error:") and "does not split over 2 processes" in err[0]
     assert not (tmp_path / "odd").exists()
 
 

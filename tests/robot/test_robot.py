@@ -1,6 +1,5 @@
 """Robot loading: the project humanoid's description, gains overrides, and one-line errors on bad files."""
 
-import subprocess
 import sys
 from pathlib import Path
 
@@ -113,12 +112,17 @@ def test_bad_robot_files(tmp_path):
         load_robot("newton:nv_humanoid.xml")
 
 
-def test_cli_errors_are_one_line_with_exit_2(tmp_path):
+def test_cli_errors_are_one_line_with_exit_2(tmp_path, capsys):
+    """Through main() in this process (a process of its own loads Newton and torch again before the check, 6 s of
+    CPU each); the executable's exit status and stderr: tests/ppo/test_trainer.py's refusals, one process each."""
+    from wresdyn.cli import main
+
     for target in (str(tmp_path / "missing.usda"), "newton:nv_humanoid.xml"):
-        res = subprocess.run([sys.executable, "-m", "wresdyn.cli", "inspect", target], capture_output=True, text=True)
-        assert res.returncode == 2
-        lines = [ln for ln in res.stderr.splitlines() if ln.startswith("wresdyn")]
-        assert len(lines) == 1 and "error:" in lines[0] and target.split(":")[-1] in lines[0]
+        capsys.readouterr()
+        assert main(["inspect", target]) == 2
+        out = capsys.readouterr()
+        lines = [ln for ln in out.err.splitlines() if ln.startswith("wresdyn")]
+        assert len(lines) == 1 and "error:" in lines[0] and target.split(":")[-1] in lines[0] and out.out == ""
 
 
 def test_mjcf_and_urdf_load_through_newton(quadruped):

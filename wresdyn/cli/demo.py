@@ -21,7 +21,8 @@ class Demo(Command):
     skill_iterations: int = 200
     """PPO iterations of the skill in the nominal simulator, and of each fine-tuning."""
     quick: bool = False
-    """Tiny sizes: a smoke run of a minute."""
+    """Tiny sizes (the first 2 s of one trajectory per split, two for training; a few iterations each): a smoke
+    run of a minute."""
 
 
 COMMAND = Demo

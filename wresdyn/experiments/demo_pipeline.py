@@ -39,6 +39,15 @@ from .skills import DeployConfig, run_benchmark
 
 __all__ = ["run_demo"]
 
+QUICK_SECONDS = 2.0
+"""Length [s] of each trajectory ``--quick`` keeps (its start: the shipped ones are 4 s)."""
+
+
+def _head(traj, n: int):
+    """The first ``n`` samples of a :class:`~wresdyn.data.dataset.Trajectory` (all of it if shorter)."""
+    cut = {f: getattr(traj, f)[:n] for f in ("t", "q", "qd", "qdd", "q_cmd")}
+    return dataclasses.replace(traj, **cut, tau=None if traj.tau is None else traj.tau[:n])
+
 
 def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterations: int = 300,
              skill_iterations: int = 200, quick: bool = False) -> list[str]:
@@ -49,7 +58,8 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
         collect: Record a fresh small dataset into ``OUT/data/`` instead of reading the shipped one.
         ppo_iterations: PPO iterations of the residual.
         skill_iterations: PPO iterations of the skill in the nominal simulator, and of each fine-tuning.
-        quick: Tiny sizes: a smoke run of a minute.
+        quick: Tiny sizes (the first 2 s of one trajectory per split, two for training; a few iterations each): a
+            smoke run of a minute.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -67,9 +77,10 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
             record_dataset(robot, mismatch, {"train": 4, "validation": 2, "heldout": 2, "ood": 2}, store_tau=False,
                            progress=lambda line: print("      " + line, flush=True)).save(data_path)
     data = load_dataset(data_path, robot=robot)
-    if quick:
-        data = dataclasses.replace(data, trajectories=data.split("train")[:2] + data.split("validation")[:1]
-                                   + data.split("heldout")[:1] + data.split("ood")[:1])
+    if quick:  # the first QUICK_SECONDS of a trajectory per split, two for training: every replay is one of these
+        n = int(round(QUICK_SECONDS * data.rate_hz))
+        trajs = [t for s, k in (("train", 2), ("validation", 1), ("heldout", 1), ("ood", 1)) for t in data.split(s)[:k]]
+        data = dataclasses.replace(data, trajectories=[_head(t, n) for t in trajs])
     splits = ", ".join(f"{s} {len(data.split(s))}" for s in ("train", "validation", "heldout", "ood"))
     print(f"[2/5] data: {data_path} ({splits}"
           f", {data.rate_hz:g} Hz)", flush=True)
@@ -84,7 +95,7 @@ def run_demo(out: str | Path = "runs/demo", *, collect: bool = False, ppo_iterat
     skill_ppo = SkillPPOConfig()
     if quick:
         gcfg = dataclasses.replace(gcfg, iterations=4, windows=4, horizon_curriculum=(2, 4))
-        scfg = dataclasses.replace(scfg, iterations=4, windows=4)
+        scfg = dataclasses.replace(scfg, iterations=4, windows=4, identifiability_windows=4)
         tcfg = dataclasses.replace(tcfg, env=dataclasses.replace(tcfg.env, num_worlds=8),
                                    ppo=dataclasses.replace(tcfg.ppo, iterations=2, num_steps_per_env=8))
         dcfg = dataclasses.replace(dcfg, train_per_family=1, iterations=2, finetune=1, num_worlds=8)
