@@ -207,3 +207,22 @@ def test_bad_runs_are_refused_in_one_line_and_nothing_is_written(tmp_path, human
     assert main(["export", str(run), "--format", "mjcf", "--physics-only"]) != 0
     assert "already exists" in capsys.readouterr().err and not any((run / "export").iterdir())
     assert [p.name for p in run.iterdir() if p.name.startswith(".")] == []
+
+
+def test_an_identified_inertia_off_the_triangle_inequality_is_moved_onto_it_and_named(humanoid):
+    """MuJoCo refuses principal moments where one exceeds the sum of the others; the fit bounds them one by one, so an
+    identified body can leave the set: the export lowers the largest to the bound, names it, and the model compiles."""
+    from wresdyn.export.mjcf import mjcf_spec
+    from wresdyn.robot.mujoco_model import mujoco_body_names
+    from wresdyn.sim.physics import PhysicalParams
+
+    physics = PhysicalParams.nominal(humanoid)
+    b = int(np.argmax(physics.body_mass))
+    physics.body_inertia[b] = np.diag([1e-3, 2e-3, 5e-3])  # 5e-3 > 1e-3 + 2e-3
+    spec, notes = mjcf_spec(humanoid, physics, 500.0)
+    model = spec.compile()
+    hit = [n for n in notes if "triangle inequality" in n]
+    assert len(hit) == 1 and "lowered to 0.0029999" in hit[0]
+    moments = np.sort(model.body_inertia[model.body(mujoco_body_names(humanoid.body_names)[b]).id])
+    assert moments[2] <= moments[0] + moments[1] + 1e-12
+    assert np.allclose(moments, [1e-3, 2e-3, 3e-3], rtol=2e-5)

@@ -105,10 +105,30 @@ def mjcf_spec(robot, physics, rate_hz: float) -> tuple[object, list[str]]:
             continue
         body = spec.body(name)
         moments, quat = inertia_principal(physics.body_inertia[b])
+        moments = _triangle(moments, name, notes)
         body.mass, body.ipos = float(physics.body_mass[b]), np.asarray(physics.body_com[b], dtype=np.float64)
         body.inertia, body.iquat = np.maximum(moments, 1e-12), quat  # quat is (w, x, y, z), MuJoCo's order
         body.explicitinertial = True
     return spec, notes
+
+
+def _triangle(moments: np.ndarray, body: str, notes: list) -> np.ndarray:
+    """Principal moments [kg m^2] on the triangle inequality MuJoCo's compiler demands (each at most the sum of the
+    other two), with a relative margin of ``_TRIANGLE_MARGIN`` that survives the MJCF's 6-digit numbers: an identified
+    inertia can leave the set or end on its edge, since the fit bounds the moments one by one. The largest is lowered
+    to the bound (the least change that a rigid body allows), and the change is named in ``notes``."""
+    m = np.asarray(moments, dtype=np.float64).copy()
+    k = int(np.argmax(m))
+    bound = float(m.sum() - m[k]) * (1.0 - _TRIANGLE_MARGIN)
+    if m[k] > bound:
+        notes.append(f"{body}: identified principal inertia {np.array2string(m, precision=4)} kg m^2 at or over the "
+                     f"triangle inequality's bound; its largest moment lowered to {bound:.6g} (a rigid body's bound)")
+        m[k] = bound
+    return m
+
+
+_TRIANGLE_MARGIN = 1e-5
+"""Relative margin under the triangle inequality's bound: twice the rounding of the MJCF's 6 significant digits."""
 
 
 def export_mjcf(run: str | Path, out: str | Path | None = None, *, force: bool = False, physics_only: bool = False,
@@ -198,7 +218,11 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
         import mujoco
 
         (tmp / "robot.xml").write_text(spec.to_xml())
-        mujoco.MjModel.from_xml_path(str(tmp / "robot.xml"))  # what a fresh process will load
+        try:
+            mujoco.MjModel.from_xml_path(str(tmp / "robot.xml"))  # what a fresh process will load
+        except ValueError as e:
+            raise ExportError(f"{robot.source.name}: MuJoCo refuses the exported model: "
+                              f"{' '.join(str(e).split())}") from None
         physics.save(tmp / "physics.json")
         for name, src in (files or {}).items():
             shutil.copyfile(src, tmp / name)
