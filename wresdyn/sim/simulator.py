@@ -34,7 +34,7 @@ from ..robot.ground import base_index
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 from .tape_step import TapeBuffers, TapeStep
-from .world_physics import model_flags, refresh, write_world_physics
+from .world_physics import model_flags, model_values, refresh, write_world_physics
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
 
@@ -173,9 +173,7 @@ class Simulator:
             for f, v in values.items():
                 if f not in arrays:
                     continue
-                v32 = v.detach().to(self.device, torch.float32)
-                if f == "effort":
-                    v32 = torch.where(torch.isfinite(v32), v32, torch.zeros_like(v32))
+                v32 = model_values(f, v, self.device)
                 view = self._model_view(f)
                 if f.startswith("body_"):
                     view[w] = v32

@@ -27,7 +27,7 @@ import torch
 
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS
 
-__all__ = ["FIELD_FLAGS", "model_flags", "write_world_physics", "refresh"]
+__all__ = ["FIELD_FLAGS", "model_flags", "model_values", "write_world_physics", "refresh"]
 
 FIELD_FLAGS = {"kp": "JOINT_DOF_FORCE_PROPERTIES", "kd": "JOINT_DOF_FORCE_PROPERTIES",
                "damping": "JOINT_DOF_FORCE_PROPERTIES", "friction": "JOINT_DOF_FORCE_PROPERTIES",
@@ -47,6 +47,13 @@ def model_flags(fields, shapes: bool = False) -> int:
         if f in FIELD_FLAGS:
             flags |= int(getattr(ModelFlags, FIELD_FLAGS[f]))
     return flags | (int(ModelFlags.SHAPE_PROPERTIES) if shapes else 0)
+
+
+def model_values(field: str, v: torch.Tensor, device) -> torch.Tensor:
+    """``field``'s values as the model's arrays hold them: float32 on ``device``, an infinite effort as 0
+    (Newton's "unlimited")."""
+    v32 = v.detach().to(device, torch.float32)
+    return torch.where(torch.isfinite(v32), v32, torch.zeros_like(v32)) if field == "effort" else v32
 
 
 def _rows(ids, num_worlds: int, device) -> tuple[object, int]:
@@ -76,9 +83,7 @@ def write_world_physics(sim, values: dict, ids=None) -> list[str]:
         for f, v in values.items():
             if f not in arrays:
                 continue
-            v32 = v.detach().to(sim.device, torch.float32)
-            if f == "effort":
-                v32 = torch.where(torch.isfinite(v32), v32, torch.zeros_like(v32))
+            v32 = model_values(f, v, sim.device)
             view = sim._model_view(f)
             if f.startswith("body_"):
                 view[rows] = v32
