@@ -242,9 +242,9 @@ def test_plain_newton_reproduces_the_servo_replay(servo_export, tmp_path):
 
     Tolerance 2e-3 rad mean, 6e-3 max over 0.6 s (measured 1.4e-3 and 4.0e-3): the two differ as for PD drives
     (MuJoCo C's implicitfast with a soft frictionloss against SolverReplay's, the servo's velocity terms explicit in
-    the actuator and implicit in SolverReplay). The servo model's own effect (the same replay without dead band, startup torque,
-    torque–speed line and profile; measured 0.13 rad) is asserted 20 times the round-trip error, so an export that
-    dropped any of it would fail."""
+    the actuator and implicit in SolverReplay). The servo model's own effect (the same replay without dead band,
+    startup torque, torque–speed line, profile, backlash and offset; measured 0.125 rad) is asserted 20 times the
+    round-trip error, so an export that dropped any of it would fail."""
     import dataclasses
 
     from wresdyn.learn.network_file import load_residual
