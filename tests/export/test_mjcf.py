@@ -163,7 +163,7 @@ def test_servo_encoder_offset_and_backlash_in_the_mjcf(tmp_path):
 
 def test_a_damper_law_run_exports_with_frictionloss_and_says_so(tmp_path, humanoid, data):
     """A run identified under the damper friction law: its friction amplitudes become MuJoCo's frictionloss and
-    the report names the change (the USD export refuses such a run)."""
+    the report names the change (the USD export maps it to Newton's joint friction the same way)."""
     import mujoco
 
     p = _physics(humanoid)

@@ -11,21 +11,24 @@ units::
     e     =  g - (q + o)                              position error [rad], o the encoder's zero offset
     e_m   =  e - clamp(e, -beta, beta)                the motor's error across the gear play beta [rad]
     e_b   =  e_m - clamp(e_m, -b, b)                  dead band of half-width b [rad] (soft threshold)
-    x     =  c (kp e_b + kd (qd* - qd) - (U / w0) qd) this drive's output [N m], c = min(|e_m| / tick, 1)
-                                                     the gear contact where beta > 0 (else 1)
+    x     =  c (kp e_b + u0 clamp(e_b / tick, -1, 1)   this drive's output [N m], c = min(|e_m| / tick, 1)
+              + kd (qd* - qd) - (U / w0) qd)         the gear contact where beta > 0 (else 1), u0 the startup
+                                                     torque ramped in over one encoder tick past the dead band
     tau   =  clamp(x, -U (1 + qd / w0), U (1 - qd / w0)) within [-U, U]      ClampingDCMotor(U, w0, U)
 
-which is the servo law ``tau = clamp(clamp(kp e_b + kd (qd* - qd), -U, U) - (U / w0) qd, -U, U)`` (a duty
-clamped to the stall torque U, minus the back-EMF of a motor whose torque falls to zero at the no-load speed
-w0): subtracting ``(U / w0) qd`` before the DC motor's clamp shifts its bounds by the same amount. With a backlash
-the contact scales the drive before the clamp (wresdyn's law scales the clamped torque): they differ only while the
-drive saturates within one encoder tick of the play's edge.
+which is the servo law ``tau = clamp(clamp(kp e_b + u0 clamp(e_b / tick, -1, 1) + kd (qd* - qd), -U, U)
+- (U / w0) qd, -U, U)`` (a duty clamped to the stall torque U, minus the back-EMF of a motor whose torque falls
+to zero at the no-load speed w0): subtracting ``(U / w0) qd`` before the DC motor's clamp shifts its bounds by the
+same amount. With a backlash the contact scales the drive before the clamp (wresdyn's law scales the clamped
+torque): they differ while the drive saturates within one encoder tick of the play's edge, and inside the play at a
+speed past w0, where the DC motor's clamp keeps a torque (its bounds exclude 0 there) that the law's contact
+zeroes.
 
 USD attributes of ``WresdynServoControlAPI`` (Newton's parser reads an actuator schema's attributes from the
 ``newton:`` namespace only, so they live there): ``newton:kp`` [N m/rad], ``newton:kd`` [N m s/rad],
 ``newton:servoDeadband`` b [rad], ``newton:servoGoalAccel`` a_max [rad/s²] (0: the goal is the command) and
 ``newton:servoBackEmf`` U / w0 [N m s/rad] (0: no torque–speed line), ``newton:servoBacklash`` beta [rad] and
-``newton:servoEncoderOffset`` o [rad] (signed; both 0: none).
+``newton:servoEncoderOffset`` o [rad] (signed; both 0: none), ``newton:servoStartupTorque`` u0 [N m] (0: none).
 
 Use it in a plain Newton script (before the first USD stage is opened: USD builds its schema registry once)::
 
@@ -65,9 +68,12 @@ _ATTRS = {  # USD name: (kwarg, doc in the schema)
     "newton:servoBackEmf": ("servo_back_emf", "Back-EMF damping U / w0 [N m s/rad]; 0: no torque-speed line"),
     "newton:servoBacklash": ("servo_backlash", "Gear play half-width beta [rad]; 0: none"),
     "newton:servoEncoderOffset": ("servo_encoder_offset", "Encoder zero offset o [rad], signed: the loop sees q + o"),
+    "newton:servoStartupTorque": ("servo_startup_torque", "Startup torque u0 [N m], ramped in over one encoder "
+                                  "tick past the dead band; 0: none"),
 }
 _TICK = wp.constant(2.0 * math.pi / 4096.0)
-"""One encoder tick of a 12-bit servo [rad]: the ramp over which the gear contact sets in past the play."""
+"""One encoder tick of a 12-bit servo [rad]: the ramp over which the gear contact sets in past the play and the
+startup torque past the dead band."""
 
 
 def register() -> None:
@@ -109,6 +115,7 @@ def _servo_kernel(
     back_emf: wp.array[float],
     backlash: wp.array[float],
     encoder_offset: wp.array[float],
+    startup: wp.array[float],
     goal_in: wp.array[float],
     goal_vel_in: wp.array[float],
     started_in: wp.array[wp.int32],
@@ -147,7 +154,8 @@ def _servo_kernel(
     if backlash[i] > 0.0:
         contact = wp.min(wp.abs(err_m) / _TICK, 1.0)
     err_b = err_m - wp.clamp(err_m, -deadband[i], deadband[i])
-    efforts[i] = contact * (kp[i] * err_b + kd[i] * (target_vel[target_vel_indices[i]] - qd) - back_emf[i] * qd)
+    kick = startup[i] * wp.clamp(err_b / _TICK, -1.0, 1.0)
+    efforts[i] = contact * (kp[i] * err_b + kick + kd[i] * (target_vel[target_vel_indices[i]] - qd) - back_emf[i] * qd)
 
 
 @wp.kernel
@@ -166,8 +174,9 @@ def _masked_reset(goal: wp.array[float], goal_vel: wp.array[float], started: wp.
 
 
 class DriveServo(DriveBase):
-    """Smart-servo drive (module docstring): dead band and goal profile on a PD law with back-EMF damping; pair it
-    with ``ClampingDCMotor(U, w0, U)`` (or ``ClampingMaxEffort(U)``) for the stall torque and torque–speed line."""
+    """Smart-servo drive (module docstring): dead band, startup torque and goal profile on a PD law with back-EMF
+    damping; pair it with ``ClampingDCMotor(U, w0, U)`` (or ``ClampingMaxEffort(U)``) for the stall torque and
+    torque–speed line."""
 
     @dataclass
     class State(DriveBase.State):
@@ -199,18 +208,23 @@ class DriveServo(DriveBase):
 
     def __init__(self, kp: wp.array[float], kd: wp.array[float], servo_deadband: wp.array[float],
                  servo_goal_accel: wp.array[float], servo_back_emf: wp.array[float],
-                 servo_backlash: wp.array[float] | None = None, servo_encoder_offset: wp.array[float] | None = None):
+                 servo_backlash: wp.array[float] | None = None, servo_encoder_offset: wp.array[float] | None = None,
+                 servo_startup_torque: wp.array[float] | None = None):
         """Per-actuator parameter arrays, shape (N,): kp [N m/rad], kd [N m s/rad], dead band [rad], goal
-        acceleration [rad/s²], back-EMF damping [N m s/rad], backlash and encoder offset [rad] (default 0)."""
+        acceleration [rad/s²], back-EMF damping [N m s/rad], backlash and encoder offset [rad], startup torque
+        [N m] (default 0)."""
         zero = lambda: wp.zeros(kp.shape, dtype=kp.dtype, device=kp.device)  # noqa: E731
         servo_backlash = zero() if servo_backlash is None else servo_backlash
         servo_encoder_offset = zero() if servo_encoder_offset is None else servo_encoder_offset
-        for a in (kd, servo_deadband, servo_goal_accel, servo_back_emf, servo_backlash, servo_encoder_offset):
+        servo_startup_torque = zero() if servo_startup_torque is None else servo_startup_torque
+        for a in (kd, servo_deadband, servo_goal_accel, servo_back_emf, servo_backlash, servo_encoder_offset,
+                  servo_startup_torque):
             if a.shape != kp.shape:
                 raise ValueError(f"DriveServo: parameter shapes differ ({a.shape} and {kp.shape})")
         self.kp, self.kd = kp, kd
         self.deadband, self.goal_accel, self.back_emf = servo_deadband, servo_goal_accel, servo_back_emf
         self.backlash, self.encoder_offset = servo_backlash, servo_encoder_offset
+        self.startup_torque = servo_startup_torque
         self._goal = self._goal_vel = None
 
     def finalize(self, device, num_actuators: int) -> None:
@@ -233,7 +247,8 @@ class DriveServo(DriveBase):
         wp.launch(_servo_kernel, dim=len(forces),
                   inputs=[positions, velocities, target_pos, target_vel, pos_indices, vel_indices, target_pos_indices,
                           target_vel_indices, self.kp, self.kd, self.deadband, self.goal_accel, self.back_emf,
-                          self.backlash, self.encoder_offset, state.goal, state.goal_vel, state.started, float(dt)],
+                          self.backlash, self.encoder_offset, self.startup_torque, state.goal, state.goal_vel,
+                          state.started, float(dt)],
                   outputs=[forces, self._goal, self._goal_vel], device=device)
 
     def update_state(self, current_state: DriveServo.State, next_state: DriveServo.State) -> None:

@@ -29,12 +29,14 @@ nothing behind):
 
 Servo joints (``drive = "servo"``, :mod:`wresdyn.robot.servo`): their ``NewtonActuator`` prim in ``actuated.usda``
 applies ``WresdynServoControlAPI`` in place of the PD (the drive of :mod:`wresdyn.export.servo_actuator`: dead band,
-goal-acceleration profile, back-EMF damping U / w0, backlash, encoder offset) with Newton's ``NewtonActuatorDelayAPI`` and
+goal-acceleration profile, back-EMF damping U / w0, backlash, encoder offset, startup torque) with Newton's ``NewtonActuatorDelayAPI`` and
 ``NewtonDCMotorClampingAPI`` (stall torque U, no-load speed w0; ``NewtonMaxEffortClampingAPI`` where w0 = 0), which
 together are the servo law. ``robot.usda`` records ``wresdyn:drive = "servo"`` and ``wresdyn:servo:deadband``
 [rad], ``wresdyn:servo:noloadSpeed`` [rad/s], ``wresdyn:servo:goalAccel`` [rad/s²], ``wresdyn:servo:backlash`` and
-``wresdyn:servo:encoderOffset`` [rad] on the joint (Newton's importer
-does not read them: loaded as it is, the joint runs its PD drive). The folder then also holds
+``wresdyn:servo:encoderOffset`` [rad], ``wresdyn:servo:startupTorque`` [N m] on the joint (Newton's importer
+does not read them: loaded as it is, the joint runs its PD drive). The servo's stiction has no Newton counterpart
+and is dropped, and a run identified under the damper friction law (``friction_kappa``) exports its amplitudes as
+``newton:friction``: ``export.json``'s ``notes`` say so (:mod:`wresdyn.export.usd_notes`). The folder then also holds
 ``servo_actuator.py`` (newton, warp and pxr only) and ``wresdyn_servo_schema/``, the codeless USD schema plugin
 Newton's importer needs to see the custom schema; ``export.json`` names them under ``"servo"``. A plain script
 calls ``servo_actuator.register()`` before it opens any USD stage. MJCF and URDF robots are converted to USD in
@@ -62,6 +64,7 @@ from ..robot.file_import import dof_by_label
 from ..sim.physics import PhysicalParams
 from .convert import converted_robot, converter_missing, is_usd
 from .run_folder import ExportError, open_run
+from .usd_notes import usd_notes
 
 __all__ = ["ExportError", "check_usd_robot", "export_run", "write_export", "write_layers", "inertia_principal"]
 
@@ -76,9 +79,9 @@ _SERVO_FILES = (Path(__file__).with_name("servo_actuator.py"), Path(__file__).wi
 """The drive's file and its USD schema plugin folder, shipped next to the layers."""
 _SERVO_ATTRS = {"wresdyn:servo:deadband": "deadband", "wresdyn:servo:noloadSpeed": "noload_speed",
                 "wresdyn:servo:goalAccel": "goal_accel", "wresdyn:servo:backlash": "backlash",
-                "wresdyn:servo:encoderOffset": "encoder_offset"}
-"""Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s², rad, rad], by PhysicalParams
-field."""
+                "wresdyn:servo:encoderOffset": "encoder_offset", "wresdyn:servo:startupTorque": "startup_torque"}
+"""Servo parameters authored on a servo joint in ``robot.usda`` [rad, rad/s, rad/s², rad, rad, N m], by
+PhysicalParams field."""
 
 
 def inertia_principal(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -245,6 +248,7 @@ def _servo_prim(prim, physics, i: int) -> str:
     _set(prim, "newton:servoBackEmf", Sdf.ValueTypeNames.Float, effort / w0 if w0 > 0 else 0.0)
     _set(prim, "newton:servoBacklash", Sdf.ValueTypeNames.Float, physics.backlash[i])
     _set(prim, "newton:servoEncoderOffset", Sdf.ValueTypeNames.Float, physics.encoder_offset[i])
+    _set(prim, "newton:servoStartupTorque", Sdf.ValueTypeNames.Float, physics.startup_torque[i])
     if w0 > 0:
         _set(prim, "newton:saturationEffort", Sdf.ValueTypeNames.Float, effort)
         _set(prim, "newton:velocityLimit", Sdf.ValueTypeNames.Float, w0)
@@ -289,10 +293,6 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
     out = Path(out) if out is not None else run / "export"
     cfg_path, residual = open_run(run, out, force, physics_only)
     kappa = run_friction_kappa(run)
-    if kappa is not None:
-        raise ExportError(f"{run}: the run was identified under the replay's damper friction law (friction_kappa = "
-                          f"{kappa:g} /s), which Newton's joints do not model; identify without --friction-kappa to "
-                          "export as USD, or export --format mjcf (MuJoCo's frictionloss)")
     data = data or json.loads(cfg_path.read_text()).get("data_path")
     if not data:
         raise ExportError(f"{run}: the run does not record its dataset; pass --data")
@@ -313,7 +313,8 @@ def export_run(run: str | Path, out: str | Path | None = None, *, force: bool = 
         if (run / "policy.onnx").is_file():
             files["residual.onnx"] = run / "policy.onnx"
     return write_export(out, robot, physics, ds.rate_hz, {"run": str(run), "dataset": str(data),
-                                                           "gains": ds.gains_config}, residual, files)
+                                                           "gains": ds.gains_config}, residual, files,
+                        friction_kappa=kappa)
 
 
 def check_usd_robot(robot) -> None:
@@ -324,7 +325,7 @@ def check_usd_robot(robot) -> None:
 
 
 def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, residual: dict | None = None,
-                 files: dict | None = None) -> Path:
+                 files: dict | None = None, *, friction_kappa: float | None = None) -> Path:
     """Write the export folder of ``physics`` on ``robot`` (module docstring) as ``out``, replacing what is there.
 
     Everything is written into a temporary folder beside ``out`` and swapped into place by two renames (the old
@@ -340,15 +341,12 @@ def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, 
             and the servo component.
         residual: ``residual.json`` of the run, or ``None`` for none.
         files: Files copied in, ``{name in out: source path}`` (the residual network).
+        friction_kappa: The damper law's kappa [1/s] the physics were identified under (``None``: the default law);
+            the friction amplitudes become Newton's joint friction, ``export.json``'s ``notes`` say so.
     """
     check_usd_robot(robot)
     out = Path(out)
-    if physics.stiction.any():
-        raise ExportError(f"{robot.source.name}: the servo stiction ({physics.stiction.max():.3g} N*m) has no exported "
-                          "drive yet; identify without it to export")
-    if physics.startup_torque.any():
-        raise ExportError(f"{robot.source.name}: the servo startup torque ({physics.startup_torque.max():.3g} N*m) has "
-                          "no exported drive yet; identify without it to export")
+    notes = usd_notes(robot, physics, friction_kappa)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
@@ -365,7 +363,7 @@ def write_export(out: str | Path, robot, physics, rate_hz: float, record: dict, 
             (tmp / "residual.json").write_text(json.dumps(residual, indent=2))
         (tmp / "export.json").write_text(json.dumps({
             "format": "wresdyn.export/1", **record, **source, "rate_hz": rate_hz, "residual": residual is not None,
-            "servo": servo}, indent=2))
+            "servo": servo, "friction_kappa": friction_kappa, "notes": notes}, indent=2))
         _swap(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
