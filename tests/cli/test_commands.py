@@ -210,6 +210,11 @@ SAME = [
 ]
 
 
+def test_a_switch_both_deploy_variants_have_is_turned_off_on_the_floor_too():
+    args = _parse(["deploy", "--floor", "--no-animation", "--nominal", "None", "--heldout-families", "all"])
+    assert not args.animation and args.sizes == FloorDeployConfig(nominal=None, heldout_families="all")
+
+
 @pytest.mark.parametrize("argv,expected", SAME, ids=[" ".join(a[:3]) for a, _ in SAME])
 def test_command_lines_of_earlier_releases_build_the_same_config(argv, expected):
     assert asdict(_config(argv)) == asdict(expected)

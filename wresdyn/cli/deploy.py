@@ -104,7 +104,8 @@ def prepare(argv: list[str]):
     cls, other = (FloorDeploy, Deploy) if floor else (Deploy, FloorDeploy)
     own, theirs = list_flags(cls, HIDDEN), list_flags(other, HIDDEN)
     for flag in (a.partition("=")[0] for a in argv if a.startswith("--")):
-        if flag not in own and (flag in theirs or flag.replace("--no-", "--", 1) in theirs):
+        switch = flag.replace("--no-", "--", 1)  # --no-X: the switch --X's other half
+        if flag not in own and switch not in own and (flag in theirs or switch in theirs):
             raise CommandLineError(f"{flag} sets the skills on the floor; it needs --floor" if not floor else
                                    f"{flag} sets the skills on the stand; it has no use with --floor")
     sizes = type(cls().sizes)
