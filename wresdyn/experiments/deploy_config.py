@@ -95,7 +95,10 @@ class FloorDeployConfig(_BenchmarkSizes):
 
     train_per_family: int = 3
     """Training motions per training family."""
-    heldout_per_family: int = 1
+    validation_per_family: int = 2
+    """Validation motions per family (the task and PPO settings were chosen on them; on the CPU the held-out families
+    too, ``heldout_families``)."""
+    heldout_per_family: int = 3
     """Held-out motions per family (training families and the held-out one)."""
     duration: float = 4.0
     """Length of a motion [s]."""
@@ -107,7 +110,7 @@ class FloorDeployConfig(_BenchmarkSizes):
     """Action noise the fine-tunings restart from (``None``: (a)'s own; ``SkillPPOConfig.restart_std``)."""
     iterations: int = 200
     """PPO iterations of (a) in the nominal simulator."""
-    finetune: int = 60
+    finetune: int = 100
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
     nominal: str | None = "auto"
     """(a) not trained here but taken as it is: ``auto``, the shipped ``floor_nominal`` (trained at full size on a GPU,
