@@ -234,7 +234,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
                                screen=cfg.screen)
     else:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
-    log(f"[1/4] {'floor ' if floor else ''}motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in motions.splits)
+    log(f"[1/4] {'floor ' if floor else ''}motions: "
+        + ", ".join(f"{s} {len(motions.split(s))}" for s in motions.splits)
         + (" (held-out: once (a) is known)" if balanced else "")
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)" + _screened(motions)
         + f" ({time.perf_counter() - t0:.0f} s)")
