@@ -110,7 +110,7 @@ class FloorDeployConfig(_BenchmarkSizes):
     """Action noise the fine-tunings restart from (``None``: (a)'s own; ``SkillPPOConfig.restart_std``)."""
     iterations: int = 200
     """PPO iterations of (a) in the nominal simulator."""
-    finetune: int = 100
+    finetune: int = 30
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
     nominal: str | None = "auto"
     """(a) not trained here but taken as it is: ``auto``, the shipped ``floor_nominal`` (trained at full size on a GPU,
