@@ -13,7 +13,8 @@ OUT=${1:?usage: bash benchmarks/skills/deploy.sh OUT [--floor]}
 TASK=()
 PROBE=()
 if [ "${2:-}" = "--floor" ]; then
-  TASK=(--floor)
+  # the real robot of the default mismatch is its file's: the dataset's header keeps the nominal floor
+  TASK=(--floor --mismatch data/mismatch_default.toml)
   PROBE=(--probe-saturation 6)
 elif [ -n "${2:-}" ]; then
   echo "usage: bash benchmarks/skills/deploy.sh OUT [--floor]" >&2
@@ -27,4 +28,4 @@ for s in 1 2; do
     --delta "$OUT/default/delta_action" --no-animation 2>&1 | tee "$OUT/seed$s.log"
 done
 "$W" collect --mismatch data/mismatch_uneven.toml "${PROBE[@]}" --out "$OUT/uneven_data" 2>&1 | tee "$OUT/uneven_collect.log"
-/usr/bin/time -v "$W" deploy "$OUT/uneven_data/dataset.npz" "${TASK[@]}" --out "$OUT/uneven" 2>&1 | tee "$OUT/uneven.log"
+/usr/bin/time -v "$W" deploy "$OUT/uneven_data/dataset.npz" "${TASK[@]:0:1}" --out "$OUT/uneven" 2>&1 | tee "$OUT/uneven.log"

@@ -210,6 +210,11 @@ SAME = [
 ]
 
 
+def test_a_switch_both_deploy_variants_have_is_turned_off_on_the_floor_too():
+    args = _parse(["deploy", "--floor", "--no-animation", "--nominal", "None", "--heldout-families", "all"])
+    assert not args.animation and args.sizes == FloorDeployConfig(nominal=None, heldout_families="all")
+
+
 @pytest.mark.parametrize("argv,expected", SAME, ids=[" ".join(a[:3]) for a, _ in SAME])
 def test_command_lines_of_earlier_releases_build_the_same_config(argv, expected):
     assert asdict(_config(argv)) == asdict(expected)
@@ -249,6 +254,11 @@ def test_deploys_task_and_ppo_flags_reach_the_benchmark(floor, monkeypatch, tmp_
     assert kw["ppo"] == SkillPPOConfig(hidden_dims=(64, 32), gamma=0.99, torch_threads=None, init_std=0.5)
     assert main(head) == 0
     assert passed[-1][1]["task"] == task_cls() and passed[-1][1]["ppo"] == SkillPPOConfig()
+    # on the floor on the CPU (a), (b) and the oracle unless told; on a GPU and on the stand the benchmark's a-d
+    assert passed[-1][1].get("policies") == (("a_nominal", "b_calibrated", "d_oracle") if floor else None)
+    assert main(head + ["--device", "cuda:0"]) == 0 and "policies" not in passed[-1][1]
+    assert main(head + ["--policies", "a_nominal", "c_delta_action"]) == 0
+    assert passed[-1][1]["policies"] == ("a_nominal", "c_delta_action")
 
 
 def test_the_hybrids_identification_shares_the_fits_device_seed_solver_and_windows():

@@ -144,7 +144,9 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     out = tmp_path / "floor"
     args = ["deploy", str(data_path), "--floor", "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--oracle-num-worlds", "3", "--train-per-family", "1",
-            "--heldout-per-family", "1", "--duration", "1.0", "--no-screen", "--ppo.torch-threads", "1"]  # one thread: conftest.py says why
+            "--heldout-per-family", "1", "--duration", "1.0", "--no-screen", "--ppo.torch-threads", "1",  # one thread: conftest.py says why
+            "--nominal", "None",  # (a) trained here, whatever the package ships
+            "--policies", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"]  # (c) too, as on a GPU
     # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
     ledger = tmp_path / "bench" / "heldout_ledger.jsonl"
     assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu", "--heldout-ledger", str(ledger)]) == 0

@@ -205,7 +205,8 @@ def test_the_floor_benchmark_trains_the_oracle_on_it(tmp_path, humanoid, data):
 
     cal = skill_runs.fit_run(tmp_path, humanoid, data, "torque", physics=True)
     cfg = FloorDeployConfig(iterations=1, finetune=1, num_worlds=2, train_per_family=1, validation_per_family=1,
-                            heldout_per_family=1, duration=0.5, oracle_plant="mujoco_warp", device=DEVICE)
+                            heldout_per_family=1, duration=0.5, oracle_plant="mujoco_warp", device=DEVICE,
+                            nominal=None)
     lines = []
     res = run_benchmark(humanoid, data, tmp_path / "floor", cfg, calibrated=cal, ppo=SkillPPOConfig(torch_threads=1),
                         policies=("a_nominal", "d_oracle"), animation=False, log=lines.append)

@@ -55,6 +55,12 @@ def test_no_gap_ratio_when_the_oracle_does_not_beat_a():
                                                                                            0.02))))
     line = gap_line(early)
     assert "succeeds less (25 % against 75 %)" in line and line.startswith("no gap ratio")
+    # an oracle 1 % better than (a) makes no ratio either: (b) 0.5 mrad better than (a) would read 500 %
+    close = _split(dict(zip(POLICIES, (0.0, 0.5, 0.5, 0.5, 0.5))), dict(zip(POLICIES, (0.05, 0.0200, 0.0195, 0.02,
+                                                                                          0.0199))))
+    line = gap_line(close)
+    assert line.startswith("no gap ratio: the oracle (d) beats (a) on MPJPE by less than 5 % (19.9 against 20.0")
+    assert not _ratios(line.replace("5 %", ""))
     # without the oracle there is nothing to close
     del early["d_oracle"]
     assert gap_line(early) == "no gap ratio: needs (a) and the oracle (d)"

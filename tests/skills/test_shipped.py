@@ -39,3 +39,100 @@ def test_install_refuses_another_policy_and_unfinished_runs(tmp_path):
     (unfinished / "policy.pt").unlink()
     with pytest.raises(WresdynError, match="not a finished skill run.*policy.pt"):
         shipped.install_policy(unfinished, tmp_path / "out2")
+
+
+
+@pytest.fixture(scope="module")
+def tiny_nominal(tmp_path_factory, humanoid, floating):
+    """A skill run of (a) as the floor benchmark writes it (one PPO iteration on 2 worlds of the nominal simulator's
+    floor, 1 s unscreened motions), from the real trainer."""
+    from wresdyn.skills.env import TrackingEnv
+    from wresdyn.skills.motions import make_motions
+    from wresdyn.skills.plants import SimPlant
+    from wresdyn.skills.skill_config import FloorTaskConfig, SkillPPOConfig
+    from wresdyn.skills.skill_ppo import train_skill
+
+    motions = make_motions(humanoid, {"train": 1}, duration=1.0, rate_hz=500.0, seed=0, floating=floating,
+                           screen=False)
+    task = FloorTaskConfig()
+    env = TrackingEnv(SimPlant(floating, 2, 500.0, task.decimation, ground=True), motions["train"], task)
+    run = tmp_path_factory.mktemp("nominal") / "a_nominal"
+    meta = {"motions": {"seed": 0, "counts": {"train": 1}, "duration": 1.0, "floor": True, "screened": False},
+            "setting": "nominal", "correction": ""}
+    train_skill(env, SkillPPOConfig(iterations=1, torch_threads=1), run, meta=meta, log=lambda s: None)
+    return run
+
+
+def test_the_shipped_nominal_is_the_cpu_default_and_one_that_does_not_fit_is_refused(tmp_path, monkeypatch,
+                                                                                     tiny_nominal, humanoid):
+    """``auto`` takes the shipped ``floor_nominal`` on the CPU only where the package has it (a GPU run and the full
+    size train (a)); a policy trained for another task, network, motion generator or robot is refused in one line
+    naming what differs."""
+    from wresdyn.experiments import nominal_policy
+    from wresdyn.experiments.deploy_config import FloorDeployConfig
+    from wresdyn.skills.skill_config import FloorTaskConfig, SkillPPOConfig
+
+    monkeypatch.setattr(shipped, "SHIPPED", tmp_path / "policies")
+    monkeypatch.setattr(nominal_policy, "SHIPPED", tmp_path / "policies")
+    assert nominal_policy.nominal_source(FloorDeployConfig()) is None  # nothing shipped: trained
+    shipped.ship_policy(tiny_nominal, "floor_nominal", "wresdyn deploy --floor ...", "2 CPU cores", "abc")
+    assert nominal_policy.nominal_source(FloorDeployConfig()) == "floor_nominal"
+    assert nominal_policy.nominal_source(FloorDeployConfig(device="cuda:0")) is None
+    assert nominal_policy.nominal_source(FloorDeployConfig(nominal=None)) is None
+    assert FloorDeployConfig.full().nominal is None and FloorDeployConfig.full().heldout_families == "all"
+
+    motions = {"seed": 3, "counts": {"train": 5}, "duration": 1.0, "floor": True, "screened": False}
+    task, ppo, n = FloorTaskConfig(), SkillPPOConfig(), humanoid.n_dof
+    nominal_policy.check_fits("floor_nominal", task, ppo, motions, n)  # another seed and count: the same generator
+    nominal_policy.check_fits(str(tiny_nominal), task, ppo, motions, n)  # a run folder
+    for args, why in (((FloorTaskConfig(w_fall=3.0), ppo, motions, n), "task w_fall 10.0 against 3.0"),
+                      ((task, SkillPPOConfig(hidden_dims=(64,)), motions, n), "network widths [256, 128] against [64]"),
+                      ((task, ppo, {**motions, "duration": 4.0, "screened": True}, n),
+                       "motions' duration 1.0 against 4.0; motions' screened False against True"),
+                      ((task, ppo, motions, n - 1), f"does not take this robot's {6 * n}")):
+        with pytest.raises(WresdynError, match="does not fit this run") as err:
+            nominal_policy.check_fits("floor_nominal", *args)
+        assert why in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+def test_the_floor_cpu_run_fine_tunes_the_shipped_nominal(tmp_path, monkeypatch, tiny_nominal, data, capsys):
+    """``wresdyn deploy --floor`` on the CPU takes the shipped ``floor_nominal`` as (a) by default (its files as
+    shipped), fine-tunes from it and deploys on the held-out families (a) carries on validation motions; another
+    task is refused in one line before anything is drawn or trained."""
+    import hashlib
+    import json
+
+    from wresdyn.cli import main
+    from wresdyn.experiments import nominal_policy
+
+    monkeypatch.setattr(shipped, "SHIPPED", tmp_path / "policies")
+    monkeypatch.setattr(nominal_policy, "SHIPPED", tmp_path / "policies")
+    shipped.ship_policy(tiny_nominal, "floor_nominal", "wresdyn deploy --floor ...", "2 CPU cores", "abc")
+    data_path = tmp_path / "dataset.npz"
+    data.save(data_path)
+    out = tmp_path / "cpu"
+    head = ["deploy", str(data_path), "--floor", "--policies", "a_nominal", "d_oracle", "--finetune", "1",
+            "--num-worlds", "2", "--train-per-family", "1", "--validation-per-family", "1", "--heldout-per-family",
+            "1", "--duration", "1.0", "--no-screen", "--ppo.torch-threads", "1", "--quiet"]
+    assert main(head + ["--out", str(out)]) == 0
+    log = (out / "deploy.log").read_text()
+    assert "policy a_nominal: floor_nominal (not trained here" in log and "in the nominal simulator" not in log
+    digest = lambda p: hashlib.sha256(p.read_bytes()).hexdigest()  # noqa: E731
+    for f in ("policy.pt", "config.json", "model_0.pt"):
+        assert digest(out / "skills" / "a_nominal" / f) == digest(tiny_nominal / f), f
+    res = json.loads((out / "results.json").read_text())
+    assert res["config"]["nominal"] == "floor_nominal"
+    assert res["nominal"] == {"source": "floor_nominal", "iterations": 1, "num_worlds": 2}
+    fam = res["heldout_families"]
+    # the stepping family has no validation motion to vouch for it: left out unless every family is
+    assert ("step" not in fam["kept"] and "validation" in fam["left_out"]["step"]) or not fam["left_out"]
+    held = res["real"]["heldout"]["a_nominal"]["motions"]
+    assert sorted({m["motion"].split("_", 1)[1].rsplit("_", 1)[0] for m in held}) == sorted(fam["kept"])
+    assert "`floor_nominal` taken as it is" in (out / "report.md").read_text()
+
+    capsys.readouterr()
+    other = tmp_path / "other"
+    assert main(head + ["--out", str(other), "--task.w-fall", "3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "does not fit" in err and "w_fall 10.0 against 3.0" in err
+    assert not (other / "skills").exists()

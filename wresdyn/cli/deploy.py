@@ -58,8 +58,9 @@ class Deploy(Command):
     """The full size, for a GPU (DeployConfig.full, FloorDeployConfig.full; the sizes given still apply)."""
     policies: tuple[Literal["a_nominal", "b_calibrated", "c_delta_action", "d_oracle", "e_randomized",
                             "f_calibrated_narrow"], ...] = ()
-    """The policies to train and deploy (a_nominal always); empty: a-d. The domain-randomised baselines (e), (f)
-    need per-world physics: on the floor a GPU."""
+    """The policies to train and deploy (a_nominal always); empty: a-d, on the floor on the CPU a, b, d (the
+    delta-action residual's fit and fine-tuning would take a fifth of the CPU run). The domain-randomised baselines
+    (e), (f) need per-world physics: on the floor a GPU."""
     animation: bool = True
     """Write the USD animation."""
     quiet: bool = False
@@ -81,6 +82,9 @@ class FloorDeploy(Deploy):
     task: FloorTaskConfig = field(default_factory=FloorTaskConfig)
     """The tracking task."""
 
+
+FLOOR_CPU_POLICIES = ("a_nominal", "b_calibrated", "d_oracle")
+"""What ``wresdyn deploy --floor`` trains and deploys on the CPU unless told: (a) (shipped), (b) and the oracle."""
 
 COMMAND = Deploy
 VARIANTS = (Deploy, FloorDeploy)
@@ -104,7 +108,8 @@ def prepare(argv: list[str]):
     cls, other = (FloorDeploy, Deploy) if floor else (Deploy, FloorDeploy)
     own, theirs = list_flags(cls, HIDDEN), list_flags(other, HIDDEN)
     for flag in (a.partition("=")[0] for a in argv if a.startswith("--")):
-        if flag not in own and (flag in theirs or flag.replace("--no-", "--", 1) in theirs):
+        switch = flag.replace("--no-", "--", 1)  # --no-X: the switch --X's other half
+        if flag not in own and switch not in own and (flag in theirs or switch in theirs):
             raise CommandLineError(f"{flag} sets the skills on the floor; it needs --floor" if not floor else
                                    f"{flag} sets the skills on the stand; it has no use with --floor")
     sizes = type(cls().sizes)
@@ -129,12 +134,13 @@ def run(args: Deploy) -> int:
     from ..sim.warmup import compile_kernels
 
     # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
-    wanted = set(args.policies or ("b_calibrated", "c_delta_action"))
+    policies = args.policies or (FLOOR_CPU_POLICIES if args.floor and cfg.device == "cpu" else ())
+    wanted = set(policies or ("b_calibrated", "c_delta_action"))
     fit_cal = not args.calibrated and bool(wanted & {"b_calibrated", "f_calibrated_narrow"})
     fit_delta = not args.delta and "c_delta_action" in wanted
     variants = ("forward",) + (("param_grads", "grad") if fit_cal else ()) + (("grad",) if fit_delta else ())
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
           mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, ledger=args.heldout_ledger, log=log,
-          **({"policies": args.policies} if args.policies else {}))
+          **({"policies": policies} if policies else {}))
     return 0

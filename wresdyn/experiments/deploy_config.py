@@ -95,7 +95,10 @@ class FloorDeployConfig(_BenchmarkSizes):
 
     train_per_family: int = 3
     """Training motions per training family."""
-    heldout_per_family: int = 1
+    validation_per_family: int = 2
+    """Validation motions per family (the task and PPO settings were chosen on them; on the CPU the held-out families
+    too, ``heldout_families``)."""
+    heldout_per_family: int = 3
     """Held-out motions per family (training families and the held-out one)."""
     duration: float = 4.0
     """Length of a motion [s]."""
@@ -107,8 +110,18 @@ class FloorDeployConfig(_BenchmarkSizes):
     """Action noise the fine-tunings restart from (``None``: (a)'s own; ``SkillPPOConfig.restart_std``)."""
     iterations: int = 200
     """PPO iterations of (a) in the nominal simulator."""
-    finetune: int = 60
+    finetune: int = 30
     """PPO iterations of each fine-tuning: (b), (c), (d)."""
+    nominal: str | None = "auto"
+    """(a) not trained here but taken as it is: ``auto``, the shipped ``floor_nominal`` (trained at full size on a GPU,
+    :mod:`wresdyn.skills.shipped`) where the package has it and PPO runs on the CPU, else trained; a shipped policy's
+    name or a finished skill run folder; ``None``: trained here. One that does not fit the run (task, network,
+    joints, motion generator: :func:`~wresdyn.experiments.nominal_policy.check_fits`) is refused in one line."""
+    heldout_families: Literal["all", "balanced"] = "balanced"
+    """Which held-out families are deployed: ``all``, or ``balanced``: the families on whose every validation motion
+    (a) succeeds in its own simulator (the stepping family, which has none, left out;
+    :func:`~wresdyn.experiments.nominal_policy.balanced_families`), so that a short CPU run deploys on motions a
+    policy trained at full size can carry."""
     oracle_beside: bool | None = None
     """Train the oracle in a process of its own beside (b) and (c) (``None``: when PPO runs on a GPU and the oracle's
     real robot is MuJoCo C, which steps on otherwise idle host cores)."""
@@ -130,6 +143,7 @@ class FloorDeployConfig(_BenchmarkSizes):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        check_choice(self.heldout_families, Literal["all", "balanced"], "floor.heldout_families")
         for f in self.extra_families:
             check_choice(f, Literal["combo"], "floor.extra_families")
         for d in self.beside_devices:
@@ -139,6 +153,8 @@ class FloorDeployConfig(_BenchmarkSizes):
     def full(cls, **kw) -> "FloorDeployConfig":
         """The full size, for one GPU: 4096 worlds, 16 training, 4 validation and 10 held-out motions per family
         (independent draws, screened: :func:`~wresdyn.skills.motions.make_motions`), 1000 + 300 iterations; the
-        oracle on 4096 worlds of the real robot's floor in mujoco_warp, as many as the others."""
+        oracle on 4096 worlds of the real robot's floor in mujoco_warp, as many as the others; (a) trained, every
+        held-out family deployed."""
         return cls(**{**dict(train_per_family=16, validation_per_family=4, heldout_per_family=10, num_worlds=4096,
-                             oracle_plant="mujoco_warp", iterations=1000, finetune=300, finetune_std=0.3), **kw})
+                             oracle_plant="mujoco_warp", iterations=1000, finetune=300, finetune_std=0.3, nominal=None,
+                             heldout_families="all"), **kw})

@@ -28,6 +28,7 @@ is its last iterate (no checkpoint selection on the real robot, which a user cou
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -40,7 +41,7 @@ from ..robot import load_robot
 from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, gaps_or_why_not, metrics
 from ..skills.ledger import LEDGER, ledger_table, record_heldout
-from ..skills.motions import make_motions
+from ..skills.motions import MotionSet, make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.real_warp import RealWarpPlant
 from ..skills.randomize import Randomization, narrow_ranges
@@ -49,6 +50,7 @@ from ..skills.skill_config import FloorTaskConfig, SkillConfig
 from ..skills.shipped import install_policy
 from ..skills.skill_ppo import load_skill, train_skill
 from .deploy_config import DeployConfig, FloorDeployConfig
+from .nominal_policy import balanced_families, check_fits, draw_heldout, nominal_source
 from .zero_shot import BASE_POLICIES, POLICIES, RANDOMIZED, fit_corrections, start_benchmark, write_results
 
 __all__ = ["DeployConfig", "FloorDeployConfig", "run_benchmark"]
@@ -215,13 +217,26 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     policies, ppo, mismatch, counts = start_benchmark(out, cfg, ppo, mismatch, dataset, policies)
     plant_robot = load_robot(robot.source, gains=robot.gains, base="floating") if floor else robot
     rate = float(dataset.rate_hz)
-    t0 = time.perf_counter()
+    meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration}}
     if floor:
-        motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed, floating=plant_robot,
-                               extra=cfg.extra_families, screen=cfg.screen)
+        meta["motions"]["floor"] = True
+        meta["motions"]["screened"] = cfg.screen  # other draws: a run trained on the others is not resumed
+        if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
+            meta["motions"]["extra"] = list(cfg.extra_families)
+    cfg = replace(cfg, nominal=nominal_source(cfg))  # before anything is fitted: a misfit is refused at once
+    if cfg.nominal:
+        check_fits(cfg.nominal, task, ppo, meta["motions"], robot.n_dof)
+    t0 = time.perf_counter()
+    balanced = floor and cfg.heldout_families == "balanced"  # held-out motions drawn once the families are chosen
+    if floor:
+        motions = make_motions(robot, {k: n for k, n in counts.items() if not (balanced and k == "heldout")},
+                               cfg.duration, rate, cfg.seed, floating=plant_robot, extra=cfg.extra_families,
+                               screen=cfg.screen)
     else:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
-    log(f"[1/4] {'floor ' if floor else ''}motions: " + ", ".join(f"{s} {len(motions.split(s))}" for s in counts)
+    log(f"[1/4] {'floor ' if floor else ''}motions: "
+        + ", ".join(f"{s} {len(motions.split(s))}" for s in motions.splits)
+        + (" (held-out: once (a) is known)" if balanced else "")
         + f" of {cfg.duration:g} s at {rate:g} Hz (policy at {rate / task.decimation:g} Hz)" + _screened(motions)
         + f" ({time.perf_counter() - t0:.0f} s)")
     t0 = time.perf_counter()
@@ -234,12 +249,6 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         f"({fit_s:.0f} s)")
     real = RealRobot(plant_robot, mismatch, rate)
     runs = {"calibrated": calibrated, "delta_action": delta}
-    meta = {"motions": {"seed": cfg.seed, "counts": counts, "duration": cfg.duration}}
-    if floor:
-        meta["motions"]["floor"] = True
-        meta["motions"]["screened"] = cfg.screen  # other draws: a run trained on the others is not resumed
-        if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
-            meta["motions"]["extra"] = list(cfg.extra_families)
     dr = randomization or Randomization(seed=cfg.seed)
     wall = _train_all(policies, plant_robot, real, motions.split("train"), task, ppo, cfg, runs, meta, out, mismatch,
                       log, dr)
@@ -252,6 +261,14 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             results["randomization"]["narrow"] = narrow_ranges(dr, plant_robot, run_physics(calibrated, plant_robot),
                                                                calibrated)[1]
     real_plant, sim = _plants(task, real, plant_robot, rate, runs, cfg.device, dr)
+    if cfg.nominal:
+        a_cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
+        results["nominal"] = {"source": str(cfg.nominal), "iterations": a_cfg["ppo"]["iterations"],
+                              "num_worlds": a_cfg["num_worlds"]}
+    in_sim = {}  # deployments in a policy's own simulator done before the loop below
+    if balanced:
+        motions, results["heldout_families"], in_sim = _heldout_families(out, robot, plant_robot, cfg, motions, sim,
+                                                                          task, log)
     rollouts = {}
     for split in ("validation", "heldout"):
         mot = motions.split(split)
@@ -263,7 +280,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             if split == "heldout":
                 rollouts[name] = dep
             setting = POLICIES.get(name, "nominal")
-            if setting != "real":
+            if (split, name) in in_sim:
+                results["sim"][split][name] = in_sim[split, name]["mean"]
+            elif setting != "real":
                 results["sim"][split][name] = metrics(deploy(policy, sim(setting, len(mot)), mot, task), robot)["mean"]
     _gaps(results, floor)
     ledgers = [out / LEDGER] + ([Path(ledger)] if ledger else [])
@@ -290,6 +309,24 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         f.write("\n## Held-out ledger\n\n" + "\n".join(ledger_table(p) for p in ledgers))
     log(f"wrote {out / 'report.md'} and {out / 'results.json'}")
     return results
+
+
+def _heldout_families(out: Path, robot, floating, cfg, motions, sim, task, log):
+    """The held-out motions of the families (a) carries in its own simulator on every validation motion
+    (:func:`~.nominal_policy.balanced_families`), drawn now: the motion set with them, the record of the rule for
+    ``results.json``, and (a)'s validation deployment in the nominal simulator (reused by the deployment)."""
+    t0 = time.perf_counter()
+    val = motions.split("validation")
+    kept, left, res = balanced_families(load_skill(out / "skills" / "a_nominal"), sim("nominal", len(val)), val, task)
+    held, unvouched = draw_heldout(robot, floating, cfg, motions.rate_hz, kept)
+    left = {**left, **unvouched} if kept else {}
+    record = {"rule": "balanced", "kept": list(dict.fromkeys(m.family for m in held)), "left_out": left}
+    log(f"[4/4] held-out families (a) carries on every validation motion in its simulator: "
+        f"{', '.join(record['kept'])}" + ("" if kept else " (it carries none: every family)")
+        + "".join(f"; left out {f}: {why}" for f, why in left.items())
+        + f"; {len(held)} held-out motions" + _screened(MotionSet(motions.rate_hz, {"heldout": held}))
+        + f" ({time.perf_counter() - t0:.0f} s)")
+    return MotionSet(motions.rate_hz, {**motions.splits, "heldout": held}), record, {("validation", "a_nominal"): res}
 
 
 def _screened(motions) -> str:

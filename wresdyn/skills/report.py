@@ -244,6 +244,25 @@ def _plot_floor_tracking(rollouts: dict, motions, robot, path, rate_hz: float, m
     return path
 
 
+def _nominal_text(results: dict) -> str:
+    """How (a) came to be: trained here, or taken as it is (a shipped policy or another run)."""
+    cfg, a = results["config"], results.get("nominal")
+    if not a:
+        return f"{cfg['iterations']} PPO iterations × {cfg['num_worlds']} worlds in the nominal simulator"
+    return (f"`{a['source']}` taken as it is, not trained here ({a['iterations']} PPO iterations × {a['num_worlds']} "
+            "worlds in the nominal simulator)")
+
+
+def _families_text(results: dict) -> str:
+    """The held-out families deployed and the rule that chose them, where not all."""
+    fam = results.get("heldout_families")
+    if not fam:
+        return ""
+    left = "; ".join(f"{f}: {why}" for f, why in fam["left_out"].items())
+    return (f"\n\nHeld-out families deployed: {', '.join(fam['kept'])}, the ones (a) succeeds on in its own simulator "
+            f"on every validation motion" + (f" (left out: {left})" if left else "") + ".")
+
+
 def _write_floor_report(out, floating, results: dict, rollouts: dict, motions, policy_rate_hz: float,
                        animation: bool = True) -> None:
     """Write ``report.md``, ``tracking_heldout.png`` and (``animation``) ``deployed_heldout.usda`` into ``out``."""
@@ -271,9 +290,9 @@ dataset, with no floor data. Skills: motion-tracking policies (PPO, rsl-rl, asym
 joint states, the IMU, the reference and its last action) at {policy_rate_hz:g} Hz. Motions per family: train
 {cfg['train_per_family']}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (squat,
 weight shift, kick, wave{extra}; the held-out set adds stepping in place, a family no policy trained on),
-{cfg['duration']:g} s each. (a): {cfg['iterations']} PPO iterations × {cfg['num_worlds']} worlds in the nominal simulator;
+{cfg['duration']:g} s each. (a): {_nominal_text(results)};
 (b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations ((d) on {cfg['oracle_num_worlds'] or cfg['num_worlds']} worlds). Every
-policy is its last iterate; nothing was selected on the real robot or on held-out motions.
+policy is its last iterate; nothing was selected on the real robot or on held-out motions.{_families_text(results)}
 
 ## Held-out motions, deployed on the real robot's floor
 
