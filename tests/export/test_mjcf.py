@@ -108,7 +108,8 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     """The SO-101 (MJCF, STS3215 servo drives) recorded on its bench real robot (scenes/so101/mismatch.toml), the
     servo model's physics (with encoder offsets of up to 30 mrad, the actuators' bias) exported by default as MJCF:
     position actuators with the back-EMF in the joint damping and the goal profile in servo.json. Held-out error of
-    MuJoCo within 10 % of the wresdyn model's (measured 0.0461 against 0.0456 rad, 1.1 %); without the goal profile
+    MuJoCo within 10 % of the wresdyn model's (measured 0.0459 against 0.0456 rad with play_mujoco's servo law, 0.0461
+    with the position actuators alone); without the goal profile
     it is far larger (measured 0.0677 rad), so the report's loss is real."""
     from wresdyn.data.mismatch import Mismatch
     from wresdyn.paths import REPO
@@ -126,7 +127,11 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     out = run / "export"
     report = json.loads((out / "mjcf_report.json").read_text())
     trip, bare = report["round_trip"], report["round_trip_without_goal_profile"]
-    print(trip, bare)
+    plain = report["round_trip_position_actuators"]
+    print(trip, plain, bare)
+    # play_mujoco's servo law follows wresdyn closer than the position actuators do (measured 4.1e-4 against 5.6e-4)
+    assert trip["between"] < 0.85 * plain["between"], (trip, plain)
+    assert set(json.loads((out / "servo.json").read_text())["law"]) >= {"deadband", "backlash", "stiction", "mask"}
     assert abs(trip["mujoco"] - trip["wresdyn"]) <= 0.1 * trip["wresdyn"], trip
     assert bare["mujoco"] > 1.3 * trip["mujoco"], (bare, trip)
     assert len(report["notes"]) == robot.n_dof and all("deadband" in n for n in report["notes"])
@@ -172,7 +177,11 @@ def test_a_damper_law_run_exports_with_frictionloss_and_says_so(tmp_path, humano
     report = json.loads((tmp_path / "out" / "mjcf_report.json").read_text())
     assert report["friction_kappa"] == 947.0 and any("damper law" in n for n in report["notes"])
     m = mujoco.MjModel.from_xml_path(str(tmp_path / "out" / "robot.xml"))
-    np.testing.assert_allclose(m.dof_frictionloss[m.jnt_dofadr[m.actuator_trnid[:, 0]]], p.friction, rtol=1e-6)
+    dofs = m.jnt_dofadr[m.actuator_trnid[:, 0]]
+    np.testing.assert_allclose(m.dof_frictionloss[dofs], p.friction, rtol=1e-6)
+    c = 947.0 * m.opt.timestep  # the damper's rate as the friction constraint's impedance, no pull to the old velocity
+    np.testing.assert_allclose(m.dof_solimp[dofs, :2], c / (1.0 + c), rtol=1e-6)
+    np.testing.assert_allclose(m.dof_solref[dofs, 0], 2.0 * m.opt.timestep * (1.0 + c) / c, rtol=1e-6)
     print(report["round_trip"])
     assert report["round_trip"]["between"] < 0.1 * report["round_trip"]["wresdyn"]
 
@@ -226,3 +235,29 @@ def test_an_identified_inertia_off_the_triangle_inequality_is_moved_onto_it_and_
     moments = np.sort(model.body_inertia[model.body(mujoco_body_names(humanoid.body_names)[b]).id])
     assert moments[2] <= moments[0] + moments[1] + 1e-12
     assert np.allclose(moments, [1e-3, 2e-3, 3e-3], rtol=2e-5)
+
+
+def test_play_mujoco_servo_law_is_wresdyns_servo_law():
+    """play_mujoco.py carries its own copy of the servo law (it runs without wresdyn): the same torques as
+    :func:`wresdyn.robot.servo.servo_torque` and :func:`~wresdyn.robot.servo.friction_bound` on random states, with
+    every term on (dead band, startup torque, backlash, encoder offset, back-EMF, stiction)."""
+    from wresdyn.export.play_mujoco import ServoLaw
+    from wresdyn.robot.servo import STARTUP_RAMP, STICTION_SPEED, friction_bound, servo_torque
+
+    rng = np.random.default_rng(0)
+    n = 6
+    p = {"kp": rng.uniform(5, 30, n), "kd": rng.uniform(0, 1, n), "effort": rng.uniform(1, 3, n),
+         "deadband": rng.uniform(0, 0.01, n), "noload_speed": rng.uniform(3, 8, n),
+         "startup_torque": rng.uniform(0, 0.2, n), "backlash": rng.uniform(0, 0.01, n),
+         "encoder_offset": rng.uniform(-0.02, 0.02, n), "friction": rng.uniform(0, 0.1, n),
+         "stiction": rng.uniform(0, 0.1, n), "damping": rng.uniform(0, 0.5, n)}
+    law = ServoLaw({**{k: v.tolist() for k, v in p.items()}, "mask": [1.0] * n, "ramp": STARTUP_RAMP,
+                    "stiction_speed": STICTION_SPEED}, None)
+    for _ in range(200):
+        goal, q, qd = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-0.2, 0.2, n) * rng.integers(0, 2)
+        q = np.where(rng.random(n) < 0.5, goal - rng.uniform(-0.02, 0.02, n), q)  # near the goal: band, play, ramp
+        want = servo_torque(goal, q, qd, p["kp"], p["kd"], p["deadband"], p["effort"], p["noload_speed"],
+                            startup_torque=p["startup_torque"], backlash=p["backlash"],
+                            encoder_offset=p["encoder_offset"])
+        np.testing.assert_allclose(law.torque(goal, q, qd), want, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(law.friction(qd), friction_bound(qd, p["friction"], p["stiction"]), rtol=1e-12)

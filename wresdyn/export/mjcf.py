@@ -15,20 +15,26 @@ The robot (from an MJCF, URDF or USD file) is rebuilt as a :class:`mujoco.MjSpec
                        interpolation between the stored commands, which is wresdyn's fractional delay exactly).
                        No visual meshes: the model carries the dynamics only.
 ``residual.onnx``      the residual network (``residual.json``: kind, joints, rate), with a residual;
-``play_mujoco.py``     replays commands in MuJoCo with the residual and the servo goal profile (mujoco, numpy,
-                       onnxruntime only); ``servo.json`` the servo joints' goal acceleration [rad/s²].
+``play_mujoco.py``     replays commands in MuJoCo with the residual and, on servo joints, the servo goal profile
+                       and the servo law (mujoco, numpy, onnxruntime only); ``servo.json`` the servo joints' goal
+                       acceleration [rad/s²] and law (:func:`servo_law`).
 ``mjcf_report.json``   what each identified term became, what has no MuJoCo counterpart, and the round trip on
                        held-out data: mean |q − q_recorded| of the wresdyn model and of the MJCF in MuJoCo.
 ``physics.json``       the identified parameters, ``export.json`` where they came from.
 =====================  ========================================================================================
 
 What changes: a run identified under the damper friction law (``friction_kappa``) gets its friction amplitudes
-as MuJoCo's ``frictionloss`` (a soft constraint, the replay's default law); a servo joint
-(:mod:`wresdyn.robot.servo`) becomes the closest plain actuator, a position actuator with ``kv = kd + U / w0``
-(its back-EMF damping) clamped at the stall torque U, without the dead band and the goal-acceleration profile;
-its encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the drive ``kp (ctrl - q - o)``, exact);
-stiction, startup torque and backlash (MuJoCo has no gear play) have no actuator and are dropped. The report names
-each of these, and the round trip measures what they cost.
+as MuJoCo's ``frictionloss`` with the friction constraint's ``solreffriction`` / ``solimpfriction`` set so that
+MuJoCo's soft friction is that damper (:func:`damper_friction`); a servo joint (:mod:`wresdyn.robot.servo`) becomes,
+in the plain MJCF, the closest plain actuator, a position actuator with ``kv = kd`` and the back-EMF ``U / w0`` in
+the joint damping, clamped at the stall torque U, without the dead band and the goal-acceleration profile; its
+encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the drive ``kp (ctrl - q - o)``, exact);
+stiction, startup torque and backlash (MuJoCo has no gear play) have no actuator. ``play_mujoco.py --servo
+servo.json`` applies the whole law instead (its :class:`~wresdyn.export.play_mujoco.ServoLaw`: dead band, startup
+torque, backlash, offset, back-EMF and stiction, the servo actuators silenced but still delaying the goal). The
+report names each of these; its round trip replays with play_mujoco's servo law
+(``round_trip``), with the position actuators alone (``round_trip_position_actuators``) and without the goal
+profile either (``round_trip_without_goal_profile``).
 """
 
 from __future__ import annotations
@@ -47,21 +53,35 @@ from ..evaluation.evaluate_run import run_friction_kappa
 from ..learn.network_file import load_residual
 from ..learn.runs import run_physics
 from ..robot.mujoco_model import mujoco_body_names, mujoco_spec
+from ..robot.servo import STARTUP_RAMP, STICTION_SPEED
 from ..sim.physics import PhysicalParams
 from ..sim.rollout import replay_trajectories
 from . import play_mujoco
 from .run_folder import ExportError, open_run
 from .usd import _swap, inertia_principal
 
-__all__ = ["export_mjcf", "mjcf_spec", "round_trip", "write_mjcf_export"]
+__all__ = ["damper_friction", "export_mjcf", "mjcf_spec", "round_trip", "servo_law", "write_mjcf_export"]
 
 ROUND_TRIP_TRAJECTORIES = 4
 """Held-out trajectories the export replays for its report (the first ones of the split)."""
 
 
-def mjcf_spec(robot, physics, rate_hz: float) -> tuple[object, list[str]]:
+def damper_friction(friction_kappa: float, dt: float) -> tuple[list[float], list[float]]:
+    """MuJoCo's friction-loss constraint parameters (``solref_friction``, ``solimp_friction``) that make it the
+    replay's damper law ``-clamp(kappa H_ii v, -mu, mu)`` on the new velocity: MuJoCo's soft friction is that
+    damper with ``c = d / (1 - d)`` (its impedance ``d``, times ``m0_i / H_ii``, 1 at the reference pose) on
+    ``v - (1 - b dt) qd`` with ``b = 2 / (d timeconst)`` (:mod:`wresdyn.sim.solver_replay.step_terms`), so
+    ``d = kappa dt / (1 + kappa dt)`` and ``timeconst = 2 dt / d`` (no pull toward the old velocity) give it (d at most
+    0.9999, MuJoCo's bound)."""
+    c = friction_kappa * dt
+    d = min(c / (1.0 + c), 0.9999) if math.isfinite(c) else 0.9999
+    return [2.0 * dt / d, 1.0], [d, d, 0.001, 0.5, 2.0]
+
+
+def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = None) -> tuple[object, list[str]]:
     """The :class:`mujoco.MjSpec` of ``robot`` with ``physics`` (module docstring) at time step ``1 / rate_hz``;
-    returns it and the notes on what has no MuJoCo counterpart (one line each)."""
+    returns it and the notes on what has no MuJoCo counterpart (one line each). ``friction_kappa``: the run's damper
+    friction law, as the friction-loss constraint's parameters (:func:`damper_friction`)."""
     import mujoco
 
     physics.check(robot, "physics")
@@ -82,10 +102,13 @@ def mjcf_spec(robot, physics, rate_hz: float) -> tuple[object, list[str]]:
                          f"and its back-EMF U/w0 = {emf:.4g} N m s/rad in the joint damping"
                          + (f"; goal profile {float(physics.goal_accel[i]):.4g} rad/s^2 in servo.json (play_mujoco.py "
                             "applies it to the commands)" if physics.goal_accel[i] > 0 else "")
-                         + f"; without a MuJoCo counterpart: {', '.join(dropped) or 'nothing'}")
+                         + f"; without a MuJoCo counterpart (play_mujoco.py --servo applies them): "
+                           f"{', '.join(dropped) or 'nothing'}")
         j.armature = float(physics.armature[i])
         j.damping = [damping, *list(j.damping)[1:]]  # [linear, higher-order terms]
-        j.frictionloss = float(physics.friction[i])
+        j.frictionloss = float(physics.friction[i]) if friction_kappa != 0.0 else 0.0  # kappa 0: no friction
+        if friction_kappa:
+            j.solref_friction, j.solimp_friction = damper_friction(friction_kappa, 1.0 / rate_hz)
         act = spec.actuator(name)
         kv = float(physics.kd[i])
         act.set_to_position(kp=float(physics.kp[i]), kv=kv)
@@ -180,20 +203,37 @@ def servo_goal_accel(robot, physics) -> np.ndarray | None:
     return accel if (accel > 0).any() else None
 
 
+def servo_law(robot, physics) -> dict | None:
+    """The servo joints' whole law for ``servo.json`` (:class:`~wresdyn.export.play_mujoco.ServoLaw`: per joint, in
+    the actuators' order, SI units; 0 / mask 0 on PD joints), ``None`` for a robot without servo drives."""
+    servo = getattr(robot, "servo", None)
+    if servo is None:
+        return None
+    on = np.asarray(servo.mask, dtype=bool)
+    law = {"mask": on.astype(float).tolist(), "ramp": STARTUP_RAMP, "stiction_speed": STICTION_SPEED}
+    for f in ("kp", "kd", "effort", "damping", "friction", "deadband", "noload_speed", "startup_torque", "stiction",
+              "backlash", "encoder_offset"):
+        law[f] = np.where(on, np.nan_to_num(np.asarray(getattr(physics, f), dtype=np.float64), posinf=0.0),
+                          0.0).tolist()
+    return law
+
+
 def round_trip(xml: str | Path, robot, physics, trajectories, rate_hz: float, policy=None, onnx=None,
-               friction_kappa: float | None = None, goal_accel=None, reference=None) -> dict:
+               friction_kappa: float | None = None, goal_accel=None, reference=None, law=None) -> dict:
     """Replay ``trajectories`` open loop in wresdyn (``physics`` + ``policy``) and in MuJoCo (``xml`` + ``onnx``,
     with the servo goal profile ``goal_accel`` on the commands, through :mod:`play_mujoco`); returns mean
     |q − q_recorded| [rad] of each (``"wresdyn"``, ``"mujoco"``) and of the two replays against each other
     (``"between"``), over every joint and sample, and wresdyn's replays (``"q"``, list of (T, n) [rad]);
-    ``reference``: such a ``"q"``, used instead of replaying in wresdyn again."""
+    ``reference``: such a ``"q"``, used instead of replaying in wresdyn again; ``law``: the servo drives' whole law
+    (:func:`servo_law`) applied by play_mujoco's loop instead of the position actuators alone."""
     import mujoco
 
     ref = reference if reference is not None else replay_trajectories(
         robot, trajectories, rate_hz, policy, physics=physics, friction_kappa=friction_kappa)["residual"].q
     model = mujoco.MjModel.from_xml_path(str(xml))
     res = None if onnx is None else play_mujoco.Residual(str(onnx), 1.0 / rate_hz)
-    mj = [play_mujoco.replay(model, t.q_cmd, t.q[0], t.qd[0], res, t.qdd[0], goal_accel)[0] for t in trajectories]
+    mj = [play_mujoco.replay(model, t.q_cmd, t.q[0], t.qd[0], res, t.qdd[0], goal_accel, law)[0]
+          for t in trajectories]
     err = lambda qs: float(np.mean(np.concatenate([np.abs(q - t.q) for q, t in zip(qs, trajectories)])))  # noqa: E731
     between = float(np.mean(np.concatenate([np.abs(a - b) for a, b in zip(mj, ref)])))
     return {"wresdyn": err(ref), "mujoco": err(mj), "between": between, "trajectories": len(trajectories),
@@ -207,11 +247,13 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
     swapped in by renames: a failure leaves ``out`` as it was). ``heldout``: trajectories for the report's round
     trip (none: no round trip), replayed with ``policy`` in wresdyn and ``residual.onnx`` in MuJoCo."""
     out = Path(out)
-    spec, notes = mjcf_spec(robot, physics, rate_hz)
+    spec, notes = mjcf_spec(robot, physics, rate_hz, friction_kappa)
     if friction_kappa is not None:
+        ref, imp = damper_friction(friction_kappa, 1.0 / rate_hz)
         notes.append(f"friction: identified under the damper law -clamp(kappa H_ii v, -mu, mu), kappa = "
-                     f"{friction_kappa:g} /s; exported as MuJoCo's frictionloss mu (a soft constraint: the replay's "
-                     "default law), which holds a joint at rest where the damper lets it creep")
+                     f"{friction_kappa:g} /s; exported as MuJoCo's frictionloss mu with solreffriction "
+                     f"{ref[0]:.4g} {ref[1]:g} and solimpfriction {imp[0]:.4g} {imp[1]:.4g}: the same damper at the "
+                     "reference pose, its rate scaled by the joint's effective inertia there over H_ii elsewhere")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
@@ -229,24 +271,28 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
         if residual is not None:
             (tmp / "residual.json").write_text(json.dumps(residual, indent=2))
         shutil.copyfile(play_mujoco.__file__, tmp / "play_mujoco.py")
-        accel = servo_goal_accel(robot, physics)
-        if accel is not None:
+        accel, law = servo_goal_accel(robot, physics), servo_law(robot, physics)
+        if law is not None:
             (tmp / "servo.json").write_text(json.dumps({
-                "goal_accel": accel.tolist(), "joints": list(robot.joint_names),
-                "about": "goal-acceleration profile [rad/s^2] of the servo joints (0: none), applied to the commands "
-                         "by play_mujoco.py --servo"}, indent=2))
+                "goal_accel": (accel if accel is not None else np.zeros(robot.n_dof)).tolist(),
+                "joints": list(robot.joint_names), "law": law,
+                "about": "goal-acceleration profile [rad/s^2] of the servo joints (0: none), applied to the commands, "
+                         "and the servo law (play_mujoco.ServoLaw), applied by play_mujoco.py --servo"}, indent=2))
         report = {"format": "wresdyn.mjcf_report/1", "rate_hz": rate_hz, "friction_kappa": friction_kappa,
                   "notes": notes, "mapping": _mapping()}
         if len(heldout):
             onnx = tmp / "residual.onnx" if residual is not None else None
             trip = round_trip(tmp / "robot.xml", robot, physics, list(heldout), rate_hz, policy, onnx, friction_kappa,
-                              accel)
+                              accel, law=law)
             ref = trip.pop("q")
             report["round_trip"] = trip
-            if accel is not None:  # what the plain MJCF loses without the profile
-                report["round_trip_without_goal_profile"] = round_trip(
-                    tmp / "robot.xml", robot, physics, list(heldout), rate_hz, policy, onnx, reference=ref)
-                report["round_trip_without_goal_profile"].pop("q")
+            if law is not None:  # what the MJCF's position actuators lose without play_mujoco's servo loop
+                keys = [("round_trip_position_actuators", accel)] + (
+                    [("round_trip_without_goal_profile", None)] if accel is not None else [])
+                for key, a in keys:
+                    report[key] = round_trip(tmp / "robot.xml", robot, physics, list(heldout), rate_hz, policy, onnx,
+                                             goal_accel=a, reference=ref)
+                    report[key].pop("q")
         (tmp / "mjcf_report.json").write_text(json.dumps(report, indent=2))
         (tmp / "export.json").write_text(json.dumps({
             "format": "wresdyn.export/1", "kind": "mjcf", **record, "robot_file": str(robot.source),
@@ -263,8 +309,9 @@ def _mapping() -> dict:
     return {"kp": "actuator/position kp [N m/rad]", "kd": "actuator/position kv [N m s/rad]",
             "effort": "actuator forcerange [N m]", "delay": "actuator delay [s] (interp linear, nsample)",
             "armature": "joint armature [kg m^2]", "damping": "joint damping [N m s/rad]",
-            "friction": "joint frictionloss [N m]", "encoder_offset": "actuator biasprm[0] = -kp o [N m]",
-            "backlash": "none (no gear play in MuJoCo; named in notes)", "body_mass": "body inertial mass [kg]",
+            "friction": "joint frictionloss [N m] (a damper-law run: solreffriction, solimpfriction)",
+            "encoder_offset": "actuator biasprm[0] = -kp o [N m]",
+            "backlash": "servo.json's law, applied by play_mujoco.py --servo (no gear play in MuJoCo)", "body_mass": "body inertial mass [kg]",
             "body_com": "body inertial pos [m]", "body_inertia": "body inertial diaginertia + quat [kg m^2]",
             "residual": "residual.onnx, applied through qfrc_applied by play_mujoco.py"}
 
