@@ -45,26 +45,26 @@ def count_code(source: str, friction: bool) -> tuple[dict, float]:
     """Arithmetic of ``replay_step`` and the module functions it calls (``+ - * /`` by kind, calls by name; the
     ``if fric_on:`` block only where ``friction``), and the bytes of the distinct per-world array elements its code
     loads and stores (``name[index]`` with a world-dependent index; float32 scalar 4 B, vec3 12 B, mat33 36 B)."""
-    tree = ast.parse(source)
-    funcs = {f.name: f for f in tree.body if isinstance(f, ast.FunctionDef)}
+    funcs = {f.name: f for f in ast.parse(source).body if isinstance(f, ast.FunctionDef)}
     size = {a.arg: {"S": 4, "V3": 12, "M33": 36, "int32": 4}.get(ast.unparse(a.annotation).split("dtype=")[-1]
                                                                   .strip(")").split(".")[-1], 0)
             for a in funcs["replay_step"].args.args}
     ops, elements = Counter(), set()
 
     def walk(node):
-        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "fric_on" and not friction:
+        if isinstance(node, ast.If) and ast.unparse(node.test) == "fric_on" and not friction:
+            return
+        if isinstance(node, ast.Assign) and ast.unparse(node.targets[0]) in ("w", "bq", "bd", "bb"):
+            return  # the world's integer offsets: no FLOPs
+        if isinstance(node, ast.Subscript):  # an array element (its index's integer arithmetic is no FLOP)
+            if (name := ast.unparse(node.value)) in size and any(isinstance(x, ast.Name) for x in ast.walk(node.slice)):
+                elements.add((name, ast.unparse(node.slice)))  # a constant index is shared by the worlds: left out
             return
         if isinstance(node, (ast.BinOp, ast.AugAssign)) and type(node.op) in BINOPS:
             ops[BINOPS[type(node.op)]] += 1
-        if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in size:
-            if any(isinstance(x, ast.Name) for x in ast.walk(node.slice)):  # a constant index: shared by the worlds
-                elements.add((node.value.id, ast.unparse(node.slice)))
         if isinstance(node, ast.Call):
-            f = node.func
-            name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else "?"
-            for stmt in funcs[name].body if name in funcs else ():  # a helper's code runs at each call
-                walk(stmt)
+            for stmt in getattr(funcs.get(name := ast.unparse(node.func).split(".")[-1]), "body", ()):
+                walk(stmt)  # a helper's code runs at each call
             if name not in funcs and name not in ("S", "V3", "M33", "tid"):
                 ops["call " + name] += 1
         for child in ast.iter_child_nodes(node):
