@@ -57,6 +57,7 @@ from ..robot.servo import STARTUP_RAMP, STICTION_SPEED
 from ..sim.physics import PhysicalParams
 from ..sim.rollout import replay_trajectories
 from . import play_mujoco
+from .mjcf_friction import MJ_SOLREF_FRICTION, damper_friction, reference_inertia, soft_friction
 from .run_folder import ExportError, open_run
 from .usd import _swap, inertia_principal
 
@@ -64,18 +65,6 @@ __all__ = ["damper_friction", "export_mjcf", "mjcf_spec", "round_trip", "servo_l
 
 ROUND_TRIP_TRAJECTORIES = 4
 """Held-out trajectories the export replays for its report (the first ones of the split)."""
-
-
-def damper_friction(friction_kappa: float, dt: float) -> tuple[list[float], list[float]]:
-    """MuJoCo's friction-loss constraint parameters (``solref_friction``, ``solimp_friction``) that make it the
-    replay's damper law ``-clamp(kappa H_ii v, -mu, mu)`` on the new velocity: MuJoCo's soft friction is that
-    damper with ``c = d / (1 - d)`` (its impedance ``d``, times ``m0_i / H_ii``, 1 at the reference pose) on
-    ``v - (1 - b dt) qd`` with ``b = 2 / (d timeconst)`` (:mod:`wresdyn.sim.solver_replay.step_terms`), so
-    ``d = kappa dt / (1 + kappa dt)`` and ``timeconst = 2 dt / d`` (no pull toward the old velocity) give it (d at most
-    0.9999, MuJoCo's bound)."""
-    c = friction_kappa * dt
-    d = min(c / (1.0 + c), 0.9999) if math.isfinite(c) else 0.9999
-    return [2.0 * dt / d, 1.0], [d, d, 0.001, 0.5, 2.0]
 
 
 def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = None) -> tuple[object, list[str]]:
@@ -132,7 +121,32 @@ def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = Non
         body.mass, body.ipos = float(physics.body_mass[b]), np.asarray(physics.body_com[b], dtype=np.float64)
         body.inertia, body.iquat = np.maximum(moments, 1e-12), quat  # quat is (w, x, y, z), MuJoCo's order
         body.explicitinertial = True
+    if friction_kappa is None and robot.base != "floating":
+        _match_soft_friction(spec, robot, physics, rate_hz, notes)
     return spec, notes
+
+
+def _match_soft_friction(spec, robot, physics, rate_hz: float, notes: list) -> None:
+    """Set each frictional joint's ``solimpfriction`` so that MuJoCo's soft friction, whose scale is the exported
+    model's reference inertia, is the replay solver's, whose scale is the robot file's (:mod:`.mjcf_friction`); the
+    replay solver drives a fixed base only (a floating base runs in Newton's MuJoCo solver, which recompiles it)."""
+    joints = robot.joint_names
+    m0_built = reference_inertia(mujoco_spec(robot, 1.0 / rate_hz, "implicitfast"), joints)
+    m0_export = reference_inertia(spec, joints)
+    imp, clipped = soft_friction(m0_built, m0_export)
+    moved = []
+    for i, name in enumerate(joints):
+        if physics.friction[i] > 0:
+            j = spec.joint(name)
+            j.solref_friction, j.solimp_friction = list(MJ_SOLREF_FRICTION), imp[i].tolist()
+            moved.append(f"{name} {m0_built[i] / m0_export[i]:.3g} -> {imp[i, 0]:.4f}"
+                         + (" (clipped at MuJoCo's 0.9999)" if clipped[i] else ""))
+    if moved:
+        notes.append("friction: wresdyn's soft frictionloss scales its regulariser by each joint's reference inertia "
+                     "of the robot file (fixed when the replay solver is built), MuJoCo by 1/dof_invweight0 of the "
+                     "exported, identified model; per joint solimpfriction[0] = d with d/(1-d) = 9 m0_file/m0_export "
+                     "(solimpfriction[1] 0.95 and solreffriction 0.02 1 kept: the same reference damping) makes "
+                     "them one constraint. Per joint m0_file/m0_export -> d: " + ", ".join(moved))
 
 
 def _triangle(moments: np.ndarray, body: str, notes: list) -> np.ndarray:
