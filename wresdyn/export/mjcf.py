@@ -25,16 +25,18 @@ The robot (from an MJCF, URDF or USD file) is rebuilt as a :class:`mujoco.MjSpec
 
 What changes: a run identified under the damper friction law (``friction_kappa``) gets its friction amplitudes
 as MuJoCo's ``frictionloss`` with the friction constraint's ``solreffriction`` / ``solimpfriction`` set so that
-MuJoCo's soft friction is that damper (:func:`damper_friction`); a servo joint (:mod:`wresdyn.robot.servo`) becomes,
-in the plain MJCF, the closest plain actuator, a position actuator with ``kv = kd`` and the back-EMF ``U / w0`` in
-the joint damping, clamped at the stall torque U, without the dead band and the goal-acceleration profile; its
-encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the drive ``kp (ctrl - q - o)``, exact);
-stiction, startup torque and backlash (MuJoCo has no gear play) have no actuator. ``play_mujoco.py --servo
-servo.json`` applies the whole law instead (its :class:`~wresdyn.export.play_mujoco.ServoLaw`: dead band, startup
-torque, backlash, offset, back-EMF and stiction, the servo actuators silenced but still delaying the goal). The
-report names each of these; its round trip replays with play_mujoco's servo law
-(``round_trip``), with the position actuators alone (``round_trip_position_actuators``) and without the goal
-profile either (``round_trip_without_goal_profile``).
+MuJoCo's soft friction is that damper (:func:`damper_friction`); a run on the default soft friction law (fixed base)
+gets per joint the ``solimpfriction`` that gives MuJoCo's friction regulariser, which MuJoCo scales by the exported
+model's reference inertia, the replay solver's scale, the robot file's (:mod:`.mjcf_friction`); a servo joint
+(:mod:`wresdyn.robot.servo`) becomes, in the plain MJCF, the closest plain actuator, a position actuator with
+``kv = kd`` and the back-EMF ``U / w0`` in the joint damping, clamped at the stall torque U, without the dead band and
+the goal-acceleration profile; its encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the
+drive ``kp (ctrl - q - o)``, exact); stiction, startup torque and backlash (MuJoCo has no gear play) have no
+actuator. ``play_mujoco.py --servo servo.json`` applies the whole law instead (its
+:class:`~wresdyn.export.play_mujoco.ServoLaw`: dead band, startup torque, backlash, offset, back-EMF and stiction,
+the servo actuators silenced but still delaying the goal). The report names each of these; its round trip replays
+with play_mujoco's servo law (``round_trip``), with the position actuators alone (``round_trip_position_actuators``)
+and without the goal profile either (``round_trip_without_goal_profile``).
 """
 
 from __future__ import annotations
@@ -323,9 +325,10 @@ def _mapping() -> dict:
     return {"kp": "actuator/position kp [N m/rad]", "kd": "actuator/position kv [N m s/rad]",
             "effort": "actuator forcerange [N m]", "delay": "actuator delay [s] (interp linear, nsample)",
             "armature": "joint armature [kg m^2]", "damping": "joint damping [N m s/rad]",
-            "friction": "joint frictionloss [N m] (a damper-law run: solreffriction, solimpfriction)",
+            "friction": "joint frictionloss [N m] with solreffriction, solimpfriction (the replay's friction law)",
             "encoder_offset": "actuator biasprm[0] = -kp o [N m]",
-            "backlash": "servo.json's law, applied by play_mujoco.py --servo (no gear play in MuJoCo)", "body_mass": "body inertial mass [kg]",
+            "backlash": "servo.json's law, applied by play_mujoco.py --servo (no gear play in MuJoCo)",
+            "body_mass": "body inertial mass [kg]",
             "body_com": "body inertial pos [m]", "body_inertia": "body inertial diaginertia + quat [kg m^2]",
             "residual": "residual.onnx, applied through qfrc_applied by play_mujoco.py"}
 
