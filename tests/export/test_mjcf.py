@@ -183,9 +183,16 @@ def test_a_damper_law_run_exports_with_frictionloss_and_says_so(tmp_path, humano
     m = mujoco.MjModel.from_xml_path(str(tmp_path / "out" / "robot.xml"))
     dofs = m.jnt_dofadr[m.actuator_trnid[:, 0]]
     np.testing.assert_allclose(m.dof_frictionloss[dofs], p.friction, rtol=1e-6)
-    c = 947.0 * m.opt.timestep  # the damper's rate as the friction constraint's impedance, no pull to the old velocity
-    np.testing.assert_allclose(m.dof_solimp[dofs, :2], c / (1.0 + c), rtol=1e-6)
-    np.testing.assert_allclose(m.dof_solref[dofs, 0], 2.0 * m.opt.timestep * (1.0 + c) / c, rtol=1e-6)
+    # the damper's rate as the friction constraint's impedance, no pull to the old velocity; MuJoCo scales the
+    # impedance's rate by m0 / H_ii (m0 = 1 / dof_invweight0), taken out at the reference pose
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    full = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, full)
+    c = 947.0 * m.opt.timestep * np.diag(full)[dofs] * m.dof_invweight0[dofs]
+    assert (c > 947.0 * m.opt.timestep * 1.01).any()  # coupled joints: the scale is not 1
+    np.testing.assert_allclose(m.dof_solimp[dofs, :2], np.repeat((c / (1.0 + c))[:, None], 2, 1), rtol=1e-5)
+    np.testing.assert_allclose(m.dof_solref[dofs, 0], 2.0 * m.opt.timestep * (1.0 + c) / c, rtol=1e-5)
     print(report["round_trip"])
     assert report["round_trip"]["between"] < 0.1 * report["round_trip"]["wresdyn"]
 

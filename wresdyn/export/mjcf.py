@@ -98,8 +98,6 @@ def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = Non
         j.armature = float(physics.armature[i])
         j.damping = [damping, *list(j.damping)[1:]]  # [linear, higher-order terms]
         j.frictionloss = float(physics.friction[i]) if friction_kappa != 0.0 else 0.0  # kappa 0: no friction
-        if friction_kappa:
-            j.solref_friction, j.solimp_friction = damper_friction(friction_kappa, 1.0 / rate_hz)
         act = spec.actuator(name)
         kv = float(physics.kd[i])
         act.set_to_position(kp=float(physics.kp[i]), kv=kv)
@@ -123,9 +121,27 @@ def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = Non
         body.mass, body.ipos = float(physics.body_mass[b]), np.asarray(physics.body_com[b], dtype=np.float64)
         body.inertia, body.iquat = np.maximum(moments, 1e-12), quat  # quat is (w, x, y, z), MuJoCo's order
         body.explicitinertial = True
-    if friction_kappa is None and robot.base != "floating":
+    if friction_kappa:
+        _damper_friction(spec, robot, friction_kappa, rate_hz, notes)
+    elif friction_kappa is None and robot.base != "floating":
         _match_soft_friction(spec, robot, physics, rate_hz, notes)
     return spec, notes
+
+
+def _damper_friction(spec, robot, friction_kappa: float, rate_hz: float, notes: list) -> None:
+    """Set each joint's friction constraint to the damper law (:func:`damper_friction`, exact at the reference pose of
+    the exported model) and say so in ``notes``."""
+    m0, h_ii = reference_inertia(spec, robot.joint_names)
+    ref, imp = damper_friction(friction_kappa, 1.0 / rate_hz, h_ii / m0)
+    d = [float(x) for x in imp[0]]
+    for i, name in enumerate(robot.joint_names):
+        j = spec.joint(name)
+        j.solref_friction, j.solimp_friction = [float(ref[0][i]), ref[1]], [d[i], d[i], *imp[2:]]
+    notes.append(f"friction: identified under the damper law -clamp(kappa H_ii v, -mu, mu), kappa = "
+                 f"{friction_kappa:g} /s; exported as MuJoCo's frictionloss mu with per joint solimpfriction d, "
+                 "d/(1-d) = kappa dt H_ii/m0 (H_ii and m0 = 1/dof_invweight0 at the reference pose), and "
+                 "solreffriction 2 dt/d 1: the same damper at the reference pose, its rate scaled by m0/H_ii "
+                 "elsewhere; d per joint: " + ", ".join(f"{n} {x:.4f}" for n, x in zip(robot.joint_names, d)))
 
 
 def _match_soft_friction(spec, robot, physics, rate_hz: float, notes: list) -> None:
@@ -133,8 +149,8 @@ def _match_soft_friction(spec, robot, physics, rate_hz: float, notes: list) -> N
     model's reference inertia, is the replay solver's, whose scale is the robot file's (:mod:`.mjcf_friction`); the
     replay solver drives a fixed base only (a floating base runs in Newton's MuJoCo solver, which recompiles it)."""
     joints = robot.joint_names
-    m0_built = reference_inertia(mujoco_spec(robot, 1.0 / rate_hz, "implicitfast"), joints)
-    m0_export = reference_inertia(spec, joints)
+    m0_built = reference_inertia(mujoco_spec(robot, 1.0 / rate_hz, "implicitfast"), joints)[0]
+    m0_export = reference_inertia(spec, joints)[0]
     imp, clipped = soft_friction(m0_built, m0_export)
     moved = []
     for i, name in enumerate(joints):
@@ -264,12 +280,6 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
     trip (none: no round trip), replayed with ``policy`` in wresdyn and ``residual.onnx`` in MuJoCo."""
     out = Path(out)
     spec, notes = mjcf_spec(robot, physics, rate_hz, friction_kappa)
-    if friction_kappa is not None:
-        ref, imp = damper_friction(friction_kappa, 1.0 / rate_hz)
-        notes.append(f"friction: identified under the damper law -clamp(kappa H_ii v, -mu, mu), kappa = "
-                     f"{friction_kappa:g} /s; exported as MuJoCo's frictionloss mu with solreffriction "
-                     f"{ref[0]:.4g} {ref[1]:g} and solimpfriction {imp[0]:.4g} {imp[1]:.4g}: the same damper at the "
-                     "reference pose, its rate scaled by the joint's effective inertia there over H_ii elsewhere")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
