@@ -54,7 +54,8 @@ def test_the_mjcf_carries_the_identified_physics(mjcf_export, humanoid):
     # MuJoCo's writer keeps about 6 significant digits of the principal moments and axes
     np.testing.assert_allclose(inertia[heavy], p.body_inertia[heavy], atol=1e-5 * np.abs(p.body_inertia).max())
     report = json.loads((out / "mjcf_report.json").read_text())
-    assert report["notes"] == [] and report["friction_kappa"] is None
+    # the one note: the soft friction's impedance per joint (test_the_soft_friction_is_wresdyns_at_any_armature)
+    assert [n[:9] for n in report["notes"]] == ["friction:"] and report["friction_kappa"] is None
     assert {"residual.onnx", "residual.json", "play_mujoco.py", "physics.json", "export.json"} <= {
         f.name for f in out.iterdir()}
 
@@ -134,7 +135,8 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     assert set(json.loads((out / "servo.json").read_text())["law"]) >= {"deadband", "backlash", "stiction", "mask"}
     assert abs(trip["mujoco"] - trip["wresdyn"]) <= 0.1 * trip["wresdyn"], trip
     assert bare["mujoco"] > 1.3 * trip["mujoco"], (bare, trip)
-    assert len(report["notes"]) == robot.n_dof and all("deadband" in n for n in report["notes"])
+    servo_notes = [n for n in report["notes"] if not n.startswith("friction:")]
+    assert len(servo_notes) == robot.n_dof and all("deadband" in n for n in servo_notes)
     accel = json.loads((out / "servo.json").read_text())["goal_accel"]
     np.testing.assert_allclose(accel, robot.servo.goal_accel)
     assert not (out / "residual.onnx").exists()
@@ -163,7 +165,9 @@ def test_servo_encoder_offset_and_backlash_in_the_mjcf(tmp_path):
     mujoco.mj_forward(model, d)
     want = np.clip(physics.kp * (0.3 - 0.1 - physics.encoder_offset), -physics.effort, physics.effort)
     np.testing.assert_allclose(d.actuator_force, want, rtol=1e-9, atol=1e-12)
-    assert all("backlash 0.009" in n for n in notes) and "backlash" in _mapping() and "encoder_offset" in _mapping()
+    servo_notes = [n for n in notes if not n.startswith("friction:")]
+    assert len(servo_notes) == robot.n_dof and all("backlash 0.009" in n for n in servo_notes)
+    assert "backlash" in _mapping() and "encoder_offset" in _mapping()
 
 
 def test_a_damper_law_run_exports_with_frictionloss_and_says_so(tmp_path, humanoid, data):
@@ -179,11 +183,62 @@ def test_a_damper_law_run_exports_with_frictionloss_and_says_so(tmp_path, humano
     m = mujoco.MjModel.from_xml_path(str(tmp_path / "out" / "robot.xml"))
     dofs = m.jnt_dofadr[m.actuator_trnid[:, 0]]
     np.testing.assert_allclose(m.dof_frictionloss[dofs], p.friction, rtol=1e-6)
-    c = 947.0 * m.opt.timestep  # the damper's rate as the friction constraint's impedance, no pull to the old velocity
-    np.testing.assert_allclose(m.dof_solimp[dofs, :2], c / (1.0 + c), rtol=1e-6)
-    np.testing.assert_allclose(m.dof_solref[dofs, 0], 2.0 * m.opt.timestep * (1.0 + c) / c, rtol=1e-6)
+    # the damper's rate as the friction constraint's impedance, no pull to the old velocity; MuJoCo scales the
+    # impedance's rate by m0 / H_ii (m0 = 1 / dof_invweight0), taken out at the reference pose
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    full = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, full)
+    c = 947.0 * m.opt.timestep * np.diag(full)[dofs] * m.dof_invweight0[dofs]
+    assert (c > 947.0 * m.opt.timestep * 1.01).any()  # coupled joints: the scale is not 1
+    np.testing.assert_allclose(m.dof_solimp[dofs, :2], np.repeat((c / (1.0 + c))[:, None], 2, 1), rtol=1e-5)
+    np.testing.assert_allclose(m.dof_solref[dofs, 0], 2.0 * m.opt.timestep * (1.0 + c) / c, rtol=1e-5)
     print(report["round_trip"])
     assert report["round_trip"]["between"] < 0.1 * report["round_trip"]["wresdyn"]
+
+
+def test_the_soft_friction_is_wresdyns_at_any_armature(tmp_path, humanoid, data):
+    """wresdyn's soft friction scales its regulariser by each DoF's reference inertia of the robot as built (the
+    replay solver's ``fric_m0``), MuJoCo by ``1 / dof_invweight0`` of the exported model: with ten times the
+    armature and 3 N m of friction on every joint the two differ up to tenfold, and the export's per-joint
+    ``solimpfriction`` makes them one constraint again. Measured: the replays 8.5e-6 rad apart, MuJoCo's error 0.2 %
+    from wresdyn's; with MuJoCo's default solimpfriction 1.35e-3 rad apart and -10 %."""
+    import mujoco
+
+    from wresdyn.export.mjcf import round_trip
+    from wresdyn.export.mjcf_friction import MJ_SOLIMP_FRICTION
+    from wresdyn.sim.physics import PhysicalParams
+    from wresdyn.sim.simulator import Simulator
+
+    p = PhysicalParams.nominal(humanoid)
+    p.armature = p.armature * 10.0
+    p.friction = np.full(humanoid.n_dof, 3.0)
+    run = _physics_only_run(tmp_path, data, p)
+    assert main(["export", str(run), "--physics-only", "--format", "mjcf", "--out", str(tmp_path / "out")]) == 0
+    xml = tmp_path / "out" / "robot.xml"
+    report = json.loads((tmp_path / "out" / "mjcf_report.json").read_text())
+    trip = report["round_trip"]
+    print(trip)
+    assert trip["between"] < 3e-5 and abs(trip["mujoco"] - trip["wresdyn"]) <= 0.01 * trip["wresdyn"], trip
+    assert any(n.startswith("friction:") and "solimpfriction" in n for n in report["notes"])
+    # the impedance is the one the replay solver's own reference inertia asks for
+    m = mujoco.MjModel.from_xml_path(str(xml))
+    dofs = m.jnt_dofadr[m.actuator_trnid[:, 0]]
+    m0 = Simulator(humanoid, 1, 1.0 / data.rate_hz).solver._reference_inertia().numpy()
+    d = m.dof_solimp[dofs, 0]
+    np.testing.assert_allclose(d / (1.0 - d), 9.0 * m0 * m.dof_invweight0[dofs], rtol=1e-4)
+    np.testing.assert_allclose(m.dof_solimp[dofs, 1:], np.tile(MJ_SOLIMP_FRICTION[1:], (len(dofs), 1)))
+    # MuJoCo's default impedance, the scale of the exported model: far apart
+    spec = mujoco.MjSpec.from_file(str(xml))
+    for j in spec.joints:
+        j.solimp_friction = list(MJ_SOLIMP_FRICTION)
+    (tmp_path / "default.xml").write_text(spec.to_xml())
+    held = data.split("heldout")
+    ref = round_trip(xml, humanoid, p, held, data.rate_hz)["q"]
+    plain = round_trip(tmp_path / "default.xml", humanoid, p, held, data.rate_hz, reference=ref)
+    plain.pop("q")
+    print(plain)
+    assert plain["between"] > 30 * trip["between"] and abs(plain["mujoco"] - plain["wresdyn"]) > 0.05 * trip["wresdyn"]
 
 
 def test_a_urdf_robot_exports_to_mjcf(tmp_path, cartpole, record):

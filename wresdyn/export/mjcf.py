@@ -25,16 +25,18 @@ The robot (from an MJCF, URDF or USD file) is rebuilt as a :class:`mujoco.MjSpec
 
 What changes: a run identified under the damper friction law (``friction_kappa``) gets its friction amplitudes
 as MuJoCo's ``frictionloss`` with the friction constraint's ``solreffriction`` / ``solimpfriction`` set so that
-MuJoCo's soft friction is that damper (:func:`damper_friction`); a servo joint (:mod:`wresdyn.robot.servo`) becomes,
-in the plain MJCF, the closest plain actuator, a position actuator with ``kv = kd`` and the back-EMF ``U / w0`` in
-the joint damping, clamped at the stall torque U, without the dead band and the goal-acceleration profile; its
-encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the drive ``kp (ctrl - q - o)``, exact);
-stiction, startup torque and backlash (MuJoCo has no gear play) have no actuator. ``play_mujoco.py --servo
-servo.json`` applies the whole law instead (its :class:`~wresdyn.export.play_mujoco.ServoLaw`: dead band, startup
-torque, backlash, offset, back-EMF and stiction, the servo actuators silenced but still delaying the goal). The
-report names each of these; its round trip replays with play_mujoco's servo law
-(``round_trip``), with the position actuators alone (``round_trip_position_actuators``) and without the goal
-profile either (``round_trip_without_goal_profile``).
+MuJoCo's soft friction is that damper (:func:`damper_friction`); a run on the default soft friction law (fixed base)
+gets per joint the ``solimpfriction`` that gives MuJoCo's friction regulariser, which MuJoCo scales by the exported
+model's reference inertia, the replay solver's scale, the robot file's (:mod:`.mjcf_friction`); a servo joint
+(:mod:`wresdyn.robot.servo`) becomes, in the plain MJCF, the closest plain actuator, a position actuator with
+``kv = kd`` and the back-EMF ``U / w0`` in the joint damping, clamped at the stall torque U, without the dead band and
+the goal-acceleration profile; its encoder offset o is the actuator's constant bias ``biasprm[0] = -kp o`` (the
+drive ``kp (ctrl - q - o)``, exact); stiction, startup torque and backlash (MuJoCo has no gear play) have no
+actuator. ``play_mujoco.py --servo servo.json`` applies the whole law instead (its
+:class:`~wresdyn.export.play_mujoco.ServoLaw`: dead band, startup torque, backlash, offset, back-EMF and stiction,
+the servo actuators silenced but still delaying the goal). The report names each of these; its round trip replays
+with play_mujoco's servo law (``round_trip``), with the position actuators alone (``round_trip_position_actuators``)
+and without the goal profile either (``round_trip_without_goal_profile``).
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ from ..robot.servo import STARTUP_RAMP, STICTION_SPEED
 from ..sim.physics import PhysicalParams
 from ..sim.rollout import replay_trajectories
 from . import play_mujoco
+from .mjcf_friction import MJ_SOLREF_FRICTION, damper_friction, reference_inertia, soft_friction
 from .run_folder import ExportError, open_run
 from .usd import _swap, inertia_principal
 
@@ -64,18 +67,6 @@ __all__ = ["damper_friction", "export_mjcf", "mjcf_spec", "round_trip", "servo_l
 
 ROUND_TRIP_TRAJECTORIES = 4
 """Held-out trajectories the export replays for its report (the first ones of the split)."""
-
-
-def damper_friction(friction_kappa: float, dt: float) -> tuple[list[float], list[float]]:
-    """MuJoCo's friction-loss constraint parameters (``solref_friction``, ``solimp_friction``) that make it the
-    replay's damper law ``-clamp(kappa H_ii v, -mu, mu)`` on the new velocity: MuJoCo's soft friction is that
-    damper with ``c = d / (1 - d)`` (its impedance ``d``, times ``m0_i / H_ii``, 1 at the reference pose) on
-    ``v - (1 - b dt) qd`` with ``b = 2 / (d timeconst)`` (:mod:`wresdyn.sim.solver_replay.step_terms`), so
-    ``d = kappa dt / (1 + kappa dt)`` and ``timeconst = 2 dt / d`` (no pull toward the old velocity) give it (d at most
-    0.9999, MuJoCo's bound)."""
-    c = friction_kappa * dt
-    d = min(c / (1.0 + c), 0.9999) if math.isfinite(c) else 0.9999
-    return [2.0 * dt / d, 1.0], [d, d, 0.001, 0.5, 2.0]
 
 
 def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = None) -> tuple[object, list[str]]:
@@ -107,8 +98,6 @@ def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = Non
         j.armature = float(physics.armature[i])
         j.damping = [damping, *list(j.damping)[1:]]  # [linear, higher-order terms]
         j.frictionloss = float(physics.friction[i]) if friction_kappa != 0.0 else 0.0  # kappa 0: no friction
-        if friction_kappa:
-            j.solref_friction, j.solimp_friction = damper_friction(friction_kappa, 1.0 / rate_hz)
         act = spec.actuator(name)
         kv = float(physics.kd[i])
         act.set_to_position(kp=float(physics.kp[i]), kv=kv)
@@ -132,7 +121,50 @@ def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = Non
         body.mass, body.ipos = float(physics.body_mass[b]), np.asarray(physics.body_com[b], dtype=np.float64)
         body.inertia, body.iquat = np.maximum(moments, 1e-12), quat  # quat is (w, x, y, z), MuJoCo's order
         body.explicitinertial = True
+    if friction_kappa:
+        _damper_friction(spec, robot, friction_kappa, rate_hz, notes)
+    elif friction_kappa is None and robot.base != "floating":
+        _match_soft_friction(spec, robot, physics, rate_hz, notes)
     return spec, notes
+
+
+def _damper_friction(spec, robot, friction_kappa: float, rate_hz: float, notes: list) -> None:
+    """Set each joint's friction constraint to the damper law (:func:`damper_friction`, exact at the reference pose of
+    the exported model) and say so in ``notes``."""
+    m0, h_ii = reference_inertia(spec, robot.joint_names)
+    ref, imp = damper_friction(friction_kappa, 1.0 / rate_hz, h_ii / m0)
+    d = [float(x) for x in imp[0]]
+    for i, name in enumerate(robot.joint_names):
+        j = spec.joint(name)
+        j.solref_friction, j.solimp_friction = [float(ref[0][i]), ref[1]], [d[i], d[i], *imp[2:]]
+    notes.append(f"friction: identified under the damper law -clamp(kappa H_ii v, -mu, mu), kappa = "
+                 f"{friction_kappa:g} /s; exported as MuJoCo's frictionloss mu with per joint solimpfriction d, "
+                 "d/(1-d) = kappa dt H_ii/m0 (H_ii and m0 = 1/dof_invweight0 at the reference pose), and "
+                 "solreffriction 2 dt/d 1: the same damper at the reference pose, its rate scaled by m0/H_ii "
+                 "elsewhere; d per joint: " + ", ".join(f"{n} {x:.4f}" for n, x in zip(robot.joint_names, d)))
+
+
+def _match_soft_friction(spec, robot, physics, rate_hz: float, notes: list) -> None:
+    """Set each frictional joint's ``solimpfriction`` so that MuJoCo's soft friction, whose scale is the exported
+    model's reference inertia, is the replay solver's, whose scale is the robot file's (:mod:`.mjcf_friction`); the
+    replay solver drives a fixed base only (a floating base runs in Newton's MuJoCo solver, which recompiles it)."""
+    joints = robot.joint_names
+    m0_built = reference_inertia(mujoco_spec(robot, 1.0 / rate_hz, "implicitfast"), joints)[0]
+    m0_export = reference_inertia(spec, joints)[0]
+    imp, clipped = soft_friction(m0_built, m0_export)
+    moved = []
+    for i, name in enumerate(joints):
+        if physics.friction[i] > 0:
+            j = spec.joint(name)
+            j.solref_friction, j.solimp_friction = list(MJ_SOLREF_FRICTION), imp[i].tolist()
+            moved.append(f"{name} {m0_built[i] / m0_export[i]:.3g} -> {imp[i, 0]:.4f}"
+                         + (" (clipped at MuJoCo's 0.9999)" if clipped[i] else ""))
+    if moved:
+        notes.append("friction: wresdyn's soft frictionloss scales its regulariser by each joint's reference inertia "
+                     "of the robot file (fixed when the replay solver is built), MuJoCo by 1/dof_invweight0 of the "
+                     "exported, identified model; per joint solimpfriction[0] = d with d/(1-d) = 9 m0_file/m0_export "
+                     "(solimpfriction[1] 0.95 and solreffriction 0.02 1 kept: the same reference damping) makes "
+                     "them one constraint. Per joint m0_file/m0_export -> d: " + ", ".join(moved))
 
 
 def _triangle(moments: np.ndarray, body: str, notes: list) -> np.ndarray:
@@ -248,12 +280,6 @@ def write_mjcf_export(out: str | Path, robot, physics, rate_hz: float, record: d
     trip (none: no round trip), replayed with ``policy`` in wresdyn and ``residual.onnx`` in MuJoCo."""
     out = Path(out)
     spec, notes = mjcf_spec(robot, physics, rate_hz, friction_kappa)
-    if friction_kappa is not None:
-        ref, imp = damper_friction(friction_kappa, 1.0 / rate_hz)
-        notes.append(f"friction: identified under the damper law -clamp(kappa H_ii v, -mu, mu), kappa = "
-                     f"{friction_kappa:g} /s; exported as MuJoCo's frictionloss mu with solreffriction "
-                     f"{ref[0]:.4g} {ref[1]:g} and solimpfriction {imp[0]:.4g} {imp[1]:.4g}: the same damper at the "
-                     "reference pose, its rate scaled by the joint's effective inertia there over H_ii elsewhere")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
@@ -309,9 +335,10 @@ def _mapping() -> dict:
     return {"kp": "actuator/position kp [N m/rad]", "kd": "actuator/position kv [N m s/rad]",
             "effort": "actuator forcerange [N m]", "delay": "actuator delay [s] (interp linear, nsample)",
             "armature": "joint armature [kg m^2]", "damping": "joint damping [N m s/rad]",
-            "friction": "joint frictionloss [N m] (a damper-law run: solreffriction, solimpfriction)",
+            "friction": "joint frictionloss [N m] with solreffriction, solimpfriction (the replay's friction law)",
             "encoder_offset": "actuator biasprm[0] = -kp o [N m]",
-            "backlash": "servo.json's law, applied by play_mujoco.py --servo (no gear play in MuJoCo)", "body_mass": "body inertial mass [kg]",
+            "backlash": "servo.json's law, applied by play_mujoco.py --servo (no gear play in MuJoCo)",
+            "body_mass": "body inertial mass [kg]",
             "body_com": "body inertial pos [m]", "body_inertia": "body inertial diaginertia + quat [kg m^2]",
             "residual": "residual.onnx, applied through qfrc_applied by play_mujoco.py"}
 
