@@ -2,16 +2,23 @@
 
 - ``fixed``: the robot file's physics in every world (as the (b) policy's plant: one physics, no redraw);
 - ``startup``: (e)'s draws, once at construction (the randomised physics' own cost: dry friction adds constraints);
-- ``redraw``: (e)'s draws again on every reset, written in place, the solver's refresh eager;
-- ``redraw_graph``: as ``redraw``, the refresh replayed from a CUDA graph (``Simulator.refresh_graph``; CUDA only);
+- ``redraw``: (e)'s draws again on every reset, written in place, the solver's refresh eager (the CPU's path);
+- ``redraw_graph``: as ``redraw``, the refresh replayed from a CUDA graph (``Simulator.refresh_graph``, CUDA's default;
+  CUDA only);
 - ``recapture``: as the redraws were before they wrote in place: each followed by the broad model-changed notice
   and a new capture of the solver's CUDA graphs;
 
 plus the cost of one redraw of a twentieth of the worlds alone, and of the solver's refresh per Newton ``ModelFlags``
 member (``redraw``: the eager refresh, where mujoco_warp's ``set_const_0`` dominates).
 
+Before the first timed plant, ``--warmup`` PPO iterations (default 1) of the first mode's plant run untimed: the
+process's first iteration compiles or loads every kernel of the step and starts torch's CUDA libraries, which would
+otherwise count in the first mode's time only (on one H200 from an empty Warp cache: 47.5 s of ``fixed``'s first
+iteration, against 0.64-0.69 s for the next four).
+
 Usage:
     python benchmarks/skills/randomize_speed.py OUT [--device cuda:0] [--worlds 4096] [--iterations 5] [--floor]
+        [--warmup 1]
 
 On the CPU the floor's several worlds run in MuJoCo C threads that share world 0's physics (no randomisation): the
 CPU run steps the humanoid on its stand in mujoco_warp on Warp's CPU device, the floor plants' solver. Writes
@@ -117,6 +124,7 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--floor", action="store_true", help="the floor's plants (a GPU: several worlds per device)")
     ap.add_argument("--modes", nargs="+", default=["fixed", "startup", "redraw", "redraw_graph", "recapture"])
+    ap.add_argument("--warmup", type=int, default=1, help="untimed PPO iterations first (module docstring; 0: none)")
     a = ap.parse_args()
     torch.set_num_threads(1)
     stand = load_robot(DEFAULT_ROBOT)
@@ -127,7 +135,11 @@ def main() -> None:
     ppo = SkillPPOConfig(iterations=a.iterations, torch_threads=1)
     a.out.mkdir(parents=True, exist_ok=True)
     rows = {}
-    for mode in [m for m in a.modes if a.device.startswith("cuda") or m != "redraw_graph"]:
+    modes = [m for m in a.modes if a.device.startswith("cuda") or m != "redraw_graph"]
+    if a.warmup > 0 and modes:
+        env = TrackingEnv(plant(robot, a.worlds, a.device, a.floor, modes[0]), motions, task, device=a.device)
+        train_skill(env, SkillPPOConfig(iterations=a.warmup, torch_threads=1), a.out / "warmup", log=lambda *_: None)
+    for mode in modes:
         p = plant(robot, a.worlds, a.device, a.floor, mode)
         env = TrackingEnv(p, motions, task, device=a.device)
         s = train_skill(env, ppo, a.out / mode, log=lambda *_: None)
@@ -146,8 +158,8 @@ def main() -> None:
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     record = {"command": " ".join(["python", *sys.argv]),
               "commit": commit, "machine": platform.node(), "device": a.device, "worlds": a.worlds,
-              "iterations": a.iterations, "num_steps_per_env": ppo.num_steps_per_env, "floor": a.floor,
-              "plants": rows}
+              "iterations": a.iterations, "warmup_iterations": a.warmup, "num_steps_per_env": ppo.num_steps_per_env,
+              "floor": a.floor, "plants": rows}
     (a.out / "randomize_speed.json").write_text(json.dumps(record, indent=2) + "\n")
 
 

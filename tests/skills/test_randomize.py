@@ -343,6 +343,7 @@ def test_a_redraw_on_mujoco_warp_equals_a_solver_built_on_the_drawn_model(humano
     the floor's friction (the CPU's floor worlds are MuJoCo C threads; the GPU test below has it)."""
     torch.set_num_threads(1)
     plant = SimPlant(humanoid, WORLDS, RATE, 1, solver="mujoco", randomization=Randomization(seed=4))
+    assert not plant.sim.refresh_graph  # no graphs on the CPU: the refresh stays eager
     _equals_a_solver_built_on_the_drawn_model(plant, humanoid, [[1, 2]])
 
 
@@ -354,10 +355,10 @@ def _cuda() -> bool:
 
 @pytest.mark.skipif(not _cuda(), reason="CUDA graphs and the floor's batched mujoco_warp worlds need a GPU")
 def test_on_a_gpu_a_captured_refresh_equals_a_solver_built_on_the_drawn_model(floating):
-    """On the floor on a GPU with the solver's refresh replayed from a CUDA graph (the first redraw captures it, the
-    second replays it) and the steps from theirs: the floor friction too."""
+    """On the floor on a GPU with the solver's refresh replayed from a CUDA graph, CUDA's default (the plant's first
+    draw captures it, the redraws replay it) and the steps from theirs: the floor friction too."""
     plant = SimPlant(floating, 16, RATE, 1, ground=True, device="cuda:0", randomization=Randomization(seed=4))
-    plant.sim.refresh_graph = True
+    assert plant.sim.refresh_graph
     # contacts found in another order by the GPU's atomics may round differently: a wider bound (not yet measured)
     _equals_a_solver_built_on_the_drawn_model(plant, floating, [[1, 2], [3, 5, 9]], ground=True, tol=1e-4)
     assert len(plant.sim._refresh_graphs) == 1

@@ -84,6 +84,8 @@ class Simulator:
         contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (default ``ContactSettings()``).
         friction_kappa: Dry-friction law of the replay solver (:func:`~wresdyn.sim.solvers.make_solver`).
         solver_threads: CPU host threads the replay solver splits the worlds over (its ``threads``).
+        refresh_graph: Replay mujoco_warp's refresh after :meth:`set_world_physics` from a CUDA graph (default: on
+            CUDA; :mod:`wresdyn.sim.world_physics` gives the measured gain); the CPU has no graphs.
 
     Properties ``q``, ``qd`` are copies of the actuated joint positions [rad] and velocities [rad/s],
     shape (num_worlds, n_dof), float32 on :attr:`device`. A floating base adds ``base_pose`` and ``base_twist``
@@ -93,7 +95,7 @@ class Simulator:
     def __init__(self, robot, num_worlds: int, dt: float, *, solver: str = "auto", substeps: int = 1,
                  device: str | None = "cpu", requires_grad: bool = False, param_grads: bool = False,
                  graph: bool | None = None, ground: bool = False, contact=None, friction_kappa=None,
-                 solver_threads: int = 1) -> None:
+                 solver_threads: int = 1, refresh_graph: bool | None = None) -> None:
         import warp as wp
 
         if num_worlds < 1 or substeps < 1 or not dt > 0:
@@ -135,7 +137,7 @@ class Simulator:
         self.upper = torch.as_tensor(robot.upper, **f32)
         self._cur = 0
         self._graphs: dict[int, object] = {}
-        self.refresh_graph, self._refresh_graphs = False, {}  # CUDA: replay the solver's refresh (world_physics)
+        self.refresh_graph, self._refresh_graphs = self._cuda and refresh_graph is not False, {}  # world_physics
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._wp_streams: dict[int, tuple] = {}  # torch stream handle -> (torch stream, Warp stream): _tape_stream
         self._tape_buffers: list = []
@@ -203,6 +205,7 @@ class Simulator:
 
         self.solver.notify_model_changed(ModelFlags.JOINT_DOF_PROPERTIES | ModelFlags.BODY_INERTIAL_PROPERTIES)
         self._graphs.clear()  # captured launches may hold recompiled kernels' predecessors
+        self._refresh_graphs.clear()
 
     # ------------------------------------------------------------------------------------------------ state
     @property
