@@ -256,8 +256,10 @@ def peer_config(args, ds) -> dict:
 
 
 def check_resume(saved: dict, config: dict, path: Path) -> None:
-    """Refuse a resume whose settings differ from the checkpoint's, in one line."""
-    diff = [f"{k}={saved.get(k)!r} there, {config[k]!r} here" for k in config if saved.get(k) != config[k]]
+    """Refuse a resume whose settings differ from the checkpoint's, in one line. The data's path is not a setting:
+    a checkpoint carried to another machine finds its data elsewhere, and ``data_sha256`` names the data."""
+    diff = [f"{k}={saved.get(k)!r} there, {config[k]!r} here" for k in config
+            if k != "data" and saved.get(k) != config[k]]
     if diff:
         raise ConfigChanged(f"error: {path} was written with other settings ({'; '.join(diff)}): "
                             "use the same settings or another --out")
@@ -508,7 +510,11 @@ def report(args) -> dict:
             raise SystemExit(f"error: the peer leg in {out / 'peer'} has not finished: run it again with --resume, "
                              "or report its best so far with --partial")
         state = json.loads((out / "peer" / "checkpoint.json").read_text())
-        ds, robot, truth = load(state["config"]["data"])
+        data = args.data or state["config"]["data"]  # the checkpoint's path is the machine's that wrote it
+        if args.data and file_digest(data) != state["config"]["data_sha256"]:
+            raise SystemExit(f"error: {data} is not the data {out / 'peer'} was fitted on (sha256 "
+                             f"{file_digest(data)} here, {state['config']['data_sha256']} there)")
+        ds, robot, truth = load(data)
         tools["mujoco.sysid"] = peer_result(state, ds, robot, truth, os.cpu_count() or 1, out / "peer" / "partial")
     for leg in sorted(out.glob("wresdyn_*.json")):
         tools[leg.stem] = json.loads(leg.read_text())
@@ -610,6 +616,8 @@ def main(argv=None) -> None:
     c = sub.add_parser("report", help="summary.json, curves.json / .png and the tables from the legs' outputs")
     c.add_argument("--out", required=True)
     c.add_argument("--title", default=None)
+    c.add_argument("--data", default=None,
+                   help="the dataset an unfinished peer is scored on (default: the path its checkpoint recorded)")
     c.add_argument("--partial", action="store_true",
                    help="an unfinished peer leg enters with its best so far, marked not converged")
     args = p.parse_args(argv)
