@@ -115,6 +115,34 @@ def file_digest(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
+def data_digest(path: str) -> str:
+    """sha256 (16 hex digits) of what a fit reads from a dataset: every recorded array and the header without its
+    ``meta``. ``meta`` is the recorder's provenance (the excitation's drawn design parameters among it), whose last
+    digits differ between machines that record bit-identical samples, so the file's own digest does too."""
+    h = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as z:
+        header = json.loads(z["header"].tobytes().decode())
+        header.pop("meta", None)
+        h.update(json.dumps(header, sort_keys=True).encode())
+        for key in sorted(k for k in z.files if k != "header"):
+            a = np.ascontiguousarray(z[key])
+            h.update(f"{key} {a.dtype.str} {a.shape}".encode())
+            h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+DATA_KEYS = ("data", "data_sha256", "data_content_sha256")
+"""The checkpoint's data: its path on the machine that wrote it, the file's digest, :func:`data_digest`."""
+
+
+def same_data(saved: dict, config: dict) -> bool:
+    """The data a checkpoint was fitted on: the same file, or the same samples and declarations (a checkpoint written
+    before ``data_content_sha256`` existed matches on the file only)."""
+    content = saved.get("data_content_sha256")
+    return saved["data_sha256"] == config["data_sha256"] or (content is not None and
+                                                              content == config["data_content_sha256"])
+
+
 def open_log(path: Path):
     path.parent.mkdir(parents=True, exist_ok=True)
     f = path.open("a")
@@ -249,7 +277,8 @@ class _Output:
 def peer_config(args, ds) -> dict:
     import mujoco
 
-    return {"data": args.data, "data_sha256": file_digest(args.data), "horizon": args.horizon, "dt": real_step(ds),
+    return {"data": args.data, "data_sha256": file_digest(args.data), "data_content_sha256": data_digest(args.data),
+            "horizon": args.horizon, "dt": real_step(ds),
             "threads": args.threads, "stages": [s.split(",") for s in args.stages], "max_iters": args.max_iters,
             "x_scale": "jac",
             "mujoco": mujoco.__version__}
@@ -257,9 +286,12 @@ def peer_config(args, ds) -> dict:
 
 def check_resume(saved: dict, config: dict, path: Path) -> None:
     """Refuse a resume whose settings differ from the checkpoint's, in one line. The data's path is not a setting:
-    a checkpoint carried to another machine finds its data elsewhere, and ``data_sha256`` names the data."""
+    a checkpoint carried to another machine finds its data elsewhere (:func:`same_data` names the data)."""
     diff = [f"{k}={saved.get(k)!r} there, {config[k]!r} here" for k in config
-            if k != "data" and saved.get(k) != config[k]]
+            if k not in DATA_KEYS and saved.get(k) != config[k]]
+    if not same_data(saved, config):
+        there = ", ".join(f"{k}={saved.get(k)!r}" for k in DATA_KEYS)
+        diff.insert(0, f"data: {config['data']} is not the data there ({there})")
     if diff:
         raise ConfigChanged(f"error: {path} was written with other settings ({'; '.join(diff)}): "
                             "use the same settings or another --out")
@@ -511,9 +543,10 @@ def report(args) -> dict:
                              "or report its best so far with --partial")
         state = json.loads((out / "peer" / "checkpoint.json").read_text())
         data = args.data or state["config"]["data"]  # the checkpoint's path is the machine's that wrote it
-        if args.data and file_digest(data) != state["config"]["data_sha256"]:
-            raise SystemExit(f"error: {data} is not the data {out / 'peer'} was fitted on (sha256 "
-                             f"{file_digest(data)} here, {state['config']['data_sha256']} there)")
+        here = {"data_sha256": file_digest(data), "data_content_sha256": data_digest(data)}
+        if not same_data(state["config"], here):
+            there = {k: state["config"].get(k) for k in DATA_KEYS[1:]}
+            raise SystemExit(f"error: {data} is not the data {out / 'peer'} was fitted on ({here} here, {there} there)")
         ds, robot, truth = load(data)
         tools["mujoco.sysid"] = peer_result(state, ds, robot, truth, os.cpu_count() or 1, out / "peer" / "partial")
     for leg in sorted(out.glob("wresdyn_*.json")):
