@@ -455,7 +455,9 @@ def peer_result(state, ds, robot, truth, threads: int, out: Path) -> dict:
         "converged": {"value": state["done"] and all(s["stop"] in CONVERGED for s in stops), "reason": reason},
         "samples_used": sum(len(t.q) for t in train),
         "residual_samples": sum(len(t.q) - len(peer.tiles(len(t.q), config["horizon"])) for t in train),
-        "machine": state["calls"][-1]["machine"], "calls": state["calls"], "config": config,
+        # every machine its calls ran on, in order: a run resumed elsewhere is not the last machine's alone
+        "machine": " / ".join(dict.fromkeys(c["machine"] for c in state["calls"])), "calls": state["calls"],
+        "config": config,
     }
 
 
