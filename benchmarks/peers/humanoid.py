@@ -115,6 +115,34 @@ def file_digest(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
+def data_digest(path: str) -> str:
+    """sha256 (16 hex digits) of what a fit reads from a dataset: every recorded array and the header without its
+    ``meta``. ``meta`` is the recorder's provenance (the excitation's drawn design parameters among it), whose last
+    digits differ between machines that record bit-identical samples, so the file's own digest does too."""
+    h = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as z:
+        header = json.loads(z["header"].tobytes().decode())
+        header.pop("meta", None)
+        h.update(json.dumps(header, sort_keys=True).encode())
+        for key in sorted(k for k in z.files if k != "header"):
+            a = np.ascontiguousarray(z[key])
+            h.update(f"{key} {a.dtype.str} {a.shape}".encode())
+            h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+DATA_KEYS = ("data", "data_sha256", "data_content_sha256")
+"""The checkpoint's data: its path on the machine that wrote it, the file's digest, :func:`data_digest`."""
+
+
+def same_data(saved: dict, config: dict) -> bool:
+    """The data a checkpoint was fitted on: the same file, or the same samples and declarations (a checkpoint written
+    before ``data_content_sha256`` existed matches on the file only)."""
+    content = saved.get("data_content_sha256")
+    return saved["data_sha256"] == config["data_sha256"] or (content is not None and
+                                                              content == config["data_content_sha256"])
+
+
 def open_log(path: Path):
     path.parent.mkdir(parents=True, exist_ok=True)
     f = path.open("a")
@@ -249,15 +277,21 @@ class _Output:
 def peer_config(args, ds) -> dict:
     import mujoco
 
-    return {"data": args.data, "data_sha256": file_digest(args.data), "horizon": args.horizon, "dt": real_step(ds),
+    return {"data": args.data, "data_sha256": file_digest(args.data), "data_content_sha256": data_digest(args.data),
+            "horizon": args.horizon, "dt": real_step(ds),
             "threads": args.threads, "stages": [s.split(",") for s in args.stages], "max_iters": args.max_iters,
             "x_scale": "jac",
             "mujoco": mujoco.__version__}
 
 
 def check_resume(saved: dict, config: dict, path: Path) -> None:
-    """Refuse a resume whose settings differ from the checkpoint's, in one line."""
-    diff = [f"{k}={saved.get(k)!r} there, {config[k]!r} here" for k in config if saved.get(k) != config[k]]
+    """Refuse a resume whose settings differ from the checkpoint's, in one line. The data's path is not a setting:
+    a checkpoint carried to another machine finds its data elsewhere (:func:`same_data` names the data)."""
+    diff = [f"{k}={saved.get(k)!r} there, {config[k]!r} here" for k in config
+            if k not in DATA_KEYS and saved.get(k) != config[k]]
+    if not same_data(saved, config):
+        there = ", ".join(f"{k}={saved.get(k)!r}" for k in DATA_KEYS)
+        diff.insert(0, f"data: {config['data']} is not the data there ({there})")
     if diff:
         raise ConfigChanged(f"error: {path} was written with other settings ({'; '.join(diff)}): "
                             "use the same settings or another --out")
@@ -421,7 +455,9 @@ def peer_result(state, ds, robot, truth, threads: int, out: Path) -> dict:
         "converged": {"value": state["done"] and all(s["stop"] in CONVERGED for s in stops), "reason": reason},
         "samples_used": sum(len(t.q) for t in train),
         "residual_samples": sum(len(t.q) - len(peer.tiles(len(t.q), config["horizon"])) for t in train),
-        "machine": state["calls"][-1]["machine"], "calls": state["calls"], "config": config,
+        # every machine its calls ran on, in order: a run resumed elsewhere is not the last machine's alone
+        "machine": " / ".join(dict.fromkeys(c["machine"] for c in state["calls"])), "calls": state["calls"],
+        "config": config,
     }
 
 
@@ -508,7 +544,12 @@ def report(args) -> dict:
             raise SystemExit(f"error: the peer leg in {out / 'peer'} has not finished: run it again with --resume, "
                              "or report its best so far with --partial")
         state = json.loads((out / "peer" / "checkpoint.json").read_text())
-        ds, robot, truth = load(state["config"]["data"])
+        data = args.data or state["config"]["data"]  # the checkpoint's path is the machine's that wrote it
+        here = {"data_sha256": file_digest(data), "data_content_sha256": data_digest(data)}
+        if not same_data(state["config"], here):
+            there = {k: state["config"].get(k) for k in DATA_KEYS[1:]}
+            raise SystemExit(f"error: {data} is not the data {out / 'peer'} was fitted on ({here} here, {there} there)")
+        ds, robot, truth = load(data)
         tools["mujoco.sysid"] = peer_result(state, ds, robot, truth, os.cpu_count() or 1, out / "peer" / "partial")
     for leg in sorted(out.glob("wresdyn_*.json")):
         tools[leg.stem] = json.loads(leg.read_text())
@@ -610,6 +651,8 @@ def main(argv=None) -> None:
     c = sub.add_parser("report", help="summary.json, curves.json / .png and the tables from the legs' outputs")
     c.add_argument("--out", required=True)
     c.add_argument("--title", default=None)
+    c.add_argument("--data", default=None,
+                   help="the dataset an unfinished peer is scored on (default: the path its checkpoint recorded)")
     c.add_argument("--partial", action="store_true",
                    help="an unfinished peer leg enters with its best so far, marked not converged")
     args = p.parse_args(argv)

@@ -19,6 +19,6 @@ case $M in
   *) echo "error: MISMATCH is default or uneven, not '$M'" >&2; exit 2 ;;
 esac
 if [ "$LEG" = report ]; then
-  exec $PY benchmarks/peers/humanoid.py report --out "$ROOT/$M" --title "humanoid, $M mismatch" "$@"
+  exec $PY benchmarks/peers/humanoid.py report --out "$ROOT/$M" --data "$DATA" --title "humanoid, $M mismatch" "$@"
 fi
 exec $PY benchmarks/peers/humanoid.py "$LEG" "$DATA" --out "$ROOT/$M" "$@"
