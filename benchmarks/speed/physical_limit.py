@@ -6,8 +6,9 @@ achieved memory bandwidth and FLOP rate against the card's peak, in one process 
 
 Per world count: (1) forward env-steps/s of ``wresdyn bench``'s rows ``replay rollout`` and ``replay step``, by its
 own code (:mod:`wresdyn.sim.solver_benchmark`). (2) ``mjwarp-testspeed`` (``python -m mujoco_warp.testspeed``) on
-mujoco_warp's own humanoid (free base, floor contacts: another workload), ``--nworld N --format json``, raw output
-kept. (3) ``SolverReplay.step``'s kernel alone, launched eagerly, timed by Warp's CUDA activity timing (CPU: the
+mujoco_warp's own humanoid (free base, floor contacts: another workload), ``--nworld N --format json
+--overflow_behavior=continue`` (its default, ``error``, aborts the run at the first world whose line search reaches
+its iteration cap: ``--mjw-overflow error`` keeps that), raw output kept. (3) ``SolverReplay.step``'s kernel alone, launched eagerly, timed by Warp's CUDA activity timing (CPU: the
 wall-clock of a synchronised step). Bytes: the distinct per-world array elements the generated kernel loads and
 stores, each once, a lower bound of the compulsory traffic (L2, 50 MB on H100 and H200, may hold a small run's arrays
 between launches). FLOPs: the kernel is straight-line scalar code (:mod:`wresdyn.sim.solver_replay.codegen`), so
@@ -21,6 +22,7 @@ from __future__ import annotations
 import argparse
 import ast
 import json
+import shlex
 import subprocess
 import sys
 import time
@@ -37,6 +39,8 @@ FIELDS = ("replay_env_steps_per_s", "mujoco_warp_steps_per_s", "replay_step_kern
           "fraction_of_peak_flops")
 """Each row's figures (None until measured; ``<part>_error`` says why one is missing)."""
 BINOPS = {ast.Add: "add", ast.Sub: "sub", ast.Mult: "mul", ast.Div: "div"}
+LS_WARNING = "linesearch iterations limit reached"
+"""The line mujoco_warp prints where a line search reaches its iteration cap (``--overflow_behavior=continue``)."""
 
 
 def count_code(source: str, friction: bool) -> tuple[dict, float]:
@@ -134,11 +138,17 @@ def step_kernel(b, robot, w: int, repeat: int, row: dict) -> None:
     row |= {"replay_step_kernel_s": float(np.median(times)), "kernel_launches_timed": len(times), "timer": timer}
 
 
-def mujoco_warp(out: Path, device: str, w: int, nstep: int, timeout: float) -> dict:
-    """``mjwarp-testspeed`` on mujoco_warp's humanoid at ``w`` worlds: its raw output kept, its steps/s read."""
+def mujoco_warp(out: Path, device: str, w: int, nstep: int, timeout: float, overflow: str = "continue",
+                extra: tuple[str, ...] = ()) -> dict:
+    """``mjwarp-testspeed`` on mujoco_warp's humanoid at ``w`` worlds: its raw output kept, its steps/s read.
+
+    ``overflow``: its ``--overflow_behavior``. With ``error`` (its default) one world whose line search reaches its
+    iteration cap (``LS_ITERATIONS``) aborts the whole run; ``continue`` times every step and prints a warning line
+    per such line search instead, counted here (``mujoco_warp_overflow_warnings``). ``extra``: more flags, as given.
+    """
     xml = Path(find_spec("mujoco_warp").origin).parent / "test_data" / "humanoid" / "humanoid.xml"
     cmd = [sys.executable, "-m", "mujoco_warp.testspeed", str(xml), f"--nworld={w}", f"--nstep={nstep}",
-           "--format=json", f"--device={device}"]
+           "--format=json", f"--device={device}", f"--overflow_behavior={overflow}", *extra]
     print(f"  {' '.join(cmd)} (timeout {timeout:.0f} s)", flush=True)
     try:
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
@@ -146,15 +156,26 @@ def mujoco_warp(out: Path, device: str, w: int, nstep: int, timeout: float) -> d
     except subprocess.TimeoutExpired as exc:
         text = [x.decode(errors="replace") if isinstance(x, bytes) else x or "" for x in (exc.stdout, exc.stderr)]
         rc, stdout, stderr = "timeout", text[0], text[1] + f"\ntimed out after {timeout} s"
+    warnings = stdout.count(LS_WARNING)
     raw = out / f"mjwarp_testspeed_{w}.txt"
-    raw.write_text(f"$ {' '.join(cmd)}\n# exit {rc}\n## stdout\n{stdout}\n## stderr\n{stderr}")
-    res = {"mujoco_warp_command": " ".join(cmd), "mujoco_warp_raw": raw.name}
+    raw.write_text(f"$ {' '.join(cmd)}\n# exit {rc}\n## stdout\n{shorten(stdout)}\n## stderr\n{shorten(stderr)}")
+    res = {"mujoco_warp_command": " ".join(cmd), "mujoco_warp_raw": raw.name, "mujoco_warp_overflow_behavior": overflow,
+           "mujoco_warp_overflow_warnings": warnings}
     line = next((x for x in reversed(stdout.splitlines()) if x.startswith("{")), None)
     if rc != 0 or line is None:
         last = [x for x in (stderr + "\n" + stdout).splitlines() if x.strip()]
         return res | {"mujoco_warp_error": f"exit {rc}: {last[-1] if last else 'no output'}"[:500]}
     report = json.loads(line)
     return res | {"mujoco_warp_steps_per_s": report["steps_per_second"], "mujoco_warp_report": report}
+
+
+def shorten(text: str, keep: int = 100) -> str:
+    """``text`` whole up to ``2 * keep`` lines, else its first and last ``keep`` lines around a count of the rest (with
+    ``continue`` the overflow warnings can run to thousands of lines)."""
+    lines = text.splitlines()
+    if len(lines) <= 2 * keep:
+        return text
+    return "\n".join([*lines[:keep], f"[... {len(lines) - 2 * keep} lines left out ...]", *lines[-keep:]]) + "\n"
 
 
 def commit() -> str:
@@ -201,6 +222,11 @@ def main() -> None:
     p.add_argument("--budget", type=float, default=540.0, help="seconds for the run: what is left bounds mjwarp")
     p.add_argument("--commit", default=None, help="the commit to record (default: the checkout's, from git)")
     p.add_argument("--mjw-timeout", type=float, default=300.0, help="seconds one mjwarp-testspeed run may take")
+    p.add_argument("--mjw-overflow", choices=("continue", "error"), default="continue",
+                   help="mjwarp-testspeed --overflow_behavior: 'error' (its default) aborts the run at the first "
+                        "world whose line search reaches its cap; 'continue' times every step")
+    p.add_argument("--mjw-args", default="",
+                   help="more mjwarp-testspeed flags, one string (e.g. '-o opt.ls_iterations=100')")
     args = p.parse_args()
     start = time.perf_counter()
     import warp as wp
@@ -239,7 +265,8 @@ def main() -> None:
         save()
     for row in res["rows"]:
         left = max(1.0, min(args.mjw_timeout, args.budget - (time.perf_counter() - start)))  # out of budget: 1 s
-        row |= part(row, "mujoco_warp", mujoco_warp, out, args.device, row["worlds"], args.nstep, left) or {}
+        row |= part(row, "mujoco_warp", mujoco_warp, out, args.device, row["worlds"], args.nstep, left,
+                    args.mjw_overflow, tuple(shlex.split(args.mjw_args))) or {}
         save()
     print(table(res), flush=True)
     print(f"total {time.perf_counter() - start:.0f} s; wrote {out / 'physical_limit.json'}", flush=True)
