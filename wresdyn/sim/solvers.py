@@ -37,9 +37,10 @@ from ..errors import WresdynError
 from ..robot.contact import ContactSettings
 from ..robot.description import Robot
 from ..robot.pinocchio_model import build_pinocchio
+from .floor_budget import collision_shapes_newton, floor_budget
 from .solver_threads import SolverMuJoCoThreads
 
-__all__ = ["SOLVERS", "explicit_pd_margin", "resolve_solver", "make_solver"]
+__all__ = ["SOLVERS", "explicit_pd_margin", "floor_solver", "resolve_solver", "make_solver"]
 
 SOLVERS = choices(SolverKind)
 """Replay solvers (see the module docstring)."""
@@ -120,8 +121,21 @@ def make_solver(model, robot: Robot, dt: float, kind: str = "auto", *, ground: b
     if not str(model.device).startswith("cuda") and model.world_count > 1:
         return SolverMuJoCoThreads(model, robot, contact)
 
+    return floor_solver(model, contact, use_mujoco_cpu=mujoco_c)
+
+
+def floor_solver(model, contact=None, *, use_mujoco_cpu: bool = False):
+    """Newton's ``SolverMuJoCo`` for a model with a floor (``Robot.build_model(ground=True)``): MuJoCo's contacts
+    on, the options of ``contact`` (:class:`~wresdyn.robot.contact.ContactSettings`, default ``ContactSettings()``),
+    ``implicitfast``. On mujoco_warp (``use_mujoco_cpu=False``: CUDA, or Warp's CPU device) its contacts and
+    constraint rows per world are sized by :func:`~wresdyn.sim.floor_budget.floor_budget` for the worst state and
+    any dry friction drawn later, not from the model as built (see :mod:`wresdyn.sim.floor_budget`); MuJoCo C
+    (``use_mujoco_cpu=True``, one world) grows its own and only reads ``nconmax`` as the contacts it exports."""
+    import newton
+
     c = contact or ContactSettings()
-    return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=mujoco_c, disable_contacts=False,
+    nconmax, njmax = floor_budget(collision_shapes_newton(model), model.joint_dof_count // max(model.world_count, 1))
+    return newton.solvers.SolverMuJoCo(model, use_mujoco_cpu=use_mujoco_cpu, disable_contacts=False,
                                        integrator="implicitfast", solver=c.solver, cone=c.cone,
                                        iterations=c.iterations, ls_iterations=c.ls_iterations, impratio=c.impratio,
-                                       enable_multiccd=False)
+                                       enable_multiccd=False, nconmax=nconmax, njmax=njmax)

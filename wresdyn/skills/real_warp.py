@@ -26,14 +26,11 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..sim.floor_budget import collision_geoms_mujoco, floor_budget
 from .reference import base_frame_imu, quat_rotate_inv
 
 __all__ = ["RealWarpPlant", "free_from_mujoco_t", "free_to_mujoco_t", "sense"]
 
-MAX_CONTACTS = 4
-"""Contacts a box touching the floor plane makes at most (its corners): what :class:`RealWarpPlant` allocates per
-collision geom, so a robot of boxes lying on the floor with every link down still fits (a robot of other collision
-shapes may need more: mujoco_warp then sets the world's ``data.overflow`` flags)."""
 
 
 def _quat_rotate(quat_xyzw: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -136,14 +133,11 @@ class RealWarpPlant:
         n = self.robot.n_dof
         if m.nu != n:
             raise WresdynError(f"{real.robot.source.name}: {m.nu} actuators for {n} joints")
-        ncollide = int(((m.geom_contype | m.geom_conaffinity) > 0).sum())
+        # the same contacts and constraint rows per world as wresdyn's floor solver (see wresdyn.sim.floor_budget)
+        nconmax, njmax = floor_budget(collision_geoms_mujoco(m), m.nv)
         with wp.ScopedDevice(self._wp_device):
             self.model = mjw.put_model(m)
-            # every collision geom may touch the floor at its corners; each contact is 4 rows of the pyramidal
-            # friction cone, plus one friction-loss row per dof and one limit row per joint
-            nconmax = MAX_CONTACTS * ncollide
-            self.data = mjw.make_data(m, nworld=self.num_worlds, nconmax=nconmax,
-                                      njmax=4 * nconmax + 2 * m.nv)
+            self.data = mjw.make_data(m, nworld=self.num_worlds, nconmax=nconmax, njmax=njmax)
         view = wp.to_torch
         self._qpos, self._qvel = view(self.data.qpos), view(self.data.qvel)
         """MuJoCo's state (N, nq), (N, nv) float32, the device's memory: base (floor) then joints."""
