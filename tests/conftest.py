@@ -75,6 +75,35 @@ def pytest_collection_modifyitems(config, items):
                 item.add_marker(skip)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def foot_workspace_once():
+    """The foot workspace of a robot, sampled once per test process for each IK, excitation configuration and seed,
+    and handed out as copies: every :func:`~wresdyn.data.real_robot.collect` of the humanoid samples the same one
+    (its own seeded generator, 400 IK solves: seconds each time). A caller that asks for the sampling's progress
+    lines (``wresdyn collect``) gets the sampling itself."""
+    import copy
+
+    from wresdyn.data import excitation
+
+    sample, done = excitation.foot_workspace, {}
+
+    def once(ik, cfg, seed=0, progress=None):
+        key = (id(ik.robot), ik.frames, ik.config, cfg, seed)
+        try:
+            hash(key)
+        except TypeError:  # an unhashable configuration: sampled as it comes
+            key = None
+        if progress is not None or key is None:
+            return sample(ik, cfg, seed, progress)
+        if key not in done:  # the robot kept with its workspace: its id is not reused
+            done[key] = (sample(ik, cfg, seed), ik.robot)
+        return copy.deepcopy(done[key][0])
+
+    excitation.foot_workspace = once
+    yield
+    excitation.foot_workspace = sample
+
+
 @pytest.fixture(autouse=True)
 def one_torch_thread():
     """Each test starts on one torch thread (as above): a learner that pins more (the skills' PPO pins 2 unless told)

@@ -1,5 +1,6 @@
 """`wresdyn fit` writes a run that `wresdyn eval` reads, and the ablation runs end to end (tiny sizes, resumable)."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -60,53 +61,58 @@ def test_fit_command_exports_a_run_that_eval_reads(tmp_path, tiny_data, model):
     assert f"| heldout | 1 | {pd:.4f}" in report and f"{metrics['improvement']:.1f}×" in report, report
 
 
-def test_ablation_cells_and_smoke_run(tmp_path, humanoid, tiny_data):
-    from wresdyn.data.dataset import load_dataset
-
-    full = AblationConfig()
-    names = [c["name"] for c in cells(full)]
-    assert len(names) == 2 * 2 * 2 * 3 + 3  # PPO and gradient: arch x kind x seed; parametric: seeds
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory, humanoid, tiny_data):
+    """The smoke ablation, run sequentially: one PPO, one gradient and one parametric cell at tiny sizes; the
+    dataset, the configuration, the output folder and the results."""
     data = load_dataset(tiny_data, robot=humanoid)
     cfg = AblationConfig(learners=("ppo", "gradient", "parametric"), archs=("mlp",), kinds=("torque",), seeds=(0,),
                          ppo_iterations=2, gradient_iterations=2, segments=2, solver="featherstone",
                          ppo_overrides={"env.num_worlds": 4, "ppo.num_steps_per_env": 4, "env.horizon": 8},
                          gradient_overrides={"windows": 2, "horizon_curriculum": (2,)})
-    results = run_ablation(humanoid, data, cfg, tmp_path, log=lambda *_: None)
+    out = tmp_path_factory.mktemp("ablation")
+    return data, cfg, out, run_ablation(humanoid, data, cfg, out, log=lambda *_: None)
+
+
+def test_ablation_cells_and_smoke_run(humanoid, smoke_run):
+    full = AblationConfig()
+    names = [c["name"] for c in cells(full)]
+    assert len(names) == 2 * 2 * 2 * 3 + 3  # PPO and gradient: arch x kind x seed; parametric: seeds
+    data, cfg, out, results = smoke_run
     assert [r["learner"] for r in results] == ["ppo", "gradient", "parametric"]
     for r in results:
         assert len(r["curve"]) == 2 and r["curve"][-1]["sim_steps"] > r["curve"][0]["sim_steps"] > 0
         assert np.isfinite(r["heldout"]["mean_abs_dq"]) and np.isfinite(r["ood"]["mean_abs_dq"])
-    table = (tmp_path / "table.md").read_text()
+    table = (out / "table.md").read_text()
     for r in results:  # one row per learner, stating its held-out error (one seed: no ± part)
         assert f"| {r['learner']} | {r['arch']} | {r['kind']} | 1 | {r['heldout']['mean_abs_dq']:.4f} |" in table, table
     # the curves: a line per learner in matplotlib's first three colours, on both panels of a wide figure
-    img = np.asarray(Image.open(tmp_path / "curves.png").convert("RGB")).astype(int)
+    img = np.asarray(Image.open(out / "curves.png").convert("RGB")).astype(int)
     assert img.shape[1] > 2 * img.shape[0]
     for colour in ((0x1F, 0x77, 0xB4), (0xFF, 0x7F, 0x0E), (0x2C, 0xA0, 0x2C)):
         assert (np.abs(img - colour).sum(axis=-1) < 30).sum() > 50, colour
     # a second run finds every cell done and only rewrites the summary
-    mtime = (tmp_path / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime
-    run_ablation(humanoid, data, cfg, tmp_path, log=lambda *_: None)
-    assert (tmp_path / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime == mtime
+    mtime = (out / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime
+    run_ablation(humanoid, data, cfg, out, log=lambda *_: None)
+    assert (out / "gradient-mlp-torque-s0" / "result.json").stat().st_mtime == mtime
 
 
-def test_parallel_cells_reproduce_the_sequential_run(tmp_path, humanoid, tiny_data):
-    """`--jobs`: cells in spawned worker processes (robot and data pickled) give the sequential figures."""
-    from wresdyn.data.dataset import load_dataset
-
-    data = load_dataset(tiny_data, robot=humanoid)
-    cfg = AblationConfig(learners=("gradient", "parametric"), archs=("mlp",), kinds=("torque",), seeds=(0,),
-                         gradient_iterations=3, segments=1, solver="featherstone",
-                         gradient_overrides={"windows": 2, "horizon_curriculum": (2,)})
-    seq = run_ablation(humanoid, data, cfg, tmp_path / "seq", log=lambda *_: None)
-    par = run_ablation(humanoid, data, cfg, tmp_path / "par", log=lambda *_: None, jobs=2)
-    assert [r["name"] for r in par] == [r["name"] for r in seq]
+def test_parallel_cells_reproduce_the_sequential_run(tmp_path, humanoid, smoke_run):
+    """`--jobs`: cells in spawned worker processes (robot and data pickled) give the sequential figures: the smoke
+    run's gradient and parametric cells (a cell depends on nothing but itself and the configuration's sizes)."""
+    data, cfg, out, results = smoke_run
+    par = run_ablation(humanoid, data, dataclasses.replace(cfg, learners=("gradient", "parametric")), tmp_path,
+                       log=lambda *_: None, jobs=2)
+    seq = [r for r in results if r["learner"] != "ppo"]
+    assert [r["name"] for r in par] == [r["name"] for r in seq] == ["gradient-mlp-torque-s0", "parametric-s0"]
     for a, b in zip(seq, par):
         assert b["heldout"]["mean_abs_dq"] == pytest.approx(a["heldout"]["mean_abs_dq"], rel=1e-6)
-    # the same table but for the wall-clock column (the 8th)
-    tables = [[row.split("|")[:8] + row.split("|")[9:] for row in (tmp_path / d / "table.md").read_text().splitlines()]
-              for d in ("seq", "par")]
-    assert tables[0] == tables[1]
+    # the same table but for the wall-clock column (the 8th) and the PPO row the parallel run has not
+    lines = [[row for row in (d / "table.md").read_text().splitlines() if not row.startswith("| ppo |")]
+             for d in (out, tmp_path)]
+    assert sum(row.startswith("|") for row in lines[1]) == 4  # header, rule, two cells
+    seq_table, par_table = ([row.split("|")[:8] + row.split("|")[9:] for row in rows] for rows in lines)
+    assert par_table == seq_table
 
 
 def test_ablation_config_refuses_bad_cells_at_construction(tmp_path, capsys):

@@ -119,18 +119,30 @@ from wresdyn.skills.plants import SimPlant
 from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, train_skill
 
 torch.set_num_threads(1)
-out, iterations, envs = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+out, envs = Path(sys.argv[1]), int(sys.argv[2])
 robot = load_robot(DEFAULT_ROBOT)
 floating = load_robot(robot.source, base="floating")
 motions = make_motions(robot, {"train": 1}, duration=1.0, rate_hz=500.0, seed=3, floating=floating, screen=False)
-cfg = SkillPPOConfig(iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
-                     num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
-n, device = rank_share(envs, cfg.device)
-for run in (out, out.with_name(out.name + "_second")):  # the second skill joins the first one's process group
-    env = TrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
-                      SkillTaskConfig.floor(decimation=5), seed=Ranks.from_env().rank, device=device)
-    s = train_skill(env, cfg, run, log=lambda *_: None)
-    print("SUMMARY", s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
+
+
+def skills(session, iterations):
+    cfg = SkillPPOConfig(iterations=iterations, num_steps_per_env=4, hidden_dims=(32, 32),
+                         num_mini_batches=1, num_learning_epochs=1, save_interval=1, torch_threads=1)
+    n, device = rank_share(envs, cfg.device)
+    for run in (out, out.with_name(out.name + "_second")):  # the second skill joins the first one's process group
+        env = TrackingEnv(SimPlant(floating, n, 500.0, 5, ground=True), motions["train"],
+                          SkillTaskConfig.floor(decimation=5), seed=Ranks.from_env().rank, device=device)
+        s = train_skill(env, cfg, run, log=lambda *_: None)
+        print("SUMMARY", session, s["processes"], s["env_steps_this_session"], s["iterations_this_session"], flush=True)
+
+
+skills("first", 2)
+torch.distributed.barrier()  # every rank done with the run before rank 0 takes its last checkpoint away
+if Ranks.from_env().main:
+    print("CHECKPOINTS", *sorted(p.name for p in out.glob("model_*.pt")), flush=True)
+    (out / "model_1.pt").unlink()  # killed after iteration 0: every rank resumes from model_0.pt
+torch.distributed.barrier()
+skills("resumed", 3)
 Ranks.from_env().close()
 """
 
@@ -138,27 +150,27 @@ Ranks.from_env().close()
 def test_torchrun_trains_a_floor_skill_on_two_processes_and_resumes(tmp_path):
     """The floor benchmark's skill PPO data-parallel as the residual's: each process its share of the worlds, rank 0
     writes the run, every rank resumes from the same checkpoint, and a second skill of the same processes joins their
-    process group."""
+    process group. One launch: the resume reads the checkpoints from disk in the ranks' next runners; a resume in a
+    fresh launch (its process group started by the resumed runner) is the residual's torchrun test above, through the
+    same runner and ``resume_runner``."""
     script = tmp_path / "skill.py"
     script.write_text(SKILL_SCRIPT)
     run = tmp_path / "skill"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script), str(run)]
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.getcwd())
-    res = subprocess.run([*cmd, "2", "4"], capture_output=True, text=True, env=env, timeout=600)
+    res = subprocess.run([*cmd, "4"], capture_output=True, text=True, env=env, timeout=600)
     assert res.returncode == 0, _failure(res)
     assert "Synchronizing parameters for rank 1" in res.stdout
     # both ranks ran 2 iterations of 2 worlds x 4 steps, and count both ranks' env-steps; then a second skill
-    assert res.stdout.count("SUMMARY 2 32 2") == 4, res.stdout[-2000:]
+    assert res.stdout.count("SUMMARY first 2 32 2") == 4, res.stdout[-2000:]
+    assert "CHECKPOINTS model_0.pt model_1.pt\n" in res.stdout
     assert (tmp_path / "skill_second" / "policy.pt").is_file()
+    # the resumed session: 2 iterations from model_0.pt on every rank, the finished second skill 1 from its model_1.pt
+    assert res.stdout.count("SUMMARY resumed 2 32 2") == 2 and (run / "model_2.pt").is_file(), res.stdout[-2000:]
+    assert res.stdout.count("SUMMARY resumed 2 16 1") == 2
     s = json.loads((run / "train_summary.json").read_text())
     assert s["processes"] == 2 and s["collect_s_per_iteration"] > 0 and s["learn_s_per_iteration"] > 0
-    assert sorted(p.name for p in run.glob("model_*.pt")) == ["model_0.pt", "model_1.pt"]
     assert (run / "policy.pt").is_file()
-    (run / "model_1.pt").unlink()  # killed after iteration 0: every rank resumes from model_0.pt
-    res = subprocess.run([*cmd, "3", "4"], capture_output=True, text=True, env=env, timeout=600)
-    assert res.returncode == 0, _failure(res)
-    assert res.stdout.count("SUMMARY 2 32 2") == 2 and (run / "model_2.pt").is_file()
-    assert res.stdout.count("SUMMARY 2 16 1") == 2  # the finished second skill goes on from its model_1.pt
 
 
 def test_learners_stop_at_the_validation_target(robot, data, tmp_path):

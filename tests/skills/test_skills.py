@@ -197,6 +197,7 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     out = tmp_path / "deploy"
     args = ["deploy", str(data_path), "--out", str(out), "--calibrated", str(cal), "--delta", str(delta),
             "--iterations", "2", "--finetune", "1", "--num-worlds", "4", "--oracle-num-worlds", "3", "--finetune-std", "0.6",
+            "--duration", "1.0",  # motions of 1 s (2 s by default): nothing checked below needs longer ones
             "--ppo.torch-threads", "1", "--train-per-family", "1", "--heldout-per-family", "1"]  # one thread: conftest.py says why
     assert main(args) == 0
     # the compile is announced, for what this run needs: both corrections given, so no fitting variants
@@ -225,8 +226,8 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
-    # --quiet: nothing printed, OUT/deploy.log keeps the lines of both runs
-    assert main(args + ["--quiet"]) == 0
+    # --quiet: nothing printed, OUT/deploy.log keeps the lines of both runs (the animation, written above, not again)
+    assert main(args + ["--quiet", "--no-animation"]) == 0
     assert capsys.readouterr().out == ""
     assert (out / "deploy.log").read_text().count("wresdyn deploy: skills on the stand") == 3
 
