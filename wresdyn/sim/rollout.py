@@ -22,7 +22,7 @@ from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .simulator import DivergenceLimits, Simulator
 
-__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device"]
+__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device", "SYNC_EVERY"]
 
 
 @dataclass
@@ -48,6 +48,31 @@ def policy_device(policy) -> torch.device | None:
     return None
 
 
+SYNC_EVERY = 32
+"""Steps between the host's reads of a replay's divergence state (without gradients). Reading it waits for the device
+to finish every step queued so far, so reading at each step bounds a GPU replay by the host's round trip; the state
+stays on the device and is updated without branches in between. A world that diverges runs on in the solver
+unchecked until the next read, which changes no output: its outputs are frozen at every step, and the worlds of a
+simulator without a floor do not interact (SolverReplay, Featherstone and MuJoCo step each world on its own; with a
+floor, a non-finite world could take contact slots of the others on mujoco_warp, so there it is reset every step).
+32 makes the reads 3 % of the steps, and an error raised at most 31 steps late in wall time, never in what it says."""
+
+
+def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, q: torch.Tensor, qd: torch.Tensor,
+          on_diverge: str) -> None:
+    """The host's read of the divergence state (dead (B,) bool, diverged_at (B,) long): raise for the earliest
+    divergence, or put the diverged worlds' held state (q, q̇ (B, n)) back into the solver, keeping non-finite values
+    out of it. The only step of a non-gradient rollout that waits for the device."""
+    if not dead.any():
+        return
+    if on_diverge == "raise":  # the lowest world among those diverged at the earliest step, as a per-step check
+        w = int(torch.where(dead, diverged_at, diverged_at.max() + 1).argmin())
+        k = int(diverged_at[w])
+        raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step {k} "
+                                 f"(t = {k * sim.dt:.3f} s)")
+    sim.set_state_where(dead, q, qd)
+
+
 def _policy_kind(policy, kind: str | None) -> str:
     if kind is not None:
         return kind
@@ -63,7 +88,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
             truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
             noise: torch.Tensor | None = None, limits: DivergenceLimits = DivergenceLimits(),
-            on_diverge: str = "freeze") -> Rollout:
+            on_diverge: str = "freeze", sync_every: int = SYNC_EVERY) -> Rollout:
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
@@ -83,7 +108,10 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             ``generator`` at each step (a captured CUDA graph reads them from a fixed buffer).
         limits: When a world counts as diverged (``max_error`` against the window's recording).
         on_diverge: ``"freeze"`` (hold the last sane state, report in ``diverged_at``) or ``"raise"``
-            (:class:`~wresdyn.errors.SimulationDiverged`).
+            (:class:`~wresdyn.errors.SimulationDiverged`, raised at the next sync point with the world and step
+            of the earliest divergence).
+        sync_every: Without ``grad``, read the divergence state on the host every this many steps and after the
+            last (see :data:`SYNC_EVERY`); a simulator with a floor reads it at every step.
     """
     b, steps = window.cmd.shape[0], window.steps
     if b != sim.num_worlds:
@@ -99,6 +127,9 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
     q, qd, qdd = window.q[:, 0], window.qd[:, 0], window.qdd[:, 0]
     qs, qds, actions = [q], [qd], []
+    if sync_every < 1:
+        raise ValueError(f"sync_every must be >= 1 (got {sync_every})")
+    every = 1 if sim.ground else sync_every
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
     if not grad:
@@ -124,17 +155,14 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         else:
             q_new, qd_new = sim.step(target, tau)
             bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
-            if bad.any():
-                if on_diverge == "raise":
-                    w = int(bad.nonzero()[0])
-                    raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step "
-                                             f"{k + 1} (t = {(k + 1) * sim.dt:.3f} s)")
-                dead |= bad
-                diverged_at[bad] = k + 1
-            if dead.any():  # frozen worlds hold their last sane state; keep NaN out of the solver and the policy
-                q_new = torch.where(dead[:, None], q, q_new)
-                qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
-                sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
+            dead |= bad
+            diverged_at.masked_fill_(bad, k + 1)
+            # frozen worlds hold their last sane state with zero velocity at every step (what the outputs and the
+            # policy see); the solver's own state of them is reset at the sync points only (see SYNC_EVERY)
+            q_new = torch.where(dead[:, None], q, q_new)
+            qd_new = qd_new.masked_fill(dead[:, None], 0.0)
+            if (k + 1) % every == 0 or k + 1 == steps:
+                _sync(sim, dead, diverged_at, q_new, qd_new, on_diverge)
         qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
