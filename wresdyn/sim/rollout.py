@@ -49,28 +49,42 @@ def policy_device(policy) -> torch.device | None:
 
 
 SYNC_EVERY = 32
-"""Steps between the host's reads of a replay's divergence state (without gradients). Reading it waits for the device
-to finish every step queued so far, so reading at each step bounds a GPU replay by the host's round trip; the state
-stays on the device and is updated without branches in between. A world that diverges runs on in the solver
-unchecked until the next read, which changes no output: its outputs are frozen at every step, and the worlds of a
-simulator without a floor do not interact (SolverReplay, Featherstone and MuJoCo step each world on its own; with a
-floor, a non-finite world could take contact slots of the others on mujoco_warp, so there it is reset every step).
-32 makes the reads 3 % of the steps, and an error raised at most 31 steps late in wall time, never in what it says."""
+"""Steps between the host's reads of a GPU replay's divergence state (without gradients). Reading it waits for the
+device to finish every step queued so far, so reading at each step bounds a GPU replay by the host's round trip; in
+between, the state stays on the device and is updated without branches. A world that diverges runs on in the solver
+unchecked until the next read, which changes no output: its outputs are held from the step it diverged (at every step
+where a policy observes them, else once at the end), and the worlds of a simulator without a floor do not interact
+(SolverReplay, Featherstone and MuJoCo step each world on its own). 32 makes the reads 3 % of the steps; an error comes
+at most 31 steps later in wall time, and says the same. On the CPU a read waits for nothing, while the branchless hold
+would cost a few torch calls per step, so the CPU reads at every step and holds only once a world has diverged; so
+does a simulator with a floor, where a non-finite world could take contact slots of the others on mujoco_warp."""
 
 
-def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, q: torch.Tensor, qd: torch.Tensor,
-          on_diverge: str) -> None:
-    """The host's read of the divergence state (dead (B,) bool, diverged_at (B,) long): raise for the earliest
-    divergence, or put the diverged worlds' held state (q, q̇ (B, n)) back into the solver, keeping non-finite values
-    out of it. The only step of a non-gradient rollout that waits for the device."""
+def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, qs: list[torch.Tensor],
+          on_diverge: str) -> bool:
+    """The host's read of the divergence state (dead (B,) bool, diverged_at (B,) long), the one wait for the device of a
+    non-gradient rollout: raise for the earliest divergence, or put each diverged world's held state (its positions
+    ``qs`` (B, n) before the step it diverged at, zero velocity) back into the solver, keeping non-finite values out of
+    it. Returns whether any world has diverged."""
     if not dead.any():
-        return
+        return False
     if on_diverge == "raise":  # the lowest world among those diverged at the earliest step, as a per-step check
         w = int(torch.where(dead, diverged_at, diverged_at.max() + 1).argmin())
         k = int(diverged_at[w])
         raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step {k} "
                                  f"(t = {k * sim.dt:.3f} s)")
-    sim.set_state_where(dead, q, qd)
+    ids = dead.nonzero().squeeze(-1)
+    held = torch.stack([qs[d - 1][w] for w, d in zip(ids.tolist(), diverged_at[ids].tolist())])
+    sim.set_state(ids, held, torch.zeros_like(held))
+    return True
+
+
+def _hold(q: torch.Tensor, qd: torch.Tensor, diverged_at: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Outputs q, q̇ (B, L + 1, n) with each diverged world held from its step ``diverged_at`` (B,) on: the positions
+    before it, zero velocity. The same values a hold at every step gives (a held step repeats the one before)."""
+    held = q.gather(1, (diverged_at - 1).clamp(min=0)[:, None, None].expand(-1, 1, q.shape[2]))
+    after = (diverged_at[:, None] >= 0) & (torch.arange(q.shape[1], device=q.device)[None] >= diverged_at[:, None])
+    return torch.where(after[..., None], held, q), qd.masked_fill(after[..., None], 0.0)
 
 
 def _policy_kind(policy, kind: str | None) -> str:
@@ -88,7 +102,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
             truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
             noise: torch.Tensor | None = None, limits: DivergenceLimits = DivergenceLimits(),
-            on_diverge: str = "freeze", sync_every: int = SYNC_EVERY) -> Rollout:
+            on_diverge: str = "freeze", sync_every: int | None = None) -> Rollout:
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
@@ -111,7 +125,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             (:class:`~wresdyn.errors.SimulationDiverged`, raised at the next sync point with the world and step
             of the earliest divergence).
         sync_every: Without ``grad``, read the divergence state on the host every this many steps and after the
-            last (see :data:`SYNC_EVERY`); a simulator with a floor reads it at every step.
+            last; default :data:`SYNC_EVERY` on a GPU, 1 on the CPU. A simulator with a floor reads it at every step.
     """
     b, steps = window.cmd.shape[0], window.steps
     if b != sim.num_worlds:
@@ -127,11 +141,13 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
     q, qd, qdd = window.q[:, 0], window.qd[:, 0], window.qdd[:, 0]
     qs, qds, actions = [q], [qd], []
-    if sync_every < 1:
+    if sync_every is not None and sync_every < 1:
         raise ValueError(f"sync_every must be >= 1 (got {sync_every})")
-    every = 1 if sim.ground else sync_every
+    every = 1 if sim.ground else sync_every or (SYNC_EVERY if sim.device.type == "cuda" else 1)
+    hold_in_loop = policy is not None  # the policy observes the held state; else the outputs are held at the end
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
+    any_dead = False
     if not grad:
         sim.set_state(None, q, qd)
     for k in range(steps):
@@ -157,12 +173,11 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
             dead |= bad
             diverged_at.masked_fill_(bad, k + 1)
-            # frozen worlds hold their last sane state with zero velocity at every step (what the outputs and the
-            # policy see); the solver's own state of them is reset at the sync points only (see SYNC_EVERY)
-            q_new = torch.where(dead[:, None], q, q_new)
-            qd_new = qd_new.masked_fill(dead[:, None], 0.0)
             if (k + 1) % every == 0 or k + 1 == steps:
-                _sync(sim, dead, diverged_at, q_new, qd_new, on_diverge)
+                any_dead = _sync(sim, dead, diverged_at, qs, on_diverge)
+            if hold_in_loop and (any_dead or every > 1):  # a diverged world holds its last sane state, at rest
+                held = dead[:, None]
+                q_new, qd_new = torch.where(held, q, q_new), qd_new.masked_fill(held, 0.0)
         qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
@@ -171,7 +186,10 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             q, qd, qdd = q.detach(), qd.detach(), qdd.detach()
             if isinstance(getattr(policy, "hidden", None), torch.Tensor):
                 policy.hidden = policy.hidden.detach()
-    return Rollout(torch.stack(qs, 1), torch.stack(qds, 1), torch.stack(actions, 1) if actions else None, diverged_at)
+    q_out, qd_out = torch.stack(qs, 1), torch.stack(qds, 1)
+    if any_dead and not hold_in_loop:
+        q_out, qd_out = _hold(q_out, qd_out, diverged_at)
+    return Rollout(q_out, qd_out, torch.stack(actions, 1) if actions else None, diverged_at)
 
 
 def replay(robot, q_cmd: np.ndarray, q0: np.ndarray, qd0: np.ndarray | None = None, dt: float = 0.002,
