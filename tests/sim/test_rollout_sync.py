@@ -1,5 +1,5 @@
 """The non-gradient rollout reads its divergence state on the host only every ``sync_every`` steps (``SYNC_EVERY`` on
-a GPU; the CPU's default, every step, is checked too): its outputs (q, q̇, actions, diverged_at), the simulator's final
+a GPU; the CPU's default with a policy, every step, is checked too): its outputs (q, q̇, actions, diverged_at), the simulator's final
 state and its error message stay bit-identical to checking every step.
 
 The reference is a frozen copy of the rollout that read the host at every step (two reads: any new divergence, any

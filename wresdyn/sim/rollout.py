@@ -49,15 +49,16 @@ def policy_device(policy) -> torch.device | None:
 
 
 SYNC_EVERY = 32
-"""Steps between the host's reads of a GPU replay's divergence state (without gradients). Reading it waits for the
-device to finish every step queued so far, so reading at each step bounds a GPU replay by the host's round trip; in
-between, the state stays on the device and is updated without branches. A world that diverges runs on in the solver
-unchecked until the next read, which changes no output: its outputs are held from the step it diverged (at every step
-where a policy observes them, else once at the end), and the worlds of a simulator without a floor do not interact
+"""Steps between the host's reads of a replay's divergence state (without gradients). Reading it waits for the device
+to finish every step queued so far, so reading at each step bounds a GPU replay by the host's round trip; in between,
+the state stays on the device and is updated without branches. A world that diverges runs on in the solver unchecked
+until the next read, which changes no output: its outputs are held from the step it diverged (at every step where a
+policy observes them, else once at the end), and the worlds of a simulator without a floor do not interact
 (SolverReplay, Featherstone and MuJoCo step each world on its own). 32 makes the reads 3 % of the steps; an error comes
-at most 31 steps later in wall time, and says the same. On the CPU a read waits for nothing, while the branchless hold
-would cost a few torch calls per step, so the CPU reads at every step and holds only once a world has diverged; so
-does a simulator with a floor, where a non-finite world could take contact slots of the others on mujoco_warp."""
+at most 31 steps later in wall time, and says the same. On the CPU a read waits for nothing, so with a policy the CPU
+reads at every step and holds only once a world has diverged (the branchless hold's torch calls cost ~5 % of a step
+there). A simulator with a floor reads and resets at every step: a non-finite world could take contact slots of the
+others on mujoco_warp."""
 
 
 def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, qs: list[torch.Tensor],
@@ -125,7 +126,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             (:class:`~wresdyn.errors.SimulationDiverged`, raised at the next sync point with the world and step
             of the earliest divergence).
         sync_every: Without ``grad``, read the divergence state on the host every this many steps and after the
-            last; default :data:`SYNC_EVERY` on a GPU, 1 on the CPU. A simulator with a floor reads it at every step.
+            last; default :data:`SYNC_EVERY`, 1 on the CPU with a policy. A simulator with a floor reads it at every
+            step.
     """
     b, steps = window.cmd.shape[0], window.steps
     if b != sim.num_worlds:
@@ -143,7 +145,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
     qs, qds, actions = [q], [qd], []
     if sync_every is not None and sync_every < 1:
         raise ValueError(f"sync_every must be >= 1 (got {sync_every})")
-    every = 1 if sim.ground else sync_every or (SYNC_EVERY if sim.device.type == "cuda" else 1)
+    every = 1 if sim.ground else sync_every or (SYNC_EVERY if sim.device.type == "cuda" or policy is None else 1)
     hold_in_loop = policy is not None  # the policy observes the held state; else the outputs are held at the end
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
