@@ -56,28 +56,35 @@ until the next read, which changes no output: its outputs are held from the step
 policy observes them, else once at the end), and the worlds of a simulator without a floor do not interact
 (SolverReplay, Featherstone and MuJoCo step each world on its own). 32 makes the reads 3 % of the steps; an error comes
 at most 31 steps later in wall time, and says the same. On the CPU a read waits for nothing, so with a policy the CPU
-reads at every step and holds only once a world has diverged (the branchless hold's torch calls cost ~5 % of a step
-there). A simulator with a floor reads and resets at every step: a non-finite world could take contact slots of the
+reads at every step and holds only once a world has diverged (the branchless hold's torch calls cost 6-8 % of a
+replay there). A simulator with a floor reads and resets at every step: a non-finite world could take contact slots of the
 others on mujoco_warp."""
 
 
-def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, qs: list[torch.Tensor],
-          on_diverge: str) -> bool:
+def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, qs: list[torch.Tensor], since: int,
+          held: torch.Tensor | None, on_diverge: str) -> torch.Tensor | None:
     """The host's read of the divergence state (dead (B,) bool, diverged_at (B,) long), the one wait for the device of a
     non-gradient rollout: raise for the earliest divergence, or put each diverged world's held state (its positions
-    ``qs`` (B, n) before the step it diverged at, zero velocity) back into the solver, keeping non-finite values out of
-    it. Returns whether any world has diverged."""
+    before the step it diverged at, zero velocity) back into the solver, keeping non-finite values out of it.
+
+    ``qs``: the positions so far, each (B, n); ``since``: how many of them the last read saw; ``held`` (B, n): the
+    diverged worlds' held positions as of the last read (``None`` before any). Returns them updated, or ``None`` while
+    no world has diverged."""
     if not dead.any():
-        return False
+        return None
     if on_diverge == "raise":  # the lowest world among those diverged at the earliest step, as a per-step check
         w = int(torch.where(dead, diverged_at, diverged_at.max() + 1).argmin())
         k = int(diverged_at[w])
         raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step {k} "
                                  f"(t = {k * sim.dt:.3f} s)")
+    fresh = diverged_at - 1 >= since  # diverged since the last read: held from a position it has not seen
+    chunk = torch.stack(qs[since:])  # (C, B, n)
+    at = (diverged_at - 1 - since).clamp(0, len(chunk) - 1)
+    new = chunk.gather(0, at[None, :, None].expand(1, -1, chunk.shape[2]))[0]
+    held = new if held is None else torch.where(fresh[:, None], new, held)
     ids = dead.nonzero().squeeze(-1)
-    held = torch.stack([qs[d - 1][w] for w, d in zip(ids.tolist(), diverged_at[ids].tolist())])
-    sim.set_state(ids, held, torch.zeros_like(held))
-    return True
+    sim.set_state(ids, held[ids], torch.zeros_like(held[ids]))
+    return held
 
 
 def _hold(q: torch.Tensor, qd: torch.Tensor, diverged_at: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -149,7 +156,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
     hold_in_loop = policy is not None  # the policy observes the held state; else the outputs are held at the end
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
-    any_dead = False
+    held, since = None, 0  # the diverged worlds' held positions (B, n) and how many of qs the last read saw
     if not grad:
         sim.set_state(None, q, qd)
     for k in range(steps):
@@ -176,10 +183,10 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             dead |= bad
             diverged_at.masked_fill_(bad, k + 1)
             if (k + 1) % every == 0 or k + 1 == steps:
-                any_dead = _sync(sim, dead, diverged_at, qs, on_diverge)
-            if hold_in_loop and (any_dead or every > 1):  # a diverged world holds its last sane state, at rest
-                held = dead[:, None]
-                q_new, qd_new = torch.where(held, q, q_new), qd_new.masked_fill(held, 0.0)
+                held, since = _sync(sim, dead, diverged_at, qs, since, held, on_diverge), len(qs)
+            if hold_in_loop and (held is not None or every > 1):  # a diverged world holds its last sane state, at rest
+                mask = dead[:, None]
+                q_new, qd_new = torch.where(mask, q, q_new), qd_new.masked_fill(mask, 0.0)
         qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
@@ -189,7 +196,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             if isinstance(getattr(policy, "hidden", None), torch.Tensor):
                 policy.hidden = policy.hidden.detach()
     q_out, qd_out = torch.stack(qs, 1), torch.stack(qds, 1)
-    if any_dead and not hold_in_loop:
+    if held is not None and not hold_in_loop:
         q_out, qd_out = _hold(q_out, qd_out, diverged_at)
     return Rollout(q_out, qd_out, torch.stack(actions, 1) if actions else None, diverged_at)
 
