@@ -3,7 +3,7 @@ shared and its load drifts: alternating gives each the same load). The validatio
 without gradients, PD only and with the fit's default residual network at its start. "after" is the CPU's default (a
 host read at every step), "after_sync32" the GPU's (``sync_every=SYNC_EVERY``), forced on the CPU.
 
-    PYTHONPATH=TREE OMP_NUM_THREADS=1 python time_ab.py data/dataset.npz OLD_ROLLOUT_PY --rounds 8
+    PYTHONPATH=TREE OMP_NUM_THREADS=1 python time_ab.py data/dataset.npz OLD_ROLLOUT_PY --rounds 8 [--device cuda:0]
 
 ``OLD_ROLLOUT_PY``: the earlier ``wresdyn/sim/rollout.py`` (``git show 9a9c8a5:wresdyn/sim/rollout.py``), loaded as a
 module of the same package, so everything but the rollout is the tree's.
@@ -35,6 +35,7 @@ def main() -> None:
     p.add_argument("old")
     p.add_argument("--rounds", type=int, default=8)
     p.add_argument("--solver", default="replay")
+    p.add_argument("--device", default="cpu", help="cpu or cuda:0 (the network on it too, as a fit puts it)")
     args = p.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)
@@ -44,9 +45,9 @@ def main() -> None:
     robot = load_robot(DEFAULT_ROBOT)
     ds = load_dataset(args.data, robot=robot)
     val = ds.split("validation")
-    sim = Simulator(robot, len(val), 1.0 / ds.rate_hz, solver=args.solver, device="cpu")
+    sim = Simulator(robot, len(val), 1.0 / ds.rate_hz, solver=args.solver, device=args.device)
     window = TrajectoryBank(val, sim.device, 0.0, servo_goal_accel(robot, None, 1.0 / ds.rate_hz, sim.device)).whole()
-    policy = build_policy(robot, ResidualConfig(), *obs_stats(ds.split("train"))).eval()
+    policy = build_policy(robot, ResidualConfig(), *obs_stats(ds.split("train"))).eval().to(sim.device)
     print(f"{len(val)} trajectories, {window.steps} steps, solver {sim.solver_kind}, torch threads "
           f"{torch.get_num_threads()}, sync_every {after.SYNC_EVERY}")
     for case, pol in (("pd", None), ("residual", policy)):
@@ -64,6 +65,8 @@ def main() -> None:
                 for name in order[r % len(order):] + order[:r % len(order)]:  # each goes first in turn
                     t0 = time.perf_counter()
                     runs[name](sim, window, pol)
+                    if sim.device.type == "cuda":
+                        torch.cuda.synchronize()
                     times[name].append(time.perf_counter() - t0)
         for name, t in times.items():
             print(f"{case} {name}: " + " ".join(f"{x:.3f}" for x in t) + f" s; median {statistics.median(t):.3f} s, "
