@@ -49,16 +49,17 @@ def policy_device(policy) -> torch.device | None:
 
 
 SYNC_EVERY = 32
-"""Steps between the host's reads of a replay's divergence state (without gradients). Reading it waits for the device
-to finish every step queued so far, so reading at each step bounds a GPU replay by the host's round trip; in between,
-the state stays on the device and is updated without branches. A world that diverges runs on in the solver unchecked
-until the next read, which changes no output: its outputs are held from the step it diverged (at every step where a
-policy observes them, else once at the end), and the worlds of a simulator without a floor do not interact
-(SolverReplay, Featherstone and MuJoCo step each world on its own). 32 makes the reads 3 % of the steps; an error comes
-at most 31 steps later in wall time, and says the same. On the CPU a read waits for nothing, so with a policy the CPU
-reads at every step and holds only once a world has diverged (the branchless hold's torch calls cost 6-8 % of a
-replay there). A simulator with a floor reads and resets at every step: a non-finite world could take contact slots of the
-others on mujoco_warp."""
+"""Steps between the host's reads of a PD replay's divergence state (without gradients, without a policy). In
+between, the state stays on the device and is updated without branches. A world that diverges runs on in the solver
+unchecked until the next read, which changes no output: its outputs are held from the step it diverged, once at the
+end, and the worlds of a simulator without a floor do not interact (SolverReplay, Featherstone and MuJoCo step each
+world on its own). An error comes at most 31 steps later in wall time, and says the same. With a policy the replay
+reads at every step and holds a world only once it has diverged: the branchless hold, which the policy would need at
+every step, costs more than the reads save, on an H200 as on the CPU (the 4 validation trajectories of the shipped
+dataset, 1999 steps: PD 0.97 of the per-step reads' time, with the residual network 1.06-1.43 slower over 3 rounds;
+CPU 6-8 % slower; benchmarks/results/speed/validation_sync/): a GPU replay is bound by the host's launches of each
+step (0.34 ms a step PD, 0.6 ms with the network), not by its reads. A simulator with a floor reads and resets at
+every step: a non-finite world could take contact slots of the others on mujoco_warp."""
 
 
 def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, qs: list[torch.Tensor], since: int,
@@ -133,8 +134,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             (:class:`~wresdyn.errors.SimulationDiverged`, raised at the next sync point with the world and step
             of the earliest divergence).
         sync_every: Without ``grad``, read the divergence state on the host every this many steps and after the
-            last; default :data:`SYNC_EVERY`, 1 on the CPU with a policy. A simulator with a floor reads it at every
-            step.
+            last; default :data:`SYNC_EVERY` for a PD replay, 1 with a policy. A simulator with a floor reads it at
+            every step.
     """
     b, steps = window.cmd.shape[0], window.steps
     if b != sim.num_worlds:
@@ -152,7 +153,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
     qs, qds, actions = [q], [qd], []
     if sync_every is not None and sync_every < 1:
         raise ValueError(f"sync_every must be >= 1 (got {sync_every})")
-    every = 1 if sim.ground else sync_every or (SYNC_EVERY if sim.device.type == "cuda" or policy is None else 1)
+    every = 1 if sim.ground else sync_every or (SYNC_EVERY if policy is None else 1)
     hold_in_loop = policy is not None  # the policy observes the held state; else the outputs are held at the end
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
