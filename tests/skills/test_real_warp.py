@@ -166,10 +166,10 @@ def test_the_captured_graph_replays_the_launched_step(floating, quiet_floor):
 @pytest.mark.slow
 def test_on_the_floor_it_follows_the_mujoco_c_real_robot(quiet_floor, kick):
     """A held-out kick the soles carry, noise off: the same model, delay line, torque limits and floor in float32.
-    Measured on Warp's CPU device (either constraint budget of the floor: the same figures): joints 6.6e-5 rad, base
-    9.9e-5 m apart up to the lift at 1.2 s (float32 round-off, largest at the first step, where the stiction and
-    contact solve from a cold start); then 1.3e-3 rad and 8.1e-4 m by the landing at 2.0 s. Played open loop on the
-    real robot, the kick tips over its standing sole from 1.1 s (base 4.7 cm low at 2.0 s) and falls later: a
+    Measured on Warp's CPU device (either constraint budget of the floor: the same figures): joints 6.6e-5 rad apart
+    at the first step (float32 round-off, the stiction and contact solved from a cold start), 8.1e-5 rad over the
+    first second, 1.2e-4 rad and base 9.9e-5 m up to the lift at 1.2 s; 1.3e-3 rad and 8.1e-4 m by the landing at
+    2.0 s, the final joints 1.2e-3 rad and base twist 3.1e-3 apart. Played open loop on the real robot, the kick tips over its standing sole from 1.1 s (base 4.7 cm low at 2.0 s) and falls later: a
     tipping robot amplifies any difference (MuJoCo C against itself, every joint started 1e-5 rad apart, parts 4x
     between 1.5 and 2.1 s, as the two plants do). An unscreened 0.6 s kick parts by 5.4e-4 rad from 0.3 s on the
     mismatch's floor (friction 0.7, time constant 0.03 s), 7.9e-5 rad on the nominal one: its soles slip, a stick-slip
@@ -228,8 +228,8 @@ def test_the_training_environment_sees_the_same_robot(quiet_floor, kick):
 @pytest.mark.slow
 def test_the_floor_benchmark_trains_the_oracle_on_it(tmp_path, humanoid, data):
     """``oracle_plant = "mujoco_warp"``: (d) trains on the mujoco_warp robot (the benchmark's log and run say so)
-    and is deployed, like every policy, on MuJoCo C. The motions are drawn unscreened: the soles carry none of a
-    family's draws in 0.5 s, and this test is of the plumbing, not of what the policies learn."""
+    and is deployed, like every policy, on MuJoCo C. The motions are drawn unscreened: the soles carry no weight shift
+    drawn in 0.5 s, and this test is of the plumbing, not of what the policies learn."""
     from wresdyn.experiments.skills import run_benchmark
     from wresdyn.skills.skill_config import SkillPPOConfig
 
