@@ -168,10 +168,11 @@ def test_on_the_floor_it_follows_the_mujoco_c_real_robot(quiet_floor, kick):
     """A held-out kick the soles carry, noise off: the same model, delay line, torque limits and floor in float32.
     Measured on Warp's CPU device (either constraint budget of the floor: the same figures): joints 6.6e-5 rad apart
     at the first step (float32 round-off, the stiction and contact solved from a cold start), 8.1e-5 rad over the
-    first second, 1.2e-4 rad and base 9.9e-5 m up to the lift at 1.2 s; 1.3e-3 rad and 8.1e-4 m by the landing at
-    2.0 s, the final joints 1.2e-3 rad and base twist 3.1e-3 apart. Played open loop on the real robot, the kick tips over its standing sole from 1.1 s (base 4.7 cm low at 2.0 s) and falls later: a
-    tipping robot amplifies any difference (MuJoCo C against itself, every joint started 1e-5 rad apart, parts 4x
-    between 1.5 and 2.1 s, as the two plants do). An unscreened 0.6 s kick parts by 5.4e-4 rad from 0.3 s on the
+    first second, 1.2e-4 rad and base 9.9e-5 m up to the lift at 1.2 s; 1.3e-3 rad and 7.9e-4 m by the landing
+    at 2.0 s, the final joints 1.2e-3 rad and base twist 3.1e-3 apart. Played open loop on the real robot, the kick
+    tips over its standing sole from 1.1 s (base 4.7 cm low at 2.0 s) and falls later: a tipping robot amplifies
+    any difference (MuJoCo C against itself, every joint started 1e-5 rad apart, parts 4x between 1.5 and 2.1 s, as
+    the two plants do). An unscreened 0.6 s kick parts by 5.4e-4 rad from 0.3 s on the
     mismatch's floor (friction 0.7, time constant 0.03 s), 7.9e-5 rad on the nominal one: its soles slip, a stick-slip
     edge where float32 decides. The five held-out floor motions stay within 1.1e-4 rad over their first second and part
     as they fall (benchmarks/results/real_warp_parity/)."""
