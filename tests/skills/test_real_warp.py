@@ -38,11 +38,26 @@ def quiet_floor(floating, shipped_mismatch):
     return skill_runs.quiet_real(floating, shipped_mismatch)
 
 
+KICK_S = 3.0
+"""Length of the drawn kick [s]: the screening finds no kick the flat soles carry in 2.5 s or less (the weight
+transfer before the lift alone takes 1.0-1.4 s)."""
+KICK_PLAYED_S = 2.1
+"""The part of it the floor tests play [s]: seed 3's left sole lifts at 1.23 s and lands at 2.00 s."""
+LIFT_S = 1.2
+"""Up to here [s] both soles of the kick stay down."""
+
+
 @pytest.fixture(scope="module")
 def kick(humanoid, floating):
-    """A held-out kick (a foot lifts and lands: contact made and broken), 0.6 s."""
-    return make_motions(humanoid, {"heldout": 1}, duration=0.6, rate_hz=RATE, seed=3, floating=floating,
-                        families=("kick",), held_out=())["heldout"]
+    """A held-out kick the soles carry (screened), cut to its first :data:`KICK_PLAYED_S`: the weight moves over
+    one sole, the other lifts and lands (contact broken and made), the rest of the kick's hold left out to keep the
+    slow tests short."""
+    m = make_motions(humanoid, {"heldout": 1}, duration=KICK_S, rate_hz=RATE, seed=3, floating=floating,
+                     families=("kick",), held_out=())["heldout"][0]
+    n = int(round(KICK_PLAYED_S * RATE)) + 1
+    lifted = np.flatnonzero(~m.planted[:n].all(-1))
+    assert m.screen and len(lifted) and lifted[-1] < n - 1, "the cut kick must lift a sole and land it"
+    return [dataclasses.replace(m, q=m.q[:n], qd=m.qd[:n], feet=m.feet[:n], base=m.base[:n], planted=m.planted[:n])]
 
 
 def _play(plants, motions, floor: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -150,17 +165,32 @@ def test_the_captured_graph_replays_the_launched_step(floating, quiet_floor):
 
 @pytest.mark.slow
 def test_on_the_floor_it_follows_the_mujoco_c_real_robot(quiet_floor, kick):
-    """A held-out kick, noise off: the same model, delay line, torque limits and floor in float32. Measured over the
-    0.6 s on Warp's CPU device: joints 6e-5 rad, base 3e-5 m apart (float32 round-off, largest at the first step,
-    where the stiction and contact solve from a cold start); the five held-out floor motions stay within 1.1e-4 rad
-    over their first second and part as they fall (benchmarks/results/real_warp_parity/)."""
+    """A held-out kick the soles carry, noise off: the same model, delay line, torque limits and floor in float32.
+    Measured on Warp's CPU device (either constraint budget of the floor: the same figures): joints 6.6e-5 rad apart
+    at the first step (float32 round-off, the stiction and contact solved from a cold start), 8.1e-5 rad over the
+    first second, 1.2e-4 rad and base 9.9e-5 m up to the lift at 1.2 s; 1.3e-3 rad and 7.9e-4 m by the landing
+    at 2.0 s, the final joints 1.2e-3 rad and base twist 3.1e-3 apart. Played open loop on the real robot, the kick
+    tips over its standing sole from 1.1 s (base 4.7 cm low at 2.0 s) and falls later: a tipping robot amplifies
+    any difference (MuJoCo C against itself, every joint started 1e-5 rad apart, parts 4x between 1.5 and 2.1 s, as
+    the two plants do). An unscreened 0.6 s kick parts by 5.4e-4 rad from 0.3 s on the
+    mismatch's floor (friction 0.7, time constant 0.03 s), 7.9e-5 rad on the nominal one: its soles slip, a stick-slip
+    edge where float32 decides. The five held-out floor motions stay within 1.1e-4 rad over their first second and part
+    as they fall (benchmarks/results/real_warp_parity/)."""
     warp, mjc = RealWarpPlant(quiet_floor, 2, DEC, device=DEVICE), RealPlant(quiet_floor, 2, DEC)
-    dq, db = _play([warp, mjc], kick * 2, floor=True)
-    # on an H200 the joints part by up to 5.9e-4 rad (CUDA's float32 sums in another order)
-    assert dq.max() < (3e-4 if DEVICE == "cpu" else 8e-4) and db.max() < 2e-4
+    dq, db = _play([warp, mjc], kick * 2, floor=True)  # (K, 2) after each policy step of 10 ms
+    lift = int(LIFT_S * RATE) // DEC
+    print(f"floor kick: joints {dq[:lift].max():.2e} rad, base {db[:lift].max():.2e} m up to the lift; "
+          f"{dq.max():.2e} rad, {db.max():.2e} m over {len(dq) * DEC / RATE:.2f} s; final joints "
+          f"{np.abs(warp.q_true.cpu().numpy() - mjc.q_true).max():.2e} rad, base twist "
+          f"{np.abs(warp.base_twist.cpu().numpy() - mjc.base_twist.numpy()).max():.2e}")
+    # CUDA sums float32 in another order: 5.9e-4 rad at the first step of an earlier kick on an H200 (10x the
+    # CPU's); the later figures of this kick are not measured there
+    cpu = DEVICE == "cpu"
+    assert dq[:lift].max() < (2e-4 if cpu else 8e-4) and db[:lift].max() < 2e-4
+    assert dq.max() < (2e-3 if cpu else 5e-3) and db.max() < (1.2e-3 if cpu else 3e-3)
     assert int(warp.data.overflow.numpy().max()) == 0  # every contact and constraint row fitted
-    np.testing.assert_allclose(warp.base_twist.cpu().numpy(), mjc.base_twist.numpy(), atol=2e-3)
-    np.testing.assert_allclose(warp.q_true.cpu().numpy(), mjc.q_true, atol=3e-4)
+    np.testing.assert_allclose(warp.base_twist.cpu().numpy(), mjc.base_twist.numpy(), atol=6e-3 if cpu else 2e-2)
+    np.testing.assert_allclose(warp.q_true.cpu().numpy(), mjc.q_true, atol=2e-3 if cpu else 5e-3)
     assert (np.abs(warp.base_pose[:, :3].cpu().numpy() - kick[0].base[0, :3]).max()) > 1e-3  # it did move
 
 
@@ -199,14 +229,15 @@ def test_the_training_environment_sees_the_same_robot(quiet_floor, kick):
 @pytest.mark.slow
 def test_the_floor_benchmark_trains_the_oracle_on_it(tmp_path, humanoid, data):
     """``oracle_plant = "mujoco_warp"``: (d) trains on the mujoco_warp robot (the benchmark's log and run say so)
-    and is deployed, like every policy, on MuJoCo C."""
+    and is deployed, like every policy, on MuJoCo C. The motions are drawn unscreened: the soles carry no weight shift
+    drawn in 0.5 s, and this test is of the plumbing, not of what the policies learn."""
     from wresdyn.experiments.skills import run_benchmark
     from wresdyn.skills.skill_config import SkillPPOConfig
 
     cal = skill_runs.fit_run(tmp_path, humanoid, data, "torque", physics=True)
     cfg = FloorDeployConfig(iterations=1, finetune=1, num_worlds=2, train_per_family=1, validation_per_family=1,
                             heldout_per_family=1, duration=0.5, oracle_plant="mujoco_warp", device=DEVICE,
-                            nominal=None)
+                            nominal=None, screen=False)
     lines = []
     res = run_benchmark(humanoid, data, tmp_path / "floor", cfg, calibrated=cal, ppo=SkillPPOConfig(torch_threads=1),
                         policies=("a_nominal", "d_oracle"), animation=False, log=lines.append)
