@@ -22,7 +22,7 @@ from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .simulator import DivergenceLimits, Simulator
 
-__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device", "SYNC_EVERY"]
+__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device"]
 
 
 @dataclass
@@ -48,54 +48,6 @@ def policy_device(policy) -> torch.device | None:
     return None
 
 
-SYNC_EVERY = 32
-"""Steps between the host's reads of a PD replay's divergence state (without gradients, without a policy). In
-between, the state stays on the device and is updated without branches. A world that diverges runs on in the solver
-unchecked until the next read, which changes no output: its outputs are held from the step it diverged, once at the
-end, and the worlds of a simulator without a floor do not interact (SolverReplay, Featherstone and MuJoCo step each
-world on its own). An error comes at most 31 steps later in wall time, and says the same. With a policy the replay
-reads at every step and holds a world only once it has diverged: the branchless hold, which the policy would need at
-every step, costs more than the reads save, on an H200 as on the CPU (the 4 validation trajectories of the shipped
-dataset, 1999 steps: PD 0.97 of the per-step reads' time, with the residual network 1.06-1.43 slower over 3 rounds;
-CPU 6-8 % slower; benchmarks/results/speed/validation_sync/): a GPU replay is bound by the host's launches of each
-step (0.34 ms a step PD, 0.6 ms with the network), not by its reads. A simulator with a floor reads and resets at
-every step: a non-finite world could take contact slots of the others on mujoco_warp."""
-
-
-def _sync(sim: Simulator, dead: torch.Tensor, diverged_at: torch.Tensor, qs: list[torch.Tensor], since: int,
-          held: torch.Tensor | None, on_diverge: str) -> torch.Tensor | None:
-    """The host's read of the divergence state (dead (B,) bool, diverged_at (B,) long), the one wait for the device of a
-    non-gradient rollout: raise for the earliest divergence, or put each diverged world's held state (its positions
-    before the step it diverged at, zero velocity) back into the solver, keeping non-finite values out of it.
-
-    ``qs``: the positions so far, each (B, n); ``since``: how many of them the last read saw; ``held`` (B, n): the
-    diverged worlds' held positions as of the last read (``None`` before any). Returns them updated, or ``None`` while
-    no world has diverged."""
-    if not dead.any():
-        return None
-    if on_diverge == "raise":  # the lowest world among those diverged at the earliest step, as a per-step check
-        w = int(torch.where(dead, diverged_at, diverged_at.max() + 1).argmin())
-        k = int(diverged_at[w])
-        raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step {k} "
-                                 f"(t = {k * sim.dt:.3f} s)")
-    fresh = diverged_at - 1 >= since  # diverged since the last read: held from a position it has not seen
-    chunk = torch.stack(qs[since:])  # (C, B, n)
-    at = (diverged_at - 1 - since).clamp(0, len(chunk) - 1)
-    new = chunk.gather(0, at[None, :, None].expand(1, -1, chunk.shape[2]))[0]
-    held = new if held is None else torch.where(fresh[:, None], new, held)
-    ids = dead.nonzero().squeeze(-1)
-    sim.set_state(ids, held[ids], torch.zeros_like(held[ids]))
-    return held
-
-
-def _hold(q: torch.Tensor, qd: torch.Tensor, diverged_at: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Outputs q, q̇ (B, L + 1, n) with each diverged world held from its step ``diverged_at`` (B,) on: the positions
-    before it, zero velocity. The same values a hold at every step gives (a held step repeats the one before)."""
-    held = q.gather(1, (diverged_at - 1).clamp(min=0)[:, None, None].expand(-1, 1, q.shape[2]))
-    after = (diverged_at[:, None] >= 0) & (torch.arange(q.shape[1], device=q.device)[None] >= diverged_at[:, None])
-    return torch.where(after[..., None], held, q), qd.masked_fill(after[..., None], 0.0)
-
-
 def _policy_kind(policy, kind: str | None) -> str:
     if kind is not None:
         return kind
@@ -111,7 +63,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
             truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
             noise: torch.Tensor | None = None, limits: DivergenceLimits = DivergenceLimits(),
-            on_diverge: str = "freeze", sync_every: int | None = None) -> Rollout:
+            on_diverge: str = "freeze") -> Rollout:
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
@@ -131,11 +83,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             ``generator`` at each step (a captured CUDA graph reads them from a fixed buffer).
         limits: When a world counts as diverged (``max_error`` against the window's recording).
         on_diverge: ``"freeze"`` (hold the last sane state, report in ``diverged_at``) or ``"raise"``
-            (:class:`~wresdyn.errors.SimulationDiverged`, raised at the next sync point with the world and step
-            of the earliest divergence).
-        sync_every: Without ``grad``, read the divergence state on the host every this many steps and after the
-            last; default :data:`SYNC_EVERY` for a PD replay, 1 with a policy. A simulator with a floor reads it at
-            every step.
+            (:class:`~wresdyn.errors.SimulationDiverged`).
     """
     b, steps = window.cmd.shape[0], window.steps
     if b != sim.num_worlds:
@@ -151,13 +99,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
     q, qd, qdd = window.q[:, 0], window.qd[:, 0], window.qdd[:, 0]
     qs, qds, actions = [q], [qd], []
-    if sync_every is not None and sync_every < 1:
-        raise ValueError(f"sync_every must be >= 1 (got {sync_every})")
-    every = 1 if sim.ground else sync_every or (SYNC_EVERY if policy is None else 1)
-    hold_in_loop = policy is not None  # the policy observes the held state; else the outputs are held at the end
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
-    held, since = None, 0  # the diverged worlds' held positions (B, n) and how many of qs the last read saw
     if not grad:
         sim.set_state(None, q, qd)
     for k in range(steps):
@@ -181,13 +124,17 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         else:
             q_new, qd_new = sim.step(target, tau)
             bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
-            dead |= bad
-            diverged_at.masked_fill_(bad, k + 1)
-            if (k + 1) % every == 0 or k + 1 == steps:
-                held, since = _sync(sim, dead, diverged_at, qs, since, held, on_diverge), len(qs)
-            if hold_in_loop and (held is not None or every > 1):  # a diverged world holds its last sane state, at rest
-                mask = dead[:, None]
-                q_new, qd_new = torch.where(mask, q, q_new), qd_new.masked_fill(mask, 0.0)
+            if bad.any():
+                if on_diverge == "raise":
+                    w = int(bad.nonzero()[0])
+                    raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step "
+                                             f"{k + 1} (t = {(k + 1) * sim.dt:.3f} s)")
+                dead |= bad
+                diverged_at[bad] = k + 1
+            if dead.any():  # frozen worlds hold their last sane state; keep NaN out of the solver and the policy
+                q_new = torch.where(dead[:, None], q, q_new)
+                qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
+                sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
         qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
@@ -196,10 +143,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             q, qd, qdd = q.detach(), qd.detach(), qdd.detach()
             if isinstance(getattr(policy, "hidden", None), torch.Tensor):
                 policy.hidden = policy.hidden.detach()
-    q_out, qd_out = torch.stack(qs, 1), torch.stack(qds, 1)
-    if held is not None and not hold_in_loop:
-        q_out, qd_out = _hold(q_out, qd_out, diverged_at)
-    return Rollout(q_out, qd_out, torch.stack(actions, 1) if actions else None, diverged_at)
+    return Rollout(torch.stack(qs, 1), torch.stack(qds, 1), torch.stack(actions, 1) if actions else None, diverged_at)
 
 
 def replay(robot, q_cmd: np.ndarray, q0: np.ndarray, qd0: np.ndarray | None = None, dt: float = 0.002,
