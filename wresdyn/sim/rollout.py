@@ -20,6 +20,7 @@ from ..errors import SimulationDiverged
 from .bank import TrajectoryBank, Window, servo_goal_accel
 from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
+from .rollout_graph import capture_blocker, rollout_key, run_captured
 from .simulator import DivergenceLimits, Simulator
 
 __all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device"]
@@ -63,7 +64,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
             truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
             noise: torch.Tensor | None = None, limits: DivergenceLimits = DivergenceLimits(),
-            on_diverge: str = "freeze") -> Rollout:
+            on_diverge: str = "freeze", graph: bool | None = None) -> Rollout:
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
@@ -83,20 +84,53 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             ``generator`` at each step (a captured CUDA graph reads them from a fixed buffer).
         limits: When a world counts as diverged (``max_error`` against the window's recording).
         on_diverge: ``"freeze"`` (hold the last sane state, report in ``diverged_at``) or ``"raise"``
-            (:class:`~wresdyn.errors.SimulationDiverged`).
+            (:class:`~wresdyn.errors.SimulationDiverged`, for the first world to diverge, after the whole window).
+        graph: Without ``grad`` on CUDA, capture the whole loop as one CUDA graph and replay it on later calls
+            (:mod:`wresdyn.sim.rollout_graph`, where it applies); default ``sim.rollout_graph``.
     """
-    b, steps = window.cmd.shape[0], window.steps
+    b = window.cmd.shape[0]
     if b != sim.num_worlds:
         raise ValueError(f"window batch {b} != simulator worlds {sim.num_worlds}")
-    pw = slice(None) if policy_worlds is None else policy_worlds
-    active = policy is not None or residual is not None
+    if on_diverge not in ("freeze", "raise"):
+        raise ValueError(f"on_diverge must be 'freeze' or 'raise', not {on_diverge!r}")
     kind = _policy_kind(policy, kind) if policy is not None else (kind or "torque")
     pdev = policy_device(policy)
+    if noise is not None and obs_noise > 0.0:
+        noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
+
+    def body(win: Window, noise: torch.Tensor | None, residual: torch.Tensor | None) -> Rollout:
+        return _loop(sim, win, policy, kind, policy_worlds, residual, grad, truncation, obs_noise, generator, noise,
+                     limits, pdev)
+
+    use_graph = sim.rollout_graph if graph is None else graph
+    if capture_blocker(sim.device, grad=grad, enabled=use_graph, policy=policy, policy_device=pdev,
+                       obs_noise=obs_noise, noise=noise) is None:
+        key = rollout_key(sim, window, policy, kind, policy_worlds, residual, obs_noise, noise, limits)
+        out = run_captured(sim, key, window, noise, residual, body, keep=policy)
+    else:
+        out = body(window, noise, residual)
+    if on_diverge == "raise" and not grad:
+        hit = out.diverged_at >= 0
+        if hit.any():  # the first step any world diverged at, and the first world diverging then
+            k = int(out.diverged_at[hit].min())
+            w = int((out.diverged_at == k).nonzero()[0])
+            raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step {k} "
+                                     f"(t = {k * sim.dt:.3f} s)")
+    return out
+
+
+def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slice | None,
+          residual: torch.Tensor | None, grad: bool, truncation: int, obs_noise: float,
+          generator: torch.Generator | None, noise: torch.Tensor | None, limits: DivergenceLimits,
+          pdev: torch.device | None) -> Rollout:
+    """The step loop of :func:`rollout`. Without gradients it is branch-free (no host read): every world's
+    divergence bookkeeping runs through masks at every step, so the same body runs eagerly or inside a CUDA graph."""
+    b, steps = window.cmd.shape[0], window.steps
+    pw = slice(None) if policy_worlds is None else policy_worlds
+    active = policy is not None or residual is not None
     if policy is not None and hasattr(policy, "reset"):
         policy.reset()
     scale = getattr(policy, "scale", None)
-    if noise is not None and obs_noise > 0.0:
-        noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
     q, qd, qdd = window.q[:, 0], window.qd[:, 0], window.qdd[:, 0]
     qs, qds, actions = [q], [qd], []
     dead = torch.zeros(b, dtype=torch.bool, device=sim.device)
@@ -124,17 +158,12 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         else:
             q_new, qd_new = sim.step(target, tau)
             bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
-            if bad.any():
-                if on_diverge == "raise":
-                    w = int(bad.nonzero()[0])
-                    raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step "
-                                             f"{k + 1} (t = {(k + 1) * sim.dt:.3f} s)")
-                dead |= bad
-                diverged_at[bad] = k + 1
-            if dead.any():  # frozen worlds hold their last sane state; keep NaN out of the solver and the policy
-                q_new = torch.where(dead[:, None], q, q_new)
-                qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
-                sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
+            dead = dead | bad
+            diverged_at = torch.where(bad, k + 1, diverged_at)
+            # frozen worlds hold their last sane state at rest; keeps NaN out of the solver and the policy
+            q_new = torch.where(dead[:, None], q, q_new)
+            qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
+            sim.set_state_where(dead, q_new, qd_new)
         qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)

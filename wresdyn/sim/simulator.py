@@ -78,7 +78,8 @@ class Simulator:
         requires_grad: Build a differentiable model (for :meth:`step_diff`).
         param_grads: Gradients also reach the model's physical parameters (identification). The replay solver's
             kernels are the same either way (they read every parameter), so this only gates :meth:`set_physics`.
-        graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA).
+        graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA). Also the default of the
+            attribute ``rollout_graph``: a no-gradient rollout captured whole as one graph (:mod:`.rollout_graph`).
         ground: Stand the robots on a floor (:meth:`wresdyn.robot.Robot.build_model`); needs the ``mujoco``
             solver (``auto`` picks it), so no gradients.
         contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (default ``ContactSettings()``).
@@ -120,7 +121,7 @@ class Simulator:
             self.solver.friction_grad = False  # until set_physics hands it a friction that carries gradients
         self.device = _torch_device(device)
         self._cuda = self.device.type == "cuda"
-        self.graph = self._cuda if graph is None else bool(graph) and self._cuda
+        self.graph = self.rollout_graph = self._cuda if graph is None else bool(graph) and self._cuda
         self.states = [self.model.state(), self.model.state()]
         self.control = self.model.control()
         w = self.num_worlds
@@ -135,8 +136,7 @@ class Simulator:
         f32 = dict(dtype=torch.float32, device=self.device)
         self.lower = torch.as_tensor(robot.lower, **f32)
         self.upper = torch.as_tensor(robot.upper, **f32)
-        self._cur = 0
-        self._graphs: dict[int, object] = {}
+        self._cur, self._graphs, self._rollout_graphs = 0, {}, {}  # buffer index; solver and rollout_graph graphs
         self.refresh_graph, self._refresh_graphs = self._cuda and refresh_graph is not False, {}  # world_physics
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._wp_streams: dict[int, tuple] = {}  # torch stream handle -> (torch stream, Warp stream): _tape_stream
@@ -164,7 +164,6 @@ class Simulator:
         :meth:`step_diff`. An infinite effort is written as 0 (Newton's "unlimited"). ``worlds``: only these
         worlds (e.g. a nominal baseline next to a calibrated model in one batch; no gradients then).
         """
-
         arrays = MODEL_ARRAYS if getattr(self.robot, "servo", None) is None else {**MODEL_ARRAYS, **SERVO_ARRAYS}
         if isinstance(values, PhysicalParams):
             values.check(self.robot)
@@ -204,8 +203,8 @@ class Simulator:
         from newton import ModelFlags
 
         self.solver.notify_model_changed(ModelFlags.JOINT_DOF_PROPERTIES | ModelFlags.BODY_INERTIAL_PROPERTIES)
-        self._graphs.clear()  # captured launches may hold recompiled kernels' predecessors
-        self._refresh_graphs.clear()
+        for graphs in (self._graphs, self._refresh_graphs, self._rollout_graphs):
+            graphs.clear()  # captured launches may hold recompiled kernels' predecessors
 
     # ------------------------------------------------------------------------------------------------ state
     @property
@@ -244,7 +243,6 @@ class Simulator:
         if self.robot.base != "floating":
             raise ValueError(f"{self.robot.source.name}: the base is fixed; load_robot(..., base='floating') for a "
                              "base pose")
-
         q0, qd0 = base_index(self.robot)
         return slice(q0, q0 + 7), slice(qd0, qd0 + 6)
 
