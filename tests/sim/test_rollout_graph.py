@@ -1,5 +1,5 @@
-"""The branch-free rollout loop (the one a CUDA graph captures) against the loop that reads the host at every step,
-the capture's gating, its key, and (on a GPU) the captured replay against the eager one."""
+"""The branch-free rollout loop (the one a CUDA graph captures) against the loop that reads the host at every step
+(the CPU's default), the capture's gating, its key, and (on a GPU) the captured replay against the eager one."""
 
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ from wresdyn.sim.rollout_graph import _WARM, capture_blocker, rollout_key
 
 def host_read_rollout(sim, window, policy=None, *, kind="torque", policy_worlds=None, residual=None,
                       limits=DivergenceLimits(), on_diverge="freeze"):
-    """The no-gradient loop as it was before it became branch-free: divergence read on the host at every step, the
-    frozen worlds written back only when there are any, a raise at the first diverged step."""
+    """The no-gradient loop written out on its own: divergence read on the host at every step, the frozen worlds
+    written back only when there are any, a raise at the first diverged step."""
     b, steps = window.cmd.shape[0], window.steps
     pw = slice(None) if policy_worlds is None else policy_worlds
     if policy is not None and hasattr(policy, "reset"):
@@ -108,11 +108,14 @@ def test_branch_free_loop_equals_the_host_read_loop_bit_for_bit(robot, setup, ca
     sim = Simulator(robot, window.cmd.shape[0], dt, solver="replay")
     with torch.no_grad():
         ref = host_read_rollout(sim, window, policy, **c)
-        out = rollout(sim, window, policy, kind="torque", **c)
-    for name, a, b in zip(("q", "qd", "actions", "diverged_at"), ref, (out.q, out.qd, out.actions, out.diverged_at)):
-        assert (a is None) == (b is None), name
-        if a is not None:
-            assert torch.equal(a, b), f"{name}: max |diff| {(a.double() - b.double()).abs().nan_to_num(1e9).max()}"
+        eager = rollout(sim, window, policy, kind="torque", **c)
+        out = rollout(sim, window, policy, kind="torque", branch_free=True, **c)
+    for run in (eager, out):
+        for name, a, b in zip(("q", "qd", "actions", "diverged_at"), ref, (run.q, run.qd, run.actions,
+                                                                           run.diverged_at)):
+            assert (a is None) == (b is None), name
+            if a is not None:
+                assert torch.equal(a, b), f"{name}: max |diff| {(a.double() - b.double()).abs().nan_to_num(1e9).max()}"
     at = out.diverged_at.numpy()
     if "limits" in c:  # the case exists to diverge: some worlds do, mid-window, and some do not
         assert (at > 0).any() and (at == -1).any(), at
@@ -136,9 +139,11 @@ def test_raise_names_the_first_world_and_step_as_the_host_read_loop(robot, setup
     with torch.no_grad():
         with pytest.raises(SimulationDiverged) as ref:
             host_read_rollout(sim, window, policy, on_diverge="raise", **c)
-        with pytest.raises(SimulationDiverged) as out:
+        with pytest.raises(SimulationDiverged) as eager:
             rollout(sim, window, policy, kind="torque", on_diverge="raise", **c)
-    assert str(out.value) == str(ref.value)
+        with pytest.raises(SimulationDiverged) as out:
+            rollout(sim, window, policy, kind="torque", on_diverge="raise", branch_free=True, **c)
+    assert str(out.value) == str(ref.value) == str(eager.value)
     if policy is None:
         assert "world 4 at step" in str(out.value)
 

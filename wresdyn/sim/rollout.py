@@ -64,7 +64,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             policy_worlds: slice | None = None, residual: torch.Tensor | None = None, grad: bool = False,
             truncation: int = 0, obs_noise: float = 0.0, generator: torch.Generator | None = None,
             noise: torch.Tensor | None = None, limits: DivergenceLimits = DivergenceLimits(),
-            on_diverge: str = "freeze", graph: bool | None = None) -> Rollout:
+            on_diverge: str = "freeze", graph: bool | None = None, branch_free: bool | None = None) -> Rollout:
     """Replay ``window`` open loop from its recorded start state, with an optional residual in the loop.
 
     Args:
@@ -84,9 +84,12 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
             ``generator`` at each step (a captured CUDA graph reads them from a fixed buffer).
         limits: When a world counts as diverged (``max_error`` against the window's recording).
         on_diverge: ``"freeze"`` (hold the last sane state, report in ``diverged_at``) or ``"raise"``
-            (:class:`~wresdyn.errors.SimulationDiverged`, for the first world to diverge, after the whole window).
+            (:class:`~wresdyn.errors.SimulationDiverged`, for the first world to diverge).
         graph: Without ``grad`` on CUDA, capture the whole loop as one CUDA graph and replay it on later calls
             (:mod:`wresdyn.sim.rollout_graph`, where it applies); default ``sim.rollout_graph``.
+        branch_free: Without ``grad``, track divergence with masks on every world at every step instead of reading
+            the host (the same results, bit for bit); a raise then comes after the whole window. Default: where the
+            loop is captured, which needs it; elsewhere the host-read loop is the faster on the CPU.
     """
     b = window.cmd.shape[0]
     if b != sim.num_worlds:
@@ -98,33 +101,38 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
     if noise is not None and obs_noise > 0.0:
         noise = obs_noise * policy.obs_std * noise  # scaled once for the window, not per step
 
+    captured = capture_blocker(sim.device, grad=grad, enabled=sim.rollout_graph if graph is None else graph,
+                               policy=policy, policy_device=pdev, obs_noise=obs_noise, noise=noise) is None
+    masked = captured or (bool(branch_free) and not grad)
+
     def body(win: Window, noise: torch.Tensor | None, residual: torch.Tensor | None) -> Rollout:
         return _loop(sim, win, policy, kind, policy_worlds, residual, grad, truncation, obs_noise, generator, noise,
-                     limits, pdev)
+                     limits, pdev, masked, on_diverge)
 
-    use_graph = sim.rollout_graph if graph is None else graph
-    if capture_blocker(sim.device, grad=grad, enabled=use_graph, policy=policy, policy_device=pdev,
-                       obs_noise=obs_noise, noise=noise) is None:
+    if captured:
         key = rollout_key(sim, window, policy, kind, policy_worlds, residual, obs_noise, noise, limits)
         out = run_captured(sim, key, window, noise, residual, body, keep=policy)
     else:
         out = body(window, noise, residual)
-    if on_diverge == "raise" and not grad:
+    if on_diverge == "raise" and masked:
         hit = out.diverged_at >= 0
         if hit.any():  # the first step any world diverged at, and the first world diverging then
             k = int(out.diverged_at[hit].min())
-            w = int((out.diverged_at == k).nonzero()[0])
-            raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {w} at step {k} "
-                                     f"(t = {k * sim.dt:.3f} s)")
+            _raise(sim, int((out.diverged_at == k).nonzero()[0]), k)
     return out
+
+
+def _raise(sim: Simulator, world: int, step: int) -> None:
+    raise SimulationDiverged(f"{sim.robot.source.name}: Newton replay diverged in world {world} at step {step} "
+                             f"(t = {step * sim.dt:.3f} s)")
 
 
 def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slice | None,
           residual: torch.Tensor | None, grad: bool, truncation: int, obs_noise: float,
           generator: torch.Generator | None, noise: torch.Tensor | None, limits: DivergenceLimits,
-          pdev: torch.device | None) -> Rollout:
-    """The step loop of :func:`rollout`. Without gradients it is branch-free (no host read): every world's
-    divergence bookkeeping runs through masks at every step, so the same body runs eagerly or inside a CUDA graph."""
+          pdev: torch.device | None, masked: bool, on_diverge: str) -> Rollout:
+    """The step loop of :func:`rollout`. ``masked``: branch-free (no host read; every world's divergence bookkeeping
+    runs through masks at every step), so it runs inside a CUDA graph; the raise is then the caller's."""
     b, steps = window.cmd.shape[0], window.steps
     pw = slice(None) if policy_worlds is None else policy_worlds
     active = policy is not None or residual is not None
@@ -158,12 +166,22 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
         else:
             q_new, qd_new = sim.step(target, tau)
             bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
-            dead = dead | bad
-            diverged_at = torch.where(bad, k + 1, diverged_at)
-            # frozen worlds hold their last sane state at rest; keeps NaN out of the solver and the policy
-            q_new = torch.where(dead[:, None], q, q_new)
-            qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
-            sim.set_state_where(dead, q_new, qd_new)
+            if masked:  # frozen worlds hold their last sane state at rest; keeps NaN out of the solver and the policy
+                dead = dead | bad
+                diverged_at = torch.where(bad, k + 1, diverged_at)
+                q_new = torch.where(dead[:, None], q, q_new)
+                qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
+                sim.set_state_where(dead, q_new, qd_new)
+            else:  # the same, read on the host: the faster on the CPU, where a read costs nothing
+                if bad.any():
+                    if on_diverge == "raise":
+                        _raise(sim, int(bad.nonzero()[0]), k + 1)
+                    dead |= bad
+                    diverged_at[bad] = k + 1
+                if dead.any():
+                    q_new = torch.where(dead[:, None], q, q_new)
+                    qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
+                    sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
         qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
