@@ -6,11 +6,12 @@ the divergence bookkeeping: small kernels each), not by the work. Captured once 
 single launch. The loop's body is branch-free without gradients (no host read; divergence is tracked with masks), so
 the captured graph does what the eager loop does, world for world.
 
-What a graph depends on is its key (:func:`rollout_key`): the simulator's buffers, the shapes of the window, the
-noise and the open-loop residual, the policy object with the storage of its parameters and buffers (an optimiser
+What a graph depends on is its key (:func:`rollout_key`): the shapes of the window, the noise and the open-loop residual, the policy object with the storage of its parameters and buffers (an optimiser
 updates them in place, which the graph then reads; a module moved or rebuilt is a new key), the residual kind, the
 policy's worlds and the divergence limits. The window's tensors, the noise and the residual are copied into the
-graph's own buffers before each replay, so the caller may pass new tensors of the same shapes. The physical
+graph's own buffers before each replay, so the caller may pass new tensors of the same shapes. The graph reads and
+writes the simulator's state buffer that was current at its capture: where a replay of an odd step count left the
+other one current, the state is copied over first (the simulator's states ping-pong). The physical
 parameters are read from the model's arrays, which :meth:`~wresdyn.sim.simulator.Simulator.set_physics` writes in
 place; a solver that recompiles on a change clears the cache (``Simulator._physics_changed``).
 
@@ -72,7 +73,7 @@ def rollout_key(sim, window: Window, policy, kind: str, policy_worlds: slice | N
         tensors = list(policy.parameters()) + list(policy.buffers())
         pol = (id(policy), type(policy), policy.training, tuple((t.data_ptr(), tuple(t.shape)) for t in tensors))
     pw = None if policy_worlds is None else (policy_worlds.start, policy_worlds.stop, policy_worlds.step)
-    return (sim._cur, tuple(_shape(getattr(window, f)) for f in _WINDOW_FIELDS), pol, kind, pw, _shape(residual),
+    return (tuple(_shape(getattr(window, f)) for f in _WINDOW_FIELDS), pol, kind, pw, _shape(residual),
             float(obs_noise), _shape(noise), limits)
 
 
@@ -93,7 +94,11 @@ def run_captured(sim, key: tuple, window: Window, noise, residual, body, keep=No
     if entry is _WARM:
         entry = _capture(sim, window, noise, residual, body, keep)
         _remember(cache, key, entry)
-    graph, static, static_noise, static_residual, out, after, _ = entry
+    graph, static, static_noise, static_residual, out, start, after, _ = entry
+    if sim._cur != start:  # the whole joint state, base included: what the eager loop would start from
+        sim._q[start].copy_(sim._q[sim._cur])
+        sim._qd[start].copy_(sim._qd[sim._cur])
+        sim._cur = start
     for f in _WINDOW_FIELDS:
         getattr(static, f).copy_(getattr(window, f))
     if noise is not None:
@@ -133,4 +138,4 @@ def _capture(sim, window: Window, noise, residual, body, keep) -> tuple:
     finally:
         sim.graph = solver_graph
     after, sim._cur = sim._cur, start
-    return graph, static, static_noise, static_residual, out, after, keep
+    return graph, static, static_noise, static_residual, out, start, after, keep
