@@ -19,7 +19,9 @@ __all__ = ["ValidationScore"]
 
 
 class ValidationScore:
-    """``score(policy) -> mean |Δq| [rad]`` on fixed validation trajectories; reuses one simulator.
+    """``score(policy) -> mean |Δq| [rad]`` on fixed validation trajectories; reuses one simulator, so on CUDA
+    its replay is captured as one CUDA graph at the second call with a policy and replayed after
+    (:mod:`wresdyn.sim.rollout_graph`).
 
     Args:
         robot: The robot (simulator side).
