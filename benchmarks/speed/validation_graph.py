@@ -1,4 +1,4 @@
-"""One validation replay of the default fit, eager against captured as one CUDA graph (:mod:`wresdyn.sim.rollout_graph`).
+"""One validation replay of the default fit, eager against captured as one CUDA graph (``wresdyn.sim.rollout_graph``).
 
     python benchmarks/speed/validation_graph.py [DATA] [--device cuda:0] [--repeats 10] [--json OUT.json]
 
@@ -101,14 +101,15 @@ def main() -> None:
             rec[f"{name}_s"] = t
             rec[f"{name}_median_s"] = statistics.median(t)
             rec[f"{name}_ms_per_step"] = 1e3 * min(t) / steps
-            print(f"{case} {name}: first call {rec[f'{name}_first_s']:.3f} s; repeats " + " ".join(f"{x:.3f}" for x in t)
-                  + f" s; median {statistics.median(t):.3f} s, min {min(t):.3f} s ({rec[f'{name}_ms_per_step']:.3f}"
-                  " ms/step)")
+            print(f"{case} {name}: first call {rec[f'{name}_first_s']:.3f} s; repeats "
+                  + " ".join(f"{x:.3f}" for x in t) + f" s; median {statistics.median(t):.3f} s, min {min(t):.3f} s "
+                  f"({rec[f'{name}_ms_per_step']:.3f} ms/step)")
         if graphs:
             a, b = outs["captured"], outs["eager"]
             diff = max(float(np.abs(x - y).max()) for g in b for x, y in zip(a[g].q, b[g].q))
             same_div = all(a[g].diverged_at == b[g].diverged_at for g in b)
-            rec.update(max_abs_dq=diff, diverged_equal=same_div, speedup=rec["eager_median_s"] / rec["captured_median_s"])
+            rec.update(max_abs_dq=diff, diverged_equal=same_div,
+                       speedup=rec["eager_median_s"] / rec["captured_median_s"])
             print(f"{case} capture call (capture + one replay) {rec['capture_s']:.3f} s; eager/captured median "
                   f"{rec['speedup']:.2f}x; max |q_captured - q_eager| {diff:.3g} rad; diverged_at equal {same_div}")
         result["cases"][case] = rec

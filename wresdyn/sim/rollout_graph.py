@@ -6,24 +6,27 @@ the divergence bookkeeping: small kernels each), not by the work. Captured once 
 single launch. The loop's body is branch-free without gradients (no host read; divergence is tracked with masks), so
 the captured graph does what the eager loop does, world for world.
 
-What a graph depends on is its key (:func:`rollout_key`): the shapes of the window, the noise and the open-loop residual, the policy object with the storage of its parameters and buffers (an optimiser
-updates them in place, which the graph then reads; a module moved or rebuilt is a new key), the residual kind, the
-policy's worlds and the divergence limits. The window's tensors, the noise and the residual are copied into the
-graph's own buffers before each replay, so the caller may pass new tensors of the same shapes. The graph reads and
-writes the simulator's state buffer that was current at its capture: where a replay of an odd step count left the
-other one current, the state is copied over first (the simulator's states ping-pong). The physical
-parameters are read from the model's arrays, which :meth:`~wresdyn.sim.simulator.Simulator.set_physics` writes in
-place; a solver that recompiles on a change clears the cache (``Simulator._physics_changed``).
+What a graph depends on is its key (:func:`rollout_key`): the shapes of the window, the noise and the open-loop
+residual, the policy object with the storage of its parameters and buffers (an optimiser updates them in place,
+which the graph then reads; a module moved or rebuilt is a new key), the residual kind, the policy's worlds and the
+divergence limits. The window's tensors, the noise and the residual are copied into the graph's own buffers before
+each replay, so the caller may pass new tensors of the same shapes. The graph reads and writes the simulator's state
+buffer that was current at its capture: where a replay of an odd step count left the other one current, the state is
+copied over first (the simulator's states ping-pong). The physical parameters are read from the model's arrays,
+which :meth:`~wresdyn.sim.simulator.Simulator.set_physics` writes in place; a solver that recompiles on a change
+clears the cache (``Simulator._physics_changed``).
 
-A key is first run eagerly on the simulator's stream (Warp modules loaded, torch warmed up), captured at its second
-call and replayed from its third on. Python-side state a policy keeps between its own steps (a GRU's hidden state)
-lives inside the loop, reset at its start, so the graph replays it too; state changed between calls other than
-in parameters and buffers (a Python attribute) is not seen, hence the policy object is part of the key.
+A key is first run eagerly on the simulator's stream (Warp modules loaded, torch warmed up), captured and replayed
+at its second call, replayed after; a capture that fails (a policy reading the host) warns and leaves the key eager.
+Python-side state a policy keeps between its own steps (a GRU's hidden state) lives inside the loop, reset at its
+start, so the graph replays it too; state changed between calls other than in parameters and buffers (a Python
+attribute) is not seen, hence the policy object is part of the key.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import torch
 
@@ -36,6 +39,7 @@ MAX_GRAPHS = 4
 
 _WINDOW_FIELDS = ("q", "qd", "qdd", "cmd", "target", "length")
 _WARM = "warm"  # a key run eagerly once, captured at its next call
+_EAGER = "eager"  # a key whose capture failed: it runs eagerly from then on
 
 
 def capture_blocker(device, *, grad: bool, enabled: bool, policy=None, policy_device=None, obs_noise: float = 0.0,
@@ -85,15 +89,19 @@ def run_captured(sim, key: tuple, window: Window, noise, residual, body, keep=No
     entry = cache.get(key)
     cur, side = torch.cuda.current_stream(sim.device), sim.side_stream()
     side.wait_stream(cur)
-    if entry is None:  # eager, on the simulator's stream as the capture will be
+    if entry is _WARM:
+        try:
+            entry = _capture(sim, window, noise, residual, body, keep)
+        except RuntimeError as e:  # something in the loop that a graph cannot hold (a host read in a policy)
+            warnings.warn(f"rollout not captured as a CUDA graph, it runs eagerly: {e}", RuntimeWarning, stacklevel=3)
+            entry = _EAGER
+        _remember(cache, key, entry)
+    if entry is None or entry is _EAGER:  # eager, on the simulator's stream as the capture is
         with torch.cuda.stream(side):
             out = body(window, noise, residual)
         cur.wait_stream(side)
-        _remember(cache, key, _WARM)
+        _remember(cache, key, entry or _WARM)
         return out
-    if entry is _WARM:
-        entry = _capture(sim, window, noise, residual, body, keep)
-        _remember(cache, key, entry)
     graph, static, static_noise, static_residual, out, start, after, _ = entry
     if sim._cur != start:  # the whole joint state, base included: what the eager loop would start from
         sim._q[start].copy_(sim._q[sim._cur])
@@ -137,5 +145,5 @@ def _capture(sim, window: Window, noise, residual, body, keep) -> tuple:
                 wp.capture_end(stream=sim._wp_side)
     finally:
         sim.graph = solver_graph
-    after, sim._cur = sim._cur, start
+        after, sim._cur = sim._cur, start
     return graph, static, static_noise, static_residual, out, start, after, keep
