@@ -204,8 +204,8 @@ def test_captured_validation_replay_equals_the_eager_one(robot, data, arch):
     if arch != "none":
         cfg = ResidualConfig(fraction=0.5, arch=arch, hidden_dims=(32,) if arch == "gru" else (64, 64))
         policy = build_policy(robot, cfg, *obs_stats(data.split("train"))).eval().to("cuda:0")
-    sims = {g: Simulator(robot, 2 * len(trajs), 1.0 / data.rate_hz, solver="replay", device="cuda:0")
-            for g in (True, False)}
+    worlds = len(trajs) * (1 if policy is None else 2)  # PD only; or the PD baseline and the residual's worlds
+    sims = {g: Simulator(robot, worlds, 1.0 / data.rate_hz, solver="replay", device="cuda:0") for g in (True, False)}
     sims[False].rollout_graph = False
     graphs = []
     for call in range(4):  # eager warm-up, capture and replay, replays; the parameters change in between
@@ -223,7 +223,7 @@ def test_captured_validation_replay_equals_the_eager_one(robot, data, arch):
         entries = [e for e in sims[True]._rollout_graphs.values() if e is not _WARM]
         graphs.append(entries[0][0] if entries else None)
     assert graphs[0] is None and graphs[1] is not None and graphs[2] is graphs[1] and graphs[3] is graphs[1]
-    assert not sims[False]._rollout_graphs
+    assert not sims[False]._rollout_graphs and len(sims[True]._rollout_graphs) == 1  # one key: the same simulator
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")

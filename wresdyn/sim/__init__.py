@@ -6,7 +6,8 @@
 - :mod:`.residual_kinds`: the residual kinds, their authority, observation and application;
 - :mod:`.physics`: the simulator's physical parameters (gains, friction, delay, link inertias) as fitted
   quantities, physically consistent, read and written as JSON;
-- :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`; :mod:`.fused`: PD-only
+- :mod:`.rollout`: the rollout driver (policy in the loop) and the numpy :func:`replay`, without gradients on CUDA
+  captured whole as one CUDA graph (:mod:`.rollout_graph`); :mod:`.fused`: PD-only
   window rollouts in one solver launch, differentiable to the physical parameters (online identification's);
 - :mod:`.solvers`: the Newton solver choice; :mod:`.solver_replay`: SolverReplay, this project's fused differentiable
   solver; :mod:`.parity`: Newton vs MuJoCo C; :mod:`.solver_benchmark`: the solver benchmark behind ``wresdyn bench``;
