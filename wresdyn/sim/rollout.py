@@ -88,8 +88,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         graph: Without ``grad`` on CUDA, capture the whole loop as one CUDA graph and replay it on later calls
             (:mod:`wresdyn.sim.rollout_graph`, where it applies); default ``sim.rollout_graph``.
         branch_free: Without ``grad``, track divergence with masks on every world at every step instead of reading
-            the host (the same results, bit for bit); a raise then comes after the whole window. Default: where the
-            loop is captured, which needs it; elsewhere the host-read loop is the faster on the CPU.
+            the host (the same results, bit for bit); a raise then comes after the whole window. A captured loop is
+            branch-free whatever this says; elsewhere the host-read loop is the default (the faster on the CPU).
     """
     b = window.cmd.shape[0]
     if b != sim.num_worlds:
@@ -103,9 +103,9 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
 
     captured = capture_blocker(sim.device, grad=grad, enabled=sim.rollout_graph if graph is None else graph,
                                policy=policy, policy_device=pdev, obs_noise=obs_noise, noise=noise) is None
-    masked = captured or (bool(branch_free) and not grad)
 
-    def body(win: Window, noise: torch.Tensor | None, residual: torch.Tensor | None) -> Rollout:
+    def body(win: Window, noise: torch.Tensor | None, residual: torch.Tensor | None,
+             masked: bool = bool(branch_free) and not grad) -> Rollout:
         return _loop(sim, win, policy, kind, policy_worlds, residual, grad, truncation, obs_noise, generator, noise,
                      limits, pdev, masked, on_diverge)
 
@@ -114,7 +114,7 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         out = run_captured(sim, key, window, noise, residual, body, keep=policy)
     else:
         out = body(window, noise, residual)
-    if on_diverge == "raise" and masked:
+    if on_diverge == "raise" and not grad:  # where the loop ran branch-free (the host-read one raised already)
         hit = out.diverged_at >= 0
         if hit.any():  # the first step any world diverged at, and the first world diverging then
             k = int(out.diverged_at[hit].min())

@@ -18,6 +18,8 @@ clears the cache (``Simulator._physics_changed``).
 
 A key is first run eagerly on the simulator's stream (Warp modules loaded, torch warmed up), captured and replayed
 at its second call, replayed after; a capture that fails (a policy reading the host) warns and leaves the key eager.
+The eager runs take the host-read loop: where a key never gets to its capture (a solver that clears the cache at
+each :meth:`~wresdyn.sim.simulator.Simulator.set_physics`), the masks at every step would only cost.
 Python-side state a policy keeps between its own steps (a GRU's hidden state) lives inside the loop, reset at its
 start, so the graph replays it too; state changed between calls other than in parameters and buffers (a Python
 attribute) is not seen, hence the policy object is part of the key.
@@ -82,9 +84,10 @@ def rollout_key(sim, window: Window, policy, kind: str, policy_worlds: slice | N
 
 
 def run_captured(sim, key: tuple, window: Window, noise, residual, body, keep=None):
-    """``body(window, noise, residual)`` (a :class:`~wresdyn.sim.rollout.Rollout`) run through the simulator's graph
-    of ``key``: run eagerly at the key's first call, captured and replayed at its second, replayed after. ``keep``:
-    an object the graph reads (the policy), held with it. Returns outputs of their own (not the graph's buffers)."""
+    """``body(window, noise, residual, masked)`` (a :class:`~wresdyn.sim.rollout.Rollout`; ``masked``: the
+    branch-free loop) run through the simulator's graph of ``key``: run eagerly (its default loop) at the key's first
+    call, captured (branch-free) and replayed at its second, replayed after. ``keep``: an object the graph reads (the
+    policy), held with it. Returns outputs of their own (not the graph's buffers)."""
     cache = sim._rollout_graphs
     entry = cache.get(key)
     cur, side = torch.cuda.current_stream(sim.device), sim.side_stream()
@@ -140,7 +143,7 @@ def _capture(sim, window: Window, noise, residual, body, keep) -> tuple:
         with torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"):
             wp.capture_begin(stream=sim._wp_side, external=True, capture_mode=wp.CaptureMode.THREAD_LOCAL)
             try:
-                out = body(static, static_noise, static_residual)
+                out = body(static, static_noise, static_residual, True)
             finally:
                 wp.capture_end(stream=sim._wp_side)
     finally:
