@@ -3,11 +3,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import importlib
 
 import numpy as np
 import pytest
 import torch
+import warp as wp
 
 from wresdyn.errors import SimulationDiverged
 from wresdyn.fit.gradfit import build_policy
@@ -15,7 +18,7 @@ from wresdyn.learn.residual import ResidualConfig, obs_stats
 from wresdyn.sim import DivergenceLimits, Simulator, TrajectoryBank, replay_trajectories, rollout
 from wresdyn.sim.bank import servo_goal_accel
 from wresdyn.sim.residual_kinds import apply_residual, observation
-from wresdyn.sim.rollout_graph import _WARM, capture_blocker, rollout_key
+from wresdyn.sim.rollout_graph import _WARM, MAX_GRAPHS, capture_blocker, rollout_key
 
 
 def host_read_rollout(sim, window, policy=None, *, kind="torque", policy_worlds=None, residual=None,
@@ -244,3 +247,57 @@ def test_captured_replay_freezes_and_raises_as_the_eager_one(robot, data):
     for out in runs:
         assert torch.equal(out.diverged_at, eager.diverged_at)
         assert (out.q - eager.q).abs().max() < 1e-4
+
+
+class _FakeStream:
+    def wait_stream(self, other) -> None:
+        pass
+
+
+class _FakeGraph:
+    """Stands in for ``torch.cuda.CUDAGraph`` on the CPU: the 'capture' runs the loop eagerly (a real capture runs
+    nothing) and a replay does nothing, so the outputs are the capture's, as a real replay's are for the same inputs."""
+
+    def __init__(self) -> None:
+        self.replays = 0
+
+    def replay(self) -> None:
+        self.replays += 1
+
+
+def test_capture_bookkeeping_with_a_fake_graph_on_the_cpu(robot, setup, monkeypatch):
+    """The warm-up, capture and replay states of a key, the state buffer carried over, the outputs cloned and a raise
+    after a replayed window, with the CUDA calls faked on the CPU (the GPU tests above check the graph itself)."""
+    window, mlp, _, dt = setup
+    rollout_module = importlib.import_module("wresdyn.sim.rollout")  # the module: wresdyn.sim's `rollout` is the function
+    monkeypatch.setattr(rollout_module, "capture_blocker", lambda *a, **k: None)
+    monkeypatch.setattr(torch.cuda, "current_stream", lambda device=None: _FakeStream())
+    monkeypatch.setattr(torch.cuda, "stream", lambda s: contextlib.nullcontext())
+    monkeypatch.setattr(torch.cuda, "CUDAGraph", _FakeGraph)
+    monkeypatch.setattr(torch.cuda, "graph", lambda graph, **k: contextlib.nullcontext())
+    monkeypatch.setattr(wp, "capture_begin", lambda **k: None)
+    monkeypatch.setattr(wp, "capture_end", lambda **k: None)
+    sim = Simulator(robot, window.cmd.shape[0], dt, solver="replay")
+    monkeypatch.setattr(sim, "side_stream", lambda: _FakeStream())
+    assert window.steps % 2 == 1  # an odd step count: each replay leaves the other state buffer current
+    with torch.no_grad():
+        ref = host_read_rollout(sim, window, mlp, policy_worlds=slice(3, 6))
+        graphs = []
+        for call in range(4):
+            out = rollout(sim, window, mlp, kind="torque", policy_worlds=slice(3, 6))
+            assert torch.equal(out.q, ref[0]) and torch.equal(out.qd, ref[1]) and torch.equal(out.actions, ref[2])
+            out.q.zero_()  # the caller's own tensors, not the graph's buffers
+            (entry,) = sim._rollout_graphs.values()
+            graphs.append(entry if entry is _WARM else entry[0])
+        assert graphs[0] is _WARM and isinstance(graphs[1], _FakeGraph) and graphs[2] is graphs[1] is graphs[3]
+        assert graphs[1].replays == 3
+        start, after = sim._rollout_graphs[next(iter(sim._rollout_graphs))][5:7]
+        assert after != start and sim._cur == after
+        res = kick(window, [4], 15)
+        for call in range(3):  # eager (raises in the loop), captured, replayed (both raise after the window)
+            with pytest.raises(SimulationDiverged, match="world 4 at step 16"):
+                rollout(sim, window, residual=res, on_diverge="raise")
+        assert len(sim._rollout_graphs) == 2
+        for i in range(MAX_GRAPHS):  # new keys push the oldest out
+            rollout(sim, dataclasses.replace(window, cmd=window.cmd[:, :-1 - i], target=window.target[:, :-1 - i]))
+        assert len(sim._rollout_graphs) == MAX_GRAPHS

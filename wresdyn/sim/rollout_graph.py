@@ -100,11 +100,12 @@ def run_captured(sim, key: tuple, window: Window, noise, residual, body, keep=No
             entry = _EAGER
         _remember(cache, key, entry)
     if entry is None or entry is _EAGER:  # eager, on the simulator's stream as the capture is
-        with torch.cuda.stream(side):
-            out = body(window, noise, residual)
-        cur.wait_stream(side)
-        _remember(cache, key, entry or _WARM)
-        return out
+        _remember(cache, key, entry or _WARM)  # warm even where it raises (a diverged replay): the kernels are loaded
+        try:
+            with torch.cuda.stream(side):
+                return body(window, noise, residual)
+        finally:
+            cur.wait_stream(side)
     graph, static, static_noise, static_residual, out, start, after, _ = entry
     if sim._cur != start:  # the whole joint state, base included: what the eager loop would start from
         sim._q[start].copy_(sim._q[sim._cur])
