@@ -269,7 +269,7 @@ def test_capture_bookkeeping_with_a_fake_graph_on_the_cpu(robot, setup, monkeypa
     """The warm-up, capture and replay states of a key, the state buffer carried over, the outputs cloned and a raise
     after a replayed window, with the CUDA calls faked on the CPU (the GPU tests above check the graph itself)."""
     window, mlp, _, dt = setup
-X
+    rollout_module = importlib.import_module("wresdyn.sim.rollout")  # wresdyn.sim's `rollout` is the function
     monkeypatch.setattr(rollout_module, "capture_blocker", lambda *a, **k: None)
     monkeypatch.setattr(torch.cuda, "current_stream", lambda device=None: _FakeStream())
     monkeypatch.setattr(torch.cuda, "stream", lambda s: contextlib.nullcontext())
