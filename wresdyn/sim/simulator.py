@@ -79,7 +79,8 @@ class Simulator:
         param_grads: Gradients also reach the model's physical parameters (identification). The replay solver's
             kernels are the same either way (they read every parameter), so this only gates :meth:`set_physics`.
         graph: Replay the solver steps of :meth:`step` from a CUDA graph (default: on CUDA). Also the default of the
-            attribute ``rollout_graph``: a no-gradient rollout captured whole as one graph (:mod:`.rollout_graph`).
+            attribute ``rollout_graph``: a rollout without gradients captured whole as one graph and replayed on later
+            calls (:mod:`.rollout_graph`); ``sim.rollout_graph = False`` keeps that loop eager.
         ground: Stand the robots on a floor (:meth:`wresdyn.robot.Robot.build_model`); needs the ``mujoco``
             solver (``auto`` picks it), so no gradients.
         contact: :class:`~wresdyn.robot.ground.ContactSettings` of the floor (default ``ContactSettings()``).
