@@ -44,7 +44,8 @@ _ORIGINAL_LOAD = None  # Warp's Module.load while enable() has wrapped it
 
 
 def root() -> Path:
-    """The prebuilt-kernel folder in use: ``$WRESDYN_PREBUILT_KERNELS`` where set and not empty, else :data:`SHIPPED`."""
+    """The prebuilt-kernel folder in use: ``$WRESDYN_PREBUILT_KERNELS`` where set and not empty, else
+    :data:`SHIPPED`."""
     given = os.environ.get("WRESDYN_PREBUILT_KERNELS", "").strip()
     return Path(given).expanduser() if given else SHIPPED
 
