@@ -11,8 +11,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
+import warp as wp
 
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.paths import REPO
@@ -110,3 +112,61 @@ def test_without_a_prebuilt_folder_nothing_is_wrapped_or_copied(tmp_path, monkey
     assert not (tmp_path / "absent").exists()
     monkeypatch.delenv("WRESDYN_PREBUILT_KERNELS")
     assert prebuilt.root() == prebuilt.SHIPPED
+
+
+@wp.kernel
+def _double(x: wp.array(dtype=float)):  # the module fetch is tried on: this test file's kernels alone
+    i = wp.tid()
+    x[i] = 2.0 * x[i]
+
+
+def _index_file(folder: Path) -> Path:
+    return folder / wp.config.version / "cpu" / "index.json"
+
+
+def test_fetch_copies_an_exact_match_and_nothing_else(tmp_path, monkeypatch):
+    """In this process: one small module compiled into one cache, exported, then fetched into empty caches: copied
+    (binary and meta only) where the index matches, left to compile where its hash or a file's SHA-256 does not."""
+    from wresdyn.sim import prebuilt
+
+    wp.init()
+    cpu = wp.get_device("cpu")
+    module = _double.module
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path / "a"))
+    module.unload()
+    wp.force_load(device=cpu, modules=[module])
+    shipped = tmp_path / "shipped"
+    names = prebuilt.export(cpu, shipped)
+    ident = module.get_module_identifier(block_dim=next(bd for (ctx, bd) in module.execs if ctx == cpu.context))
+    assert names == [ident]  # only what this cache holds, not the modules other tests loaded into theirs
+    monkeypatch.setenv("WRESDYN_PREBUILT_KERNELS", str(shipped))
+    entry = json.loads(_index_file(shipped).read_text())["modules"][0]
+    bd = entry["block_dim"]
+
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path / "b"))
+    assert prebuilt.fetch(module, cpu, bd) is True
+    assert sorted(p.name for p in (tmp_path / "b" / ident).iterdir()) == sorted([entry["binary"], entry["meta"]])
+    assert prebuilt.fetch(module, cpu, bd) is False  # in the cache now: nothing to do
+    # loaded from the copy, nothing compiled, and it runs
+    module.unload()
+    wp.force_load(device=cpu, modules=[module])
+    assert not list((tmp_path / "b").rglob("*.cpp"))
+    x = wp.array(np.arange(4, dtype=np.float32), device=cpu)
+    wp.launch(_double, dim=4, inputs=[x], device=cpu)
+    assert np.array_equal(x.numpy(), 2.0 * np.arange(4))
+
+    index = json.loads(_index_file(shipped).read_text())
+    good = index["modules"][0]["hash"]
+    index["modules"][0]["hash"] = ("0" if good[0] != "0" else "1") + good[1:]
+    _index_file(shipped).write_text(json.dumps(index))
+    prebuilt._read_index.cache_clear()
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path / "c"))
+    assert prebuilt.fetch(module, cpu, bd) is False and not (tmp_path / "c" / ident).exists()
+
+    index["modules"][0]["hash"] = good
+    _index_file(shipped).write_text(json.dumps(index))
+    prebuilt._read_index.cache_clear()
+    binary = shipped / wp.config.version / "cpu" / ident / entry["binary"]
+    binary.write_bytes(binary.read_bytes() + b"\0")
+    assert prebuilt.fetch(module, cpu, bd) is False and not (tmp_path / "c" / ident).exists()
+    prebuilt._read_index.cache_clear()
