@@ -33,6 +33,10 @@ class Warmup(Command):
     """Warp device: cpu or cuda:0 (one GPU compiles for every GPU of its architecture)."""
     shipped: bool = True
     """Also compile for the shipped robots (--no-shipped: only --robot)."""
+    export: str | None = None
+    """Folder to copy the compiled modules to, with an index (Warp version, device architecture, module hashes): ship
+    it, or point WRESDYN_PREBUILT_KERNELS at it, and a fresh machine of that architecture and Warp version copies
+    them into its cache instead of compiling (only on an exact match)."""
 
 
 COMMAND = Warmup
@@ -60,5 +64,5 @@ def run(args: Warmup) -> int:
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     from ..sim.warmup import warm_up
 
-    warm_up(targets, device=args.device)
+    warm_up(targets, device=args.device, export=args.export)
     return 0

@@ -28,7 +28,7 @@ from pathlib import Path
 import torch
 
 from ..learn.parametric import ParametricResidual
-from ..learn.residual import GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
+from ..learn.residual import EluMLP, GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
 from ..learn.runs import RunFolder
 from ..learn.selection import ValidationScore
 from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
@@ -44,8 +44,6 @@ __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", 
 def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "network"):
     """A fresh residual: a network (MLP with ELU, or GRU + MLP) as a :class:`~wresdyn.learn.residual.ResidualPolicy`,
     or the ``"parametric"`` baseline."""
-    from rsl_rl.modules.mlp import MLP
-
     n = robot.n_dof
     if model == "parametric":
         return ParametricResidual(robot, residual_scale(robot, "torque", cfg.fraction))
@@ -54,10 +52,10 @@ def build_policy(robot, cfg: ResidualConfig, obs_mean, obs_std, model: str = "ne
     scale = residual_scale(robot, cfg.kind, cfg.fraction)
     if cfg.arch == "gru":
         gru = torch.nn.GRU(4 * n, cfg.gru_hidden_dim, cfg.gru_layers)
-        mlp = MLP(cfg.gru_hidden_dim, n, list(cfg.hidden_dims), "elu")
+        mlp = EluMLP(cfg.gru_hidden_dim, n, list(cfg.hidden_dims))
         policy = GRUResidualPolicy(gru, mlp, obs_mean, obs_std, scale, cfg.kind)
     else:
-        mlp = MLP(4 * n, n, list(cfg.hidden_dims), "elu")
+        mlp = EluMLP(4 * n, n, list(cfg.hidden_dims))
         policy = MLPResidualPolicy(mlp, obs_mean, obs_std, scale, cfg.kind)
     last = [m for m in mlp.modules() if isinstance(m, torch.nn.Linear)][-1]
     with torch.no_grad():  # start at PD-only

@@ -28,7 +28,6 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn as nn
-from rsl_rl.models import MLPModel, RNNModel
 
 from ..choices import Arch, choices
 from .network_file import export_onnx, save_program
@@ -38,6 +37,7 @@ __all__ = [
     "ARCHS",
     "ResidualConfig",
     "obs_stats",
+    "EluMLP",
     "ResidualMLPModel",
     "ResidualRNNModel",
     "actor_critic_cfg",
@@ -75,20 +75,57 @@ def _shrink_last_layer(mlp: nn.Module, gain: float) -> None:
         last.bias.zero_()
 
 
-class ResidualMLPModel(MLPModel):
-    """rsl-rl :class:`~rsl_rl.models.MLPModel` whose output starts near zero (``output_gain``)."""
+class EluMLP(nn.Sequential):
+    """Linear layers with ELU between them, the last one linear: rsl-rl's ``MLP`` (same layers, names, one shared
+    activation, the same draws from torch's generator, so the same weights under one seed) without importing
+    rsl-rl, whose package import loads tensordict and torch's compiler (seconds) that a gradient fit never uses.
+    Input (N, ``n_in``) -> output (N, ``n_out``)."""
 
-    def __init__(self, *args, output_gain: float = 1.0, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        _shrink_last_layer(self.mlp, output_gain)
+    def __init__(self, n_in: int, n_out: int, hidden_dims) -> None:
+        super().__init__()
+        act = nn.ELU()
+        sizes = [n_in, *hidden_dims]
+        layers = []
+        for a, b in zip(sizes[:-1], sizes[1:]):
+            layers += [nn.Linear(a, b), act]
+        layers.append(nn.Linear(sizes[-1], n_out))
+        for i, layer in enumerate(layers):
+            self.add_module(str(i), layer)
 
 
-class ResidualRNNModel(RNNModel):
-    """rsl-rl :class:`~rsl_rl.models.RNNModel` (GRU + MLP) whose output starts near zero (``output_gain``)."""
+_RSL_MODELS = ("ResidualMLPModel", "ResidualRNNModel")
+"""The actor classes built on rsl-rl's models: made on first access (:func:`__getattr__`)."""
 
-    def __init__(self, *args, output_gain: float = 1.0, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        _shrink_last_layer(self.mlp, output_gain)
+
+def _rsl_models() -> dict[str, type]:
+    """rsl-rl's :class:`~rsl_rl.models.MLPModel` and :class:`~rsl_rl.models.RNNModel` (GRU + MLP) whose output starts
+    near zero (``output_gain``): ``ResidualMLPModel`` and ``ResidualRNNModel``, the actors of residual PPO."""
+    from rsl_rl.models import MLPModel, RNNModel
+
+    class ResidualMLPModel(MLPModel):
+        def __init__(self, *args, output_gain: float = 1.0, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            _shrink_last_layer(self.mlp, output_gain)
+
+    class ResidualRNNModel(RNNModel):
+        def __init__(self, *args, output_gain: float = 1.0, **kwargs) -> None:
+            super().__init__(*args, **kwargs)
+            _shrink_last_layer(self.mlp, output_gain)
+
+    out = {"ResidualMLPModel": ResidualMLPModel, "ResidualRNNModel": ResidualRNNModel}
+    for name, cls in out.items():  # named as module attributes: pickle and rsl-rl's "module:Class" find them
+        cls.__qualname__ = name
+        cls.__module__ = __name__
+    return out
+
+
+def __getattr__(name: str):
+    """``ResidualMLPModel`` and ``ResidualRNNModel`` on first access (rsl-rl resolving :func:`actor_critic_cfg`'s
+    class names, an import, pickle): rsl-rl loads with PPO only, not with every user of this module."""
+    if name in _RSL_MODELS:
+        globals().update(_rsl_models())
+        return globals()[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def actor_critic_cfg(cfg: ResidualConfig) -> tuple[dict, dict]:
@@ -179,8 +216,8 @@ class GRUResidualPolicy(ResidualPolicy):
         self.hidden = torch.zeros(self.gru.num_layers, 0, self.gru.hidden_size, device=self.obs_mean.device)
 
 
-def policy_from_actor(actor: MLPModel, obs_mean, obs_std, scale, kind: str, gain: float = 1.0) -> ResidualPolicy:
-    """Copy a trained rsl-rl actor into a :class:`ResidualPolicy` (CPU, eval mode)."""
+def policy_from_actor(actor, obs_mean, obs_std, scale, kind: str, gain: float = 1.0) -> ResidualPolicy:
+    """Copy a trained rsl-rl actor (an ``MLPModel`` or ``RNNModel``) into a :class:`ResidualPolicy` (CPU, eval mode)."""
     import copy
 
     mlp = copy.deepcopy(actor.mlp).cpu()

@@ -26,6 +26,8 @@ from ..errors import WresdynError
 from ..robot.description import load_robot
 from .first_steps import check_newton
 from .goal_profile import profile_modules
+from .prebuilt import enable as enable_prebuilt
+from .prebuilt import export as export_prebuilt
 from .simulator import Simulator
 from .solver_replay.kernels import background_compiles, compile_batch, deferred_compile, start_background_compiles
 
@@ -107,6 +109,7 @@ def compile_kernels(robot, rate_hz: float, variants=("forward",), *, solver: str
         return None
     say = say or (lambda line: print(line, flush=True))
     wp.init()
+    enable_prebuilt()  # a module the prebuilt kernels hold exactly is copied into the cache, not compiled
     cache = _home(str(wp.config.kernel_cache_dir))
     name = Path(str(robot.source)).name
     say(f"compiling Warp kernels for {name} ({robot.n_dof} joints; {', '.join(todo.values())}): on a robot's first "
@@ -162,7 +165,7 @@ def _cache_entries() -> set[str]:
     return {p.name for p in root.iterdir()} if root.is_dir() else set()
 
 
-def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -> int:
+def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None, export: str | None = None) -> int:
     """Compile into Warp's cache every kernel module the default ``fit``, ``identify``, ``train`` (PPO) and ``eval``
     of each robot in ``targets`` use on ``device``, without training (``wresdyn warmup``): the forward and the
     adjoint variant of its replay solver, each with its step, fused rollout and dynamics-terms kernels, and Newton's
@@ -174,6 +177,9 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -
         device: Warp device, ``cpu`` or ``cuda:N``.
         rate_hz: Sample rate of the warm-up world [Hz]; the compiled code does not depend on it.
         say: Progress printer (default: ``print``, flushed).
+        export: Folder to copy the compiled modules to afterwards, with their index
+            (:func:`wresdyn.sim.prebuilt.export`): what a package or container ships so that a fresh machine of the
+            same architecture and Warp version loads them instead of compiling.
 
     Returns:
         The number of cache entries this call added (0: everything was compiled already).
@@ -215,4 +221,8 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None) -
     added = len(_cache_entries() - before)
     say(f"warmup: {added} new entries in {_home(str(wp.config.kernel_cache_dir))} in "
         f"{time.perf_counter() - t0:.1f} s" + ("" if added else " (all compiled already)"))
+    if export is not None:
+        names = export_prebuilt(dev, export)
+        say(f"exported {len(names)} compiled modules for {dev} to {export} (Warp {wp.config.version}): used by a "
+            f"fresh machine of the same architecture and Warp version given WRESDYN_PREBUILT_KERNELS={export}")
     return added

@@ -21,6 +21,7 @@ import numpy as np
 import warp as wp
 
 from ...errors import WresdynError
+from ..prebuilt import fetch
 from .cache import load_module
 from .codegen import generate_source
 from .tree import ReplayTree
@@ -203,8 +204,10 @@ def _pieces_from_env() -> int | None:
 
 def _compiled(module, device) -> bool:
     """Whether Warp's kernel cache holds ``module``'s binary for ``device`` (Warp 1.19's cache layout; False if
-    that cannot be told)."""
+    that cannot be told), after copying it in from the prebuilt kernels where they hold it exactly
+    (:func:`~wresdyn.sim.prebuilt.fetch`)."""
     try:
+        fetch(module, device)
         name = module._get_compile_output_name(device)
         return os.path.exists(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(), name))
     except (AttributeError, TypeError, OSError):
