@@ -2,7 +2,7 @@
 own pieces on the CPU (no training): the fits are reused, (a) is installed from the shipped policy, and (b)'s saved
 ``config.json`` passes the resume check against the record (b) would be trained with.
 
-Usage (repository root): python benchmarks/results/floor_fair/h200_default_s0_partial/check_resume.py FOLDER OUT
+Usage (repository root): python benchmarks/results/floor_fair/full/floor_def_s0/check_resume.py FOLDER OUT
 """
 
 import json
