@@ -18,6 +18,8 @@ from wresdyn.paths import REPO
 
 CARTPOLE = ("--robot", "newton:cartpole.urdf", "--gains", str(REPO / "examples" / "gains" / "cartpole.toml"))
 """The smallest robot at hand (3 DoF): its kernels compile in seconds on the CPU."""
+# the checkout first, then the caller's path (where a machine installs its wheels off the default path)
+PATH = os.pathsep.join(filter(None, (str(REPO), os.environ.get("PYTHONPATH"))))
 
 
 def _modules(cache: Path) -> set[str]:
@@ -51,7 +53,7 @@ def test_after_warmup_fit_train_and_eval_compile_nothing(tmp_path, cartpole, rec
     data.save(tmp_path / "cart.npz")
     cache = tmp_path / "warp"
     env = dict(os.environ, WARP_CACHE_PATH=str(cache), WRESDYN_KERNEL_DIR=str(tmp_path / "kernels"),
-               PYTHONPATH=str(REPO))
+               PYTHONPATH=PATH)
 
     first, cold = _wresdyn(env, "warmup", "--no-shipped", *CARTPOLE)
     compiled = _modules(cache)

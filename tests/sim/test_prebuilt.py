@@ -21,6 +21,8 @@ from wresdyn.paths import REPO
 
 CARTPOLE = ("--robot", "newton:cartpole.urdf", "--gains", str(REPO / "examples" / "gains" / "cartpole.toml"))
 """The smallest robot at hand (3 DoF): its kernels compile in seconds on the CPU."""
+# the checkout first, then the caller's path (where a machine installs its wheels off the default path)
+PATH = os.pathsep.join(filter(None, (str(REPO), os.environ.get("PYTHONPATH"))))
 
 
 def _compiled_here(cache: Path) -> set[str]:
@@ -44,7 +46,7 @@ def _fit(tmp_path: Path, name: str, data: Path, prebuilt: Path) -> tuple[Path, P
     """The default (hybrid) fit, two iterations of each stage, on an empty cache; (Warp cache, run folder)."""
     cache, run = tmp_path / f"warp_{name}", tmp_path / f"run_{name}"
     env = dict(os.environ, WARP_CACHE_PATH=str(cache), WRESDYN_KERNEL_DIR=str(tmp_path / f"kernels_{name}"),
-               WRESDYN_PREBUILT_KERNELS=str(prebuilt), PYTHONPATH=str(REPO))
+               WRESDYN_PREBUILT_KERNELS=str(prebuilt), PYTHONPATH=PATH)
     _wresdyn(env, "fit", str(data), "--out", str(run), "--iterations", "2", "--identify.iterations", "2")
     return cache, run
 
@@ -64,7 +66,7 @@ def test_prebuilt_kernels_replace_the_compile_only_on_an_exact_match(tmp_path, c
     data.gains = cartpole.gains_record()
     data.save(tmp_path / "cart.npz")
     shipped = tmp_path / "prebuilt"
-    env = dict(os.environ, WARP_CACHE_PATH=str(tmp_path / "warp_export"), PYTHONPATH=str(REPO),
+    env = dict(os.environ, WARP_CACHE_PATH=str(tmp_path / "warp_export"), PYTHONPATH=PATH,
                WRESDYN_KERNEL_DIR=str(tmp_path / "kernels_export"), WRESDYN_PREBUILT_KERNELS=str(tmp_path / "none"))
     out = _wresdyn(env, "warmup", "--no-shipped", *CARTPOLE, "--export", str(shipped)).stdout
     index_path = next(shipped.rglob("index.json"))
