@@ -239,6 +239,8 @@ class ReplayEnv(VecEnv):
         start = sim._cur
         if start not in self._warm:  # eager, on the simulator's stream as the capture will be
             self._warm.add(start)
+            # after torch's current stream: the actions and the episode state were written there
+            sim.side_stream().wait_stream(torch.cuda.current_stream(self.device))
             with torch.cuda.stream(sim.side_stream()):
                 out = self._step(actions, None)
             torch.cuda.current_stream(self.device).wait_stream(sim.side_stream())

@@ -344,7 +344,7 @@ class Simulator:
         if graph is None:
             self._advance()  # compiles and allocates outside the capture
             self._cur = start
-            with wp.ScopedCapture(device=self.model.device) as cap:  # on the current (torch's) stream
+            with wp.ScopedCapture(device=self.model.device) as cap:  # on Warp's current stream (step's: _wp_side)
                 self._advance()
             self._cur = start
             graph = self._graphs[start] = cap.graph
@@ -370,9 +370,10 @@ class Simulator:
             raise RuntimeError("step_diff needs Simulator(..., requires_grad=True)")
         if tau is None:
             tau = torch.zeros_like(target)
-        while len(self._tape_buffers) <= k:
-            self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.num_worlds, self.nq, self.nqd,
-                                                  self.q_index, self.qd_index))
+        with self._tape_stream():  # Warp fills new buffers on the stream whose torch writes to them come next
+            while len(self._tape_buffers) <= k:
+                self._tape_buffers.append(TapeBuffers(self.model, self.substeps, self.num_worlds, self.nq, self.nqd,
+                                                      self.q_index, self.qd_index))
         names = tuple(self._physics)
         return TapeStep.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))
 
