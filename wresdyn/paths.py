@@ -1,10 +1,12 @@
-"""Where the shipped robot, data and configs live (the repository's ``scenes/`` and ``data/`` folders)."""
+"""Where the shipped robot, data and configs live (the repository's ``scenes/`` and ``data/`` folders), and a
+file's content hash."""
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
-__all__ = ["REPO", "DEFAULT_ROBOT", "DEFAULT_DATASET", "DEFAULT_MISMATCH"]
+__all__ = ["REPO", "DEFAULT_ROBOT", "DEFAULT_DATASET", "DEFAULT_MISMATCH", "file_sha256"]
 
 REPO = Path(__file__).resolve().parent.parent
 """Repository root (wresdyn is installed in editable mode from it)."""
@@ -14,3 +16,12 @@ DEFAULT_DATASET = REPO / "data" / "dataset.npz"
 """The shipped benchmark dataset, recorded by ``wresdyn collect`` on the default mismatch."""
 DEFAULT_MISMATCH = REPO / "data" / "mismatch_default.toml"
 """The shipped mismatch config of the simulated "real" robot."""
+
+
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes (hex), read in 1 MiB chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()

@@ -16,14 +16,13 @@ The MuJoCo and Pinocchio models are built from this view (:mod:`wresdyn.robot.mu
 from __future__ import annotations
 
 import copy
-import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import RobotError
-from ..paths import DEFAULT_ROBOT
+from ..paths import DEFAULT_ROBOT, file_sha256
 from .contact import ContactSettings
 from .file_import import SUFFIX_KIND, import_file, resolve_path, short_label
 from .gains import apply_overrides, read_gains
@@ -240,13 +239,6 @@ class Robot:
         return model
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
 
 def load_robot(path: str | Path, gains: str | Path | dict | None = None, base: str = "fixed",
                package_path: list[str] | str | None = None) -> Robot:
@@ -364,7 +356,7 @@ def _describe(builder, path: Path, base: str) -> Robot:
     effort[~(effort > 0)] = np.inf  # importers write 0 or inf for "no limit"
     return Robot(
         source=path,
-        source_sha256=_sha256(path),
+        source_sha256=file_sha256(path),
         base=base,
         builder=builder,
         body_names=[short_label(builder.body_label[b]) for b in range(nb)],

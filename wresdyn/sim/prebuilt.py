@@ -22,7 +22,6 @@ module compiles as it would without it. The folder looked in is ``$WRESDYN_PREBU
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import os
 import shutil
@@ -31,6 +30,8 @@ from pathlib import Path
 
 import warp as wp
 from warp._src import context as _wpc
+
+from ..paths import file_sha256
 
 __all__ = ["SHIPPED", "arch_tag", "enable", "export", "fetch", "root"]
 
@@ -68,13 +69,6 @@ def _read_index(folder: str, version: str) -> dict:
     return {e["identifier"]: e for e in index.get("modules", []) if isinstance(e, dict) and "identifier" in e}
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
 
 def _place(src: Path, dest_dir: Path, name: str) -> None:
     """Copy ``src`` to ``dest_dir/name`` through a temporary name, so that no process sees a part-written file."""
@@ -105,7 +99,7 @@ def fetch(module, device, block_dim: int | None = None) -> bool:
         return False
     src = folder / ident
     files = entry.get("sha256", {})
-    if set(files) != {binary, meta} or any(_sha256(src / name) != digest for name, digest in files.items()):
+    if set(files) != {binary, meta} or any(file_sha256(src / name) != digest for name, digest in files.items()):
         return False
     cache.mkdir(parents=True, exist_ok=True)
     _place(src / binary, cache, binary)
@@ -159,7 +153,7 @@ def export(device, dest) -> list[str]:
                 _place(cache / ident / name, folder / ident, name)
             entries[ident] = {"identifier": ident, "name": module.name, "block_dim": bd, "hash": ex.module_hash.hex(),
                               "binary": binary, "meta": meta,
-                              "sha256": {n: _sha256(folder / ident / n) for n in (binary, meta)}}
+                              "sha256": {n: file_sha256(folder / ident / n) for n in (binary, meta)}}
     merged = {**old, **entries}  # a second export (another robot) adds to the first
     index = {"warp": wp.config.version, "arch": arch_tag(device), "device": device.name,
              "modules": sorted(merged.values(), key=lambda e: e["identifier"])}

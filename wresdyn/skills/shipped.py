@@ -9,12 +9,12 @@ machine, and the sha256 of every file, checked before a file is used.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
 from pathlib import Path
 
 from ..errors import WresdynError
+from ..paths import file_sha256
 
 __all__ = ["SHIPPED", "shipped_folder", "install_policy", "ship_policy"]
 
@@ -24,9 +24,6 @@ SHIPPED = Path(__file__).parent / "policies"
 _FILES = ("config.json", "train_summary.json", "policy.pt")
 """The run files a shipped policy keeps, beside its last checkpoint."""
 
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def shipped_folder(name: str) -> Path:
@@ -38,7 +35,7 @@ def shipped_folder(name: str) -> Path:
         raise WresdynError(f"no shipped policy {name!r} (shipped: {', '.join(have) or 'none'})")
     record = json.loads(manifest.read_text())
     for file, digest in record["sha256"].items():
-        if not (folder / file).is_file() or _sha256(folder / file) != digest:
+        if not (folder / file).is_file() or file_sha256(folder / file) != digest:
             raise WresdynError(f"{folder / file}: missing or changed since it was shipped (sha256 differs)")
     return folder
 
@@ -56,7 +53,7 @@ def install_policy(source: str | Path, dst: Path) -> Path:
     files = (*_FILES, ckpts[-1].name)
     dst = Path(dst)
     if dst.exists():
-        if all((dst / f).is_file() and _sha256(dst / f) == _sha256(src / f) for f in files):
+        if all((dst / f).is_file() and file_sha256(dst / f) == file_sha256(src / f) for f in files):
             return dst
         raise WresdynError(f"{dst}: holds another policy; remove it or choose another output folder")
     tmp = dst.with_name(dst.name + ".partial")
@@ -73,6 +70,6 @@ def ship_policy(run: str | Path, name: str, command: str, machine: str, commit: 
     folder = install_policy(run, SHIPPED / name)
     files = sorted(p.name for p in folder.iterdir() if p.name != "shipped.json")
     record = {"name": name, "command": command, "machine": machine, "commit": commit, "source": str(run),
-              "sha256": {f: _sha256(folder / f) for f in files}}
+              "sha256": {f: file_sha256(folder / f) for f in files}}
     (folder / "shipped.json").write_text(json.dumps(record, indent=1) + "\n")
     return folder
