@@ -114,7 +114,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         out = run_captured(sim, key, window, noise, residual, body, keep=policy)
     else:
         out = body(window, noise, residual)
-    if on_diverge == "raise" and not grad:  # where the loop ran branch-free (the host-read one raised already)
+    if on_diverge == "raise" and (captured or (branch_free and not grad)):  # a branch-free loop raises here: the
+        # host-read one raised at its step already, and a read of every world here would be one more wait
         hit = out.diverged_at >= 0
         if hit.any():  # the first step any world diverged at, and the first world diverging then
             k = int(out.diverged_at[hit].min())
