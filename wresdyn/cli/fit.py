@@ -23,6 +23,7 @@ import tyro
 from ..choices import FitModel
 from ..fit.gradfit_config import GradFitConfig
 from ..identify.sysid_config import SysIdConfig
+from .clock import ClockLog
 from .command import FLAT, Command
 
 IDENTIFY_SHARED = ("device", "seed", "solver", "friction_kappa")
@@ -103,9 +104,8 @@ def run(args: Fit) -> int:
         what = f"hybrid (identified physics + {what})"
     elif cfg.physics:
         what += f" on the physics of {cfg.physics}"
-    from ..progress import Log
-
-    log = Log(out / "fit.log", quiet=args.quiet)
+    # WRESDYN_LOG_CLOCK=1 stamps the lines with the seconds since the process started (where a first run's time goes)
+    log = ClockLog(out / "fit.log", quiet=args.quiet)
     from ..learn.schedule import describe_length
 
     log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {describe_length(cfg)} "
@@ -151,5 +151,9 @@ def run(args: Fit) -> int:
 
         # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would wait
         # for Clang's first compile of them)
+        if log.clock:
+            log("evaluating the run (wresdyn eval)")
         evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
+        if log.clock:
+            log("evaluation done")
     return 0
