@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# A first GPU fit's seconds on a fresh machine, four whole commands in one go (each timed by the shell, its log kept,
+# every fit line stamped with the seconds since its process started: WRESDYN_LOG_CLOCK=1, so the log says when the
+# first iteration was done):
+#   a. fit_cold:      `wresdyn fit DATA --device DEV --eval` from an empty Warp cache, no prebuilt kernels (the
+#                     baseline of this run);
+#   b. warmup_export: `wresdyn warmup --device DEV --no-shipped --robot ROBOT --export OUT/prebuilt` from another
+#                     empty cache (the dataset's robot only: the kernels the fit loads; the shipped SO-101's would add
+#                     about a minute and the fit does not use them);
+#   c. fit_prebuilt:  the fit from a third empty cache with WRESDYN_PREBUILT_KERNELS=OUT/prebuilt (the cold figure a
+#                     user of a package with shipped kernels sees);
+#   d. fit_warm:      the same command again on c's cache.
+# CUDA's own cache is off (CUDA_CACHE_DISABLE=1) and each step has its own WARP_CACHE_PATH under OUT, so nothing
+# compiled by one step serves another except through the export. Run from the repository root on an idle GPU (no
+# other work on it), the environment set by the caller (PYTHONPATH etc.):
+#
+#   bash benchmarks/speed/coldfit.sh OUT
+#
+# Environment: PYTHON (python3), DEVICE (cuda:0), DATA (data/dataset.npz), ROBOT (scenes/humanoid.usda, the
+# dataset's), FIT_EXTRA (more fit arguments, none by default; a CPU smoke check: DEVICE=cpu FIT_EXTRA="--iterations 4
+# --identify.iterations 4 --windows 4"), TOTAL (the whole script's budget [s], 355: each step gets what is left, a
+# step cut short says so: rc=124), GPU (the CUDA_VISIBLE_DEVICES of every step, 0).
+# Output: OUT/<step>.log (stdout and stderr, its last line `whole command: S s rc=RC`), OUT/<step>.fitlog (the run's
+# fit.log), OUT/STAGES (the clock of each step), OUT/machine.txt, OUT/summary.txt (each step's whole command and
+# first-iteration times, read off the logs).
+set -uo pipefail
+out=${1:?usage: coldfit.sh OUT}
+mkdir -p "$out"
+out=$(cd "$out" && pwd)
+py=${PYTHON:-python3}
+dev=${DEVICE:-cuda:0}
+data=${DATA:-data/dataset.npz}
+robot=${ROBOT:-scenes/humanoid.usda}
+extra=${FIT_EXTRA:-}
+total=${TOTAL:-355}
+export CUDA_VISIBLE_DEVICES=${GPU:-0} CUDA_CACHE_DISABLE=1 PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 WRESDYN_LOG_CLOCK=1
+unset WRESDYN_PREBUILT_KERNELS
+t_start=$(date +%s)
+stage() { echo "$(date -u +%T) $*" >> "$out/STAGES"; }
+left() { echo $(( total - ($(date +%s) - t_start) )); }
+
+{ date -u; nvidia-smi 2>&1 | head -20; nproc; uptime
+  "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)" 2>&1
+  git log -1 --format='%H %s' 2>&1; git status --porcelain --untracked-files=no 2>&1 | head -20; } > "$out/machine.txt"
+
+timed() {  # timed STEP CMD...: the whole command under the budget left, its log and the shell's clock
+  local step=$1; shift
+  local budget; budget=$(left)
+  if [ "$budget" -le 5 ]; then
+    echo "not run: the budget of $total s is spent" > "$out/$step.log"; stage "$step skipped"; return
+  fi
+  stage "$step start"
+  local s; s=$(date +%s.%N)
+  timeout "$budget" "$@" > "$out/$step.log" 2>&1
+  local rc=$?
+  echo "whole command: $("$py" -c "import time; print(round(time.time() - $s, 1))") s rc=$rc" >> "$out/$step.log"
+  stage "$step rc=$rc"
+}
+
+fit() {  # fit STEP CACHE: the fit from that Warp cache folder
+  rm -rf "$out/runs/$1"
+  WARP_CACHE_PATH=$2 timed "$1" "$py" -m wresdyn.cli fit "$data" --device "$dev" --eval --out "$out/runs/$1" $extra
+  cp "$out/runs/$1/fit.log" "$out/$1.fitlog" 2>/dev/null
+}
+
+: > "$out/STAGES"
+rm -rf "$out/wc_cold" "$out/wc_export" "$out/wc_prebuilt" "$out/prebuilt"
+fit fit_cold "$out/wc_cold"
+WARP_CACHE_PATH=$out/wc_export timed warmup_export "$py" -m wresdyn.cli warmup --device "$dev" --no-shipped \
+  --robot "$robot" --export "$out/prebuilt"
+du -sh "$out/prebuilt" >> "$out/warmup_export.log" 2>&1
+export WRESDYN_PREBUILT_KERNELS=$out/prebuilt
+fit fit_prebuilt "$out/wc_prebuilt"
+fit fit_warm "$out/wc_prebuilt"
+
+for step in fit_cold warmup_export fit_prebuilt fit_warm; do
+  whole=$(grep -h "^whole command:" "$out/$step.log" 2>/dev/null | tail -1)
+  first=$(grep -ho "first iteration of [a-z]* done at [0-9.]* s" "$out/$step.log" 2>/dev/null | head -1)
+  echo "$step: ${whole:-not run}${first:+; $first}"
+done > "$out/summary.txt"
+cat "$out/summary.txt"
