@@ -11,7 +11,9 @@
 #                     user of a package with shipped kernels sees);
 #   d. fit_warm:      the same command again on c's cache.
 # CUDA's own cache is off (CUDA_CACHE_DISABLE=1) and each step has its own WARP_CACHE_PATH under OUT, so nothing
-# compiled by one step serves another except through the export. Run from the repository root on an idle GPU (no
+# compiled by one step serves another except through the export; the background compile a cold fit leaves running
+# for its next run (the one-kernel adjoint) is ended after the step (OUT/STAGES says how many), so no step shares the
+# host with another's compiler. Run from the repository root on an idle GPU (no
 # other work on it), the environment set by the caller (PYTHONPATH etc.):
 #
 #   bash benchmarks/speed/coldfit.sh OUT
@@ -57,10 +59,19 @@ timed() {  # timed STEP CMD...: the whole command under the budget left, its log
   stage "$step rc=$rc"
 }
 
+workers() {  # workers CACHE: pids of the background compile workers writing into that Warp cache
+  ps -eo pid=,comm=,args= | awk -v c="$1/" '$2 ~ /^python/ && index($0, "compile_worker.py") && index($0, c) {print $1}'
+}
+
 fit() {  # fit STEP CACHE: the fit from that Warp cache folder
   rm -rf "$out/runs/$1"
   WARP_CACHE_PATH=$2 timed "$1" "$py" -m wresdyn.cli fit "$data" --device "$dev" --eval --out "$out/runs/$1" $extra
   cp "$out/runs/$1/fit.log" "$out/$1.fitlog" 2>/dev/null
+  # a cold CUDA fit leaves the one-kernel adjoint compiling for the next run in a detached worker (the command does
+  # not wait for it): ended here, by pid, so that it takes no cores from the next step's clock
+  local pids; pids=$(workers "$2")
+  stage "$1 left $(echo $pids | wc -w) background compile worker(s)${pids:+, ended: $pids}"
+  [ -n "$pids" ] && kill $pids 2>/dev/null
 }
 
 : > "$out/STAGES"
