@@ -149,10 +149,10 @@ def run(args: Fit) -> int:
     if args.eval:
         from ..evaluation.evaluate_run import evaluate_run
 
-        # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would wait
-        # for Clang's first compile of them)
         if log.clock:
             log("evaluating the run (wresdyn eval)")
+        # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would wait
+        # for Clang's first compile of them)
         evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
         if log.clock:
             log("evaluation done")
