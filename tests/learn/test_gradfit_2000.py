@@ -68,3 +68,35 @@ def test_graph_replayed_schedule_gives_the_eager_result(robot, data):
     assert graph["final_loss"] == pytest.approx(eager["final_loss"], rel=1e-3)
     assert graph["final_validation"] == pytest.approx(eager["final_validation"], abs=1e-5)
     assert graph["returned_params_abs_sum"] == pytest.approx(eager["returned_params_abs_sum"], rel=1e-4)
+
+
+def test_all_worlds_policy_and_unit_gain_give_the_sliced_and_scaled_results_bit_for_bit(robot, data):
+    # the fit's per-step savings (no full slice of the state for the policy, no product with a gain of 1) against the
+    # longer forms they replace: the same rollout, loss and parameter gradients on the CPU, bit for bit
+    import numpy as np
+
+    from wresdyn.fit.gradfit import build_policy
+    from wresdyn.learn.residual import obs_stats
+    from wresdyn.sim import Simulator, TrajectoryBank, rollout
+
+    train = data.split("train")
+    torch.manual_seed(0)
+    policy = build_policy(robot, TINY.residual, *obs_stats(train))
+    sim = Simulator(robot, 4, 1.0 / data.rate_hz, requires_grad=True)
+    window = TrajectoryBank(train, sim.device).sample(np.random.default_rng(3), 4, 6)
+    noise = torch.randn(6, 4, 4 * robot.n_dof, generator=torch.Generator().manual_seed(1))
+
+    def run(worlds, product=False):
+        policy.zero_grad()
+        if product:  # the product with the gain of 1 that the unit-gain path skips, written out
+            policy._to_residual = lambda a: (1.0 * a).clamp(-1.0, 1.0) * policy.scale
+        out = rollout(sim, window, policy, grad=True, truncation=4, obs_noise=0.1, noise=noise, policy_worlds=worlds)
+        policy.__dict__.pop("_to_residual", None)
+        loss = ((out.q - window.q) ** 2).sum() + (out.actions ** 2).sum()
+        loss.backward()
+        return [out.q.detach(), out.qd.detach(), out.actions.detach(), *(p.grad.clone() for p in policy.parameters())]
+
+    fast, sliced, scaled = run(None), run(slice(None)), run(None, product=True)
+    assert policy.gain == 1.0 and "_to_residual" not in policy.__dict__ and len(fast) > 3
+    for a, b, c in zip(fast, sliced, scaled):
+        assert torch.equal(a, b) and torch.equal(a, c)
