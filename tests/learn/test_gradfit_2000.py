@@ -61,7 +61,7 @@ def test_graph_replayed_schedule_gives_the_eager_result(robot, data):
     import dataclasses
 
     measure = _script().measure
-    cfg = dataclasses.replace(TINY, windows=64, iterations=24, select_every=12, device="cuda:0")
+    cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0")
     graph = measure(robot, data, cfg, log=lambda *_: None)
     eager = measure(robot, data, dataclasses.replace(cfg, cuda_graph=False), log=lambda *_: None)
     assert graph["cuda_graph"] and not eager["cuda_graph"]
