@@ -166,7 +166,9 @@ class ResidualPolicy(nn.Module):
         self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
 
     def _to_residual(self, a: torch.Tensor) -> torch.Tensor:
-        return (self.gain * a).clamp(-1.0, 1.0) * self.scale
+        # at gain 1 (every residual but PPO's with an action gain) the product is ``a`` itself, bit for bit: skip it,
+        # one kernel forward and one backward per step of a differentiable rollout
+        return (a if self.gain == 1.0 else self.gain * a).clamp(-1.0, 1.0) * self.scale
 
     def residual_kind(self) -> str:
         """``"torque"`` or ``"delta_action"`` (the exported residual has it too)."""

@@ -149,7 +149,10 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     for k in range(steps):
         res = None
         if policy is not None:
-            obs = observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k])
+            # all worlds: the tensors themselves, not a full slice of each, whose backward would allocate and fill a
+            # copy of every step's gradient (three per step)
+            obs = (observation(q, qd, qdd, window.cmd[:, k]) if policy_worlds is None
+                   else observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k]))
             if obs_noise > 0.0:
                 obs = obs + (noise[k] if noise is not None else obs_noise * policy.obs_std * torch.randn(
                     obs.shape, generator=generator, device=obs.device))

@@ -1,0 +1,59 @@
+"""Torch operators of one gradient-fit iteration by name, per step of its windows: what the iteration's torch kernels
+are (on CUDA most operators here are one kernel each; views such as ``t``, ``view``, ``select`` are none).
+
+    python benchmarks/speed/gradfit_torch_ops.py --horizon 16 --windows 8
+
+The shipped humanoid (21 DoF) and data, the gradient fit's defaults at one window length, on the CPU: one iteration
+warms up, the next runs under torch's profiler. Counted: the operators called from Python or autograd (an operator
+another one calls is not counted again).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def main() -> None:
+    import torch
+    import warp as wp
+    from torch.profiler import ProfilerActivity, profile
+
+    from wresdyn.data.dataset import load_dataset
+    from wresdyn.fit.gradfit import GradFitConfig, _FitLearner
+    from wresdyn.learn.window_fit import start_window_fit
+    from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--horizon", type=int, default=16, help="window length [steps]")
+    p.add_argument("--windows", type=int, default=8)
+    p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
+    args = p.parse_args()
+    wp.config.quiet = True
+    torch.set_num_threads(1)
+    robot = load_robot(DEFAULT_ROBOT)
+    data = load_dataset(args.data, robot=robot)
+    h = args.horizon
+    cfg = GradFitConfig(windows=args.windows, horizon_curriculum=(h,), iterations=4)
+    rng, train, dt = start_window_fit(cfg, data)
+    learner = _FitLearner(robot, data, cfg, None, rng, train, dt, print)
+    learner.step(0, h, cfg.lr)  # loads the kernels
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        learner.step(1, h, cfg.lr)
+    events = [e for e in prof.events() if e.name.startswith("aten::")]
+    top = [e for e in events if e.cpu_parent is None or not e.cpu_parent.name.startswith("aten::")]
+    count = collections.Counter(e.name for e in top)
+    total = sum(count.values())
+    print(f"humanoid {robot.n_dof} DoF, {args.windows} windows, H = {h}: {total} operators in one iteration, "
+          f"{total / h:.1f} per step")
+    print("| operator | count | per step |")
+    print("|---|---|---|")
+    for name, c in count.most_common():
+        print(f"| {name} | {c} | {c / h:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
