@@ -32,8 +32,8 @@ def _start(humanoid, out, cfg=CFG, draw_fails: bool = False) -> tuple:
     got, lines = [], []
 
     class Recording(MotionStore):
-        def motions(self, draw):
-            got.append(super().motions(draw))
+        def motions(self, draw, trained=()):
+            got.append(super().motions(draw, trained))
             return got[-1]
 
     def stop(*args, **kw):
@@ -94,11 +94,13 @@ def test_a_resumed_floor_run_reads_back_the_motions_it_drew_bit_for_bit(drawn):
                                            ({"screen": False}, "screen")])
 def test_motions_drawn_from_other_inputs_are_refused_naming_the_field(humanoid, drawn, change, field):
     out = drawn[0]
+    (out / "skills" / "a_nominal").mkdir(parents=True, exist_ok=True)  # a policy trained on the stored motions
     before = (out / MOTIONS_FILE).read_bytes()
     with pytest.raises(WresdynError) as e:
         _start(humanoid, out, replace(CFG, **change), draw_fails=True)
     msg = str(e.value)
     assert "\n" not in msg and str(out / MOTIONS_FILE) in msg and f"drawn with {field} = " in msg, msg
+    assert "(a_nominal trained on them)" in msg, msg
     assert (out / MOTIONS_FILE).read_bytes() == before  # never drawn over
 
 

@@ -141,9 +141,10 @@ class MotionStore:
                      "drawing the motions again")
             return None
 
-    def motions(self, draw) -> MotionSet:
+    def motions(self, draw, trained=()) -> MotionSet:
         """The stored motions where their fingerprint is this run's; else ``draw()``'s, written. Raises a one-line
-        :class:`~wresdyn.errors.WresdynError` where the stored ones were drawn from other inputs."""
+        :class:`~wresdyn.errors.WresdynError` where the stored ones were drawn from other inputs (naming the policies
+        ``trained`` on them)."""
         stored = self._read()
         if stored is None:
             motion_set = draw()
@@ -152,8 +153,10 @@ class MotionStore:
         diff = _first_difference(stored[1]["fingerprint"], self.fingerprint)
         if diff:
             field, old, new = diff
+            on = f" ({', '.join(trained)} trained on them)" if trained else ""
             raise WresdynError(f"{self.path}: the run's motions were drawn with {field} = {json.dumps(old)}, this run "
-                               f"asks for {json.dumps(new)}; resume with the same settings or choose another folder")
+                               f"asks for {json.dumps(new)}{on}; resume with the same settings or choose another "
+                               "folder")
         self.log(f"motions loaded from {self.path}")
         return stored[0]
 
