@@ -41,6 +41,7 @@ from ..robot import load_robot
 from ..skills.env import TrackingEnv
 from ..skills.evaluate import deploy, gap_closed, gaps_or_why_not, metrics
 from ..skills.ledger import LEDGER, ledger_table, record_heldout
+from ..skills.motion_store import MotionStore, motion_fingerprint
 from ..skills.motions import MotionSet, make_motions
 from ..skills.plants import RealPlant, sim_plant
 from ..skills.real_warp import RealWarpPlant
@@ -228,10 +229,15 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         check_fits(cfg.nominal, task, ppo, meta["motions"], robot.n_dof)
     t0 = time.perf_counter()
     balanced = floor and cfg.heldout_families == "balanced"  # held-out motions drawn once the families are chosen
-    if floor:
-        motions = make_motions(robot, {k: n for k, n in counts.items() if not (balanced and k == "heldout")},
-                               cfg.duration, rate, cfg.seed, floating=plant_robot, extra=cfg.extra_families,
-                               screen=cfg.screen)
+    store = None
+    if floor:  # drawn once per run folder: a resumed run reads them back (refused where drawn from other inputs)
+        store = MotionStore(out, motion_fingerprint(robot, counts, cfg.duration, rate, cfg.seed, floor=True,
+                                                    screen=cfg.screen, extra=cfg.extra_families,
+                                                    heldout_families=cfg.heldout_families), log)
+        motions = store.motions(lambda: make_motions(
+            robot, {k: n for k, n in counts.items() if not (balanced and k == "heldout")}, cfg.duration, rate,
+            cfg.seed, floating=plant_robot, extra=cfg.extra_families, screen=cfg.screen),
+            trained=sorted(p.name for p in (out / "skills").glob("*") if p.is_dir()))
     else:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)
     log(f"[1/4] {'floor ' if floor else ''}motions: "
@@ -268,7 +274,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     in_sim = {}  # deployments in a policy's own simulator done before the loop below
     if balanced:
         motions, results["heldout_families"], in_sim = _heldout_families(out, robot, plant_robot, cfg, motions, sim,
-                                                                          task, log)
+                                                                          task, log, store)
     rollouts = {}
     for split in ("validation", "heldout"):
         mot = motions.split(split)
@@ -311,14 +317,15 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     return results
 
 
-def _heldout_families(out: Path, robot, floating, cfg, motions, sim, task, log):
+def _heldout_families(out: Path, robot, floating, cfg, motions, sim, task, log, store: MotionStore):
     """The held-out motions of the families (a) carries in its own simulator on every validation motion
-    (:func:`~.nominal_policy.balanced_families`), drawn now: the motion set with them, the record of the rule for
-    ``results.json``, and (a)'s validation deployment in the nominal simulator (reused by the deployment)."""
+    (:func:`~.nominal_policy.balanced_families`), drawn now (or read back from ``store`` where drawn for the same
+    families): the motion set with them, the record of the rule for ``results.json``, and (a)'s validation deployment
+    in the nominal simulator (reused by the deployment)."""
     t0 = time.perf_counter()
     val = motions.split("validation")
     kept, left, res = balanced_families(load_skill(out / "skills" / "a_nominal"), sim("nominal", len(val)), val, task)
-    held, unvouched = draw_heldout(robot, floating, cfg, motions.rate_hz, kept)
+    held, unvouched = store.heldout(motions, kept, lambda: draw_heldout(robot, floating, cfg, motions.rate_hz, kept))
     left = {**left, **unvouched} if kept else {}
     record = {"rule": "balanced", "kept": list(dict.fromkeys(m.family for m in held)), "left_out": left}
     log(f"[4/4] held-out families (a) carries on every validation motion in its simulator: "

@@ -27,7 +27,8 @@ from ..robot.pinocchio_model import build_pinocchio
 from .families import FAMILIES, TASK_FAMILIES, arm_keys, keyframes, leg_keys, stance
 from .feasibility import screen as screen_feasibility
 
-__all__ = ["TASK_FAMILIES", "FAMILIES", "Motion", "MotionSet", "make_motion", "make_motions", "stance", "PLANTED_TOL"]
+__all__ = ["TASK_FAMILIES", "FAMILIES", "Motion", "MotionSet", "make_motion", "make_motions", "stance", "PLANTED_TOL",
+           "joint_velocity"]
 
 PLANTED_TOL = 0.002
 """A sole less than this above the lowest sole is planted [m]."""
@@ -134,13 +135,19 @@ def _play(robot: Robot, ik: FootIK, leg, arm, t: np.ndarray, rate_hz: float, ik_
     if float(err[:, :, 0].max()) > ik_tol:
         return None
     q = np.clip(q + keyframes(t, *arm), robot.lower, robot.upper)
-    qd = np.gradient(q, 1.0 / rate_hz, axis=0)
+    qd = joint_velocity(q, rate_hz)
     feet = np.array([ik.forward(x)[0] for x in q])
     params = {**params, "ik_max_error_m": float(err[:, :, 0].max())}
     if floating is None:
         return Motion(name, family, q, qd, feet, params)
     base, planted = _place(floating, feet, q)
     return Motion(name, family, q, qd, feet, params, base=base, planted=planted)
+
+
+def joint_velocity(q: np.ndarray, rate_hz: float) -> np.ndarray:
+    """A motion's reference joint velocities [rad/s], shape (T, n_dof), from its positions ``q`` (T, n_dof) [rad]
+    sampled at ``rate_hz``: central differences (one-sided at the ends)."""
+    return np.gradient(q, 1.0 / rate_hz, axis=0)
 
 
 def _stretch(keys, factor: float, duration: float):
