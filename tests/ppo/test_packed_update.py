@@ -76,7 +76,8 @@ def compare(alg) -> dict:
     torch.manual_seed(1)  # the mini-batch permutation
     ref_losses = alg.update()
     ref, ref_lr = _state(alg), alg.learning_rate
-    moved = max(float((p - b).abs().max()) for p, b in zip((*alg.actor.parameters(), *alg.critic.parameters()), before))
+    moved = max(float((p.detach() - b).abs().max())
+                for p, b in zip((*alg.actor.parameters(), *alg.critic.parameters()), before))
     alg.actor.load_state_dict(start[0])
     alg.critic.load_state_dict(start[1])
     alg.optimizer.load_state_dict(start[2])

@@ -25,6 +25,7 @@ critic, no RND, no symmetry, the KL of the gradients' dtype); anything else runs
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from rsl_rl.algorithms import PPO
 
@@ -109,10 +110,10 @@ class PackedPPO(PPO):
             if adaptive:
                 if copied is not None:
                     copied.synchronize()  # the one wait of the mini-batch
-                higher, lower = flags.tolist()
+                higher, lower = flags.numpy().tolist()  # a host buffer: no wait on the device
                 self.learning_rate = next_learning_rate(self.learning_rate, higher, lower)
                 if self.is_multi_gpu:  # rsl-rl broadcasts the rate as a float32 tensor
-                    self.learning_rate = torch.tensor(self.learning_rate, dtype=torch.float32).item()
+                    self.learning_rate = float(np.float32(self.learning_rate))
                 for group in self.optimizer.param_groups:
                     group["lr"] = self.learning_rate
             self.optimizer.step()
