@@ -25,12 +25,14 @@ export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} PYTHONUNBUFFERED=1
 HERE=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$HERE" || exit 1
 
+FAILED=0
 step() {  # step NAME COMMAND...: run it, log its time and status (a failed step does not stop the others)
   local name=$1 s e rc
   shift
   s=$(date +%s.%N)
   "$@"
   rc=$?
+  (( rc == 0 )) || FAILED=$((FAILED + 1))
   e=$(date +%s.%N)
   echo "$(date -u +%T) $name: $(python3 -c "print(round($e - $s, 1))") s rc=$rc" | tee -a "$OUT/steps.txt"
 }
@@ -67,3 +69,4 @@ profile() {
 step "profile, 2 GPUs" profile
 tail -n 20 "$OUT/profile_two.txt"
 uptime >> "$OUT/machine.txt"
+(( FAILED == 0 )) || { echo "ppo90.sh: $FAILED step(s) failed (steps.txt; each step's .txt)" >&2; exit 1; }
