@@ -11,7 +11,9 @@ residual's time to a validation target.
 A case is ``LEARNER:ENVS[+OPTION...]`` with ENVS the worlds of all processes together (split as ``wresdyn train``
 splits them); an option sets a PPO field (:data:`OPTIONS`): ``+one_sync`` the update with one host synchronisation
 (``ppo.one_sync_update``), ``+bf16`` rsl-rl's mixed precision, ``+compile`` rsl-rl's ``torch.compile``, ``+mbK``
-K mini-batches, ``+epK`` K epochs.
+K mini-batches, ``+epK`` K epochs; ``+rsl_update`` (residual only) runs rsl-rl's own ``PPO.update`` instead of the
+residual's default :class:`~wresdyn.ppo.packed_update.PackedPPO`, the same update bit for bit with fewer collectives
+and host waits: the baseline of that change in the same run.
 
 - ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
   world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph.
@@ -48,6 +50,9 @@ OPTIONS = {"one_sync": ("one_sync_update", True), "bf16": ("mixed_precision", Tr
 """A case's ``+OPTION``: the PPO config field it sets (``+mbK`` sets ``num_mini_batches`` = K, ``+epK``
 ``num_learning_epochs`` = K); the skill's config has ``one_sync``, ``mbK`` and ``epK``."""
 
+RSL_UPDATE = "rsl_update"
+"""The residual case's option for rsl-rl's own ``PPO.update`` (not a config field: the runner config's class)."""
+
 
 def _parse_case(text: str) -> tuple[str, int, dict]:
     """``LEARNER:ENVS[+OPTION...]`` as (learner, worlds of all processes, PPO config fields to set)."""
@@ -55,7 +60,9 @@ def _parse_case(text: str) -> tuple[str, int, dict]:
     learner, _, envs = head.partition(":")
     fields = {}
     for o in opts:
-        if o in OPTIONS:
+        if o == RSL_UPDATE:
+            fields[RSL_UPDATE] = True
+        elif o in OPTIONS:
             fields[OPTIONS[o][0]] = OPTIONS[o][1]
         elif o[:2] in ("mb", "ep") and o[2:].isdigit():
             fields["num_mini_batches" if o[:2] == "mb" else "num_learning_epochs"] = int(o[2:])
@@ -63,6 +70,8 @@ def _parse_case(text: str) -> tuple[str, int, dict]:
             raise SystemExit(f"ppo_scaling.py: case {text!r}: unknown option {o!r} ({', '.join(OPTIONS)}, mbK, epK)")
     if learner not in ("residual", "skill") or not envs.isdigit():
         raise SystemExit(f"ppo_scaling.py: case {text!r} is not residual|skill:ENVS[+OPTION...]")
+    if learner == "skill" and RSL_UPDATE in fields:
+        raise SystemExit(f"ppo_scaling.py: case {text!r}: the skill's PPO runs rsl-rl's own update already")
     if learner == "skill" and set(fields) & {"mixed_precision", "compile_mode"}:
         raise SystemExit(f"ppo_scaling.py: case {text!r}: the skill's PPO has no mixed precision or compile option")
     return learner, int(envs), fields
@@ -78,7 +87,7 @@ def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Pat
     from wresdyn.learn.residual import obs_stats
 
     cfg = set_fields(default_config(), {"env.num_worlds": envs, "ppo.device": device,
-                                        **{f"ppo.{k}": v for k, v in fields.items()}})
+                                        **{f"ppo.{k}": v for k, v in fields.items() if k != RSL_UPDATE}})
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
@@ -87,6 +96,8 @@ def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Pat
                     graph=cfg.ppo.cuda_graph, weights=data.fit_weights())
     rcfg = runner_cfg(cfg)
     rcfg["check_for_nan"] = not env.graph
+    if fields.get(RSL_UPDATE):
+        rcfg["algorithm"]["class_name"] = "PPO"
     return env, make_runner(env, rcfg, tmp, ranks.main), cfg.ppo.num_steps_per_env
 
 
@@ -152,6 +163,7 @@ def _throughput(ranks, robot, data, case: str, device: str, warmup: int, iterati
         collect, learn = sum(times["collect"][warmup:]), sum(times["learn"][warmup:])
         row = {"case": case, "learner": learner, "options": "+".join(case.split("+")[1:]), "processes": ranks.world,
                "envs": envs, "envs_per_process": env.num_envs, "device": str(env.device), "iterations": iterations,
+               "update": type(runner.alg).__name__,
                "build_s": build, "warmup_s": warm, "collect_s": collect / iterations, "learn_s": learn / iterations,
                "s_per_iteration": (collect + learn) / iterations,
                "training_steps_per_s": envs * steps * iterations / (collect + learn),

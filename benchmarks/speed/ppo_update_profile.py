@@ -4,10 +4,13 @@
     python benchmarks/speed/ppo_update_profile.py --device cuda:0 --envs 4096
     python benchmarks/speed/ppo_update_profile.py --device cuda:0 --envs 4096 --set ppo.one_sync_update=true
     torchrun --standalone --nproc_per_node 2 benchmarks/speed/ppo_update_profile.py --device cuda --envs 8192
+    torchrun --standalone --nproc_per_node 2 benchmarks/speed/ppo_update_profile.py --device cuda --envs 8192 \\
+        --rsl-update
 
 Workload: the shipped benchmark with the default residual PPO (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
 world, 5 epochs x 4 mini-batches, adaptive learning rate), ``--envs`` worlds in total (split over torchrun's
-processes, as ``wresdyn train`` splits them), ``--set`` overrides as on ``wresdyn train``.
+processes, as ``wresdyn train`` splits them), ``--set`` overrides as on ``wresdyn train``; the update is the
+residual's default (:class:`~wresdyn.ppo.packed_update.PackedPPO`), or rsl-rl's own with ``--rsl-update``.
 
 1. **Split** (``--iterations`` plain iterations after 2 of warm-up): rsl-rl's own collect and learn times.
 2. **Breakdown** (as many iterations again, instrumented): every part of ``PPO.update`` timed between device
@@ -118,6 +121,8 @@ def instrument(alg, parts: Parts) -> None:
     for name in ("item", "tolist", "__bool__"):
         # Adam reads its step counts, host tensors, with item(): no wait on the device
         parts.wrap(torch.Tensor, name, f"host sync: Tensor.{name}", skip_inside=("optimizer step",))
+    if torch.cuda.is_available():  # the packed update waits on an event (its KL tests copied to the host)
+        parts.wrap(torch.cuda.Event, "synchronize", "host sync: Event.synchronize")
     if torch.distributed.is_available():
         for name in ("all_reduce", "broadcast"):
             parts.wrap(torch.distributed, name, f"collective: {name}")
@@ -173,6 +178,8 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=256, help="worlds in total (split over torchrun's processes)")
     p.add_argument("--iterations", type=int, default=5, help="iterations of each phase")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
+    p.add_argument("--rsl-update", action="store_true",
+                   help="rsl-rl's own PPO.update instead of the residual's default (the packed update, bit for bit)")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     wp.config.quiet = True
@@ -192,6 +199,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp, into_file(Path(tmp) / "rsl_rl.log"):
         rcfg = runner_cfg(cfg)
         rcfg["check_for_nan"] = not env.graph
+        if args.rsl_update:
+            rcfg["algorithm"]["class_name"] = "PPO"
         runner = make_runner(env, rcfg, Path(tmp), main=ranks.main)  # rank 0 logs as in a run
         runner.learn(2)
         with iteration_times(runner) as (collect, learn):
@@ -202,7 +211,8 @@ def main() -> None:
         parts.undo()
     n = args.iterations
     row = {"device": str(device), "gpu": torch.cuda.get_device_name(device) if str(device).startswith("cuda") else "cpu",
-           "processes": ranks.world, "envs_per_process": env.num_envs, "one_sync_update": cfg.ppo.one_sync_update,
+           "processes": ranks.world, "envs_per_process": env.num_envs, "update": type(runner.alg).__name__,
+           "one_sync_update": cfg.ppo.one_sync_update,
            "mixed_precision": cfg.ppo.mixed_precision, "compile_mode": cfg.ppo.compile_mode,
            "mini_batches": cfg.ppo.num_mini_batches, "epochs": cfg.ppo.num_learning_epochs,
            "collect_s": sum(collect) / n, "learn_s": sum(learn) / n,
@@ -218,7 +228,7 @@ def main() -> None:
 
 def _print(row: dict) -> None:
     print(f"\n{row['gpu']} ({row['device']}), {row['processes']} process(es) x {row['envs_per_process']} worlds; "
-          f"{row['epochs']} epochs x {row['mini_batches']} mini-batches; one-sync update {row['one_sync_update']}, "
+          f"{row['epochs']} epochs x {row['mini_batches']} mini-batches; update {row['update']}, "
           f"mixed precision {row['mixed_precision']}, compile {row['compile_mode'] or 'off'}")
     print(f"plain iterations: collect {row['collect_s']:.4f} s + learn {row['learn_s']:.4f} s per iteration, "
           f"{row['training_steps_per_s'] / 1e3:.1f}k training env-steps/s (all processes)")

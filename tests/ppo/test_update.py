@@ -34,7 +34,9 @@ def _rollout(robot, data, tmp_path, desired_kl):
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
     env = ReplayEnv(robot, trajs, data.rate_hz, 8, cfg.env, cfg.residual, cfg.rewards, obs_mean=mean, obs_std=std)
-    runner = make_runner(env, runner_cfg(cfg), tmp_path)
+    rcfg = runner_cfg(cfg)
+    rcfg["algorithm"]["class_name"] = "PPO"  # rsl-rl's own update the reference
+    runner = make_runner(env, rcfg, tmp_path)
     alg, obs = runner.alg, env.get_observations()
     with torch.inference_mode():
         for _ in range(cfg.ppo.num_steps_per_env):
@@ -95,8 +97,9 @@ def test_rsl_rls_options_reach_its_runner_config():
     rcfg = runner_cfg(cfg)
     assert rcfg["algorithm"]["use_mixed_precision"] is True and rcfg["torch_compile_mode"] == "default"
     assert rcfg["algorithm"]["class_name"] == "wresdyn.ppo.update:OneSyncPPO"
-    plain = runner_cfg(tiny())  # the defaults: rsl-rl's PPO as before
-    assert plain["algorithm"]["class_name"] == "PPO" and plain["torch_compile_mode"] is None
+    plain = runner_cfg(tiny())  # the defaults: rsl-rl's PPO update, bit for bit (tests/ppo/test_packed_update.py)
+    assert plain["algorithm"]["class_name"] == "wresdyn.ppo.packed_update:PackedPPO"
+    assert plain["torch_compile_mode"] is None
     assert plain["algorithm"]["use_mixed_precision"] is False
     with pytest.raises(WresdynError, match="compile_mode"):
         set_fields(tiny(), {"ppo.compile_mode": "reduce-overhead"})

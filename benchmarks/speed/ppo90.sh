@@ -1,0 +1,72 @@
+#!/bin/bash
+# The residual PPO's scaling on 2 GPUs, three rounds, with rsl-rl's own update as the baseline in the same run:
+#
+#   bash benchmarks/speed/ppo90.sh OUT           # ~5 min on an idle 2-GPU host
+#   BASELINE=0 bash benchmarks/speed/ppo90.sh OUT  # the default update only (~3.5 min)
+#   DEVICE=cpu N=16 ITERS=1 bash benchmarks/speed/ppo90.sh OUT  # a check of the script on the CPU (gloo; no figure)
+#
+# Each round: one GPU (torchrun, 1 process) at 4096 worlds, then two GPUs (torchrun, 2 processes) at 4096 worlds
+# each, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py): the residual's default update
+# (wresdyn.ppo.packed_update.PackedPPO) and, unless BASELINE=0, rsl-rl's own PPO.update (+rsl_update), the same
+# update bit for bit (tests/ppo/test_packed_update.py), in one process per launch, their order swapped from round to
+# round so that neither always runs first. Then the update's profile on 2 GPUs once (the default update).
+# The environment (PYTHONPATH, caches) is the caller's; python is python3. Writes into OUT:
+#   machine.txt                 the GPUs, host, load, versions, commit
+#   one_rN.{txt,json}           round N on one GPU; two_rN.{txt,json} on two; table_rN.txt both with the efficiency
+#   profile_two.{txt,json}      benchmarks/speed/ppo_update_profile.py on 2 GPUs
+#   steps.txt                   each step's start, seconds and exit status
+set -u
+OUT=${1:?usage: ppo90.sh OUT}
+BASELINE=${BASELINE:-1} DEVICE=${DEVICE:-cuda} N=${N:-4096} ITERS=${ITERS:-15}
+mkdir -p "$OUT"
+PY=python3
+TORCHRUN=(python3 -m torch.distributed.run --standalone)
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} PYTHONUNBUFFERED=1
+HERE=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$HERE" || exit 1
+
+FAILED=0
+step() {  # step NAME COMMAND...: run it, log its time and status (a failed step does not stop the others)
+  local name=$1 s e rc
+  shift
+  s=$(date +%s.%N)
+  "$@"
+  rc=$?
+  (( rc == 0 )) || FAILED=$((FAILED + 1))
+  e=$(date +%s.%N)
+  echo "$(date -u +%T) $name: $(python3 -c "print(round($e - $s, 1))") s rc=$rc" | tee -a "$OUT/steps.txt"
+}
+
+{ date -u; nvidia-smi; nproc; lscpu | grep "Model name"; uptime
+  $PY -c "import torch, warp, rsl_rl; from importlib.metadata import version
+print('torch', torch.__version__, 'warp', warp.__version__, 'rsl-rl', version('rsl-rl-lib'))"
+  git log -1 --format='%H %s' 2>/dev/null; git status --short 2>/dev/null | head -20; env | grep '^NCCL_' ; } \
+  > "$OUT/machine.txt" 2>&1
+
+scaling() {  # scaling GPUS PROCESSES JSON CASES...: ppo_scaling.py under torchrun, its output beside the JSON
+  local gpus=$1 n=$2 json=$3
+  shift 3
+  CUDA_VISIBLE_DEVICES=$gpus "${TORCHRUN[@]}" --nproc_per_node "$n" benchmarks/speed/ppo_scaling.py --device "$DEVICE" \
+    --iterations "$ITERS" --json "$json" --cases "$@" > "${json%.json}.txt" 2>&1
+}
+
+for r in 1 2 3; do
+  one=("residual:$N") two=("residual:$((2 * N))")
+  if [[ $BASELINE == 1 ]]; then
+    if (( r % 2 )); then one+=("residual:$N+rsl_update") two+=("residual:$((2 * N))+rsl_update")
+    else one=("residual:$N+rsl_update" "${one[@]}") two=("residual:$((2 * N))+rsl_update" "${two[@]}"); fi
+  fi
+  step "round $r, 1 GPU: ${one[*]}" scaling 0 1 "$OUT/one_r$r.json" "${one[@]}"
+  step "round $r, 2 GPUs: ${two[*]}" scaling 0,1 2 "$OUT/two_r$r.json" "${two[@]}"
+  $PY benchmarks/speed/ppo_scaling.py --table "$OUT/one_r$r.json" "$OUT/two_r$r.json" > "$OUT/table_r$r.txt" 2>&1
+  cat "$OUT/table_r$r.txt"
+done
+
+profile() {
+  CUDA_VISIBLE_DEVICES=0,1 "${TORCHRUN[@]}" --nproc_per_node 2 benchmarks/speed/ppo_update_profile.py --device "$DEVICE" \
+    --envs $((2 * N)) --iterations "$(( ITERS < 5 ? ITERS : 5 ))" --json "$OUT/profile_two.json" > "$OUT/profile_two.txt" 2>&1
+}
+step "profile, 2 GPUs" profile
+tail -n 20 "$OUT/profile_two.txt"
+uptime >> "$OUT/machine.txt"
+(( FAILED == 0 )) || { echo "ppo90.sh: $FAILED step(s) failed (steps.txt; each step's .txt)" >&2; exit 1; }
