@@ -55,8 +55,12 @@ def main() -> None:
     fights: dict = {}
     not_run: dict = {
         "isaac_sim_humanoid": "Isaac Sim 6.2's backend runs outside Kit (benchmarks/results/peers/isaac_sim/), but "
-                              "only CPU smoke runs of its recipe (1-2 of 60 iterations) fitted on this machine; its "
-                              "full run on a GPU has not been made, so it has no comparable score"}
+                              "its recipe has no comparable score: CPU smoke runs fitted 1-2 of its 60 iterations on "
+                              "short chunks; on one H200 shared with three PPO trainings (isaac_sim/h200_20261130/) "
+                              "the full-data solve ran 1277 s without finishing its first iteration (its progress "
+                              "never passed the first of 16 training chunks), so its 60 iterations would need more "
+                              "than 60 x 21 min on this path (a lower bound), far beyond a 30-minute GPU session; "
+                              "neither the peer nor the adapter resumes a solve across sessions"}
     humanoid(fights, not_run)
     so101(fights)
     known_truth(fights)
