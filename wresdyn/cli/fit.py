@@ -15,6 +15,7 @@ physics (the residual alone, nothing identified). ``--model parametric`` fits th
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Annotated
 
@@ -83,6 +84,20 @@ HIDDEN = {GradFitConfig: ("model",), SysIdConfig: IDENTIFY_SHARED}
 """Config fields without a flag of their own (the command sets them)."""
 
 
+def run_beside(background, work):
+    """Run ``background()`` in a thread while ``work()`` runs here; return ``work``'s result once both are done.
+
+    ``work``'s error is raised first (after ``background`` has finished, so no file is left half written), then
+    ``background``'s. For host work that shares nothing with ``work`` but the interpreter (the ONNX export beside
+    the evaluation): the results are those of running them one after the other.
+    """
+    with ThreadPoolExecutor(1, thread_name_prefix="beside") as pool:
+        done = pool.submit(background)
+        result = work()
+        done.result()
+    return result
+
+
 def run(args: Fit) -> int:
     import json
     from dataclasses import asdict
@@ -135,7 +150,7 @@ def run(args: Fit) -> int:
             id_wall = None
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
-    export_run(policy, out, cfg, ds, args.data, physics=physics)
+    write_onnx = export_run(policy, out, cfg, ds, args.data, physics=physics, onnx_later=args.eval)
     if cfg.model == "parametric":
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
         (out / "parameters.json").write_text(json.dumps(params, indent=1))
@@ -151,9 +166,17 @@ def run(args: Fit) -> int:
 
         if log.clock:
             log("evaluating the run (wresdyn eval)")
-        # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would wait
-        # for Clang's first compile of them)
-        evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
+
+        def evaluate():
+            # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would
+            # wait for Clang's first compile of them)
+            evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
+            if log.clock:
+                log("evaluation done")
+
+        # the ONNX file (most of the export's time) is written beside the evaluation, which reads policy.pt only:
+        # the same file from the same program, off the command's critical path
+        run_beside(write_onnx, evaluate)
         if log.clock:
-            log("evaluation done")
+            log(f"wrote {out / 'policy.onnx'}")
     return 0

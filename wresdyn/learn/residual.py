@@ -23,6 +23,7 @@ The networks are rsl-rl models (MLP with ELU, or GRU + MLP), trained by :mod:`wr
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -249,7 +250,14 @@ def export_policy(policy: ResidualPolicy, path: str | Path, onnx_path: str | Pat
     MLP: ``obs`` (N, 4n) -> ``residual`` (N, n). GRU: (``obs``, ``h_in`` (layers, N, H)) -> (``residual``,
     ``h_out``); the caller carries the hidden state, starting from zeros (``load_residual`` does).
     """
+    program, names_in, names_out = _save_archive(policy, path)
+    if onnx_path is not None:
+        export_onnx(program, onnx_path, names_in, names_out)
+    return program
 
+
+def _save_archive(policy: ResidualPolicy, path: str | Path):
+    """:func:`export_policy`'s archive: ``(program, input names, output names)``, the program saved at ``path``."""
     n_obs = policy.obs_mean.shape[0]
     batch = torch.export.Dim("batch", min=1)
     obs = torch.zeros(2, n_obs)  # a batch of 2: torch.export specialises a size-1 axis to the constant 1
@@ -262,22 +270,28 @@ def export_policy(policy: ResidualPolicy, path: str | Path, onnx_path: str | Pat
     else:
         module, args, shapes = policy, (obs,), {"obs": {0: batch}}
         names_in, names_out = ["obs"], ["residual"]
-    program = save_program(module, args, shapes, path, meta)
-    if onnx_path is not None:
-        export_onnx(program, onnx_path, names_in, names_out)
-    return program
+    return save_program(module, args, shapes, path, meta), names_in, names_out
 
 
-def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, **meta) -> None:
+def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, onnx_later: bool = False, **meta):
     """Write what ``wresdyn eval`` and a deployment read from a run folder: ``policy.pt`` (the ``torch.export``
     archive of :func:`export_policy`, under the name tools check for a trained run), ``policy.onnx`` and
-    ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``)."""
+    ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``).
+
+    With ``onnx_later`` the ONNX file is left to the caller: the function that writes it (the same file, from the
+    same program) is returned, so that it can run beside other work (the evaluation reads ``policy.pt`` only, and
+    the ONNX export is most of the export's time); otherwise it is written here and ``None`` is returned.
+    """
     import json
 
     run_dir = Path(run_dir)
-    export_policy(policy, run_dir / "policy.pt", run_dir / "policy.onnx")
+    program, names_in, names_out = _save_archive(policy, run_dir / "policy.pt")
+    write_onnx = functools.partial(export_onnx, program, run_dir / "policy.onnx", names_in, names_out)
+    if not onnx_later:
+        write_onnx()
     info = {"kind": policy.kind, "joint_names": list(dataset.joint_names), "rate_hz": float(dataset.rate_hz),
             "scale": [float(s) for s in policy.scale], **meta,
             "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",
             "output": "N*m added to the PD torque" if policy.kind == "torque" else "rad added to q_cmd"}
     (run_dir / "residual.json").write_text(json.dumps(info, indent=2))
+    return write_onnx if onnx_later else None
