@@ -157,7 +157,9 @@ def test_torchrun_trains_a_floor_skill_on_two_processes_and_resumes(tmp_path):
     script.write_text(SKILL_SCRIPT)
     run = tmp_path / "skill"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script), str(run)]
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.getcwd())
+    # the checkout first, then the caller's path (a machine that installs its wheels off the default path lists them)
+    path = os.pathsep.join(filter(None, (os.getcwd(), os.environ.get("PYTHONPATH"))))
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=path)
     res = subprocess.run([*cmd, "4"], capture_output=True, text=True, env=env, timeout=600)
     assert res.returncode == 0, _failure(res)
     assert "Synchronizing parameters for rank 1" in res.stdout

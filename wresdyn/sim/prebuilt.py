@@ -16,7 +16,9 @@ solver asks :func:`fetch` before it checks the cache itself), :func:`fetch` copi
 the full module hash, the binary's name (device architecture, CPU target, PTX or CUBIN) and every file's SHA-256
 match; anything else (an index of another Warp, a changed kernel, a tampered or truncated file) is ignored and the
 module compiles as it would without it. The folder looked in is ``$WRESDYN_PREBUILT_KERNELS`` where set, else
-:data:`SHIPPED` (absent unless a package build put kernels there): without either, nothing changes.
+:data:`SHIPPED`, which holds the humanoid's kernels for Warp 1.19.0 on ``sm90`` (H100, H200), exported by
+``wresdyn warmup --device cuda:0 --no-shipped --robot scenes/humanoid.usda --export`` from the kernel sources they
+match. Another Warp, another architecture or a changed kernel finds no exact entry there and compiles as before.
 """
 
 from __future__ import annotations
@@ -36,8 +38,8 @@ from ..paths import file_sha256
 __all__ = ["SHIPPED", "arch_tag", "enable", "export", "fetch", "root"]
 
 SHIPPED = Path(__file__).resolve().parent / "prebuilt_kernels"
-"""Where a package build puts the kernels it ships (``<Warp version>/<arch>/index.json`` and a folder per module);
-the repository holds none: binaries are made on the machine they are for (``wresdyn warmup --export``)."""
+"""The kernels the package ships (``<Warp version>/<arch>/index.json`` and a folder per module): exported on the GPU
+they are for (``wresdyn warmup --export``) and valid only while the kernel sources and Warp's version are theirs."""
 
 INDEX = "index.json"
 _LOCK = threading.Lock()
