@@ -133,6 +133,10 @@ class FloorDeployConfig(_BenchmarkSizes):
     """More devices of the host (``cuda:1,cuda:2``): each simulated fine-tuning after (b) trains in a process of its
     own on the next one, beside (b) on ``device``, so that (b) and (c) take one fine-tuning's wall-clock. Empty:
     one after the other on ``device``."""
+    motion_workers: int = 0
+    """Processes that draw and screen the floor motions at the start of a run (0: the host's usable cores, up to the
+    number of motions; 1, no process started, on a host of at most 2 cores). The motions are the same bit for bit
+    at any count (each has its own random stream: :func:`~wresdyn.skills.motions.make_motions`)."""
     seed: int = 0
     """Seed of the motions and of PPO."""
     device: str = "cpu"
@@ -148,6 +152,7 @@ class FloorDeployConfig(_BenchmarkSizes):
             check_choice(f, Literal["combo"], "floor.extra_families")
         for d in self.beside_devices:
             check_device(d, "floor.beside_devices")
+        check_number(self.motion_workers, "floor.motion_workers", integer=True, ge=0)
 
     @classmethod
     def full(cls, **kw) -> "FloorDeployConfig":

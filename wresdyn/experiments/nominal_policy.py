@@ -108,7 +108,7 @@ def draw_heldout(robot, floating, cfg, rate_hz: float, kept: list[str]) -> tuple
     held-out family left out that no validation motion vouches for; every family's where none is kept (a run that
     deploys nothing shows nothing)."""
     per = {"heldout": cfg.heldout_per_family}
-    kw = dict(floating=floating, screen=cfg.screen)
+    kw = dict(floating=floating, screen=cfg.screen, workers=cfg.motion_workers)
     if not kept:
         return make_motions(robot, per, cfg.duration, rate_hz, cfg.seed, **kw)["heldout"], {}
     held = make_motions(robot, per, cfg.duration, rate_hz, cfg.seed, families=kept, held_out=(), **kw)["heldout"]

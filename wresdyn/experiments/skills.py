@@ -236,7 +236,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
                                                     heldout_families=cfg.heldout_families), log)
         motions = store.motions(lambda: make_motions(
             robot, {k: n for k, n in counts.items() if not (balanced and k == "heldout")}, cfg.duration, rate,
-            cfg.seed, floating=plant_robot, extra=cfg.extra_families, screen=cfg.screen),
+            cfg.seed, floating=plant_robot, extra=cfg.extra_families, screen=cfg.screen, workers=cfg.motion_workers),
             trained=sorted(p.name for p in (out / "skills").glob("*") if p.is_dir()))
     else:
         motions = make_motions(robot, counts, cfg.duration, rate, cfg.seed)

@@ -15,7 +15,10 @@ Motions that lift a foot first shift the weight: the soles move sideways until t
 
 from __future__ import annotations
 
+import multiprocessing as mp
+import os
 import zlib
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +31,7 @@ from .families import FAMILIES, TASK_FAMILIES, arm_keys, keyframes, leg_keys, st
 from .feasibility import screen as screen_feasibility
 
 __all__ = ["TASK_FAMILIES", "FAMILIES", "Motion", "MotionSet", "make_motion", "make_motions", "stance", "PLANTED_TOL",
-           "joint_velocity"]
+           "joint_velocity", "pool_workers"]
 
 PLANTED_TOL = 0.002
 """A sole less than this above the lowest sole is planted [m]."""
@@ -208,9 +211,37 @@ def _key(name: str) -> int:
     return zlib.crc32(name.encode())
 
 
+def pool_workers(workers: int, n: int) -> int:
+    """Processes that draw ``n`` floor motions with ``workers`` asked (0: automatic, the host's usable cores, on a
+    host of at most 2 cores 1: the serial path, no process started), never more than ``n``, at least 1."""
+    if workers == 0:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        workers = 1 if cores <= 2 else cores
+    return max(1, min(int(workers), n))
+
+
+_WORKER: dict = {}
+"""A pool worker's robots and foot IK, made once by :func:`_init_worker`."""
+
+
+def _init_worker(robot: Robot, floating: Robot, frames) -> None:
+    """Start a pool worker: the robots arrive as their :func:`~wresdyn.robot.description.load_robot` calls (loaded
+    here again, the file's hash checked), the foot IK is built here."""
+    _WORKER.update(robot=robot, floating=floating, ik=FootIK(robot) if frames is None else FootIK(robot, frames))
+
+
+def _draw(job: tuple) -> Motion:
+    """One floor motion in a pool worker: ``job`` is :func:`make_motion`'s arguments after the robots and IK, its
+    random stream as the stream's seed."""
+    family, duration, rate_hz, stream, name, side, max_draws, shift, screen = job
+    w = _WORKER
+    return make_motion(w["robot"], w["ik"], family, duration, rate_hz, np.random.default_rng(stream), name,
+                       side=side, max_draws=max_draws, floating=w["floating"], shift=shift, screen=screen)
+
+
 def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = None, rate_hz: float = 500.0,
                  seed: int = 0, frames=None, *, floating: Robot | None = None, families=None, held_out=None,
-                 extra=(), screen: bool = True, max_draws: int = 20) -> MotionSet:
+                 extra=(), screen: bool = True, max_draws: int = 20, workers: int = 1) -> MotionSet:
     """Draw the motion set of the task on the stand, or with ``floating`` on the floor: ``counts`` maps a split to
     motions per family (``families`` for every split, ``held_out`` families in ``heldout`` only, ``extra`` families
     in every other split, drawn after the others so that those are the same with or without them); each split draws
@@ -229,6 +260,10 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
         screen: On the floor, keep only draws the flat soles can carry, slowed where needed (:func:`make_motion`;
             ``False``: every draw as drawn, for studies of infeasible references).
         max_draws: Draws of each motion before it is given up (a one-line error).
+        workers: On the floor, processes that draw the motions (0: automatic, :func:`pool_workers`): each motion
+            has its own stream, so the set is bit for bit the one drawn serially, in the same order. The robots
+            travel as their ``load_robot`` calls; a robot not made by ``load_robot`` is drawn serially. On the stand
+            (one stream per split, in order) always serial.
 
     The waves of a split alternate between the arms (the first arm drawn per split), so a split of two or more waves
     has both: training on one arm's waves alone leaves a policy untaught for the other's.
@@ -262,9 +297,18 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
         # on the floor one stream per motion, by the split's and the family's names: a split's draws never repeat
         # another's whatever ``counts`` holds, and the first n of a family are the same at any larger count
         first = int(np.random.default_rng([seed, _key(split), 1]).integers(2))
-        splits[split] = [make_motion(robot, ik, f, duration, rate_hz,
-                                     np.random.default_rng([seed, _key(split), 7, _key(f), i]), f"{split}_{f}_{i}",
-                                     side=("left", "right")[(first + i) % 2] if f == "wave" else None,
-                                     max_draws=max_draws, floating=floating, shift=shift, screen=screen)
+        splits[split] = [(f, duration, rate_hz, [seed, _key(split), 7, _key(f), i], f"{split}_{f}_{i}",
+                          ("left", "right")[(first + i) % 2] if f == "wave" else None, max_draws, shift, screen)
                          for f in fams for i in range(per)]
+    if floating is not None:
+        jobs = [j for js in splits.values() for j in js]
+        n = pool_workers(workers, len(jobs))
+        if n > 1 and all(getattr(r, "_load_args", None) is not None for r in (robot, floating)):
+            with ProcessPoolExecutor(n, mp_context=mp.get_context("spawn"), initializer=_init_worker,
+                                     initargs=(robot, floating, None if frames is None else tuple(frames))) as pool:
+                done = iter(list(pool.map(_draw, jobs)))
+        else:
+            done = (make_motion(robot, ik, f, d, r, np.random.default_rng(st), nm, side=sd, max_draws=md,
+                                floating=floating, shift=sh, screen=sc) for f, d, r, st, nm, sd, md, sh, sc in jobs)
+        splits = {k: [next(done) for _ in js] for k, js in splits.items()}
     return MotionSet(float(rate_hz), splits)
