@@ -24,6 +24,7 @@ def held_out(run, data=None):
     stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
     # each split draws from a stream of its own position: the run's held-out motions without drawing the others
     counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}
-    motions = make_motions(stand, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"], floating=floating)["heldout"]
+    motions = make_motions(stand, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"], floating=floating,
+                           workers=0)["heldout"]
     real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
     return res, task, floating, motions, real

@@ -108,14 +108,15 @@ def main() -> None:
     if args.combo:
         stand = load_robot(floating.source, gains=floating.gains)
         motions = make_motions(stand, {"train": 0, "validation": args.combo}, res["config"]["duration"], real.rate_hz,
-                               res["config"]["seed"], floating=floating, families=(), extra=("combo",))["validation"]
+                               res["config"]["seed"], floating=floating, families=(), extra=("combo",),
+                               workers=0)["validation"]
         fams = ["combo"]
     if args.slow:
         from wresdyn.skills.feasibility import floor_feasibility
 
         stand = load_robot(floating.source, gains=floating.gains)
         motions = make_motions(stand, {"heldout": 4}, args.slow, real.rate_hz, res["config"]["seed"] + 1000,
-                               floating=floating, families=())["heldout"]
+                               floating=floating, families=(), workers=0)["heldout"]
         for m in motions:
             m.name = m.name.replace("heldout", "slow")
             margin = floor_feasibility(floating, m, real.rate_hz, every=5, skip=0.01).margin

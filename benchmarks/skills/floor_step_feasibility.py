@@ -55,7 +55,8 @@ def main() -> None:
     if args.combo:
         stand = load_robot(floating.source, gains=floating.gains)
         combos = make_motions(stand, {"train": args.combo}, res["config"]["duration"], real.rate_hz,
-                              res["config"]["seed"], floating=floating, families=(), extra=("combo",))["train"]
+                              res["config"]["seed"], floating=floating, families=(), extra=("combo",),
+                              workers=0)["train"]
         for m in combos:
             f = floor_feasibility(floating, m, real.rate_hz, every=args.every, skip=0.01)
             print(f"{m.name:24s} ZMP margin min {1e3 * f.margin.min():+6.0f} mm, outside the support on "

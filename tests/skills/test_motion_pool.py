@@ -16,7 +16,7 @@ RATE = 100.0
 
 
 def _same(a, b) -> None:
-    """Every field of two motions equal, arrays bit for bit (NaN nowhere: ``array_equal`` would miss nothing)."""
+    """Every field of two motions equal, arrays bit for bit (same dtype, shape and values)."""
     for f in dataclasses.fields(a):
         x, y = getattr(a, f.name), getattr(b, f.name)
         if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
@@ -27,7 +27,7 @@ def _same(a, b) -> None:
 
 def test_a_pool_of_two_draws_the_serial_set_bit_for_bit(humanoid, floating):
     # seed 0's third validation weight shift is slowed x1.3 by the screening (test_motions.py), so the pool repeats
-    # a slowed draw too; the held-out split adds a step, the family the screening redraws most
+    # a slowed draw too; the held-out split adds a step (two splits, two families, results in the serial order)
     kw = dict(floating=floating, families=("weight_shift",))
     counts = {"validation": 3, "heldout": 1}
     serial = make_motions(humanoid, counts, 4.0, RATE, seed=0, workers=1, **kw)
@@ -35,6 +35,7 @@ def test_a_pool_of_two_draws_the_serial_set_bit_for_bit(humanoid, floating):
     assert list(pooled.splits) == list(serial.splits) == ["validation", "heldout"]
     assert [m.name for m in pooled["validation"]] == [f"validation_weight_shift_{i}" for i in range(3)]
     assert [m.screen for m in serial["validation"]] == ["ok", "ok", "slowed x1.3"]
+    assert [m.name for m in pooled["heldout"]] == ["heldout_weight_shift_0", "heldout_step_0"]
     for s in serial.splits:
         assert len(pooled[s]) == len(serial[s])
         for a, b in zip(serial[s], pooled[s]):
