@@ -43,11 +43,12 @@ def test_a_pool_of_two_draws_the_serial_set_bit_for_bit(humanoid, floating):
     assert pooled.rate_hz == serial.rate_hz
 
 
-def test_automatic_workers_are_the_usable_cores_and_serial_on_two(monkeypatch):
+def test_automatic_workers_are_the_usable_cores_for_enough_motions_and_serial_on_two(monkeypatch):
     monkeypatch.setattr(motions_module.os, "sched_getaffinity", lambda pid: set(range(2)), raising=False)
     assert pool_workers(0, 130) == 1
     monkeypatch.setattr(motions_module.os, "sched_getaffinity", lambda pid: set(range(32)), raising=False)
-    assert pool_workers(0, 130) == 32 and pool_workers(0, 5) == 5
+    assert pool_workers(0, 130) == 16 and pool_workers(0, 300) == 32  # at least 8 motions a worker
+    assert pool_workers(0, 5) == 1 and pool_workers(0, 16) == 2
     assert pool_workers(4, 130) == 4 and pool_workers(4, 2) == 2 and pool_workers(1, 130) == 1
 
 

@@ -134,8 +134,8 @@ class FloorDeployConfig(_BenchmarkSizes):
     own on the next one, beside (b) on ``device``, so that (b) and (c) take one fine-tuning's wall-clock. Empty:
     one after the other on ``device``."""
     motion_workers: int = 0
-    """Processes that draw and screen the floor motions at the start of a run (0: the host's usable cores, up to the
-    number of motions; 1, no process started, on a host of at most 2 cores). The motions are the same bit for bit
+    """Processes that draw and screen the floor motions at the start of a run (0: the host's usable cores, at most
+    one per 8 motions; 1, no process started, on a host of at most 2 cores). The motions are the same bit for bit
     at any count (each has its own random stream: :func:`~wresdyn.skills.motions.make_motions`)."""
     seed: int = 0
     """Seed of the motions and of PPO."""

@@ -211,12 +211,18 @@ def _key(name: str) -> int:
     return zlib.crc32(name.encode())
 
 
+POOL_MOTIONS_PER_WORKER = 8
+"""Automatic pools give each worker at least this many motions: a worker spends about as long starting (imports,
+robots) as drawing 8 motions, so fewer would cost more than they save."""
+
+
 def pool_workers(workers: int, n: int) -> int:
-    """Processes that draw ``n`` floor motions with ``workers`` asked (0: automatic, the host's usable cores, on a
-    host of at most 2 cores 1: the serial path, no process started), never more than ``n``, at least 1."""
+    """Processes that draw ``n`` floor motions with ``workers`` asked (0: automatic, the host's usable cores but at
+    most one per :data:`POOL_MOTIONS_PER_WORKER` motions; on a host of at most 2 cores 1: the serial path, no process
+    started), never more than ``n``, at least 1."""
     if workers == 0:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        workers = 1 if cores <= 2 else cores
+        workers = 1 if cores <= 2 else min(cores, n // POOL_MOTIONS_PER_WORKER)
     return max(1, min(int(workers), n))
 
 
