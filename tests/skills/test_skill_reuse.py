@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -12,6 +15,7 @@ import pytest
 from wresdyn.experiments import skills as bench
 from wresdyn.experiments.deploy_config import DeployConfig
 from wresdyn.learn.runs import RunError
+from wresdyn.paths import REPO
 from wresdyn.skills.env import SkillConfig, TrackingEnv
 from wresdyn.skills.motions import make_motions
 from wresdyn.skills.plants import SimPlant
@@ -107,3 +111,59 @@ def test_the_benchmark_reuses_a_finished_policy_without_building_its_plant(tmp_p
         bench._train_policy(0, "a_nominal", humanoid, real, motions.split("train"), TASK, PPO,
                             dataclasses.replace(cfg, seed=5), {}, {"motions": {"seed": 5}}, tmp_path, lines.append)
     assert snapshot(run) == before
+
+
+TORCHRUN_SCRIPT = """
+import sys
+from pathlib import Path
+
+import torch
+
+from wresdyn.ppo.runner import Ranks
+from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+from wresdyn.skills.env import SkillConfig, TrackingEnv
+from wresdyn.skills.motions import make_motions
+from wresdyn.skills.plants import SimPlant
+from wresdyn.skills.skill_ppo import SkillPPOConfig, rank_share, train_skill
+
+torch.set_num_threads(1)
+run, rank = Path(sys.argv[1]), Ranks.from_env().rank
+robot = load_robot(DEFAULT_ROBOT)
+motions = make_motions(robot, {"train": 1}, duration=0.4, rate_hz=500.0, seed=3)
+for iterations in map(int, sys.argv[2:]):
+    cfg = SkillPPOConfig(iterations=iterations, num_steps_per_env=4, hidden_dims=(16,), num_mini_batches=1,
+                         num_learning_epochs=1, torch_threads=1)
+    n, device = rank_share(4, cfg.device)
+    env = TrackingEnv(SimPlant(robot, n, 500.0, 5), motions["train"], SkillConfig(decimation=5), seed=rank)
+    lines = []
+    s = train_skill(env, cfg, run, log=lines.append)
+    reused = any("reused" in line for line in lines)
+    with open(run.with_name(f"rank{rank}.txt"), "a") as f:  # a file each: the ranks' printed lines interleave
+        f.write(f"{iterations} {s['iterations_this_session']} {'reused' if reused else 'trained'}\\n")
+Ranks.from_env().close()
+"""
+
+
+def test_under_torchrun_every_rank_reuses_a_finished_skill_alike(tmp_path):
+    """Two processes over gloo: a skill trained, asked again in the same launch (its process group up) and in a fresh
+    one (none started): every rank reuses it, rank 0 rewrites nothing; more iterations resume it on every rank."""
+    script, run = tmp_path / "skill.py", tmp_path / "skill"
+    script.write_text(TORCHRUN_SCRIPT)
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script), str(run)]
+    env = dict(os.environ, OMP_NUM_THREADS="1",
+               PYTHONPATH=os.pathsep.join(filter(None, (str(REPO), os.environ.get("PYTHONPATH")))))
+
+    def launch(*iterations):
+        res = subprocess.run([*cmd, *map(str, iterations)], capture_output=True, text=True, env=env, timeout=600)
+        assert res.returncode == 0, res.stderr[-3000:]
+        said = [(tmp_path / f"rank{rank}.txt").read_text().splitlines() for rank in (0, 1)]
+        for rank in (0, 1):
+            (tmp_path / f"rank{rank}.txt").unlink()
+        return said
+
+    # each rank: (iterations asked, iterations this session, trained or reused)
+    assert launch(1, 1) == [["1 1 trained", "1 1 reused"]] * 2
+    before = snapshot(run)
+    assert launch(1, 2) == [["1 1 reused", "2 1 trained"]] * 2
+    after = snapshot(run)
+    assert after[Path("model_0.pt")] == before[Path("model_0.pt")] and Path("model_1.pt") in after

@@ -172,7 +172,8 @@ def finished_skill(cfg: SkillPPOConfig, run_dir, task: dict, worlds: int, *, ini
         task: The task's record (:attr:`~wresdyn.skills.env.TrackingEnv.cfg_dict`, ``asdict`` of the task config).
         worlds: This process's worlds (the ``env.num_envs`` :func:`train_skill` would see: under torchrun its share).
 
-    Under torchrun every rank reads the folder before any rank goes on to write to it, so all take the same decision.
+    Under torchrun every rank reads the folder once rank 0 has written the skills before and before it writes this
+    one, so all take the same decision.
     """
     return _checked(Path(run_dir), cfg, task, worlds, init, meta)[2]
 
@@ -184,13 +185,19 @@ def _checked(run_dir: Path, cfg: SkillPPOConfig, task: dict, worlds: int, init, 
     record = {"ppo": asdict(cfg), "task": task, "num_worlds": worlds * ranks.world,
               "init": None if init is None else str(Path(init).resolve()), **(meta or {})}
     run = UpgradingRunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO", upgrade=upgrade_record)
+    _all_ranks_here(ranks)  # rank 0 has written the last skill it trained (its export follows the last collective)
     ckpt = latest_checkpoint(run_dir)
     run.check(ckpt)
     done = _stored_summary(run_dir, ckpt, cfg.iterations)
-    # rank 0 may write the folder once past here (a resumed export): every rank has read it by then
+    _all_ranks_here(ranks)  # rank 0 may write the folder once past here (a resumed export): every rank has read it
+    return run, ckpt, done
+
+
+def _all_ranks_here(ranks: Ranks) -> None:
+    """Wait for every torchrun process where their process group is up (a first skill's is not, until its runner
+    starts it: nothing of this launch has been written yet)."""
     if ranks.world > 1 and torch.distributed.is_initialized():
         torch.distributed.barrier()
-    return run, ckpt, done
 
 
 def _stored_summary(run_dir: Path, ckpt: Path | None, iterations: int) -> dict | None:
