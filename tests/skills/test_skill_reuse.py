@@ -146,10 +146,11 @@ Ranks.from_env().close()
 
 def test_under_torchrun_every_rank_reuses_a_finished_skill_alike(tmp_path):
     """Two processes over gloo: a skill trained, asked again in the same launch (its process group up) and in a fresh
-    one (none started): every rank reuses it, rank 0 rewrites nothing; more iterations resume it on every rank."""
+    one (none started): every rank reuses it; more iterations then resume it on every rank."""
     script, run = tmp_path / "skill.py", tmp_path / "skill"
     script.write_text(TORCHRUN_SCRIPT)
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script), str(run)]
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", str(script),
+           str(run)]
     env = dict(os.environ, OMP_NUM_THREADS="1",
                PYTHONPATH=os.pathsep.join(filter(None, (str(REPO), os.environ.get("PYTHONPATH")))))
 

@@ -6,9 +6,9 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
 changed (the folder is a :class:`wresdyn.ppo.runner.UpgradingRunnerFolder`). A run that has already trained its
-iterations and passes that check is reused as it is (:func:`finished_skill`): nothing is rebuilt or rewritten. The world count is the plant's,
-recorded as ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the same
-(:func:`upgrade_record`). The rsl-rl glue (runner, checkpoints, progress) is the residual learner's,
+iterations and passes that check is reused as it is (:func:`finished_skill`): nothing is rebuilt or rewritten. The
+world count is the plant's, recorded as ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the
+same (:func:`upgrade_record`). The rsl-rl glue (runner, checkpoints, progress) is the residual learner's,
 :mod:`wresdyn.ppo.runner`.
 
 Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.ppo.trainer.train`): each process
