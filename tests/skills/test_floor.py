@@ -189,6 +189,15 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
+    # run again as it was: every policy, done earlier, is reused as it is (no process beside, no summary rewritten)
+    summaries = {p: p.read_bytes() for p in out.glob("skills/*/train_summary.json")}
+    logged = len((out / "deploy.log").read_text())
+    assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu", "--no-animation", "--quiet"]) == 0
+    again = (out / "deploy.log").read_text()[logged:]
+    for name in ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle"):
+        assert f"[3/4] policy {name}: done earlier ({2 if name == 'a_nominal' else 1} iterations), reused" in again
+    assert "beside" not in again and "resuming" not in again, again
+    assert len(summaries) == 4 and all(p.read_bytes() == b for p, b in summaries.items())
 
 
 @pytest.mark.slow  # its code path is the floor deploy end to end above; examples' imports and flags: test_examples

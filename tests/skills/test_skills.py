@@ -227,9 +227,14 @@ def test_wresdyn_deploy_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
     assert len(err.splitlines()) == 1 and "a_nominal" in err
     assert (out / "skills" / "a_nominal" / "config.json").read_text() == before
     # --quiet: nothing printed, OUT/deploy.log keeps the lines of both runs (the animation, written above, not again)
+    summaries = {p: p.read_bytes() for p in out.glob("skills/*/train_summary.json")}
     assert main(args + ["--quiet", "--no-animation"]) == 0
     assert capsys.readouterr().out == ""
-    assert (out / "deploy.log").read_text().count("wresdyn deploy: skills on the stand") == 3
+    log = (out / "deploy.log").read_text()
+    assert log.count("wresdyn deploy: skills on the stand") == 3
+    # every policy, trained above, is reused as it is: one line each, no summary rewritten
+    assert log.count(": done earlier (") == 4 and "[3/4] policy b_calibrated: done earlier (1 iterations), reused" in log
+    assert len(summaries) == 4 and all(p.read_bytes() == b for p, b in summaries.items())
 
 
 @pytest.mark.slow  # its code path is test_wresdyn_deploy_end_to_end_and_resume's; examples' imports and flags: test_examples

@@ -49,7 +49,7 @@ from ..skills.randomize import Randomization, narrow_ranges
 from ..skills.report import write_report
 from ..skills.skill_config import FloorTaskConfig, SkillConfig
 from ..skills.shipped import install_policy
-from ..skills.skill_ppo import load_skill, train_skill
+from ..skills.skill_ppo import finished_skill, load_skill, train_skill
 from .deploy_config import DeployConfig, FloorDeployConfig
 from .nominal_policy import balanced_families, check_fits, draw_heldout, nominal_source
 from .zero_shot import BASE_POLICIES, POLICIES, RANDOMIZED, fit_corrections, start_benchmark, write_results
@@ -83,13 +83,39 @@ def _imu_noise(task) -> tuple[float, float]:
     return (task.gyro_noise, task.gravity_noise) if task.floating else (0.0, 0.0)
 
 
+def _run_of(i: int, name: str, ppo, cfg, runs: dict, meta: dict, out: Path, dr: Randomization | None):
+    """What policy ``name`` (the ``i``-th) trains into: its run folder, PPO config, the run it is fine-tuned from
+    (``None`` for ``a_nominal``) and the meta its ``config.json`` records."""
+    setting = POLICIES[name]
+    run_meta = {**meta, "setting": setting, "correction": str(runs.get(RANDOMIZED.get(setting, setting), ""))}
+    if setting in RANDOMIZED:
+        run_meta["randomization"] = asdict(dr or Randomization())
+    run_ppo = replace(ppo, iterations=cfg.iterations if i == 0 else cfg.finetune,
+                      restart_std=None if i == 0 else cfg.finetune_std)
+    return out / "skills" / name, run_ppo, None if i == 0 else out / "skills" / "a_nominal", run_meta
+
+
+def _reused(i: int, name: str, task, ppo, cfg, runs: dict, meta: dict, out: Path, log, dr=None) -> bool:
+    """Whether policy ``name`` has already trained all its iterations with this configuration
+    (:func:`~wresdyn.skills.skill_ppo.finished_skill`, which refuses another one): then it is reused as it is, said
+    in one line, without building its plant."""
+    run_dir, run_ppo, init, run_meta = _run_of(i, name, ppo, cfg, runs, meta, out, dr)
+    worlds = cfg.oracle_worlds if POLICIES[name] == "real" else cfg.num_worlds
+    if finished_skill(run_ppo, run_dir, asdict(task), worlds, init=init, meta=run_meta) is None:
+        return False
+    log(f"[3/4] policy {name}: done earlier ({run_ppo.iterations} iterations), reused")
+    return True
+
+
 def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs: dict, meta: dict, out: Path,
                   log, dr: Randomization | None = None) -> float:
     """Train policy ``name`` (the ``i``-th of the benchmark: ``a_nominal`` from scratch, the others fine-tuned from it)
-    on its plant (``robot``: the one the task acts on, on its stand or with its free base); returns the wall-clock
-    time [s]."""
+    on its plant (``robot``: the one the task acts on, on its stand or with its free base), or reuse it where it has
+    already trained (:func:`_reused`); returns the wall-clock time [s]."""
     setting = POLICIES[name]
     t0 = time.perf_counter()
+    if _reused(i, name, task, ppo, cfg, runs, meta, out, log, dr):
+        return time.perf_counter() - t0
     worlds = cfg.oracle_worlds if setting == "real" else cfg.num_worlds
     real_plant, sim = _plants(task, real, robot, real.rate_hz, runs, cfg.device, dr)
     if setting != "real":
@@ -100,16 +126,13 @@ def _train_policy(i: int, name: str, robot, real, motions, task, ppo, cfg, runs:
     else:
         plant = real_plant(worlds, cfg.seed + 1)
     env = TrackingEnv(plant, motions, task, seed=cfg.seed + i, device=cfg.device)
-    run_meta = {**meta, "setting": setting, "correction": str(runs.get(RANDOMIZED.get(setting, setting), ""))}
-    if setting in RANDOMIZED:
-        run_meta["randomization"] = asdict(dr or Randomization())
-    it = cfg.iterations if i == 0 else cfg.finetune
-    train_skill(env, replace(ppo, iterations=it, restart_std=None if i == 0 else cfg.finetune_std),
-                out / "skills" / name, log=log, init=None if i == 0 else out / "skills" / "a_nominal", meta=run_meta)
+    run_dir, run_ppo, init, run_meta = _run_of(i, name, ppo, cfg, runs, meta, out, dr)
+    train_skill(env, run_ppo, run_dir, log=log, init=init, meta=run_meta)
     wall = time.perf_counter() - t0
     where = "on the floor of the" if task.floating else "in the"
     what = f"robot ({cfg.oracle_plant})" if setting == "real" else "simulator"
-    log(f"[3/4] policy {name}: {it} PPO iterations x {worlds} worlds {where} {setting} {what} ({wall:.0f} s)")
+    log(f"[3/4] policy {name}: {run_ppo.iterations} PPO iterations x {worlds} worlds {where} {setting} {what} "
+        f"({wall:.0f} s)")
     return wall
 
 
@@ -141,7 +164,7 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
     pool, jobs = None, {}
     try:
         for name in policies:
-            if name in beside:
+            if name in beside or name in wall:  # trained beside, or found done earlier
                 continue
             if name == "a_nominal" and cfg.nominal:  # trained elsewhere (a shipped policy): fine-tuned from here
                 install_policy(cfg.nominal, out / "skills" / name)
@@ -150,6 +173,12 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
             else:
                 wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out,
                                            log, dr)
+            if name == "a_nominal":  # a fine-tuning done earlier is not handed to a process of its own
+                for other in list(beside):
+                    t0 = time.perf_counter()
+                    if _reused(index[other], other, task, ppo, cfg, runs, meta, out, log, dr):
+                        wall[other] = time.perf_counter() - t0
+                        del beside[other]
             if name == "a_nominal" and beside:
                 import multiprocessing as mp
 

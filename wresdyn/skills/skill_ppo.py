@@ -5,9 +5,10 @@ checkpoints ``model_<it>.pt`` (written and read as weights only, :class:`wresdyn
 ``policy.pt`` (a ``torch.export`` archive, :mod:`wresdyn.learn.network_file`: observation (N, 6n) -> action (N, n), the
 deterministic mean), ``train_summary.json`` and rsl-rl's per-iteration log ``train.log``. A run killed mid-way resumes
 from its last checkpoint; one asked to resume with another configuration is refused in one line, naming what
-changed (the folder is a :class:`wresdyn.ppo.runner.UpgradingRunnerFolder`). The world count is the plant's,
-recorded as ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the same
-(:func:`upgrade_record`). The rsl-rl glue (runner, checkpoints, progress) is the residual learner's,
+changed (the folder is a :class:`wresdyn.ppo.runner.UpgradingRunnerFolder`). A run that has already trained its
+iterations and passes that check is reused as it is (:func:`finished_skill`): nothing is rebuilt or rewritten. The
+world count is the plant's, recorded as ``num_worlds``; a ``config.json`` that keeps it as ``ppo.num_envs`` reads the
+same (:func:`upgrade_record`). The rsl-rl glue (runner, checkpoints, progress) is the residual learner's,
 :mod:`wresdyn.ppo.runner`.
 
 Under ``torchrun`` a skill trains data-parallel as the residual does (:func:`wresdyn.ppo.trainer.train`): each process
@@ -17,6 +18,7 @@ gradients, rank 0 alone writes the run folder, and every rank resumes from the s
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -30,8 +32,8 @@ from ..ppo.runner import (Ranks, UpgradingRunnerFolder, latest_checkpoint, learn
 from ..progress import bar
 from .skill_config import SkillPPOConfig
 
-__all__ = ["SkillPPOConfig", "train_skill", "load_skill", "rank_share", "runner_cfg", "RESUME_MAY_CHANGE",
-           "upgrade_record"]
+__all__ = ["SkillPPOConfig", "train_skill", "finished_skill", "load_skill", "rank_share", "runner_cfg",
+           "RESUME_MAY_CHANGE", "upgrade_record"]
 
 RESUME_MAY_CHANGE = ("ppo.iterations", "ppo.device", "ppo.torch_threads", "ppo.one_sync_update")
 """What a resumed skill run may change: a run may be extended, or moved to another device or machine."""
@@ -104,15 +106,17 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
     the summary's counts are those of rank 0's worlds, its env-steps those of every process. The process group stays
     up for the next skill of the process; ``Ranks.from_env().close()`` ends it once the last is trained.
 
+    A run that has already trained ``cfg.iterations`` is reused (:func:`finished_skill`): nothing is trained or
+    written, and its stored summary is returned.
+
     Returns:
-        The summary written to ``train_summary.json``.
+        The summary written to ``train_summary.json`` (for a reused run, the one it holds).
     """
     run_dir, ranks = Path(run_dir), Ranks.from_env()
-    record = {"ppo": asdict(cfg), "task": env.cfg_dict, "num_worlds": env.num_envs * ranks.world,
-              "init": None if init is None else str(Path(init).resolve()), **(meta or {})}
-    run = UpgradingRunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO", upgrade=upgrade_record)
-    ckpt = latest_checkpoint(run_dir)
-    run.check(ckpt)
+    run, ckpt, done = _checked(run_dir, cfg, env.cfg_dict, env.num_envs, init, meta)
+    if done is not None:
+        log(f"{run_dir.name}: done earlier ({cfg.iterations} iterations), reused")
+        return done
     seed_processes(cfg.seed + ranks.rank, cfg.torch_threads)
     if ranks.main:
         run_dir.mkdir(parents=True, exist_ok=True)
@@ -153,6 +157,58 @@ def train_skill(env, cfg: SkillPPOConfig, run_dir, *, init: str | Path | None = 
                      run_dir / "policy.pt", {"kind": "skill"})
         run.write_summary(summary)
     return summary
+
+
+def finished_skill(cfg: SkillPPOConfig, run_dir, task: dict, worlds: int, *, init: str | Path | None = None,
+                   meta: dict | None = None) -> dict | None:
+    """The stored summary of the skill run ``run_dir`` where :func:`train_skill` would have nothing to do, checked
+    without an environment: its latest checkpoint is ``model_<cfg.iterations - 1>.pt``, its ``policy.pt`` and a
+    ``train_summary.json`` of ``cfg.iterations`` are there, and its ``config.json`` passes the resume check
+    (another configuration is refused as :func:`train_skill` refuses it); ``None``: a run to train (fresh, cut
+    short, extended or with its export missing).
+
+    Args:
+        cfg, init, meta: As for :func:`train_skill`.
+        task: The task's record (:attr:`~wresdyn.skills.env.TrackingEnv.cfg_dict`, ``asdict`` of the task config).
+        worlds: This process's worlds (the ``env.num_envs`` :func:`train_skill` would see: under torchrun its share).
+
+    Under torchrun every rank reads the folder once rank 0 has written the skills before and before it writes this
+    one, so all take the same decision.
+    """
+    return _checked(Path(run_dir), cfg, task, worlds, init, meta)[2]
+
+
+def _checked(run_dir: Path, cfg: SkillPPOConfig, task: dict, worlds: int, init, meta):
+    """The run folder of a skill, its latest checkpoint (``None``: none) and, where it has already trained
+    ``cfg.iterations``, its stored summary (:func:`finished_skill`); a changed configuration is refused."""
+    ranks = Ranks.from_env()
+    record = {"ppo": asdict(cfg), "task": task, "num_worlds": worlds * ranks.world,
+              "init": None if init is None else str(Path(init).resolve()), **(meta or {})}
+    run = UpgradingRunnerFolder(run_dir, record, RESUME_MAY_CHANGE, writer="the skills' PPO", upgrade=upgrade_record)
+    _all_ranks_here(ranks)  # rank 0 has written the last skill it trained (its export follows the last collective)
+    ckpt = latest_checkpoint(run_dir)
+    run.check(ckpt)
+    done = _stored_summary(run_dir, ckpt, cfg.iterations)
+    _all_ranks_here(ranks)  # rank 0 may write the folder once past here (a resumed export): every rank has read it
+    return run, ckpt, done
+
+
+def _all_ranks_here(ranks: Ranks) -> None:
+    """Wait for every torchrun process where their process group is up (a first skill's is not, until its runner
+    starts it: nothing of this launch has been written yet)."""
+    if ranks.world > 1 and torch.distributed.is_initialized():
+        torch.distributed.barrier()
+
+
+def _stored_summary(run_dir: Path, ckpt: Path | None, iterations: int) -> dict | None:
+    """The ``train_summary.json`` of a run that has trained ``iterations`` and exported its policy, else ``None``."""
+    if ckpt is None or ckpt.name != f"model_{iterations - 1}.pt" or not (run_dir / "policy.pt").is_file():
+        return None
+    try:
+        summary = json.loads((run_dir / "train_summary.json").read_text())
+    except (OSError, ValueError):  # never written (killed before) or cut short
+        return None
+    return summary if isinstance(summary, dict) and summary.get("iterations") == iterations else None
 
 
 def _start_from(runner, init, restart_std: float | None) -> None:
