@@ -98,7 +98,8 @@ def measure(robot, dataset, cfg, log=print) -> dict:
             "per_length": lengths,
             "overhead_s": train - rated if all(x["ms_per_iteration"] is not None for x in lengths) else None,
             "final_loss": curve[-1]["loss"], "final_validation": curve[-1].get("validation"),
-            "best_validation": best["validation"] if best else None, "best_iteration": best["iteration"] if best else None,
+            "best_validation": best["validation"] if best else None,
+            "best_iteration": best["iteration"] if best else None,
             "returned_params_abs_sum": float(params.abs().sum()), "sim_steps": curve[-1]["sim_steps"]}
 
 
