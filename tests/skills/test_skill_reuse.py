@@ -144,6 +144,7 @@ Ranks.from_env().close()
 """
 
 
+@pytest.mark.slow  # two torchrun launches of two processes (about 70 s on 2 cores); run with --run-slow
 def test_under_torchrun_every_rank_reuses_a_finished_skill_alike(tmp_path):
     """Two processes over gloo: a skill trained, asked again in the same launch (its process group up) and in a fresh
     one (none started): every rank reuses it; more iterations then resume it on every rank."""
