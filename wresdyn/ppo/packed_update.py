@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from rsl_rl.algorithms import PPO
+
+from wresdyn.ppo.update import PlainPPO
 
 __all__ = ["PackedPPO", "next_learning_rate"]
 
@@ -42,12 +43,9 @@ def next_learning_rate(lr: float, higher: bool, lower: bool) -> float:
     return lr
 
 
-class PackedPPO(PPO):
+class PackedPPO(PlainPPO):
     """rsl-rl's :class:`~rsl_rl.algorithms.PPO` with one collective and one host wait per mini-batch (see the
     module)."""
-
-    def _plain(self) -> bool:
-        return not (self.actor.is_recurrent or self.critic.is_recurrent or self.rnd or self.symmetry)
 
     def _flags_buffer(self) -> torch.Tensor:
         """A host tensor of 2 booleans (the KL tests) the device copies into without blocking: page-locked on CUDA,
@@ -67,32 +65,7 @@ class PackedPPO(PPO):
         params = [*self.actor.parameters(), *self.critic.parameters()]
         sums = torch.zeros(3, dtype=torch.float64, device=self.device)  # value, surrogate, entropy
         for batch in self.storage.mini_batch_generator(self.num_mini_batches, self.num_learning_epochs):
-            if self.normalize_advantage_per_mini_batch:
-                with torch.no_grad():
-                    batch.advantages = (batch.advantages - batch.advantages.mean()) / (batch.advantages.std() + 1e-8)
-            with torch.amp.autocast(device_type=torch.device(self.device).type, enabled=self.use_mixed_precision,
-                                    dtype=torch.bfloat16):
-                self.actor(batch.observations, stochastic_output=True)
-                log_prob = self.actor.get_output_log_prob(batch.actions)
-                values = self.critic(batch.observations)
-                entropy = self.actor.output_entropy
-                kl = None
-                if adaptive:
-                    with torch.inference_mode():
-                        kl = torch.mean(self.actor.get_kl_divergence(batch.old_distribution_params,
-                                                                     self.actor.output_distribution_params))
-                ratio = torch.exp(log_prob - torch.squeeze(batch.old_actions_log_prob))
-                surrogate = -torch.squeeze(batch.advantages) * ratio
-                clipped = -torch.squeeze(batch.advantages) * torch.clamp(ratio, 1.0 - self.clip_param,
-                                                                         1.0 + self.clip_param)
-                surrogate_loss = torch.max(surrogate, clipped).mean()
-                if self.use_clipped_value_loss:
-                    value_clipped = batch.values + (values - batch.values).clamp(-self.clip_param, self.clip_param)
-                    value_loss = torch.max((values - batch.returns).pow(2),
-                                           (value_clipped - batch.returns).pow(2)).mean()
-                else:
-                    value_loss = (batch.returns - values).pow(2).mean()
-                loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
+            loss, kl, logged = self._losses(batch, with_kl=adaptive)
             self.optimizer.zero_grad()
             loss.backward()
             if self.is_multi_gpu:
@@ -117,7 +90,7 @@ class PackedPPO(PPO):
                 for group in self.optimizer.param_groups:
                     group["lr"] = self.learning_rate
             self.optimizer.step()
-            sums += torch.stack([value_loss.detach(), surrogate_loss.detach(), entropy.mean().detach()]).double()
+            sums += logged.double()
         obs = self.storage.observations.flatten(0, 1)
         self.actor.update_normalization(obs)
         self.critic.update_normalization(obs)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import torch
 from rsl_rl.algorithms import PPO
 
-__all__ = ["OneSyncPPO", "adapt_learning_rate"]
+__all__ = ["OneSyncPPO", "PlainPPO", "adapt_learning_rate"]
 
 LR_MIN, LR_MAX, LR_FACTOR = 1e-5, 1e-2, 1.5
 """rsl-rl's adaptive-schedule bounds on the learning rate and its step factor."""
@@ -36,11 +36,49 @@ def adapt_learning_rate(lr: torch.Tensor, kl: torch.Tensor, desired_kl: float) -
     return torch.where(kl > desired_kl * 2.0, down, torch.where((kl < desired_kl / 2.0) & (kl > 0.0), up, lr))
 
 
-class OneSyncPPO(PPO):
-    """rsl-rl's :class:`~rsl_rl.algorithms.PPO` whose update waits on the device once (see the module)."""
+class PlainPPO(PPO):
+    """rsl-rl's :class:`~rsl_rl.algorithms.PPO` with its plain case's mini-batch losses in one method, for the updates
+    that change only how the processes and the host meet (:class:`OneSyncPPO`,
+    :class:`~wresdyn.ppo.packed_update.PackedPPO`); the same operations in the same order as rsl-rl's update."""
 
     def _plain(self) -> bool:
         return not (self.actor.is_recurrent or self.critic.is_recurrent or self.rnd or self.symmetry)
+
+    def _losses(self, batch, with_kl: bool) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """The mini-batch's loss (a 0-d tensor to back-propagate), its mean KL divergence from the rollout's policy
+        (0-d, without gradient; None unless ``with_kl``) and the value, surrogate and entropy losses for the log
+        (shape (3,), detached). Normalises ``batch.advantages`` in place where rsl-rl does."""
+        if self.normalize_advantage_per_mini_batch:
+            with torch.no_grad():
+                batch.advantages = (batch.advantages - batch.advantages.mean()) / (batch.advantages.std() + 1e-8)
+        with torch.amp.autocast(device_type=torch.device(self.device).type, enabled=self.use_mixed_precision,
+                                dtype=torch.bfloat16):
+            self.actor(batch.observations, stochastic_output=True)
+            log_prob = self.actor.get_output_log_prob(batch.actions)
+            values = self.critic(batch.observations)
+            entropy = self.actor.output_entropy
+            kl = None
+            if with_kl:
+                with torch.inference_mode():
+                    kl = torch.mean(self.actor.get_kl_divergence(batch.old_distribution_params,
+                                                                 self.actor.output_distribution_params))
+            ratio = torch.exp(log_prob - torch.squeeze(batch.old_actions_log_prob))
+            advantages = torch.squeeze(batch.advantages)
+            surrogate = torch.max(-advantages * ratio,
+                                  -advantages * torch.clamp(ratio, 1.0 - self.clip_param, 1.0 + self.clip_param))
+            surrogate_loss = surrogate.mean()
+            if self.use_clipped_value_loss:
+                clipped = batch.values + (values - batch.values).clamp(-self.clip_param, self.clip_param)
+                value_loss = torch.max((values - batch.returns).pow(2), (clipped - batch.returns).pow(2)).mean()
+            else:
+                value_loss = (batch.returns - values).pow(2).mean()
+            loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
+        logged = torch.stack([value_loss.detach(), surrogate_loss.detach(), entropy.mean().detach()])
+        return loss, kl, logged
+
+
+class OneSyncPPO(PlainPPO):
+    """rsl-rl's :class:`~rsl_rl.algorithms.PPO` whose update waits on the device once (see the module)."""
 
     def _device_lr(self) -> torch.Tensor:
         """The learning rate as a 0-d float64 tensor on the device, set in every parameter group (on CUDA Adam then
@@ -69,29 +107,7 @@ class OneSyncPPO(PPO):
         params = [p for p in (*self.actor.parameters(), *self.critic.parameters())]
         sums = torch.zeros(3, device=self.device)  # value, surrogate, entropy
         for batch in self.storage.mini_batch_generator(self.num_mini_batches, self.num_learning_epochs):
-            if self.normalize_advantage_per_mini_batch:
-                with torch.no_grad():
-                    batch.advantages = (batch.advantages - batch.advantages.mean()) / (batch.advantages.std() + 1e-8)
-            with torch.amp.autocast(device_type=torch.device(self.device).type, enabled=self.use_mixed_precision,
-                                    dtype=torch.bfloat16):
-                self.actor(batch.observations, stochastic_output=True)
-                log_prob = self.actor.get_output_log_prob(batch.actions)
-                values = self.critic(batch.observations)
-                entropy = self.actor.output_entropy
-                with torch.no_grad():
-                    kl = self.actor.get_kl_divergence(batch.old_distribution_params,
-                                                      self.actor.output_distribution_params).mean()
-                ratio = torch.exp(log_prob - torch.squeeze(batch.old_actions_log_prob))
-                advantages = torch.squeeze(batch.advantages)
-                surrogate = torch.max(-advantages * ratio,
-                                      -advantages * torch.clamp(ratio, 1.0 - self.clip_param, 1.0 + self.clip_param))
-                surrogate_loss = surrogate.mean()
-                if self.use_clipped_value_loss:
-                    clipped = batch.values + (values - batch.values).clamp(-self.clip_param, self.clip_param)
-                    value_loss = torch.max((values - batch.returns).pow(2), (clipped - batch.returns).pow(2)).mean()
-                else:
-                    value_loss = (batch.returns - values).pow(2).mean()
-                loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
+            loss, kl, logged = self._losses(batch, with_kl=adaptive or self.is_multi_gpu)
             self.optimizer.zero_grad()
             loss.backward()
             if self.is_multi_gpu:
@@ -101,7 +117,7 @@ class OneSyncPPO(PPO):
             torch.nn.utils.clip_grad_norm_(self.actor.parameters(), self.max_grad_norm)
             torch.nn.utils.clip_grad_norm_(self.critic.parameters(), self.max_grad_norm)
             self.optimizer.step()
-            sums += torch.stack([value_loss.detach(), surrogate_loss.detach(), entropy.mean().detach()]).float()
+            sums += logged.float()
         obs = self.storage.observations.flatten(0, 1)
         self.actor.update_normalization(obs)
         self.critic.update_normalization(obs)
