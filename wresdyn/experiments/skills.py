@@ -20,7 +20,9 @@ the "real" robot, on its stand or standing on its floor (the task config's varia
 4. Deployment (:mod:`wresdyn.skills.evaluate`): every policy, and the reference played open loop, on the "real" robot
    (the dataset's mismatch; on the floor its IMU's noise too) over the validation and held-out motions; each policy
    also in the simulator it was trained in. Gap closed = (a − b) / (a − d) on held-out MPJPE (on the floor also on
-   g-MPJPE). ``report.md``, ``results.json``, tracking plots and a USD animation of the held-out rollouts side by side.
+   g-MPJPE); each deployment is kept in the run folder as it ends and read back on a rerun
+   (:mod:`wresdyn.skills.deployment_store`). ``report.md``, ``results.json``, tracking plots and a USD animation of
+   the held-out rollouts side by side.
 
 No choice here looks at held-out motions: the task and PPO settings were set on validation motions, and every policy
 is its last iterate (no checkpoint selection on the real robot, which a user could not do before deploying).
