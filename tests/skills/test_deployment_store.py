@@ -186,3 +186,29 @@ def test_a_rerun_benchmark_reads_back_its_deployments_and_scores_the_same(tmp_pa
         assert res["real"][split]["b_calibrated"] == res["real"][split]["a_nominal"]
         assert res["real"][split]["b_calibrated"] != json.loads(first)["real"][split]["b_calibrated"]
     assert len(read_ledger(out / "heldout_ledger.jsonl")) == 2
+
+
+@pytest.mark.slow  # ~2 min on 2 cores: the floor benchmark at the smallest size, twice
+def test_a_rerun_floor_benchmark_reads_back_its_deployments_and_scores_the_same(tmp_path, humanoid, data):
+    """The floor's rollouts (base, links, failure causes) read back give the same results.json; the balanced held-out
+    families' pick (a's validation deployment in its simulator, run again) keeps the same held-out motions."""
+    from wresdyn.experiments.deploy_config import FloorDeployConfig
+    from wresdyn.experiments.skills import run_benchmark
+    from wresdyn.skills.skill_config import SkillPPOConfig
+
+    cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
+    cfg = FloorDeployConfig(iterations=1, finetune=1, num_worlds=2, train_per_family=1, validation_per_family=1,
+                            heldout_per_family=1, duration=0.5, device="cpu", nominal=None, screen=False,
+                            heldout_families="balanced")
+    out, runs = tmp_path / "floor", []
+    for _ in range(2):
+        lines = []
+        run_benchmark(humanoid, data, out, cfg, calibrated=cal, ppo=SkillPPOConfig(torch_threads=1),
+                      policies=("a_nominal", "d_oracle"), animation=False, log=lines.append)
+        runs.append((_numbers(out), [x for x in lines if "deployed earlier" in x]))
+    (first, none), (again, reused) = runs
+    stored = list((out / "deployments").rglob("*.npz"))
+    assert none == [] and len(stored) == 2 * (3 + 2) - 1  # (a)'s validation run in its simulator is the pick's
+    assert again == first and len(reused) == len(stored) and all("reused" in x for x in reused)
+    assert "falls" in json.loads(first)["real"]["heldout"]["a_nominal"]["mean"]  # the floor's metrics
+    assert len(read_ledger(out / "heldout_ledger.jsonl")) == 1
