@@ -37,7 +37,8 @@ def floor_deployment(seed: int = 0) -> Deployment:
     cmd[0, 3:] = np.nan
     return Deployment(q, q_ref, cmd, np.array([3, 4, -1]), ["m0", "m1", "m2"], 0.02, floating=True, base=base,
                       bodies=bodies, base_ref=base_ref, bodies_ref=bodies_ref,
-                      planted=rng.random((m, k + 1, 2)) > 0.5, feet=np.array([3, 4]), fell=np.array([True, False, False]),
+                      planted=rng.random((m, k + 1, 2)) > 0.5, feet=np.array([3, 4]),
+                      fell=np.array([True, False, False]),
                       cause=np.array([FAILURE_CAUSES[0], "drifted", ""], dtype=object), fell_at=np.array([3, -1, -1]),
                       base_error_max=rng.random(m))
 
