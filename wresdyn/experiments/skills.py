@@ -20,7 +20,9 @@ the "real" robot, on its stand or standing on its floor (the task config's varia
 4. Deployment (:mod:`wresdyn.skills.evaluate`): every policy, and the reference played open loop, on the "real" robot
    (the dataset's mismatch; on the floor its IMU's noise too) over the validation and held-out motions; each policy
    also in the simulator it was trained in. Gap closed = (a − b) / (a − d) on held-out MPJPE (on the floor also on
-   g-MPJPE). ``report.md``, ``results.json``, tracking plots and a USD animation of the held-out rollouts side by side.
+   g-MPJPE); each deployment is kept in the run folder as it ends and read back on a rerun
+   (:mod:`wresdyn.skills.deployment_store`). ``report.md``, ``results.json``, tracking plots and a USD animation of
+   the held-out rollouts side by side.
 
 No choice here looks at held-out motions: the task and PPO settings were set on validation motions, and every policy
 is its last iterate (no checkpoint selection on the real robot, which a user could not do before deploying).
@@ -39,8 +41,9 @@ from ..errors import WresdynError
 from ..learn.runs import run_physics
 from ..robot import load_robot
 from ..skills.env import TrackingEnv
-from ..skills.evaluate import deploy, gap_closed, gaps_or_why_not, metrics
-from ..skills.ledger import LEDGER, ledger_table, record_heldout
+from ..skills.deployment_store import DeploymentStore, deploy_all, run_fingerprint
+from ..skills.evaluate import gap_closed, gaps_or_why_not
+from ..skills.ledger import LEDGER, ledger_table
 from ..skills.motion_store import MotionStore, motion_fingerprint
 from ..skills.motions import MotionSet, make_motions
 from ..skills.plants import RealPlant, sim_plant
@@ -304,26 +307,21 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     if balanced:
         motions, results["heldout_families"], in_sim = _heldout_families(out, robot, plant_robot, cfg, motions, sim,
                                                                           task, log, store)
-    rollouts = {}
-    for split in ("validation", "heldout"):
-        mot = motions.split(split)
-        results["real"][split], results["sim"][split] = {}, {}
-        for name in ("reference", *policies):
-            policy = None if name == "reference" else load_skill(out / "skills" / name)
-            dep = deploy(policy, real_plant(len(mot), cfg.seed + 100), mot, task)
-            results["real"][split][name] = metrics(dep, robot)
-            if split == "heldout":
-                rollouts[name] = dep
-            setting = POLICIES.get(name, "nominal")
-            if (split, name) in in_sim:
-                results["sim"][split][name] = in_sim[split, name]["mean"]
-            elif setting != "real":
-                results["sim"][split][name] = metrics(deploy(policy, sim(setting, len(mot)), mot, task), robot)["mean"]
+    # each deployment kept as it ends, so that a run killed here resumes from the ones done
+    deployed = DeploymentStore(out, {
+        "task": asdict(task), "real": {"mismatch": mismatch.to_dict(), "rate_hz": rate, "seed": cfg.seed + 100},
+        "sim": {"device": cfg.device}, "motions": store.fingerprint if store else motion_fingerprint(
+            robot, counts, cfg.duration, rate, cfg.seed, floor=False, screen=False)}, log)
+    results["real"], results["sim"], rollouts = deploy_all(
+        deployed, {n: POLICIES.get(n, "nominal") for n in ("reference", *policies)}, out / "skills", motions,
+        lambda worlds: real_plant(worlds, cfg.seed + 100), sim, task, robot, in_sim, lambda setting: {
+            "setting": setting, "correction": run_fingerprint(runs.get(RANDOMIZED.get(setting, setting))),
+            "randomization": asdict(dr) if setting in RANDOMIZED else None})
     _gaps(results, floor)
     ledgers = [out / LEDGER] + ([Path(ledger)] if ledger else [])
-    record_heldout(ledgers, {"benchmark": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo),
-                             "mismatch": mismatch.to_dict()}, cfg.seed,
-                   {n: r["mean"] for n, r in results["real"]["heldout"].items()}, len(motions.split("heldout")))
+    deployed.record(ledgers, {"benchmark": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo),
+                              "mismatch": mismatch.to_dict()}, cfg.seed,
+                    {n: r["mean"] for n, r in results["real"]["heldout"].items()}, len(motions.split("heldout")))
     held = results["real"]["heldout"]
     n_held = len(motions.split("heldout"))
     if floor:
