@@ -281,7 +281,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
                                                              and not installed_from(cfg, p) for p in policies))
     fit_s = time.perf_counter() - t0
     log(f"[2/4] corrections{' fitted on the stand' if floor else ''}: calibrated {calibrated}, delta action {delta} "
-        f"({fit_s:.0f} s)")
+        f"({fit_s:.0f} s)" if calibrated or delta else "[2/4] corrections: none fitted (none trains a policy here)")
     real = RealRobot(plant_robot, mismatch, rate)
     runs = {"calibrated": calibrated, "delta_action": delta}
     dr = randomization or Randomization(seed=cfg.seed)
