@@ -134,9 +134,10 @@ def run(args: Deploy) -> int:
     from ..sim.warmup import compile_kernels
 
     # the skills replay forward; the corrections not given are fitted here (identification, then gradient fits)
-    policies = args.policies or (FLOOR_CPU_POLICIES if args.floor and cfg.device == "cpu" else ())
+    shipped = getattr(cfg, "shipped", False)  # every policy taken as it is: nothing fitted
+    policies = args.policies or (FLOOR_CPU_POLICIES if args.floor and (cfg.device == "cpu" or shipped) else ())
     wanted = set(policies or ("b_calibrated", "c_delta_action"))
-    fit_cal = not args.calibrated and bool(wanted & {"b_calibrated", "f_calibrated_narrow"})
+    fit_cal = not args.calibrated and not shipped and bool(wanted & {"b_calibrated", "f_calibrated_narrow"})
     fit_delta = not args.delta and "c_delta_action" in wanted
     variants = ("forward",) + (("param_grads", "grad") if fit_cal else ()) + (("grad",) if fit_delta else ())
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)

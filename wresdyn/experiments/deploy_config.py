@@ -117,6 +117,13 @@ class FloorDeployConfig(_BenchmarkSizes):
     :mod:`wresdyn.skills.shipped`) where the package has it and PPO runs on the CPU, else trained; a shipped policy's
     name or a finished skill run folder; ``None``: trained here. One that does not fit the run (task, network,
     joints, motion generator: :func:`~wresdyn.experiments.nominal_policy.check_fits`) is refused in one line."""
+    shipped: bool = False
+    """Train nothing: deploy the policies the package ships, (a), (b) and the oracle (d), each trained at full size on
+    a GPU for the real robot of ``data/mismatch_default.toml``
+    (:data:`~wresdyn.experiments.nominal_policy.SHIPPED_FLOOR`; their training commands and hashes in
+    ``shipped.json``), on motions this run draws with its own ``seed`` (not the policies' 0): the CPU run that shows
+    the benchmark's point. No training motion is drawn and no correction fitted; (b) is not deployed in its
+    simulator."""
     heldout_families: Literal["all", "balanced"] = "balanced"
     """Which held-out families are deployed: ``all``, or ``balanced``: the families on whose every validation motion
     (a) succeeds in its own simulator (the stepping family, which has none, left out;

@@ -30,7 +30,6 @@ is its last iterate (no checkpoint selection on the real robot, which a user cou
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -54,7 +53,8 @@ from ..skills.skill_config import FloorTaskConfig, SkillConfig
 from ..skills.shipped import install_policy
 from ..skills.skill_ppo import finished_skill, load_skill, train_skill
 from .deploy_config import DeployConfig, FloorDeployConfig
-from .nominal_policy import balanced_families, check_fits, draw_heldout, nominal_source
+from .nominal_policy import balanced_families, check_installed, draw_heldout, installed_from, installed_record, \
+    nominal_source
 from .zero_shot import BASE_POLICIES, POLICIES, RANDOMIZED, fit_corrections, start_benchmark, write_results
 
 __all__ = ["DeployConfig", "FloorDeployConfig", "run_benchmark"]
@@ -79,6 +79,12 @@ def _plants(task, real, robot, rate: float, runs: dict, device: str, dr: Randomi
                          randomization=randomization)
 
     return real_plant, sim
+
+
+def _own_sim(setting: str, runs: dict) -> str | None:
+    """The simulator a policy is deployed in besides the real robot: ``None`` where it has none here (a shipped
+    policy whose correction this run does not build)."""
+    return None if setting != "real" and runs.get(setting, setting) is None else setting
 
 
 def _imu_noise(task) -> tuple[float, float]:
@@ -169,10 +175,11 @@ def _train_all(policies, robot, real, motions, task, ppo, cfg, runs, meta, out: 
         for name in policies:
             if name in beside or name in wall:  # trained beside, or found done earlier
                 continue
-            if name == "a_nominal" and cfg.nominal:  # trained elsewhere (a shipped policy): fine-tuned from here
-                install_policy(cfg.nominal, out / "skills" / name)
+            source = installed_from(cfg, name)
+            if source:  # trained elsewhere (a shipped policy): (a) fine-tuned from here unless all are shipped
+                install_policy(source, out / "skills" / name)
                 wall[name] = 0.0
-                log(f"[3/4] policy {name}: {cfg.nominal} (not trained here: {out / 'skills' / name})")
+                log(f"[3/4] policy {name}: {source} (not trained here: {out / 'skills' / name})")
             else:
                 wall[name] = _train_policy(index[name], name, robot, real, motions, task, ppo, cfg, runs, meta, out,
                                            log, dr)
@@ -257,8 +264,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         if cfg.extra_families:  # a run without them keeps the meta of the runs before the option
             meta["motions"]["extra"] = list(cfg.extra_families)
     cfg = replace(cfg, nominal=nominal_source(cfg))  # before anything is fitted: a misfit is refused at once
-    if cfg.nominal:
-        check_fits(cfg.nominal, task, ppo, meta["motions"], robot.n_dof)
+    check_installed(cfg, policies, mismatch, task, ppo, meta["motions"], robot.n_dof)
     t0 = time.perf_counter()
     balanced = floor and cfg.heldout_families == "balanced"  # held-out motions drawn once the families are chosen
     store = None
@@ -281,10 +287,10 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     calibrated, delta = fit_corrections(dataset, data_path, robot, out, calibrated, delta, cfg.device, log,
                                          need_delta="c_delta_action" in policies,
                                          need_calibrated=any(POLICIES[p] in ("calibrated", "calibrated_narrow")
-                                                             for p in policies))
+                                                             and not installed_from(cfg, p) for p in policies))
     fit_s = time.perf_counter() - t0
     log(f"[2/4] corrections{' fitted on the stand' if floor else ''}: calibrated {calibrated}, delta action {delta} "
-        f"({fit_s:.0f} s)")
+        f"({fit_s:.0f} s)" if calibrated or delta else "[2/4] corrections: none fitted (none trains a policy here)")
     real = RealRobot(plant_robot, mismatch, rate)
     runs = {"calibrated": calibrated, "delta_action": delta}
     dr = randomization or Randomization(seed=cfg.seed)
@@ -299,10 +305,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
             results["randomization"]["narrow"] = narrow_ranges(dr, plant_robot, run_physics(calibrated, plant_robot),
                                                                calibrated)[1]
     real_plant, sim = _plants(task, real, plant_robot, rate, runs, cfg.device, dr)
-    if cfg.nominal:
-        a_cfg = json.loads((out / "skills" / "a_nominal" / "config.json").read_text())
-        results["nominal"] = {"source": str(cfg.nominal), "iterations": a_cfg["ppo"]["iterations"],
-                              "num_worlds": a_cfg["num_worlds"]}
+    results.update(installed_record(cfg, out))
     in_sim = {}  # deployments in a policy's own simulator done before the loop below
     if balanced:
         motions, results["heldout_families"], in_sim = _heldout_families(out, robot, plant_robot, cfg, motions, sim,
@@ -312,8 +315,9 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         "task": asdict(task), "real": {"mismatch": mismatch.to_dict(), "rate_hz": rate, "seed": cfg.seed + 100},
         "sim": {"device": cfg.device}, "motions": store.fingerprint if store else motion_fingerprint(
             robot, counts, cfg.duration, rate, cfg.seed, floor=False, screen=False)}, log)
+    own = {n: _own_sim(POLICIES.get(n, "nominal"), runs) for n in ("reference", *policies)}
     results["real"], results["sim"], rollouts = deploy_all(
-        deployed, {n: POLICIES.get(n, "nominal") for n in ("reference", *policies)}, out / "skills", motions,
+        deployed, own, out / "skills", motions,
         lambda worlds: real_plant(worlds, cfg.seed + 100), sim, task, robot, in_sim, lambda setting: {
             "setting": setting, "correction": run_fingerprint(runs.get(RANDOMIZED.get(setting, setting))),
             "randomization": asdict(dr) if setting in RANDOMIZED else None})

@@ -56,6 +56,8 @@ def start_benchmark(out: Path, cfg, ppo, mismatch, dataset, policies) -> Benchma
     mismatch = mismatch if mismatch is not None else Mismatch.from_dict(dataset.mismatch, "the dataset's mismatch")
     counts = {"train": cfg.train_per_family, "validation": cfg.validation_per_family,
               "heldout": cfg.heldout_per_family}
+    if getattr(cfg, "shipped", False):  # every policy taken as it is: no training motions to draw
+        del counts["train"]
     return BenchmarkStart(policies, ppo, mismatch, counts)
 
 

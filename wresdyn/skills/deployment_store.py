@@ -193,7 +193,7 @@ def deploy_all(store: DeploymentStore, settings: dict, skills, motions, real_pla
 
     Args:
         store: The run folder's deployments.
-        settings: Per policy name (and ``reference``) the simulator it trained in (``"real"``: none).
+        settings: Per policy name (and ``reference``) the simulator it trained in (``"real"``, ``None``: none).
         skills: The folder of the skill run folders (one per policy name).
         motions: The :class:`~.motions.MotionSet` with ``validation`` and ``heldout`` splits.
         real_plant, sim: Plant makers: ``real_plant(worlds)``, ``sim(setting, worlds)``.
@@ -218,7 +218,7 @@ def deploy_all(store: DeploymentStore, settings: dict, skills, motions, real_pla
                 rollouts[name] = dep
             if (split, name) in in_sim:
                 in_sims[split][name] = in_sim[split, name]["mean"]
-            elif setting != "real":
+            elif setting not in ("real", None):
                 dep = store.deploy(split, "sim", name, run_dir, mot,
                                    lambda p: deploy(p, sim(setting, len(mot)), mot, task), sim_plant(setting))
                 in_sims[split][name] = metrics(dep, robot)["mean"]

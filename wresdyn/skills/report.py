@@ -201,7 +201,8 @@ def _floor_table(split: dict, sim: dict | None = None) -> str:
                f"{1e3 * m.get('action_rate', nan):.1f} |")
         if sim:
             s = sim.get(name)
-            row += f" {1e3 * s.get('mpjpe', nan):.1f} |" if s else " – (trained on the real robot) |"
+            gone = " – (trained on the real robot) |" if name == "d_oracle" else " – (its simulator not built here) |"
+            row += f" {1e3 * s.get('mpjpe', nan):.1f} |" if s else gone
         rows.append(row)
     return "\n".join(rows)
 
@@ -253,6 +254,29 @@ def _nominal_text(results: dict) -> str:
             "worlds in the nominal simulator)")
 
 
+def _shipped_fit(results: dict) -> str:
+    return " (for the shipped (b): at full size, by its own run)" if results.get("shipped") else ""
+
+
+def _train_count(results: dict) -> str:
+    return "none (no policy trained here)" if results.get("shipped") else str(results["config"]["train_per_family"])
+
+
+def _policies_text(results: dict) -> str:
+    """How the policies came to be: (a) and the fine-tunings trained here, or all shipped, trained at full size on a
+    GPU elsewhere (their command, commit and policy's hash)."""
+    cfg, shipped = results["config"], results.get("shipped")
+    if not shipped:
+        return (f"(a): {_nominal_text(results)}; (b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations ((d) on "
+                f"{cfg['oracle_num_worlds'] or cfg['num_worlds']} worlds).")
+    lines = "".join(f"\n- {LABELS.get(n, n)}: `{s['source']}`, {s['iterations']} PPO iterations × {s['num_worlds']} "
+                    f"worlds on {s['device']} ({s['machine']}), by `{s['command']}` at commit {s['commit']}; "
+                    f"policy.pt sha256 `{s['policy_sha256']}`" for n, s in shipped.items())
+    return ("No policy was trained on this machine: (a), (b) and (d) are the ones the package ships, trained at full "
+            "size on a GPU ((d) on the real robot of this run's mismatch); this run draws its own motions (seed "
+            f"{cfg['seed']}), none of which they trained on:{lines}\n\n")
+
+
 def _families_text(results: dict) -> str:
     """The held-out families deployed and the rule that chose them, where not all."""
     fam = results.get("heldout_families")
@@ -286,12 +310,11 @@ def _write_floor_report(out, floating, results: dict, rollouts: dict, motions, p
 Robot `{floating.source.name}` with a free base on a floor; the "real" robot is the MuJoCo C model with the dataset's
 mismatch (physics, {1e3 * results['mismatch']['delay']:g} ms delay, torque limits, joint noise) and an IMU with
 {task['gyro_noise']:g} rad/s and {task['gravity_noise']:g} noise. The corrections were fitted **on the stand** from the
-dataset, with no floor data. Skills: motion-tracking policies (PPO, rsl-rl, asymmetric actor-critic: the actor sees
+dataset, with no floor data{_shipped_fit(results)}. Skills: motion-tracking policies (PPO, rsl-rl, asymmetric actor-critic: the actor sees
 joint states, the IMU, the reference and its last action) at {policy_rate_hz:g} Hz. Motions per family: train
-{cfg['train_per_family']}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (squat,
+{_train_count(results)}, validation {cfg['validation_per_family']}, held-out {cfg['heldout_per_family']} (squat,
 weight shift, kick, wave{extra}; the held-out set adds stepping in place, a family no policy trained on),
-{cfg['duration']:g} s each. (a): {_nominal_text(results)};
-(b), (c), (d): (a) fine-tuned {cfg['finetune']} iterations ((d) on {cfg['oracle_num_worlds'] or cfg['num_worlds']} worlds). Every
+{cfg['duration']:g} s each. {_policies_text(results)} Every
 policy is its last iterate; nothing was selected on the real robot or on held-out motions.{_families_text(results)}
 
 ## Held-out motions, deployed on the real robot's floor

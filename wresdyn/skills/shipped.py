@@ -1,5 +1,6 @@
 """Skill policies that ship inside the package, so that a CPU run fine-tunes and deploys instead of training from
-scratch: the nominal floor policy (a) trained at full size on a GPU.
+scratch: the nominal floor policy (a) trained at full size on a GPU, and for the CPU run that only deploys
+(``wresdyn deploy --floor --shipped``) the calibrated policy (b) and the oracle (d) fine-tuned from it at full size.
 
 A shipped policy is a folder under ``wresdyn/skills/policies/<name>/``: the skill run's last rsl-rl checkpoint
 ``model_<it>.pt`` (actor, critic, optimiser: what a fine-tuning starts from), its exported ``policy.pt``, its
@@ -65,11 +66,12 @@ def install_policy(source: str | Path, dst: Path) -> Path:
     return dst
 
 
-def ship_policy(run: str | Path, name: str, command: str, machine: str, commit: str) -> Path:
-    """Copy the finished skill run ``run`` into the package as the shipped policy ``name``, with its manifest."""
+def ship_policy(run: str | Path, name: str, command: str, machine: str, commit: str, extra: dict | None = None) -> Path:
+    """Copy the finished skill run ``run`` into the package as the shipped policy ``name``, with its manifest
+    (``extra``: more fields of it, e.g. the real robot's mismatch an oracle was trained on)."""
     folder = install_policy(run, SHIPPED / name)
     files = sorted(p.name for p in folder.iterdir() if p.name != "shipped.json")
     record = {"name": name, "command": command, "machine": machine, "commit": commit, "source": str(run),
-              "sha256": {f: file_sha256(folder / f) for f in files}}
+              **(extra or {}), "sha256": {f: file_sha256(folder / f) for f in files}}
     (folder / "shipped.json").write_text(json.dumps(record, indent=1) + "\n")
     return folder
