@@ -282,7 +282,8 @@ class RunFolder:
 
         With ``background`` the checkpoint is copied to host memory here (:func:`host_copy`) and serialised, checked
         and written on a thread while the caller trains on: serialising the growing curve and reading it back
-        through the weights-only unpickler (pure Python) costs more than a training iteration late in a run.
+        through the weights-only unpickler (pure Python) costs more than a training iteration late in a run. The
+        thread touches host memory only (the copy is taken here), so it cannot meet a CUDA graph being captured.
         Checkpoints are written one at a time, in order; :meth:`flush` waits for the last and raises its error."""
         if self.curve:
             self.iteration, self.wall = self.curve[-1]["iteration"], self.curve[-1]["wall"]
