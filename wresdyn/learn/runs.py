@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from ..robot.physical import PhysicalParams
 from .config_diff import config_diff, describe_diff, plain_json
 
 __all__ = ["RunError", "RunFolder", "RunnerFolder", "Best", "check_resume", "read_unset", "UNSET_WAS_ZERO",
-           "run_physics", "load_checkpoint", "save_checkpoint", "write_json"]
+           "run_physics", "load_checkpoint", "save_checkpoint", "write_json", "host_copy"]
 
 
 class RunError(WresdynError):
@@ -150,6 +151,27 @@ def save_checkpoint(data: dict, path) -> Path:
     return path
 
 
+def host_copy(data):
+    """``data`` (tensors and plain containers) with every tensor copied to host memory and every container rebuilt,
+    so that another thread can serialise it while the caller goes on changing the originals (an optimiser stepping
+    its weights in place, the curve growing). Rows of a list of dicts (a learning curve: flat rows, never changed
+    once appended) are copied shallowly."""
+    import torch
+
+    if isinstance(data, torch.Tensor):
+        return data.detach().to("cpu", copy=True)
+    if isinstance(data, dict):
+        return {k: host_copy(v) for k, v in data.items()}
+    if isinstance(data, list):
+        if data and all(type(r) is dict for r in data) and all(
+                not isinstance(v, (dict, list, tuple, torch.Tensor)) for v in data[-1].values()):
+            return [dict(r) for r in data]
+        return [host_copy(v) for v in data]
+    if isinstance(data, tuple):
+        return tuple(host_copy(v) for v in data)
+    return data
+
+
 def write_json(data, path) -> Path:
     """Write ``data`` as indented JSON, atomically (a kill mid-write leaves the previous file)."""
     path = Path(path)
@@ -226,6 +248,8 @@ class RunFolder:
         """Training wall-clock of those iterations [s]."""
         self.meta: dict = {}
         """The resumed checkpoint's ``meta`` (the learner's extra bookkeeping is there); empty for a fresh run."""
+        self._writer: threading.Thread | None = None
+        self._write_error: BaseException | None = None
 
     def resume(self, keys=(), map_location=None) -> dict | None:
         """Continue from the checkpoint if there is one: read it as weights only (with ``keys``, ``"best"`` and
@@ -251,17 +275,45 @@ class RunFolder:
         if self.path is not None:
             write_json({**self.record, self.key: self.config}, self.path / "config.json")
 
-    def save(self, state: dict, **meta) -> None:
+    def save(self, state: dict, *, background: bool = False, **meta) -> None:
         """Checkpoint ``state`` (the learner's weights-only entries) with the best and the bookkeeping, atomically;
         ``meta``: the learner's extra bookkeeping (e.g. its window sampler's state). Sets :attr:`iteration` and
-        :attr:`wall` from the curve's last row."""
+        :attr:`wall` from the curve's last row.
+
+        With ``background`` the checkpoint is copied to host memory here (:func:`host_copy`) and serialised, checked
+        and written on a thread while the caller trains on: serialising the growing curve and reading it back
+        through the weights-only unpickler (pure Python) costs more than a training iteration late in a run. The
+        thread touches host memory only (the copy is taken here), so it cannot meet a CUDA graph being captured.
+        Checkpoints are written one at a time, in order; :meth:`flush` waits for the last and raises its error."""
         if self.curve:
             self.iteration, self.wall = self.curve[-1]["iteration"], self.curve[-1]["wall"]
         if self.checkpoint is None:
             return
+        self.flush()
         meta = {"config": self.config, **meta, "curve": self.curve, "iteration": self.iteration, "wall": self.wall,
                 "best_validation": self.best.value, "best_iteration": self.best.iteration}
-        save_checkpoint({**state, "meta": meta, "best": self.best.state or {}}, self.checkpoint)
+        data = {**state, "meta": meta, "best": self.best.state or {}}
+        if not background:
+            save_checkpoint(data, self.checkpoint)
+            return
+        self._writer = threading.Thread(target=self._write, args=(host_copy(data), self.checkpoint),
+                                        name="checkpoint writer")
+        self._writer.start()
+
+    def _write(self, data: dict, path: Path) -> None:
+        try:
+            save_checkpoint(data, path)
+        except BaseException as e:  # noqa: BLE001 - handed to the training thread by flush()
+            self._write_error = e
+
+    def flush(self, check: bool = True) -> None:
+        """Wait for a checkpoint written in the background; raise its error (with ``check``)."""
+        if self._writer is not None:
+            self._writer.join()
+            self._writer = None
+        error, self._write_error = self._write_error, None
+        if error is not None and check:
+            raise error
 
     def write_curve(self) -> None:
         """Write ``curve.json``."""

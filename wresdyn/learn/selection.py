@@ -13,7 +13,7 @@ import numpy as np
 
 from ..data.dataset import fitted_mask
 from ..sim import Simulator
-from ..sim.rollout import replay_trajectories
+from ..sim.rollout import replay_setup, run_replay
 
 __all__ = ["ValidationScore"]
 
@@ -48,6 +48,9 @@ class ValidationScore:
                              friction_kappa=friction_kappa)
         self.last_diverged = 0
         """Validation replays that diverged in the last call."""
+        self._fixed_physics = physics
+        self._setup = None  # (with a policy, the replay's set-up): kept while the physics are the ones given here
+        self._loose = None  # the last set-up for other physics, whose trajectory banks the next one reuses
 
     def __call__(self, policy=None, kind: str | None = None) -> float:
         import torch
@@ -56,11 +59,23 @@ class ValidationScore:
         if was_training:
             policy.eval()
         try:
-            runs = replay_trajectories(self.robot, self.trajectories, self.rate_hz, policy, kind=kind,
-                                       sim=self.sim, delay=self.delay, physics=self.physics)
+            runs = run_replay(self._replay_setup(policy is not None), policy, kind=kind)
         finally:
             if was_training:
                 policy.train()
         rep = runs["residual"] if "residual" in runs else runs["pd"]
         self.last_diverged = sum(a >= 0 for a in rep.diverged_at)
         return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)])[:, self.mask].mean())
+
+    def _replay_setup(self, with_policy: bool):
+        """The replay's set-up (the simulator's physics, the trajectories on its device), made once for the physics
+        given at construction and reused at every later check: the same physics give the same set-up, so only the
+        rollout is repeated. Physics set later (a subclass scoring other parameters each call) are set up anew."""
+        if self.physics is not self._fixed_physics:  # the recordings stay on the device, the command paths change
+            self._loose = replay_setup(self.robot, self.trajectories, self.rate_hz, with_policy, sim=self.sim,
+                                       delay=self.delay, physics=self.physics, reuse=self._loose)
+            return self._loose
+        if self._setup is None or self._setup[0] != with_policy:
+            self._setup = (with_policy, replay_setup(self.robot, self.trajectories, self.rate_hz, with_policy,
+                                                     sim=self.sim, delay=self.delay, physics=self.physics))
+        return self._setup[1]

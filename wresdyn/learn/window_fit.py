@@ -12,6 +12,7 @@ it does at given iterations.
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from typing import Protocol
 
 import numpy as np
@@ -122,11 +123,13 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         pending.clear()
 
     def checkpoint() -> None:
-        run.save(learner.state(), rng=rng.bit_generator.state, schedule=sched.state(), **learner.meta())
+        # written on a thread while training goes on (RunFolder.save), waited for before this function returns
+        run.save(learner.state(), background=True, rng=rng.bit_generator.state, schedule=sched.state(),
+                 **learner.meta())
 
     total = sched.total if until is None else min(until, sched.total)
     it = start_it
-    with bar(log, total, learner.name, start_it) as progress:
+    with bar(log, total, learner.name, start_it) as progress, _flushed_on_error(run):
         while True:
             wall = curve[-1]["wall"] if curve else run.wall
             if sched.finished(it, wall):
@@ -182,11 +185,22 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         if curve and run.iteration != it:
             checkpoint()
         log(f"{learner.what}: {sched.reason}")
+    run.flush()
     run.write_curve()
     if best.state is not None and (finished or reached):
         learner.module.load_state_dict(best.state)
         log(f"selected iteration {best.iteration} by validation ({best.value:.4f} rad)")
     return curve
+
+
+@contextmanager
+def _flushed_on_error(run: RunFolder):
+    """Wait for a checkpoint still being written when the loop fails, keeping the loop's error (not the writer's)."""
+    try:
+        yield
+    except BaseException:
+        run.flush(check=False)
+        raise
 
 
 def start_window_fit(cfg, dataset):

@@ -23,7 +23,8 @@ from .residual_kinds import apply_residual, observation
 from .rollout_graph import capture_blocker, rollout_key, run_captured
 from .simulator import DivergenceLimits, Simulator
 
-__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "policy_device"]
+__all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "replay_setup", "run_replay",
+           "ReplaySetup", "policy_device"]
 
 
 @dataclass
@@ -273,17 +274,58 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
         ``{"pd": Replays, "residual": Replays}`` (``"residual"`` absent without a policy or physics, ``"pd"``
         without the baseline).
     """
+    setup = replay_setup(robot, trajectories, rate_hz, policy is not None, solver=solver, substeps=substeps,
+                         device=device, with_baseline=with_baseline, delay=delay, sim=sim, physics=physics,
+                         friction_kappa=friction_kappa)
+    return run_replay(setup, policy, kind=kind)
+
+
+@dataclass
+class ReplaySetup:
+    """What :func:`replay_trajectories` prepares before its rollout: the simulator (its physics set), the whole
+    trajectories as one window on its device and where the model's worlds are. A caller that replays the same
+    trajectories with the same physics again (validation at every check) keeps it and calls :func:`run_replay`."""
+
+    sim: Simulator
+    window: Window
+    """The worlds' trajectories, ``len(groups)`` copies of the recordings side by side."""
+    policy_worlds: slice | None
+    """The worlds the policy drives (the model's), ``None``: all."""
+    groups: list
+    """``"pd"`` and/or ``"residual"``, in world order."""
+    lengths: list
+    """Each trajectory's sample count."""
+    banks: tuple = ()
+    """The trajectory banks the window was cut from (the nominal's, the model's): :func:`replay_setup`'s ``reuse``
+    sets their command paths anew instead of uploading the recordings again."""
+
+
+def replay_setup(robot, trajectories, rate_hz: float, with_policy: bool, *, solver: str = "auto", substeps: int = 1,
+                 device: str | None = "cpu", with_baseline: bool = False, delay=0.0, sim: Simulator | None = None,
+                 physics=None, friction_kappa: float | None = None, reuse: ReplaySetup | None = None) -> ReplaySetup:
+    """The set-up of :func:`replay_trajectories` (same arguments, ``with_policy``: whether a policy will drive the
+    model's worlds): the simulator, its physics and the trajectories' window on the device. ``reuse``: an earlier
+    set-up of the same trajectories on ``sim`` whose banks take the new command paths (the recordings are on the
+    device already); the same window as a fresh set-up."""
     trajectories = list(trajectories)
-    model = policy is not None or physics is not None
+    model = with_policy or physics is not None
     groups = (["pd"] if with_baseline or not model else []) + (["residual"] if model else [])
     w = len(trajectories)
     if sim is None or sim.num_worlds != w * len(groups):
         sim = Simulator(robot, w * len(groups), 1.0 / rate_hz, solver=solver, substeps=substeps, device=device,
                         friction_kappa=friction_kappa)
     pw = slice(groups.index("residual") * w, (groups.index("residual") + 1) * w) if len(groups) == 2 else None
+    old = reuse.banks if reuse is not None and reuse.sim is sim and reuse.groups == groups else ()
+
+    def bank(i: int, delay, accel) -> TrajectoryBank:
+        if i < len(old):
+            old[i].set_command_path(delay, accel)
+            return old[i]
+        return TrajectoryBank(trajectories, sim.device, delay, accel)
+
     if physics is None:
-        accel = servo_goal_accel(robot, None, 1.0 / rate_hz, sim.device)
-        window = TrajectoryBank(trajectories, sim.device, delay, accel).whole().repeat(len(groups))
+        banks = (bank(0, delay, servo_goal_accel(robot, None, 1.0 / rate_hz, sim.device)),)
+        window = banks[0].whole().repeat(len(groups))
     else:
         mw = slice(None) if pw is None else pw
         if pw is not None:
@@ -291,15 +333,23 @@ def replay_trajectories(robot, trajectories, rate_hz: float, policy=None, *, kin
         sim.set_physics(physics, worlds=mw)
         model_delay = torch.as_tensor(np.asarray(physics.delay) * rate_hz, dtype=torch.float32, device=sim.device)
         nominal_accel, model_accel = (servo_goal_accel(robot, p, 1.0 / rate_hz, sim.device) for p in (None, physics))
-        parts = ([TrajectoryBank(trajectories, sim.device, delay, nominal_accel).whole()] if pw is not None else []) \
-            + [TrajectoryBank(trajectories, sim.device, model_delay, model_accel).whole()]
+        banks = ((bank(0, delay, nominal_accel),) if pw is not None else ()) \
+            + (bank(1 if pw is not None else 0, model_delay, model_accel),)
+        parts = [b.whole() for b in banks]
         window = Window(*(torch.cat([getattr(p, f) for p in parts]) for f in ("q", "qd", "qdd", "cmd", "target",
                                                                                "length")))
+    return ReplaySetup(sim, window, pw, groups, [len(t.q) for t in trajectories], banks)
+
+
+def run_replay(setup: ReplaySetup, policy=None, *, kind: str | None = None) -> dict[str, Replays]:
+    """The rollout of :func:`replay_trajectories` on a :func:`replay_setup` (made with ``with_policy`` as
+    ``policy is not None``); the same result."""
+    sim, window, pw, groups, lengths = setup.sim, setup.window, setup.policy_worlds, setup.groups, setup.lengths
+    w = len(lengths)
     with torch.no_grad():
         out = rollout(sim, window, policy, kind=kind, policy_worlds=pw)
     q, qd = out.q.cpu().double().numpy(), out.qd.cpu().double().numpy()
     at = out.diverged_at.cpu().numpy()
-    lengths = [len(t.q) for t in trajectories]
     return {g: Replays([q[i * w + j, :lengths[j]] for j in range(w)], [qd[i * w + j, :lengths[j]] for j in range(w)],
                        [int(a) if 0 <= a < lengths[j] else -1 for j, a in enumerate(at[i * w:(i + 1) * w])])
             for i, g in enumerate(groups)}
