@@ -501,11 +501,16 @@ def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | N
             "config": dataclasses.asdict(cfg)}
 
 
+def leg_tag(tag: str | None, recipe: str, device: str) -> str:
+    """The name of a wresdyn leg's outputs: ``tag`` if given, else the recipe's for a recipe other than the defaults,
+    else ``cpu`` or ``cuda``."""
+    return tag or (recipe if recipe != "default" else "cuda" if device.startswith("cuda") else "cpu")
+
+
 def run_wresdyn(args) -> dict:
     """The wresdyn leg: :func:`identify_wresdyn` with ``args.recipe`` (its defaults unless told) on ``args.device``,
-    ``OUT/wresdyn_TAG.json`` (resumable through its run folder ``OUT/wresdyn_TAG/``); TAG is ``--tag``, else the
-    recipe's name for a recipe other than the defaults, else ``cpu`` or ``cuda``."""
-    tag = args.tag or (args.recipe if args.recipe != "default" else "cuda" if args.device.startswith("cuda") else "cpu")
+    ``OUT/wresdyn_TAG.json`` (resumable through its run folder ``OUT/wresdyn_TAG/``, TAG :func:`leg_tag`)."""
+    tag = leg_tag(args.tag, args.recipe, args.device)
     out = Path(args.out) / f"wresdyn_{tag}"
     log_ = open_log(out / "log.txt")
     lines = []
@@ -631,7 +636,8 @@ def table(tools: dict, extra: dict) -> None:
               f"{extra[f'ratio_{tag}']}")
 
 
-def main(argv=None) -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line: one subcommand per leg."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="leg", required=True)
     a = sub.add_parser("peer", help="mujoco.sysid, staged, to its own termination (resumable)")
@@ -663,7 +669,11 @@ def main(argv=None) -> None:
                    help="the dataset an unfinished peer is scored on (default: the path its checkpoint recorded)")
     c.add_argument("--partial", action="store_true",
                    help="an unfinished peer leg enters with its best so far, marked not converged")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv=None) -> None:
+    args = build_parser().parse_args(argv)
     {"peer": run_peer, "wresdyn": run_wresdyn, "report": report}[args.leg](args)
 
 
