@@ -29,12 +29,12 @@ sys.path[:0] = [str(HERE.parents[1])]  # this checkout
 RECIPES = {
     "default": {},
     "refine": {"refine": 20},
-    "h256": {"horizon_curriculum": (16, 32, 64, 128, 256)},
     "h256_refine": {"horizon_curriculum": (16, 32, 64, 128, 256), "refine": 20},
 }
 """Recipe name -> :class:`~wresdyn.identify.sysid_config.SysIdConfig` fields over its defaults. ``refine``: L-BFGS
 steps on fixed training windows of the longest horizon after the Adam selection, each validated, the best kept;
-``h256``: a fifth horizon stage of 256 samples (0.5 s at 500 Hz, the peer's window) after the default four."""
+``h256_refine``: that after a fifth horizon stage of 256 samples (0.5 s at 500 Hz, the peer's window). What each
+scored on validation, and the one chosen: ``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
 
 
 def recipe_config(name: str, device: str = "cpu"):
