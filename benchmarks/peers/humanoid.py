@@ -37,7 +37,8 @@ vector with its regulariser reset (the backend takes no regulariser in), so a re
 while the regulariser of the interrupted run was 0; the iteration count and the curve continue.
 
 ``wresdyn``: :func:`wresdyn.identify.sysid.identify` with its defaults (it stops when validation plateaus) on
-``--device``, kernels compiled first (counted in its wall-clock), resumable through its own run folder.
+``--device``, kernels compiled first (counted in its wall-clock), resumable through its own run folder;
+``--recipe NAME`` fits a recipe of :data:`recipe_search.RECIPES` instead (chosen there on validation only).
 
 Scoring, the same for both: each candidate is replayed open loop over every whole validation trajectory from its
 first recorded state (:func:`wresdyn.evaluation.open_loop.metrics`, mean |Δq| over the fitted joints), each model in
@@ -65,6 +66,7 @@ sys.path[:0] = [str(HERE.parents[1]), str(HERE)]  # this checkout, this folder (
 import host  # noqa: E402
 import peer_adapter as peer  # noqa: E402
 from peer_adapter import SPLITS, param_errors  # noqa: E402
+from recipe_search import RECIPES, recipe_config  # noqa: E402
 
 STAGES = (peer.JOINT_FIELDS, ("bodies",))
 """The fields each stage fits: the joints' own, then the links' inertias."""
@@ -471,16 +473,18 @@ def final_peer(args, state, ds, robot, truth, log) -> None:
 
 # --- the wresdyn leg -----------------------------------------------------------------------------------------------
 
-def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | None = None) -> dict:
-    """``wresdyn identify`` (defaults; ``iterations`` a fixed count instead of its plateau stopping) on ``device``,
-    kernels compiled first and counted: the identified parameters, the best-validation curve ``[(s, rad)]``, the
-    final scores per split, setup / total seconds."""
+def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | None = None,
+                     recipe: str = "default") -> dict:
+    """``wresdyn identify`` (``recipe`` of :data:`recipe_search.RECIPES`, its defaults by default; ``iterations`` a
+    fixed count instead of its plateau stopping) on ``device``, kernels compiled first and counted: the identified
+    parameters, the best-validation curve ``[(s, rad)]``, the final scores per split, setup / total seconds."""
     from wresdyn.evaluation.open_loop import evaluate_split
     from wresdyn.identify.sysid import identify
-    from wresdyn.identify.sysid_config import SysIdConfig
     from wresdyn.sim.warmup import compile_kernels
 
-    cfg = SysIdConfig(device=device) if iterations is None else SysIdConfig(device=device, iterations=iterations)
+    cfg = recipe_config(recipe, device)
+    if iterations is not None:
+        cfg = dataclasses.replace(cfg, iterations=iterations)
     load0, t0 = os.getloadavg()[0], time.perf_counter()
     compile_kernels(robot, ds.rate_hz, ("forward", "param_grads"), solver=cfg.solver, device=cfg.device, say=log)
     setup = time.perf_counter() - t0
@@ -497,10 +501,16 @@ def identify_wresdyn(robot, ds, out: Path, device: str, log, iterations: int | N
             "config": dataclasses.asdict(cfg)}
 
 
+def leg_tag(tag: str | None, recipe: str, device: str) -> str:
+    """The name of a wresdyn leg's outputs: ``tag`` if given, else the recipe's for a recipe other than the defaults,
+    else ``cpu`` or ``cuda``."""
+    return tag or (recipe if recipe != "default" else "cuda" if device.startswith("cuda") else "cpu")
+
+
 def run_wresdyn(args) -> dict:
-    """The wresdyn leg: :func:`identify_wresdyn` with its defaults on ``args.device``, ``OUT/wresdyn_{cpu,cuda}.json``
-    (resumable through its run folder ``OUT/wresdyn_{cpu,cuda}/``)."""
-    tag = args.tag or ("cuda" if args.device.startswith("cuda") else "cpu")
+    """The wresdyn leg: :func:`identify_wresdyn` with ``args.recipe`` (its defaults unless told) on ``args.device``,
+    ``OUT/wresdyn_TAG.json`` (resumable through its run folder ``OUT/wresdyn_TAG/``, TAG :func:`leg_tag`)."""
+    tag = leg_tag(args.tag, args.recipe, args.device)
     out = Path(args.out) / f"wresdyn_{tag}"
     log_ = open_log(out / "log.txt")
     lines = []
@@ -511,9 +521,9 @@ def run_wresdyn(args) -> dict:
 
     ds, robot, truth = load(args.data)
     threads = None if args.device.startswith("cuda") else 1  # its default torch_threads
-    log(f"# wresdyn identify on {args.data}, device {args.device}; {machine(threads, args.device)}; "
-        f"load average {os.getloadavg()[0]:.2f}")
-    w = identify_wresdyn(robot, ds, out, args.device, log)
+    log(f"# wresdyn identify on {args.data}, device {args.device}, recipe {args.recipe} {RECIPES[args.recipe]}; "
+        f"{machine(threads, args.device)}; load average {os.getloadavg()[0]:.2f}")
+    w = identify_wresdyn(robot, ds, out, args.device, log, recipe=args.recipe)
     best = w["curve"]
     reason = next((ln.split(": ", 1)[1] for ln in reversed(lines)
                    if ": converged at iteration" in ln or ": stopped at the" in ln), "unknown")
@@ -522,7 +532,7 @@ def run_wresdyn(args) -> dict:
         "converged": {"value": reason.startswith("converged"), "reason": reason},
         "samples_used": sum(len(t.q) for t in ds.split("train")),
         "param_errors": param_errors(w["params"], truth, ds.split("train")),
-        "machine": machine(threads, args.device), "device": args.device,
+        "machine": machine(threads, args.device), "device": args.device, "recipe": args.recipe,
     }
     w["params"].save(out / "physics.json")
     write_json(Path(args.out) / f"wresdyn_{tag}.json", result)
@@ -626,7 +636,8 @@ def table(tools: dict, extra: dict) -> None:
               f"{extra[f'ratio_{tag}']}")
 
 
-def main(argv=None) -> None:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line: one subcommand per leg."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="leg", required=True)
     a = sub.add_parser("peer", help="mujoco.sysid, staged, to its own termination (resumable)")
@@ -641,13 +652,16 @@ def main(argv=None) -> None:
                         "'bodies')")
     a.add_argument("--max-iters", type=int, default=MAX_ITERS,
                    help="Gauss-Newton iterations per stage at most (default out of reach)")
-    b = sub.add_parser("wresdyn", help="wresdyn identify with its defaults")
+    b = sub.add_parser("wresdyn", help="wresdyn identify with its defaults (or --recipe's settings)")
     b.add_argument("data")
     b.add_argument("--out", required=True)
     b.add_argument("--device", default="cpu", help="cpu or cuda:0")
     b.add_argument("--tag", default=None,
-                   help="names the leg's outputs OUT/wresdyn_TAG{,.json} (default: cpu or cuda), so that one device on "
-                        "two machines keeps two legs")
+                   help="names the leg's outputs OUT/wresdyn_TAG{,.json} (default: --recipe's name; with the "
+                        "defaults cpu or cuda), so that one device on two machines keeps two legs")
+    b.add_argument("--recipe", default="default", choices=sorted(RECIPES),
+                   help="identification settings of recipe_search.RECIPES (default: SysIdConfig's defaults); names "
+                        "the outputs OUT/wresdyn_RECIPE unless --tag")
     c = sub.add_parser("report", help="summary.json, curves.json / .png and the tables from the legs' outputs")
     c.add_argument("--out", required=True)
     c.add_argument("--title", default=None)
@@ -655,7 +669,11 @@ def main(argv=None) -> None:
                    help="the dataset an unfinished peer is scored on (default: the path its checkpoint recorded)")
     c.add_argument("--partial", action="store_true",
                    help="an unfinished peer leg enters with its best so far, marked not converged")
-    args = p.parse_args(argv)
+    return p
+
+
+def main(argv=None) -> None:
+    args = build_parser().parse_args(argv)
     {"peer": run_peer, "wresdyn": run_wresdyn, "report": report}[args.leg](args)
 
 
