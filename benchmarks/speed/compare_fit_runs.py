@@ -1,7 +1,7 @@
 """Compare two fit run folders: every JSON leaf of the files below less the wall-clocks and run paths, every
 checkpoint tensor bit for bit, the exported files, JSON files and plots byte for byte.
 
-    python compare.py BEFORE_RUN AFTER_RUN
+    python benchmarks/speed/compare_fit_runs.py BEFORE_RUN AFTER_RUN
 """
 import json
 import sys

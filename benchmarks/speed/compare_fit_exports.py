@@ -3,7 +3,7 @@ record (file paths and line numbers of the code that was traced, which move with
 archive's random serialization id: every weight byte for byte, the graphs field for field, and both files' outputs
 on the same random observations bit for bit.
 
-    python compare_exports.py BEFORE_RUN AFTER_RUN
+    python benchmarks/speed/compare_fit_exports.py BEFORE_RUN AFTER_RUN
 """
 import json
 import sys
