@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 
-__all__ = ["config_diff", "describe_diff", "plain_json"]
+__all__ = ["config_diff", "describe_diff", "first_difference", "plain_json"]
 
 
 def plain_json(value):
@@ -51,6 +51,15 @@ def config_diff(old: dict, new: dict) -> list[str]:
     out: list[str] = []
     _diff(plain_json(old), plain_json(new), "", out)
     return out
+
+
+def first_difference(old, new) -> tuple[str, object, object] | None:
+    """The first dotted path of :func:`config_diff` with the value on each side (``"<missing>"`` where a side lacks
+    it), ``None`` where the two are equal."""
+    paths = config_diff(old, new)
+    if not paths:
+        return None
+    return paths[0], _lookup(plain_json(old), paths[0]), _lookup(plain_json(new), paths[0])
 
 
 def _lookup(d, path: str):

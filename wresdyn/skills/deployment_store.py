@@ -32,11 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..learn.config_diff import first_difference
 from ..paths import file_sha256
 from ..ppo.runner import latest_checkpoint
 from .evaluate import Deployment, deploy, metrics
 from .ledger import config_hash, read_ledger, record_heldout
-from .motion_store import _first_difference, _plain
+from .motion_store import _plain
 from .skill_ppo import load_skill
 
 __all__ = ["DEPLOYMENTS", "VERSION", "DeploymentStore", "save_deployment", "read_deployment", "policy_fingerprint",
@@ -158,7 +159,7 @@ class DeploymentStore:
         want = self.fingerprint(split, where, name, run_dir, motions, plant)
         stored = self._read(path)
         if stored is not None:
-            diff = _first_difference(stored[1], want)
+            diff = first_difference(stored[1], want)
             if diff is None:
                 self.log(f"[4/4] {name} on the {where} plant, {split}: deployed earlier, reused ({path})")
                 return stored[0]

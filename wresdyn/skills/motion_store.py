@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import WresdynError
+from ..learn.config_diff import first_difference
 from ..paths import REPO, file_sha256
 from . import families, feasibility, motions
 from .motions import Motion, MotionSet, joint_velocity
@@ -114,17 +115,6 @@ def read_motions(path) -> tuple[MotionSet, dict]:
     return MotionSet(float(meta["rate_hz"]), splits), meta
 
 
-def _first_difference(old, new, at: str = "") -> tuple[str, object, object] | None:
-    """The first field (dotted path) where ``old`` and ``new`` differ, with both values; ``None`` where equal."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        for k in list(new) + [k for k in old if k not in new]:
-            found = _first_difference(old.get(k), new.get(k), f"{at}.{k}" if at else k)
-            if found:
-                return found
-        return None
-    return None if old == new else (at, old, new)
-
-
 class MotionStore:
     """A run folder's ``motions.npz``: :meth:`motions` reads or draws the run's motions, :meth:`heldout` its later
     held-out draw."""
@@ -154,7 +144,7 @@ class MotionStore:
             motion_set = draw()
             save_motions(self.path, motion_set, self.fingerprint)
             return motion_set
-        diff = _first_difference(stored[1]["fingerprint"], self.fingerprint)
+        diff = first_difference(stored[1]["fingerprint"], self.fingerprint)
         if diff:
             field, old, new = diff
             on = f" ({', '.join(trained)} trained on them)" if trained else ""
