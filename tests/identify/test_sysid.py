@@ -65,6 +65,25 @@ def test_refinement_resumes_adam_and_never_selects_worse(humanoid, recorded, tmp
     assert PhysicalParams.load(tmp_path / "physics.json", humanoid).kd.tolist() == refined.kd.tolist()
 
 
+def test_refinement_fits_delay_and_effort_only_when_not_frozen(humanoid, recorded, tmp_path):
+    adam, _ = identify(humanoid, recorded, SMALL, out=tmp_path, log=lambda *_: None)
+    base = dataclasses.replace(SMALL, refine=2, refine_windows=4)
+    kept, _ = identify(humanoid, recorded, base, out=tmp_path, log=lambda *_: None)
+    assert kept.delay.tolist() == adam.delay.tolist() and kept.effort.tolist() == adam.effort.tolist()
+    lines = []
+    moved, curve = identify(humanoid, recorded, dataclasses.replace(base, refine_frozen=()), out=tmp_path,
+                            log=lines.append)
+    assert any(s.startswith("resumed from") for s in lines), lines  # refine_frozen may change on resume
+    rows = [r for r in curve if r.get("stage") == "refine"]
+    assert rows[-1]["loss"] <= rows[0]["loss"]
+    # the delayed commands are re-interpolated at each evaluation, so the delay has a gradient and moves
+    assert np.abs(moved.delay - adam.delay).max() > 1e-6
+    assert np.abs(moved.effort - adam.effort).max() > 1e-6
+    assert (moved.delay >= 0).all() and (moved.effort >= 0.05 * humanoid.effort - 1e-9).all()
+    with pytest.raises(ValueError, match="refine_frozen"):
+        dataclasses.replace(SMALL, refine_frozen=("nonsense",))
+
+
 def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys):
     """`wresdyn identify --eval` writes the parameters, the report against the truth and an evaluation of the
     calibrated model; `wresdyn fit --physics` learns a residual on top and its run replays with that physics."""
