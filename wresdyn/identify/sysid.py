@@ -119,6 +119,16 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     window = bank.window(traj, first, h)
     profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
     delayed = "delay" in fields  # the windows' PD targets move with the fitted delay
+    floor = model.ref_effort * (0.05 if model.effort_floor is None else model.effort_floor)
+
+    def physics():  # the line search tries points outside what project() keeps: the delay and effort held there
+        v = model()
+        if delayed:
+            v["delay"] = v["delay"].clamp(min=0.0)
+        if "effort" in fields:
+            v["effort"] = torch.maximum(v["effort"], floor)
+        return v
+
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.LBFGS(params, lr=1.0, max_iter=20, history_size=50, line_search_fn="strong_wolfe")
 
@@ -126,11 +136,11 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
         optim.zero_grad()
         w = window
         if profiled or delayed:  # the fixed windows' targets move with the fitted goal acceleration and delay
-            d = model.delay_steps().float().to(sim.device) if delayed else delay
+            d = model.delay_steps().clamp(min=0.0).float().to(sim.device) if delayed else delay
             goal = model.goal_accel_steps().float().to(sim.device) if profiled else bank.goal_accel
             bank.set_command_path(d, goal)
             w = bank.window(traj, first, h)
-        loss, _ = physics_window_loss(cfg, model, sim, w, weights)
+        loss, _ = physics_window_loss(cfg, physics if delayed or "effort" in fields else model, sim, w, weights)
         if not torch.isfinite(loss):
             raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
         loss.backward()
