@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from wresdyn.cli import main
+from wresdyn.cli import main, parse_command
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
 from wresdyn.identify.sysid import PhysicsScore, SysIdConfig, identify
@@ -82,6 +82,7 @@ def test_refinement_fits_delay_and_effort_only_when_not_frozen(humanoid, recorde
     assert (moved.delay >= 0).all() and (moved.effort >= 0.05 * humanoid.effort - 1e-9).all()
     with pytest.raises(ValueError, match="refine_frozen"):
         dataclasses.replace(SMALL, refine_frozen=("nonsense",))
+    assert parse_command(["identify", "d.npz", "--refine-frozen"])[2].config.refine_frozen == ()
 
 
 def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys):
