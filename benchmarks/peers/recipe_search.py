@@ -30,10 +30,12 @@ RECIPES = {
     "default": {},
     "refine": {"refine": 20},
     "h256_refine": {"horizon_curriculum": (16, 32, 64, 128, 256), "refine": 20},
+    "refine_all": {"refine": 20, "refine_frozen": ()},
 }
 """Recipe name -> :class:`~wresdyn.identify.sysid_config.SysIdConfig` fields over its defaults. ``refine``: L-BFGS
 steps on fixed training windows of the longest horizon after the Adam selection, each validated, the best kept;
-``h256_refine``: that after a fifth horizon stage of 256 samples (0.5 s at 500 Hz, the peer's window). What each
+``h256_refine``: that after a fifth horizon stage of 256 samples (0.5 s at 500 Hz, the peer's window);
+``refine_all``: ``refine`` fitting the delay and the effort limits too. What each
 scored on validation, and the one chosen: ``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
 
 

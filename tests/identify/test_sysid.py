@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from wresdyn.cli import main
+from wresdyn.cli import main, parse_command
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
 from wresdyn.identify.sysid import PhysicsScore, SysIdConfig, identify
@@ -63,6 +63,26 @@ def test_refinement_resumes_adam_and_never_selects_worse(humanoid, recorded, tmp
     assert score(refined) == pytest.approx(best, rel=1e-6)  # the best on validation, Adam's start included
     assert score(refined) < 0.9 * score(adam)  # here 40 Adam steps leave plenty: 0.0103 -> 0.0068 rad
     assert PhysicalParams.load(tmp_path / "physics.json", humanoid).kd.tolist() == refined.kd.tolist()
+
+
+def test_refinement_fits_delay_and_effort_only_when_not_frozen(humanoid, recorded, tmp_path):
+    adam, _ = identify(humanoid, recorded, SMALL, out=tmp_path, log=lambda *_: None)
+    base = dataclasses.replace(SMALL, refine=2, refine_windows=4)
+    kept, _ = identify(humanoid, recorded, base, out=tmp_path, log=lambda *_: None)
+    assert kept.delay.tolist() == adam.delay.tolist() and kept.effort.tolist() == adam.effort.tolist()
+    lines = []
+    moved, curve = identify(humanoid, recorded, dataclasses.replace(base, refine_frozen=()), out=tmp_path,
+                            log=lines.append)
+    assert any(s.startswith("resumed from") for s in lines), lines  # refine_frozen may change on resume
+    rows = [r for r in curve if r.get("stage") == "refine"]
+    assert rows[-1]["loss"] <= rows[0]["loss"]
+    # the delayed commands are re-interpolated at each evaluation, so the delay has a gradient and moves
+    assert np.abs(moved.delay - adam.delay).max() > 1e-6
+    assert np.abs(moved.effort - adam.effort).max() > 1e-6
+    assert (moved.delay >= 0).all() and (moved.effort >= 0.05 * humanoid.effort - 1e-9).all()
+    with pytest.raises(ValueError, match="refine_frozen"):
+        dataclasses.replace(SMALL, refine_frozen=("nonsense",))
+    assert parse_command(["identify", "d.npz", "--refine-frozen"])[2].config.refine_frozen == ()
 
 
 def test_identify_cli_report_and_hybrid_fit(humanoid, recorded, tmp_path, capsys):

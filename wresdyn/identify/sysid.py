@@ -49,8 +49,8 @@ from .unexcited_limits import reset_effort_limits, share_effort_ratio
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "fused", "max_iterations",
-                     "max_seconds", "identifiability", "identifiability_windows")
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "refine_frozen", "fused",
+                     "max_iterations", "max_seconds", "identifiability", "identifiability_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
 states are the stepped replay's), the L-BFGS refinement, which runs after the checkpointed Adam steps, the
 ceilings of a run until convergence, and the identifiability report, which reads the selected parameters only."""
@@ -100,15 +100,16 @@ def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = Fal
 
 def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
     """``cfg.refine`` L-BFGS steps from ``start`` on fixed windows of ``bank`` (the training trajectories; its delay
-    is set to ``start``'s) (:attr:`SysIdConfig.refine`); returns the best parameters on validation (``start`` when
-    no step beats ``start_validation``). Appends to ``curve``.
+    is set to ``start``'s, or to the fitted one at every evaluation when the delay is refined) of the fields of
+    ``cfg.fit`` outside ``cfg.refine_frozen`` (:attr:`SysIdConfig.refine`); returns the best parameters on validation
+    (``start`` when no step beats ``start_validation``). Appends to ``curve``.
 
     Adam's steps through the multiple-shooting loss stop in a long, ill-conditioned valley: on the shipped data the
     loss keeps falling along the straight line to the true parameters (``benchmarks/fidelity/sysid_valley.py``), and a
     quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
     2 cores, rerun on resume."""
-    fields = [f for f in cfg.fit if f not in ("effort", "delay")]
-    model = PhysicsModel(robot, start, fit=fields, dt=dt)
+    fields = [f for f in cfg.fit if f not in cfg.refine_frozen]
+    model = PhysicsModel(robot, start, fit=fields, dt=dt, effort_floor=cfg.effort_floor if "effort" in fields else None)
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True, friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
@@ -117,16 +118,29 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
     window = bank.window(traj, first, h)
     profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
+    delayed = "delay" in fields  # the windows' PD targets move with the fitted delay
+    floor = model.ref_effort * (0.05 if model.effort_floor is None else model.effort_floor)
+
+    def physics():  # the line search tries points outside what project() keeps: the delay and effort held there
+        v = model()
+        if delayed:
+            v["delay"] = v["delay"].clamp(min=0.0)
+        if "effort" in fields:
+            v["effort"] = torch.maximum(v["effort"], floor)
+        return v
+
     params = [p for p in model.parameters() if p.requires_grad]
     optim = torch.optim.LBFGS(params, lr=1.0, max_iter=20, history_size=50, line_search_fn="strong_wolfe")
 
     def closure():
         optim.zero_grad()
         w = window
-        if profiled:  # the servo goals of the fixed windows move with the fitted goal acceleration
-            bank.set_command_path(delay, model.goal_accel_steps().float().to(sim.device))
+        if profiled or delayed:  # the fixed windows' targets move with the fitted goal acceleration and delay
+            d = model.delay_steps().clamp(min=0.0).float().to(sim.device) if delayed else delay
+            goal = model.goal_accel_steps().float().to(sim.device) if profiled else bank.goal_accel
+            bank.set_command_path(d, goal)
             w = bank.window(traj, first, h)
-        loss, _ = physics_window_loss(cfg, model, sim, w, weights)
+        loss, _ = physics_window_loss(cfg, physics if delayed or "effort" in fields else model, sim, w, weights)
         if not torch.isfinite(loss):
             raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
         loss.backward()
@@ -154,6 +168,9 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
         curve.append(row)
         log(f"refine {k + 1:3d}/{cfg.refine}  H={h:3d}  loss {loss:.3e}"
             + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
+    if delayed or profiled:  # the bank's command path back to plain values, the selected parameters'
+        bank.set_command_path(torch.as_tensor(best.delay / dt, dtype=torch.float32, device=sim.device),
+                              servo_goal_accel(robot, best, dt, sim.device))
     log(f"refined: validation {best_v:.4f} rad")
     return best
 

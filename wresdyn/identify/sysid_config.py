@@ -112,9 +112,15 @@ class SysIdConfig(WindowFitStop):
     refine: int = 0
     """L-BFGS steps after Adam (0: off), each up to 20 evaluations with a strong-Wolfe line search, on
     ``refine_windows`` fixed training windows of the longest horizon, from the parameters selected so far; every
-    step is validated and the best kept. The fields of ``fit`` except the effort limit and the delay (both kept)."""
+    step is validated and the best kept. The fields of ``fit`` except those of ``refine_frozen``."""
     refine_windows: int = 64
     """Fixed training windows of the refinement."""
+    refine_frozen: tuple[str, ...] = ("effort", "delay")
+    """Fields of ``fit`` the refinement keeps at the values selected so far. By default the effort limit and the
+    delay: the two the Adam stages reach through grid searches, whose loss is flat (an unsaturated drive) or kinked
+    (the delay's interpolation between samples) where a quasi-Newton model of the curvature is least trustworthy.
+    Empty: the refinement fits every field of ``fit``, the delay through commands re-delayed at every evaluation and
+    the effort limit above ``effort_floor``."""
     share_effort_ratio: bool = True
     """After the selection, give the effort limits the training data never reaches the ratio to the file's limit that
     the saturating joints share, bounded below by the torque the data demands
@@ -174,6 +180,9 @@ class SysIdConfig(WindowFitStop):
             check_number(f, f"lr_scale[{i}]", gt=0)
         check_number(self.refine, "refine", integer=True, ge=0)
         check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
+        bad = sorted(set(self.refine_frozen) - set(FIT_FIELDS))
+        if bad:
+            raise ValueError(f"refine_frozen: unknown field(s) {bad}; choose from {list(FIT_FIELDS)}")
         check_number(self.saturated_min, "saturated_min", gt=0, le=1)
         check_number(self.shooting, "shooting", integer=True, ge=1)
         check_number(self.identifiability_windows, "identifiability_windows", integer=True, ge=1)
