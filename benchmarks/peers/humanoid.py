@@ -603,9 +603,9 @@ def plot(path: Path, tools: dict, title: str) -> None:
     ax.set(xscale="log", yscale="log", xlabel="wall-clock [s] (validation excluded)",
            ylabel="best validation mean |Δq| [rad]", title=title)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    # beside the axes: inside, seven legs' names hid the peer's long flat tail
+    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
 
