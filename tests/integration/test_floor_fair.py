@@ -48,3 +48,32 @@ def test_summary_fields_means_and_interval(tmp_path):
 def test_no_gap_ratio_when_the_oracle_does_not_beat_a(tmp_path):
     _, table = _summary(tmp_path, oracle_g=0.060)
     assert "no gap ratio" in table and "%" not in table.split("(b) b_calibrated")[1].split("|")[7]
+
+
+def _probe(tmp_path: Path, env: dict, fits: bool = True) -> subprocess.CompletedProcess:
+    """``floor_fair_probe.sh`` run from ``tmp_path`` (its dataset a stand-in file), its ``/root`` under it."""
+    (tmp_path / "data/uneven_probe").mkdir(parents=True)
+    (tmp_path / "data/uneven_probe/dataset.npz").touch()
+    for c in ("calibrated", "delta_action") if fits else ():
+        (tmp_path / "src/unvp_fits" / c).mkdir(parents=True)
+        (tmp_path / "src/unvp_fits" / c / "policy.pt").touch()
+    (tmp_path / "src").mkdir(exist_ok=True)
+    return subprocess.run(["bash", str(ROOT / "benchmarks/skills/floor_fair_probe.sh"), "src", "log"], cwd=tmp_path,
+                          env={"PATH": "/usr/bin:/bin", "ROOT": str(tmp_path / "root"), **env}, capture_output=True,
+                          text=True)
+
+
+def test_probe_runs_refuse_missing_corrections(tmp_path):
+    done = _probe(tmp_path, {"DRY": "1", "GPUS": "0"}, fits=False)
+    assert done.returncode == 2 and "unvp_fits/calibrated/policy.pt is missing" in done.stderr
+
+
+def test_probe_runs_dry_take_the_gpus_in_turn_and_touch_nothing(tmp_path):
+    done = _probe(tmp_path, {"DRY": "1", "GPUS": "0 1"})
+    lines = done.stdout.splitlines()
+    assert done.returncode == 0 and len(lines) == 3
+    assert [ln.split()[0] for ln in lines] == ["CUDA_VISIBLE_DEVICES=0", "CUDA_VISIBLE_DEVICES=1",
+                                               "CUDA_VISIBLE_DEVICES=0"]
+    assert all(f"--seed {s} " in ln and f"root/floor_unvp_s{s} " in ln for s, ln in enumerate(lines))
+    assert all(f"--calibrated {tmp_path}/root/unvp_fits/calibrated" in ln for ln in lines)
+    assert not (tmp_path / "log").exists() and not (tmp_path / "root").exists()
