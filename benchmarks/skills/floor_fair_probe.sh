@@ -13,10 +13,17 @@
 # SRC holds unvp_fits (calibrated/ and delta_action/, fitted) and, to resume a stopped session, the floor_unvp_s*
 # folders as packed (floor_fair_pack.py); they are copied to $ROOT/<name> (ROOT, default /root: the absolute paths the
 # skills' config.json files record, so a resume must use the same). data/uneven_probe/dataset.npz must exist. GPUS
-# (default: every GPU nvidia-smi lists) are the CUDA devices the runs take in turn. DRY=1 checks the inputs and prints
-# the commands without copying or running anything. LOG gets STAGES, <run>.out and load.log as floor_fair_resume.sh
-# writes them. Python is python3; the environment is the caller's. Returns when all three have ended; rerun the same
-# command to resume (finished policies and deployments are reused).
+# (default: every GPU nvidia-smi lists) are the CUDA devices the runs take in turn, started STAGGER s apart (10).
+# DRY=1 checks the inputs and prints the commands without copying or running anything. LOG gets STAGES, <run>.out and
+# load.log as floor_fair_resume.sh writes them. Python is python3; the environment is the caller's. Returns when all
+# three have ended; rerun the same command to resume (finished policies and deployments are reused).
+#
+# REUSE=1 keeps (d) and (e) of the committed uneven runs, which do not depend on the corrections, and trains only (b),
+# (c) and (f): seed N runs in $ROOT/floor_unv_sN, the folder its (d) and (e) were trained in (the path their
+# config.json files record), set up once from SRC/floor_unv_sN with (b), (c), (f) and the earlier results removed (a
+# marker file, .probe_reuse, says it was; the held-out ledger keeps the earlier scoring's line and gets this one's).
+# SRC/floor_unvp_sN, where present, is such a folder packed by an earlier session and is resumed instead. Pack the
+# folders as usual and keep them as floor_unvp_sN.
 set -u
 [ $# -eq 2 ] || { echo "usage: floor_fair_probe.sh SRC LOG" >&2; exit 2; }
 SRC=$1; R=$2
@@ -37,10 +44,19 @@ fi
 read -r -a gpu <<< "$GPUS"
 P="a_nominal b_calibrated c_delta_action d_oracle e_randomized f_calibrated_narrow"
 CU="--calibrated $ROOT/unvp_fits/calibrated --delta $ROOT/unvp_fits/delta_action"
+out_of() {  # NAME: the folder a run writes
+  if [ "${REUSE:-0}" = 1 ]; then echo "$ROOT/${1/floor_unvp_/floor_unv_}"; else echo "$ROOT/$1"; fi
+}
 command_of() {  # NAME SEED
   echo "python3 -m wresdyn.cli deploy $DATA --floor --full --device cuda:0 --mismatch data/mismatch_uneven.toml" \
-    "--seed $2 --nominal floor_nominal --policies $P --no-animation --quiet --out $ROOT/$1 $CU"
+    "--seed $2 --nominal floor_nominal --policies $P --no-animation --quiet --out $(out_of $1) $CU"
 }
+if [ "${REUSE:-0}" = 1 ]; then
+  for n in $RUNS; do
+    [ -d "$SRC/$n" ] || [ -d "$SRC/${n/floor_unvp_/floor_unv_}/skills/d_oracle" ] \
+      || fail "REUSE=1 needs $SRC/${n/floor_unvp_/floor_unv_} (the committed run) or $SRC/$n"
+  done
+fi
 if [ "${DRY:-0}" = 1 ]; then
   i=0
   for n in $RUNS; do
@@ -49,8 +65,17 @@ if [ "${DRY:-0}" = 1 ]; then
   exit 0
 fi
 mkdir -p "$R"
-for r in unvp_fits $RUNS; do  # a run folder absent from SRC starts fresh in $ROOT
-  [ -d "$SRC/$r" ] && [ ! -e "$ROOT/$r" ] && cp -r "$SRC/$r" "$ROOT/$r"
+mkdir -p "$ROOT"
+[ -e "$ROOT/unvp_fits" ] || cp -r "$SRC/unvp_fits" "$ROOT/unvp_fits"
+for r in $RUNS; do  # a run folder absent from SRC starts fresh in $ROOT
+  o=$(out_of $r)
+  [ -d "$SRC/$r" ] && [ ! -e "$o" ] && cp -r "$SRC/$r" "$o"
+  if [ "${REUSE:-0}" = 1 ] && [ ! -e "$o/.probe_reuse" ]; then
+    [ -e "$o" ] || cp -r "$SRC/${r/floor_unvp_/floor_unv_}" "$o"
+    rm -rf "$o"/skills/{b_calibrated,c_delta_action,f_calibrated_narrow} "$o"/deployments "$o"/results.json \
+      "$o"/report.md "$o"/tracking_heldout.png
+    touch "$o/.probe_reuse"
+  fi
 done
 stage() { echo "$(date -u +%T) $* (load $(cut -d' ' -f1-3 /proc/loadavg))" >> "$R/STAGES"; }
 floor() {  # GPU NAME SEED
@@ -65,7 +90,7 @@ LOAD=$!
 i=0
 for n in $RUNS; do
   floor "${gpu[$(( i % ${#gpu[@]} ))]}" $n $i &
-  i=$(( i + 1 )); sleep 10
+  i=$(( i + 1 )); sleep "${STAGGER:-10}"
 done
 wait $(jobs -p | grep -v "^$LOAD$")
 kill $LOAD 2>/dev/null

@@ -77,3 +77,36 @@ def test_probe_runs_dry_take_the_gpus_in_turn_and_touch_nothing(tmp_path):
     assert all(f"--seed {s} " in ln and f"root/floor_unvp_s{s} " in ln for s, ln in enumerate(lines))
     assert all(f"--calibrated {tmp_path}/root/unvp_fits/calibrated" in ln for ln in lines)
     assert not (tmp_path / "log").exists() and not (tmp_path / "root").exists()
+
+
+def test_probe_runs_reuse_write_where_d_and_e_were_trained(tmp_path):
+    done = _probe(tmp_path, {"DRY": "1", "GPUS": "0", "REUSE": "1"})
+    assert done.returncode == 2 and "REUSE=1 needs src/floor_unv_s0" in done.stderr
+    for s in range(3):
+        (tmp_path / f"src/floor_unv_s{s}/skills/d_oracle").mkdir(parents=True)
+    lines = subprocess.run(["bash", str(ROOT / "benchmarks/skills/floor_fair_probe.sh"), "src", "log"], cwd=tmp_path,
+                           env={"PATH": "/usr/bin:/bin", "ROOT": str(tmp_path / "root"), "DRY": "1", "GPUS": "0",
+                                "REUSE": "1"}, capture_output=True, text=True).stdout.splitlines()
+    assert all(f"--out {tmp_path}/root/floor_unv_s{s} " in ln for s, ln in enumerate(lines)) and len(lines) == 3
+
+
+def test_probe_runs_reuse_set_up_once_keeping_d_and_e(tmp_path):
+    for s in range(3):
+        run = tmp_path / f"src/floor_unv_s{s}"
+        for p in ("b_calibrated", "c_delta_action", "d_oracle", "e_randomized", "f_calibrated_narrow"):
+            (run / "skills" / p).mkdir(parents=True)
+        (run / "results.json").write_text("{}")
+        (run / "heldout_ledger.jsonl").write_text("{}\n")
+    # the deploy itself fails at once here (no wresdyn on this PATH's python's path): only the set-up is checked
+    done = _probe(tmp_path, {"GPUS": "0", "REUSE": "1", "STAGGER": "0"})
+    assert "STAGES" in {p.name for p in (tmp_path / "log").iterdir()}, done.stderr
+    for s in range(3):
+        run = tmp_path / f"root/floor_unv_s{s}"
+        assert sorted(p.name for p in (run / "skills").iterdir()) == ["d_oracle", "e_randomized"]
+        assert (run / ".probe_reuse").exists() and (run / "heldout_ledger.jsonl").exists()
+        assert not (run / "results.json").exists()
+    (tmp_path / "root/floor_unv_s0/skills/b_calibrated").mkdir()  # progress of a run, kept by a rerun
+    subprocess.run(["bash", str(ROOT / "benchmarks/skills/floor_fair_probe.sh"), "src", "log"], cwd=tmp_path,
+                   env={"PATH": "/usr/bin:/bin", "ROOT": str(tmp_path / "root"), "GPUS": "0", "REUSE": "1",
+                        "STAGGER": "0"}, capture_output=True, text=True)
+    assert (tmp_path / "root/floor_unv_s0/skills/b_calibrated").exists()
