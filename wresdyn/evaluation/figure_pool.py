@@ -15,10 +15,17 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from types import SimpleNamespace
 
-__all__ = ["FigurePool", "light_runs", "light_robot"]
+__all__ = ["FigurePool", "default_workers", "light_runs", "light_robot"]
 
 MAX_WORKERS = 4
 """At most one process per figure of an evaluation (three splits and the learning curves)."""
+
+
+def default_workers() -> int:
+    """One worker per core this process may run on, less the one the replays keep busy, at most
+    :data:`MAX_WORKERS`, at least one."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(MAX_WORKERS, cores - 1))
 
 
 def _ready() -> None:
@@ -48,12 +55,12 @@ class FigurePool:
     no process can be started the figures are drawn here, one after the other, as before.
 
     Args:
-        workers: Processes to start at once (default: one per core, at most :data:`MAX_WORKERS`); each imports
-            matplotlib at its start.
+        workers: Processes to start at once (default :func:`default_workers`); each imports matplotlib at its
+            start.
     """
 
     def __init__(self, workers: int | None = None) -> None:
-        n = max(1, workers or min(MAX_WORKERS, os.cpu_count() or 1))
+        n = max(1, workers or default_workers())
         self._jobs: list[Future] = []
         try:
             self._pool = ProcessPoolExecutor(n, mp_context=mp.get_context("spawn"), initializer=_ready)
