@@ -6,7 +6,6 @@ from ..learn.run_residual import load_policy
 from ..learn.runs import RunError, run_physics
 from ..ppo.ppo_config import config_from_dict
 from ..sim.warmup import compile_kernels
-from .figure_pool import FigurePool, light_robot, light_runs
 from .open_loop import evaluate_splits, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves
 
@@ -43,19 +42,16 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
             todo[split] = trajs
         else:
             print(f"{split}: no trajectories, skipped")
+    done = evaluate_splits(robot, todo, ds.rate_hz, policy, meta["kind"], solver, substeps, device, physics=physics,
+                           weights=weights, friction_kappa=kappa) if todo else {}
+    for split, (summary, runs) in done.items():
+        trajs = todo[split]
+        results[split] = summary
+        plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
+                  title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)
+        print(summary_line(split, summary), flush=True)
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
-    # the figures are drawn by other processes while this one replays; the report lists them, so it waits for them
-    with FigurePool() as figures:
-        figures.submit(plot_learning_curves, curves, out_dir / "fig4_learning_curves.png")
-        done = evaluate_splits(robot, todo, ds.rate_hz, policy, meta["kind"], solver, substeps, device, physics=physics,
-                               weights=weights, friction_kappa=kappa) if todo else {}
-        for split, (summary, runs) in done.items():
-            trajs = todo[split]
-            results[split] = summary
-            figures.submit(plot_fig3, light_robot(robot), trajs[0], light_runs(runs), out_dir / f"fig3_{split}.png",
-                           ds.rate_hz, joints, title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + "
-                           "residual)", weights=weights)
-            print(summary_line(split, summary), flush=True)
+    plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
     law = {} if kappa is None else {"friction_kappa": kappa}  # the soft default's reports stay as they were
     write_report(out_dir, robot, results, {"run": str(run_dir), "residual": meta["kind"], "arch": meta["arch"],
                                            "physics": "physics.json" if physics is not None else "robot file",
