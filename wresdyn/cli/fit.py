@@ -105,10 +105,10 @@ def long_lived():
     """Run a command's set-up without the cyclic garbage collector, then freeze what it left alive.
 
     A set-up creates objects that live as long as the process: the imported modules, the robot, and Warp's syntax
-    trees of every kernel (over a million objects for the humanoid). Each full pass of the collector walks all of
-    them, and a set-up starts about ten as they pile up (2 s of a small CPU fit's first 8 s; one pass at the end
-    took 1.7 s); frozen (``gc.freeze``) they are never walked again. The set-up's few cyclic garbage objects are
-    frozen with them. Collections free memory only: no result depends on when they run.
+    trees of every kernel (1.2 million objects for the humanoid). Each full pass of the collector walks all of
+    them: on the development CPU ten passes took 2.3 s of a fit's first 7 s as they piled up, and each later one
+    0.6-1.0 s. Frozen (``gc.freeze``), they are never walked again; the set-up's cyclic garbage (about 2 % of its
+    objects) is frozen with them. Collections free memory only: no result depends on when they run.
     """
     was = gc.isenabled()
     gc.disable()
