@@ -1,11 +1,12 @@
 """The fit's set-up runs without the cyclic collector and freezes what it leaves alive
-(:func:`wresdyn.cli.fit.long_lived`), restoring the collector's state even when the set-up fails."""
+(:func:`wresdyn.cli.fit.long_lived`), its export and evaluation without the collector
+(:func:`~wresdyn.cli.fit.without_collector`); the collector's state is restored even when the set-up fails."""
 
 import gc
 
 import pytest
 
-from wresdyn.cli.fit import long_lived
+from wresdyn.cli.fit import long_lived, without_collector
 
 
 def test_the_set_up_runs_without_the_collector_and_its_objects_are_frozen():
@@ -40,3 +41,11 @@ def test_a_disabled_collector_stays_disabled():
     finally:
         gc.enable()
         gc.unfreeze()
+
+
+def test_the_last_part_runs_without_the_collector_and_freezes_nothing():
+    before = gc.get_freeze_count()
+    with without_collector():
+        assert not gc.isenabled()
+        kept = [[i] for i in range(100)]
+    assert gc.isenabled() and gc.get_freeze_count() == before and kept

@@ -101,6 +101,19 @@ def run_beside(background, work):
 
 
 @contextmanager
+def without_collector():
+    """The cyclic garbage collector off for the block, then as it was: for work whose objects are few or short-lived
+    but which the collector's passes over everything alive would slow (imports above all)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
+@contextmanager
 def long_lived():
     """Run a command's set-up without the cyclic garbage collector, then freeze what it left alive.
 
@@ -110,20 +123,22 @@ def long_lived():
     0.6-1.0 s. Frozen (``gc.freeze``), they are never walked again; the set-up's cyclic garbage (about 2 % of its
     objects) is frozen with them. Collections free memory only: no result depends on when they run.
     """
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        gc.freeze()
-        if was:
-            gc.enable()
+    with without_collector():
+        try:
+            yield
+        finally:
+            gc.freeze()
 
 
 def run(args: Fit) -> int:
     with long_lived():
         cfg, identify_first, sysid, ds, robot, out, log, physics = _set_up(args)
-    return _fit(args, cfg, identify_first, sysid, ds, robot, out, log, physics)
+    policy, curve, cfg, id_wall, physics = _fit(args, cfg, identify_first, sysid, ds, robot, out, log, physics)
+    # the export and the evaluation import the exporters and matplotlib and leave a few figures' cycles, which the
+    # command's end frees: no collector passes over them on the way
+    with without_collector():
+        _finish(args, cfg, ds, robot, out, log, policy, curve, id_wall, physics)
+    return 0
 
 
 def _set_up(args: Fit):
@@ -165,14 +180,10 @@ def _set_up(args: Fit):
     return cfg, identify_first, sysid, ds, robot, out, log, physics
 
 
-def _fit(args: Fit, cfg, identify_first, sysid, ds, robot, out, log, physics) -> int:
-    """The fit itself, its export and, with ``--eval``, the evaluation."""
-    import json
-    from dataclasses import asdict
-
-    import numpy as np
-
-    from ..fit.gradfit import export_run, fit
+def _fit(args: Fit, cfg, identify_first, sysid, ds, robot, out, log, physics):
+    """The fit itself (both stages of the hybrid): ``(policy, curve, config run, identification wall-clock or None,
+    physics)``."""
+    from ..fit.gradfit import fit
     from . import UserError
 
     try:
@@ -187,6 +198,18 @@ def _fit(args: Fit, cfg, identify_first, sysid, ds, robot, out, log, physics) ->
             id_wall = None
     except (ValueError, FloatingPointError) as e:
         raise UserError(str(e).splitlines()[0]) from None
+    return policy, curve, cfg, id_wall, physics
+
+
+def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics) -> None:
+    """The run's files (export, parameters, summary) and, with ``--eval``, the evaluation."""
+    import json
+    from dataclasses import asdict
+
+    import numpy as np
+
+    from ..fit.gradfit import export_run
+
     write_onnx = export_run(policy, out, cfg, ds, args.data, physics=physics, onnx_later=args.eval)
     if cfg.model == "parametric":
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
@@ -216,4 +239,3 @@ def _fit(args: Fit, cfg, identify_first, sysid, ds, robot, out, log, physics) ->
         run_beside(write_onnx, evaluate)
         if log.clock:
             log(f"wrote {out / 'policy.onnx'}")
-    return 0
