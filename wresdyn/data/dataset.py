@@ -29,6 +29,7 @@ import numpy as np
 from ..errors import WresdynError
 from .dataset_header import (FORMAT, READ_VERSIONS, SCHEMA_VERSION, DatasetError, check_gains, first_line,
                              header_from, read_header)
+from .savgol import savgol_filter  # scipy.signal's filter without importing scipy.signal (most of SciPy)
 
 __all__ = ["SCHEMA_VERSION", "READ_VERSIONS", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset",
            "load_dataset", "read_header", "derive_qdd", "fitted_mask", "MOVING_SPEED"]
@@ -88,13 +89,11 @@ def derive_qdd(qd: np.ndarray, rate_hz: float) -> np.ndarray:
     """Joint accelerations from velocities, as a real robot gets them: a Savitzky-Golay first derivative
     (quadratic fit over :data:`QDD_WINDOW`, at least 5 samples), i.e. finite differences low-passed without
     phase lag. Shape (T, n_dof) [rad/s^2]."""
-    from scipy.signal import savgol_filter
-
     qd = np.asarray(qd, dtype=np.float64)
     window = max(5, int(round(QDD_WINDOW * rate_hz)) | 1)
     if len(qd) < window:
         return np.gradient(qd, 1.0 / rate_hz, axis=0) if len(qd) > 1 else np.zeros_like(qd)
-    return savgol_filter(qd, window, polyorder=2, deriv=1, delta=1.0 / rate_hz, axis=0, mode="interp")
+    return savgol_filter(qd, window, polyorder=2, deriv=1, delta=1.0 / rate_hz)
 
 
 @dataclass

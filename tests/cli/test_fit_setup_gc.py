@@ -1,0 +1,51 @@
+"""The fit's set-up runs without the cyclic collector and freezes what it leaves alive
+(:func:`wresdyn.cli.fit.long_lived`), its export and evaluation without the collector
+(:func:`~wresdyn.cli.fit.without_collector`); the collector's state is restored even when the set-up fails."""
+
+import gc
+
+import pytest
+
+from wresdyn.cli.fit import long_lived, without_collector
+
+
+def test_the_set_up_runs_without_the_collector_and_its_objects_are_frozen():
+    assert gc.isenabled()
+    before = gc.get_freeze_count()
+    try:
+        with long_lived():
+            assert not gc.isenabled()
+            kept = [[i] for i in range(1000)]  # objects the set-up leaves alive
+        assert gc.isenabled()
+        assert gc.get_freeze_count() >= before + len(kept)
+    finally:
+        gc.unfreeze()  # the rest of the test session collects as before
+
+
+def test_a_failed_set_up_gives_the_collector_back():
+    try:
+        with pytest.raises(RuntimeError):
+            with long_lived():
+                raise RuntimeError("no data")
+        assert gc.isenabled()
+    finally:
+        gc.unfreeze()
+
+
+def test_a_disabled_collector_stays_disabled():
+    gc.disable()
+    try:
+        with long_lived():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.enable()
+        gc.unfreeze()
+
+
+def test_the_last_part_runs_without_the_collector_and_freezes_nothing():
+    before = gc.get_freeze_count()
+    with without_collector():
+        assert not gc.isenabled()
+        kept = [[i] for i in range(100)]
+    assert gc.isenabled() and gc.get_freeze_count() == before and kept
