@@ -41,10 +41,11 @@ RECIPES = {
 steps on fixed training windows of the longest horizon after the Adam selection, each validated, the best kept;
 ``h256_refine``: that after a fifth horizon stage of 256 samples (0.5 s at 500 Hz, the peer's window);
 ``refine_all``: ``refine`` fitting the delay and the effort limits too; ``refine_all_delay_first``: that with one
-delay of 0-8 samples for every joint chosen by a grid before the first Adam step, from the file's damping and
-armature; ``refine_all_shared_delay``: that with the delay tied across joints through the Adam steps and the
-refinement; ``refine_all_shared_delay_nogrid``: the tied delay from the file's (0) without the grid. What each
-scored on validation, and the one chosen: ``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
+delay of 0-8 samples for every joint chosen by a grid before the first Adam step (from the file's values the grid's
+end, 8, on both mismatches: a start, not a measurement); ``refine_all_shared_delay``: that with the delay tied across
+joints through the Adam steps and the refinement; ``refine_all_shared_delay_nogrid``: the tied delay from the file's
+(0) without the grid. What each scored on validation, and the one chosen:
+``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
 
 
 def recipe_config(name: str, device: str = "cpu"):
