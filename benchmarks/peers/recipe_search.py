@@ -31,12 +31,21 @@ RECIPES = {
     "refine": {"refine": 20},
     "h256_refine": {"horizon_curriculum": (16, 32, 64, 128, 256), "refine": 20},
     "refine_all": {"refine": 20, "refine_frozen": ()},
+    "refine_all_delay_first": {"refine": 20, "refine_frozen": (), "delay_grid": tuple(range(9)),
+                               "delay_grid_first": True},
+    "refine_all_shared_delay": {"refine": 20, "refine_frozen": (), "delay_grid": tuple(range(9)),
+                                "delay_grid_first": True, "shared_delay": True},
+    "refine_all_shared_delay_nogrid": {"refine": 20, "refine_frozen": (), "shared_delay": True},
 }
 """Recipe name -> :class:`~wresdyn.identify.sysid_config.SysIdConfig` fields over its defaults. ``refine``: L-BFGS
 steps on fixed training windows of the longest horizon after the Adam selection, each validated, the best kept;
 ``h256_refine``: that after a fifth horizon stage of 256 samples (0.5 s at 500 Hz, the peer's window);
-``refine_all``: ``refine`` fitting the delay and the effort limits too. What each
-scored on validation, and the one chosen: ``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
+``refine_all``: ``refine`` fitting the delay and the effort limits too; ``refine_all_delay_first``: that with one
+delay of 0-8 samples for every joint chosen by a grid before the first Adam step (from the file's values the grid's
+end, 8, on both mismatches: a start, not a measurement); ``refine_all_shared_delay``: that with the delay tied across
+joints through the Adam steps and the refinement; ``refine_all_shared_delay_nogrid``: the tied delay from the file's
+(0) without the grid. What each scored on validation, and the one chosen:
+``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
 
 
 def recipe_config(name: str, device: str = "cpu"):

@@ -250,3 +250,26 @@ def test_solver_threads_split_the_windows_with_the_same_results(humanoid, record
             assert np.array_equal(getattr(one, field), getattr(two, field)), (fused, field)
     with pytest.raises(ValueError, match="sim_threads"):
         dataclasses.replace(cfg, sim_threads=0)
+
+
+def test_delay_grid_first_searches_before_adam_and_shared_delay_stays_one(humanoid, recorded):
+    # the effort limit would join the fit after the last of the 2 steps: the delay grid runs only if it runs first
+    cfg = dataclasses.replace(SMALL, iterations=2, effort_after=1.0, delay_grid=(0.0, 2.0, 4.0), delay_grid_first=True,
+                              shared_delay=True)
+    searches = []
+    params, _ = identify(humanoid, recorded, cfg, log=lambda *_: None, on_search=searches.append)
+    (delay,) = searches
+    assert delay.field == "delay" and delay.losses.shape == (3,)
+    later = []
+    identify(humanoid, recorded, dataclasses.replace(cfg, delay_grid_first=False), log=lambda *_: None,
+             on_search=later.append)
+    assert later == []
+    assert np.ptp(params.delay) < 1e-12  # one delay for every joint, through the Adam steps
+    per_joint = dataclasses.replace(cfg, shared_delay=False, delay_grid_per_joint=True)
+    searches.clear()
+    identify(humanoid, recorded, per_joint, log=lambda *_: None, on_search=searches.append)
+    assert searches[0].losses.shape == (3, humanoid.n_dof)
+    with pytest.raises(ValueError, match="delay_grid"):
+        SysIdConfig(delay_grid_first=True)
+    with pytest.raises(ValueError, match="shared_delay"):
+        SysIdConfig(fit=("kp",), shared_delay=True)

@@ -144,3 +144,18 @@ def test_per_world_physics_replay_as_each_world_set_alone(humanoid):
     assert not torch.equal(mixed[0], mixed[1])
     with pytest.raises(ValueError, match="worlds"):
         both.set_world_physics({"kp": per_world["kp"][:1]})
+
+
+def test_shared_delay_is_one_delay_with_one_gradient(humanoid):
+    """``shared_delay``: every joint reads the mean coordinate, so the joints' gradients are equal and Adam moves them
+    together; without it each joint keeps its own."""
+    start = PhysicalParams.nominal(humanoid)
+    start.delay = np.linspace(0.0, 0.006, humanoid.n_dof)
+    model = PhysicsModel(humanoid, start, dt=DT, shared_delay=True)
+    np.testing.assert_allclose(model.values().delay, np.full(humanoid.n_dof, start.delay.mean()), rtol=1e-12)
+    weights = torch.arange(humanoid.n_dof, dtype=torch.float64)
+    (model.delay_steps() * weights).sum().backward()
+    grad = model.u_delay.grad
+    assert torch.allclose(grad, grad[0].expand_as(grad)) and float(grad[0]) > 0
+    apart = PhysicsModel(humanoid, start, dt=DT)
+    np.testing.assert_allclose(apart.values().delay, start.delay, rtol=1e-12)

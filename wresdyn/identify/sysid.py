@@ -109,7 +109,8 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
     2 cores, rerun on resume."""
     fields = [f for f in cfg.fit if f not in cfg.refine_frozen]
-    model = PhysicsModel(robot, start, fit=fields, dt=dt, effort_floor=cfg.effort_floor if "effort" in fields else None)
+    model = PhysicsModel(robot, start, fit=fields, dt=dt, effort_floor=cfg.effort_floor if "effort" in fields else None,
+                         shared_delay=cfg.shared_delay)
     h = max(cfg.horizon_curriculum or (64,))
     sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                     param_grads=True, friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
@@ -249,7 +250,8 @@ class IdentifyLearner:
     def __init__(self, robot, dataset, cfg: SysIdConfig, start, rng, train, dt: float, log, on_search) -> None:
         self.robot, self.cfg, self.rng, self.train, self.dt, self.log = robot, cfg, rng, train, dt, log
         self.on_search = on_search
-        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt, effort_floor=cfg.effort_floor)
+        self.model = self.module = PhysicsModel(robot, start, fit=cfg.fit, dt=dt, effort_floor=cfg.effort_floor,
+                                                shared_delay=cfg.shared_delay)
         model = self.model
         groups = [[model.u_kp, model.u_kd, model.u_armature, model.u_noload_speed, model.u_goal_accel],
                   [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband,
@@ -304,8 +306,14 @@ class IdentifyLearner:
                             self.weights, per_joint=per_joint)
 
     def _events(self, it: int) -> None:
-        """The grid searches: kp before the first step, delay and effort where the effort limit joins the fit."""
+        """The grid searches: kp before the first step, delay and effort where the effort limit joins the fit (the
+        delay before the first step with ``delay_grid_first``)."""
         cfg, searched = self.cfg, []
+        n, dt = self.robot.n_dof, self.dt
+        delay_at = 0 if cfg.delay_grid_first else self.effort_from
+        if it == delay_at and "delay" in cfg.fit:
+            searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(n, g * dt),
+                                         per_joint=cfg.delay_grid_per_joint))
         if it == 0 and cfg.gain_grid:
             start_kp = self.model.values().kp
             choice = self._search("kp", cfg.gain_grid, lambda g: g * start_kp, per_joint=True)
@@ -316,10 +324,7 @@ class IdentifyLearner:
                 self.run.best.consider(v, 0, self.model)
             searched.append(choice)
         if it == self.effort_from:
-            n, dt = self.robot.n_dof, self.dt
             file_effort = np.asarray(self.robot.effort, dtype=np.float64)
-            if "delay" in cfg.fit:
-                searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(n, g * dt)))
             grid = cfg.effort_grid if cfg.effort_floor is None else \
                 tuple(dict.fromkeys(max(g, cfg.effort_floor) for g in cfg.effort_grid))  # raised to the floor, once
             searched.append(self._search("effort", grid,

@@ -66,10 +66,25 @@ class SysIdConfig(WindowFitStop):
     """Fractions of the robot file's effort limits tried when the effort limit joins the fit (forward only, on
     training windows); empty = continue from the file's limits."""
     delay_grid: tuple[float, ...] = ()
-    """Command delays [steps] tried (one for every joint) when the effort limit joins the fit, before it. Off by
+    """Command delays [steps] tried (one for every joint) when the effort limit joins the fit, before it (before the
+    first step with ``delay_grid_first``). Off by
     default: on the shipped data (true delay 3 steps) the grid 0-8 picked 0 there, the gains, damping and
     friction having already absorbed the delay, and the final error did not change (0.0057 vs 0.0055 rad
     held-out)."""
+    delay_grid_first: bool = False
+    """Run ``delay_grid`` before the first Adam step (before ``gain_grid``) instead of where the effort limit joins
+    the fit, where the first horizon stage has already put the delay's phase lag into the damping, kd and armature.
+    From the file's values the search is biased the other way: on the humanoid fight's data (true delay 2 and 3
+    samples) the loss fell monotonically to the grid's end, 8 samples, the file's stiffer, unlimited drives asking for
+    any lag; Adam then brought the delay back. Only with a ``delay_grid``."""
+    delay_grid_per_joint: bool = False
+    """Each joint takes the ``delay_grid`` point of its own least training position error (the joints tried together,
+    one rollout per grid point, as ``gain_grid``) instead of the one point of least total error."""
+    shared_delay: bool = False
+    """One command delay for every joint, fitted through all of them (:class:`~wresdyn.sim.physics.PhysicsModel`'s
+    ``shared_delay``), in the Adam steps and the refinement: for a command path whose latency is the bus's, the same
+    on every joint, where a joint that barely moves, or whose armature or damping is off, would otherwise bend its
+    own delay to its other errors. Only when the delay is fitted."""
     gain_grid: tuple[float, ...] = ()
     """Factors on the start's position gain kp tried before the first step, each joint taking the factor of its own
     least training error (forward only, every joint at one factor per rollout); empty = start from the file's kp.
@@ -173,6 +188,12 @@ class SysIdConfig(WindowFitStop):
             check_number(self.effort_floor, "effort_floor", ge=0, le=1)
             if "effort" not in self.fit:
                 raise ValueError("effort_floor bounds the effort limit, which is not among the fitted fields (fit)")
+        if (self.delay_grid_first or self.delay_grid_per_joint) and not self.delay_grid:
+            raise ValueError("delay_grid_first and delay_grid_per_joint set how delay_grid is searched: give a "
+                             "delay_grid")
+        if (self.delay_grid_first or self.delay_grid_per_joint or self.shared_delay) and "delay" not in self.fit:
+            raise ValueError("delay_grid_first, delay_grid_per_joint and shared_delay act on the delay, which is not "
+                             "among the fitted fields (fit)")
         if self.effort_reset and "effort" not in self.fit:
             raise ValueError("effort_reset puts the effort limit back, which is not among the fitted fields (fit)")
         check_number(self.effort_after, "effort_after", ge=0)

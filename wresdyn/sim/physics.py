@@ -112,14 +112,18 @@ class PhysicsModel(torch.nn.Module):
         dt: Sample period [s]; the delay's unit.
         effort_floor: Least effort limit :meth:`project` keeps, as a fraction of the robot's finite limits
             (``None``: 0.05 of them).
+        shared_delay: One command delay for every joint (the mean of the per-joint coordinates, so each joint's
+            gradient is the shared one's and they move together), for a command path whose latency is the bus's,
+            the same on every joint.
     """
 
     def __init__(self, robot, start: PhysicalParams | None = None, fit=None, dt: float = 0.002,
-                 effort_floor: float | None = None) -> None:
+                 effort_floor: float | None = None, shared_delay: bool = False) -> None:
         super().__init__()
         start = start or PhysicalParams.nominal(robot)
         start.check(robot)
         self.robot, self.start, self.dt = robot, start, float(dt)
+        self.shared_delay = bool(shared_delay)
         self.fit = set(fit or (*JOINT_FIELDS, "bodies"))
         f64 = dict(dtype=torch.float64)
         n = robot.n_dof
@@ -191,6 +195,7 @@ class PhysicsModel(torch.nn.Module):
         out = {f: getattr(self, f"start_{f}") * torch.exp(getattr(self, f"u_{f}")) for f in _LOG_FIELDS}
         for f in self.ref:
             out[f] = getattr(self, f"ref_{f}") * getattr(self, f"u_{f}")
+        out["delay"] = self.ref_delay * self._u_delay()
         nm = len(self.moving)
         u = torch.diag_embed(torch.exp(self.u_body_logdiag))
         u = u.index_put((torch.arange(nm)[:, None].expand(nm, 6), self.triu[0].expand(nm, 6),
@@ -236,7 +241,11 @@ class PhysicsModel(torch.nn.Module):
 
     def delay_steps(self) -> torch.Tensor:
         """The delay in sample periods, (n,) float64 (what :class:`~wresdyn.sim.bank.TrajectoryBank` takes)."""
-        return self.ref_delay * self.u_delay / self.dt
+        return self.ref_delay * self._u_delay() / self.dt
+
+    def _u_delay(self) -> torch.Tensor:
+        """The delay's coordinates, (n,): the shared one on every joint with ``shared_delay``."""
+        return self.u_delay.mean().expand_as(self.u_delay) if self.shared_delay else self.u_delay
 
     def goal_accel_steps(self) -> torch.Tensor:
         """The servo goal acceleration in rad per sample period², (n,) float64 (what
