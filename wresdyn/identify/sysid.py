@@ -120,7 +120,7 @@ def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation
     window = bank.window(traj, first, h)
     profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
     delayed = "delay" in fields  # the windows' PD targets move with the fitted delay
-    floor = model.ref_effort * (0.05 if model.effort_floor is None else model.effort_floor)
+    floor = model.ref_effort * torch.as_tensor(model.effort_floor_u()).to(model.ref_effort)
 
     def physics():  # the line search tries points outside what project() keeps: the delay and effort held there
         v = model()
@@ -309,11 +309,13 @@ class IdentifyLearner:
         """The grid searches: kp before the first step, delay and effort where the effort limit joins the fit (the
         delay before the first step with ``delay_grid_first``)."""
         cfg, searched = self.cfg, []
-        n, dt = self.robot.n_dof, self.dt
-        delay_at = 0 if cfg.delay_grid_first else self.effort_from
-        if it == delay_at and "delay" in cfg.fit:
-            searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(n, g * dt),
-                                         per_joint=cfg.delay_grid_per_joint))
+
+        def delay_search():
+            if "delay" in cfg.fit:
+                searched.append(self._search("delay", cfg.delay_grid, lambda g: np.full(self.robot.n_dof, g * self.dt),
+                                             per_joint=cfg.delay_grid_per_joint))
+        if it == 0 and cfg.delay_grid_first:
+            delay_search()
         if it == 0 and cfg.gain_grid:
             start_kp = self.model.values().kp
             choice = self._search("kp", cfg.gain_grid, lambda g: g * start_kp, per_joint=True)
@@ -324,6 +326,8 @@ class IdentifyLearner:
                 self.run.best.consider(v, 0, self.model)
             searched.append(choice)
         if it == self.effort_from:
+            if not cfg.delay_grid_first:
+                delay_search()
             file_effort = np.asarray(self.robot.effort, dtype=np.float64)
             grid = cfg.effort_grid if cfg.effort_floor is None else \
                 tuple(dict.fromkeys(max(g, cfg.effort_floor) for g in cfg.effort_grid))  # raised to the floor, once

@@ -194,8 +194,7 @@ class PhysicsModel(torch.nn.Module):
         """Current values, float64 tensors named as :class:`PhysicalParams` fields (delay in seconds)."""
         out = {f: getattr(self, f"start_{f}") * torch.exp(getattr(self, f"u_{f}")) for f in _LOG_FIELDS}
         for f in self.ref:
-            out[f] = getattr(self, f"ref_{f}") * getattr(self, f"u_{f}")
-        out["delay"] = self.ref_delay * self._u_delay()
+            out[f] = getattr(self, f"ref_{f}") * (self._u_delay() if f == "delay" else getattr(self, f"u_{f}"))
         nm = len(self.moving)
         u = torch.diag_embed(torch.exp(self.u_body_logdiag))
         u = u.index_put((torch.arange(nm)[:, None].expand(nm, 6), self.triu[0].expand(nm, 6),
@@ -216,10 +215,14 @@ class PhysicsModel(torch.nn.Module):
             u = getattr(self, f"u_{f}")
             if f == "encoder_offset":
                 continue
-            if f == "effort" and self.effort_floor is not None:
-                u.copy_(torch.maximum(u, self.effort_floor.to(u.device)))
+            if f == "effort":
+                u.copy_(torch.maximum(u, torch.as_tensor(self.effort_floor_u(), dtype=u.dtype, device=u.device)))
             else:
-                u.clamp_(min=0.05 if f == "effort" else 0.0)
+                u.clamp_(min=0.0)
+
+    def effort_floor_u(self) -> torch.Tensor | float:
+        """The least effort-limit coordinate :meth:`project` keeps: ``effort_floor`` per joint, else 0.05."""
+        return 0.05 if self.effort_floor is None else self.effort_floor
 
     @torch.no_grad()
     def assign(self, field: str, value, keep=None) -> None:
