@@ -19,7 +19,7 @@ def test_the_set_up_runs_without_the_collector_and_its_objects_are_frozen():
         assert gc.isenabled()
         assert gc.get_freeze_count() >= before + len(kept)
     finally:
-        gc.unfreeze()  # the rest of the test session collects as before
+        gc.unfreeze()  # the rest of the test process collects normally
 
 
 def test_a_failed_set_up_gives_the_collector_back():
