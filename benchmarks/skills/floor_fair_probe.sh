@@ -14,7 +14,8 @@
 # folders as packed (floor_fair_pack.py); they are copied to $ROOT/<name> (ROOT, default /root: the absolute paths the
 # skills' config.json files record, so a resume must use the same). data/uneven_probe/dataset.npz must exist. GPUS
 # (default: every GPU nvidia-smi lists) are the CUDA devices the runs take in turn, started STAGGER s apart (10).
-# DRY=1 checks the inputs and prints the commands without copying or running anything. LOG gets STAGES, <run>.out and
+# RUNS (default: all three) narrows the runs to some of them, e.g. RUNS=floor_unvp_s1; a run's seed is the number its
+# name ends in, whatever the order. DRY=1 checks the inputs and prints the commands without copying or running anything. LOG gets STAGES, <run>.out and
 # load.log as floor_fair_resume.sh writes them. Python is python3; the environment is the caller's. Returns when all
 # three have ended; rerun the same command to resume (finished policies and deployments are reused).
 #
@@ -29,7 +30,7 @@ set -u
 SRC=$1; R=$2
 ROOT=${ROOT:-/root}
 DATA=data/uneven_probe/dataset.npz
-RUNS="floor_unvp_s0 floor_unvp_s1 floor_unvp_s2"
+RUNS=${RUNS:-floor_unvp_s0 floor_unvp_s1 floor_unvp_s2}
 fail() { echo "error: $*" >&2; exit 2; }
 [ -d "$SRC" ] || fail "$SRC is not a folder"
 [ -f $DATA ] || fail "$DATA is missing: record it first (wresdyn collect --mismatch data/mismatch_uneven.toml \
@@ -60,7 +61,7 @@ fi
 if [ "${DRY:-0}" = 1 ]; then
   i=0
   for n in $RUNS; do
-    echo "CUDA_VISIBLE_DEVICES=${gpu[$(( i % ${#gpu[@]} ))]} $(command_of $n $i)"; i=$(( i + 1 ))
+    echo "CUDA_VISIBLE_DEVICES=${gpu[$(( i % ${#gpu[@]} ))]} $(command_of $n ${n##*_s})"; i=$(( i + 1 ))
   done
   exit 0
 fi
@@ -89,7 +90,7 @@ stage floors start
 LOAD=$!
 i=0
 for n in $RUNS; do
-  floor "${gpu[$(( i % ${#gpu[@]} ))]}" $n $i &
+  floor "${gpu[$(( i % ${#gpu[@]} ))]}" $n ${n##*_s} &
   i=$(( i + 1 )); sleep "${STAGGER:-10}"
 done
 wait $(jobs -p | grep -v "^$LOAD$")

@@ -90,6 +90,16 @@ def test_probe_runs_reuse_write_where_d_and_e_were_trained(tmp_path):
     assert all(f"--out {tmp_path}/root/floor_unv_s{s} " in ln for s, ln in enumerate(lines)) and len(lines) == 3
 
 
+def test_probe_runs_narrowed_keep_each_run_its_own_seed(tmp_path):
+    for s in range(3):
+        (tmp_path / f"src/floor_unv_s{s}/skills/d_oracle").mkdir(parents=True)
+    done = _probe(tmp_path, {"DRY": "1", "GPUS": "1", "REUSE": "1", "RUNS": "floor_unvp_s2 floor_unvp_s0"})
+    lines = done.stdout.splitlines()
+    assert len(lines) == 2 and all(ln.startswith("CUDA_VISIBLE_DEVICES=1 ") for ln in lines)
+    assert "--seed 2 " in lines[0] and f"--out {tmp_path}/root/floor_unv_s2 " in lines[0]
+    assert "--seed 0 " in lines[1] and f"--out {tmp_path}/root/floor_unv_s0 " in lines[1]
+
+
 def test_probe_runs_reuse_set_up_once_keeping_d_and_e(tmp_path):
     for s in range(3):
         run = tmp_path / f"src/floor_unv_s{s}"
