@@ -596,10 +596,13 @@ def plot(path: Path, tools: dict, title: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    for name, r in tools.items():
-        c = np.asarray(r["curve"])
+    for i, (name, r) in enumerate(n for n in tools.items() if n[0] != "mujoco.sysid"):
+        c = np.asarray(r["curve"])  # past ten legs the colour cycle repeats: those dotted
         if len(c):
-            ax.step(np.maximum(c[:, 0], 1e-1), c[:, 1], where="post", label=name)
+            ax.step(np.maximum(c[:, 0], 1e-1), c[:, 1], where="post", label=name, color=f"C{i % 10}", ls="-:"[i >= 10])
+    if "mujoco.sysid" in tools:  # black and drawn last, so that no leg's colour or line hides the peer's
+        c = np.asarray(tools["mujoco.sysid"]["curve"])
+        ax.step(np.maximum(c[:, 0], 1e-1), c[:, 1], where="post", label="mujoco.sysid", color="k", lw=2)
     ax.set(xscale="log", yscale="log", xlabel="wall-clock [s] (validation excluded)",
            ylabel="best validation mean |Δq| [rad]", title=title)
     ax.grid(True, which="both", alpha=0.3)
