@@ -42,15 +42,16 @@ def test_solutions_are_the_reference_loops_bit_for_bit(humanoid, position_only):
     q0 = stance(humanoid)
     home, rot = ik.forward(q0)
     rng = np.random.default_rng(0)
-    targets = [(home + d, None if ik.position_only else rot, q0) for d in np.cumsum(rng.normal(0, 0.004, (40, 2, 3)), 0)]
+    r = None if ik.position_only else rot
+    targets = [(home + d, r, q0) for d in np.cumsum(rng.normal(0, 0.004, (40, 2, 3)), 0)]
     # far targets run out of iterations at the joint limits; orientation-only targets use the rotation rows alone
-    targets += [(home + rng.normal(0, 0.2, (2, 3)), None if ik.position_only else rot, q0) for _ in range(3)]
+    targets += [(home + rng.normal(0, 0.2, (2, 3)), r, q0) for _ in range(3)]
     if not ik.position_only:
         targets += [(None, rot, q0 + rng.normal(0, 0.1, q0.shape)) for _ in range(3)]
     q = q0
-    for pos, r, start in targets:
+    for pos, target_rot, start in targets:
         start = q if start is q0 and pos is not None else start  # a path: warm-started as solve_path does
-        got, want = ik.solve(pos, r, start), _reference_solve(ik, pos, r, start)
+        got, want = ik.solve(pos, target_rot, start), _reference_solve(ik, pos, target_rot, start)
         for a, b in zip(got, want):
             assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
         q = got[0]
