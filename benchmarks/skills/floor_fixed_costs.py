@@ -44,10 +44,10 @@ def main() -> None:
     p.add_argument("--rate", type=float, default=500.0, help="sample rate [Hz] (the shipped dataset's)")
     p.add_argument("--mismatch", default="data/mismatch_default.toml")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--motions-only", action="store_true")
+    p.add_argument("--motions-only", action="store_true", help="draw and time the motions only")
     p.add_argument("--full", action="store_true",
-                   help="draw (and time) the full-size run's motion set instead: 16 training, 4 validation and 10 "
-                        "held-out motions a family (FloorDeployConfig.full), as `wresdyn deploy --floor --full` does")
+                   help="the full-size run's motion set instead: 16 training, 4 validation and 10 held-out motions a "
+                        "family (FloorDeployConfig.full), as `wresdyn deploy --floor --full` draws it")
     p.add_argument("--workers", type=int, default=1, help="motion processes (make_motions workers)")
     a = p.parse_args()
     stand = load_robot(DEFAULT_ROBOT)
@@ -58,7 +58,7 @@ def main() -> None:
     motions = make_motions(stand, counts, 4.0, a.rate, a.seed, floating=floating, workers=a.workers)
     out = {"motions": sum(len(m) for m in motions.splits.values()), "motions_s": round(time.perf_counter() - t0, 2),
            "motions_cpu_s": round(time.process_time() - c0, 2), "motions_sha256": digest(motions)}
-    if not (a.motions_only or a.full):
+    if not a.motions_only:
         task = FloorTaskConfig()
         real = RealRobot(floating, Mismatch.load(a.mismatch), a.rate)
         with tempfile.TemporaryDirectory() as tmp:
