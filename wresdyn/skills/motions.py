@@ -117,12 +117,12 @@ class FloorCache:
         self._stands: dict[bytes, np.ndarray] = {}
 
     def stand(self, q: np.ndarray) -> np.ndarray:
-        """The standing base pose [x y z qx qy qz qw] of joints ``q`` [rad] (n_dof,), float64."""
+        """The standing base pose [x y z qx qy qz qw] of joints ``q`` [rad] (n_dof,), float64 (a copy)."""
         q = np.asarray(q, dtype=np.float64)
         key = q.tobytes()  # the exact configuration: a pose is reused for the same bits only
         if key not in self._stands:
             self._stands[key] = standing_state(self.robot, q).base_pose
-        return self._stands[key]
+        return self._stands[key].copy()
 
 
 def _place(floor: FloorCache, feet: np.ndarray, q: np.ndarray):
