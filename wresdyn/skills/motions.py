@@ -236,7 +236,8 @@ def _key(name: str) -> int:
 
 POOL_MOTIONS_PER_WORKER = 8
 """Automatic pools give each worker at least this many motions: a worker spends about as long starting (imports,
-robots) as drawing 8 motions, so fewer would cost more than they save."""
+robots: 2.5 s on the project's CPU) as drawing 5 motions (0.49 s each at full size), so fewer would cost more than
+they save; 8 also leaves cores to the runs beside it (``benchmarks/results/floor_fair/speed_cpu/``)."""
 
 
 def pool_workers(workers: int, n: int) -> int:
