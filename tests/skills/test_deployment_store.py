@@ -107,6 +107,27 @@ def test_a_matching_deployment_is_reused_and_a_changed_input_deployed_again(tmp_
     assert store.deployed == {("heldout", "real")}
 
 
+def test_a_skill_is_loaded_once_for_every_deployment_of_the_same_file(tmp_path, monkeypatch):
+    loads, used = [], []
+    monkeypatch.setattr(ds, "load_skill", lambda run_dir: loads.append(run_dir) or object())
+    skill = tmp_path / "skills" / "a_nominal"
+    skill.mkdir(parents=True)
+    (skill / "policy.pt").write_bytes(b"weights 1")
+    store = _store(tmp_path, [])
+
+    def run(policy):
+        used.append(policy)
+        return floor_deployment()
+
+    for split in ("validation", "heldout"):
+        for where in ("real", "sim"):
+            store.deploy(split, where, "a_nominal", skill, [motion(split)], run)
+    assert len(loads) == 1 and len(used) == 4 and all(p is used[0] for p in used)
+    (skill / "policy.pt").write_bytes(b"weights 2")  # another file under the same folder: loaded again
+    store.deploy("heldout", "real", "a_nominal", skill, [motion("heldout")], run)
+    assert len(loads) == 2 and used[-1] is not used[0]
+
+
 def test_an_unreadable_deployment_is_deployed_again_with_a_warning(tmp_path):
     lines, calls = [], []
     path = tmp_path / "deployments" / "validation" / "sim_reference.npz"

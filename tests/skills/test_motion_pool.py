@@ -1,9 +1,12 @@
-"""Floor motions drawn in a process pool: the same set, bit for bit, as drawn serially; and how many processes the
+"""Floor motions drawn in a process pool: the same set, bit for bit, as drawn serially; each draw the same with the
+floor cache the draws share as with one of its own; the workers' import without torch; and how many processes the
 floor benchmark asks for. At 100 Hz, as in ``test_motions.py``: the IK costs a tenth of the simulation's rate."""
 
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -41,6 +44,33 @@ def test_a_pool_of_two_draws_the_serial_set_bit_for_bit(humanoid, floating):
         for a, b in zip(serial[s], pooled[s]):
             _same(a, b)
     assert pooled.rate_hz == serial.rate_hz
+
+
+def test_a_shared_floor_cache_draws_what_a_cache_per_draw_draws(monkeypatch, humanoid, floating):
+    # make_motions shares one FloorCache (the Pinocchio model, the standing pose of each start) over every draw; with
+    # make_motion's own per draw (floor_cache=None) every motion must be the same, the slowed third draw included
+    kw = dict(floating=floating, families=("weight_shift",))
+    shared = make_motions(humanoid, {"validation": 3}, 4.0, RATE, seed=0, workers=1, **kw)
+    draw = motions_module.make_motion
+    built = []
+
+    def own_cache(*args, floor_cache=None, **kwargs):
+        built.append(floor_cache)
+        return draw(*args, **kwargs)
+
+    monkeypatch.setattr(motions_module, "make_motion", own_cache)
+    alone = make_motions(humanoid, {"validation": 3}, 4.0, RATE, seed=0, workers=1, **kw)
+    assert len(built) == 3 and all(isinstance(c, motions_module.FloorCache) for c in built)
+    assert [m.screen for m in shared["validation"]] == ["ok", "ok", "slowed x1.3"]
+    for a, b in zip(shared["validation"], alone["validation"]):
+        _same(a, b)
+
+
+def test_a_motion_worker_imports_no_torch():
+    # what a spawned worker imports before its first draw (torch would add seconds to each one's start)
+    code = "import sys, wresdyn.skills.motions; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "False"
 
 
 def test_automatic_workers_are_the_usable_cores_for_enough_motions_and_serial_on_two(monkeypatch):

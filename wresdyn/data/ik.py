@@ -112,6 +112,8 @@ class FootIK:
         m = self.config.limit_margin
         self.lower = np.where(np.isfinite(robot.lower), robot.lower + m, -np.pi)
         self.upper = np.where(np.isfinite(robot.upper), robot.upper - m, np.pi)
+        self._lower_dofs, self._upper_dofs = self.lower[self.dofs], self.upper[self.dofs]
+        self._row_sets: dict = {}
         self._pin = pin
         pose_rank, pos_rank = self._ranks()
         for f, r in zip(frames, pos_rank):
@@ -140,11 +142,10 @@ class FootIK:
 
     def forward(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sole positions [m], shape (n_frames, 3), and rotation matrices, shape (n_frames, 3, 3), at ``q``."""
-        pin = self._pin
-        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=np.float64))
-        pos = np.array([self.data.oMf[f].translation for f in self.frame_ids])
-        rot = np.array([self.data.oMf[f].rotation for f in self.frame_ids])
-        return pos, rot
+        self._pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=np.float64))
+        oMf = self.data.oMf
+        h = np.array([oMf[f].homogeneous for f in self.frame_ids])  # one copy of both out of Pinocchio
+        return h[:, :3, 3].copy(), h[:, :3, :3].copy()
 
     def _error(self, q, pos, rot):
         p, r = self.forward(q)
@@ -176,28 +177,41 @@ class FootIK:
         if pos is None and self.position_only:
             raise ValueError("position-only IK needs target positions")
         q = np.array(q_init, dtype=np.float64)
-        q[self.dofs] = np.clip(q[self.dofs], self.lower[self.dofs], self.upper[self.dofs])
-        rows = np.arange(3) if self.position_only else np.arange(6) if pos is not None else np.arange(3, 6)
-        w = np.array([1.0, 1.0, 1.0, cfg.rot_weight, cfg.rot_weight, cfg.rot_weight])
-        nf = len(self.frame_ids)
+        dofs, lower, upper = self.dofs, self._lower_dofs, self._upper_dofs
+        q[dofs] = np.clip(q[dofs], lower, upper)
+        rows, w_rows, w_col, eye = self._rows(pos is None)
+        nf, m = len(self.frame_ids), len(rows)
+        # the error of each iterate is the one the loop tests next, and the last one is returned: each configuration's
+        # forward kinematics runs once
+        err = self._error(q, pos, rot)
         for _ in range(cfg.max_iters):
-            err = self._error(q, pos, rot)
-            if (np.linalg.norm(err[:, :3], axis=1) < cfg.pos_tol).all() and (
-                    np.linalg.norm(err[:, 3:], axis=1) < cfg.rot_tol).all():
+            norms = _norms(err)
+            if (norms[:, 0] < cfg.pos_tol).all() and (norms[:, 1] < cfg.rot_tol).all():
                 break
             pin.computeJointJacobians(self.model, self.data, q)
-            m = len(rows)
-            jac = np.zeros((m * nf, len(self.dofs)))
+            jac = np.empty((m * nf, len(dofs)))
             for i, fid in enumerate(self.frame_ids):
                 # LOCAL_WORLD_ALIGNED: linear rows are the world velocity of the sole origin, matching err
                 j = pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)
-                jac[m * i: m * i + m] = (w[:, None] * j[:, self.dofs])[rows]
-            e = (w * err)[:, rows].ravel()
+                jac[m * i: m * i + m] = w_col * j[rows][:, dofs]
+            e = (err[:, rows] * w_rows).ravel()
             lam = cfg.damping * float(e @ e) + cfg.damping_floor
-            dq = jac.T @ np.linalg.solve(jac @ jac.T + lam * np.eye(m * nf), e)
-            q[self.dofs] = np.clip(q[self.dofs] + dq, self.lower[self.dofs], self.upper[self.dofs])
-        err = self._error(q, pos, rot)
-        return q, np.stack([np.linalg.norm(err[:, :3], axis=1), np.linalg.norm(err[:, 3:], axis=1)], axis=1)
+            dq = jac.T @ np.linalg.solve(jac @ jac.T + lam * eye, e)
+            q[dofs] = np.clip(q[dofs] + dq, lower, upper)
+            err = self._error(q, pos, rot)
+        return q, _norms(err)
+
+    def _rows(self, orientation_only: bool):
+        """The error rows a solve drives (position and orientation, the position's alone, or the orientation's
+        alone), their weights as a row and as a column, and the identity of the damped system's size; made once per
+        kind (a path solves thousands of samples)."""
+        key = (self.position_only, orientation_only, self.config)
+        if key not in self._row_sets:
+            cfg = self.config
+            rows = np.arange(3) if self.position_only else np.arange(3, 6) if orientation_only else np.arange(6)
+            w = np.array([1.0, 1.0, 1.0, cfg.rot_weight, cfg.rot_weight, cfg.rot_weight])[rows]
+            self._row_sets[key] = (rows, w, w[:, None], np.eye(len(rows) * len(self.frame_ids)))
+        return self._row_sets[key]
 
     def solve_path(self, pos: np.ndarray, rot: np.ndarray, q_init: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Solve a target path sample by sample, each warm-started from the previous solution.
@@ -219,3 +233,10 @@ class FootIK:
             q, errs[k] = self.solve(pos[k], None if rot is None else rot[k], q)
             out[k] = q
         return out, errs
+
+
+def _norms(err: np.ndarray) -> np.ndarray:
+    """The position and orientation error norms of each frame, (k, 2), of its errors ``err`` (k, 6): what
+    ``np.linalg.norm`` gives of ``err[:, :3]`` and of ``err[:, 3:]`` (the same operations: the squares, their sum in
+    order, the square root), in one pass without its argument checks (the IK tests them at every iterate)."""
+    return np.sqrt(np.add.reduce((err * err).reshape(len(err), 2, 3), axis=2))

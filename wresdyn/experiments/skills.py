@@ -316,11 +316,13 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         "sim": {"device": cfg.device}, "motions": store.fingerprint if store else motion_fingerprint(
             robot, counts, cfg.duration, rate, cfg.seed, floor=False, screen=False)}, log)
     own = {n: _own_sim(POLICIES.get(n, "nominal"), runs) for n in ("reference", *policies)}
+    t0 = time.perf_counter()  # the deployment's wall-clock, for the log: one of a run's fixed costs
     results["real"], results["sim"], rollouts = deploy_all(
         deployed, own, out / "skills", motions,
         lambda worlds: real_plant(worlds, cfg.seed + 100), sim, task, robot, in_sim, lambda setting: {
             "setting": setting, "correction": run_fingerprint(runs.get(RANDOMIZED.get(setting, setting))),
             "randomization": asdict(dr) if setting in RANDOMIZED else None})
+    deploy_s = time.perf_counter() - t0
     _gaps(results, floor)
     ledgers = [out / LEDGER] + ([Path(ledger)] if ledger else [])
     deployed.record(ledgers, {"benchmark": asdict(cfg), "task": asdict(task), "ppo": asdict(ppo),
@@ -329,13 +331,13 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
     held = results["real"]["heldout"]
     n_held = len(motions.split("heldout"))
     if floor:
-        log("[4/4] deployed on the real robot's floor (" + f"{n_held} held-out motions): " + "; ".join(
+        log(f"[4/4] deployed on the real robot's floor ({n_held} held-out motions; {deploy_s:.0f} s): " + "; ".join(
             f"{n} success {100 * r['mean']['success']:.0f} % ({r['mean']['falls']} falls), MPJPE "
             f"{1e3 * r['mean'].get('mpjpe', float('nan')):.1f} mrad, "
             f"g-MPJPE {1e3 * r['mean'].get('g_mpjpe', float('nan')):.0f} mm"
             for n, r in held.items()) + _gap_log(held, results["gap_closed_mpjpe"], " (MPJPE)"))
     else:
-        log(f"[4/4] deployed on the real robot ({n_held} held-out motions), MPJPE: " + ", ".join(
+        log(f"[4/4] deployed on the real robot ({n_held} held-out motions; {deploy_s:.0f} s), MPJPE: " + ", ".join(
             f"{n} {1e3 * r['mean']['mpjpe']:.1f} mrad" for n, r in held.items())
             + _gap_log(held, results["gap_closed"]))
     results["wall_s"] = time.perf_counter() - t_start

@@ -128,6 +128,10 @@ class DeploymentStore:
         self.log = log
         self.deployed = set()
         """``(split, where)`` of the deployments this session ran (not read back)."""
+        self._policies: dict[tuple[Path, str], object] = {}
+        """The skills loaded by :meth:`deploy`, by run folder and ``policy.pt``'s SHA-256: each is deployed on two
+        splits and two plants, and loading one (a ``torch.export`` program) takes a few tenths of a second; an
+        inference-only program, the same for every deployment."""
 
     def path(self, split: str, where: str, name: str) -> Path:
         """Where deployment ``name`` of ``split`` on ``where`` (``real`` or ``sim``) is kept."""
@@ -165,7 +169,13 @@ class DeploymentStore:
                 return stored[0]
             self.log(f"[4/4] {name} on the {where} plant, {split}: deployed earlier with {diff[0]} = "
                      f"{json.dumps(diff[1])[:80]}, now {json.dumps(diff[2])[:80]}: deployed again")
-        dep = run(None if run_dir is None else load_skill(run_dir))
+        policy = None
+        if run_dir is not None:
+            key = (Path(run_dir), want["policy"]["policy_sha256"])
+            if key not in self._policies:
+                self._policies[key] = load_skill(run_dir)
+            policy = self._policies[key]
+        dep = run(policy)
         save_deployment(path, dep, want)
         self.deployed.add((split, where))
         return dep

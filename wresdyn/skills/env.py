@@ -36,6 +36,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from ..sim.kinematics import BodyPositions
+from .feasibility import FOOT_BODIES
 from .reference import base_frame_imu, motion_tensors, plant_dt, quat_angle, quat_rotate_inv, start_points, tilt
 from .skill_config import FloorTaskConfig, SkillConfig, SkillTaskConfig
 
@@ -54,8 +55,6 @@ FAILURE_CAUSES = ("fell_low", "tilted", "drifted", "diverged")
 falls; a step that sees several causes reports the first in this order (a topple that also drifts is a fall)."""
 FALLS = FAILURE_CAUSES[:2]
 """The causes that are falls."""
-FOOT_BODIES = ("left_foot", "right_foot")
-"""The bodies whose slip is penalised where the reference plants them."""
 
 
 class TrackingEnv(VecEnv):

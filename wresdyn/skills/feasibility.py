@@ -28,12 +28,16 @@ import numpy as np
 
 from ..robot.ground import collision_shapes
 from ..robot.pinocchio_model import build_pinocchio
-from .env import FOOT_BODIES
 
-__all__ = ["FloorFeasibility", "floor_feasibility", "screen", "SOLE_FRAMES", "SCREEN_EVERY_S", "SCREEN_SKIP_S"]
+__all__ = ["FloorFeasibility", "floor_feasibility", "screen", "FOOT_BODIES", "SOLE_FRAMES", "SCREEN_EVERY_S",
+           "SCREEN_SKIP_S"]
 
+FOOT_BODIES = ("left_foot", "right_foot")
+"""The foot bodies (left, right): the soles' collision boxes here, the bodies whose slip the tracking environment
+penalises where the reference plants them (:mod:`.env`). Kept here, torch-free, so that the processes that draw the
+floor motions import no torch."""
 SOLE_FRAMES = ("left_sole", "right_sole")
-"""The sole frames the contact wrenches act at (left, right), in :data:`~.env.FOOT_BODIES` order."""
+"""The sole frames the contact wrenches act at (left, right), in :data:`FOOT_BODIES` order."""
 
 SCREEN_EVERY_S = 0.01
 """Sample spacing [s] of :func:`screen` (the zero-moment point of a minimum-jerk reference changes over tenths of a
@@ -63,7 +67,7 @@ class FloorFeasibility:
 
 def _foot_boxes(robot) -> list[np.ndarray]:
     """The corners of each foot's collision boxes in the foot's frame [m], (8 k, 3) per foot of
-    :data:`~.env.FOOT_BODIES`."""
+    :data:`FOOT_BODIES`."""
     from scipy.spatial.transform import Rotation as R
 
     shapes = collision_shapes(robot)
@@ -87,9 +91,17 @@ def _margin(points: np.ndarray, p: np.ndarray) -> float:
     return float(-(hull.equations[:, :2] @ p + hull.equations[:, 2]).max())
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of two 3-vectors, the same products and differences without its axis handling (the screening's
+    loop calls it once a sample)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None = None,
                       friction: np.ndarray | None = None, damping: np.ndarray | None = None, every: int = 1,
-                      skip: float = 0.0) -> FloorFeasibility:
+                      skip: float = 0.0, model=None) -> FloorFeasibility:
     """Zero-moment point, its margin in the support polygon and the joint torques of ``motion`` (a
     :class:`~wresdyn.skills.motions.Motion` on the floor) on ``robot`` (a floating base; its masses and inertias are the
     ones used).
@@ -103,6 +115,8 @@ def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None =
         skip: Leave out the samples within this time [s] of a change of the planted soles (default none): the
             reference's base can step there by the planted soles' average, which finite differences turn into a
             spike of acceleration.
+        model: ``robot``'s Pinocchio model (:func:`~wresdyn.robot.pinocchio_model.build_pinocchio`), where the caller
+            keeps one for many motions (default: built here).
     """
     import pinocchio as pin
 
@@ -111,7 +125,7 @@ def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None =
     effort = np.asarray(robot.effort if effort is None else effort, dtype=np.float64)
     friction = np.asarray(robot.friction if friction is None else friction, dtype=np.float64)
     damping = np.asarray(robot.damping if damping is None else damping, dtype=np.float64)
-    model = build_pinocchio(robot)
+    model = build_pinocchio(robot) if model is None else model
     data = model.createData()
     soles = [model.getFrameId(s) for s in SOLE_FRAMES]
     feet = [model.getFrameId(b) for b in FOOT_BODIES]
@@ -139,7 +153,7 @@ def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None =
         pin.framesForwardKinematics(model, data, q)
         pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
         f = data.dhg.linear - mass * g
-        n = np.cross(data.com[0], f) + data.dhg.angular
+        n = _cross(data.com[0], f) + data.dhg.angular
         zmp[row] = (-n[1] / f[2], n[0] / f[2])
         down = [i for i in range(2) if motion.planted[k, i]]
         corners = []
@@ -163,13 +177,13 @@ def floor_feasibility(robot, motion, rate_hz: float, effort: np.ndarray | None =
 
 
 
-def screen(robot, motion, rate_hz: float) -> dict:
+def screen(robot, motion, rate_hz: float, model=None) -> dict:
     """Whether flat soles can carry ``motion`` on ``robot`` (a floating base, its nominal masses and limits): the
     zero-moment point never leaves the planted soles and no joint torque passes its effort limit, sampled every
     :data:`SCREEN_EVERY_S`. Returns ``feasible``, ``zmp_margin_m`` (the smallest margin [m], negative: outside) and
-    ``effort_ratio`` (the largest |τ| / τ_max)."""
+    ``effort_ratio`` (the largest |τ| / τ_max); ``model``: as :func:`floor_feasibility`'s."""
     f = floor_feasibility(robot, motion, rate_hz, every=max(1, int(round(SCREEN_EVERY_S * rate_hz))),
-                          skip=max(SCREEN_SKIP_S, 2.0 / rate_hz))
+                          skip=max(SCREEN_SKIP_S, 2.0 / rate_hz), model=model)
     effort = np.asarray(robot.effort, dtype=np.float64)
     limited = np.isfinite(effort) & (effort > 0)
     ratio = float((np.abs(f.tau[:, limited]) / effort[limited]).max())

@@ -94,7 +94,7 @@ def _com(robot: Robot, model, data, q: np.ndarray) -> np.ndarray:
 def _shift_over(robot: Robot, ik: FootIK, q0, home, rot, foot: int, iterations: int = 6) -> float:
     """Sideways shift of both soles [m] that puts the centre of mass above sole ``foot`` (0 left, 1 right)."""
 
-    model = build_pinocchio(robot)
+    model = ik.model  # ``robot``'s Pinocchio model (the IK's robot), with data of its own
     data = model.createData()
     d, q = 0.0, q0
     for _ in range(iterations):
@@ -105,12 +105,32 @@ def _shift_over(robot: Robot, ik: FootIK, q0, home, rot, foot: int, iterations: 
     return float(d)
 
 
-def _place(floating: Robot, feet: np.ndarray, q: np.ndarray):
+class FloorCache:
+    """What every floor draw of one free-base robot shares, made once per :func:`make_motions` call (and pool worker)
+    rather than once per draw: the robot's Pinocchio model (the screening's) and the standing base pose of each start
+    configuration met (:func:`~wresdyn.robot.ground.standing_state` builds a Newton model each call; the motions
+    start in the stance, so one is usually met). Only reads the robot: the draws are those made without it."""
+
+    def __init__(self, floating: Robot):
+        self.robot = floating
+        self.model = build_pinocchio(floating)
+        self._stands: dict[bytes, np.ndarray] = {}
+
+    def stand(self, q: np.ndarray) -> np.ndarray:
+        """The standing base pose [x y z qx qy qz qw] of joints ``q`` [rad] (n_dof,), float64 (a copy)."""
+        q = np.asarray(q, dtype=np.float64)
+        key = q.tobytes()  # the exact configuration: a pose is reused for the same bits only
+        if key not in self._stands:
+            self._stands[key] = standing_state(self.robot, q).base_pose
+        return self._stands[key].copy()
+
+
+def _place(floor: FloorCache, feet: np.ndarray, q: np.ndarray):
     """The reference base (T, 7) and planted soles (T, 2) of sole paths ``feet`` (T, 2, 3) in the stand frame."""
 
     low = feet[:, :, 2].min(axis=1)
     planted = feet[:, :, 2] - low[:, None] < PLANTED_TOL
-    start = standing_state(floating, q[0]).base_pose
+    start = floor.stand(q[0])
     home = feet[0]
     base = np.tile(start, (len(q), 1))
     shift = np.where(planted[..., None], home[None] - feet, 0.0).sum(1) / planted.sum(1, keepdims=True)
@@ -127,10 +147,11 @@ UNSCREENED = ("combo",)
 """Floor families drawn without screening: ``combo`` asks for transfers too fast to follow on purpose."""
 
 
-def _play(robot: Robot, ik: FootIK, leg, arm, t: np.ndarray, rate_hz: float, ik_tol: float, floating, family: str,
-          name: str, params: dict) -> Motion | None:
-    """The motion of keyframes ``leg`` (times, sole positions) and ``arm`` (times, joint offsets) sampled at ``t``;
-    ``None`` where the sole IK misses a keyframe path by more than ``ik_tol`` [m]."""
+def _play(robot: Robot, ik: FootIK, leg, arm, t: np.ndarray, rate_hz: float, ik_tol: float,
+          floor: FloorCache | None, family: str, name: str, params: dict) -> Motion | None:
+    """The motion of keyframes ``leg`` (times, sole positions) and ``arm`` (times, joint offsets) sampled at ``t``,
+    placed on ``floor``'s robot's floor (``None``: the stand); ``None`` where the sole IK misses a keyframe path by
+    more than ``ik_tol`` [m]."""
     q0 = stance(robot)
     home, rot = ik.forward(q0)
     pos = keyframes(t, *leg)
@@ -141,9 +162,9 @@ def _play(robot: Robot, ik: FootIK, leg, arm, t: np.ndarray, rate_hz: float, ik_
     qd = joint_velocity(q, rate_hz)
     feet = np.array([ik.forward(x)[0] for x in q])
     params = {**params, "ik_max_error_m": float(err[:, :, 0].max())}
-    if floating is None:
+    if floor is None:
         return Motion(name, family, q, qd, feet, params)
-    base, planted = _place(floating, feet, q)
+    base, planted = _place(floor, feet, q)
     return Motion(name, family, q, qd, feet, params, base=base, planted=planted)
 
 
@@ -165,18 +186,20 @@ def _stretch(keys, factor: float, duration: float):
 def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz: float, rng: np.random.Generator,
                 name: str, ik_tol: float = 0.005, max_draws: int = 20, side: str | None = None, *,
                 floating: Robot | None = None, shift: tuple[float, float] | None = None,
-                screen: bool = False) -> Motion:
+                screen: bool = False, floor_cache: FloorCache | None = None) -> Motion:
     """Draw one motion of ``family`` (redrawn until the sole IK reaches every keyframe path within ``ik_tol`` [m]);
     ``side`` fixes a wave's arm (default: drawn). ``floating``: the robot with a free base, to place the motion on
     its floor (a floor family; ``shift``: the weight shifts over each sole).
 
     ``screen`` (the floor): a draw must pass :func:`~.feasibility.screen` (the zero-moment point inside the planted
     soles, every joint torque within its effort limit); one that does not is slowed by the first factor of
-    :data:`SLOWER` that passes, else redrawn. :attr:`Motion.screen` says which; ``params`` keeps the measure."""
+    :data:`SLOWER` that passes, else redrawn. :attr:`Motion.screen` says which; ``params`` keeps the measure.
+    ``floor_cache``: ``floating``'s :class:`FloorCache`, shared by many draws (default: made here)."""
     task = "stand" if floating is None else "floor"
     if family not in TASK_FAMILIES[task].all:
         raise ValueError(f"unknown {task} motion family {family!r}; choose from {TASK_FAMILIES[task].all}")
     screen = screen and floating is not None and family not in UNSCREENED
+    floor = None if floating is None else floor_cache if floor_cache is not None else FloorCache(floating)
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
     home, _ = ik.forward(stance(robot))
     worst = None
@@ -187,12 +210,12 @@ def make_motion(robot: Robot, ik: FootIK, family: str, duration: float, rate_hz:
             leg, arm = _stretch((lt, lk), factor, duration), _stretch((at, ak), factor, duration)
             if leg is None or arm is None:
                 break
-            m = _play(robot, ik, leg, arm, t, rate_hz, ik_tol, floating, family, name, {**lp, **ap})
+            m = _play(robot, ik, leg, arm, t, rate_hz, ik_tol, floor, family, name, {**lp, **ap})
             if m is None:  # the IK missed a keyframe path: redraw
                 break
             if not screen:
                 return m
-            m.params.update(screen_feasibility(floating, m, rate_hz), slowed=factor, redraws=draw)
+            m.params.update(screen_feasibility(floating, m, rate_hz, floor.model), slowed=factor, redraws=draw)
             if m.params["feasible"]:
                 m.screen = ("ok" if factor == 1.0 else f"slowed x{factor:g}") + (f", {draw} redraws" if draw else "")
                 return m
@@ -213,7 +236,8 @@ def _key(name: str) -> int:
 
 POOL_MOTIONS_PER_WORKER = 8
 """Automatic pools give each worker at least this many motions: a worker spends about as long starting (imports,
-robots) as drawing 8 motions, so fewer would cost more than they save."""
+robots: 2.5 s on the project's CPU) as drawing 5 motions (0.49 s each at full size), so fewer would cost more than
+they save; 8 also leaves cores to the runs beside it (``benchmarks/results/floor_fair/speed_cpu/``)."""
 
 
 def pool_workers(workers: int, n: int) -> int:
@@ -227,13 +251,14 @@ def pool_workers(workers: int, n: int) -> int:
 
 
 _WORKER: dict = {}
-"""A pool worker's robots and foot IK, made once by :func:`_init_worker`."""
+"""A pool worker's robots, foot IK and :class:`FloorCache`, made once by :func:`_init_worker`."""
 
 
 def _init_worker(robot: Robot, floating: Robot, frames) -> None:
     """Start a pool worker: the robots arrive as their :func:`~wresdyn.robot.description.load_robot` calls (loaded
-    here again, the file's hash checked), the foot IK is built here."""
-    _WORKER.update(robot=robot, floating=floating, ik=FootIK(robot) if frames is None else FootIK(robot, frames))
+    here again, the file's hash checked), the foot IK and the floor's cache are built here."""
+    _WORKER.update(robot=robot, floating=floating, ik=FootIK(robot) if frames is None else FootIK(robot, frames),
+                   floor=FloorCache(floating))
 
 
 def _draw(job: tuple) -> Motion:
@@ -242,7 +267,8 @@ def _draw(job: tuple) -> Motion:
     family, duration, rate_hz, stream, name, side, max_draws, shift, screen = job
     w = _WORKER
     return make_motion(w["robot"], w["ik"], family, duration, rate_hz, np.random.default_rng(stream), name,
-                       side=side, max_draws=max_draws, floating=w["floating"], shift=shift, screen=screen)
+                       side=side, max_draws=max_draws, floating=w["floating"], shift=shift, screen=screen,
+                       floor_cache=w["floor"])
 
 
 def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = None, rate_hz: float = 500.0,
@@ -314,7 +340,9 @@ def make_motions(robot: Robot, counts: dict[str, int], duration: float | None = 
                                      initargs=(robot, floating, None if frames is None else tuple(frames))) as pool:
                 done = iter(list(pool.map(_draw, jobs)))
         else:
+            floor = FloorCache(floating)
             done = (make_motion(robot, ik, f, d, r, np.random.default_rng(st), nm, side=sd, max_draws=md,
-                                floating=floating, shift=sh, screen=sc) for f, d, r, st, nm, sd, md, sh, sc in jobs)
+                                floating=floating, shift=sh, screen=sc, floor_cache=floor)
+                    for f, d, r, st, nm, sd, md, sh, sc in jobs)
         splits = {k: [next(done) for _ in js] for k, js in splits.items()}
     return MotionSet(float(rate_hz), splits)

@@ -252,6 +252,9 @@ class RealPlant:
         self.lim = m.actuator_forcerange[:n].copy()
         self.limited = m.actuator_forcelimited[:n].astype(bool)
         self.state = np.zeros((self.num_worlds, self._nstate))
+        self._base_of = None
+        """The base pose and twist (float64) of the state they were read from, ``(state, pose, twist)``: an
+        environment step reads them four times (pose, twist, and both again for the IMU)."""
         self._fifo = np.zeros((self.num_worlds, real.n_delay, n))
         self.rng = np.random.default_rng(seed)
         self.q_true = np.zeros((self.num_worlds, n))
@@ -289,6 +292,7 @@ class RealPlant:
                 d.qpos[:7], d.qvel[:6] = base_qpos[i], base_qvel[i]
             d.qpos[-n:], d.qvel[-n:] = q[i], qd[i]
             self._mj.mj_getState(self.real.model, d, self.state[w], self._spec)
+        self._base_of = None  # the state changed in place
         self._fifo[ids] = q[:, None, :]
         self.q_true[ids], self.qd_true[ids] = q, qd
 
@@ -304,7 +308,10 @@ class RealPlant:
 
     def _base(self):
         s = self.state
-        pose, twist = free_from_mujoco(self.robot, s[:, self._iq0:self._iq0 + 7], s[:, self._iv0:self._iv0 + 6])
+        if self._base_of is None or self._base_of[0] is not s:  # a step replaces the state array
+            self._base_of = (s, *free_from_mujoco(self.robot, s[:, self._iq0:self._iq0 + 7],
+                                                  s[:, self._iv0:self._iv0 + 6]))
+        pose, twist = self._base_of[1:]
         f32 = dict(dtype=torch.float32)
         return torch.as_tensor(pose, **f32), torch.as_tensor(twist, **f32)
 
