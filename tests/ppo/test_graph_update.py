@@ -106,6 +106,65 @@ def test_kept_tensors_and_the_recapture_check(robot, data, tmp_path):
     assert alg._inputs() != inputs
 
 
+class _Recorded:
+    """A stand-in for a captured graph on the CPU: its replay runs the step, after checking that no tensor the step
+    reads was replaced since the capture (a real graph would read the old addresses)."""
+
+    def __init__(self, alg, step) -> None:
+        self.alg, self.step, self.inputs = alg, step, alg._inputs()
+
+    def replay(self) -> None:
+        assert self.alg._inputs() == self.inputs
+        self.step()
+
+
+@pytest.fixture
+def recorded_capture(monkeypatch) -> list:
+    """The CUDA path's warm-up and capture replaced by eager stand-ins (:class:`_Recorded`); the captures made."""
+    captures = []
+    monkeypatch.setattr(GraphPPO, "_on_side_stream", lambda self, step: step())
+    monkeypatch.setattr(GraphPPO, "_capture", lambda self, step: captures.append(_Recorded(self, step)) or captures[-1])
+    return captures
+
+
+@pytest.mark.parametrize("desired_kl", KLS[:2])
+def test_capture_path_order_equals_the_packed_update(robot, data, tmp_path, recorded_capture, desired_kl):
+    """The CUDA path's control flow (``WARMUP`` eager mini-batches, one capture, the captured mini-batch and every
+    later one replayed) with the capture recorded instead: the packed update bit for bit. ``compare`` gives each update
+    a copied rollout, new tensors, so the second update captures again."""
+    r = compare(_rollout(robot, data.split("train"), data.rate_hz, tmp_path, desired_kl),
+                run_graph=lambda a: a.static_update(capture=True))
+    assert r["moved"] > 1e-4 and r["equal"] and r["losses"][1] == r["losses"][0]
+    assert len(recorded_capture) == UPDATES
+
+
+def test_one_capture_while_the_inputs_stay(robot, data, tmp_path, recorded_capture):
+    """A rollout refilled in place (as rsl-rl's runner does) keeps the graph; a checkpoint's optimiser state loaded
+    replaces Adam's tensors, and the next update captures again instead of replaying on the old ones."""
+    alg = _rollout(robot, data.split("train"), data.rate_hz, tmp_path, 0.03)
+    saved = copy.deepcopy(alg.storage)
+    alg.__class__ = GraphPPO
+
+    def refill():
+        st = alg.storage
+        with torch.inference_mode():  # where the runner writes its rollout
+            st.observations.copy_(saved.observations)
+            for name in ("actions", "values", "returns", "actions_log_prob", "rewards", "dones"):
+                getattr(st, name).copy_(getattr(saved, name))
+            for mine, theirs in zip(st.distribution_params, saved.distribution_params):
+                mine.copy_(theirs)
+        st.advantages, st.step = saved.advantages.clone(), saved.step  # rsl-rl makes the advantages anew
+
+    for _ in range(2):
+        refill()
+        alg.static_update(capture=True)
+    assert len(recorded_capture) == 1
+    alg.optimizer.load_state_dict(copy.deepcopy(alg.optimizer.state_dict()))
+    refill()
+    alg.static_update(capture=True)
+    assert len(recorded_capture) == 2
+
+
 def test_graph_update_config():
     cfg = set_fields(tiny(), {"ppo.graph_update": True})
     assert runner_cfg(cfg)["algorithm"]["class_name"] == "wresdyn.ppo.graph_update:GraphPPO"

@@ -95,7 +95,7 @@ class GraphPPO(DeviceRate, PackedPPO):
         if (static is None or static.index.numel() != mini_batch
                 or static.advantages.shape[0] != st.num_envs * st.num_transitions_per_env):
             static = self._static = _Static(st, mini_batch, self.device)
-            self._graph = None
+            self._graph, self._warm = None, 0
         static.advantages.copy_(st.advantages.flatten(0, 1))
         static.sums.zero_()
         if capture and getattr(self, "_graph", None) is not None and self._graph_inputs != self._inputs():
@@ -144,23 +144,35 @@ class GraphPPO(DeviceRate, PackedPPO):
         """The mini-batch's step on CUDA: eager on a side stream for the first :data:`WARMUP`, then captured once
         (a capture runs nothing, so the captured mini-batch is replayed too) and replayed."""
         graph = getattr(self, "_graph", None)
-        if graph is not None:
-            graph.replay()
-            return
-        warm = getattr(self, "_warm", 0)
-        if warm < WARMUP:
-            side = torch.cuda.Stream(device=self.device)
-            side.wait_stream(torch.cuda.current_stream(self.device))
-            with torch.cuda.stream(side):
+        if graph is None:
+            def step():
                 self._step(adaptive, lr, static)
-            torch.cuda.current_stream(self.device).wait_stream(side)
-            self._warm = warm + 1
-            return
-        graph = torch.cuda.CUDAGraph()
-        with torch.cuda.graph(graph):
-            self._step(adaptive, lr, static)
-        self._graph, self._graph_inputs = graph, self._inputs()
+
+            warm = getattr(self, "_warm", 0)
+            if warm < WARMUP:
+                self._warm = warm + 1
+                return self._on_side_stream(step)
+            graph = self._graph = self._capture(step)
+            self._graph_inputs = self._inputs()
         graph.replay()
+
+    def _on_side_stream(self, step) -> None:
+        """Run ``step`` on a side stream, ordered after and before the current stream's work (PyTorch's warm-up for
+        a capture: autograd's and Adam's lazily made state then never comes from inside a graph)."""
+        side = torch.cuda.Stream(device=self.device)
+        side.wait_stream(torch.cuda.current_stream(self.device))
+        with torch.cuda.stream(side):
+            step()
+        torch.cuda.current_stream(self.device).wait_stream(side)
+
+    def _capture(self, step) -> "torch.cuda.CUDAGraph":
+        """``step`` captured as a CUDA graph (not run)."""
+        graph = torch.cuda.CUDAGraph()
+        # thread-local: the NCCL watchdog's thread may query the events of earlier collectives meanwhile, which a
+        # global capture would count as an unsafe call and abort on
+        with torch.cuda.graph(graph, capture_error_mode="thread_local"):
+            step()
+        return graph
 
     def _inputs(self) -> tuple[int, ...]:
         """The addresses of every tensor a captured step reads or writes besides its own intermediates: the
