@@ -12,8 +12,9 @@
 # update bit for bit (tests/ppo/test_packed_update.py), and with GRAPH=1 the update replayed from one CUDA graph per
 # mini-batch (+graph, ppo.graph_update: wresdyn.ppo.graph_update.GraphPPO), in one process per launch, their order
 # rotated from round to round so that none always runs first. GRAPH=1 first checks the captured update against the
-# default one on GPU 0 (tests/ppo/test_graph_update.py's CUDA test, where pytest is installed). Then the update's
-# profile on 2 GPUs once (the default update: the profile's synchronisations cannot run inside a capture).
+# default one on one GPU and on two over NCCL (tests/ppo/test_graph_update.py's CUDA tests, where pytest is
+# installed). Then the update's profile on 2 GPUs once (the default update: the profile's synchronisations cannot
+# run inside a capture).
 # The environment (PYTHONPATH, caches) is the caller's; python is python3. Writes into OUT:
 #   machine.txt                 the GPUs, host, load, versions, commit
 #   one_rN.{txt,json}           round N on one GPU; two_rN.{txt,json} on two; table_rN.txt both with the efficiency
@@ -55,12 +56,12 @@ scaling() {  # scaling GPUS PROCESSES JSON CASES...: ppo_scaling.py under torchr
     --iterations "$ITERS" --json "$json" --cases "$@" > "${json%.json}.txt" 2>&1
 }
 
-graph_check() {  # the captured update against the default one on GPU 0, within its stated tolerance
+graph_check() {  # the captured update against the default one on GPU 0 and on GPUs 0-1, within its tolerance
   if ! $PY -c "import pytest" 2>/dev/null; then
     echo "pytest is not installed: no check" > "$OUT/graph_check.txt"
     return 0
   fi
-  CUDA_VISIBLE_DEVICES=0 $PY -m pytest -p no:cacheprovider -q tests/ppo/test_graph_update.py -k cuda \
+  CUDA_VISIBLE_DEVICES=0,1 $PY -m pytest -p no:cacheprovider -q tests/ppo/test_graph_update.py -k cuda \
     > "$OUT/graph_check.txt" 2>&1
 }
 if [[ $GRAPH == 1 && $DEVICE == cuda* ]]; then step "graph check, 1 GPU" graph_check; fi

@@ -66,7 +66,7 @@ def compare(alg, run_graph=lambda alg: alg.static_update(capture=False)) -> dict
     torch.manual_seed(1)
     got, lr, losses = _updates(alg, storage, GraphPPO, run_graph)
     alg.__class__ = PackedPPO
-    rel = max(float((g.double() - r.double()).abs().max() / (r.double().abs().max() + 1e-7))
+    rel = max(float((g.cpu().double() - r.cpu().double()).abs().max() / (r.cpu().double().abs().max() + 1e-7))
               for r, g in zip(ref, got) if r.is_floating_point() and r.numel())
     equal = len(ref) == len(got) and all(torch.equal(r.cpu(), g.cpu()) for r, g in zip(ref, got))
     return {"moved": moved, "equal": equal, "rel": rel, "lr": [ref_lr, lr, start[3]], "losses": [ref_losses, losses]}
@@ -81,7 +81,7 @@ def test_graph_step_equals_the_packed_update_on_the_cpu(robot, data, tmp_path, d
     assert r["losses"][1] == r["losses"][0]
 
 
-def test_graph_update_runs_the_packed_update_without_cuda(robot, data, tmp_path):
+def test_graph_update_on_the_cpu_is_the_packed_update(robot, data, tmp_path):
     """On the CPU ``update`` is the packed update itself: the same numbers, nothing kept for a graph."""
     alg = _rollout(robot, data.split("train"), data.rate_hz, tmp_path, 0.03)
     r = compare(alg, run_graph=lambda a: a.update())
@@ -165,6 +165,22 @@ def test_one_capture_while_the_inputs_stay(robot, data, tmp_path, recorded_captu
     assert len(recorded_capture) == 2
 
 
+def test_a_graph_update_run_on_the_cpu_is_the_default_run(robot, data, tmp_path):
+    """``wresdyn train --ppo.graph-update`` on the CPU trains as without it (the packed update runs), checkpoints as
+    rsl-rl does, and the switch may change on resume."""
+    from wresdyn.ppo.trainer import train
+
+    cfg = set_fields(tiny(iterations=2), {"ppo.graph_update": True})
+    train(data, robot, cfg, tmp_path / "graph")
+    train(data, robot, set_fields(cfg, {"ppo.graph_update": False}), tmp_path / "default")
+    a, b = (torch.load(tmp_path / name / "model_1.pt", weights_only=True) for name in ("graph", "default"))
+    for key in ("actor_state_dict", "critic_state_dict"):
+        assert all(torch.equal(a[key][k], b[key][k]) for k in b[key])
+    assert all(type(g["lr"]) is float for g in a["optimizer_state_dict"]["param_groups"])
+    s = train(data, robot, set_fields(cfg, {"ppo.graph_update": False, "ppo.iterations": 3}), tmp_path / "graph")
+    assert s["iterations_this_session"] == 1
+
+
 def test_graph_update_config():
     cfg = set_fields(tiny(), {"ppo.graph_update": True})
     assert runner_cfg(cfg)["algorithm"]["class_name"] == "wresdyn.ppo.graph_update:GraphPPO"
@@ -174,14 +190,20 @@ def test_graph_update_config():
         PPOConfig(graph_update=True, one_sync_update=True)
 
 
-def test_graph_step_equals_the_packed_update_on_two_processes(tmp_path):
-    """Two ranks over gloo, each its own rollout: the step the graph captures, with the KL packed into the gradients'
-    all-reduce and the rate adapted on the device of every rank, against the packed update."""
+def _torchrun_two(tmp_path, device: str) -> None:
+    """This file's worker on two processes (gloo on the CPU, NCCL on two GPUs), its results in ``tmp_path``."""
     path = os.pathsep.join([str(ROOT), str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=path)
     res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-                          __file__, str(tmp_path)], capture_output=True, text=True, env=env, timeout=600, cwd=ROOT)
+                          __file__, str(tmp_path), device], capture_output=True, text=True, env=env, timeout=600,
+                         cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
+
+
+def test_graph_step_equals_the_packed_update_on_two_processes(tmp_path):
+    """Two ranks over gloo, each its own rollout: the step the graph captures, with the KL packed into the gradients'
+    all-reduce and the rate adapted on the device of every rank, against the packed update."""
+    _torchrun_two(tmp_path, "cpu")
     for rank in (0, 1):
         for kl in KLS:
             r = json.loads((tmp_path / f"rank{rank}_kl{kl}.json").read_text())
@@ -206,8 +228,22 @@ def test_captured_update_is_the_packed_update_within_rounding_on_cuda(robot, dat
         assert got == pytest.approx(ref, rel=1e-3, abs=1e-6)
 
 
-def _two_process_worker(out: Path) -> None:
-    """One torchrun rank of the two-process test: the packed update and the graph's step over gloo."""
+@pytest.mark.skipif(torch.cuda.device_count() < 2, reason="two GPUs: NCCL inside a captured graph")
+def test_captured_update_is_the_packed_update_within_rounding_on_two_cuda_processes(tmp_path):
+    """Two ranks on two GPUs over NCCL, the all-reduce inside each rank's graph: within :data:`CUDA_RTOL` of the
+    packed update on every rank, the rate moved the same way."""
+    _torchrun_two(tmp_path, "cuda")
+    for rank in (0, 1):
+        for kl in KLS:
+            r = json.loads((tmp_path / f"rank{rank}_kl{kl}.json").read_text())
+            assert r["moved"] > 1e-4 and r["rel"] <= CUDA_RTOL, (rank, kl, r["rel"])
+            ref_lr, lr, lr0 = r["lr"]
+            assert lr == pytest.approx(ref_lr, rel=1e-6) and lr != lr0, (rank, kl, r["lr"])
+
+
+def _two_process_worker(out: Path, device: str) -> None:
+    """One torchrun rank of the two-process tests: the packed update against the graph's step run eagerly (``cpu``,
+    gloo) or against the captured update (``cuda``: this rank's GPU, NCCL)."""
     from wresdyn.data.dataset import load_dataset
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
 
@@ -217,10 +253,12 @@ def _two_process_worker(out: Path) -> None:
     trajs = data.split("train")[:2]
     for kl in KLS:
         (out / f"run{rank}_{kl}").mkdir()
-        alg = _rollout(robot, trajs, data.rate_hz, out / f"run{rank}_{kl}", kl, seed=rank)
+        dev = f"cuda:{os.environ['LOCAL_RANK']}" if device == "cuda" else "cpu"
+        alg = _rollout(robot, trajs, data.rate_hz, out / f"run{rank}_{kl}", kl, seed=rank, device=dev)
         assert alg.is_multi_gpu and alg.gpu_world_size == 2
-        (out / f"rank{rank}_kl{kl}.json").write_text(json.dumps(compare(alg)))
+        r = compare(alg) if device == "cpu" else compare(alg, run_graph=lambda a: a.update())
+        (out / f"rank{rank}_kl{kl}.json").write_text(json.dumps(r))
 
 
 if __name__ == "__main__":
-    _two_process_worker(Path(sys.argv[1]))
+    _two_process_worker(Path(sys.argv[1]), sys.argv[2])
