@@ -37,12 +37,15 @@ buffers."""
 
 
 def _updates(alg, storage, cls, run) -> tuple[list[torch.Tensor], float, list[dict]]:
-    """``UPDATES`` updates of ``alg`` run as ``cls`` by ``run(alg)``, each on a copy of the same rollout: the state
-    after them, the learning rate, the losses of each."""
+    """``UPDATES`` updates of ``alg`` run as ``cls`` by ``run(alg)``, each on a copy of the same rollout and with its
+    own seed of the mini-batch permutation (a captured graph may advance CUDA's generator other than the eager steps
+    do, by the action samples the forward pass draws and discards): the state after them, the learning rate, the
+    losses of each."""
     alg.__class__ = cls
     losses = []
-    for _ in range(UPDATES):
+    for k in range(UPDATES):
         alg.storage = copy.deepcopy(storage)
+        torch.manual_seed(1 + k)
         losses.append(run(alg))
     return _state(alg), alg.learning_rate, losses
 
@@ -55,7 +58,6 @@ def compare(alg, run_graph=lambda alg: alg.static_update(capture=False)) -> dict
                            alg.learning_rate))
     before = [p.detach().clone() for p in (*alg.actor.parameters(), *alg.critic.parameters())]
     storage = copy.deepcopy(alg.storage)
-    torch.manual_seed(1)  # the mini-batch permutations
     ref, ref_lr, ref_losses = _updates(alg, storage, PackedPPO, lambda a: a.update())
     moved = max(float((p.detach() - b).abs().max())
                 for p, b in zip((*alg.actor.parameters(), *alg.critic.parameters()), before))
@@ -63,7 +65,6 @@ def compare(alg, run_graph=lambda alg: alg.static_update(capture=False)) -> dict
     alg.critic.load_state_dict(start[1])
     alg.optimizer.load_state_dict(start[2])
     alg.learning_rate = start[3]
-    torch.manual_seed(1)
     got, lr, losses = _updates(alg, storage, GraphPPO, run_graph)
     alg.__class__ = PackedPPO
     rel = max(float((g.cpu().double() - r.cpu().double()).abs().max() / (r.cpu().double().abs().max() + 1e-7))
