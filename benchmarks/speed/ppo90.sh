@@ -3,21 +3,27 @@
 #
 #   bash benchmarks/speed/ppo90.sh OUT           # ~5 min on an idle 2-GPU host
 #   BASELINE=0 bash benchmarks/speed/ppo90.sh OUT  # the default update only (~3.5 min)
+#   ITERS=50 BASELINE=0 GRAPH=1 bash benchmarks/speed/ppo90.sh OUT  # the default and the CUDA-graph update (~6 min)
 #   DEVICE=cpu N=16 ITERS=1 bash benchmarks/speed/ppo90.sh OUT  # a check of the script on the CPU (gloo; no figure)
 #
 # Each round: one GPU (torchrun, 1 process) at 4096 worlds, then two GPUs (torchrun, 2 processes) at 4096 worlds
 # each, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py): the residual's default update
 # (wresdyn.ppo.packed_update.PackedPPO) and, unless BASELINE=0, rsl-rl's own PPO.update (+rsl_update), the same
-# update bit for bit (tests/ppo/test_packed_update.py), in one process per launch, their order swapped from round to
-# round so that neither always runs first. Then the update's profile on 2 GPUs once (the default update).
+# update bit for bit (tests/ppo/test_packed_update.py), and with GRAPH=1 the update replayed from one CUDA graph per
+# mini-batch (+graph, ppo.graph_update: wresdyn.ppo.graph_update.GraphPPO), in one process per launch, their order
+# rotated from round to round so that none always runs first. GRAPH=1 first checks the captured update against the
+# default one on one GPU and on two over NCCL (tests/ppo/test_graph_update.py's CUDA tests, where pytest is
+# installed). Then the update's profile on 2 GPUs once (the default update: the profile's synchronisations cannot
+# run inside a capture).
 # The environment (PYTHONPATH, caches) is the caller's; python is python3. Writes into OUT:
 #   machine.txt                 the GPUs, host, load, versions, commit
 #   one_rN.{txt,json}           round N on one GPU; two_rN.{txt,json} on two; table_rN.txt both with the efficiency
+#   graph_check.txt             GRAPH=1: the CUDA test's output
 #   profile_two.{txt,json}      benchmarks/speed/ppo_update_profile.py on 2 GPUs
 #   steps.txt                   each step's start, seconds and exit status
 set -u
 OUT=${1:?usage: ppo90.sh OUT}
-BASELINE=${BASELINE:-1} DEVICE=${DEVICE:-cuda} N=${N:-4096} ITERS=${ITERS:-15}
+BASELINE=${BASELINE:-1} GRAPH=${GRAPH:-0} DEVICE=${DEVICE:-cuda} N=${N:-4096} ITERS=${ITERS:-15}
 mkdir -p "$OUT"
 PY=python3
 TORCHRUN=(python3 -m torch.distributed.run --standalone)
@@ -50,12 +56,23 @@ scaling() {  # scaling GPUS PROCESSES JSON CASES...: ppo_scaling.py under torchr
     --iterations "$ITERS" --json "$json" --cases "$@" > "${json%.json}.txt" 2>&1
 }
 
-for r in 1 2 3; do
-  one=("residual:$N") two=("residual:$((2 * N))")
-  if [[ $BASELINE == 1 ]]; then
-    if (( r % 2 )); then one+=("residual:$N+rsl_update") two+=("residual:$((2 * N))+rsl_update")
-    else one=("residual:$N+rsl_update" "${one[@]}") two=("residual:$((2 * N))+rsl_update" "${two[@]}"); fi
+graph_check() {  # the captured update against the default one on GPU 0 and on GPUs 0-1, within its tolerance
+  if ! $PY -c "import pytest" 2>/dev/null; then
+    echo "pytest is not installed: no check" > "$OUT/graph_check.txt"
+    return 0
   fi
+  CUDA_VISIBLE_DEVICES=0,1 $PY -m pytest -p no:cacheprovider -q tests/ppo/test_graph_update.py -k cuda \
+    > "$OUT/graph_check.txt" 2>&1
+}
+if [[ $GRAPH == 1 && $DEVICE == cuda* ]]; then step "graph check, 1 GPU" graph_check; fi
+
+variants=("")  # each case's options: the default update, then the switched-on comparisons
+[[ $BASELINE == 1 ]] && variants+=("+rsl_update")
+[[ $GRAPH == 1 ]] && variants+=("+graph")
+for r in 1 2 3; do
+  k=$(( (r - 1) % ${#variants[@]} ))
+  one=() two=()
+  for v in "${variants[@]:k}" "${variants[@]:0:k}"; do one+=("residual:$N$v") two+=("residual:$((2 * N))$v"); done
   step "round $r, 1 GPU: ${one[*]}" scaling 0 1 "$OUT/one_r$r.json" "${one[@]}"
   step "round $r, 2 GPUs: ${two[*]}" scaling 0,1 2 "$OUT/two_r$r.json" "${two[@]}"
   $PY benchmarks/speed/ppo_scaling.py --table "$OUT/one_r$r.json" "$OUT/two_r$r.json" > "$OUT/table_r$r.txt" 2>&1

@@ -37,13 +37,14 @@ def test_host_learning_rate_follows_rsl_rls_rule():
     assert next_learning_rate(1e-5, True, False) == 1e-5 and next_learning_rate(9e-3, False, True) == 1e-2
 
 
-def _rollout(robot, trajs, rate_hz, tmp_path, desired_kl, seed=0):
-    """A runner of the tiny residual run (rsl-rl's PPO) after one rollout: its storage full, the returns computed."""
+def _rollout(robot, trajs, rate_hz, tmp_path, desired_kl, seed=0, device="cpu"):
+    """A runner of the tiny residual run (rsl-rl's PPO) on ``device`` after one rollout: its storage full, the
+    returns computed."""
     torch.manual_seed(0)  # the same initial weights on every rank
     cfg = set_fields(tiny(), {"env.num_worlds": 8, "ppo.num_learning_epochs": 3, "ppo.desired_kl": desired_kl})
     mean, std = obs_stats(trajs)
     env = ReplayEnv(robot, trajs, rate_hz, 8, cfg.env, cfg.residual, cfg.rewards, obs_mean=mean, obs_std=std,
-                    seed=seed)
+                    seed=seed, device=device)
     rcfg = runner_cfg(cfg)
     assert rcfg["algorithm"]["class_name"] == "wresdyn.ppo.packed_update:PackedPPO"  # the residual's default
     rcfg["algorithm"]["class_name"] = "PPO"

@@ -77,6 +77,12 @@ class PPOConfig:
     """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.ppo.update.OneSyncPPO`:
     the adaptive learning rate on the device, gradients and KL in one all-reduce per mini-batch across processes)
     instead of rsl-rl's ~5 per mini-batch; the same update up to rounding."""
+    graph_update: bool = False
+    """On CUDA, replay each mini-batch's whole update step (forward, backward, the all-reduce, clip, Adam) from one
+    CUDA graph (:class:`~wresdyn.ppo.graph_update.GraphPPO`), so the host launches one graph per mini-batch instead
+    of its kernels one by one; off until measured on GPUs (``benchmarks/results/speed/ppograph57_plan.md``). The
+    packed update up to Adam's rounding (capturable Adam); on the CPU, with mixed precision or with ``compile_mode``
+    the packed update runs as without it."""
     mixed_precision: bool = False
     """rsl-rl's mixed precision: the update's forward passes and losses under bfloat16 autocast."""
     compile_mode: str = ""
@@ -98,12 +104,14 @@ class PPOConfig:
             if getattr(self, name) is not None:
                 check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
         check_device(self.device, "ppo.device")
+        if self.graph_update and self.one_sync_update:
+            raise WresdynError("ppo.graph_update and ppo.one_sync_update are two updates; choose one")
         if self.compile_mode not in COMPILE_MODES:
             raise WresdynError(f"ppo.compile_mode = {self.compile_mode!r}; choose from {COMPILE_MODES}")
 
 
 RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph", "one_sync_update",
-                     "mixed_precision", "compile_mode")
+                     "graph_update", "mixed_precision", "compile_mode")
 """:class:`PPOConfig` fields a resumed run may change: how long, where and how it runs (the arithmetic of the
 update included, as a change of device changes it), not what it learns."""
 

@@ -139,7 +139,8 @@ class Runner(OnPolicyRunner):
 
 def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, critic: dict,
                    critic_groups=("critic",), run_name: str = "", one_sync_update: bool = False,
-                   packed_update: bool = False, compile_mode: str = "", **algorithm) -> dict:
+                   packed_update: bool = False, graph_update: bool = False, compile_mode: str = "",
+                   **algorithm) -> dict:
     """The rsl-rl ``OnPolicyRunner`` configuration dict: PPO with the adaptive learning rate, its settings
     ``algorithm`` (``num_learning_epochs``, ``num_mini_batches``, ``clip_param``, ``gamma``, ``lam``,
     ``value_loss_coef``, ``entropy_coef``, ``learning_rate``, ``max_grad_norm``, ``desired_kl``,
@@ -147,9 +148,10 @@ def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, c
     observation group ``policy``, the critic ``critic_groups`` (more than the actor's: an asymmetric actor-critic).
     ``one_sync_update``: the update of :class:`~wresdyn.ppo.update.OneSyncPPO` instead of rsl-rl's own;
     ``packed_update`` (without ``one_sync_update``): :class:`~wresdyn.ppo.packed_update.PackedPPO`, rsl-rl's update
-    bit for bit with fewer collectives and host waits;
+    bit for bit with fewer collectives and host waits; ``graph_update`` (without ``one_sync_update``):
+    :class:`~wresdyn.ppo.graph_update.GraphPPO`, the packed update with each mini-batch's step one CUDA graph replay;
     ``compile_mode``: rsl-rl's ``torch.compile`` of the actor and critic (``""``: none)."""
-    ppo = ("wresdyn.ppo.update:OneSyncPPO" if one_sync_update
+    ppo = ("wresdyn.ppo.update:OneSyncPPO" if one_sync_update else "wresdyn.ppo.graph_update:GraphPPO" if graph_update
            else "wresdyn.ppo.packed_update:PackedPPO" if packed_update else "PPO")
     return {
         "num_steps_per_env": num_steps_per_env,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import torch
 from rsl_rl.algorithms import PPO
 
-__all__ = ["OneSyncPPO", "PlainPPO", "adapt_learning_rate"]
+__all__ = ["DeviceRate", "OneSyncPPO", "PlainPPO", "adapt_learning_rate"]
 
 LR_MIN, LR_MAX, LR_FACTOR = 1e-5, 1e-2, 1.5
 """rsl-rl's adaptive-schedule bounds on the learning rate and its step factor."""
@@ -77,8 +77,10 @@ class PlainPPO(PPO):
         return loss, kl, logged
 
 
-class OneSyncPPO(PlainPPO):
-    """rsl-rl's :class:`~rsl_rl.algorithms.PPO` whose update waits on the device once (see the module)."""
+class DeviceRate:
+    """A PPO whose learning rate lives on the device while it updates (:class:`OneSyncPPO`,
+    :class:`~wresdyn.ppo.graph_update.GraphPPO`): the rate as a tensor in Adam's groups, and checkpoints as rsl-rl's
+    own update writes them (the rate a number, Adam's step counts on the host). Mixed into a PPO class."""
 
     def _device_lr(self) -> torch.Tensor:
         """The learning rate as a 0-d float64 tensor on the device, set in every parameter group (on CUDA Adam then
@@ -98,6 +100,28 @@ class OneSyncPPO(PlainPPO):
                     if "step" in state:
                         state["step"] = state["step"].to(device=self.device, dtype=torch.float32)
         return lr
+
+    def save(self) -> dict:
+        """rsl-rl's checkpoint, with the learning rate as a number and Adam's step counts on the host, as rsl-rl's own
+        update saves them."""
+        data = super().save()
+        opt = data["optimizer_state_dict"]
+        for group in opt["param_groups"]:
+            group["lr"] = float(group["lr"])
+            group["capturable"] = False
+        # the per-parameter dicts are the live optimiser's: copied before the step counts move
+        opt["state"] = {k: {**v, "step": v["step"].detach().to("cpu", torch.float32)} if torch.is_tensor(v.get("step"))
+                        else v for k, v in opt["state"].items()}
+        return data
+
+    def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
+        out = super().load(loaded_dict, load_cfg, strict)
+        self.learning_rate = float(self.learning_rate)
+        return out
+
+
+class OneSyncPPO(DeviceRate, PlainPPO):
+    """rsl-rl's :class:`~rsl_rl.algorithms.PPO` whose update waits on the device once (see the module)."""
 
     def update(self) -> dict[str, float]:
         if not self._plain():
@@ -135,21 +159,3 @@ class OneSyncPPO(PlainPPO):
         packed /= self.gpu_world_size
         torch._foreach_copy_(grads, list(torch.split(packed[:-1], [g.numel() for g in grads])))
         return packed[-1]
-
-    def save(self) -> dict:
-        """rsl-rl's checkpoint, with the learning rate as a number and Adam's step counts on the host, as rsl-rl's own
-        update saves them."""
-        data = super().save()
-        opt = data["optimizer_state_dict"]
-        for group in opt["param_groups"]:
-            group["lr"] = float(group["lr"])
-            group["capturable"] = False
-        # the per-parameter dicts are the live optimiser's: copied before the step counts move
-        opt["state"] = {k: {**v, "step": v["step"].detach().to("cpu", torch.float32)} if torch.is_tensor(v.get("step"))
-                        else v for k, v in opt["state"].items()}
-        return data
-
-    def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
-        out = super().load(loaded_dict, load_cfg, strict)
-        self.learning_rate = float(self.learning_rate)
-        return out
