@@ -165,7 +165,8 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
                     row["validation"] = value
                     best.consider(value, it + 1, learner.module)
                     reached = stop_below is not None and value <= stop_below
-                note = sched.observe(value, it + 1, row["wall"])
+                kept = best.state is not None and best.iteration == 0  # the starting point, still selected
+                note = sched.observe(value, it + 1, row["wall"], start=best.value if kept else None)
             curve.append(row)
             progress.update(1, f"H={h}" + (f"  loss {row['loss']:.2e}" if "loss" in row else ""))
             it += 1
