@@ -1,6 +1,7 @@
 """The window-fit loop (:mod:`wresdyn.learn.window_fit`) on a toy learner: the schedule, scoring and selection on
 validation, a run stopped with ``until`` and resumed equal to one run straight through, ``stop_below``, and loss
-parts read back late (the CUDA-graph path) giving the same rows."""
+parts read back late (the CUDA-graph path) giving the same rows, the start rule (``beat_start_within``) and the
+clocked log's set-up line."""
 
 from dataclasses import dataclass
 
@@ -238,3 +239,24 @@ def test_the_start_rule_counts_checks_across_a_resume(tmp_path):
     toy, run, resumed, lines = _start_rule(Away, 3, tmp_path / "run")
     assert _strip(resumed) == _strip(straight) and run.best.iteration == 0
     assert any("none of 3 validation checks" in line for line in lines)
+
+
+def test_a_clocked_log_marks_the_end_of_the_set_up_before_the_start_is_scored():
+    rng = np.random.default_rng(0)
+    order = []
+
+    class Marked(Toy):
+        def begin(self, run):
+            order.append("begin")
+            super().begin(run)
+
+    def log(line):
+        order.append(line)
+
+    log.clock = True  # as ClockLog's with WRESDYN_LOG_CLOCK=1
+    run_window_fit(Cfg(), Marked(rng), RunFolder(None, {}), rng, log=log)
+    assert order[:2] == ["toy fit: set up; scoring the start", "begin"]
+    plain = []
+    run_window_fit(Cfg(), Toy(np.random.default_rng(0)), RunFolder(None, {}), np.random.default_rng(0),
+                   log=plain.append)
+    assert not any("set up" in line for line in plain)  # without the clock the log is unchanged

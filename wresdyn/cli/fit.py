@@ -246,7 +246,8 @@ def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics
         def evaluate():
             # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would
             # wait for Clang's first compile of them)
-            evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
+            evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device,
+                         mark=log if log.clock else None)
             if log.clock:
                 log("evaluation done")
 

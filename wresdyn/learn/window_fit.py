@@ -101,6 +101,8 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         sched.restore(data["meta"].get("schedule", {}))
         log(f"resumed from {run.checkpoint} at iteration {run.iteration}")
     else:
+        if getattr(log, "clock", False):  # a clocked log splits the learner's set-up from its first validation
+            log(f"{learner.what}: set up; scoring the start")
         learner.begin(run)
     start_it, curve, best = run.iteration, run.curve, run.best
     t0 = time.perf_counter() - run.wall
