@@ -107,8 +107,8 @@ def onnx_with_evaluation(write_onnx, evaluate, device: str):
     On the CPU the replay's steps run in Warp's kernels outside the interpreter, which the export's tracing (pure
     Python) uses meanwhile. On a GPU the replay is the interpreter launching small kernels and waiting for the device
     twice a step, and each wait hands the interpreter to the export's thread, which keeps it for up to a switch
-    interval: beside the export the H200's evaluation took 6.5-10.2 s, the export and the evaluation one after the
-    other 7.3-9.6 s together (``benchmarks/results/speed/fitcut57_cpu/prediction.md``)."""
+    interval: from stage 2's selection to the evaluation's end the H200 took 8.4-11.8 s with the thread, 7.3-9.6 s
+    with the export before the evaluation (``benchmarks/results/speed/fitcut57_cpu/prediction.md``)."""
     if str(device).startswith("cpu"):
         return run_beside(write_onnx, evaluate)
     result = evaluate()
