@@ -1,6 +1,8 @@
-"""``Simulator.diverged`` against its definition written out with ``torch.isfinite`` (the form it had before its
-finiteness test became ``x * 0 == 0`` and its bounds could be given once per loop): equal on every edge case that
-either form could read differently, non-finite values, infinite limits and limits of every kind."""
+"""What a replay runs at every step to find and hold diverged worlds, against plain definitions: ``Simulator.diverged``
+against the form it had before (``torch.isfinite``, one reduction per test, the bounds computed per call), equal on
+every edge case either could read differently (non-finite values, infinite limits, limits of every kind); and
+``Simulator.set_state_where`` (written in place where the state's columns are a slice) against ``set_state`` of the
+masked worlds, for a slice and for an index tensor."""
 
 import math
 
@@ -59,3 +61,22 @@ def test_diverged_equals_its_isfinite_definition_on_every_edge_case(sim, limits,
             assert 0 < int(want.sum()) < worlds  # both kinds of world are in the test
     finally:
         sim.lower, sim.upper = lower, upper
+
+
+@pytest.mark.parametrize("as_tensor", [False, True])
+def test_set_state_where_writes_the_masked_worlds_only(robot, as_tensor):
+    sim = Simulator(robot, 5, 0.002)
+    if as_tensor:  # the gather-and-scatter path of a robot whose coordinates are not contiguous
+        for name in ("q_index", "qd_index"):
+            index = getattr(sim, name)
+            setattr(sim, name, torch.arange(index.start, index.stop))
+    assert isinstance(sim.q_index, torch.Tensor) == as_tensor
+    gen = torch.Generator().manual_seed(1)
+    n = sim.lower.shape[0]
+    q0, qd0 = torch.rand(5, n, generator=gen), torch.rand(5, n, generator=gen)
+    q1, qd1 = torch.rand(5, n, generator=gen), torch.rand(5, n, generator=gen)
+    mask = torch.tensor([True, False, True, False, False])
+    sim.set_state(None, q0, qd0)
+    sim.set_state_where(mask, q1, qd1)
+    want_q, want_qd = torch.where(mask[:, None], q1, q0), torch.where(mask[:, None], qd1, qd0)
+    assert torch.equal(sim.q, want_q) and torch.equal(sim.qd, want_qd)
