@@ -188,7 +188,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                     q_new = torch.where(dead[:, None], q, q_new)
                     qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
                     sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
-        qdd = (qd_new - qd) / sim.dt
+        if policy is not None:  # the policy's observation is what reads it
+            qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
         qds.append(qd)
