@@ -171,7 +171,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
             q_new, qd_new = sim.step_diff(k, q, qd, target, tau)
         else:
             q_new, qd_new = sim.step(target, tau)
-            bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1], bounds) & ~dead
+            # on bools a > b is a and not b, in one kernel
+            bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1], bounds) > dead
             if masked:  # frozen worlds hold their last sane state at rest; keeps NaN out of the solver and the policy
                 dead = dead | bad
                 diverged_at = torch.where(bad, k + 1, diverged_at)

@@ -383,7 +383,7 @@ class Simulator:
         tensors -> bool (N,). ``bounds``: (lower, upper), the limits widened by the margin, from a loop over steps."""
         lo, hi = bounds or (self.lower - limits.limit_margin, self.upper + limits.limit_margin)
         nonfinite = torch.cat([q, qd], -1).mul(0.0).ne(0.0)  # x * 0 is ±0 for a finite x, NaN for ±inf and NaN
-        bad = torch.cat([nonfinite, (q < lo) | (q > hi), qd.abs() > limits.max_qd], -1).any(-1)  # one reduction
+        bad = torch.cat([nonfinite, q < lo, q > hi, qd.abs() > limits.max_qd], -1).any(-1)  # one reduction
         if q_ref is not None and math.isfinite(limits.max_error):
             bad |= ((q - q_ref).abs() > limits.max_error).any(-1)
         return bad
