@@ -12,9 +12,9 @@ first) with a falling learning rate. Two schedules drive them:
   ``min_improvement`` (relative) over the best so far. Stage s of S starts at the cosine's rate at s / S, so the
   rates the stages see are the fixed schedule's. ``max_iterations`` and ``max_seconds`` (training wall-clock) are
   ceilings. Where the starting point is a candidate (the hybrid's zero residual) and ``beat_start_within`` is set, a
-  fit none of whose first ``beat_start_within`` checks beat the start stops there, keeping the start. A fixed count tuned on one robot under- or over-fits another (a 29-DoF humanoid's validation still fell
-  by 20 % over the last tenth of the shipped humanoid's 800 identification iterations); validation says when to
-  move on for any robot.
+  fit none of whose first ``beat_start_within`` checks beat the start stops there, keeping the start. A fixed count
+  tuned on one robot under- or over-fits another (a 29-DoF humanoid's validation still fell by 20 % over the last
+  tenth of the shipped humanoid's 800 identification iterations); validation says when to move on for any robot.
 
 The log says why each stage ended and why the fit stopped (:attr:`PlateauSchedule.reason`).
 """

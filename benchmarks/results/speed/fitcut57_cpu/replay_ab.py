@@ -3,7 +3,7 @@ torch thread) of the tree on PYTHONPATH: PD and with the residual network at its
 default) and the branch-free one (the loop a CUDA graph captures); best and median of REPEATS after one warm-up, and a
 hash of each output (q, q̇, diverged_at) for comparing two trees' results.
 
-    PYTHONPATH=TREE OMP_NUM_THREADS=1 python benchmarks/results/speed/fitcut57_cpu/replay_ab.py data/dataset.npz [REPEATS]
+    PYTHONPATH=TREE OMP_NUM_THREADS=1 python replay_ab.py data/dataset.npz [REPEATS]   (this folder's script)
 """
 import hashlib
 import json
