@@ -1,5 +1,5 @@
-"""The fit's ONNX export beside its evaluation: the files are those of the export in one go, and an error in either
-is raised, not lost in the thread."""
+"""The fit's ONNX export beside its evaluation (CPU) or after it (GPU): the files are those of the export in one go,
+and an error in either is raised, not lost in the thread."""
 
 import filecmp
 import threading
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from wresdyn.cli.fit import run_beside
+from wresdyn.cli.fit import onnx_with_evaluation, run_beside
 from wresdyn.learn.residual import MLPResidualPolicy, export_run_files
 
 FILES = ("policy.pt", "policy.onnx", "residual.json")
@@ -63,3 +63,32 @@ def test_the_work_error_wins_after_the_background_finished():
     with pytest.raises(ValueError, match="evaluation failed"):
         run_beside(background, work)
     assert finished == [True]
+
+
+@pytest.mark.parametrize("device", ["cpu", "cuda:0", "cuda"])
+def test_the_onnx_is_written_beside_a_cpu_evaluation_and_after_a_gpu_one(device):
+    events = []  # (what, in the main thread)
+
+    def write_onnx():
+        events.append(("onnx", threading.current_thread() is threading.main_thread()))
+
+    def evaluate():
+        if device == "cpu":  # beside: the export runs while the evaluation does
+            assert _wait_for(events), "the export did not run beside the evaluation"
+        events.append(("eval", threading.current_thread() is threading.main_thread()))
+        return 3
+
+    assert onnx_with_evaluation(write_onnx, evaluate, device) == 3
+    if device == "cpu":
+        assert events == [("onnx", False), ("eval", True)]
+    else:  # one after the other, here
+        assert events == [("eval", True), ("onnx", True)]
+
+
+def _wait_for(events, seconds=30.0):
+    import time
+
+    end = time.monotonic() + seconds
+    while not events and time.monotonic() < end:
+        time.sleep(0.001)
+    return bool(events)

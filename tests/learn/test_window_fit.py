@@ -1,6 +1,7 @@
 """The window-fit loop (:mod:`wresdyn.learn.window_fit`) on a toy learner: the schedule, scoring and selection on
 validation, a run stopped with ``until`` and resumed equal to one run straight through, ``stop_below``, and loss
-parts read back late (the CUDA-graph path) giving the same rows."""
+parts read back late (the CUDA-graph path) giving the same rows, the start rule (``beat_start_within``) and the
+clocked log's set-up line."""
 
 from dataclasses import dataclass
 
@@ -128,6 +129,7 @@ class PlateauCfg:
     lr_decay: float = 0.5
     max_iterations: int = 400
     max_seconds: float | None = None
+    beat_start_within: int | None = None
 
 
 class Target(Toy):
@@ -186,3 +188,75 @@ def test_until_a_plateau_resumes_to_the_same_numbers(tmp_path):
     toy, _, resumed, lines = _plateau(tmp_path / "run")
     strip = lambda rows: [{k: v for k, v in r.items() if k != "wall"} for r in rows]  # noqa: E731
     assert strip(resumed) == strip(straight) and any("converged" in line for line in lines)
+
+
+class Away(Target):
+    """Drifts away from the validation optimum: no check ever beats the start."""
+
+    def step(self, it, h, lr):
+        self.seen.append((it, h, lr))
+        w = self.module.weight
+        with torch.no_grad():
+            w -= lr * 0.2 * (w + 1.0)
+        loss = (w.detach() + 1.0) ** 2
+        return {"h": h, "loss": float(loss), "pos": float(loss)}, None
+
+
+def _strip(rows):
+    return [{k: v for k, v in r.items() if k != "wall"} for r in rows]
+
+
+def _start_rule(learner, within, out=None, until=None):
+    rng = np.random.default_rng(0)
+    toy, lines = learner(rng), []
+    run = RunFolder(out, {"iterations": None}, key="toy")
+    curve = run_window_fit(PlateauCfg(beat_start_within=within), toy, run, rng, log=lines.append, until=until)
+    return toy, run, curve, lines
+
+
+def test_a_fit_that_never_beats_its_start_stops_after_beat_start_within_checks_with_the_same_selection():
+    toy, run, curve, lines = _start_rule(Away, None)
+    checks = _strip(r for r in curve if "validation" in r)
+    assert len(checks) > 3 and all(r["validation"] >= run.best.value for r in checks)
+    assert run.best.iteration == 0 and float(toy.module.weight.detach()) == 0.0  # the whole schedule selects the start
+    toy3, run3, curve3, lines3 = _start_rule(Away, 3)
+    assert _strip(r for r in curve3 if "validation" in r) == checks[:3] and len(curve3) == 3 * PlateauCfg.select_every
+    assert run3.best.iteration == 0 and float(toy3.module.weight.detach()) == 0.0  # the same selection, earlier
+    assert any("none of 3 validation checks beat the start's" in line for line in lines3), lines3[-3:]
+    assert "selected iteration 0 by validation" in lines3[-1]
+
+
+def test_a_fit_that_beats_its_start_runs_its_whole_schedule_whatever_beat_start_within_says():
+    _, run, curve, _ = _start_rule(Target, None)
+    _, run1, curve1, lines1 = _start_rule(Target, 1)
+    assert _strip(curve1) == _strip(curve) and run1.best.iteration == run.best.iteration > 0
+    assert not any("beat the start" in line for line in lines1)
+
+
+def test_the_start_rule_counts_checks_across_a_resume(tmp_path):
+    _, _, straight, _ = _start_rule(Away, 3)
+    _start_rule(Away, 3, tmp_path / "run", until=2 * PlateauCfg.select_every)
+    toy, run, resumed, lines = _start_rule(Away, 3, tmp_path / "run")
+    assert _strip(resumed) == _strip(straight) and run.best.iteration == 0
+    assert any("none of 3 validation checks" in line for line in lines)
+
+
+def test_a_clocked_log_marks_the_end_of_the_set_up_before_the_start_is_scored():
+    rng = np.random.default_rng(0)
+    order = []
+
+    class Marked(Toy):
+        def begin(self, run):
+            order.append("begin")
+            super().begin(run)
+
+    def log(line):
+        order.append(line)
+
+    log.clock = True  # as ClockLog's with WRESDYN_LOG_CLOCK=1
+    run_window_fit(Cfg(), Marked(rng), RunFolder(None, {}), rng, log=log)
+    assert order[:2] == ["toy fit: set up; scoring the start", "begin"]
+    plain = []
+    run_window_fit(Cfg(), Toy(np.random.default_rng(0)), RunFolder(None, {}), np.random.default_rng(0),
+                   log=plain.append)
+    assert not any("set up" in line for line in plain)  # without the clock the log is unchanged

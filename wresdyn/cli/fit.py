@@ -100,6 +100,22 @@ def run_beside(background, work):
     return result
 
 
+def onnx_with_evaluation(write_onnx, evaluate, device: str):
+    """Write the ONNX file (``write_onnx()``) with the evaluation (``evaluate()``, whose result is returned): beside it
+    on a thread where the evaluation replays on the CPU, after it elsewhere.
+
+    On the CPU the replay's steps run in Warp's kernels outside the interpreter, which the export's tracing (pure
+    Python) uses meanwhile. On a GPU the replay is the interpreter launching small kernels and waiting for the device
+    twice a step, and each wait hands the interpreter to the export's thread, which keeps it for up to a switch
+    interval: from stage 2's selection to the evaluation's end the H200 took 8.4-11.8 s with the thread, 7.3-9.6 s
+    with the export before the evaluation (``benchmarks/results/speed/fitcut57_cpu/prediction.md``)."""
+    if str(device).startswith("cpu"):
+        return run_beside(write_onnx, evaluate)
+    result = evaluate()
+    write_onnx()
+    return result
+
+
 @contextmanager
 def without_collector():
     """The cyclic garbage collector off for the block, then as it was: for work whose objects are few or short-lived
@@ -230,12 +246,13 @@ def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics
         def evaluate():
             # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would
             # wait for Clang's first compile of them)
-            evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device)
+            evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device,
+                         mark=log if log.clock else None)
             if log.clock:
                 log("evaluation done")
 
-        # the ONNX file (most of the export's time) is written beside the evaluation, which reads policy.pt only:
-        # the same file from the same program, off the command's critical path
-        run_beside(write_onnx, evaluate)
+        # the ONNX file (most of the export's time) is the same file from the same program whenever it is written:
+        # the evaluation reads policy.pt only
+        onnx_with_evaluation(write_onnx, evaluate, cfg.device)
         if log.clock:
             log(f"wrote {out / 'policy.onnx'}")

@@ -13,12 +13,13 @@ __all__ = ["evaluate_run", "load_run_model", "run_friction_kappa"]
 
 
 def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
-                 device: str = "cpu", joints: int = 6, compare=(), data_label: str = "") -> dict:
+                 device: str = "cpu", joints: int = 6, compare=(), data_label: str = "", mark=None) -> dict:
     """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
     per-split summaries. A run with ``physics.json`` (``wresdyn identify``, or a residual fitted on top of
     identified physics) replays its model with those parameters; a run with no residual evaluates the
     calibrated model under PD alone. Every replay runs under the run's own dry-friction law
-    (:func:`run_friction_kappa`)."""
+    (:func:`run_friction_kappa`). ``mark``: called with a short note as each part ends (the model loaded, the splits
+    replayed), for a clocked log; ``None``: nothing."""
     import json
     from pathlib import Path
 
@@ -31,6 +32,8 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     out_dir = Path(out) if out else run_dir / "eval"
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
+    mark = mark or (lambda _: None)
+    mark("evaluation: the model loaded")
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)
@@ -44,6 +47,7 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
             print(f"{split}: no trajectories, skipped")
     done = evaluate_splits(robot, todo, ds.rate_hz, policy, meta["kind"], solver, substeps, device, physics=physics,
                            weights=weights, friction_kappa=kappa) if todo else {}
+    mark("evaluation: the splits replayed")
     for split, (summary, runs) in done.items():
         trajs = todo[split]
         results[split] = summary

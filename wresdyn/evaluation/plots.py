@@ -59,10 +59,11 @@ def save_figure(fig, path: str | Path, dpi: int = 110) -> Path:
 
 def learning_curves(run_dir: str | Path, tags=("Reward/mimic", "Train/mean_reward", "Error/mean_abs_dq")) -> dict:
     """Scalars logged to tensorboard in ``run_dir``: tag -> (iterations (k,), values (k,)); later files win."""
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
     curves: dict[str, dict[int, float]] = {}
-    for f in sorted(Path(run_dir).glob("events.out.tfevents.*"), key=lambda p: p.stat().st_mtime):
+    files = sorted(Path(run_dir).glob("events.out.tfevents.*"), key=lambda p: p.stat().st_mtime)
+    if files:  # tensorboard's reader takes a few tenths of a second to import; a gradient fit logs no events
+        from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    for f in files:
         acc = EventAccumulator(str(f), size_guidance={"scalars": 0})
         acc.Reload()
         for tag in tags:

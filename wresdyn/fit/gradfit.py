@@ -83,9 +83,11 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
     return loss, {k: v.detach() for k, v in parts.items()}
 
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph", "max_iterations", "max_seconds")
-""":class:`GradFitConfig` fields a resumed fit may change: where it runs and the ceilings of a run until convergence,
-not what it learns (``iterations`` shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph", "max_iterations", "max_seconds",
+                     "beat_start_within")
+""":class:`GradFitConfig` fields a resumed fit may change: where it runs and the ceilings and early stop of a run until
+convergence, not what it learns (``iterations`` shapes the learning-rate and horizon schedule, so it is part of what
+it learns)."""
 
 
 def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None,

@@ -22,6 +22,14 @@ class GradFitConfig(WindowFitStop):
     ``None``. Two: on the shipped humanoid's identified model the residual's validation stays within 1 % over its six
     horizons either way (3: 1040 iterations, 60 s; 2: 680 iterations, 34 s)."""
 
+    beat_start_within: int | None = 12
+    """Validation checks within which the residual must beat its start where the start is a candidate (the hybrid:
+    the identified model alone), else the fit stops and keeps the start; ``None`` = the whole schedule runs. Twelve,
+    chosen on the validation curves of every fit until a plateau in ``benchmarks/results``
+    (``speed/fitcut57_cpu/start_rule.md``): the residual beat its start at the latest at check 12 (the UR5, 480
+    iterations) or not in 17-20 checks (the shipped humanoid, the G1, Panda and Solo12 of the robot zoo); twelve is also
+    the fewest checks in which the six horizons can each plateau at ``patience`` 2."""
+
     residual: ResidualConfig = ResidualConfig(fraction=0.25)
     """Residual kind (torque / delta action), network (MLP / GRU) and authority: 0.25 of each effort limit,
     chosen on validation (0.0282 rad against 0.0294 at 0.5, both with ``obs_noise`` 0.1;

@@ -11,9 +11,10 @@ first) with a falling learning rate. Two schedules drive them:
   ``lr_final``, and a plateau there ends the fit. A plateau is ``patience`` validations in a row without a gain of
   ``min_improvement`` (relative) over the best so far. Stage s of S starts at the cosine's rate at s / S, so the
   rates the stages see are the fixed schedule's. ``max_iterations`` and ``max_seconds`` (training wall-clock) are
-  ceilings. A fixed count tuned on one robot under- or over-fits another (a 29-DoF humanoid's validation still fell
-  by 20 % over the last tenth of the shipped humanoid's 800 identification iterations); validation says when to
-  move on for any robot.
+  ceilings. Where the starting point is a candidate (the hybrid's zero residual) and ``beat_start_within`` is set, a
+  fit none of whose first ``beat_start_within`` checks beat the start stops there, keeping the start. A fixed count
+  tuned on one robot under- or over-fits another (a 29-DoF humanoid's validation still fell by 20 % over the last
+  tenth of the shipped humanoid's 800 identification iterations); validation says when to move on for any robot.
 
 The log says why each stage ended and why the fit stopped (:attr:`PlateauSchedule.reason`).
 """
@@ -58,8 +59,9 @@ class FixedSchedule:
     def log_now(self, it: int) -> bool:
         return (it + 1) % self.log_every == 0
 
-    def observe(self, value: float | None, it: int, wall: float) -> str:
-        """Take the validation ``value`` [rad] scored after iteration ``it`` (from 1); the message to log, if any."""
+    def observe(self, value: float | None, it: int, wall: float, start: float | None = None) -> str:
+        """Take the validation ``value`` [rad] scored after iteration ``it`` (from 1); the message to log, if any.
+        ``start``: the starting point's validation [rad] while it is still the best candidate, else ``None``."""
         return ""
 
     def finished(self, it: int, wall: float) -> bool:
@@ -93,6 +95,8 @@ class PlateauSchedule:
         """The best validation seen [rad]."""
         self.stale = 0
         """Validations in a row without a gain of ``min_improvement`` on :attr:`best`."""
+        self.checks = 0
+        """Validations taken."""
         self.done = False
         self.reason = ""
 
@@ -108,8 +112,16 @@ class PlateauSchedule:
     def log_now(self, it: int) -> bool:
         return self.validate_now(it)
 
-    def observe(self, value: float | None, it: int, wall: float) -> str:
+    def observe(self, value: float | None, it: int, wall: float, start: float | None = None) -> str:
         cfg = self.cfg
+        self.checks += 1
+        within = cfg.beat_start_within
+        if start is not None and within is not None and self.checks >= within:
+            # every check so far scored at or above the start, which stays selected unless a later one beats it
+            self.done = True
+            self.reason = (f"stopped at iteration {it}: none of {self.checks} validation checks beat the start's "
+                           f"{start:.4f} rad (beat_start_within {within})")
+            return ""
         if value is not None and value < self.best * (1.0 - cfg.min_improvement):
             self.best, self.stale = value, 0
             return ""
@@ -149,11 +161,12 @@ class PlateauSchedule:
 
     def state(self) -> dict:
         return {"stage": self.stage, "lr": self.lr, "best": self.best, "stale": self.stale, "done": self.done,
-                "reason": self.reason}
+                "reason": self.reason, "checks": self.checks}
 
     def restore(self, state: dict) -> None:
         self.stage, self.lr, self.best, self.stale = state["stage"], state["lr"], state["best"], state["stale"]
         self.done, self.reason = state["done"], state["reason"]
+        self.checks = state.get("checks", 0)  # a checkpoint from before the count: its checks count from here
 
 
 def make_schedule(cfg, horizons) -> FixedSchedule | PlateauSchedule:

@@ -101,6 +101,8 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         sched.restore(data["meta"].get("schedule", {}))
         log(f"resumed from {run.checkpoint} at iteration {run.iteration}")
     else:
+        if getattr(log, "clock", False):  # a clocked log splits the learner's set-up from its first validation
+            log(f"{learner.what}: set up; scoring the start")
         learner.begin(run)
     start_it, curve, best = run.iteration, run.curve, run.best
     t0 = time.perf_counter() - run.wall
@@ -165,7 +167,8 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
                     row["validation"] = value
                     best.consider(value, it + 1, learner.module)
                     reached = stop_below is not None and value <= stop_below
-                note = sched.observe(value, it + 1, row["wall"])
+                kept = best.state is not None and best.iteration == 0  # the starting point, still selected
+                note = sched.observe(value, it + 1, row["wall"], start=best.value if kept else None)
             curve.append(row)
             progress.update(1, f"H={h}" + (f"  loss {row['loss']:.2e}" if "loss" in row else ""))
             it += 1

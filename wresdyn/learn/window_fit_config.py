@@ -25,6 +25,8 @@ def check_window_fit_config(cfg) -> None:
         check_number(cfg.iterations, "iterations", integer=True, ge=1)
     if cfg.max_seconds is not None:
         check_number(cfg.max_seconds, "max_seconds", gt=0)
+    if cfg.beat_start_within is not None:
+        check_number(cfg.beat_start_within, "beat_start_within", integer=True, ge=1)
     check_number(cfg.min_improvement, "min_improvement", ge=0, le=1)
     check_number(cfg.lr_decay, "lr_decay", gt=0, le=1)
     for i, h in enumerate(cfg.horizon_curriculum):
@@ -61,3 +63,8 @@ class WindowFitStop:
     still improving)."""
     max_seconds: float | None = None
     """Ceiling on the training wall-clock [s] when ``iterations`` is ``None``; ``None`` = none."""
+    beat_start_within: int | None = None
+    """Validation checks within which a fit until a plateau must beat its starting point, where the start is a
+    candidate (the hybrid's residual: the identified model alone): when none of the first ``beat_start_within``
+    checks scored below the start, the fit stops there and keeps the start, the result it would select if no later
+    check beat it either. ``None`` = the whole schedule runs; only with ``iterations`` ``None``."""

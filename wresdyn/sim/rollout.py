@@ -147,6 +147,7 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     diverged_at = torch.full((b,), -1, dtype=torch.long, device=sim.device)
     if not grad:
         sim.set_state(None, q, qd)
+        bounds = (sim.lower - limits.limit_margin, sim.upper + limits.limit_margin)  # once, not at every step
     for k in range(steps):
         res = None
         if policy is not None:
@@ -170,12 +171,13 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
             q_new, qd_new = sim.step_diff(k, q, qd, target, tau)
         else:
             q_new, qd_new = sim.step(target, tau)
-            bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1]) & ~dead
+            # on bools a > b is a and not b, in one kernel
+            bad = sim.diverged(q_new, qd_new, limits, window.q[:, k + 1], bounds) > dead
             if masked:  # frozen worlds hold their last sane state at rest; keeps NaN out of the solver and the policy
                 dead = dead | bad
                 diverged_at = torch.where(bad, k + 1, diverged_at)
                 q_new = torch.where(dead[:, None], q, q_new)
-                qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
+                qd_new.masked_fill_(dead[:, None], 0.0)  # the step's own copy: one kernel, not a zeros and a where
                 sim.set_state_where(dead, q_new, qd_new)
             else:  # the same, read on the host: the faster on the CPU, where a read costs nothing
                 if bad.any():
@@ -187,7 +189,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                     q_new = torch.where(dead[:, None], q, q_new)
                     qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
                     sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
-        qdd = (qd_new - qd) / sim.dt
+        if policy is not None:  # the policy's observation is what reads it
+            qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)
         qds.append(qd)

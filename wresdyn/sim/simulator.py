@@ -227,10 +227,11 @@ class Simulator:
         """Overwrite the joint state of the worlds where ``mask`` (num_worlds,) bool with q, qd (num_worlds, n); the
         others keep theirs. Fixed shapes and no host sync: safe inside a CUDA graph."""
         m = mask[:, None]
-        cq = self._q[self._cur][:, self.q_index]
-        cqd = self._qd[self._cur][:, self.qd_index]
-        self._q[self._cur][:, self.q_index] = torch.where(m, q.to(torch.float32), cq)
-        self._qd[self._cur][:, self.qd_index] = torch.where(m, qd.to(torch.float32), cqd)
+        for state, index, x in ((self._q[self._cur], self.q_index, q), (self._qd[self._cur], self.qd_index, qd)):
+            if isinstance(index, slice):  # a view: written in place by one kernel, not gathered, selected and copied
+                torch.where(m, x.to(torch.float32), state[:, index], out=state[:, index])
+            else:
+                state[:, index] = torch.where(m, x.to(torch.float32), state[:, index])
         self._refresh_fk()
 
     def _refresh_fk(self) -> None:
@@ -255,8 +256,7 @@ class Simulator:
 
     @property
     def base_twist(self) -> torch.Tensor:
-        """Base centre-of-mass velocity [m/s] and angular velocity [rad/s] per world, world axes, shape
-        (num_worlds, 6); a floating base only."""
+        """Base velocity per world in world axes: centre of mass [m/s], angular [rad/s]; (num_worlds, 6); floating."""
         return self._qd[self._cur][:, self._base_slices()[1]].clone()
 
     def set_full_state(self, ids, base_pose: torch.Tensor, base_twist: torch.Tensor, q: torch.Tensor,
@@ -378,12 +378,12 @@ class Simulator:
         return TapeStep.apply(q, qd, target, tau, self, k, names, *(self._physics[f] for f in names))
 
     def diverged(self, q: torch.Tensor, qd: torch.Tensor, limits: DivergenceLimits,
-                 q_ref: torch.Tensor | None = None) -> torch.Tensor:
-        """Worlds past ``limits``: non-finite, runaway speed, far past a joint limit, or far from ``q_ref``.
-        (N, n) tensors -> bool (N,)."""
-        bad = ~(torch.isfinite(q).all(-1) & torch.isfinite(qd).all(-1))
-        bad |= (qd.abs() > limits.max_qd).any(-1)
-        bad |= ((q < self.lower - limits.limit_margin) | (q > self.upper + limits.limit_margin)).any(-1)
+                 q_ref: torch.Tensor | None = None, bounds=None) -> torch.Tensor:
+        """Worlds past ``limits``: non-finite, runaway speed, far past a joint limit, or far from ``q_ref``. (N, n)
+        tensors -> bool (N,). ``bounds``: (lower, upper), the limits widened by the margin, from a loop over steps."""
+        lo, hi = bounds or (self.lower - limits.limit_margin, self.upper + limits.limit_margin)
+        nonfinite = torch.cat([q, qd], -1).mul(0.0).ne(0.0)  # x * 0 is ±0 for a finite x, NaN for ±inf and NaN
+        bad = torch.cat([nonfinite, q < lo, q > hi, qd.abs() > limits.max_qd], -1).any(-1)  # one reduction
         if q_ref is not None and math.isfinite(limits.max_error):
             bad |= ((q - q_ref).abs() > limits.max_error).any(-1)
         return bad

@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# pairs.sh N FLAGS...: N pairs of the small fit, before then after, back to back
+n=$1; shift
+for i in $(seq 1 $n); do
+  /tmp/fs57/one.sh /tmp/fs57/before small_before$i "$@"
+  /tmp/fs57/one.sh /tmp/fs57/after2 small_after$i "$@"
+done
