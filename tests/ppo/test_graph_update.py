@@ -259,6 +259,10 @@ def _two_process_worker(out: Path, device: str) -> None:
         assert alg.is_multi_gpu and alg.gpu_world_size == 2
         r = compare(alg) if device == "cpu" else compare(alg, run_graph=lambda a: a.update())
         (out / f"rank{rank}_kl{kl}.json").write_text(json.dumps(r))
+    # gloo's worker threads must be joined before the interpreter ends: a process that exits with its group alive
+    # may abort ("terminate called without an active exception") after its results are written
+    torch.distributed.barrier()
+    torch.distributed.destroy_process_group()
 
 
 if __name__ == "__main__":

@@ -134,6 +134,10 @@ def _two_process_worker(out: Path) -> None:
         alg = _rollout(robot, trajs, data.rate_hz, out / f"run{rank}_{kl}", kl, seed=rank)
         assert alg.is_multi_gpu and alg.gpu_world_size == 2
         (out / f"rank{rank}_kl{kl}.json").write_text(json.dumps(compare(alg)))
+    # gloo's worker threads must be joined before the interpreter ends: a process that exits with its group alive
+    # may abort ("terminate called without an active exception") after its results are written
+    torch.distributed.barrier()
+    torch.distributed.destroy_process_group()
 
 
 if __name__ == "__main__":
