@@ -95,3 +95,66 @@ def test_collect_adds_probes_to_train_and_leaves_the_rest_unchanged(humanoid, ca
 def test_probe_rejects_a_trajectory_too_short(humanoid, ik):
     with pytest.raises(RobotError, match="longer"):
         saturation_probe(humanoid, ik.chains, humanoid.q0, 0.2, RATE, np.random.default_rng(0))
+
+
+DEFAULT_SHA256 = {0: "b4a9adbc52bb672c77eb8bda37e8d0ab37e6bb97fb92596af07b5660f9405802",
+                  1: "99c62fec85f837fb4fa6b020977a97dc87f88d5b66b747684cf4acf69a3f2f27"}
+"""sha256 of the default probe's q_cmd (4 s at 500 Hz, the humanoid's home pose), seeds 0 and 1, as drawn before the
+``across`` option existed: the datasets recorded with the default probe stay reproducible."""
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_default_probe_draws_the_trajectories_it_drew_before_across(humanoid, ik, seed):
+    import hashlib
+
+    for cfg in (SaturationProbe(), SaturationProbe(across=False)):
+        e = saturation_probe(humanoid, ik.chains, humanoid.q0, 4.0, RATE, np.random.default_rng(seed), cfg)
+        assert hashlib.sha256(np.ascontiguousarray(e.q_cmd).tobytes()).hexdigest() == DEFAULT_SHA256[seed]
+        assert not any("across" in s for p in e.params["joints"].values() for s in p["steps"])
+
+
+def test_across_steps_the_short_ranged_joints_over_their_range_and_stays_in_limits(humanoid, ik):
+    """Ankle roll (±0.26 rad, kp 40, file limit 50 N·m) has no side with room for its 0.6-0.9 x 50 N·m demand: with
+    ``across`` each of its steps spans the range less the margins, 0.42 rad (kp·Δ = 0.34 of the file's limit, twice
+    the 0.17 one side allows); the knees, which have room, step as without it."""
+    across = SaturationProbe(steps=1, across=True)
+    e, plain = _draw(humanoid, ik, 0, across), _draw(humanoid, ik, 0)
+    lo, hi = humanoid.lower + CFG.limit_margin, humanoid.upper - CFG.limit_margin
+    assert (e.q_cmd >= lo - 1e-12).all() and (e.q_cmd <= hi + 1e-12).all()
+    for name in ("left_ankle_roll", "right_ankle_roll"):
+        j = humanoid.joint_names.index(name)
+        (step,) = e.params["joints"][name]["steps"]
+        assert step["across"] and abs(step["delta"]) == pytest.approx(hi[j] - lo[j])
+        assert np.ptp(e.q_cmd[:, j]) == pytest.approx(hi[j] - lo[j])
+        assert e.params["joints"][name]["reach"] == pytest.approx(2 * plain.params["joints"][name]["reach"])
+    for name in ("left_knee", "right_knee"):
+        j = humanoid.joint_names.index(name)
+        np.testing.assert_array_equal(e.q_cmd[:, j], plain.q_cmd[:, j])
+
+
+def test_across_saturates_the_uneven_robots_ankle_pitch_longer(humanoid, ik):
+    """On the second benchmark mismatch (drives at 0.3 of the file's 50 N·m on the ankles), ``across`` steps ankle
+    pitch over its 1.30 rad (kp·Δ 52 N·m) where one side allowed 0.82 rad: both ankle pitches stay at their limit on
+    more samples. Ankle roll does not reach its limit either way: the mismatch's friction (0.12 of the file's
+    limit, 6 N·m) stalls it 0.16 rad short of every command (module docstring)."""
+    from wresdyn.paths import REPO
+
+    real = RealRobot(humanoid, Mismatch.load(REPO / "data" / "mismatch_uneven.toml"), RATE)
+    limit = real.model.actuator_forcerange[:humanoid.n_dof, 1]
+    share = {}
+    for cfg in (SaturationProbe(), SaturationProbe(across=True)):
+        e = saturation_probe(humanoid, ik.chains, humanoid.q0, 4.0, RATE, np.random.default_rng(0), cfg)
+        _, _, tau = real.record(e.q_cmd, np.random.default_rng(0))
+        share[cfg.across] = (np.abs(tau) >= 0.99 * limit).mean(0)
+    for name in ("left_ankle_pitch", "right_ankle_pitch"):
+        j = humanoid.joint_names.index(name)
+        assert share[True][j] > 1.5 * share[False][j] > 0, name
+
+
+def test_collect_records_across_only_when_it_is_on(humanoid):
+    counts = {"train": 0, "validation": 0, "heldout": 0, "ood": 0}
+    plain = collect(humanoid, Mismatch(), counts, duration=DURATION, probe=1, probe_config=CFG)
+    across = collect(humanoid, Mismatch(), counts, duration=DURATION, probe=1,
+                     probe_config=SaturationProbe(steps=1, across=True))
+    assert "across" not in plain.meta["saturation_probe"]  # a default dataset's meta as before the option
+    assert across.meta["saturation_probe"]["across"] is True

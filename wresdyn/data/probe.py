@@ -10,6 +10,23 @@ so a derated drive saturates until the joint has covered most of δ, tens of ms.
 ``limit_margin`` inside the joint's limits: a joint whose range is too short for the demand steps as far as the
 range allows (on the humanoid, the ankles: kp·range is below their file limit).
 
+``across`` (opt-in) makes such range-limited joints saturate anyway. The drive is kp·(q_cmd − q) − kd·q̇ with no
+velocity feed-forward, so its kd term opposes the move and a step's demand peaks at about kp·Δ, Δ the commanded
+jump, before the joint has moved: the only way to raise the demand within the limits is a larger Δ. A step that
+finds no side with room for its demand goes from one end of the range to the other and back instead (home → one end
+→ the other → the first → home, each move one ``rise``, holds of a quarter pair between): Δ is the whole range less
+the margins, and each pair has two saturating steps. Humanoid numbers (kp 40 N·m/rad, kd 2 N·m·s/rad, file limit 50
+N·m on both ankle joints): ankle roll's range ±0.26 rad gives Δ = 0.42 rad with the 0.05 rad margin, kp·Δ = 17 N·m
+(0.34 of the file's limit) where one side's 0.21 rad gave 8.5 N·m (0.17): above the mismatches' derating of 0.3 (15
+N·m; 0.9 of kp: 15.3 N·m, a thin excess), not above 0.15-0.2 (``limit_margin`` 0.02: 19 N·m); ankle pitch's
+−0.87..0.52 rad gives 1.30 rad, kp·Δ = 52 N·m, above even the file's limit, where its longer side's 0.82 rad gave 33
+N·m. Holding against a joint limit would saturate for longer but commands outside the limits and leaves the stop's
+contact to the replay; the probe does neither. Recorded on the second benchmark mismatch
+(`benchmarks/results/floor_fair/ankle_probe_cpu/`), ankle pitch saturates on about twice the samples; ankle roll not
+at all: that mismatch's ankle friction (0.12 of the file's limit, 6 N·m) stalls the joint f/kp ≈ 0.16 rad short of
+every command, so |q_cmd − q| stays below the 0.42 rad range less the stall and kp·(Δ − f/kp) ≈ 10 N·m under its 15
+N·m limit: within the joint limits no position step saturates it.
+
 The k-th joint of every IK chain is probed at once (the base is fixed, so the legs do not load each other), the
 chain positions in a random order, ``steps`` out-and-back pairs each, each step to a random side that has room.
 
@@ -52,6 +69,10 @@ class SaturationProbe:
     """Hold of the home pose before the first step [s]."""
     limit_margin: float = 0.05
     """Steps stay this far inside every joint limit [rad]."""
+    across: bool = False
+    """A step whose demand no side of the home pose has room for steps across the joint's whole range and back
+    instead of as far as one side allows (module docstring): ankle pitch saturates longer; ankle roll only where its
+    friction lets it reach the range's end. Off: the steps, and their random draws, as before."""
 
     def __post_init__(self) -> None:
         lo, hi = self.effort_fraction
@@ -75,8 +96,9 @@ def saturation_probe(robot: Robot, chains: list[np.ndarray], home: np.ndarray, d
         cfg: Step sizes and timing.
 
     Returns:
-        The excitation; ``params`` holds, per probed joint, its steps (``t0`` [s], ``delta`` [rad]) and ``reach``,
-        the largest kp·|δ| over the file's effort limit [-] (below 1: the joint's range is too short to ask for it).
+        The excitation; ``params`` holds, per probed joint, its steps (``t0`` [s], ``delta`` [rad]; ``across``:
+        true on a step across the range, ``t0`` and ``delta`` then its first crossing) and ``reach``, the largest
+        kp·|δ| over the file's effort limit [-] (below 1: the joint's range is too short to ask for it).
 
     Raises:
         RobotError: one line: a trajectory too short for the steps, a probed joint without gain or effort limit.
@@ -112,10 +134,18 @@ def saturation_probe(robot: Robot, chains: list[np.ndarray], home: np.ndarray, d
                 side = int(rng.choice(sides)) if len(sides) else int(np.argmax(room))
                 delta = (1.0 if side == 0 else -1.0) * min(want, room[side])
                 t0 = cfg.lead + (slot * cfg.steps + s) * pair
-                for start, a, b in ((t0, 0.0, delta), (t0 + 0.5 * pair, delta, 0.0)):
+                step = {"t0": float(t0), "delta": float(delta)}
+                moves = ((t0, 0.0, delta), (t0 + 0.5 * pair, delta, 0.0))
+                if cfg.across and not len(sides):
+                    far = -np.sign(delta) * room[1 - side]  # the other end, from the end with more room
+                    moves = ((t0, 0.0, delta), (t0 + 0.25 * pair, delta, far), (t0 + 0.5 * pair, far, delta),
+                             (t0 + 0.75 * pair, delta, 0.0))
+                    delta = far - delta
+                    step = {"t0": float(t0 + 0.25 * pair), "delta": float(delta), "across": True}
+                for start, a, b in moves:
                     u = np.clip((t - start) / cfg.rise, 0.0, 1.0)
                     q[:, j] = np.where(t >= start, home[j] + a + min_jerk(u) * (b - a), q[:, j])
-                steps.append({"t0": float(t0), "delta": float(delta)})
+                steps.append(step)
                 reach = max(reach, kp[j] * abs(delta) / effort[j])
             params["joints"][name] = {"steps": steps, "reach": float(reach)}
     speed = float(np.abs(np.diff(q, axis=0)).max() * rate_hz) if len(t) > 1 else 0.0

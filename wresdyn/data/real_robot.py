@@ -373,7 +373,10 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
                            "settle_s": 0.5},
             "trajectory_params": params}
     if probe:
-        meta["saturation_probe"] = {"trajectories": probe, **dataclasses.asdict(probe_config or SaturationProbe())}
+        # an option left off is not written, so a default probe's dataset stays byte-identical to earlier ones
+        probe_meta = {k: v for k, v in dataclasses.asdict(probe_config or SaturationProbe()).items()
+                      if k != "across" or v}
+        meta["saturation_probe"] = {"trajectories": probe, **probe_meta}
     return Dataset(list(robot.joint_names), float(rate_hz), trajs, _display_path(robot.source), robot.source_sha256,
                    mismatch.to_dict(), int(seed), meta, robot.gains_record())
 
