@@ -133,9 +133,9 @@ def test_across_steps_the_short_ranged_joints_over_their_range_and_stays_in_limi
 
 
 def test_across_saturates_the_uneven_robots_ankle_pitch_longer(humanoid, ik):
-    """On the second benchmark mismatch (drives at 0.3 of the file's 50 N·m on the ankles), ``across`` steps ankle
-    pitch over its 1.30 rad (kp·Δ 52 N·m) where one side allowed 0.82 rad: both ankle pitches stay at their limit on
-    more samples. Ankle roll does not reach its limit either way: the mismatch's friction (0.12 of the file's
+    """On the second benchmark mismatch (drives at 0.3 of the file's 50 N·m on the ankles), from the neutral pose,
+    ``across`` steps ankle pitch over its 1.30 rad (kp·Δ 52 N·m) where one side allowed 0.82 rad: both ankle pitches
+    stay at their limit on more samples (from the foot workspace's home, where `collect` probes, they have room). Ankle roll does not reach its limit either way: the mismatch's friction (0.12 of the file's
     limit, 6 N·m) stalls it 0.16 rad short of every command (module docstring)."""
     from wresdyn.paths import REPO
 

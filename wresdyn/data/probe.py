@@ -21,11 +21,13 @@ N·m on both ankle joints): ankle roll's range ±0.26 rad gives Δ = 0.42 rad wi
 N·m; 0.9 of kp: 15.3 N·m, a thin excess), not above 0.15-0.2 (``limit_margin`` 0.02: 19 N·m); ankle pitch's
 −0.87..0.52 rad gives 1.30 rad, kp·Δ = 52 N·m, above even the file's limit, where its longer side's 0.82 rad gave 33
 N·m. Holding against a joint limit would saturate for longer but commands outside the limits and leaves the stop's
-contact to the replay; the probe does neither. Recorded on the second benchmark mismatch
-(`benchmarks/results/floor_fair/ankle_probe_cpu/`), ankle pitch saturates on about twice the samples; ankle roll not
-at all: that mismatch's ankle friction (0.12 of the file's limit, 6 N·m) stalls the joint f/kp ≈ 0.16 rad short of
-every command, so |q_cmd − q| stays below the 0.42 rad range less the stall and kp·(Δ − f/kp) ≈ 10 N·m under its 15
-N·m limit: within the joint limits no position step saturates it.
+contact to the replay; the probe does neither. On the second benchmark mismatch
+(`benchmarks/results/floor_fair/ankle_probe_cpu/`) it does less than these numbers say. From the robot's neutral
+pose ankle pitch steps across and saturates on about twice the samples, but from the foot workspace's home that
+`wresdyn collect` probes from (ankle pitch at −0.53 and −0.82 rad) its steps have room and do not change. Ankle roll
+steps across and still does not saturate: that mismatch's ankle friction (0.12 of the file's limit, 6 N·m) stalls it
+f/kp ≈ 0.16 rad short of every command, so its drive delivers at most about 10 N·m of its 15: within the joint
+limits no position step saturates it.
 
 The k-th joint of every IK chain is probed at once (the base is fixed, so the legs do not load each other), the
 chain positions in a random order, ``steps`` out-and-back pairs each, each step to a random side that has room.
@@ -71,8 +73,8 @@ class SaturationProbe:
     """Steps stay this far inside every joint limit [rad]."""
     across: bool = False
     """A step whose demand no side of the home pose has room for steps across the joint's whole range and back
-    instead of as far as one side allows (module docstring): ankle pitch saturates longer; ankle roll only where its
-    friction lets it reach the range's end. Off: the steps, and their random draws, as before."""
+    instead of as far as one side allows (module docstring: it doubles ankle roll's demand, which friction can still
+    hold below the limit). Off: the steps, and their random draws, as before."""
 
     def __post_init__(self) -> None:
         lo, hi = self.effort_fraction
