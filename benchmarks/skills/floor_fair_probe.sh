@@ -15,9 +15,10 @@
 # skills' config.json files record, so a resume must use the same). data/uneven_probe/dataset.npz must exist. GPUS
 # (default: every GPU nvidia-smi lists) are the CUDA devices the runs take in turn, started STAGGER s apart (10).
 # RUNS (default: all three) narrows the runs to some of them, e.g. RUNS=floor_unvp_s1; a run's seed is the number its
-# name ends in, whatever the order. DRY=1 checks the inputs and prints the commands without copying or running anything. LOG gets STAGES, <run>.out and
-# load.log as floor_fair_resume.sh writes them. Python is python3; the environment is the caller's. Returns when all
-# three have ended; rerun the same command to resume (finished policies and deployments are reused).
+# name ends in, whatever the order. DRY=1 checks the inputs and prints the commands without copying or running anything.
+# LOG gets STAGES, <run>.out and load.log as floor_fair_resume.sh writes them. Python is python3; the environment is the
+# caller's. Returns when all three have ended; rerun the same command to resume (finished policies and deployments are
+# reused).
 #
 # REUSE=1 keeps (d) and (e) of the committed uneven runs, which do not depend on the corrections, and trains only (b),
 # (c) and (f): seed N runs in $ROOT/floor_unv_sN, the folder its (d) and (e) were trained in (the path their

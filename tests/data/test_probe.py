@@ -135,8 +135,9 @@ def test_across_steps_the_short_ranged_joints_over_their_range_and_stays_in_limi
 def test_across_saturates_the_uneven_robots_ankle_pitch_longer(humanoid, ik):
     """On the second benchmark mismatch (drives at 0.3 of the file's 50 N·m on the ankles), from the neutral pose,
     ``across`` steps ankle pitch over its 1.30 rad (kp·Δ 52 N·m) where one side allowed 0.82 rad: both ankle pitches
-    stay at their limit on more samples (from the foot workspace's home, where `collect` probes, they have room). Ankle roll does not reach its limit either way: the mismatch's friction (0.12 of the file's
-    limit, 6 N·m) stalls it 0.16 rad short of every command (module docstring)."""
+    stay at their limit on more samples (from the foot workspace's home, where `collect` probes, they have room). Ankle
+    roll does not reach its limit either way: the mismatch's friction (0.12 of the file's limit, 6 N·m) stalls it 0.16
+    rad short of every command (module docstring)."""
     from wresdyn.paths import REPO
 
     real = RealRobot(humanoid, Mismatch.load(REPO / "data" / "mismatch_uneven.toml"), RATE)
@@ -156,5 +157,5 @@ def test_collect_records_across_only_when_it_is_on(humanoid):
     plain = collect(humanoid, Mismatch(), counts, duration=DURATION, probe=1, probe_config=CFG)
     across = collect(humanoid, Mismatch(), counts, duration=DURATION, probe=1,
                      probe_config=SaturationProbe(steps=1, across=True))
-    assert "across" not in plain.meta["saturation_probe"]  # a default dataset's meta as before the option
+    assert "across" not in plain.meta["saturation_probe"]  # a default dataset's meta names no option it did not use
     assert across.meta["saturation_probe"]["across"] is True

@@ -74,7 +74,7 @@ class SaturationProbe:
     across: bool = False
     """A step whose demand no side of the home pose has room for steps across the joint's whole range and back
     instead of as far as one side allows (module docstring: it doubles ankle roll's demand, which friction can still
-    hold below the limit). Off: the steps, and their random draws, as before."""
+    hold below the limit). Off: such a step goes as far as its side allows, with the same random draws."""
 
     def __post_init__(self) -> None:
         lo, hi = self.effort_fraction

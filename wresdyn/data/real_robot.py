@@ -373,7 +373,7 @@ def collect(robot: Robot, mismatch: Mismatch, counts: dict[str, int], duration: 
                            "settle_s": 0.5},
             "trajectory_params": params}
     if probe:
-        # an option left off is not written, so a default probe's dataset stays byte-identical to earlier ones
+        # an option left off is not written: a default probe's meta, and so its dataset's bytes, do not depend on it
         probe_meta = {k: v for k, v in dataclasses.asdict(probe_config or SaturationProbe()).items()
                       if k != "across" or v}
         meta["saturation_probe"] = {"trajectories": probe, **probe_meta}

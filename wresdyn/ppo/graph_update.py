@@ -31,8 +31,8 @@ gloo (``tests/ppo/test_graph_update.py``). On CUDA, capturable Adam computes its
 device in float32 where :class:`PackedPPO`'s Adam uses Python floats (as :class:`~wresdyn.ppo.update.OneSyncPPO`'s
 does), so the weights differ in the last bits after the first step; the CUDA test bounds the difference
 (:data:`CUDA_RTOL`). The random numbers of later rollouts may differ too: the forward pass draws action samples it
-discards, and a replay advances CUDA's generator by the count the capture recorded. Only the plain case in float32 and uncompiled takes this path, on CUDA; anything else runs
-:class:`PackedPPO`'s eager update.
+discards, and a replay advances CUDA's generator by the count the capture recorded. Only the plain case in float32 and
+uncompiled takes this path, on CUDA; anything else runs :class:`PackedPPO`'s eager update.
 """
 
 from __future__ import annotations
