@@ -161,12 +161,23 @@ class GraphPPO(DeviceRate, PackedPPO):
                 self._step(adaptive, lr, static)
 
             warm = getattr(self, "_warm", 0)
+            if warm == 0:
+                self._release_actor_graph(static)
             if warm < WARMUP:
                 self._warm = warm + 1
                 return self._on_side_stream(step)
             graph = self._graph = self._capture(step)
             self._graph_inputs = self._inputs()
         graph.replay()
+
+    def _release_actor_graph(self, static: _Static) -> None:
+        """Replace the actor's kept distribution by one made without gradient. The kept one's autograd graph keeps
+        the parameters' gradient accumulators alive, and an accumulator stays on the stream it was made on: made by
+        an eager update on the default stream, the captured backward would end by recording an event on the legacy
+        stream while the capture runs, which CUDA refuses (``cudaErrorStreamCaptureImplicit`` on an H200). Released,
+        the warm-up makes them again on its side stream."""
+        with torch.no_grad():
+            self._actor_distribution(self.storage.observations.flatten(0, 1)[static.index])
 
     def _on_side_stream(self, step) -> None:
         """Run ``step`` on a side stream, ordered after and before the current stream's work (PyTorch's warm-up for
