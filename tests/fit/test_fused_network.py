@@ -45,3 +45,15 @@ def test_plain_checkpoint_resumes_fused(robot, data, tmp_path):
     _, curve = fit(robot, data, dataclasses.replace(TINY, fused_network=True), out=tmp_path, log=lambda *_: None)
     assert [r["iteration"] for r in curve] == list(range(1, 10))
     assert all(torch.isfinite(torch.tensor(r["loss"])) for r in curve)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")
+def test_graph_replayed_fused_fit_gives_the_eager_plain_fit(robot, data):
+    # the fused step, its deferred gradients and fused Adam inside the CUDA graph against the plain path run eagerly:
+    # the bounds of the graph-against-eager test of the plain path (tests/learn/test_gradfit_2000.py)
+    cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0")
+    fused = _figures(*fit(robot, data, dataclasses.replace(cfg, fused_network=True), log=lambda *_: None))
+    plain = _figures(*fit(robot, data, dataclasses.replace(cfg, cuda_graph=False), log=lambda *_: None))
+    assert fused[0][-1] == pytest.approx(plain[0][-1], rel=1e-3)
+    assert fused[1][-1][1] == pytest.approx(plain[1][-1][1], abs=1e-5)
+    torch.testing.assert_close(fused[3].cpu(), plain[3].cpu(), rtol=1e-3, atol=1e-5)

@@ -32,7 +32,6 @@ def fusable(policy) -> str | None:
     """Why ``policy`` cannot run as a :class:`FusedMLPRollout`, or ``None`` if it can: an
     :class:`~wresdyn.learn.residual.MLPResidualPolicy` at gain 1 without a second normaliser, its network linear
     layers with ELU between them."""
-
     if not isinstance(policy, MLPResidualPolicy):
         return f"{type(policy).__name__} is not an MLP residual"
     if policy.gain != 1.0 or not isinstance(policy.norm, nn.Identity):
