@@ -12,6 +12,10 @@
 #
 #   bash benchmarks/speed/gradfit10.sh OUT
 #
+# The budget is for a machine whose Warp kernels are cached (or prebuilt: WRESDYN_PREBUILT_KERNELS): from an empty
+# cache the first run compiles them first (minutes, benchmarks/results/speed/coldfit_accounting.md), so on a fresh
+# machine run `wresdyn warmup --device cuda:0` before it, or give TOTAL more.
+#
 # Environment: PYTHON (python3), DEVICE (cuda:0), DATA (data/dataset.npz), ITERATIONS (2000), WINDOWS (1024),
 # TOTAL (the whole script's budget [s], 235: each run gets what is left; one cut short says so, rc=124).
 # Output: OUT/<run>.json (gradfit_2000.py's figures), OUT/<run>.log (its output, last line `whole command: S s rc=RC`),
