@@ -35,12 +35,3 @@ def test_the_dataset_derivation_does_not_import_scipy_signal():
             "derive_qdd(np.ones((50, 3)), 500.0); print('scipy.signal' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() \
         == "False"
-
-
-def test_the_kept_coefficients_are_read_only_and_the_same_bits():
-    from wresdyn.data.savgol import _coeffs, savgol_coeffs
-
-    kept = savgol_coeffs(21, 2, deriv=1, delta=0.002)
-    again = _coeffs.__wrapped__(21, 2, 1, 0.002)
-    assert savgol_coeffs(21, 2, deriv=1, delta=0.002) is kept and not kept.flags.writeable
-    assert kept.tobytes() == again.tobytes()

@@ -11,7 +11,6 @@ Developers.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -21,30 +20,19 @@ __all__ = ["savgol_coeffs", "savgol_filter"]
 
 def savgol_coeffs(window_length: int, polyorder: int, deriv: int = 0, delta: float = 1.0) -> np.ndarray:
     """Convolution coefficients of the filter for an odd ``window_length`` (``scipy.signal.savgol_coeffs``, its
-    window centred, ``use="conv"``), shape (window_length,), read-only.
-
-    Kept per argument tuple: a dataset filters every trajectory with the same window (28 solves of the same least
-    squares problem in a default fit's load), and the solve is deterministic, so the kept array is the same bits."""
-    return _coeffs(int(window_length), int(polyorder), int(deriv), float(delta))
-
-
-@functools.lru_cache(maxsize=32)
-def _coeffs(window_length: int, polyorder: int, deriv: int, delta: float) -> np.ndarray:
+    window centred, ``use="conv"``), shape (window_length,)."""
     from scipy.linalg import lstsq
 
     if window_length % 2 != 1 or not 0 <= polyorder < window_length:
         raise ValueError("an odd window_length above polyorder is needed")
     if deriv > polyorder:
-        c = np.zeros(window_length)
-    else:
-        pos = window_length // 2
-        x = np.flip(np.arange(-pos, window_length - pos, dtype=np.float64))
-        a = x ** np.arange(polyorder + 1, dtype=np.float64).reshape(-1, 1)
-        y = np.zeros(polyorder + 1, dtype=np.float64)
-        y[deriv] = float(math.factorial(deriv)) / (delta ** deriv)
-        c = lstsq(a, y, cond=np.finfo(np.float64).eps * max(a.shape))[0]
-    c.flags.writeable = False  # shared by every caller
-    return c
+        return np.zeros(window_length)
+    pos = window_length // 2
+    x = np.flip(np.arange(-pos, window_length - pos, dtype=np.float64))
+    a = x ** np.arange(polyorder + 1, dtype=np.float64).reshape(-1, 1)
+    y = np.zeros(polyorder + 1, dtype=np.float64)
+    y[deriv] = float(math.factorial(deriv)) / (delta ** deriv)
+    return lstsq(a, y, cond=np.finfo(np.float64).eps * max(a.shape))[0]
 
 
 def _polyfit(x: np.ndarray, y: np.ndarray, deg: int) -> np.ndarray:
