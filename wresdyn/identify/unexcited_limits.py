@@ -181,6 +181,8 @@ def search_unexcited_efforts(cfg, robot, dataset, train, dt, params, score, vali
     if not joints:
         log("effort line search: no unexcited limit above the shared derating")
         return params, validation
+    # whole trajectories, not the grid searches' windows: a saturation on 1 % of the samples is a few short episodes
+    # (the probe's steps), which a batch of random windows may miss and a whole replay never does
     replay = ValidationScore(robot, train, dataset.rate_hz, cfg.solver, cfg.device, weights=dataset.fit_weights(),
                              friction_kappa=cfg.friction_kappa)
     after = before.copy()
@@ -222,7 +224,7 @@ def effort_candidates(cfg, robot, dataset, train, dt, params, score, validation,
     if cfg.effort_reset:
         params, validation = reset_effort_limits(robot, params, score, validation if shared is None else shared,
                                                  dataset.fit_weights() > 0, log)
-    if cfg.effort_line_points:
+    if cfg.effort_line_points:  # compared with the parameters it starts from: the reset's, else the shared ratio's
         current = validation if shared is None or cfg.effort_reset else shared
         searched, v = search_unexcited_efforts(cfg, robot, dataset, train, dt, params, score, current, log)
         if searched is not params:
