@@ -211,3 +211,25 @@ def test_probe_runs_reuse_set_up_keeping_c_with_other_calibrated_corrections(tmp
         assert (run / ".probe_reuse").read_text().startswith(f"floor_unvp55_s{s}: kept c_delta_action")
         assert not (run / "results.json").exists()
     assert "floor_unvp55_s0.out" in {p.name for p in (tmp_path / "log").iterdir()}
+
+
+def test_compare_the_probe_runs_with_the_committed_ones_on_validation():
+    """``floor_fair_compare.py`` on the committed uneven runs: the figures the probe configuration was chosen on."""
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair_compare.py"),
+                           *(str(FULL / f"floor_unv_s{s}") for s in range(3)), "--",
+                           *(str(FULL / f"floor_unvp_s{s}") for s in range(3)), "--names", "floor_unv", "floor_unvp"],
+                          check=True, capture_output=True, text=True)
+    lines = done.stdout.splitlines()
+    assert lines[0] == "Validation success on the real robot, mean over seeds, floor_unv -> floor_unvp:"
+    assert lines[2] == "| policy | all | squat | weight_shift | kick | wave |"
+    # (b) 64.6 -> 75.0 % and (f) 75.0 -> 83.3 % (full/MANIFEST.md); the squats gained, the kicks lost
+    assert "| b_calibrated | 64.6 -> 75.0 | 33.3 -> 100.0 | 100.0 -> 100.0 | 25.0 -> 0.0 | 100.0 -> 100.0 |" in lines
+    assert "| f_calibrated_narrow | 75.0 -> 83.3 | 25.0 -> 100.0 | 100.0 -> 100.0 | 75.0 -> 33.3 | 100.0 -> 100.0 |" \
+        in lines
+    assert "| d_oracle | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 |" in lines
+
+
+def test_compare_needs_two_configurations():
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair_compare.py"),
+                           str(FULL / "floor_unv_s0")], capture_output=True, text=True)
+    assert done.returncode == 1 and "RUN_A... -- RUN_B..." in done.stderr
