@@ -184,7 +184,7 @@ class IdentifyLearner:
                 raise ValueError("cuda_graph: a robot with servo drives identifies eagerly; set cuda_graph to false")
             model.to(self.sim.device)  # a parameter on the host would be copied, not captured
             self.graphs, self.deferred = StepGraphs(self.sim, before_capture=self._release), True
-            adopt_optimiser(self.optim, self.sim.device, capturable=self.sim.device.type == "cuda")
+            adopt_optimiser(self.optim, self.sim.device, capturable=self._capturable())
         self.bank = TrajectoryBank(train, self.sim.device)
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
@@ -320,6 +320,11 @@ class IdentifyLearner:
         if torch.is_tensor(self.bank.delay):
             self.bank.delay = self.bank.delay.detach()
 
+    def _capturable(self) -> bool:
+        """Whether Adam runs ``capturable`` (the learning rate a device tensor): captured steps on CUDA (on the CPU,
+        only the tests' stand-in for a capture, which replays eagerly)."""
+        return self.graphs is not None and self.sim.device.type == "cuda"
+
     def non_finite(self, it: int) -> Exception:
         """The error of a non-finite loss at iteration ``it`` (from 0), read back from a deferred step."""
         return _non_finite(it, self.cfg.fit)
@@ -351,8 +356,9 @@ class IdentifyLearner:
         self.effort_from = data["meta"].get("effort_from", self.effort_from)
         self.model.load_state_dict(data["model"])
         self.optim.load_state_dict(data["optim"])
-        if self.graphs is not None:  # the loaded optimiser brings its own flags and new state tensors
-            adopt_optimiser(self.optim, self.sim.device, capturable=self.sim.device.type == "cuda")
+        # the loaded optimiser brings the flags of the run that saved it (cuda_graph may change on resume)
+        adopt_optimiser(self.optim, self.sim.device, capturable=self._capturable())
+        if self.graphs is not None:  # and new state tensors
             self.graphs.reset()
         if self.nodes is not None:
             self.nodes.load_state_dict(data["nodes"])
