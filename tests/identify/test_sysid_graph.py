@@ -3,6 +3,7 @@
 replays, which must equal the eager identification bit for bit and capture again after every event; on CUDA the
 captured identification against the eager one."""
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -10,8 +11,9 @@ import pytest
 import torch
 
 from wresdyn.data.mismatch import Mismatch
-from wresdyn.identify.sysid import SysIdConfig, identify
+from wresdyn.identify.sysid import IdentifyLearner, SysIdConfig, identify
 from wresdyn.learn.graph_step import StepGraphs
+from wresdyn.learn.window_fit import start_window_fit
 
 REAL = Mismatch(kp_scale=0.8, kd_scale=1.3, friction=0.03, damping=0.3, delay=0.004, torque_limit_scale=0.5)
 TINY = SysIdConfig(iterations=30, windows=3, horizon_curriculum=(6, 10), select_every=10, effort_grid=(0.3, 1.0),
@@ -86,6 +88,21 @@ def test_without_events_a_length_is_captured_once(humanoid, recorded, recorded_c
     cfg = dataclasses.replace(TINY, iterations=8, effort_grid=(), gain_grid=(), delay_grid=(), cuda_graph=True,
                               fit=("kp", "kd", "damping"))
     identify(humanoid, recorded, cfg, log=lambda *_: None)
+    assert len(recorded_capture) == 2
+
+
+def test_a_restored_checkpoint_is_captured_again(humanoid, recorded, recorded_capture):
+    """A checkpoint loaded into the optimiser replaces Adam's state: the next step warms up again and the one after
+    captures (a replay of the old capture would fail :class:`_Recorded`'s check)."""
+    cfg = dataclasses.replace(TINY, cuda_graph=True, gain_grid=(), effort_grid=(), delay_grid=())
+    rng, train, dt = start_window_fit(cfg, recorded)
+    learner = IdentifyLearner(humanoid, recorded, cfg, None, rng, train, dt, lambda *_: None, None)
+    for it in range(3):
+        learner.step(it, 6, cfg.lr)
+    assert len(recorded_capture) == 1
+    learner.restore(copy.deepcopy({**learner.state(), "meta": learner.meta()}))
+    for it in range(3, 6):
+        learner.step(it, 6, cfg.lr)
     assert len(recorded_capture) == 2
 
 
