@@ -11,8 +11,7 @@ built as :func:`~wresdyn.identify.sysid.identify` builds it, at iterations after
 launches counted: the solver's recorded launch plans (:class:`~wresdyn.sim.solver_replay.launch.LaunchPlans`, one
 call per kernel launch) and direct ``wp.launch`` calls. Torch operators are counted as ``gradfit_torch_ops.py``
 counts them (top-level ``aten::`` operators, views, empty allocations, casts to the own device and host reads not
-being kernels; a cast that copies, ``aten::to (copy)``, is one). Host transfers of the eager GPU step (its physical model is on the host) are counted as the
-operators that cross devices there: every model array into the simulator and every gradient back.
+being kernels; a cast that copies, ``aten::to (copy)``, is one).
 """
 
 from __future__ import annotations

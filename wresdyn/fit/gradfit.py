@@ -209,7 +209,8 @@ class GradFitIteration:
     :meth:`~wresdyn.sim.Simulator._tape_stream`), Adam ``capturable`` with the learning rate a device tensor. The
     first call at each length runs eagerly on that stream (it loads kernels and creates Adam's state and
     torch's workspaces, which a capture must not). The window indices and the observation noise enter through
-    fixed buffers; the gradients live in each graph's memory pool. Without ``graph`` the same code runs eagerly.
+    fixed buffers; the gradients live in each graph's memory pool (:class:`~wresdyn.learn.graph_step.StepGraphs`,
+    shared with identification). Without ``graph`` the same code runs eagerly.
     With ``cfg.fused_network`` the rollout runs the MLP as :class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`, whose
     :meth:`~wresdyn.learn.fused_mlp.FusedMLPRollout.finish` forms the parameters' gradients after the backward pass.
     """

@@ -35,8 +35,8 @@ def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = Fal
 def refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
     """``cfg.refine`` L-BFGS steps from ``start`` on fixed windows of ``bank`` (the training trajectories; its delay
     is set to ``start``'s, or to the fitted one at every evaluation when the delay is refined) of the fields of
-    ``cfg.fit`` outside ``cfg.refine_frozen`` (:attr:`~wresdyn.identify.sysid_config.SysIdConfig.refine`); returns the best parameters on validation
-    (``start`` when no step beats ``start_validation``). Appends to ``curve``.
+    ``cfg.fit`` outside ``cfg.refine_frozen`` (:attr:`~wresdyn.identify.sysid_config.SysIdConfig.refine`); returns
+    the best parameters on validation (``start`` when no step beats ``start_validation``). Appends to ``curve``.
 
     Adam's steps through the multiple-shooting loss stop in a long, ill-conditioned valley: on the shipped data the
     loss keeps falling along the straight line to the true parameters (``benchmarks/fidelity/sysid_valley.py``), and a

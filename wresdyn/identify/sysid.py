@@ -52,8 +52,9 @@ __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice"
 RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "refine_frozen", "fused",
                      "cuda_graph", "max_iterations", "max_seconds", "identifiability", "identifiability_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
-states are the stepped replay's, the captured step's the eager one's to float32 rounding), the L-BFGS refinement, which runs after the checkpointed Adam steps, the
-ceilings of a run until convergence, and the identifiability report, which reads the selected parameters only."""
+states are the stepped replay's, the captured step's the eager one's to float32 rounding), the L-BFGS refinement,
+which runs after the checkpointed Adam steps, the ceilings of a run until convergence, and the identifiability report,
+which reads the selected parameters only."""
 
 
 class NonFiniteLoss(WresdynError):
