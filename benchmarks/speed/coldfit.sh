@@ -9,7 +9,9 @@
 #                     about a minute and the fit does not use them);
 #   c. fit_prebuilt:  the fit from a third empty cache with WRESDYN_PREBUILT_KERNELS=OUT/prebuilt (the cold figure a
 #                     user of a package with shipped kernels sees);
-#   d. fit_warm:      the same command again on c's cache.
+#   d. fit_warm:      the same command again on c's cache;
+#   e. fit_warm_graph (only with STEP_GRAPH=1): d again with `--identify.cuda-graph` (identification's Adam step
+#                     replayed from a CUDA graph, SysIdConfig.cuda_graph), on the same cache.
 # CUDA's own cache is off (CUDA_CACHE_DISABLE=1) and each step has its own WARP_CACHE_PATH under OUT, so nothing
 # compiled by one step serves another except through the export; the background compile a cold fit leaves running
 # for its next run (the one-kernel adjoint) is ended after the step (OUT/STAGES says how many), so no step shares the
@@ -21,7 +23,8 @@
 # Environment: PYTHON (python3), DEVICE (cuda:0), DATA (data/dataset.npz), ROBOT (scenes/humanoid.usda, the
 # dataset's), FIT_EXTRA (more fit arguments, none by default; a CPU smoke check: DEVICE=cpu FIT_EXTRA="--iterations 4
 # --identify.iterations 4 --windows 4"), TOTAL (the whole script's budget [s], 355: each step gets what is left, a
-# step cut short says so: rc=124), GPU (the CUDA_VISIBLE_DEVICES of every step, 0).
+# step cut short says so: rc=124; with STEP_GRAPH=1 give it about 80 s more), GPU (the CUDA_VISIBLE_DEVICES of every
+# step, 0), STEP_GRAPH (1: run step e).
 # Output: OUT/<step>.log (stdout and stderr, its last line `whole command: S s rc=RC`), OUT/<step>.fitlog (the run's
 # fit.log), OUT/STAGES (the clock of each step), OUT/machine.txt, OUT/summary.txt (each step's whole command and
 # first-iteration times, read off the logs).
@@ -63,9 +66,12 @@ workers() {  # workers CACHE: pids of the background compile workers writing int
   ps -eo pid=,comm=,args= | awk -v c="$1/" '$2 ~ /^python/ && index($0, "compile_worker.py") && index($0, c) {print $1}'
 }
 
-fit() {  # fit STEP CACHE: the fit from that Warp cache folder
-  rm -rf "$out/runs/$1"
-  WARP_CACHE_PATH=$2 timed "$1" "$py" -m wresdyn.cli fit "$data" --device "$dev" --eval --out "$out/runs/$1" $extra
+fit() {  # fit STEP CACHE [MORE...]: the fit from that Warp cache folder, with more arguments
+  local step=$1 cache=$2; shift 2
+  rm -rf "$out/runs/$step"
+  WARP_CACHE_PATH=$cache timed "$step" "$py" -m wresdyn.cli fit "$data" --device "$dev" --eval --out "$out/runs/$step" \
+    $extra "$@"
+  set -- "$step" "$cache"
   cp "$out/runs/$1/fit.log" "$out/$1.fitlog" 2>/dev/null
   # a cold CUDA fit leaves the one-kernel adjoint compiling for the next run in a detached worker (the command does
   # not wait for it): ended here, by pid, so that it takes no cores from the next step's clock
@@ -83,8 +89,13 @@ du -sh "$out/prebuilt" >> "$out/warmup_export.log" 2>&1
 export WRESDYN_PREBUILT_KERNELS=$out/prebuilt
 fit fit_prebuilt "$out/wc_prebuilt"
 fit fit_warm "$out/wc_prebuilt"
+steps="fit_cold warmup_export fit_prebuilt fit_warm"
+if [ "${STEP_GRAPH:-0}" = 1 ]; then
+  fit fit_warm_graph "$out/wc_prebuilt" --identify.cuda-graph
+  steps="$steps fit_warm_graph"
+fi
 
-for step in fit_cold warmup_export fit_prebuilt fit_warm; do
+for step in $steps; do
   whole=$(grep -h "^whole command:" "$out/$step.log" 2>/dev/null | tail -1)
   first=$(grep -ho "first iteration of [a-z]* done at [0-9.]* s" "$out/$step.log" 2>/dev/null | head -1)
   echo "$step: ${whole:-not run}${first:+; $first}"

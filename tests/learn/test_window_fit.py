@@ -118,6 +118,22 @@ def test_a_non_finite_loss_read_back_late_names_its_iteration():
         run_window_fit(Cfg(), Diverging(rng, deferred=True), RunFolder(None, {}), rng, log=lambda *_: None)
 
 
+def test_a_learner_names_its_own_error_for_a_non_finite_loss_read_back_late():
+    """Identification's deferred step raises its own error (what to change) through ``non_finite``, with the
+    iteration counted from 0 as its eager step counts it."""
+    class Own(Toy):
+        def step(self, it, h, lr):
+            fields, parts = super().step(it, h, lr)
+            return fields, parts * (float("nan") if it == 2 else 1.0)
+
+        def non_finite(self, it):
+            return ArithmeticError(f"own error at {it}")
+
+    rng = np.random.default_rng(0)
+    with pytest.raises(ArithmeticError, match="own error at 2"):
+        run_window_fit(Cfg(), Own(rng, deferred=True), RunFolder(None, {}), rng, log=lambda *_: None)
+
+
 @dataclass(frozen=True)
 class PlateauCfg:
     iterations: None = None

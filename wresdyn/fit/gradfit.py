@@ -28,6 +28,7 @@ from pathlib import Path
 import torch
 
 from ..learn.fused_mlp import FusedMLPRollout
+from ..learn.graph_step import StepGraphs, adopt_optimiser, set_lr
 from ..learn.parametric import ParametricResidual
 from ..learn.residual import EluMLP, GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
 from ..learn.runs import RunFolder
@@ -208,7 +209,8 @@ class GradFitIteration:
     :meth:`~wresdyn.sim.Simulator._tape_stream`), Adam ``capturable`` with the learning rate a device tensor. The
     first call at each length runs eagerly on that stream (it loads kernels and creates Adam's state and
     torch's workspaces, which a capture must not). The window indices and the observation noise enter through
-    fixed buffers; the gradients live in each graph's memory pool. Without ``graph`` the same code runs eagerly.
+    fixed buffers; the gradients live in each graph's memory pool (:class:`~wresdyn.learn.graph_step.StepGraphs`,
+    shared with identification). Without ``graph`` the same code runs eagerly.
     With ``cfg.fused_network`` the rollout runs the MLP as :class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`, whose
     :meth:`~wresdyn.learn.fused_mlp.FusedMLPRollout.finish` forms the parameters' gradients after the backward pass.
     """
@@ -219,22 +221,13 @@ class GradFitIteration:
         self.obs_noise, self.graph, self.weights = obs_noise, graph, weights
         self.torque_scale = policy.scale if policy.kind == "torque" else None
         self.fused = FusedMLPRollout(policy) if cfg.fused_network else None
-        self._warm: set[int] = set()
-        self._graphs: dict[int, tuple] = {}  # window length -> (graph, (traj, start, noise) buffers, output)
+        self._graphs = StepGraphs(sim)
         self.adopt_optimiser()
 
     def adopt_optimiser(self) -> None:
         """Put Adam's learning rate and step count where this mode wants them (a device tensor with ``graph``, a
         float and a CPU tensor without); again after a resumed optimiser state is loaded."""
-        graph, optim, fused = self.graph, self.optim, self.fused is not None
-        for group in optim.param_groups:  # a resumed optimiser takes its flags from the checkpoint: set them here
-            group["capturable"] = graph
-            group["fused"] = fused or None
-            lr = float(group["lr"])
-            group["lr"] = torch.tensor(lr, device=self.sim.device) if graph else lr
-        for state in optim.state.values():  # Adam's step count lives where capturable or fused wants it
-            if "step" in state:
-                state["step"] = state["step"].to(self.sim.device if graph or fused else "cpu", torch.float32)
+        adopt_optimiser(self.optim, self.sim.device, self.graph, self.fused is not None)
 
     def _run(self, traj, start, h: int, noise) -> torch.Tensor:
         window = self.bank.window(traj, start, h)
@@ -252,44 +245,16 @@ class GradFitIteration:
         return torch.stack([loss.detach(), *(parts[k] for k in _FitLearner.parts[1:])])
 
     def __call__(self, traj, start, h: int, noise, lr: float) -> torch.Tensor:
+        for group in self.optim.param_groups:
+            set_lr(group, lr)
         if not self.graph:
-            for group in self.optim.param_groups:
-                group["lr"] = lr
             self.optim.zero_grad()
             return self._run(traj, start, h, noise)
-        import warp as wp
 
-        for group in self.optim.param_groups:
-            group["lr"].fill_(lr)
-        sim, cur = self.sim, torch.cuda.current_stream(self.sim.device)
-        side = sim.side_stream()
-        side.wait_stream(cur)
-        if h not in self._warm:
-            self._warm.add(h)
-            with torch.cuda.stream(side):
-                self.optim.zero_grad()
-                out = self._run(traj, start, h, noise)
-            cur.wait_stream(side)
-            return out
-        entry = self._graphs.get(h)
-        if entry is None:
-            inputs = (traj.clone(), start.clone(), None if noise is None else noise.clone())
-            self.optim.zero_grad(set_to_none=True)  # backward allocates the gradients in the graph's pool
-            graph = torch.cuda.CUDAGraph()
-            with torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"):
-                wp.capture_begin(stream=sim._wp_side, external=True, capture_mode=wp.CaptureMode.THREAD_LOCAL)
-                try:
-                    out = self._run(inputs[0], inputs[1], h, inputs[2])
-                finally:
-                    wp.capture_end(stream=sim._wp_side)
-            entry = self._graphs[h] = (graph, inputs, out)
-        graph, inputs, out = entry
-        inputs[0].copy_(traj)
-        inputs[1].copy_(start)
-        if noise is not None:
-            inputs[2].copy_(noise)
-        graph.replay()
-        return out.clone()
+        def run(traj, start, noise):
+            self.optim.zero_grad()  # to None: the captured backward allocates the gradients in the graph's pool
+            return self._run(traj, start, h, noise)
+        return self._graphs(h, run, traj, start, noise)
 
 
 def run_record(cfg: GradFitConfig) -> dict:

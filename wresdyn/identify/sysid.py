@@ -26,22 +26,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..learn.graph_step import StepGraphs, adopt_optimiser, set_lr
 from ..learn.runs import RunFolder
 from ..learn.selection import ValidationScore
-from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.bank import servo_goal_accel
-from ..sim.fused import can_fuse, fused_rollout
+from ..learn.window_fit import joint_weights, run_window_fit, start_window_fit
+from ..sim import Simulator, TrajectoryBank
+from ..sim.fused import can_fuse
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .identifiability import identifiability, write_identifiability
+from .refine import physics_window_loss, refine
 from .shooting import ShootingNodes, chain_loss, draw_chains
 from .sysid_config import SysIdConfig
 from .unexcited_limits import effort_candidates
@@ -50,10 +50,11 @@ __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice"
            "physics_window_loss", "NonFiniteLoss"]
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "refine_frozen", "fused",
-                     "max_iterations", "max_seconds", "identifiability", "identifiability_windows")
+                     "cuda_graph", "max_iterations", "max_seconds", "identifiability", "identifiability_windows")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
-states are the stepped replay's), the L-BFGS refinement, which runs after the checkpointed Adam steps, the
-ceilings of a run until convergence, and the identifiability report, which reads the selected parameters only."""
+states are the stepped replay's, the captured step's the eager one's to float32 rounding), the L-BFGS refinement,
+which runs after the checkpointed Adam steps, the ceilings of a run until convergence, and the identifiability report,
+which reads the selected parameters only."""
 
 
 class NonFiniteLoss(WresdynError):
@@ -83,99 +84,6 @@ class PhysicsScore(ValidationScore):
         return super().__call__()
 
 
-def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = False):
-    """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
-    per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps.
-    ``fused``: the windows replayed in one launch (:func:`~wresdyn.sim.fused.fused_rollout`), the same states."""
-    sim.set_physics(model())
-    if fused:
-        q, qd = fused_rollout(sim, window)
-    else:
-        run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation or 0)
-        q, qd = run.q, run.qd
-    pos = squared_error(q[:, 1:], window.q[:, 1:], weights)
-    vel = squared_error(qd[:, 1:], window.qd[:, 1:], weights)
-    return cfg.w_q * pos + cfg.w_qd * vel, {"pos": pos.detach(), "vel": vel.detach()}  # read when logged
-
-
-def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
-    """``cfg.refine`` L-BFGS steps from ``start`` on fixed windows of ``bank`` (the training trajectories; its delay
-    is set to ``start``'s, or to the fitted one at every evaluation when the delay is refined) of the fields of
-    ``cfg.fit`` outside ``cfg.refine_frozen`` (:attr:`SysIdConfig.refine`); returns the best parameters on validation
-    (``start`` when no step beats ``start_validation``). Appends to ``curve``.
-
-    Adam's steps through the multiple-shooting loss stop in a long, ill-conditioned valley: on the shipped data the
-    loss keeps falling along the straight line to the true parameters (``benchmarks/fidelity/sysid_valley.py``), and a
-    quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
-    2 cores, rerun on resume."""
-    fields = [f for f in cfg.fit if f not in cfg.refine_frozen]
-    model = PhysicsModel(robot, start, fit=fields, dt=dt, effort_floor=cfg.effort_floor if "effort" in fields else None,
-                         shared_delay=cfg.shared_delay)
-    h = max(cfg.horizon_curriculum or (64,))
-    sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                    param_grads=True, friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
-    delay = torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device)
-    bank.set_command_path(delay, servo_goal_accel(robot, start, dt, sim.device))
-    traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
-    window = bank.window(traj, first, h)
-    profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
-    delayed = "delay" in fields  # the windows' PD targets move with the fitted delay
-    floor = model.ref_effort * torch.as_tensor(model.effort_floor_u()).to(model.ref_effort)
-
-    def physics():  # the line search tries points outside what project() keeps: the delay and effort held there
-        v = model()
-        if delayed:
-            v["delay"] = v["delay"].clamp(min=0.0)
-        if "effort" in fields:
-            v["effort"] = torch.maximum(v["effort"], floor)
-        return v
-
-    params = [p for p in model.parameters() if p.requires_grad]
-    optim = torch.optim.LBFGS(params, lr=1.0, max_iter=20, history_size=50, line_search_fn="strong_wolfe")
-
-    def closure():
-        optim.zero_grad()
-        w = window
-        if profiled or delayed:  # the fixed windows' targets move with the fitted goal acceleration and delay
-            d = model.delay_steps().clamp(min=0.0).float().to(sim.device) if delayed else delay
-            goal = model.goal_accel_steps().float().to(sim.device) if profiled else bank.goal_accel
-            bank.set_command_path(d, goal)
-            w = bank.window(traj, first, h)
-        loss, _ = physics_window_loss(cfg, physics if delayed or "effort" in fields else model, sim, w, weights)
-        if not torch.isfinite(loss):
-            raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
-        loss.backward()
-        for p in params:  # L-BFGS flattens the gradients with view()
-            if p.grad is not None and not p.grad.is_contiguous():
-                p.grad = p.grad.contiguous()
-        return loss
-
-    best, best_v = start, start_validation
-    t0 = time.perf_counter()
-    wall0 = curve[-1]["wall"] if curve else 0.0
-    for k in range(cfg.refine):
-        loss = float(optim.step(closure).detach())
-        model.project()
-        row = {"iteration": (curve[-1]["iteration"] if curve else 0) + 1, "stage": "refine",
-               "wall": wall0 + time.perf_counter() - t0, "loss": loss}
-        if score is not None:
-            t_eval = time.perf_counter()
-            row["validation"] = score(model.values())
-            t0 += time.perf_counter() - t_eval
-            if row["validation"] < best_v:
-                best, best_v = model.values(), row["validation"]
-        else:
-            best = model.values()
-        curve.append(row)
-        log(f"refine {k + 1:3d}/{cfg.refine}  H={h:3d}  loss {loss:.3e}"
-            + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
-    if delayed or profiled:  # the bank's command path back to plain values, the selected parameters'
-        bank.set_command_path(torch.as_tensor(best.delay / dt, dtype=torch.float32, device=sim.device),
-                              servo_goal_accel(robot, best, dt, sim.device))
-    log(f"refined: validation {best_v:.4f} rad")
-    return best
-
-
 def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, log=print,
              start: PhysicalParams | None = None, on_search=None):
     """Identify the simulator's physical parameters from ``dataset``'s training split.
@@ -203,7 +111,7 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     params, validation = effort_candidates(cfg, robot, dataset, train, dt, params, learner.physics_score,
                                            run.best.value, log)
     if cfg.refine:
-        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
+        params = refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
                          curve, log)
     if run.path is not None:
         params.save(run.path / "physics.json")
@@ -236,7 +144,9 @@ def run_record(cfg: SysIdConfig, dataset) -> dict:
 class IdentifyLearner:
     """Identification as a :class:`~wresdyn.learn.window_fit.WindowLearner`: the physical parameters
     (:class:`~wresdyn.sim.physics.PhysicsModel`) under Adam, with the grid searches before the first step (kp) and
-    where the effort limit joins the fit (delay, effort)."""
+    where the effort limit joins the fit (delay, effort). With ``cfg.cuda_graph`` on CUDA the Adam step is replayed
+    from a CUDA graph per window length (:attr:`graphs`), captured again after every grid search, where the effort
+    limit joins the fit, at each horizon stage and after a checkpoint is restored."""
 
     name, what, parts, checkpoint_keys, map_location, deferred = \
         "identify", "identification", ("loss", "pos", "vel"), ("model", "optim"), "cpu", False
@@ -268,6 +178,14 @@ class IdentifyLearner:
             raise ValueError("fused replays PD drives with the replay solver at one substep; this identification's "
                              "robot or solver is not that: set fused to false")
         self.fused = fusable if cfg.fused is None else cfg.fused
+        self.graphs = None
+        """The Adam step's CUDA graphs (:class:`~wresdyn.learn.graph_step.StepGraphs`), ``None``: eager steps."""
+        if cfg.cuda_graph and StepGraphs.available(self.sim.device):
+            if getattr(robot, "servo", None) is not None:  # its command path compares goal profiles on the host
+                raise ValueError("cuda_graph: a robot with servo drives identifies eagerly; set cuda_graph to false")
+            model.to(self.sim.device)  # a parameter on the host would be copied, not captured
+            self.graphs, self.deferred = StepGraphs(self.sim, before_capture=self._release), True
+            adopt_optimiser(self.optim, self.sim.device, capturable=self._capturable())
         self.bank = TrajectoryBank(train, self.sim.device)
         self.weights = joint_weights(dataset, self.sim.device)  # joints excluded from fitting weigh 0 in the loss
         self.horizons = cfg.horizon_curriculum or (64,)
@@ -294,14 +212,16 @@ class IdentifyLearner:
         if self.cfg.iterations is None and "effort" in self.cfg.fit \
                 and stage == int(self.cfg.effort_after * len(self.horizons)) and it < self.effort_from:
             self.effort_from = it
+        if self.graphs is not None:  # the last length's graphs are not replayed again: their memory goes
+            self.graphs.reset()
 
     def _search(self, field: str, grid, values, per_joint: bool = False) -> GridChoice | None:
         return grid_search(self.cfg, self.model, self.sim, self.train, self.rng, field, grid, values, self.log,
                             self.weights, per_joint=per_joint)
 
-    def _events(self, it: int) -> None:
+    def _events(self, it: int) -> bool:
         """The grid searches: kp before the first step, delay and effort where the effort limit joins the fit (the
-        delay before the first step with ``delay_grid_first``)."""
+        delay before the first step with ``delay_grid_first``); whether one ran."""
         cfg, searched = self.cfg, []
 
         def delay_search():
@@ -330,8 +250,11 @@ class IdentifyLearner:
         for choice in searched:
             if choice is not None and self.on_search:
                 self.on_search(choice)
+        return any(choice is not None for choice in searched)
 
     def step(self, it: int, h: int, lr: float):
+        if self.graphs is not None:
+            return self._graphed_step(it, h, lr)
         cfg, model = self.cfg, self.model
         for group in self.optim.param_groups:
             group["lr"] = group["scale"] * lr
@@ -362,6 +285,51 @@ class IdentifyLearner:
         model.project()
         return {"loss": float(loss.detach()), **{k: float(v) for k, v in parts.items()}}, None
 
+    def _graphed_step(self, it: int, h: int, lr: float):
+        """:meth:`step` through :attr:`graphs`: the same arithmetic (on CUDA, Adam ``capturable``), the loss parts
+        returned on the device (a non-finite loss is found when they are read, :meth:`non_finite`)."""
+        for group in self.optim.param_groups:
+            set_lr(group, group["scale"] * lr)
+        if self._events(it) or it == self.effort_from:  # parameters moved on the host, or the effort gets a gradient
+            self.graphs.reset()
+        traj, start = self.bank.draw(self.rng, self.cfg.windows, h)
+        with_effort = it >= self.effort_from
+        return {}, self.graphs(h, lambda traj, start: self._adam_step(traj, start, h, with_effort), traj, start)
+
+    def _adam_step(self, traj, start, h: int, with_effort: bool) -> torch.Tensor:
+        """One Adam step on the windows at (trajectory, start) (B,) each; returns (loss, pos, vel) in float64 (the
+        values :meth:`step`'s row holds), without reading them."""
+        cfg, model = self.cfg, self.model
+        self.bank.set_delay(model.delay_steps().float().to(self.sim.device))
+        window = self.bank.window(traj, start, h)
+        loss, parts = physics_window_loss(cfg, model, self.sim, window, self.weights, fused=self.fused)
+        loss = loss + cfg.w_prior * model.prior().to(loss.device)
+        self.optim.zero_grad()  # to None: a captured backward allocates the gradients in the graph's pool
+        loss.backward()
+        if not with_effort and model.u_effort.grad is not None:
+            model.u_effort.grad = None
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        self.optim.step()
+        model.project()
+        return torch.stack([loss.detach().double(), parts["pos"].double(), parts["vel"].double()])
+
+    def _release(self) -> None:
+        """Drop the autograd graphs the simulator and the bank keep from the last eager step (the model arrays'
+        and the delay's): their gradient accumulators would tie a captured backward to the stream they were made
+        on. Both are set again at the start of every step."""
+        self.sim._physics = {}
+        if torch.is_tensor(self.bank.delay):
+            self.bank.delay = self.bank.delay.detach()
+
+    def _capturable(self) -> bool:
+        """Whether Adam runs ``capturable`` (the learning rate a device tensor): captured steps on CUDA (on the CPU,
+        only the tests' stand-in for a capture, which replays eagerly)."""
+        return self.graphs is not None and self.sim.device.type == "cuda"
+
+    def non_finite(self, it: int) -> Exception:
+        """The error of a non-finite loss at iteration ``it`` (from 0), read back from a deferred step."""
+        return _non_finite(it, self.cfg.fit)
+
     def _chains(self, h: int):
         """This iteration's chains of ``cfg.shooting`` windows of ``h`` steps: (trajectory, first sample), (B,) each,
         fresh or from the pool of the window length (:attr:`SysIdConfig.shooting_pool`)."""
@@ -389,6 +357,10 @@ class IdentifyLearner:
         self.effort_from = data["meta"].get("effort_from", self.effort_from)
         self.model.load_state_dict(data["model"])
         self.optim.load_state_dict(data["optim"])
+        # the loaded optimiser brings the flags of the run that saved it (cuda_graph may change on resume)
+        adopt_optimiser(self.optim, self.sim.device, capturable=self._capturable())
+        if self.graphs is not None:  # and new state tensors
+            self.graphs.reset()
         if self.nodes is not None:
             self.nodes.load_state_dict(data["nodes"])
             self.node_optim.load_state_dict(data["node_optim"])

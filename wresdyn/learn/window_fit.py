@@ -83,7 +83,7 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         cfg: The learner's config: ``iterations`` (``None``: until validation plateaus, :mod:`.schedule`), ``lr``,
             ``lr_final``, ``select_every`` and the plateau rule's fields.
         learner: The model, its loss and its step; its optional ``on_stage(stage, it)`` is called where a horizon
-            stage begins.
+            stage begins, its optional ``non_finite(it)`` makes the error raised for a non-finite loss (``it`` from 0).
         run: The run folder (``RunFolder(None, ...)`` keeps it in memory).
         rng: The window sampler, checkpointed with the run.
         log: Progress printer.
@@ -120,8 +120,9 @@ def run_window_fit(cfg, learner: WindowLearner, run: RunFolder, rng: np.random.G
         for (row, _), v in zip(pending, values):
             row.update(zip(learner.parts, v))
             if not np.isfinite(row["loss"]):
-                raise FloatingPointError(f"{learner.what}: non-finite loss at iteration {row['iteration']} "
-                                         "(simulation diverged)")
+                own = getattr(learner, "non_finite", None)  # a learner's own error (what to change), if it has one
+                raise own(row["iteration"] - 1) if own else FloatingPointError(
+                    f"{learner.what}: non-finite loss at iteration {row['iteration']} (simulation diverged)")
         pending.clear()
 
     def checkpoint() -> None:

@@ -90,7 +90,9 @@ def delay_commands(q_cmd: torch.Tensor, rows: torch.Tensor, first: torch.Tensor,
         if delay == 0:
             return q_cmd[rows]
         delay = torch.full((n,), float(delay), device=q_cmd.device)
-    if (delay.detach() < 0).any():
+    # a CUDA graph being captured cannot read the host: there the caller keeps the delay >= 0 (identification's
+    # projection)
+    if not (delay.is_cuda and torch.cuda.is_current_stream_capturing()) and (delay.detach() < 0).any():
         raise ValueError("the command delay must be >= 0 steps")
     m = torch.floor(delay.detach()).long()  # (n,)
     alpha = delay - m.to(delay.dtype)  # carries the gradient

@@ -133,9 +133,10 @@ class PhysicsModel(torch.nn.Module):
         self.ref = {"damping": kd, "friction": 0.05 * eff_ref, "effort": eff_ref, "delay": np.full(n, self.dt)}
         for f, r in self.ref.items():
             self.register_buffer(f"ref_{f}", torch.as_tensor(r, **f64))
-        # not a buffer: a setting of the fit, not a fitted state (checkpoints keep their keys)
-        self.effort_floor = None if effort_floor is None else torch.as_tensor(
-            np.where(np.isfinite(eff), max(float(effort_floor), 0.05), 0.05), **f64)
+        # not persistent: a setting of the fit, not a fitted state (checkpoints keep their keys); a buffer, so that it
+        # moves with the model (a captured step's projection reads it on the device)
+        self.register_buffer("effort_floor", None if effort_floor is None else torch.as_tensor(
+            np.where(np.isfinite(eff), max(float(effort_floor), 0.05), 0.05), **f64), persistent=False)
         for f in ("kp", "kd", "armature"):
             self.register_buffer(f"start_{f}", torch.as_tensor(getattr(start, f), **f64))
             self.register_parameter(f"u_{f}", torch.nn.Parameter(torch.zeros(n, **f64), f in self.fit))
@@ -197,7 +198,7 @@ class PhysicsModel(torch.nn.Module):
             out[f] = getattr(self, f"ref_{f}") * (self._u_delay() if f == "delay" else getattr(self, f"u_{f}"))
         nm = len(self.moving)
         u = torch.diag_embed(torch.exp(self.u_body_logdiag))
-        u = u.index_put((torch.arange(nm)[:, None].expand(nm, 6), self.triu[0].expand(nm, 6),
+        u = u.index_put((torch.arange(nm, device=u.device)[:, None].expand(nm, 6), self.triu[0].expand(nm, 6),
                          self.triu[1].expand(nm, 6)), self.u_body_off)
         m, c, inertia = from_pseudo_inertia(u @ u.transpose(-1, -2))
         out["body_mass"] = self.start_mass.index_put((self.moving,), m)
@@ -216,7 +217,8 @@ class PhysicsModel(torch.nn.Module):
             if f == "encoder_offset":
                 continue
             if f == "effort":
-                u.copy_(torch.maximum(u, torch.as_tensor(self.effort_floor_u(), dtype=u.dtype, device=u.device)))
+                floor = self.effort_floor_u()  # a scalar floor as a clamp: no host tensor copied in a capture
+                u.copy_(u.clamp(min=floor) if isinstance(floor, float) else torch.maximum(u, floor))
             else:
                 u.clamp_(min=0.0)
 
@@ -269,7 +271,9 @@ class PhysicsModel(torch.nn.Module):
             terms.append((self.u_body_logdiag - self.u0_body_logdiag) ** 2)
             scale = torch.exp(self.u0_body_logdiag).amax(-1, keepdim=True)  # off-diagonals relative to the factor
             terms.append(((self.u_body_off - self.u0_body_off) / scale) ** 2)
-        return sum(t.sum() for t in terms) if terms else torch.zeros((), dtype=torch.float64)
+        if not terms:
+            return torch.zeros((), dtype=torch.float64, device=self.ref_delay.device)
+        return sum(t.sum() for t in terms)
 
 
 def _moves(robot, b: int) -> bool:
