@@ -282,8 +282,9 @@ def test_warm_up_releases_what_an_eager_update_kept(robot, data, tmp_path, monke
     seen = []
     monkeypatch.setattr(GraphPPO, "_on_side_stream",
                         lambda self, step: seen.append(self.actor.output_mean.requires_grad) or step())
-    monkeypatch.setattr(GraphPPO, "_capture", lambda self, step: _Recorded(self, step))
+    monkeypatch.setattr(GraphPPO, "_capture",
+                        lambda self, step: seen.append(self.actor.output_mean.requires_grad) or _Recorded(self, step))
     alg.__class__ = GraphPPO
     alg.storage = saved
     alg.static_update(capture=True)
-    assert seen[:1] == [False] and all(seen[1:])
+    assert seen == [False, True, True, False]  # released before the first warm-up and before the capture

@@ -166,6 +166,7 @@ class GraphPPO(DeviceRate, PackedPPO):
             if warm < WARMUP:
                 self._warm = warm + 1
                 return self._on_side_stream(step)
+            self._release_actor_graph(static)
             graph = self._graph = self._capture(step)
             self._graph_inputs = self._inputs()
         graph.replay()
@@ -174,27 +175,39 @@ class GraphPPO(DeviceRate, PackedPPO):
         """Replace the actor's kept distribution by one made without gradient. The kept one's autograd graph keeps
         the parameters' gradient accumulators alive, and an accumulator stays on the stream it was made on: made by
         an eager update on the default stream, the captured backward would end by recording an event on the legacy
-        stream while the capture runs, which CUDA refuses (``cudaErrorStreamCaptureImplicit`` on an H200). Released,
-        the warm-up makes them again on its side stream."""
+        stream while the capture runs, which CUDA refuses (``cudaErrorStreamCaptureImplicit`` on an H200). Released
+        before the first warm-up and before the capture, they are made again on the side stream."""
         with torch.no_grad():
             self._actor_distribution(self.storage.observations.flatten(0, 1)[static.index])
 
+    def _side_stream(self) -> "torch.cuda.Stream":
+        """The one side stream of the warm-ups and the capture (made at the first call). One stream for both keeps
+        the step's gradient accumulators on the capturing stream, so the captured backward waits on no event
+        recorded outside the capture (the gradient fit's graphed step does the same on its simulator's stream)."""
+        side = getattr(self, "_side", None)
+        if side is None:
+            side = self._side = torch.cuda.Stream(device=self.device)
+        return side
+
     def _on_side_stream(self, step) -> None:
-        """Run ``step`` on a side stream, ordered after and before the current stream's work (PyTorch's warm-up for
-        a capture: autograd's and Adam's lazily made state then never comes from inside a graph)."""
-        side = torch.cuda.Stream(device=self.device)
+        """Run ``step`` on the side stream, ordered after and before the current stream's work (PyTorch's warm-up
+        for a capture: autograd's and Adam's lazily made state then never comes from inside a graph)."""
+        side = self._side_stream()
         side.wait_stream(torch.cuda.current_stream(self.device))
         with torch.cuda.stream(side):
             step()
         torch.cuda.current_stream(self.device).wait_stream(side)
 
     def _capture(self, step) -> "torch.cuda.CUDAGraph":
-        """``step`` captured as a CUDA graph (not run)."""
+        """``step`` captured as a CUDA graph on the side stream (not run)."""
+        side = self._side_stream()
+        side.wait_stream(torch.cuda.current_stream(self.device))
         graph = torch.cuda.CUDAGraph()
         # thread-local: the NCCL watchdog's thread may query the events of earlier collectives meanwhile, which a
         # global capture would count as an unsafe call and abort on
-        with torch.cuda.graph(graph, capture_error_mode="thread_local"):
+        with torch.cuda.graph(graph, stream=side, capture_error_mode="thread_local"):
             step()
+        torch.cuda.current_stream(self.device).wait_stream(side)
         return graph
 
     def _inputs(self) -> tuple[int, ...]:
