@@ -17,16 +17,15 @@ from a coarse search: the training loss of a few windows at a geometric grid of 
 limit (forward only, :mod:`.grid_search`); the gradient refines from the best. ``SysIdConfig.effort_floor`` bounds
 both from below (a servo's data-sheet stall torque as the least torque bound). Model selection on the validation
 split, as for every learner: every ``select_every`` iterations the current parameters replay the validation
-trajectories and the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
-each step validated the same way. Held-out and OOD data are never read. The Adam loop is the gradient fit's
-(:func:`~wresdyn.learn.window_fit.run_window_fit`).
+trajectories and the best are returned. Optional L-BFGS (``SysIdConfig.refine``) and Levenberg-Marquardt
+(``polish``, :mod:`.refine`) steps follow on fixed training windows, each validated the same way. Held-out and OOD
+data are never read. The Adam loop is the gradient fit's (:func:`~wresdyn.learn.window_fit.run_window_fit`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -35,13 +34,13 @@ import torch
 from ..errors import WresdynError
 from ..learn.runs import RunFolder
 from ..learn.selection import ValidationScore
-from ..learn.window_fit import joint_weights, run_window_fit, squared_error, start_window_fit
-from ..sim import Simulator, TrajectoryBank, rollout
-from ..sim.bank import servo_goal_accel
-from ..sim.fused import can_fuse, fused_rollout
+from ..learn.window_fit import joint_weights, run_window_fit, start_window_fit
+from ..sim import Simulator, TrajectoryBank
+from ..sim.fused import can_fuse
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .identifiability import identifiability, write_identifiability
+from .refine import lbfgs_refine, physics_window_loss, polish
 from .shooting import ShootingNodes, chain_loss, draw_chains
 from .sysid_config import SysIdConfig
 from .unexcited_limits import reset_effort_limits, share_effort_ratio
@@ -50,10 +49,11 @@ __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice"
            "physics_window_loss", "NonFiniteLoss"]
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "refine_frozen", "fused",
-                     "max_iterations", "max_seconds", "identifiability", "identifiability_windows")
+                     "max_iterations", "max_seconds", "identifiability", "identifiability_windows", "polish",
+                     "polish_windows", "polish_threshold")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
-states are the stepped replay's), the L-BFGS refinement, which runs after the checkpointed Adam steps, the
-ceilings of a run until convergence, and the identifiability report, which reads the selected parameters only."""
+states are the stepped replay's), the L-BFGS refinement and the polish, which run after the checkpointed Adam steps,
+the ceilings of a run until convergence, and the identifiability report, which reads the selected parameters only."""
 
 
 class NonFiniteLoss(WresdynError):
@@ -81,99 +81,6 @@ class PhysicsScore(ValidationScore):
     def __call__(self, params: PhysicalParams) -> float:
         self.physics = params
         return super().__call__()
-
-
-def physics_window_loss(cfg, model, sim, window, weights=None, fused: bool = False):
-    """Identification loss of one batch of windows: w_q |q − q_r|² + w_qd |q̇ − q̇_r|², summed over joints with
-    per-joint ``weights`` (n,) tensor (0: a joint excluded from fitting; ``None``: all 1), mean over steps.
-    ``fused``: the windows replayed in one launch (:func:`~wresdyn.sim.fused.fused_rollout`), the same states."""
-    sim.set_physics(model())
-    if fused:
-        q, qd = fused_rollout(sim, window)
-    else:
-        run = rollout(sim, window, grad=True, truncation=cfg.grad_truncation or 0)
-        q, qd = run.q, run.qd
-    pos = squared_error(q[:, 1:], window.q[:, 1:], weights)
-    vel = squared_error(qd[:, 1:], window.qd[:, 1:], weights)
-    return cfg.w_q * pos + cfg.w_qd * vel, {"pos": pos.detach(), "vel": vel.detach()}  # read when logged
-
-
-def _refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_validation: float, weights, curve, log):
-    """``cfg.refine`` L-BFGS steps from ``start`` on fixed windows of ``bank`` (the training trajectories; its delay
-    is set to ``start``'s, or to the fitted one at every evaluation when the delay is refined) of the fields of
-    ``cfg.fit`` outside ``cfg.refine_frozen`` (:attr:`SysIdConfig.refine`); returns the best parameters on validation
-    (``start`` when no step beats ``start_validation``). Appends to ``curve``.
-
-    Adam's steps through the multiple-shooting loss stop in a long, ill-conditioned valley: on the shipped data the
-    loss keeps falling along the straight line to the true parameters (``benchmarks/fidelity/sysid_valley.py``), and a
-    quasi-Newton method on a fixed batch moves along such valleys far faster. Not checkpointed: under a minute on
-    2 cores, rerun on resume."""
-    fields = [f for f in cfg.fit if f not in cfg.refine_frozen]
-    model = PhysicsModel(robot, start, fit=fields, dt=dt, effort_floor=cfg.effort_floor if "effort" in fields else None,
-                         shared_delay=cfg.shared_delay)
-    h = max(cfg.horizon_curriculum or (64,))
-    sim = Simulator(robot, cfg.refine_windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
-                    param_grads=True, friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
-    delay = torch.as_tensor(start.delay / dt, dtype=torch.float32, device=sim.device)
-    bank.set_command_path(delay, servo_goal_accel(robot, start, dt, sim.device))
-    traj, first = bank.draw(np.random.default_rng(cfg.seed + 1), cfg.refine_windows, h)
-    window = bank.window(traj, first, h)
-    profiled = getattr(robot, "servo", None) is not None and "goal_accel" in fields
-    delayed = "delay" in fields  # the windows' PD targets move with the fitted delay
-    floor = model.ref_effort * torch.as_tensor(model.effort_floor_u()).to(model.ref_effort)
-
-    def physics():  # the line search tries points outside what project() keeps: the delay and effort held there
-        v = model()
-        if delayed:
-            v["delay"] = v["delay"].clamp(min=0.0)
-        if "effort" in fields:
-            v["effort"] = torch.maximum(v["effort"], floor)
-        return v
-
-    params = [p for p in model.parameters() if p.requires_grad]
-    optim = torch.optim.LBFGS(params, lr=1.0, max_iter=20, history_size=50, line_search_fn="strong_wolfe")
-
-    def closure():
-        optim.zero_grad()
-        w = window
-        if profiled or delayed:  # the fixed windows' targets move with the fitted goal acceleration and delay
-            d = model.delay_steps().clamp(min=0.0).float().to(sim.device) if delayed else delay
-            goal = model.goal_accel_steps().float().to(sim.device) if profiled else bank.goal_accel
-            bank.set_command_path(d, goal)
-            w = bank.window(traj, first, h)
-        loss, _ = physics_window_loss(cfg, physics if delayed or "effort" in fields else model, sim, w, weights)
-        if not torch.isfinite(loss):
-            raise FloatingPointError("identification: non-finite loss in the L-BFGS refinement (simulation diverged)")
-        loss.backward()
-        for p in params:  # L-BFGS flattens the gradients with view()
-            if p.grad is not None and not p.grad.is_contiguous():
-                p.grad = p.grad.contiguous()
-        return loss
-
-    best, best_v = start, start_validation
-    t0 = time.perf_counter()
-    wall0 = curve[-1]["wall"] if curve else 0.0
-    for k in range(cfg.refine):
-        loss = float(optim.step(closure).detach())
-        model.project()
-        row = {"iteration": (curve[-1]["iteration"] if curve else 0) + 1, "stage": "refine",
-               "wall": wall0 + time.perf_counter() - t0, "loss": loss}
-        if score is not None:
-            t_eval = time.perf_counter()
-            row["validation"] = score(model.values())
-            t0 += time.perf_counter() - t_eval
-            if row["validation"] < best_v:
-                best, best_v = model.values(), row["validation"]
-        else:
-            best = model.values()
-        curve.append(row)
-        log(f"refine {k + 1:3d}/{cfg.refine}  H={h:3d}  loss {loss:.3e}"
-            + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
-    if delayed or profiled:  # the bank's command path back to plain values, the selected parameters'
-        bank.set_command_path(torch.as_tensor(best.delay / dt, dtype=torch.float32, device=sim.device),
-                              servo_goal_accel(robot, best, dt, sim.device))
-    log(f"refined: validation {best_v:.4f} rad")
-    return best
 
 
 def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, log=print,
@@ -209,8 +116,10 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
                                                   validation if shared is None else shared,
                                                   dataset.fit_weights() > 0, log)
     if cfg.refine:
-        params = _refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
+        params = lbfgs_refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
                          curve, log)
+    if cfg.polish:
+        params = polish(cfg, robot, learner.bank, dt, params, learner.physics_score, learner.weights, curve, log)
     if run.path is not None:
         params.save(run.path / "physics.json")
         run.write_curve()
