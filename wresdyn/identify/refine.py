@@ -8,20 +8,20 @@ tell apart but also pulls every well-excited coordinate towards the robot file's
 w_prior |u − u_0|² a direction of data curvature H sits a fraction w_prior / (H + w_prior) of its distance from the
 start short of the data's optimum (on ``mujoco.sysid``'s known-truth cases 0.05-0.4 %,
 ``benchmarks/peers/known_truth.py``). The polish removes that bias where the data dominate and keeps the prior's values
-elsewhere:
+elsewhere::
 
     r(u)                  weighted residuals [√w_q (q − q_r), √w_qd (q̇ − q̇_r)] of M samples (fixed training windows)
     J = ∂r/∂u             forward differences, every coordinate perturbed in its own worlds of one batched replay
     H = JᵀJ / M           the Gauss-Newton curvature of the data loss (Adam's loss is |r|² / M)
-    P                     the prior's curvature per coordinate (1, or the body off-diagonals' 1 / scale²,
-                          :meth:`~wresdyn.sim.physics.PhysicsModel.prior`; 1 for the linear fields it leaves out)
-    P^-½ H P^-½ = V Λ Vᵀ  determined directions: λ_k > ``polish_threshold`` · w_prior
+    P                     the prior's curvature per coordinate (1, or the body off-diagonals' 1 / scale², as in
+                          PhysicsModel.prior; 1 for the linear fields it leaves out)
+    P^-½ H P^-½ = V Λ Vᵀ  determined directions: λ_k > polish_threshold · w_prior
     Δu = −P^-½ V_d (Λ_d + μ)⁻¹ V_dᵀ P^-½ Jᵀr / M      the step, in the determined directions only
 
 μ is Levenberg-Marquardt's damping: a step that raises the training loss is refused and retried with ten times more.
 Every accepted step replays validation and the best parameters there are kept (the start if none beats it), as the
-L-BFGS refinement's. The effort limit (a flat or kinked loss) and the
-command path's fields (delay, servo goal acceleration: they move the PD targets, not the model) keep their values.
+L-BFGS refinement's. The effort limit (a flat or kinked loss) and the command path's fields (delay, servo goal
+acceleration: they move the PD targets, not the model) keep their values.
 """
 
 from __future__ import annotations
