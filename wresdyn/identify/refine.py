@@ -119,7 +119,10 @@ def _metric(model: PhysicsModel, params: list) -> np.ndarray:
 def _values(model: PhysicsModel, params: list, theta: np.ndarray) -> dict:
     """The model's values at coordinates ``theta`` (the model is left there)."""
     with torch.no_grad():
-        torch.nn.utils.vector_to_parameters(torch.as_tensor(theta, dtype=torch.float64), params)
+        at = 0
+        for p in params:  # copied in place: a coordinate tensor may not be contiguous (torch's helpers view it)
+            p.copy_(torch.as_tensor(theta[at:at + p.numel()], dtype=p.dtype).reshape(p.shape))
+            at += p.numel()
         return {k: v.detach().cpu() for k, v in model().items()}
 
 
@@ -134,7 +137,7 @@ def polish(cfg, robot, bank, dt: float, start: PhysicalParams, score, weights, c
     if not params:
         log("polish: no field to polish")
         return start
-    theta = torch.nn.utils.parameters_to_vector(params).detach().cpu().numpy().astype(np.float64)
+    theta = torch.cat([p.detach().reshape(-1) for p in params]).cpu().numpy().astype(np.float64)
     p_count = len(theta)
     h = max(cfg.horizon_curriculum or (64,))
     bank.set_command_path(torch.as_tensor(start.delay / dt, dtype=torch.float32, device=bank.device),
