@@ -49,3 +49,23 @@ def test_the_last_part_runs_without_the_collector_and_freezes_nothing():
         assert not gc.isenabled()
         kept = [[i] for i in range(100)]
     assert gc.isenabled() and gc.get_freeze_count() == before and kept
+
+
+def test_the_optimisers_dynamo_import_is_part_of_the_frozen_set_up():
+    """Every optimiser imports torch._dynamo (167,000 objects): the fit's set-up imports it, the collector off, before
+    the data load (here made to stop the command)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gc, sys\n"
+        "import wresdyn.data.loading as loading\n"
+        "from wresdyn.cli.fit import Fit, run\n"
+        "def stop(*a, **k):\n"
+        "    raise SystemExit(0 if 'torch._dynamo' in sys.modules and not gc.isenabled() else 3)\n"
+        "loading.load_data = stop\n"
+        "assert 'torch._dynamo' not in sys.modules\n"
+        "run(Fit(data='none.npz', quiet=True))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]

@@ -79,34 +79,105 @@ def test_probe_runs_dry_take_the_gpus_in_turn_and_touch_nothing(tmp_path):
     assert not (tmp_path / "log").exists() and not (tmp_path / "root").exists()
 
 
+FULL = ROOT / "benchmarks/results/floor_fair/full"
+FINETUNED = ("b_calibrated", "c_delta_action", "d_oracle", "e_randomized", "f_calibrated_narrow")
+
+
+def _committed_base(tmp_path: Path, base: str) -> None:
+    """``src/<base>_s0..2`` holding the committed runs' ``config.json`` files, all the set-up's check reads."""
+    for s in range(3):
+        for p in FINETUNED:
+            (tmp_path / f"src/{base}_s{s}/skills/{p}").mkdir(parents=True)
+            (tmp_path / f"src/{base}_s{s}/skills/{p}/config.json").write_bytes(
+                (FULL / f"{base}_s{s}/skills/{p}/config.json").read_bytes())
+
+
+def _dry_at_root(tmp_path: Path, env: dict) -> subprocess.CompletedProcess:
+    """A dry run with ROOT /root, where the committed skills' paths point (a dry run copies nothing there)."""
+    return subprocess.run(["bash", str(ROOT / "benchmarks/skills/floor_fair_probe.sh"), "src", "log"], cwd=tmp_path,
+                          env={"PATH": "/usr/bin:/bin", "ROOT": "/root", "DRY": "1", "GPUS": "0", "REUSE": "1",
+                               **env}, capture_output=True, text=True)
+
+
+def _commands(done: subprocess.CompletedProcess) -> list[str]:
+    return [ln for ln in done.stdout.splitlines() if not ln.startswith("# ")]
+
+
 def test_probe_runs_reuse_write_where_d_and_e_were_trained(tmp_path):
     done = _probe(tmp_path, {"DRY": "1", "GPUS": "0", "REUSE": "1"})
     assert done.returncode == 2 and "REUSE=1 needs src/floor_unv_s0" in done.stderr
-    for s in range(3):
-        (tmp_path / f"src/floor_unv_s{s}/skills/d_oracle").mkdir(parents=True)
-    lines = subprocess.run(["bash", str(ROOT / "benchmarks/skills/floor_fair_probe.sh"), "src", "log"], cwd=tmp_path,
-                           env={"PATH": "/usr/bin:/bin", "ROOT": str(tmp_path / "root"), "DRY": "1", "GPUS": "0",
-                                "REUSE": "1"}, capture_output=True, text=True).stdout.splitlines()
-    assert all(f"--out {tmp_path}/root/floor_unv_s{s} " in ln for s, ln in enumerate(lines)) and len(lines) == 3
+    _committed_base(tmp_path, "floor_unv")
+    done = _dry_at_root(tmp_path, {})
+    lines = _commands(done)
+    assert done.returncode == 0 and len(lines) == 3, done.stderr
+    assert all(f"--out /root/floor_unv_s{s} --calibrated /root/unvp_fits/calibrated "
+               "--delta /root/unvp_fits/delta_action" in ln for s, ln in enumerate(lines))
+    assert "# floor_unvp_s1: /root/floor_unv_s1 from src/floor_unv_s1, keeping d_oracle e_randomized, retraining " \
+           "b_calibrated c_delta_action f_calibrated_narrow" in done.stdout.splitlines()
+
+
+def test_probe_runs_reuse_keep_c_of_the_probe_runs(tmp_path):
+    """The effort line search's calibrated corrections: (b) and (f) retrained, (c), (d), (e) of the probe runs."""
+    _probe(tmp_path, {"DRY": "1", "GPUS": "0"})
+    (tmp_path / "src/unvp55_fits/calibrated").mkdir(parents=True)
+    (tmp_path / "src/unvp55_fits/calibrated/policy.pt").touch()
+    _committed_base(tmp_path, "floor_unvp")
+    done = _dry_at_root(tmp_path, {"BASE": "floor_unvp", "NAME": "floor_unvp55", "CAL": "/root/unvp55_fits/calibrated",
+                                   "KEEP": "c_delta_action d_oracle e_randomized"})
+    lines = _commands(done)
+    assert done.returncode == 0 and len(lines) == 3, done.stderr
+    assert all(f"--seed {s} " in ln and f"--out /root/floor_unv_s{s} --calibrated /root/unvp55_fits/calibrated "
+               "--delta /root/unvp_fits/delta_action" in ln for s, ln in enumerate(lines))
+    assert "# /root/unvp55_fits/calibrated: from src/unvp55_fits/calibrated unless there" in done.stdout
+    assert "# floor_unvp55_s2: /root/floor_unv_s2 from src/floor_unvp_s2, keeping c_delta_action d_oracle " \
+           "e_randomized, retraining b_calibrated f_calibrated_narrow" in done.stdout.splitlines()
+
+
+def test_probe_runs_reuse_refuse_a_kept_policy_on_other_corrections(tmp_path):
+    _probe(tmp_path, {"DRY": "1", "GPUS": "0"})
+    _committed_base(tmp_path, "floor_unv")  # (c) trained on unv_fits/, the command passes unvp_fits/
+    done = _dry_at_root(tmp_path, {"KEEP": "c_delta_action d_oracle e_randomized"})
+    assert done.returncode == 2 and not done.stdout
+    assert done.stderr == "error: src/floor_unv_s0/skills/c_delta_action/config.json records corrections " \
+                          "'/root/unv_fits/delta_action', the command passes '/root/unvp_fits/delta_action'\n"
+    (tmp_path / "src/floor_unv_s1/skills/d_oracle/config.json").unlink()
+    done = _dry_at_root(tmp_path, {"RUNS": "floor_unvp_s1"})
+    assert done.returncode == 2 and "KEEP names d_oracle but src/floor_unv_s1/skills/d_oracle/config.json" in \
+        done.stderr
+    done = _dry_at_root(tmp_path, {"KEEP": "a_nominal"})
+    assert done.returncode == 2 and "KEEP names a_nominal, not one of b_calibrated" in done.stderr
+    done = _dry_at_root(tmp_path, {"BASE": "floor_unvp"})
+    assert done.returncode == 2 and "NAME and BASE are both floor_unvp" in done.stderr
 
 
 def test_probe_runs_narrowed_keep_each_run_its_own_seed(tmp_path):
-    for s in range(3):
-        (tmp_path / f"src/floor_unv_s{s}/skills/d_oracle").mkdir(parents=True)
-    done = _probe(tmp_path, {"DRY": "1", "GPUS": "1", "REUSE": "1", "RUNS": "floor_unvp_s2 floor_unvp_s0"})
-    lines = done.stdout.splitlines()
+    _probe(tmp_path, {"DRY": "1", "GPUS": "0"})
+    _committed_base(tmp_path, "floor_unv")
+    done = _dry_at_root(tmp_path, {"GPUS": "1", "RUNS": "floor_unvp_s2 floor_unvp_s0"})
+    lines = _commands(done)
     assert len(lines) == 2 and all(ln.startswith("CUDA_VISIBLE_DEVICES=1 ") for ln in lines)
-    assert "--seed 2 " in lines[0] and f"--out {tmp_path}/root/floor_unv_s2 " in lines[0]
-    assert "--seed 0 " in lines[1] and f"--out {tmp_path}/root/floor_unv_s0 " in lines[1]
+    assert "--seed 2 " in lines[0] and "--out /root/floor_unv_s2 " in lines[0]
+    assert "--seed 0 " in lines[1] and "--out /root/floor_unv_s0 " in lines[1]
+
+
+def _fake_base(tmp_path: Path, base: str, delta: str = "") -> None:
+    """``src/<base>_s0..2`` with every fine-tuned policy (its ``config.json`` naming its corrections under the test's
+    ROOT), results and a held-out ledger of two lines."""
+    fits = {"b_calibrated": "unvp_fits/calibrated", "c_delta_action": delta or "unvp_fits/delta_action",
+            "f_calibrated_narrow": "unvp_fits/calibrated"}
+    for s in range(3):
+        run = tmp_path / f"src/{base}_s{s}"
+        for p in FINETUNED:
+            (run / "skills" / p).mkdir(parents=True)
+            correction = str(tmp_path / "root" / fits[p]) if p in fits else ""
+            (run / "skills" / p / "config.json").write_text(json.dumps({"init": "a", "correction": correction},
+                                                                       indent=2))
+        (run / "results.json").write_text("{}")
+        (run / "heldout_ledger.jsonl").write_text('{"seed": 0}\n{"seed": 0}\n')
 
 
 def test_probe_runs_reuse_set_up_once_keeping_d_and_e(tmp_path):
-    for s in range(3):
-        run = tmp_path / f"src/floor_unv_s{s}"
-        for p in ("b_calibrated", "c_delta_action", "d_oracle", "e_randomized", "f_calibrated_narrow"):
-            (run / "skills" / p).mkdir(parents=True)
-        (run / "results.json").write_text("{}")
-        (run / "heldout_ledger.jsonl").write_text("{}\n")
+    _fake_base(tmp_path, "floor_unv")
     # the deploy itself fails at once here (no wresdyn on this PATH's python's path): only the set-up is checked
     done = _probe(tmp_path, {"GPUS": "0", "REUSE": "1", "STAGGER": "0"})
     assert "STAGES" in {p.name for p in (tmp_path / "log").iterdir()}, done.stderr
@@ -120,3 +191,45 @@ def test_probe_runs_reuse_set_up_once_keeping_d_and_e(tmp_path):
                    env={"PATH": "/usr/bin:/bin", "ROOT": str(tmp_path / "root"), "GPUS": "0", "REUSE": "1",
                         "STAGGER": "0"}, capture_output=True, text=True)
     assert (tmp_path / "root/floor_unv_s0/skills/b_calibrated").exists()
+
+
+def test_probe_runs_reuse_set_up_keeping_c_with_other_calibrated_corrections(tmp_path):
+    _fake_base(tmp_path, "floor_unvp")
+    (tmp_path / "src/unvp55_fits/calibrated").mkdir(parents=True)
+    (tmp_path / "src/unvp55_fits/calibrated/policy.pt").write_text("55")
+    done = _probe(tmp_path, {"GPUS": "0", "REUSE": "1", "STAGGER": "0", "BASE": "floor_unvp", "NAME": "floor_unvp55",
+                             "KEEP": "c_delta_action d_oracle e_randomized",
+                             "CAL": str(tmp_path / "root/unvp55_fits/calibrated")})
+    assert (tmp_path / "log/STAGES").exists(), done.stderr
+    assert (tmp_path / "root/unvp55_fits/calibrated/policy.pt").read_text() == "55"
+    assert (tmp_path / "root/unvp_fits/delta_action/policy.pt").exists()
+    assert not (tmp_path / "root/unvp_fits/calibrated").exists()
+    for s in range(3):
+        run = tmp_path / f"root/floor_unv_s{s}"
+        assert sorted(p.name for p in (run / "skills").iterdir()) == ["c_delta_action", "d_oracle", "e_randomized"]
+        assert len((run / "heldout_ledger.jsonl").read_text().splitlines()) == 2  # the base's scorings
+        assert (run / ".probe_reuse").read_text().startswith(f"floor_unvp55_s{s}: kept c_delta_action")
+        assert not (run / "results.json").exists()
+    assert "floor_unvp55_s0.out" in {p.name for p in (tmp_path / "log").iterdir()}
+
+
+def test_compare_the_probe_runs_with_the_committed_ones_on_validation():
+    """``floor_fair_compare.py`` on the committed uneven runs: the figures the probe configuration was chosen on."""
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair_compare.py"),
+                           *(str(FULL / f"floor_unv_s{s}") for s in range(3)), "--",
+                           *(str(FULL / f"floor_unvp_s{s}") for s in range(3)), "--names", "floor_unv", "floor_unvp"],
+                          check=True, capture_output=True, text=True)
+    lines = done.stdout.splitlines()
+    assert lines[0] == "Validation success on the real robot, mean over seeds, floor_unv -> floor_unvp:"
+    assert lines[2] == "| policy | all | squat | weight_shift | kick | wave |"
+    # (b) 64.6 -> 75.0 % and (f) 75.0 -> 83.3 % (full/MANIFEST.md); the squats gained, the kicks lost
+    assert "| b_calibrated | 64.6 -> 75.0 | 33.3 -> 100.0 | 100.0 -> 100.0 | 25.0 -> 0.0 | 100.0 -> 100.0 |" in lines
+    assert "| f_calibrated_narrow | 75.0 -> 83.3 | 25.0 -> 100.0 | 100.0 -> 100.0 | 75.0 -> 33.3 | 100.0 -> 100.0 |" \
+        in lines
+    assert "| d_oracle | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 |" in lines
+
+
+def test_compare_needs_two_configurations():
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair_compare.py"),
+                           str(FULL / "floor_unv_s0")], capture_output=True, text=True)
+    assert done.returncode == 1 and "RUN_A... -- RUN_B..." in done.stderr

@@ -267,3 +267,23 @@ def _two_process_worker(out: Path, device: str) -> None:
 
 if __name__ == "__main__":
     _two_process_worker(Path(sys.argv[1]), sys.argv[2])
+
+
+
+def test_warm_up_releases_what_an_eager_update_kept(robot, data, tmp_path, monkeypatch):
+    """An eager update leaves the actor's distribution with an autograd graph, which keeps the parameters' gradient
+    accumulators (each tied to the stream it was made on) alive; the graph path's warm-up starts with that graph
+    released, so the accumulators are made anew (one made on CUDA's legacy stream would make the captured backward
+    touch that stream)."""
+    alg = _rollout(robot, data.split("train"), data.rate_hz, tmp_path, 0.03)
+    saved = copy.deepcopy(alg.storage)
+    alg.update()
+    assert alg.actor.output_mean.requires_grad
+    seen = []
+    monkeypatch.setattr(GraphPPO, "_on_side_stream",
+                        lambda self, step: seen.append(self.actor.output_mean.requires_grad) or step())
+    monkeypatch.setattr(GraphPPO, "_capture", lambda self, step: _Recorded(self, step))
+    alg.__class__ = GraphPPO
+    alg.storage = saved
+    alg.static_update(capture=True)
+    assert seen[:1] == [False] and all(seen[1:])

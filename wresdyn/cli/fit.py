@@ -163,11 +163,21 @@ def _set_up(args: Fit):
 
     from ..data.loading import load_data
     from ..fit.gradfit import fit  # noqa: F401  (torch and the learners: set-up objects too)
+    from ..fit.hybrid import fit_hybrid  # noqa: F401  (the identification's modules)
+    from .clock import since_start
 
+    imported = since_start()
+    # every optimiser's constructor and step import torch._dynamo, so any fit's first iteration does; imported here,
+    # its 167,000 objects (sympy's, the ONNX exporter's modules) are frozen with the set-up's instead of costing about
+    # 390 collections while it imports and a walk in every full collection after
+    import torch._dynamo  # noqa: F401
+
+    dynamo = since_start() - imported
     cfg = args.config
     identify_first = args.model == "hybrid" and not cfg.physics
     sysid = args.identify_config if identify_first else None
     ds, robot = load_data(args.data, args.robot, args.gains)
+    loaded = since_start()
     out = Path(args.out)
     what = "parametric baseline" if cfg.model == "parametric" else f"{cfg.residual.kind} residual ({cfg.residual.arch})"
     if identify_first:
@@ -178,6 +188,9 @@ def _set_up(args: Fit):
     log = ClockLog(out / "fit.log", quiet=args.quiet)
     from ..learn.schedule import describe_length
 
+    if log.clock:  # the start's seconds split
+        log(f"start: imports {imported:.1f} s, torch._dynamo {dynamo:.1f} s, the dataset and robot (Warp's and "
+            f"Newton's imports with them) {loaded - imported - dynamo:.1f} s")
     log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {describe_length(cfg)} "
         f"x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}")
     from ..sim.physics import PhysicalParams

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import torch
 
+from ..learn.fused_mlp import FusedMLPRollout
 from ..learn.parametric import ParametricResidual
 from ..learn.residual import EluMLP, GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
 from ..learn.runs import RunFolder
@@ -83,11 +84,11 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
     return loss, {k: v.detach() for k, v in parts.items()}
 
 
-RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph", "max_iterations", "max_seconds",
-                     "beat_start_within")
-""":class:`GradFitConfig` fields a resumed fit may change: where it runs and the ceilings and early stop of a run until
-convergence, not what it learns (``iterations`` shapes the learning-rate and horizon schedule, so it is part of what
-it learns)."""
+RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph", "fused_network", "max_iterations",
+                     "max_seconds", "beat_start_within")
+""":class:`GradFitConfig` fields a resumed fit may change: where and how it runs (``fused_network`` changes only the
+rounding) and the ceilings and early stop of a run until convergence, not what it learns (``iterations`` shapes the
+learning-rate and horizon schedule, so it is part of what it learns)."""
 
 
 def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None,
@@ -139,7 +140,8 @@ class _FitLearner:
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
         self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
-        self.optim = torch.optim.Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred)
+        self.optim = torch.optim.Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred,
+                                      fused=cfg.fused_network or None)
         self.map_location = cfg.device
         delay = 0.0
         if physics is not None:
@@ -207,6 +209,8 @@ class GradFitIteration:
     first call at each length runs eagerly on that stream (it loads kernels and creates Adam's state and
     torch's workspaces, which a capture must not). The window indices and the observation noise enter through
     fixed buffers; the gradients live in each graph's memory pool. Without ``graph`` the same code runs eagerly.
+    With ``cfg.fused_network`` the rollout runs the MLP as :class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`, whose
+    :meth:`~wresdyn.learn.fused_mlp.FusedMLPRollout.finish` forms the parameters' gradients after the backward pass.
     """
 
     def __init__(self, cfg: GradFitConfig, sim, bank, policy, optim, obs_noise: float, graph: bool,
@@ -214,6 +218,7 @@ class GradFitIteration:
         self.cfg, self.sim, self.bank, self.policy, self.optim = cfg, sim, bank, policy, optim
         self.obs_noise, self.graph, self.weights = obs_noise, graph, weights
         self.torque_scale = policy.scale if policy.kind == "torque" else None
+        self.fused = FusedMLPRollout(policy) if cfg.fused_network else None
         self._warm: set[int] = set()
         self._graphs: dict[int, tuple] = {}  # window length -> (graph, (traj, start, noise) buffers, output)
         self.adopt_optimiser()
@@ -221,22 +226,27 @@ class GradFitIteration:
     def adopt_optimiser(self) -> None:
         """Put Adam's learning rate and step count where this mode wants them (a device tensor with ``graph``, a
         float and a CPU tensor without); again after a resumed optimiser state is loaded."""
-        graph, optim = self.graph, self.optim
-        for group in optim.param_groups:  # a resumed optimiser takes its flag from the checkpoint: set it here
+        graph, optim, fused = self.graph, self.optim, self.fused is not None
+        for group in optim.param_groups:  # a resumed optimiser takes its flags from the checkpoint: set them here
             group["capturable"] = graph
+            group["fused"] = fused or None
             lr = float(group["lr"])
             group["lr"] = torch.tensor(lr, device=self.sim.device) if graph else lr
-        for state in optim.state.values():  # Adam's step count lives where capturable wants it
+        for state in optim.state.values():  # Adam's step count lives where capturable or fused wants it
             if "step" in state:
-                state["step"] = state["step"].to(self.sim.device if graph else "cpu", torch.float32)
+                state["step"] = state["step"].to(self.sim.device if graph or fused else "cpu", torch.float32)
 
     def _run(self, traj, start, h: int, noise) -> torch.Tensor:
         window = self.bank.window(traj, start, h)
-        run = rollout(self.sim, window, self.policy, grad=True, truncation=self.cfg.grad_truncation or 0,
-                      obs_noise=self.obs_noise, noise=noise)
+        if self.fused is not None:
+            self.fused.begin(h, window.cmd.shape[0])
+        run = rollout(self.sim, window, self.policy if self.fused is None else self.fused, grad=True,
+                      truncation=self.cfg.grad_truncation or 0, obs_noise=self.obs_noise, noise=noise)
         loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],
                                   window.qd[:, 1:], self.torque_scale, self.weights)
         loss.backward()
+        if self.fused is not None:
+            self.fused.finish()
         torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.cfg.grad_clip)
         self.optim.step()
         return torch.stack([loss.detach(), *(parts[k] for k in _FitLearner.parts[1:])])

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..choices import ModelKind, SolverKind, check_choice, check_number
+from ..errors import WresdynError
 from ..learn.residual_config import ResidualConfig
 from ..learn.window_fit_config import WindowFitStop, check_window_fit_config
 
@@ -96,6 +97,12 @@ class GradFitConfig(WindowFitStop):
     through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
     length, with no host synchronisation inside (:class:`GradFitIteration`). The CPU runs the same code eagerly; off,
     CUDA does too. May change on resume."""
+    fused_network: bool = False
+    """Run the MLP residual of the training rollouts in fewer torch kernels per step
+    (:class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`: the parameters' gradients formed once per iteration, the clip's
+    mask kept from the forward pass) and Adam as torch's fused kernel. The same fit to float32 rounding, not bit for
+    bit (the gradients' sums run in another order), so off by default; for the launch-bound GPU iteration
+    (``benchmarks/speed/gradfit10.sh``). MLP networks only. May change on resume."""
     physics: str = ""
     """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
     identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
@@ -107,3 +114,5 @@ class GradFitConfig(WindowFitStop):
         check_number(self.horizon, "horizon", integer=True, ge=1)
         for name in ("w_torque", "w_action_rate", "obs_noise"):
             check_number(getattr(self, name), name, ge=0)
+        if self.fused_network and (self.model != "network" or self.residual.arch != "mlp"):
+            raise WresdynError("fused_network runs the MLP network only (model 'network', residual.arch 'mlp')")

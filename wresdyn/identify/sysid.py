@@ -43,7 +43,7 @@ from .identifiability import identifiability, write_identifiability
 from .refine import lbfgs_refine, physics_window_loss, polish
 from .shooting import ShootingNodes, chain_loss, draw_chains
 from .sysid_config import SysIdConfig
-from .unexcited_limits import reset_effort_limits, share_effort_ratio
+from .unexcited_limits import effort_candidates
 
 __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice", "RESUME_MAY_CHANGE",
            "physics_window_loss", "NonFiniteLoss"]
@@ -107,17 +107,11 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     run = RunFolder(out, dataclasses.asdict(cfg), RESUME_MAY_CHANGE, key="sysid", record=run_record(cfg, dataset))
     curve = run_window_fit(cfg, learner, run, rng, log)
     params = learner.model.values()
-    validation, shared = run.best.value, None
-    if cfg.share_effort_ratio and "effort" in cfg.fit:
-        params, shared = share_effort_ratio(cfg, robot, dataset, train, dt, params, learner.physics_score,
-                                            validation, log)
-    if cfg.effort_reset and "effort" in cfg.fit:
-        params, validation = reset_effort_limits(robot, params, learner.physics_score,
-                                                  validation if shared is None else shared,
-                                                  dataset.fit_weights() > 0, log)
+    params, validation = effort_candidates(cfg, robot, dataset, train, dt, params, learner.physics_score,
+                                           run.best.value, log)
     if cfg.refine:
-        params = lbfgs_refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
-                         curve, log)
+        params = lbfgs_refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation,
+                              learner.weights, curve, log)
     if cfg.polish:
         params = polish(cfg, robot, learner.bank, dt, params, learner.physics_score, learner.weights, curve, log)
     if run.path is not None:

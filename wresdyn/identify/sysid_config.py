@@ -160,6 +160,16 @@ class SysIdConfig(WindowFitStop):
     back at the robot file's are replayed on validation and kept if better: a candidate of the selection, for a file
     whose limit is a measured figure (a servo's data-sheet stall torque) that training windows trade against the other
     fields. Only when the effort limit is fitted and there is a validation split."""
+    effort_line_points: int = 0
+    """After the selection (and ``share_effort_ratio``, ``effort_reset``), a per-joint line search on the effort
+    limits the training data never reach but that stand above the saturating joints' shared derating
+    (:func:`~wresdyn.identify.unexcited_limits.search_unexcited_efforts`): each replayed on the whole training
+    trajectories at this many limits from its own down to the derating, the lowest within ``effort_line_tolerance``
+    of the least error taken; 0 = off. For a drive whose saturation the fit explained away with its other fields,
+    which the demanded-torque bound then keeps high. Only when the effort limit is fitted."""
+    effort_line_tolerance: float = 0.02
+    """How much worse than the line's least a searched limit may leave its joint's own training replay error, and the
+    searched limits together the validation error, as a fraction (0.02: 2 %); only with ``effort_line_points``."""
     saturated_min: float = 0.01
     """Fraction of training samples on which a drive must saturate for its effort limit to count as identified."""
     shooting: int = 1
@@ -210,6 +220,10 @@ class SysIdConfig(WindowFitStop):
                              "among the fitted fields (fit)")
         if self.effort_reset and "effort" not in self.fit:
             raise ValueError("effort_reset puts the effort limit back, which is not among the fitted fields (fit)")
+        check_number(self.effort_line_points, "effort_line_points", integer=True, ge=0)
+        check_number(self.effort_line_tolerance, "effort_line_tolerance", ge=0)
+        if self.effort_line_points and "effort" not in self.fit:
+            raise ValueError("effort_line_points searches the effort limit, which is not among the fitted fields (fit)")
         check_number(self.effort_after, "effort_after", ge=0)
         for i, f in enumerate(self.lr_scale):
             check_number(f, f"lr_scale[{i}]", gt=0)

@@ -20,8 +20,19 @@ samples the median ratio of those that do, times its own file limit, and never b
 ``effort_j = max(r̃ · effort_file_j, max_t |τ_j(t)|)``. It changes nothing where no joint saturates
 (no ratio to share), on joints excluded from fitting and on unlimited drives.
 
-After identification's selection, :func:`share_effort_ratio` and :func:`reset_effort_limits` are the candidates it
-keeps only where validation is no worse: the shared ratio, and the robot file's own limits put back.
+The lower bound fails where the real drive did saturate but the fit explained the clipped torque away (friction,
+gains and damping bent to the lag instead of a low limit): the joint lagged behind its command, so kp·(q_cmd − q)
+grew past the torque it delivered, and the bound keeps a limit the drive never had. On the uneven mismatch's probe
+data the right ankle pitch saturates on 1.3 % of the training samples against its true 15 N·m; the fit put its limit
+at 34.9 N·m, its own largest demand, and the bound kept it there (``benchmarks/results/floor_fair/ident55_cpu/``).
+:func:`search_unexcited_efforts` is a per-joint line search on such limits: each is replayed on the whole training
+trajectories at limits from its own down to the shared derating, and takes the lowest whose own position error is
+within a tolerance of the line's least.
+
+After identification's selection, :func:`share_effort_ratio`, :func:`reset_effort_limits` and
+:func:`search_unexcited_efforts` are the candidates it keeps only where validation is no worse (the search: by no
+more than its tolerance): the shared ratio, the robot file's own limits put back, the searched limits
+(:func:`effort_candidates` runs them in that order).
 """
 
 from __future__ import annotations
@@ -31,11 +42,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..learn.selection import ValidationScore
 from ..robot.physical import PhysicalParams
 from ..sim.bank import delay_commands
 
 __all__ = ["UnexcitedLimits", "demanded_torque", "limit_unexcited_efforts", "share_effort_ratio",
-           "reset_effort_limits"]
+           "reset_effort_limits", "search_unexcited_efforts", "effort_candidates"]
 
 
 @dataclass(frozen=True)
@@ -147,3 +159,74 @@ def reset_effort_limits(robot, params, score, validation, fitted, log):
     log(f"effort limits at the file's: validation {v:.4f} rad against {validation:.4f} rad, "
         + ("kept" if kept else "not kept"))
     return (reset, v) if kept else (params, validation)
+
+
+def search_unexcited_efforts(cfg, robot, dataset, train, dt, params, score, validation, log):
+    """The per-joint effort line search (``cfg.effort_line_points``, module docstring) from ``params``: returns
+    (parameters, their validation; ``validation`` where nothing changed).
+
+    The joints searched saturate on fewer than ``cfg.saturated_min`` of the training samples and have a limit above
+    r̃·effort_file (:func:`limit_unexcited_efforts`'s shared ratio). Each is replayed alone, the others at ``params``,
+    at ``cfg.effort_line_points`` limits geometrically spaced from its own (included) down to r̃·effort_file, and
+    takes the lowest whose own mean |Δq| over the whole training trajectories is within ``cfg.effort_line_tolerance``
+    of the line's least. The searched limits are replayed together on validation (``score(params) -> rad``,
+    ``None``: no split) and kept unless worse than ``validation`` by more than the same tolerance."""
+    fitted = dataset.fit_weights() > 0
+    _, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=fitted, saturated_min=cfg.saturated_min)
+    if found.ratio is None:
+        return params, validation
+    floor = found.ratio * np.asarray(robot.effort, dtype=np.float64)
+    before = np.asarray(params.effort, dtype=np.float64)
+    joints = [j for j, name in enumerate(params.joint_names) if name in found.changed and before[j] > floor[j]]
+    if not joints:
+        log("effort line search: no unexcited limit above the shared derating")
+        return params, validation
+    # whole trajectories, not the grid searches' windows: a saturation on 1 % of the samples is a few short episodes
+    # (the probe's steps), which a batch of random windows may miss and a whole replay never does
+    replay = ValidationScore(robot, train, dataset.rate_hz, cfg.solver, cfg.device, weights=dataset.fit_weights(),
+                             friction_kappa=cfg.friction_kappa)
+    after = before.copy()
+    for j in joints:
+        line = np.geomspace(before[j], floor[j], cfg.effort_line_points + 1)
+        errors = []
+        for limit in line:
+            replay.physics = params.copy()
+            replay.physics.effort = np.where(np.arange(len(before)) == j, limit, before)
+            replay()
+            errors.append(replay.last_errors[j])
+        errors = np.asarray(errors)
+        after[j] = line[np.flatnonzero(errors <= (1 + cfg.effort_line_tolerance) * errors.min()).max()]
+        log(f"effort line search {params.joint_names[j]}: "
+            + "  ".join(f"{x:.3g}:{e:.3e}" for x, e in zip(line, errors)) + f"  -> {after[j]:.3g} N·m")
+    if np.array_equal(after, before):
+        return params, validation
+    out = params.copy()
+    out.effort = after
+    if score is None:
+        return out, validation
+    v = score(out)
+    if v > (1 + cfg.effort_line_tolerance) * validation:
+        log(f"  not kept: validation {v:.4f} rad against {validation:.4f} rad")
+        return params, validation
+    log(f"  validation {v:.4f} rad (was {validation:.4f} rad)")
+    return out, v
+
+
+def effort_candidates(cfg, robot, dataset, train, dt, params, score, validation, log):
+    """Identification's selected ``params`` through the effort-limit candidates ``cfg`` turns on, in order
+    (:func:`share_effort_ratio`, :func:`reset_effort_limits`, :func:`search_unexcited_efforts`); returns (parameters,
+    the validation the refinement starts from). Nothing is done unless the effort limit is fitted."""
+    if "effort" not in cfg.fit:
+        return params, validation
+    shared = None
+    if cfg.share_effort_ratio:
+        params, shared = share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log)
+    if cfg.effort_reset:
+        params, validation = reset_effort_limits(robot, params, score, validation if shared is None else shared,
+                                                 dataset.fit_weights() > 0, log)
+    if cfg.effort_line_points:  # compared with the parameters it starts from: the reset's, else the shared ratio's
+        current = validation if shared is None or cfg.effort_reset else shared
+        searched, v = search_unexcited_efforts(cfg, robot, dataset, train, dt, params, score, current, log)
+        if searched is not params:
+            params, validation = searched, v
+    return params, validation

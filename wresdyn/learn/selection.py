@@ -48,6 +48,8 @@ class ValidationScore:
                              friction_kappa=friction_kappa)
         self.last_diverged = 0
         """Validation replays that diverged in the last call."""
+        self.last_errors = np.zeros(robot.n_dof)
+        """Mean |Δq| of each joint in the last call [rad], shape (n_dof,), excluded joints too."""
         self._fixed_physics = physics
         self._setup = None  # (with a policy, the replay's set-up): kept while the physics are the ones given here
         self._loose = None  # the last set-up for other physics, whose trajectory banks the next one reuses
@@ -65,7 +67,9 @@ class ValidationScore:
                 policy.train()
         rep = runs["residual"] if "residual" in runs else runs["pd"]
         self.last_diverged = sum(a >= 0 for a in rep.diverged_at)
-        return float(np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)])[:, self.mask].mean())
+        errors = np.concatenate([np.abs(q - t.q) for t, q in zip(self.trajectories, rep.q)])
+        self.last_errors = errors.mean(0)
+        return float(errors[:, self.mask].mean())
 
     def _replay_setup(self, with_policy: bool):
         """The replay's set-up (the simulator's physics, the trajectories on its device), made once for the physics

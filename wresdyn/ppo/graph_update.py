@@ -30,8 +30,8 @@ with ``capture=False``; no CPU capture exists) equals :class:`PackedPPO` bit for
 gloo (``tests/ppo/test_graph_update.py``). On CUDA, capturable Adam computes its bias corrections and step size on the
 device in float32 where :class:`PackedPPO`'s Adam uses Python floats (as :class:`~wresdyn.ppo.update.OneSyncPPO`'s
 does), so the weights differ in the last bits after the first step; the CUDA test bounds the difference
-(:data:`CUDA_RTOL`). The random numbers of later rollouts may differ too: the forward pass draws action samples it
-discards, and a replay advances CUDA's generator by the count the capture recorded. Only the plain case in float32 and
+(:data:`CUDA_RTOL`). The random numbers of later rollouts differ too: the step draws no action sample, where rsl-rl's
+forward pass draws one per mini-batch and discards it. Only the plain case in float32 and
 uncompiled takes this path, on CUDA; anything else runs :class:`PackedPPO`'s eager update.
 """
 
@@ -78,7 +78,16 @@ class GraphPPO(DeviceRate, PackedPPO):
 
     def _graphable(self) -> bool:
         return (self._plain() and not self.use_mixed_precision and self.actor is self._raw_actor
-                and self.critic is self._raw_critic)
+                and self.critic is self._raw_critic and getattr(self.actor, "distribution", None) is not None)
+
+    def _actor_distribution(self, observations) -> None:
+        """On the captured path, the actor's distribution from its network's output without the action sample
+        rsl-rl's forward pass draws and the update discards: CUDA's generator refused that draw inside the capture
+        (the stream is capturing) on an H200, and the loss does not depend on the sample. Run eagerly, rsl-rl's."""
+        if not getattr(self, "_capturing_path", False):
+            return super()._actor_distribution(observations)
+        actor = self.actor
+        actor.distribution.update(actor.mlp(actor.get_latent(observations)))
 
     def update(self) -> dict[str, float]:
         if torch.device(self.device).type != "cuda" or not self._graphable():
@@ -92,6 +101,7 @@ class GraphPPO(DeviceRate, PackedPPO):
         st = self.storage
         mini_batch = st.num_envs * st.num_transitions_per_env // self.num_mini_batches
         lr = self._device_lr()
+        self._capturing_path = capture
         self._pin_normalisers()
         static = getattr(self, "_static", None)
         if (static is None or static.index.numel() != mini_batch
@@ -151,12 +161,23 @@ class GraphPPO(DeviceRate, PackedPPO):
                 self._step(adaptive, lr, static)
 
             warm = getattr(self, "_warm", 0)
+            if warm == 0:
+                self._release_actor_graph(static)
             if warm < WARMUP:
                 self._warm = warm + 1
                 return self._on_side_stream(step)
             graph = self._graph = self._capture(step)
             self._graph_inputs = self._inputs()
         graph.replay()
+
+    def _release_actor_graph(self, static: _Static) -> None:
+        """Replace the actor's kept distribution by one made without gradient. The kept one's autograd graph keeps
+        the parameters' gradient accumulators alive, and an accumulator stays on the stream it was made on: made by
+        an eager update on the default stream, the captured backward would end by recording an event on the legacy
+        stream while the capture runs, which CUDA refuses (``cudaErrorStreamCaptureImplicit`` on an H200). Released,
+        the warm-up makes them again on its side stream."""
+        with torch.no_grad():
+            self._actor_distribution(self.storage.observations.flatten(0, 1)[static.index])
 
     def _on_side_stream(self, step) -> None:
         """Run ``step`` on a side stream, ordered after and before the current stream's work (PyTorch's warm-up for

@@ -44,6 +44,11 @@ class PlainPPO(PPO):
     def _plain(self) -> bool:
         return not (self.actor.is_recurrent or self.critic.is_recurrent or self.rnd or self.symmetry)
 
+    def _actor_distribution(self, observations) -> None:
+        """Set the actor's action distribution for ``observations`` as rsl-rl's update does (its forward pass, which
+        also draws an action sample the update discards)."""
+        self.actor(observations, stochastic_output=True)
+
     def _losses(self, batch, with_kl: bool) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
         """The mini-batch's loss (a 0-d tensor to back-propagate), its mean KL divergence from the rollout's policy
         (0-d, without gradient; None unless ``with_kl``) and the value, surrogate and entropy losses for the log
@@ -53,7 +58,7 @@ class PlainPPO(PPO):
                 batch.advantages = (batch.advantages - batch.advantages.mean()) / (batch.advantages.std() + 1e-8)
         with torch.amp.autocast(device_type=torch.device(self.device).type, enabled=self.use_mixed_precision,
                                 dtype=torch.bfloat16):
-            self.actor(batch.observations, stochastic_output=True)
+            self._actor_distribution(batch.observations)
             log_prob = self.actor.get_output_log_prob(batch.actions)
             values = self.critic(batch.observations)
             entropy = self.actor.output_entropy

@@ -1,0 +1,167 @@
+"""The MLP residual inside a differentiable rollout in fewer torch kernels per step (the gradient fit's opt-in
+``fused_network``, :class:`~wresdyn.fit.gradfit_config.GradFitConfig`).
+
+Through the plain path each step of the rollout runs the network's forward and, in the backward pass, autograd's
+per-layer backward: a GEMM for the layer input's gradient, one for the weight's, a bias sum and two additions into the
+parameters' gradients (four layers: 16 kernels a step for the parameters alone), and the clip's backward as four
+kernels. On a GPU these small kernels are launch-bound (``benchmarks/results/speed/gradfit10_plan.md``: ~73 torch
+kernels a step at ~2.4 µs each). :class:`FusedMLPRollout` runs the same network with
+
+* the parameters' gradients formed once per iteration: each step writes its layers' inputs and the gradients at their
+  outputs into (H, B, ·) buffers, and :meth:`FusedMLPRollout.finish` turns them into each weight's gradient with one
+  GEMM over all H·B rows and each bias's with one sum (8 kernels an iteration instead of 16 a step);
+* the clip's mask kept from the forward pass (one comparison), its backward one ``where``.
+
+The forward values, the residual and the gradient each step passes back to the simulated state are the plain path's
+operations on the same operands (equal bit for bit on the CPU, ``tests/learn/test_fused_mlp.py``). The parameters'
+gradients are the same sums in another order (one GEMM over H·B rows instead of H GEMMs over B rows added up step by
+step), so they agree with autograd's to float32 rounding only; that is why the path is opt-in.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn as nn
+
+from .residual import MLPResidualPolicy
+
+__all__ = ["FusedMLPRollout", "fusable"]
+
+
+def fusable(policy) -> str | None:
+    """Why ``policy`` cannot run as a :class:`FusedMLPRollout`, or ``None`` if it can: an
+    :class:`~wresdyn.learn.residual.MLPResidualPolicy` at gain 1 without a second normaliser, its network linear
+    layers with ELU between them."""
+    if not isinstance(policy, MLPResidualPolicy):
+        return f"{type(policy).__name__} is not an MLP residual"
+    if policy.gain != 1.0 or not isinstance(policy.norm, nn.Identity):
+        return "the fused MLP runs residuals at gain 1 without a second normaliser (the gradient fit's)"
+    layers = list(policy.mlp)
+    linear, act = layers[0::2], layers[1::2]
+    if not all(isinstance(m, nn.Linear) and m.bias is not None for m in linear) or len(linear) != len(act) + 1 \
+            or not all(isinstance(m, nn.ELU) and m.alpha == act[0].alpha for m in act):
+        return "the network is not linear layers with one ELU between them"
+    return None
+
+
+class _Step(torch.autograd.Function):
+    """One step of :class:`FusedMLPRollout`: raw observation -> residual. ``token`` is a leaf that requires grad so the
+    step is in the backward graph even where the observation carries no gradient (a window's first step, a step after
+    truncation): its backward is what stores the gradients at the layer outputs."""
+
+    @staticmethod
+    def forward(ctx, obs, token, run, k):
+        ctx.run, ctx.k = run, k
+        return run._forward(obs, k)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad):
+        return ctx.run._backward(grad, ctx.k, ctx.needs_input_grad[0]), None, None, None
+
+
+class FusedMLPRollout(nn.Module):
+    """Stands in for an :class:`~wresdyn.learn.residual.MLPResidualPolicy` in one differentiable rollout
+    (:func:`wresdyn.sim.rollout` with ``grad=True``): :meth:`begin` before it, the rollout's steps (one call each),
+    the loss's ``backward()``, then :meth:`finish`, which adds the parameters' gradients to their ``.grad`` as
+    autograd would (set where ``None``, added otherwise). Its calls outside that order are refused.
+
+    Example::
+
+        fused = FusedMLPRollout(policy)
+        fused.begin(window.steps, window.cmd.shape[0])
+        run = rollout(sim, window, fused, grad=True)
+        loss(run).backward()
+        fused.finish()
+    """
+
+    def __init__(self, policy) -> None:
+        super().__init__()
+        why = fusable(policy)
+        if why is not None:
+            raise ValueError(f"cannot fuse this residual: {why}")
+        self.policy = policy
+        self.kind = policy.kind
+        self.linears = list(policy.mlp)[0::2]
+        self.alpha = float(policy.mlp[1].alpha) if len(self.linears) > 1 else 1.0
+        dev = policy.obs_mean.device
+        self._token = torch.ones((), device=dev, requires_grad=True)
+        self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
+        self._steps, self._k = 0, 0
+        self._x = self._z = self._g = self._mask = None
+
+    @property
+    def scale(self) -> torch.Tensor:
+        return self.policy.scale
+
+    @property
+    def obs_std(self) -> torch.Tensor:
+        return self.policy.obs_std
+
+    def begin(self, steps: int, batch: int) -> None:
+        """Buffers for a rollout of ``steps`` steps over ``batch`` windows: per layer its input (H, B, in), each hidden
+        layer's pre-activation, the gradients at the layer outputs (zeros: a step whose backward never runs adds
+        nothing) and the clip's mask."""
+        w = self.policy.obs_mean
+        ins = [m.in_features for m in self.linears]
+        outs = [m.out_features for m in self.linears]
+        self._x = [torch.empty(steps, batch, d, device=w.device, dtype=w.dtype) for d in ins]
+        self._z = [torch.empty(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs[:-1]]
+        self._g = [torch.zeros(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs]
+        self._mask = torch.empty(steps, batch, outs[-1], device=w.device, dtype=torch.bool)
+        self._steps, self._k = steps, 0
+
+    def reset(self) -> None:
+        """The rollout's start (:func:`wresdyn.sim.rollout` calls it): the next call is step 0."""
+        self._k = 0
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        if self._x is None or self._k >= self._steps:
+            raise RuntimeError("FusedMLPRollout: call begin(steps, batch) before each rollout, one call per step")
+        self._k += 1
+        return _Step.apply(obs, self._token, self, self._k - 1)
+
+    def _forward(self, obs: torch.Tensor, k: int) -> torch.Tensor:
+        # the plain path's operations in its order: (obs - mean) / std, then per layer addmm (what F.linear runs on a
+        # 2-D input) and ELU, then the clip and the scale
+        p = self.policy
+        x = torch.div(obs - p.obs_mean, p.obs_std, out=self._x[0][k])
+        last = len(self.linears) - 1
+        for i, lin in enumerate(self.linears):
+            if i == last:
+                y = torch.addmm(lin.bias, x, lin.weight.t())
+                break
+            z = torch.addmm(lin.bias, x, lin.weight.t(), out=self._z[i][k])
+            x = torch._C._nn.elu(z, self.alpha, out=self._x[i + 1][k])
+        c = y.clamp(-1.0, 1.0)
+        # clamp's backward passes the gradient where min <= y <= max; c == y is that set in one kernel (NaN: neither)
+        torch.eq(c, y, out=self._mask[k])
+        return c * p.scale
+
+    def _backward(self, grad: torch.Tensor, k: int, need_obs: bool) -> torch.Tensor | None:
+        p = self.policy
+        g = torch.where(self._mask[k], grad * p.scale, self._zero, out=self._g[-1][k])
+        for i in range(len(self.linears) - 1, -1, -1):
+            w = self.linears[i].weight
+            if i == 0:
+                # the normalisation's backward: sub passes the gradient through, div divides by std
+                return torch.mm(g, w) / p.obs_std if need_obs else None
+            g = torch.ops.aten.elu_backward.grad_input(torch.mm(g, w), self.alpha, 1, 1, False, self._z[i - 1][k],
+                                                      grad_input=self._g[i - 1][k])
+        return None
+
+    def finish(self) -> None:
+        """After the backward pass: each layer's weight gradient as one GEMM over the steps' and windows' rows, each
+        bias's as one sum, added to the parameters' ``.grad`` (set where ``None``); the buffers are released."""
+        if self._x is None or self._k != self._steps:
+            raise RuntimeError(f"FusedMLPRollout.finish after {self._k} of {self._steps} steps")
+        for lin, x, g in zip(self.linears, self._x, self._g):
+            g = g.view(-1, g.shape[-1])
+            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x): here over all rows at once
+            for param, new in ((lin.weight, torch.mm(g.t(), x.view(-1, x.shape[-1]))), (lin.bias, g.sum(0))):
+                if param.grad is None:
+                    param.grad = new
+                else:
+                    param.grad.add_(new)
+        self._x = self._z = self._g = self._mask = None
+        self._steps = self._k = 0
