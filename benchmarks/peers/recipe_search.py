@@ -36,6 +36,11 @@ RECIPES = {
     "refine_all_shared_delay": {"refine": 20, "refine_frozen": (), "delay_grid": tuple(range(9)),
                                 "delay_grid_first": True, "shared_delay": True},
     "refine_all_shared_delay_nogrid": {"refine": 20, "refine_frozen": (), "shared_delay": True},
+    "refine_all_shared_delay_polish": {"refine": 20, "refine_frozen": (), "delay_grid": tuple(range(9)),
+                                       "delay_grid_first": True, "shared_delay": True, "polish": 20},
+    "refine_all_shared_delay_polish_all": {"refine": 20, "refine_frozen": (), "delay_grid": tuple(range(9)),
+                                           "delay_grid_first": True, "shared_delay": True, "polish": 20,
+                                           "polish_threshold": 0.0},
 }
 """Recipe name -> :class:`~wresdyn.identify.sysid_config.SysIdConfig` fields over its defaults. ``refine``: L-BFGS
 steps on fixed training windows of the longest horizon after the Adam selection, each validated, the best kept;
@@ -44,7 +49,10 @@ steps on fixed training windows of the longest horizon after the Adam selection,
 delay of 0-8 samples for every joint chosen by a grid before the first Adam step (from the file's values the grid's
 end, 8, on both mismatches: a start, not a measurement); ``refine_all_shared_delay``: that with the delay tied across
 joints through the Adam steps and the refinement; ``refine_all_shared_delay_nogrid``: the tied delay from the file's
-(0) without the grid. What each scored on validation, and the one chosen:
+(0) without the grid; ``refine_all_shared_delay_polish``: ``refine_all_shared_delay`` followed by up to 20
+Levenberg-Marquardt steps in the directions the data determine (``SysIdConfig.polish``);
+``refine_all_shared_delay_polish_all``: that in every direction the data see (``polish_threshold`` 0, the prior's pull
+ignored). What each scored on validation, and the one chosen:
 ``benchmarks/results/peers/humanoid/recipe_search/MANIFEST.md``."""
 
 

@@ -46,9 +46,14 @@ def so101(fights: dict) -> None:
 
 
 def known_truth(fights: dict) -> None:
-    d = json.loads((RESULTS / "known_truth" / "summary.json").read_text())
-    for case, c in d["cases"].items():
-        fights[f"known_truth_{case}"] = {tool: row(t) for tool, t in c["tools"].items()}
+    """The first run (``known_truth/``) and the runs with the polish's recipes (``known_truth/polish/``, on shared
+    cores, and ``known_truth/polish_idle/``, the same on an idle machine), which timed the peer and wresdyn's defaults
+    again beside them."""
+    runs = (("", "known_truth"), ("polish", "known_truth_polish"), ("polish_idle", "known_truth_polish_idle"))
+    for run, key in runs:
+        d = json.loads((RESULTS / "known_truth" / run / "summary.json").read_text())
+        for case, c in d["cases"].items():
+            fights[f"{key}_{case}"] = {tool: row(t) for tool, t in c["tools"].items()}
 
 
 def main() -> None:

@@ -273,3 +273,12 @@ def test_delay_grid_first_searches_before_adam_and_shared_delay_stays_one(humano
         SysIdConfig(delay_grid_first=True)
     with pytest.raises(ValueError, match="shared_delay"):
         SysIdConfig(fit=("kp",), shared_delay=True)
+
+
+def test_polish_settings_are_checked():
+    with pytest.raises(ValueError, match="polish"):
+        SysIdConfig(polish=-1)
+    with pytest.raises(ValueError, match="polish_windows"):
+        SysIdConfig(polish_windows=0)
+    with pytest.raises(ValueError, match="polish_threshold"):
+        SysIdConfig(polish_threshold=-1.0)

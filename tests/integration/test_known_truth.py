@@ -4,6 +4,7 @@ tolerance its authors assert, and wresdyn's identification recovers the spring-m
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import sys
 from pathlib import Path
@@ -70,3 +71,29 @@ def test_wresdyn_recovers_the_spring_mass_within_the_peer_tolerance(kt, spring):
     run = kt.run_wresdyn(case, robot, ds, cfg, log=lambda s: None)
     rec = kt.recovery(case, run["estimates"])["ball_mass"]
     assert rec["pass"], rec
+
+
+@pytest.mark.parametrize("threshold", [1.0, 1e30])
+def test_polish_moves_only_what_the_data_determine(kt, spring, threshold):
+    """With the default prior (``w_prior`` 1e-5) and one Adam step, the Levenberg-Marquardt polish
+    (``SysIdConfig.polish``) recovers the 1 kg mass within the peer's tolerance, and leaves the ball's centre of mass
+    and rotational inertia, which a slide joint never shows, where the prior holds them; with no direction above the
+    threshold it changes nothing at all."""
+    from wresdyn.identify.sysid import identify
+    from wresdyn.identify.sysid_config import SysIdConfig
+
+    robot, ds, _ = spring
+    case, ball = kt.CASES["spring_mass"], robot.body_names.index("ball")
+    base = SysIdConfig(fit=case.fit, identifiability=False, iterations=1)
+    before, _ = identify(robot, ds, base, log=lambda s: None)
+    logs = []
+    after, curve = identify(robot, ds, dataclasses.replace(base, polish=10, polish_threshold=threshold),
+                            log=logs.append)
+    if threshold > 1.0:
+        assert any("nothing the data determine" in s for s in logs)
+        np.testing.assert_array_equal(after.body_mass, before.body_mass)
+        return
+    assert abs(after.body_mass[ball] - 1.0) <= case.params[0].atol, after.body_mass[ball]
+    assert any(row.get("stage") == "polish" for row in curve)
+    np.testing.assert_allclose(after.body_com[ball], before.body_com[ball], atol=1e-9)
+    np.testing.assert_allclose(after.body_inertia[ball], before.body_inertia[ball], rtol=1e-6)

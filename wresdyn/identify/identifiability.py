@@ -42,8 +42,8 @@ from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicsModel
 from .unexcited_limits import limit_unexcited_efforts
 
-__all__ = ["Identifiability", "identifiability", "write_identifiability", "CORRELATED", "STEP", "RIDGE",
-           "MIN_RANGE", "MIN_MOVING"]
+__all__ = ["Identifiability", "identifiability", "write_identifiability", "weighted_residuals", "CORRELATED", "STEP",
+           "RIDGE", "MIN_RANGE", "MIN_MOVING"]
 
 STEP = 0.01
 """Forward-difference step in θ (1 % of a value, or 0.01 of the reference unit where the value is 0): far above the
@@ -190,7 +190,7 @@ def _parameters(robot, params, fields, fitted: np.ndarray):
     return out
 
 
-def _residuals(run, window, weights, w_q: float, w_qd: float, copies: int) -> torch.Tensor:
+def weighted_residuals(run, window, weights, w_q: float, w_qd: float, copies: int) -> torch.Tensor:
     """Weighted residuals of ``copies`` blocks of the window batch: (copies, N) float64."""
     w = torch.sqrt(torch.as_tensor(weights, dtype=torch.float32, device=run.q.device))
     q = (run.q[:, 1:] - window.q[:, 1:].repeat(copies, 1, 1)) * w * w_q ** 0.5
@@ -243,7 +243,7 @@ def _jacobian(robot, params, plist, validation, dt, cfg, weights):
         big.target = target
         with torch.no_grad():
             run = rollout(sim, big)
-        r_all.append(_residuals(run, window, weights, cfg.w_q, cfg.w_qd, len(chunk)))
+        r_all.append(weighted_residuals(run, window, weights, cfg.w_q, cfg.w_qd, len(chunk)))
     r = torch.cat(r_all).numpy()[:len(blocks)]
     scale = np.array([np.log1p(STEP) if v > 0 else STEP for *_, v, _ in plist])  # the step in θ
     return r[0], (r[1:] - r[0]) / scale[:, None], b, steps

@@ -17,9 +17,9 @@ from a coarse search: the training loss of a few windows at a geometric grid of 
 limit (forward only, :mod:`.grid_search`); the gradient refines from the best. ``SysIdConfig.effort_floor`` bounds
 both from below (a servo's data-sheet stall torque as the least torque bound). Model selection on the validation
 split, as for every learner: every ``select_every`` iterations the current parameters replay the validation
-trajectories and the best are returned. An optional L-BFGS refinement (``SysIdConfig.refine``) follows on fixed training windows,
-each step validated the same way. Held-out and OOD data are never read. The Adam loop is the gradient fit's
-(:func:`~wresdyn.learn.window_fit.run_window_fit`).
+trajectories and the best are returned. Optional L-BFGS (``SysIdConfig.refine``) and Levenberg-Marquardt
+(``polish``, :mod:`.refine`) steps follow on fixed training windows, each validated the same way. Held-out and OOD
+data are never read. The Adam loop is the gradient fit's (:func:`~wresdyn.learn.window_fit.run_window_fit`).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from ..sim.fused import can_fuse
 from ..sim.physics import PhysicalParams, PhysicsModel
 from .grid_search import GridChoice, grid_search
 from .identifiability import identifiability, write_identifiability
-from .refine import physics_window_loss, refine
+from .refine import lbfgs_refine, physics_window_loss, polish
 from .shooting import ShootingNodes, chain_loss, draw_chains
 from .sysid_config import SysIdConfig
 from .unexcited_limits import effort_candidates
@@ -50,11 +50,12 @@ __all__ = ["SysIdConfig", "identify", "run_record", "PhysicsScore", "GridChoice"
            "physics_window_loss", "NonFiniteLoss"]
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "refine", "refine_windows", "refine_frozen", "fused",
-                     "cuda_graph", "max_iterations", "max_seconds", "identifiability", "identifiability_windows")
+                     "cuda_graph", "max_iterations", "max_seconds", "identifiability", "identifiability_windows",
+                     "polish", "polish_windows", "polish_threshold")
 """:class:`SysIdConfig` fields a resumed identification may change: where and how fast it runs (the fused replay's
-states are the stepped replay's, the captured step's the eager one's to float32 rounding), the L-BFGS refinement,
-which runs after the checkpointed Adam steps, the ceilings of a run until convergence, and the identifiability report,
-which reads the selected parameters only."""
+states are the stepped replay's, the captured step's the eager one's to float32 rounding), the L-BFGS refinement and
+the polish, which run after the checkpointed Adam steps, the ceilings of a run until convergence, and the
+identifiability report, which reads the selected parameters only."""
 
 
 class NonFiniteLoss(WresdynError):
@@ -111,8 +112,10 @@ def identify(robot, dataset, cfg: SysIdConfig, out: str | Path | None = None, lo
     params, validation = effort_candidates(cfg, robot, dataset, train, dt, params, learner.physics_score,
                                            run.best.value, log)
     if cfg.refine:
-        params = refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation, learner.weights,
-                         curve, log)
+        params = lbfgs_refine(cfg, robot, learner.bank, dt, params, learner.physics_score, validation,
+                              learner.weights, curve, log)
+    if cfg.polish:
+        params = polish(cfg, robot, learner.bank, dt, params, learner.physics_score, learner.weights, curve, log)
     if run.path is not None:
         params.save(run.path / "physics.json")
         run.write_curve()

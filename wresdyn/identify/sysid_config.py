@@ -136,6 +136,20 @@ class SysIdConfig(WindowFitStop):
     """L-BFGS steps after Adam (0: off), each up to 20 evaluations with a strong-Wolfe line search, on
     ``refine_windows`` fixed training windows of the longest horizon, from the parameters selected so far; every
     step is validated and the best kept. The fields of ``fit`` except those of ``refine_frozen``."""
+    polish: int = 0
+    """Levenberg-Marquardt iterations at the very end (0: off; :func:`wresdyn.identify.refine.polish`): Gauss-Newton
+    steps on ``polish_windows`` fixed training windows of the longest horizon, with a Jacobian by forward differences
+    (every fitted coordinate perturbed in its own worlds of one batched replay), in the directions whose data curvature
+    exceeds ``polish_threshold`` times ``w_prior`` only, so the prior no longer biases what the data determine and still
+    holds what they do not; every step validated and the best kept. The fields of ``fit`` but the effort limit, the
+    delay and the servo goal acceleration. On ``mujoco.sysid``'s known-truth cases (noise-free, in the truth's model
+    class) it brings the default fit within the peer's tolerance (``benchmarks/results/peers/known_truth``)."""
+    polish_windows: int = 16
+    """Fixed training windows of the polish (its Jacobian replays this many times the fitted coordinates' count)."""
+    polish_threshold: float = 1.0
+    """A direction of the coordinates counts as determined by the data where the curvature of the data loss along it
+    exceeds this multiple of the prior's (``w_prior``, in the prior's own metric): at 1 the prior would pull it less
+    than half way to the start. With ``w_prior`` 0, every direction the data see (above 1e-12 of the largest)."""
     refine_windows: int = 64
     """Fixed training windows of the refinement."""
     refine_frozen: tuple[str, ...] = ("effort", "delay")
@@ -223,6 +237,9 @@ class SysIdConfig(WindowFitStop):
             check_number(f, f"lr_scale[{i}]", gt=0)
         check_number(self.refine, "refine", integer=True, ge=0)
         check_number(self.refine_windows, "refine_windows", integer=True, ge=1)
+        check_number(self.polish, "polish", integer=True, ge=0)
+        check_number(self.polish_windows, "polish_windows", integer=True, ge=1)
+        check_number(self.polish_threshold, "polish_threshold", ge=0)
         bad = sorted(set(self.refine_frozen) - set(FIT_FIELDS))
         if bad:
             raise ValueError(f"refine_frozen: unknown field(s) {bad}; choose from {list(FIT_FIELDS)}")
