@@ -126,6 +126,25 @@ def _values(model: PhysicsModel, params: list, theta: np.ndarray) -> dict:
         return {k: v.detach().cpu() for k, v in model().items()}
 
 
+def _validated_row(curve: list, stage: str, wall: float, loss: float, score, model, best, best_v):
+    """A step's row of ``curve`` (appended): its iteration, ``stage``, ``wall`` [s] and training ``loss``, and its
+    validation by ``score`` of ``model``'s values where there is one. Returns the row, the best parameters and their
+    validation so far (``best_v`` ``None``: none yet; without ``score`` the last step's) and the seconds the
+    validation took (kept out of the stage's wall clock)."""
+    row = {"iteration": (curve[-1]["iteration"] if curve else 0) + 1, "stage": stage, "wall": wall, "loss": loss}
+    spent = 0.0
+    if score is not None:
+        t = time.perf_counter()
+        row["validation"] = score(model.values())
+        spent = time.perf_counter() - t
+        if best_v is None or row["validation"] < best_v:
+            best, best_v = model.values(), row["validation"]
+    else:
+        best = model.values()
+    curve.append(row)
+    return row, best, best_v, spent
+
+
 def polish(cfg, robot, bank, dt: float, start: PhysicalParams, score, weights, curve: list, log) -> PhysicalParams:
     """``cfg.polish`` Levenberg-Marquardt iterations from ``start`` (module docstring) on ``cfg.polish_windows``
     fixed windows of ``bank`` (the training trajectories) of the longest horizon; returns the best parameters on
@@ -177,17 +196,9 @@ def polish(cfg, robot, bank, dt: float, start: PhysicalParams, score, weights, c
             break
         theta, r, mu = new, r_new, mu / 10.0
         _values(model, params, theta)
-        row = {"iteration": (curve[-1]["iteration"] if curve else 0) + 1, "stage": "polish",
-               "wall": wall0 + time.perf_counter() - t0, "loss": loss_new}
-        if score is not None:
-            t_eval = time.perf_counter()
-            row["validation"] = score(model.values())
-            t0 += time.perf_counter() - t_eval
-            if best_v is None or row["validation"] < best_v:
-                best, best_v = model.values(), row["validation"]
-        else:
-            best = model.values()
-        curve.append(row)
+        row, best, best_v, spent = _validated_row(curve, "polish", wall0 + time.perf_counter() - t0, loss_new,
+                                                  score, model, best, best_v)
+        t0 += spent
         log(f"polish {k + 1:3d}/{cfg.polish}  {int(keep.sum())}/{p_count} directions  loss {loss_new:.3e}"
             + (f"  validation {row['validation']:.3e} rad" if "validation" in row else "") + f"  {row['wall']:.1f}s")
         if loss - loss_new <= MIN_GAIN * loss:
@@ -254,17 +265,9 @@ def lbfgs_refine(cfg, robot, bank, dt, start: PhysicalParams, score, start_valid
     for k in range(cfg.refine):
         loss = float(optim.step(closure).detach())
         model.project()
-        row = {"iteration": (curve[-1]["iteration"] if curve else 0) + 1, "stage": "refine",
-               "wall": wall0 + time.perf_counter() - t0, "loss": loss}
-        if score is not None:
-            t_eval = time.perf_counter()
-            row["validation"] = score(model.values())
-            t0 += time.perf_counter() - t_eval
-            if row["validation"] < best_v:
-                best, best_v = model.values(), row["validation"]
-        else:
-            best = model.values()
-        curve.append(row)
+        row, best, best_v, spent = _validated_row(curve, "refine", wall0 + time.perf_counter() - t0, loss, score,
+                                                  model, best, best_v)
+        t0 += spent
         log(f"refine {k + 1:3d}/{cfg.refine}  H={h:3d}  loss {loss:.3e}"
             + (f"  validation {row['validation']:.4f} rad" if "validation" in row else "") + f"  {row['wall']:.0f}s")
     if delayed or profiled:  # the bank's command path back to plain values, the selected parameters'
