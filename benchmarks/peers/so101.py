@@ -30,6 +30,7 @@ import mujoco
 import numpy as np
 
 import host
+import so101_residual
 import so101_sysid as adapter
 
 from wresdyn.data.dataset import load_dataset
@@ -105,6 +106,12 @@ def parse_args():
     p.add_argument("--threads", type=int, default=1, help="mujoco.rollout threads per part")
     p.add_argument("--train-runs", type=int, default=None, help="only the first N training runs (smoke tests)")
     p.add_argument("--only", default=",".join(PARTS), help=f"parts to run, of {','.join(PARTS)}")
+    p.add_argument("--residual", choices=("radians", "normalised"), default="radians",
+                   help="the Playground and LeRobot fits' residual: arm-joint position error in radians, or "
+                        "mujoco.sysid's default (each column divided by its window's RMS value)")
+    p.add_argument("--pick", choices=("validation", "last"), default="validation",
+                   help="the Playground fit's reported iterate: the one of lowest validation error, or the last")
+    p.add_argument("--tag", default="", help="suffix of the part's file (parts/KEY_TAG.json), so settings coexist")
     p.add_argument("--merge", action="store_true", help="only merge the parts already in OUT/parts")
     p.add_argument("--part", action="store_true", help="run the one part of --only here (the parallel runner's "
                                                           "call) instead of spawning every part and merging")
@@ -174,9 +181,22 @@ def run_part(key: str, args) -> None:
             delay = float(params["delay"].value[0]) if "delay" in params else 0.0
             return adapter.mean_abs_dq(val, adapter.replay_q(m, val, delay, threads=args.threads))
 
+        residual = so101_residual.radian_residual if args.residual == "radians" else None
         opt, rec = adapter.fit_sysid(params, ms, val_pd, delay=key == "playground", max_iters=args.max_iters,
-                                     threads=args.threads, log=lambda *a, **k: print(f"[{key}]", *a, **k))
+                                     threads=args.threads, log=lambda *a, **k: print(f"[{key}]", *a, **k),
+                                     modify_residual=residual)
         print(f"[{key}] {rec.method}: {rec.seconds:.0f} s, {rec.status}", flush=True)
+        last = rec.curve[-1]
+        part["last_iterate"] = {"iteration": last["iteration"], "validation": last["validation"]}
+        if key == "playground" and args.pick == "validation":
+            # Gauss-Newton lowers the training objective, not the whole-run error: validation picks the iterate
+            best = min(rec.curve, key=lambda c: c["validation"])
+            for k, v in best["values"].items():
+                opt[k].update_from_vector(np.asarray(v))
+            rec.values = best["values"]
+            part["picked_iterate"] = {"iteration": best["iteration"], "validation": best["validation"]}
+            print(f"[{key}] picked iterate {best['iteration']} (validation {best['validation']:.5f} rad; last "
+                  f"{last['validation']:.5f} rad)", flush=True)
         delay = float(opt["delay"].value[0]) if key == "playground" else 0.0
         part["name"] = NAMES[key]
         part["scores"] = score(NAMES[key], adapter.build(opt, spec_score), delay=delay)
@@ -201,11 +221,13 @@ def run_part(key: str, args) -> None:
     else:
         raise ValueError(f"unknown part {key!r}; parts: {PARTS}")
     part["settings"] = {"horizon": args.horizon, "per_run": args.per_run, "max_iters": args.max_iters,
-                        "max_nfev": args.max_nfev, "threads": args.threads, "train_runs": len(train)}
+                        "max_nfev": args.max_nfev, "threads": args.threads, "train_runs": len(train),
+                        "residual": args.residual, "pick": args.pick}
     part["dataset"] = str(data)
     parts = Path(args.out) / "parts"
     parts.mkdir(parents=True, exist_ok=True)
-    (parts / f"{key}.json").write_text(json.dumps(part, indent=2))
+    name = f"{key}_{args.tag}" if args.tag else key
+    (parts / f"{name}.json").write_text(json.dumps(part, indent=2))
 
 
 REF = "robot file's PD model (MuJoCo C)"
@@ -304,7 +326,8 @@ def main() -> None:
     build_dataset(Path(args.tarballs), Path(args.work), args.robot)
     passed = ["--tarballs", args.tarballs, "--work", args.work, "--out", args.out, "--robot", args.robot,
               "--horizon", str(args.horizon), "--per-run", str(args.per_run), "--max-iters", str(args.max_iters),
-              "--max-nfev", str(args.max_nfev), "--threads", str(args.threads)]
+              "--max-nfev", str(args.max_nfev), "--threads", str(args.threads), "--residual", args.residual,
+              "--pick", args.pick] + (["--tag", args.tag] if args.tag else [])
     if args.train_runs:
         passed += ["--train-runs", str(args.train_runs)]
     procs = [subprocess.Popen([sys.executable, __file__, *passed, "--only", k, "--part"]) for k in keys]

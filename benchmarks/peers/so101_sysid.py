@@ -261,13 +261,16 @@ class FitRecord:
 
 
 def fit_sysid(params: sysid.ParameterDict, ms: sysid.ModelSequences, val_fn, *, delay: bool, max_iters: int,
-              threads: int, log=print) -> tuple[sysid.ParameterDict, FitRecord]:
+              threads: int, log=print, modify_residual=None) -> tuple[sysid.ParameterDict, FitRecord]:
     """``mujoco.sysid.optimize`` (the ``"mujoco"`` backend: projected Gauss-Newton with finite-difference Jacobians
     over ``mujoco.rollout``, ``x_scale="jac"``) to its own termination or ``max_iters``; ``val_fn(params) ->`` mean
-    |Δq| on validation, evaluated at every iteration's candidate (its time not counted)."""
+    |Δq| on validation, evaluated at every iteration's candidate (its time not counted). The record keeps every
+    candidate's values (``curve``) so the iterate of lowest validation error can be rebuilt; ``modify_residual``
+    replaces ``mujoco.sysid``'s default residual."""
     builder = CachedBuild()
     residual_fn = sysid.build_residual_fn(models_sequences=[ms], build_model=builder, n_threads=threads,
-                                          custom_rollout=delayed_rollout if delay else None)
+                                          custom_rollout=delayed_rollout if delay else None,
+                                          modify_residual=modify_residual)
     curve, paused = [], [0.0]
     t0 = time.perf_counter()
 
@@ -277,8 +280,9 @@ def fit_sysid(params: sysid.ParameterDict, ms: sysid.ModelSequences, val_fn, *, 
         p.update_from_vector(np.asarray(trace[-1].candidate).ravel())
         v = val_fn(p)
         elapsed = t_pause - t0 - paused[0]
+        values = {k: q.value.tolist() for k, q in p.items()}
         curve.append({"iteration": len(trace) - 1, "seconds": round(elapsed, 2),
-                      "objective": float(trace[-1].objective), "validation": v})
+                      "objective": float(trace[-1].objective), "validation": v, "values": values})
         log(f"  iter {len(trace) - 1:3d}  objective {float(trace[-1].objective):.6g}  validation {v:.5f} rad  "
             f"{elapsed:.0f} s", flush=True)
         paused[0] += time.perf_counter() - t_pause
@@ -293,9 +297,9 @@ def fit_sysid(params: sysid.ParameterDict, ms: sysid.ModelSequences, val_fn, *, 
     iters = int(m.group(1)) if m else len(curve)
     converged = bool(m) and "maximum iterations" not in status
     final_v = val_fn(opt)
-    curve.append({"iteration": iters, "seconds": round(seconds, 2), "objective": None, "validation": final_v,
-                  "final": True})
     values = {k: p.value.tolist() for k, p in opt.items()}
+    curve.append({"iteration": iters, "seconds": round(seconds, 2), "objective": None, "validation": final_v,
+                  "final": True, "values": values})
     rec = FitRecord("mujoco.sysid.optimize (mujoco backend)", values, seconds, iters, status, converged,
                     sum(len(s.times) for s in ms.sensordata), curve)
     return opt, rec

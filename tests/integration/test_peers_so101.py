@@ -121,3 +121,28 @@ def test_bam_native_replays_like_bam_drive(adapter):
     moved = np.abs(q_drive - q_drive[0]).max()
     assert moved > 0.1
     assert np.abs(q_native - q_drive).max() < 0.004 * moved
+
+
+def test_radian_residual_is_the_arm_position_error(adapter):
+    """The Playground fit's residual (``so101_residual.radian_residual`` through ``build_residual_fn``) is the arm
+    joints' position error of the replay in radians, sample for sample, the window's given first sample left out."""
+    from mujoco import sysid
+
+    path = ROOT / "benchmarks" / "peers" / "so101_residual.py"
+    spec_r = importlib.util.spec_from_file_location("so101_residual", path)
+    residual = importlib.util.module_from_spec(spec_r)
+    spec_r.loader.exec_module(residual)
+    truth = adapter.load_spec(ROBOT, RATE).compile()
+    run = record(adapter, truth, commands(np.random.default_rng(3), 300))
+    spec = adapter.load_spec(ROBOT, RATE)
+    arm = adapter.joint_names(spec)[:adapter.ARM]
+    params = adapter.joint_params(spec, arm, ("kp",), {"kp": (1.0, 2000.0)})
+    params.update_from_vector(np.full(adapter.ARM, 40.0))
+    ms = adapter.model_sequences(spec, [run], 300, 1)
+    fn = sysid.build_residual_fn(models_sequences=[ms], build_model=adapter.build, n_threads=1,
+                                 modify_residual=residual.radian_residual)
+    r = np.concatenate([np.ravel(x) for x in fn(params.as_vector(), params)[0]])
+    q = adapter.replay_q(adapter.build(params, spec), [run])[0]
+    expected = (q[1:, :adapter.ARM] - run.q[1:, :adapter.ARM]).ravel()
+    assert np.abs(expected).max() > 1e-3  # the gains differ from the truth's: a real error to compare
+    np.testing.assert_allclose(r, expected, atol=1e-9)
