@@ -150,7 +150,7 @@ def run_part(key: str, args) -> None:
                   f"diverged {r['diverged']}  {time.perf_counter() - t0:.1f} s", flush=True)
         return row
 
-    part = {"key": key}
+    part = {"key": key, "machine": machine()}
     if key == "unfitted":
         m = mujoco.MjModel.from_xml_path(args.robot)
         m.opt.timestep = dt
@@ -230,6 +230,8 @@ def run_part(key: str, args) -> None:
     (parts / f"{name}.json").write_text(json.dumps(part, indent=2))
 
 
+OLD_MACHINE = "2 CPU cores (AMD EPYC), shared with other jobs"
+"""The machine of the parts written before each part recorded its own (their MANIFEST gives the load)."""
 REF = "robot file's PD model (MuJoCo C)"
 """The reference of every ratio: ``scenes/so101/so101.xml`` as it is (the Playground fit's start)."""
 NAMES = {
@@ -244,14 +246,13 @@ def merge(args, wall: float | None) -> None:
     out = Path(args.out)
     parts = {p.stem: json.loads(p.read_text()) for p in sorted((out / "parts").glob("*.json"))}
     wres = wresdyn_row(Path.cwd())
-    mach = machine()
 
     def entry(part):
         sc, rec = part["scores"], part["record"]
         return {"heldout_error": sc["heldout"]["mean_abs_dq"], "ood_error": sc["ood"]["mean_abs_dq"],
                 "seconds_to_final": round(rec["seconds"], 1),
                 "converged": {"value": rec["converged"], "reason": rec["status"]},
-                "samples_used": rec["samples"], "machine": mach,
+                "samples_used": rec["samples"], "machine": part.get("machine", OLD_MACHINE),
                 "extras": {"name": part["name"], "method": rec["method"], "iterations": rec["iterations"],
                            "validation_error": sc["validation"]["mean_abs_dq"],
                            "diverged": {s: sc[s]["diverged"] for s in SPLITS}, "fitted": rec["values"],
@@ -298,7 +299,8 @@ def merge(args, wall: float | None) -> None:
         if k != "unfitted":
             st = part["settings"]
             cap = st["max_nfev"] if k == "bam" else st["max_iters"]
-            line(f"{part['name']}, windows {st['per_run']} x {st['horizon']}, cap {cap}",
+            residual = f", residual {st['residual']}" if "residual" in st else ""
+            line(f"{part['name']}, windows {st['per_run']} x {st['horizon']}, cap {cap}{residual}",
                  {s: part["scores"][s]["mean_abs_dq"] for s in SPLITS})
     line(f"wresdyn servo model ({WRESDYN_RUN})", {"validation": wres["extras"]["validation_error"],
                                                   "heldout": w_h, "ood": w_o})
