@@ -5,9 +5,9 @@ OOD runs like the published (unfitted) models of ``benchmarks/real/so101_baselin
 Metric: mean |Δq| [rad] over the five arm joints and every sample of whole runs, open loop from the first recorded
 state (:func:`wresdyn.evaluation.servo_baselines.evaluate_baseline`, MuJoCo C, the robot file's options). The data
 is the import of ``benchmarks/real/so101_servo_real.sh`` (same command, same splits: 26 training, 6 validation, 6
-held-out, 2 OOD runs); training runs fit, validation only draws the curves, held-out and OOD are scored once per
-model. The recipes and the adapter: ``so101_sysid.py`` beside this file. wresdyn's row is read from its committed
-result (:data:`WRESDYN_RUN`), not rerun. The unfitted rows and the three fits are independent: each runs in its own
+held-out, 2 OOD runs); training runs fit, validation draws the curves and picks the Playground fit's iterate and
+setting, held-out and OOD are scored once per model. The recipes and the adapter: ``so101_sysid.py`` beside this
+file. wresdyn's row is read from its committed result (:data:`WRESDYN_RUN`), not rerun. The unfitted rows and the three fits are independent: each runs in its own
 process (``--part``, ``parts/*.json``), then one merge writes ``summary.json`` and the tables.
 
     PYTHONPATH=. python benchmarks/peers/so101.py --tarballs ../shared/real/so101 --work /tmp/peers_so101 \\

@@ -10,7 +10,7 @@ Written on public APIs only: ``mujoco.sysid`` (``Parameter``, ``ParameterDict``,
   ``frictionloss``, ``stiffness`` and ``damping``, read here as the position servo's P and D gains (its simulation
   constants, ``robots/so101/sim/constant.py``, list armature, frictionloss and "position servo PD gains identified
   from real teleop data"), fitted by ``mujoco.sysid``'s Gauss-Newton least squares on the joint positions of
-  rollouts. Playground measures the serial command transport delay from its logs' stamps and shifts the control
+  rollouts (the error in radians: ``so101_residual.py``). Playground measures the serial command transport delay from its logs' stamps and shifts the control
   times by it; the SAGE logs carry no such stamps, so here the delay is a 25th parameter fitted with the others:
   each command reaches the servo ``delay`` seconds late (the control series shifted in time, linearly
   interpolated, so finite differences see a change below one sample).
