@@ -1,5 +1,5 @@
 #!/bin/bash
-# One GPU session's measurements for the open speed and floor items, in the order that keeps each clean, on a
+# One GPU session's speed and floor measurements, in the order that keeps each clean, on a
 # 2 x H200 host staged as the device README says (wheels installed under /tmp/site; this tree copied to a folder of
 # its own, ignored data carried beside it). Stages, each only if named in STAGES (default: all five, in this order):
 #   checks    the opt-in CUDA graph paths' CUDA tests, each file alone under a 300 s timeout, stopping at the first
