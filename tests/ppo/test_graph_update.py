@@ -260,9 +260,12 @@ def _two_process_worker(out: Path, device: str) -> None:
         r = compare(alg) if device == "cpu" else compare(alg, run_graph=lambda a: a.update())
         (out / f"rank{rank}_kl{kl}.json").write_text(json.dumps(r))
     # gloo's worker threads must be joined before the interpreter ends: a process that exits with its group alive
-    # may abort ("terminate called without an active exception") after its results are written
+    # may abort ("terminate called without an active exception") after its results are written; an NCCL group whose
+    # all-reduce a graph captured hangs in destroy_process_group instead (the runner's close says so), so it is left
+    # to the interpreter's exit
     torch.distributed.barrier()
-    torch.distributed.destroy_process_group()
+    if torch.distributed.get_backend() != "nccl":
+        torch.distributed.destroy_process_group()
 
 
 if __name__ == "__main__":

@@ -69,13 +69,16 @@ class Ranks:
         """Tear a finished run's process group down, every rank once rank 0 has written the run.
 
         Done while the interpreter is alive: a gloo group left to interpreter exit aborts a rank now and then
-        ("terminate called without an active exception", pytorch#190489). A failed rank skips this; torchrun stops
-        the others."""
+        ("terminate called without an active exception", pytorch#190489). An NCCL group is left to the interpreter's
+        exit instead: with an all-reduce captured in a CUDA graph (the graph update) ``destroy_process_group`` waits
+        forever on both ranks of an H200 pair (``benchmarks/results/speed/h200x2_20261130f/ppo_two_process``), and
+        NCCL's teardown at exit returns. A failed rank skips this; torchrun stops the others."""
         import torch
 
         if self.world > 1 and torch.distributed.is_initialized():
             torch.distributed.barrier()
-            torch.distributed.destroy_process_group()
+            if torch.distributed.get_backend() != "nccl":
+                torch.distributed.destroy_process_group()
 
 
 CHECKPOINT_KEYS = ("actor_state_dict", "critic_state_dict", "optimizer_state_dict", "iter")
