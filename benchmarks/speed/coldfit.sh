@@ -10,8 +10,10 @@
 #   c. fit_prebuilt:  the fit from a third empty cache with WRESDYN_PREBUILT_KERNELS=OUT/prebuilt (the cold figure a
 #                     user of a package with shipped kernels sees);
 #   d. fit_warm:      the same command again on c's cache;
-#   e. fit_warm_graph (only with STEP_GRAPH=1): d again with `--identify.cuda-graph` (identification's Adam step
-#                     replayed from a CUDA graph, SysIdConfig.cuda_graph), on the same cache.
+#   e. fit_warm_graph (only with STEP_GRAPH=1): d again with `--identify.cuda-graph True` (identification's Adam step
+#                     replayed from a CUDA graph, SysIdConfig.cuda_graph), on the same cache; the default on CUDA
+#                     since the graph was measured, so e repeats d there, and a-d are eager only with FIT_EXTRA=
+#                     "--identify.cuda-graph False".
 # CUDA's own cache is off (CUDA_CACHE_DISABLE=1) and each step has its own WARP_CACHE_PATH under OUT, so nothing
 # compiled by one step serves another except through the export; the background compile a cold fit leaves running
 # for its next run (the one-kernel adjoint) is ended after the step (OUT/STAGES says how many), so no step shares the
@@ -91,7 +93,7 @@ fit fit_prebuilt "$out/wc_prebuilt"
 fit fit_warm "$out/wc_prebuilt"
 steps="fit_cold warmup_export fit_prebuilt fit_warm"
 if [ "${STEP_GRAPH:-0}" = 1 ]; then
-  fit fit_warm_graph "$out/wc_prebuilt" --identify.cuda-graph
+  fit fit_warm_graph "$out/wc_prebuilt" --identify.cuda-graph True
   steps="$steps fit_warm_graph"
 fi
 

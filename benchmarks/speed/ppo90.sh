@@ -3,18 +3,19 @@
 #
 #   bash benchmarks/speed/ppo90.sh OUT           # ~5 min on an idle 2-GPU host
 #   BASELINE=0 bash benchmarks/speed/ppo90.sh OUT  # the default update only (~3.5 min)
-#   ITERS=50 BASELINE=0 GRAPH=1 bash benchmarks/speed/ppo90.sh OUT  # the default and the CUDA-graph update (~6 min)
+#   ITERS=50 BASELINE=0 GRAPH=1 bash benchmarks/speed/ppo90.sh OUT  # the packed and the CUDA-graph update (~6 min)
 #   DEVICE=cpu N=16 ITERS=1 bash benchmarks/speed/ppo90.sh OUT  # a check of the script on the CPU (gloo; no figure)
 #
 # Each round: one GPU (torchrun, 1 process) at 4096 worlds, then two GPUs (torchrun, 2 processes) at 4096 worlds
-# each, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py): the residual's default update
-# (wresdyn.ppo.packed_update.PackedPPO) and, unless BASELINE=0, rsl-rl's own PPO.update (+rsl_update), the same
-# update bit for bit (tests/ppo/test_packed_update.py), and with GRAPH=1 the update replayed from one CUDA graph per
-# mini-batch (+graph, ppo.graph_update: wresdyn.ppo.graph_update.GraphPPO), in one process per launch, their order
-# rotated from round to round so that none always runs first. GRAPH=1 first checks the captured update against the
-# default one on one GPU and on two over NCCL (tests/ppo/test_graph_update.py's CUDA tests, where pytest is
-# installed). Then the update's profile on 2 GPUs once (the default update: the profile's synchronisations cannot
-# run inside a capture).
+# each, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py): the packed update run eagerly
+# (+packed: wresdyn.ppo.packed_update.PackedPPO, ppo.graph_update false) and, unless BASELINE=0, rsl-rl's own
+# PPO.update (+rsl_update), the same update bit for bit (tests/ppo/test_packed_update.py), and with GRAPH=1 the
+# update replayed from one CUDA graph per mini-batch (+graph, ppo.graph_update: wresdyn.ppo.graph_update.GraphPPO,
+# the residual's default on CUDA since these rounds measured it), in one process per launch, their order rotated
+# from round to round so that none always runs first. GRAPH=1 first checks the captured update against the packed
+# one on one GPU and on two over NCCL (tests/ppo/test_graph_update.py's CUDA tests, where pytest is installed). Then
+# the update's profile on 2 GPUs once (the packed update: the profile's synchronisations cannot run inside a
+# capture).
 # The environment (PYTHONPATH, caches) is the caller's; python is python3. Writes into OUT:
 #   machine.txt                 the GPUs, host, load, versions, commit
 #   one_rN.{txt,json}           round N on one GPU; two_rN.{txt,json} on two; table_rN.txt both with the efficiency
@@ -66,7 +67,7 @@ graph_check() {  # the captured update against the default one on GPU 0 and on G
 }
 if [[ $GRAPH == 1 && $DEVICE == cuda* ]]; then step "graph check, 1 GPU" graph_check; fi
 
-variants=("")  # each case's options: the default update, then the switched-on comparisons
+variants=("+packed")  # each case's options: the packed update, then the switched-on comparisons
 [[ $BASELINE == 1 ]] && variants+=("+rsl_update")
 [[ $GRAPH == 1 ]] && variants+=("+graph")
 for r in 1 2 3; do

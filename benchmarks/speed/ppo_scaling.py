@@ -11,11 +11,12 @@ residual's time to a validation target.
 A case is ``LEARNER:ENVS[+OPTION...]`` with ENVS the worlds of all processes together (split as ``wresdyn train``
 splits them); an option sets a PPO field (:data:`OPTIONS`): ``+one_sync`` the update with one host synchronisation
 (``ppo.one_sync_update``), ``+graph`` each mini-batch's update step replayed from one CUDA graph
-(``ppo.graph_update``, :class:`~wresdyn.ppo.graph_update.GraphPPO`), ``+bf16`` rsl-rl's mixed precision,
-``+compile`` rsl-rl's ``torch.compile``, ``+mbK`` K mini-batches, ``+epK`` K epochs; ``+rsl_update`` (residual
-only) runs rsl-rl's own ``PPO.update`` instead of the residual's default
-:class:`~wresdyn.ppo.packed_update.PackedPPO`, the same update bit for bit with fewer collectives and host waits: the
-baseline of that change in the same run.
+(``ppo.graph_update``, :class:`~wresdyn.ppo.graph_update.GraphPPO`, the residual's default on CUDA), ``+packed`` the
+same update run eagerly (``ppo.graph_update`` false: :class:`~wresdyn.ppo.packed_update.PackedPPO`), ``+bf16``
+rsl-rl's mixed precision, ``+compile`` rsl-rl's ``torch.compile``, ``+mbK`` K mini-batches, ``+epK`` K epochs;
+``+rsl_update`` (residual only) runs rsl-rl's own ``PPO.update`` instead of the residual's update, which is
+:class:`~wresdyn.ppo.packed_update.PackedPPO`'s bit for bit with fewer collectives and host waits (on the CPU, or
+eagerly with ``+packed``): the baseline of that change in the same run.
 
 - ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
   world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph.
@@ -47,8 +48,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-OPTIONS = {"one_sync": ("one_sync_update", True), "graph": ("graph_update", True), "bf16": ("mixed_precision", True),
-           "compile": ("compile_mode", "default")}
+OPTIONS = {"one_sync": ("one_sync_update", True), "graph": ("graph_update", True), "packed": ("graph_update", False),
+           "bf16": ("mixed_precision", True), "compile": ("compile_mode", "default")}
 """A case's ``+OPTION``: the PPO config field it sets (``+mbK`` sets ``num_mini_batches`` = K, ``+epK``
 ``num_learning_epochs`` = K); the skill's config has ``one_sync``, ``mbK`` and ``epK``."""
 

@@ -9,8 +9,9 @@
 
 Workload: the shipped benchmark with the default residual PPO (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
 world, 5 epochs x 4 mini-batches, adaptive learning rate), ``--envs`` worlds in total (split over torchrun's
-processes, as ``wresdyn train`` splits them), ``--set`` overrides as on ``wresdyn train``; the update is the
-residual's default (:class:`~wresdyn.ppo.packed_update.PackedPPO`), or rsl-rl's own with ``--rsl-update``.
+processes, as ``wresdyn train`` splits them), ``--set`` overrides as on ``wresdyn train``; the update is
+:class:`~wresdyn.ppo.packed_update.PackedPPO` run eagerly (``ppo.graph_update`` false: the parts' synchronisations
+cannot run inside the CUDA graph of the residual's default on CUDA), or rsl-rl's own with ``--rsl-update``.
 
 1. **Split** (``--iterations`` plain iterations after 2 of warm-up): rsl-rl's own collect and learn times.
 2. **Breakdown** (as many iterations again, instrumented): every part of ``PPO.update`` timed between device
@@ -179,13 +180,14 @@ def main() -> None:
     p.add_argument("--iterations", type=int, default=5, help="iterations of each phase")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
     p.add_argument("--rsl-update", action="store_true",
-                   help="rsl-rl's own PPO.update instead of the residual's default (the packed update, bit for bit)")
+                   help="rsl-rl's own PPO.update instead of the packed update (the same, bit for bit)")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     wp.config.quiet = True
     ranks = Ranks.from_env()
     cfg = apply_overrides(set_fields(default_config(), {"env.num_worlds": args.envs, "ppo.device": args.device,
-                                                        "ppo.save_interval": 10**6}), args.set)
+                                                        "ppo.save_interval": 10**6, "ppo.graph_update": False}),
+                          args.set)
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
     robot = load_robot(DEFAULT_ROBOT)
     data = load_dataset(args.data, robot=robot)

@@ -166,27 +166,39 @@ def test_one_capture_while_the_inputs_stay(robot, data, tmp_path, recorded_captu
     assert len(recorded_capture) == 2
 
 
-def test_a_graph_update_run_on_the_cpu_is_the_default_run(robot, data, tmp_path):
-    """``wresdyn train --ppo.graph-update`` on the CPU trains as without it (the packed update runs), checkpoints as
-    rsl-rl does, and the switch may change on resume."""
+def test_a_graph_update_run_on_the_cpu_is_the_packed_run(robot, data, tmp_path):
+    """``wresdyn train`` on the CPU with the graph update (the default, or ``--ppo.graph-update True``) trains as with
+    it off (the packed update runs), checkpoints as rsl-rl does, and the switch may change on resume."""
     from wresdyn.ppo.trainer import train
 
-    cfg = set_fields(tiny(iterations=2), {"ppo.graph_update": True})
-    train(data, robot, cfg, tmp_path / "graph")
-    train(data, robot, set_fields(cfg, {"ppo.graph_update": False}), tmp_path / "default")
-    a, b = (torch.load(tmp_path / name / "model_1.pt", weights_only=True) for name in ("graph", "default"))
-    for key in ("actor_state_dict", "critic_state_dict"):
-        assert all(torch.equal(a[key][k], b[key][k]) for k in b[key])
-    assert all(type(g["lr"]) is float for g in a["optimizer_state_dict"]["param_groups"])
-    s = train(data, robot, set_fields(cfg, {"ppo.graph_update": False, "ppo.iterations": 3}), tmp_path / "graph")
+    cfg = tiny(iterations=2)
+    assert cfg.ppo.graph_update is None
+    train(data, robot, cfg, tmp_path / "default")
+    train(data, robot, set_fields(cfg, {"ppo.graph_update": True}), tmp_path / "graph")
+    train(data, robot, set_fields(cfg, {"ppo.graph_update": False}), tmp_path / "packed")
+    ref = torch.load(tmp_path / "packed" / "model_1.pt", weights_only=True)
+    for name in ("default", "graph"):
+        got = torch.load(tmp_path / name / "model_1.pt", weights_only=True)
+        for key in ("actor_state_dict", "critic_state_dict"):
+            assert all(torch.equal(got[key][k], ref[key][k]) for k in ref[key]), (name, key)
+        assert got["optimizer_state_dict"]["param_groups"] == ref["optimizer_state_dict"]["param_groups"], name
+        opt, ref_opt = got["optimizer_state_dict"]["state"], ref["optimizer_state_dict"]["state"]
+        assert opt.keys() == ref_opt.keys() and all(
+            torch.equal(opt[k][f], ref_opt[k][f]) for k in ref_opt for f in ref_opt[k]), name
+    assert all(type(g["lr"]) is float for g in ref["optimizer_state_dict"]["param_groups"])
+    s = train(data, robot, set_fields(cfg, {"ppo.graph_update": False, "ppo.iterations": 3}), tmp_path / "default")
     assert s["iterations_this_session"] == 1
 
 
 def test_graph_update_config():
-    cfg = set_fields(tiny(), {"ppo.graph_update": True})
-    assert runner_cfg(cfg)["algorithm"]["class_name"] == "wresdyn.ppo.graph_update:GraphPPO"
-    assert runner_cfg(tiny())["algorithm"]["class_name"] == "wresdyn.ppo.packed_update:PackedPPO"  # off by default
-    assert not PPOConfig().graph_update and "graph_update" in RESUME_MAY_CHANGE
+    """The graph update is the residual's default (it runs on CUDA only); ``one_sync_update`` asked for takes its
+    place, and both asked for are refused."""
+    assert PPOConfig().graph_update is None and "graph_update" in RESUME_MAY_CHANGE
+    for fields, name in (({}, "graph_update:GraphPPO"), ({"ppo.graph_update": True}, "graph_update:GraphPPO"),
+                         ({"ppo.graph_update": False}, "packed_update:PackedPPO"),
+                         ({"ppo.one_sync_update": True}, "update:OneSyncPPO"),
+                         ({"ppo.one_sync_update": True, "ppo.graph_update": False}, "update:OneSyncPPO")):
+        assert runner_cfg(set_fields(tiny(), fields))["algorithm"]["class_name"] == "wresdyn.ppo." + name, fields
     with pytest.raises(WresdynError, match="choose one"):
         PPOConfig(graph_update=True, one_sync_update=True)
 

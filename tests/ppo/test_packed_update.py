@@ -46,7 +46,8 @@ def _rollout(robot, trajs, rate_hz, tmp_path, desired_kl, seed=0, device="cpu"):
     env = ReplayEnv(robot, trajs, rate_hz, 8, cfg.env, cfg.residual, cfg.rewards, obs_mean=mean, obs_std=std,
                     seed=seed, device=device)
     rcfg = runner_cfg(cfg)
-    assert rcfg["algorithm"]["class_name"] == "wresdyn.ppo.packed_update:PackedPPO"  # the residual's default
+    # the residual's default: the graph update, which is PackedPPO on the CPU
+    assert rcfg["algorithm"]["class_name"] == "wresdyn.ppo.graph_update:GraphPPO"
     rcfg["algorithm"]["class_name"] = "PPO"
     runner = make_runner(env, rcfg, tmp_path)
     alg, obs = runner.alg, env.get_observations()

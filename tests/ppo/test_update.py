@@ -97,8 +97,8 @@ def test_rsl_rls_options_reach_its_runner_config():
     rcfg = runner_cfg(cfg)
     assert rcfg["algorithm"]["use_mixed_precision"] is True and rcfg["torch_compile_mode"] == "default"
     assert rcfg["algorithm"]["class_name"] == "wresdyn.ppo.update:OneSyncPPO"
-    plain = runner_cfg(tiny())  # the defaults: rsl-rl's PPO update, bit for bit (tests/ppo/test_packed_update.py)
-    assert plain["algorithm"]["class_name"] == "wresdyn.ppo.packed_update:PackedPPO"
+    plain = runner_cfg(tiny())  # the defaults: the graph update, rsl-rl's bit for bit on the CPU (test_graph_update.py)
+    assert plain["algorithm"]["class_name"] == "wresdyn.ppo.graph_update:GraphPPO"
     assert plain["torch_compile_mode"] is None
     assert plain["algorithm"]["use_mixed_precision"] is False
     with pytest.raises(WresdynError, match="compile_mode"):

@@ -183,9 +183,12 @@ class IdentifyLearner:
         self.fused = fusable if cfg.fused is None else cfg.fused
         self.graphs = None
         """The Adam step's CUDA graphs (:class:`~wresdyn.learn.graph_step.StepGraphs`), ``None``: eager steps."""
-        if cfg.cuda_graph and StepGraphs.available(self.sim.device):
-            if getattr(robot, "servo", None) is not None:  # its command path compares goal profiles on the host
-                raise ValueError("cuda_graph: a robot with servo drives identifies eagerly; set cuda_graph to false")
+        servo = getattr(robot, "servo", None) is not None  # its command path compares goal profiles on the host
+        if cfg.cuda_graph is True and servo and StepGraphs.available(self.sim.device):
+            raise ValueError("cuda_graph: a robot with servo drives identifies eagerly; set cuda_graph to false or "
+                             "none")
+        # None: captured wherever it can be (shooting 1 is the config's check for True)
+        if cfg.cuda_graph is not False and not servo and cfg.shooting == 1 and StepGraphs.available(self.sim.device):
             model.to(self.sim.device)  # a parameter on the host would be copied, not captured
             self.graphs, self.deferred = StepGraphs(self.sim, before_capture=self._release), True
             adopt_optimiser(self.optim, self.sim.device, capturable=self._capturable())

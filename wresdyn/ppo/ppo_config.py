@@ -77,12 +77,17 @@ class PPOConfig:
     """Run the PPO update with one host synchronisation per iteration (:class:`~wresdyn.ppo.update.OneSyncPPO`:
     the adaptive learning rate on the device, gradients and KL in one all-reduce per mini-batch across processes)
     instead of rsl-rl's ~5 per mini-batch; the same update up to rounding."""
-    graph_update: bool = False
+    graph_update: bool | None = None
     """On CUDA, replay each mini-batch's whole update step (forward, backward, the all-reduce, clip, Adam) from one
     CUDA graph (:class:`~wresdyn.ppo.graph_update.GraphPPO`), so the host launches one graph per mini-batch instead
-    of its kernels one by one; off until measured on GPUs (``benchmarks/results/speed/ppograph57_plan.md``). The
-    packed update up to Adam's rounding (capturable Adam); on the CPU, with mixed precision or with ``compile_mode``
-    the packed update runs as without it."""
+    of its kernels one by one. The packed update up to Adam's rounding (capturable Adam); on the CPU, with mixed
+    precision or with ``compile_mode`` the packed update runs as without it, bit for bit. ``None`` (the default):
+    this update unless ``one_sync_update`` asks for that one; ``True`` refuses ``one_sync_update``; ``False``: the
+    packed update everywhere. On by default on CUDA because two H200s ran it: its four CUDA tests passed (one GPU,
+    two over NCCL), an iteration took 2.3-2.7x less than the packed update's and two GPUs kept 89-94 % of twice one
+    (``benchmarks/results/speed/h200x2_20261130f/ppo90g``). The skills' PPO
+    (:class:`~wresdyn.skills.skill_config.SkillPPOConfig`) has no such switch and keeps rsl-rl's update: no test
+    covers a captured update of its networks."""
     mixed_precision: bool = False
     """rsl-rl's mixed precision: the update's forward passes and losses under bfloat16 autocast."""
     compile_mode: str = ""
@@ -104,7 +109,7 @@ class PPOConfig:
             if getattr(self, name) is not None:
                 check_number(getattr(self, name), f"ppo.{name}", integer=True, ge=1)
         check_device(self.device, "ppo.device")
-        if self.graph_update and self.one_sync_update:
+        if self.graph_update is True and self.one_sync_update:
             raise WresdynError("ppo.graph_update and ppo.one_sync_update are two updates; choose one")
         if self.compile_mode not in COMPILE_MODES:
             raise WresdynError(f"ppo.compile_mode = {self.compile_mode!r}; choose from {COMPILE_MODES}")
