@@ -149,6 +149,22 @@ def test_set_comma_lists_none_and_bare_optional_switches_are_rewritten():
         "--ppo.one-sync-update", "--ppo.no-mixed-precision"]
 
 
+def test_switches_of_old_that_became_optional_are_rewritten():
+    """``SysIdConfig.cuda_graph`` and ``PPOConfig.graph_update`` were switches and are ``bool | None`` now: their
+    negatives and ``--set`` spellings of old still parse, to ``False`` or ``True``."""
+    notes = []
+    assert rewrite("fit", command_flags("fit"), ["--identify.no-cuda-graph"], notes.append) == [
+        "--identify.cuda-graph", "False"]
+    assert rewrite("identify", command_flags("identify"), ["--no-cuda-graph"], notes.append) == [
+        "--cuda-graph", "False"]
+    assert rewrite("train", command_flags("train"), ["--ppo.no-graph-update", "--set", "ppo.graph_update=true"],
+                   notes.append) == ["--ppo.graph-update", "False", "--ppo.graph-update=True"]
+    assert len(notes) == 4
+    assert _config(["fit", "d.npz", "--identify.no-cuda-graph"]).cuda_graph  # the gradient fit's own graph stays
+    assert _parse(["fit", "d.npz", "--identify.no-cuda-graph"]).identify.cuda_graph is False
+    assert _config(["train", "d.npz"]).ppo.graph_update is None
+
+
 def test_a_spelling_of_today_is_left_alone():
     notes = []
     argv = ["d.npz", "--horizon-curriculum", "2", "4", "--residual.kind", "torque", "--no-cuda-graph", "--lr=0.01"]

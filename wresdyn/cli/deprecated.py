@@ -7,7 +7,8 @@ What is rewritten:
 - ``wresdyn train --set SECTION.FIELD=VALUE``: the field's own flag, ``--section.field VALUE``;
 - a comma list (``--seeds 0,1,2``): a space-separated one (``--seeds 0 1 2``; ``""`` the empty list);
 - ``none`` for an unset value: ``None``;
-- an optional switch given bare (``deploy --oracle-beside``): ``--oracle-beside True``;
+- an optional switch given bare (``deploy --oracle-beside``): ``--oracle-beside True``; its negative
+  (``--ppo.no-graph-update``, a switch of old): ``--ppo.graph-update False``;
 - ``--flag=VALUE``: ``--flag VALUE`` (read by both, split only to rewrite the parts).
 """
 
@@ -75,8 +76,11 @@ def rewrite(command: str, flags: dict[str, object], argv: list[str], say: Callab
                 say(f"note: --set {item} is deprecated; write {switch}")
                 out.append(switch)
                 continue
-            say(f"note: --set {item} is deprecated; write {new} {text.strip()}")
-            flag, eq, inline = new, "=", text.strip()
+            value = text.strip()
+            if _optional(flags[new]) == (bool, True) and value.lower() in ("true", "false", "none"):
+                value = value.capitalize()  # an optional switch reads True, False or None
+            say(f"note: --set {item} is deprecated; write {new} {value}")
+            flag, eq, inline = new, "=", value
         elif flag in renamed:
             say(f"note: {flag} is deprecated; write {renamed[flag]}")
             flag = renamed[flag]
@@ -86,14 +90,15 @@ def rewrite(command: str, flags: dict[str, object], argv: list[str], say: Callab
             flag = "--" + (f"{head}." if head else "") + "no-" + last
             say(f"note: --{token[2:]} is deprecated; write {flag}")
         tp, optional = _optional(flags.get(flag))
-        positive = flags.get("--" + flag[5:]) if flag.startswith("--no-") else None
+        head, _, last = flag[2:].rpartition(".")  # a nested switch's negative: --section.no-name
+        positive = flags.get("--" + (f"{head}." if head else "") + last[3:]) if last.startswith("no-") else None
         if tp is bool and optional:  # an optional switch of old: given bare for True
             if not eq and (i >= len(argv) or argv[i] not in ("True", "False", "None")):
                 say(f"note: a bare {flag} is deprecated; write {flag} True")
                 out += [flag, "True"]
                 continue
         if positive is not None and _optional(positive) == (bool, True):
-            name = "--" + flag[5:]
+            name = "--" + (f"{head}." if head else "") + last[3:]
             say(f"note: {flag} is deprecated; write {name} False")
             out += [name, "False"]
             continue
