@@ -26,7 +26,9 @@
 # dataset's), FIT_EXTRA (more fit arguments, none by default; a CPU smoke check: DEVICE=cpu FIT_EXTRA="--iterations 4
 # --identify.iterations 4 --windows 4"), TOTAL (the whole script's budget [s], 355: each step gets what is left, a
 # step cut short says so: rc=124; with STEP_GRAPH=1 give it about 80 s more), GPU (the CUDA_VISIBLE_DEVICES of every
-# step, 0), STEP_GRAPH (1: run step e).
+# step, 0), STEP_GRAPH (1: run step e), NO_GRAPH (1: d again with `--identify.no-cuda-graph`, fit_warm_eager: the
+# identification stepped eagerly, the baseline of a default that replays its graph), SHIPPED (1: skip a and b; c
+# from an empty cache with the kernels the package ships, WRESDYN_PREBUILT_KERNELS unset: ~3 min for c, d and one more).
 # Output: OUT/<step>.log (stdout and stderr, its last line `whole command: S s rc=RC`), OUT/<step>.fitlog (the run's
 # fit.log), OUT/STAGES (the clock of each step), OUT/machine.txt, OUT/summary.txt (each step's whole command and
 # first-iteration times, read off the logs).
@@ -84,17 +86,28 @@ fit() {  # fit STEP CACHE [MORE...]: the fit from that Warp cache folder, with m
 
 : > "$out/STAGES"
 rm -rf "$out/wc_cold" "$out/wc_export" "$out/wc_prebuilt" "$out/prebuilt"
-fit fit_cold "$out/wc_cold"
-WARP_CACHE_PATH=$out/wc_export timed warmup_export "$py" -m wresdyn.cli warmup --device "$dev" --no-shipped \
-  --robot "$robot" --export "$out/prebuilt"
-du -sh "$out/prebuilt" >> "$out/warmup_export.log" 2>&1
-export WRESDYN_PREBUILT_KERNELS=$out/prebuilt
-fit fit_prebuilt "$out/wc_prebuilt"
+if [ "${SHIPPED:-0}" = 1 ]; then
+  # the package's own prebuilt kernels (wresdyn/sim/prebuilt_kernels), as a user's first run finds them
+  fit fit_prebuilt "$out/wc_prebuilt"
+  steps="fit_prebuilt"
+else
+  fit fit_cold "$out/wc_cold"
+  WARP_CACHE_PATH=$out/wc_export timed warmup_export "$py" -m wresdyn.cli warmup --device "$dev" --no-shipped \
+    --robot "$robot" --export "$out/prebuilt"
+  du -sh "$out/prebuilt" >> "$out/warmup_export.log" 2>&1
+  export WRESDYN_PREBUILT_KERNELS=$out/prebuilt
+  fit fit_prebuilt "$out/wc_prebuilt"
+  steps="fit_cold warmup_export fit_prebuilt"
+fi
 fit fit_warm "$out/wc_prebuilt"
-steps="fit_cold warmup_export fit_prebuilt fit_warm"
+steps="$steps fit_warm"
 if [ "${STEP_GRAPH:-0}" = 1 ]; then
   fit fit_warm_graph "$out/wc_prebuilt" --identify.cuda-graph True
   steps="$steps fit_warm_graph"
+fi
+if [ "${NO_GRAPH:-0}" = 1 ]; then
+  fit fit_warm_eager "$out/wc_prebuilt" --identify.no-cuda-graph
+  steps="$steps fit_warm_eager"
 fi
 
 for step in $steps; do

@@ -229,6 +229,31 @@ def test_compare_the_probe_runs_with_the_committed_ones_on_validation():
     assert "| d_oracle | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 | 100.0 -> 100.0 |" in lines
 
 
+def test_compare_the_line_search_runs_with_the_probe_runs_on_validation():
+    """The packed ``floor_unvp55_s0``, ``_s1`` against the probe runs of the same seeds: what validation chose on."""
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair_compare.py"),
+                           *(str(FULL / f"floor_unvp_s{s}") for s in range(2)), "--",
+                           *(str(FULL / f"floor_unvp55_s{s}") for s in range(2)), "--names", "floor_unvp",
+                           "floor_unvp55"], check=True, capture_output=True, text=True)
+    # one kick more of 8 for (b) and for (f) (benchmarks/results/floor_fair/unvp55_choice/MANIFEST.md)
+    assert "| b_calibrated | 75.0 -> 78.1 | 100.0 -> 100.0 | 100.0 -> 100.0 | 0.0 -> 12.5 | 100.0 -> 100.0 |" \
+        in done.stdout.splitlines()
+    assert "| f_calibrated_narrow | 87.5 -> 90.6 | 100.0 -> 100.0 | 100.0 -> 100.0 | 50.0 -> 62.5 | 100.0 -> 100.0 |" \
+        in done.stdout.splitlines()
+    assert (ROOT / "benchmarks/results/floor_fair/unvp55_choice/validation_two_seeds.md").read_text() == done.stdout
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_line_search_runs_ledger_every_held_out_scoring(seed):
+    """Each packed run's held-out ledger is its base's, the same motions, and one line more: its own scoring."""
+    base = (FULL / f"floor_unvp_s{seed}/heldout_ledger.jsonl").read_text().splitlines()
+    run = FULL / f"floor_unvp55_s{seed}"
+    lines = (run / "heldout_ledger.jsonl").read_text().splitlines()
+    assert lines[:-1] == base and len(lines) == 3 and json.loads(lines[-1])["seed"] == seed
+    assert (run / ".probe_reuse").read_text().startswith(f"floor_unvp55_s{seed}: kept c_delta_action d_oracle "
+                                                          "e_randomized of floor_unvp")
+
+
 def test_compare_needs_two_configurations():
     done = subprocess.run([sys.executable, str(ROOT / "benchmarks/skills/floor_fair_compare.py"),
                            str(FULL / "floor_unv_s0")], capture_output=True, text=True)
