@@ -12,8 +12,7 @@
 #   d. fit_warm:      the same command again on c's cache;
 #   e. fit_warm_graph (only with STEP_GRAPH=1): d again with `--identify.cuda-graph True` (identification's Adam step
 #                     replayed from a CUDA graph, SysIdConfig.cuda_graph), on the same cache; the default on CUDA
-#                     since the graph was measured, so e repeats d there, and a-d are eager only with FIT_EXTRA=
-#                     "--identify.cuda-graph False".
+#                     since the graph was measured, so e repeats d there (NO_GRAPH=1 gives d's eager baseline).
 # CUDA's own cache is off (CUDA_CACHE_DISABLE=1) and each step has its own WARP_CACHE_PATH under OUT, so nothing
 # compiled by one step serves another except through the export; the background compile a cold fit leaves running
 # for its next run (the one-kernel adjoint) is ended after the step (OUT/STAGES says how many), so no step shares the
@@ -26,7 +25,7 @@
 # dataset's), FIT_EXTRA (more fit arguments, none by default; a CPU smoke check: DEVICE=cpu FIT_EXTRA="--iterations 4
 # --identify.iterations 4 --windows 4"), TOTAL (the whole script's budget [s], 355: each step gets what is left, a
 # step cut short says so: rc=124; with STEP_GRAPH=1 give it about 80 s more), GPU (the CUDA_VISIBLE_DEVICES of every
-# step, 0), STEP_GRAPH (1: run step e), NO_GRAPH (1: d again with `--identify.no-cuda-graph`, fit_warm_eager: the
+# step, 0), STEP_GRAPH (1: run step e), NO_GRAPH (1: d again with `--identify.cuda-graph False`, fit_warm_eager: the
 # identification stepped eagerly, the baseline of a default that replays its graph), SHIPPED (1: skip a and b; c
 # from an empty cache with the kernels the package ships, WRESDYN_PREBUILT_KERNELS unset: ~3 min for c, d and one more).
 # Output: OUT/<step>.log (stdout and stderr, its last line `whole command: S s rc=RC`), OUT/<step>.fitlog (the run's
@@ -106,7 +105,7 @@ if [ "${STEP_GRAPH:-0}" = 1 ]; then
   steps="$steps fit_warm_graph"
 fi
 if [ "${NO_GRAPH:-0}" = 1 ]; then
-  fit fit_warm_eager "$out/wc_prebuilt" --identify.no-cuda-graph
+  fit fit_warm_eager "$out/wc_prebuilt" --identify.cuda-graph False
   steps="$steps fit_warm_eager"
 fi
 
