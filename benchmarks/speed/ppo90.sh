@@ -5,6 +5,7 @@
 #   BASELINE=0 bash benchmarks/speed/ppo90.sh OUT  # the default update only (~3.5 min)
 #   ITERS=50 BASELINE=0 GRAPH=1 bash benchmarks/speed/ppo90.sh OUT  # the packed and the CUDA-graph update (~6 min)
 #   DEVICE=cpu N=16 ITERS=1 bash benchmarks/speed/ppo90.sh OUT  # a check of the script on the CPU (gloo; no figure)
+#   FOUR=1 ...                     # each round also on four GPUs (0-3), 4096 worlds each (a 4-GPU host)
 #
 # Each round: one GPU (torchrun, 1 process) at 4096 worlds, then two GPUs (torchrun, 2 processes) at 4096 worlds
 # each, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py): the packed update run eagerly
@@ -18,13 +19,14 @@
 # capture).
 # The environment (PYTHONPATH, caches) is the caller's; python is python3. Writes into OUT:
 #   machine.txt                 the GPUs, host, load, versions, commit
-#   one_rN.{txt,json}           round N on one GPU; two_rN.{txt,json} on two; table_rN.txt both with the efficiency
+#   one_rN.{txt,json}           round N on one GPU; two_rN.{txt,json} on two (four_rN with FOUR=1); table_rN.txt
+#                               all of them with the efficiency
 #   graph_check.txt             GRAPH=1: the CUDA test's output
 #   profile_two.{txt,json}      benchmarks/speed/ppo_update_profile.py on 2 GPUs
 #   steps.txt                   each step's start, seconds and exit status
 set -u
 OUT=${1:?usage: ppo90.sh OUT}
-BASELINE=${BASELINE:-1} GRAPH=${GRAPH:-0} DEVICE=${DEVICE:-cuda} N=${N:-4096} ITERS=${ITERS:-15}
+BASELINE=${BASELINE:-1} GRAPH=${GRAPH:-0} FOUR=${FOUR:-0} DEVICE=${DEVICE:-cuda} N=${N:-4096} ITERS=${ITERS:-15}
 mkdir -p "$OUT"
 PY=python3
 TORCHRUN=(python3 -m torch.distributed.run --standalone)
@@ -72,11 +74,18 @@ variants=("+packed")  # each case's options: the packed update, then the switche
 [[ $GRAPH == 1 ]] && variants+=("+graph")
 for r in 1 2 3; do
   k=$(( (r - 1) % ${#variants[@]} ))
-  one=() two=()
-  for v in "${variants[@]:k}" "${variants[@]:0:k}"; do one+=("residual:$N$v") two+=("residual:$((2 * N))$v"); done
+  one=() two=() four=()
+  for v in "${variants[@]:k}" "${variants[@]:0:k}"; do
+    one+=("residual:$N$v") two+=("residual:$((2 * N))$v") four+=("residual:$((4 * N))$v")
+  done
   step "round $r, 1 GPU: ${one[*]}" scaling 0 1 "$OUT/one_r$r.json" "${one[@]}"
   step "round $r, 2 GPUs: ${two[*]}" scaling 0,1 2 "$OUT/two_r$r.json" "${two[@]}"
-  $PY benchmarks/speed/ppo_scaling.py --table "$OUT/one_r$r.json" "$OUT/two_r$r.json" > "$OUT/table_r$r.txt" 2>&1
+  jsons=("$OUT/one_r$r.json" "$OUT/two_r$r.json")
+  if [[ $FOUR == 1 ]]; then
+    step "round $r, 4 GPUs: ${four[*]}" scaling 0,1,2,3 4 "$OUT/four_r$r.json" "${four[@]}"
+    jsons+=("$OUT/four_r$r.json")
+  fi
+  $PY benchmarks/speed/ppo_scaling.py --table "${jsons[@]}" > "$OUT/table_r$r.txt" 2>&1
   cat "$OUT/table_r$r.txt"
 done
 
