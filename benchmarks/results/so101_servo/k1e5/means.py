@@ -8,7 +8,9 @@ import json
 from pathlib import Path
 
 SETTINGS = {
-    "kappa 3e4, effort reset": ["effort/k3e4_reset", "effort/k3e4_reset_seed1"],
+    "kappa 3e4, effort reset": ["effort/k3e4_reset", "effort/k3e4_reset_seed1", "k1e5/k3e4_reset_seed2"],
+    "kappa 3e4, effort reset, backlash and encoder offsets (benchmarks/real/so101_servo_real.sh's recipe)": [
+        "backlash/bl_seed0", "k1e5/k3e4_bl_seed1", "k1e5/k3e4_bl_seed2"],
     "kappa 1e5, effort reset, seeds 0-1 (the kappa choice)": ["effort/k1e5_reset", "k1e5/reset_seed1"],
     "kappa 1e5, effort reset": ["effort/k1e5_reset", "k1e5/reset_seed1", "k1e5/reset_seed2"],
     "kappa 1e5, effort reset, backlash and encoder offsets": ["k1e5/bl_seed0", "k1e5/bl_seed1", "k1e5/bl_seed2"],
@@ -32,7 +34,8 @@ def main() -> None:
             print(f"{r}: " + "  ".join(f"{s} {v:.5f}" for s, v in splits(r).items()))
         vals = [splits(r)["validation"] for r in runs]
         each = " / ".join(f"{v:.5f}" for v in vals)
-        print(f"  {name}: mean validation {sum(vals) / len(vals):.5f} rad over {len(vals)} seed(s) ({each})\n")
+        two = f"; seeds 0-1: {sum(vals[:2]) / 2:.6f}" if len(vals) > 2 else ""
+        print(f"  {name}: mean validation {sum(vals) / len(vals):.5f} rad over {len(vals)} seed(s) ({each}){two}\n")
 
 
 if __name__ == "__main__":
