@@ -103,7 +103,8 @@ def wresdyn_row(root: Path) -> dict:
         "seconds_to_final": seconds,
         "converged": {"value": False, "reason": reason},
         "samples_used": samples,
-        "machine": "2 CPU cores (AMD EPYC), shared with other jobs (identify.log's wall clock)",
+        "machine": "2 CPU cores (AMD EPYC), shared with other jobs (the wall clock of identify.log"
+                   + (" and train_summary.json)" if WRESDYN_RESIDUAL else ")"),
         "extras": {"source": source,
                    "validation_error": ev["validation"]["pd_residual"]["mean_abs_dq"],
                    "samples_used_means": "window samples stepped over the run with repeats: windows x iterations "
