@@ -7,8 +7,9 @@ state (:func:`wresdyn.evaluation.servo_baselines.evaluate_baseline`, MuJoCo C, t
 is the import of ``benchmarks/real/so101_servo_real.sh`` (same command, same splits: 26 training, 6 validation, 6
 held-out, 2 OOD runs); training runs fit, validation draws the curves and picks the Playground fit's iterate and
 setting, held-out and OOD are scored once per model. The recipes and the adapter: ``so101_sysid.py`` beside this
-file. wresdyn's row is read from its committed result (:data:`WRESDYN_RUN`), not rerun. The unfitted rows and the three fits are independent: each runs in its own
-process (``--part``, ``parts/*.json``), then one merge writes ``summary.json`` and the tables.
+file. wresdyn's row is read from its committed results (:data:`WRESDYN_RUN`, :data:`WRESDYN_RESIDUAL`), not rerun. The
+unfitted rows and the three fits are independent: each runs in its own process (``--part``, ``parts/*.json``), then
+one merge writes ``summary.json`` and the tables.
 
     PYTHONPATH=. python benchmarks/peers/so101.py --tarballs ../shared/real/so101 --work /tmp/peers_so101 \\
         --out benchmarks/results/peers/so101 | tee benchmarks/results/peers/so101/log.txt
@@ -40,9 +41,13 @@ from wresdyn.evaluation.servo_baselines import (BAM_STS3215_7V4, BamDrive, bam_m
 from wresdyn.robot.description import load_robot
 
 SPLITS = ("validation", "heldout", "ood")
-WRESDYN_RUN = "benchmarks/results/so101_servo/effort/k3e4_reset"
-"""wresdyn's servo model as chosen on validation (``benchmarks/real/so101_servo_real.sh``, seed 0): its
-``eval_metrics.json`` and ``identify.log``."""
+WRESDYN_RUN = "benchmarks/results/so101_servo/effort/k1e5_reset"
+"""wresdyn's servo model as chosen on validation (the damper friction law's rate 1e5 /s, the effort reset; seed 0):
+its ``identify.log`` and ``config.json``, and its ``eval_metrics.json`` when no residual is on top."""
+WRESDYN_RESIDUAL: str | None = "benchmarks/results/so101_servo/hybrid/gru_delta"
+"""The residual network fitted on that servo model (``wresdyn fit --physics``), kept where validation chose the hybrid
+over the servo model alone: its ``eval_metrics.json`` scores wresdyn's row and its ``train_summary.json`` adds its
+time and samples; ``None`` = the servo model alone."""
 FIELDS = ("heldout_error", "ood_error", "seconds_to_final", "converged", "samples_used", "machine")
 
 
@@ -68,28 +73,43 @@ def machine() -> str:
 
 
 def wresdyn_row(root: Path) -> dict:
-    """wresdyn's servo model from its committed files: errors from ``eval_metrics.json``, time from the
-    ``done: N s`` line of ``identify.log``, windows from ``config.json``."""
+    """wresdyn's model from its committed files: the servo model's time from the ``done: N s`` line of
+    ``identify.log`` and its windows from ``config.json``; with :data:`WRESDYN_RESIDUAL`, the residual's training
+    time and samples added from its ``train_summary.json``; the errors from the scored model's
+    ``eval_metrics.json``."""
     run = root / WRESDYN_RUN
-    ev = json.loads((run / "eval_metrics.json").read_text())["splits"]
     cfg = json.loads((run / "config.json").read_text())["sysid"]
     log = (run / "identify.log").read_text()
     done = [line for line in log.splitlines() if line.startswith("done:")]
     seconds = float(done[-1].split()[1]) if done else None
     per_stage = cfg["iterations"] // len(cfg["horizon_curriculum"])
     samples = cfg["windows"] * per_stage * sum(cfg["horizon_curriculum"])
+    reason = (f"fixed budget of {cfg['iterations']} Adam iterations (no stopping rule), the iterate chosen by "
+              "validation, then the effort-limit reset")
+    scored, source = run, f"{WRESDYN_RUN}/eval_metrics.json, identify.log, config.json"
+    if WRESDYN_RESIDUAL:
+        scored = root / WRESDYN_RESIDUAL
+        fit = json.loads((scored / "train_summary.json").read_text())
+        seconds = None if seconds is None else round(seconds + fit["residual_wall_s"], 1)
+        samples += fit["sim_steps"] // 2  # the fit counts each window step twice, forward and backward
+        reason += (f"; the residual fitted on it until validation plateaued ({fit['iterations']} iterations), its "
+                   "iterate chosen by validation")
+        source = (f"{WRESDYN_RUN}/identify.log, config.json; {WRESDYN_RESIDUAL}/eval_metrics.json, "
+                  "train_summary.json")
+    ev = json.loads((scored / "eval_metrics.json").read_text())["splits"]
     return {
         "heldout_error": ev["heldout"]["pd_residual"]["mean_abs_dq"],
         "ood_error": ev["ood"]["pd_residual"]["mean_abs_dq"],
         "seconds_to_final": seconds,
-        "converged": {"value": False, "reason": f"fixed budget of {cfg['iterations']} Adam iterations (no stopping "
-                      "rule), the iterate chosen by validation, then the effort-limit reset"},
+        "converged": {"value": False, "reason": reason},
         "samples_used": samples,
-        "machine": "2 CPU cores (AMD EPYC), shared with other jobs (identify.log's wall clock)",
-        "extras": {"source": f"{WRESDYN_RUN}/eval_metrics.json, identify.log, config.json",
+        "machine": "2 CPU cores (AMD EPYC), shared with other jobs (the wall clock of identify.log"
+                   + (" and train_summary.json)" if WRESDYN_RESIDUAL else ")"),
+        "extras": {"source": source,
                    "validation_error": ev["validation"]["pd_residual"]["mean_abs_dq"],
                    "samples_used_means": "window samples stepped over the run with repeats: windows x iterations "
-                                         "per horizon stage x sum of the horizons"},
+                                         "per horizon stage x sum of the horizons (identification), plus the "
+                                         "residual fit's window steps"},
     }
 
 
@@ -302,7 +322,7 @@ def merge(args, wall: float | None) -> None:
             residual = f", residual {st['residual']}" if "residual" in st else ""
             line(f"{part['name']}, windows {st['per_run']} x {st['horizon']}, cap {cap}{residual}",
                  {s: part["scores"][s]["mean_abs_dq"] for s in SPLITS})
-    line(f"wresdyn servo model ({WRESDYN_RUN})", {"validation": wres["extras"]["validation_error"],
+    line(f"wresdyn ({WRESDYN_RESIDUAL or WRESDYN_RUN})", {"validation": wres["extras"]["validation_error"],
                                                   "heldout": w_h, "ood": w_o})
     print("\n| fit | seconds to final | converged | samples used |\n|---|---|---|---|")
     for fight in fights.values():
@@ -310,7 +330,7 @@ def merge(args, wall: float | None) -> None:
             if k != "wresdyn_servo":
                 print(f"| {e['extras']['name']} | {e['seconds_to_final']} | {e['converged']['value']}: "
                       f"{e['converged']['reason']} | {e['samples_used']} |")
-    print(f"| wresdyn servo model | {wres['seconds_to_final']} | {wres['converged']['value']}: "
+    print(f"| wresdyn | {wres['seconds_to_final']} | {wres['converged']['value']}: "
           f"{wres['converged']['reason']} | {wres['samples_used']} |")
     print(f"\nwrote {out / 'summary.json'}", flush=True)
 
