@@ -15,10 +15,11 @@ identified limit (the calibrated model's view of the same motion), the joints li
 limits. Transplants (``--transplant``, each alone): ``floor`` (the nominal floor the simulator has: friction and
 softness), ``floor_friction``, ``floor_soft``, ``effort`` (every drive's limit), ``effort:JOINT``, ``gains`` (kp, kd),
 ``joint_friction``, ``damping``, ``armature``, ``joints`` (the five together), ``links`` (masses and centres of mass),
-``link:BODY`` (one body's mass and centre of mass), ``model`` (joints and links) and ``model+floor``; ``seed:N`` is
-the untouched real robot with its sensor and IMU noise drawn from seed N instead (how far an outcome moves with the
-noise alone, against which a transplant's is read). The real robot is deployed over every validation motion in one
-batch (its sensor noise is drawn per batch), so the untouched one reproduces the run's ``results.json``.
+``link:BODY`` (one body's mass and centre of mass; ``mass:BODY``, ``com:BODY`` each alone), ``model`` (joints and
+links) and ``model+floor``; ``seed:N`` is the untouched real robot with its sensor and IMU noise drawn from seed N
+instead (how far an outcome moves with the noise alone, against which a transplant's is read). The real robot is
+deployed over every validation motion in one batch (its sensor noise is drawn per batch), so the untouched one
+reproduces the run's ``results.json``.
 """
 
 from __future__ import annotations
@@ -70,10 +71,14 @@ def transplanted(res: dict, floating, rate_hz: float, ident, what: str):
     if what in ("links", "model", "model+floor"):
         m.body_mass[1:] = ident.body_mass
         m.body_ipos[1:] = ident.body_com
-    if what.startswith("link:"):  # one body's mass and centre of mass, its inertia scaled with the mass
-        b = list(floating.body_names).index(what.split(":", 1)[1])
-        m.body_inertia[b + 1] *= ident.body_mass[b] / m.body_mass[b + 1]
-        m.body_mass[b + 1], m.body_ipos[b + 1] = ident.body_mass[b], ident.body_com[b]
+    kind, _, body = what.partition(":")
+    if kind in ("link", "mass", "com"):  # one body's mass (its inertia scaled with it) and/or centre of mass
+        b = list(floating.body_names).index(body)
+        if kind != "com":
+            m.body_inertia[b + 1] *= ident.body_mass[b] / m.body_mass[b + 1]
+            m.body_mass[b + 1] = ident.body_mass[b]
+        if kind != "mass":
+            m.body_ipos[b + 1] = ident.body_com[b]
     return real
 
 
@@ -191,7 +196,7 @@ def main() -> None:
     p.add_argument("--family", default="kick")
     p.add_argument("--sim", action="store_true", help="also deploy in the calibrated simulator")
     p.add_argument("--transplant", nargs="*", default=[],
-                   help=f"{', '.join(TRANSPLANTS)}, effort:JOINT, link:BODY or seed:N")
+                   help=f"{', '.join(TRANSPLANTS)}, effort:JOINT, link:BODY, mass:BODY, com:BODY or seed:N")
     p.add_argument("--min-share", type=float, default=0.005, help="joints listed from this saturated share")
     args = p.parse_args()
 
