@@ -1,5 +1,5 @@
 """The kick successes of every ``floor_kick_gap.py`` output here, per policy and condition, summed over the runs
-that played it (their ``summary`` lines): ``python tabulate.py PREFIX... > table.md``; a PREFIX picks the files
+that played it (their ``summary`` lines): ``python kick_table.py PREFIX... > table.md``; a PREFIX picks the files
 (``f_``, ``c_``, ...), and a run's figure is read from the first file that has it."""
 
 import json
