@@ -9,6 +9,9 @@ from collections import defaultdict
 from pathlib import Path
 
 HERE = Path(__file__).parent
+VARIANTS = (("cal_wide_torso_effort", "torso at (e)'s end, effort x0.9"), ("cal_wide_torso", "torso at (e)'s end"),
+            ("cal_torso_effort", "torso+effort true"), ("cal_effort", "effort true"), ("cal_torso", "torso true"))
+"""The calibrated folders of ``variants.py`` and ``range_ends.py`` and their labels, the longest name first."""
 
 
 def main() -> None:
@@ -21,8 +24,7 @@ def main() -> None:
             run = re.search(r"floor_unvp\w*_s\d", text).group(0)
             line = next(x for x in text.splitlines() if x.startswith("summary "))
             cal_line = next(x for x in text.splitlines() if ": 16 validation motions" in x)
-            cal = ("torso+effort true" if "cal_torso_effort" in cal_line else "effort true" if "cal_effort" in cal_line
-                   else "torso true" if "cal_torso" in cal_line else "")
+            cal = next((label for key, label in VARIANTS if key in cal_line), "")
             for key, ok in json.loads(line[len("summary "):]).items():
                 policy, cond = key.split(" | ")
                 if cond == "calibrated sim" and cal:
