@@ -9,7 +9,8 @@ from collections import defaultdict
 from pathlib import Path
 
 HERE = Path(__file__).parent
-VARIANTS = (("cal_wide_torso_effort", "torso at (e)'s end, effort x0.9"), ("cal_wide_torso", "torso at (e)'s end"),
+VARIANTS = (("cal_cand1_end", "candidate 1's far end"), ("cal_wide_torso_effort", "torso at (e)'s end, effort x0.9"),
+            ("cal_wide_torso", "torso at (e)'s end"),
             ("cal_torso_effort", "torso+effort true"), ("cal_effort", "effort true"), ("cal_torso", "torso true"))
 """The calibrated folders of ``variants.py`` and ``range_ends.py`` and their labels, the longest name first."""
 

@@ -1,7 +1,8 @@
 """What the stand's validation sees of the kick's causes: the identification's selection score (mean |Δq| over the
 stand dataset's validation trajectories, replayed from ``physics.json``) for the calibrated robot as fitted and with
 one group set to the truth (the dataset's mismatch) -- the torso's mass alone, its centre of mass alone, both (its
-inertia scaled with the mass), the hips' roll limits, every limit -- and for the truth. Diagnosis of what stand validation can choose.
+inertia scaled with the mass), the hips' roll limits, every limit -- and for the truth. Diagnosis of what stand
+validation can choose.
 
     python benchmarks/results/floor_fair/kick55/stand_blind.py DATA CALIBRATED
 """
