@@ -7,9 +7,10 @@ import json
 from pathlib import Path
 
 
-def held_out(run, data=None):
+def held_out(run, data=None, split="heldout"):
     """``(results, task, floating robot, held-out motions, real robot)`` of the floor run folder ``run``; ``data``:
-    the dataset whose robot file it used (default: the shipped one)."""
+    the dataset whose robot file it used (default: the shipped one); ``split`` ``"validation"``: its validation
+    motions instead."""
     from wresdyn.data.dataset import load_dataset
     from wresdyn.data.mismatch import Mismatch
     from wresdyn.data.real_robot import RealRobot
@@ -23,8 +24,8 @@ def held_out(run, data=None):
     ds = load_dataset(data or DEFAULT_DATASET)
     stand, floating = load_robot(ds.robot_file), load_robot(ds.robot_file, base="floating")
     # each split draws from a stream of its own position: the run's held-out motions without drawing the others
-    counts = {"train": 0, "validation": 0, "heldout": cfg["heldout_per_family"]}
+    counts = {"train": 0, "validation": 0, "heldout": 0, split: cfg[f"{split}_per_family"]}
     motions = make_motions(stand, counts, cfg["duration"], float(ds.rate_hz), cfg["seed"], floating=floating,
-                           workers=0)["heldout"]
+                           workers=0)[split]
     real = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), float(ds.rate_hz))
     return res, task, floating, motions, real

@@ -1,0 +1,42 @@
+"""The calibrated robot with one group of its identified physics set to the truth, for the kick diagnosis's runs in
+the calibrated simulator (``floor_kick_gap.py --sim --calibrated OUT/<variant>``): ``cal_torso`` (the torso's mass
+and centre of mass true, its inertia scaled with the mass), ``cal_effort`` (every effort limit true) and
+``cal_torso_effort`` (both). The residual network and its files are copied unchanged.
+
+    python benchmarks/results/floor_fair/kick55/variants.py CALIBRATED RUN OUT
+
+RUN is a floor run folder: its ``results.json``'s mismatch is the truth.
+"""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from wresdyn.data.dataset import load_dataset
+from wresdyn.data.mismatch import Mismatch
+from wresdyn.data.real_robot import RealRobot
+from wresdyn.paths import DEFAULT_DATASET
+from wresdyn.robot.description import load_robot
+
+cal, run, out = (Path(a) for a in sys.argv[1:4])
+floating = load_robot(load_dataset(DEFAULT_DATASET).robot_file, base="floating")
+res = json.loads((run / "results.json").read_text())
+truth = RealRobot(floating, Mismatch.from_dict(res["mismatch"], "the run's mismatch"), 500.0).physics()
+for name, torso, effort in (("cal_torso", True, False), ("cal_effort", False, True), ("cal_torso_effort", True, True)):
+    dst = out / name
+    dst.mkdir(parents=True, exist_ok=True)
+    for f in ("config.json", "residual.json", "policy.pt"):
+        shutil.copy(cal / f, dst / f)
+    d = json.loads((cal / "physics.json").read_text())
+    if torso:
+        b = d["body_names"].index("torso")
+        d["body_inertia"][b] = (np.asarray(d["body_inertia"][b]) * truth.body_mass[b] / d["body_mass"][b]).tolist()
+        d["body_mass"][b], d["body_com"][b] = float(truth.body_mass[b]), [float(x) for x in truth.body_com[b]]
+    if effort:
+        e, t = np.asarray(d["effort"], float), np.asarray(truth.effort, float)
+        d["effort"] = np.where(np.isfinite(t), t, e).tolist()
+    (dst / "physics.json").write_text(json.dumps(d))
+    print(f"{dst}: torso {'true' if torso else 'identified'}, effort limits {'true' if effort else 'identified'}")
