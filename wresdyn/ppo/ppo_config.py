@@ -84,7 +84,7 @@ class PPOConfig:
     precision or with ``compile_mode`` the packed update runs as without it, bit for bit. ``None`` (the default):
     this update unless ``one_sync_update`` asks for that one; ``True`` refuses ``one_sync_update``; ``False``: the
     packed update everywhere. On by default on CUDA because two H200s ran it: its four CUDA tests passed (one GPU,
-    two over NCCL), an iteration took 2.3-2.7x less than the packed update's and two GPUs kept 89-94 % of twice one
+    two over NCCL), an iteration took 2.2-2.7x less than the packed update's and two GPUs kept 89-94 % of twice one
     (``benchmarks/results/speed/h200x2_20261130f/ppo90g``). The skills' PPO
     (:class:`~wresdyn.skills.skill_config.SkillPPOConfig`) has no such switch and keeps rsl-rl's update: no test
     covers a captured update of its networks."""
