@@ -118,3 +118,24 @@ def test_the_deploy_command_line_sets_it_and_refuses_a_bad_value(capsys):
     assert main(["deploy", "--floor", "--randomization.unseen-mass-add-kg", "-5", "5"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "only with --randomization.unseen wide" in err
+
+
+def test_only_f_records_the_switch_so_a_kept_e_resumes(tmp_path):
+    """(e) never reads the unseen fields: a policy (e) trained before them (a committed floor run's) resumes under
+    ``unseen="wide"``, while (f)'s record carries the switch."""
+    from pathlib import Path
+
+    from wresdyn.experiments.deploy_config import FloorDeployConfig
+    from wresdyn.experiments.skills import _run_of
+    from wresdyn.skills.skill_config import SkillPPOConfig
+
+    kept = Path(__file__).parents[2] / "benchmarks/results/floor_fair/full/floor_unvp55_s0/skills/e_randomized"
+    saved = json.loads((kept / "config.json").read_text())["randomization"]
+    wide = Randomization(unseen="wide", unseen_mass_add_kg=(-5.0, 5.0))
+    runs = {"calibrated": tmp_path / "cal"}
+    meta = {}
+    for name in ("e_randomized", "f_calibrated_narrow"):
+        meta[name] = _run_of(1, name, SkillPPOConfig(), FloorDeployConfig(), runs, {}, tmp_path, wide)[3]
+    e = json.loads(json.dumps(meta["e_randomized"]["randomization"]))
+    check_resume(kept, {"randomization": saved}, {"randomization": e})
+    assert meta["f_calibrated_narrow"]["randomization"]["unseen"] == "wide"

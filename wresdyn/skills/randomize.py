@@ -114,11 +114,12 @@ class Randomization:
         if com is not None and not (len(com) == 3 and all(math.isfinite(x) and x >= 0 for x in com)):
             raise WresdynError(f"randomization.unseen_com_offset: three half-ranges >= 0 m, got {com}")
 
-    def record(self) -> dict:
+    def record(self, narrow: bool = True) -> dict:
         """The fields as a run records them (``config.json``, ``results.json``): the :data:`UNSEEN_FIELDS` only with
-        ``unseen="wide"``, so that every run recorded before them reads the same and resumes."""
+        ``unseen="wide"`` and for (f) (``narrow``; (e) never reads them), so that every run recorded before them reads
+        the same and resumes, (e)'s whatever they are."""
         out = asdict(self)
-        if self.unseen == "narrow":
+        if self.unseen == "narrow" or not narrow:
             for f in UNSEEN_FIELDS:
                 del out[f]
         return out
