@@ -34,6 +34,7 @@
 # NAME (default floor_unvp, never BASE) names the runs: RUNS are NAME_s0..2 and SRC/NAME_sN, where present, is such a
 # folder packed by an earlier session and is resumed instead. Pack the folders as usual (floor_fair_pack.py packs
 # $ROOT/floor_unv_sN as floor_unv_sN) and keep them as NAME_sN. DRY=1 also prints the set-up, in lines starting "# ".
+# EXTRA (default none) is appended to every deploy command, e.g. EXTRA="--randomization.unseen wide" for (f).
 set -u
 [ $# -eq 2 ] || { echo "usage: floor_fair_probe.sh SRC LOG" >&2; exit 2; }
 SRC=$1; R=$2
@@ -63,7 +64,7 @@ out_of() {  # NAME: the folder a run writes
 }
 command_of() {  # NAME SEED
   echo "python3 -m wresdyn.cli deploy $DATA --floor --full --device cuda:0 --mismatch data/mismatch_uneven.toml" \
-    "--seed $2 --nominal floor_nominal --policies $P --no-animation --quiet --out $(out_of $1) $CU"
+    "--seed $2 --nominal floor_nominal --policies $P --no-animation --quiet --out $(out_of $1) $CU${EXTRA:+ $EXTRA}"
 }
 corr_of() {  # POLICY: the corrections path its config.json must record
   case $1 in b_calibrated|f_calibrated_narrow) echo "$CAL";; c_delta_action) echo "$DELT";; *) echo "";; esac

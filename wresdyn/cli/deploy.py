@@ -21,6 +21,7 @@ import tyro
 
 from ..experiments.deploy_config import DeployConfig, FloorDeployConfig
 from ..paths import DEFAULT_DATASET
+from ..skills.randomize import Randomization
 from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 from .command import FLAT, Command, CommandLineError, list_flags
 
@@ -71,6 +72,9 @@ class Deploy(Command):
     """The tracking task."""
     ppo: SkillPPOConfig = field(default_factory=SkillPPOConfig)
     """PPO of every policy."""
+    randomization: Randomization = field(default_factory=Randomization)
+    """The domain randomisation of (e) (its wide ranges) and (f) (``unseen``: the range of what the identification
+    could not see); its seed is the sizes' ``seed``."""
 
 
 @dataclass(frozen=True)
@@ -91,7 +95,7 @@ VARIANTS = (Deploy, FloorDeploy)
 """Every class the command line may be read as (deprecated spellings are rewritten against all of them)."""
 VARIANT_FLAGS = ("--floor",)
 """The flags that pick a variant (the CLI reference shows each one's help too)."""
-HIDDEN = {SkillPPOConfig: PPO_FROM_SIZES}
+HIDDEN = {SkillPPOConfig: PPO_FROM_SIZES, Randomization: ("seed",)}
 """Config fields without a flag of their own (the benchmark sets them from the sizes)."""
 
 
@@ -122,6 +126,8 @@ def run(args: Deploy) -> int:
     from ..data.loading import load_data
     from ..data.mismatch import Mismatch
 
+    from dataclasses import replace
+
     cfg, task, ppo = args.sizes, args.task, args.ppo
     from ..experiments.skills import run_benchmark as bench
     ds, robot = load_data(args.data)
@@ -143,5 +149,5 @@ def run(args: Deploy) -> int:
     compile_kernels(robot, ds.rate_hz, tuple(dict.fromkeys(variants)), device=cfg.device, say=log)
     bench(robot, ds, args.out, cfg, data_path=args.data, calibrated=args.calibrated, delta=args.delta,
           mismatch=mismatch, task=task, ppo=ppo, animation=args.animation, ledger=args.heldout_ledger, log=log,
-          **({"policies": policies} if policies else {}))
+          randomization=replace(args.randomization, seed=cfg.seed), **({"policies": policies} if policies else {}))
     return 0

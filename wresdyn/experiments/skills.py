@@ -98,7 +98,7 @@ def _run_of(i: int, name: str, ppo, cfg, runs: dict, meta: dict, out: Path, dr: 
     setting = POLICIES[name]
     run_meta = {**meta, "setting": setting, "correction": str(runs.get(RANDOMIZED.get(setting, setting), ""))}
     if setting in RANDOMIZED:
-        run_meta["randomization"] = asdict(dr or Randomization())
+        run_meta["randomization"] = (dr or Randomization()).record(narrow=setting == "calibrated_narrow")
     run_ppo = replace(ppo, iterations=cfg.iterations if i == 0 else cfg.finetune,
                       restart_std=None if i == 0 else cfg.finetune_std)
     return out / "skills" / name, run_ppo, None if i == 0 else out / "skills" / "a_nominal", run_meta
@@ -300,7 +300,7 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
                "policies": policies, "corrections": {k: str(v) for k, v in runs.items() if v is not None},
                "train_wall_s": wall, "fit_wall_s": fit_s, "real": {}, "sim": {}}
     if any(POLICIES[p] in RANDOMIZED for p in policies):
-        results["randomization"] = asdict(dr)
+        results["randomization"] = dr.record()
         if "f_calibrated_narrow" in policies:
             results["randomization"]["narrow"] = narrow_ranges(dr, plant_robot, run_physics(calibrated, plant_robot),
                                                                calibrated)[1]
@@ -321,7 +321,8 @@ def run_benchmark(robot, dataset, out, cfg: DeployConfig | FloorDeployConfig | N
         deployed, own, out / "skills", motions,
         lambda worlds: real_plant(worlds, cfg.seed + 100), sim, task, robot, in_sim, lambda setting: {
             "setting": setting, "correction": run_fingerprint(runs.get(RANDOMIZED.get(setting, setting))),
-            "randomization": asdict(dr) if setting in RANDOMIZED else None})
+            "randomization": dr.record(narrow=setting == "calibrated_narrow") if setting in RANDOMIZED
+            else None})
     deploy_s = time.perf_counter() - t0
     _gaps(results, floor)
     ledgers = [out / LEDGER] + ([Path(ledger)] if ledger else [])

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -32,8 +32,8 @@ import torch
 from ..errors import WresdynError
 from ..sim.world_physics import model_flags, refresh, write_world_physics
 
-__all__ = ["Randomization", "Ranges", "Randomizer", "wide_ranges", "narrow_ranges", "NARROW_SIGMAS", "NARROW_FLOOR",
-           "NARROW_DEFAULT"]
+__all__ = ["Randomization", "Ranges", "Randomizer", "wide_ranges", "narrow_ranges", "unseen_parameters",
+           "NARROW_SIGMAS", "NARROW_FLOOR", "NARROW_DEFAULT", "UNSEEN_FIELDS"]
 
 SCALED = ("kp", "kd", "armature", "effort", "body_mass")
 """Fields drawn as a factor on the centre value (log-uniform)."""
@@ -85,6 +85,48 @@ class Randomization:
     """Draw again for every world an episode resets, or once at construction."""
     seed: int = 0
     """Seed of the draws."""
+    unseen: Literal["narrow", "wide"] = "narrow"
+    """(f)'s range of a parameter its identifiability report marks unseen (no finite error: the stand's data carry
+    no trace of it), read from the report alone: ``"narrow"`` ±:data:`NARROW_DEFAULT` like any parameter without an
+    error; ``"wide"`` (e)'s range (``unseen_mass_add_kg`` for a link's mass, where set) and, when ``com_body``'s
+    mass is unseen, (e)'s whole CoM offset (``unseen_com_offset``, where set) instead of :data:`NARROW_DEFAULT` of
+    it. (e) is untouched."""
+    unseen_mass_add_kg: tuple[float, float] | None = None
+    """With ``unseen="wide"``: the mass added to an unseen link [kg], drawn as the factor (m+lo)/m..(m+hi)/m on its
+    identified mass m (its inertia alike, at least a tenth of m), instead of ``mass_scale`` (``None``). Sourced
+    value (-5.0, 5.0): IsaacLab ``locomotion/velocity/velocity_env_cfg.py`` ``add_base_mass``
+    (``randomize_rigid_body_mass``, ``mass_distribution_params (-5.0, 5.0)``, ``operation "add"``, the base link)."""
+    unseen_com_offset: tuple[float, float, float] | None = None
+    """With ``unseen="wide"`` and ``com_body``'s mass unseen: the half-ranges of its CoM offset along x, y, z [m]
+    instead of ``com_offset`` (``None``). Sourced value (0.05, 0.05, 0.01): IsaacLab ``velocity_env_cfg.py``
+    ``base_com`` (x, y ±0.05, z ±0.01 m)."""
+
+    def __post_init__(self) -> None:
+        if self.unseen not in ("narrow", "wide"):
+            raise WresdynError(f"randomization.unseen: 'narrow' or 'wide', got {self.unseen!r}")
+        if self.unseen == "narrow" and (self.unseen_mass_add_kg, self.unseen_com_offset) != (None, None):
+            raise WresdynError("randomization.unseen-mass-add-kg / unseen-com-offset act only with "
+                               "--randomization.unseen wide")
+        add = self.unseen_mass_add_kg
+        if add is not None and not (len(add) == 2 and all(math.isfinite(x) for x in add) and add[0] < add[1]):
+            raise WresdynError(f"randomization.unseen_mass_add_kg: (lo, hi) kg with lo < hi, got {add}")
+        com = self.unseen_com_offset
+        if com is not None and not (len(com) == 3 and all(math.isfinite(x) and x >= 0 for x in com)):
+            raise WresdynError(f"randomization.unseen_com_offset: three half-ranges >= 0 m, got {com}")
+
+    def record(self, narrow: bool = True) -> dict:
+        """The fields as a run records them (``config.json``, ``results.json``): the :data:`UNSEEN_FIELDS` only with
+        ``unseen="wide"`` and for (f) (``narrow``; (e) never reads them), so that every run recorded before them reads
+        the same and resumes, (e)'s whatever they are."""
+        out = asdict(self)
+        if self.unseen == "narrow" or not narrow:
+            for f in UNSEEN_FIELDS:
+                del out[f]
+        return out
+
+
+UNSEEN_FIELDS = ("unseen", "unseen_mass_add_kg", "unseen_com_offset")
+"""The fields of :class:`Randomization` that change only (f)'s ranges of unseen parameters."""
 
 
 @dataclass
@@ -129,40 +171,74 @@ NARROW_DEFAULT = 0.10
 """(f): the half-width of a parameter the report does not cover (not fitted, no finite error, no report): ±10 %."""
 
 
+def unseen_parameters(report: dict) -> set[str]:
+    """The names the identifiability ``report`` (``identifiability.json``) marks unseen: zero sensitivity or no finite
+    error (the data carry no trace of them). A finite error without a relative one (``se_pct`` ``None``: a value of 0
+    in absolute units) is seen."""
+    return {p["name"] for p in report["parameters"]
+            if p.get("sensitivity") == 0 or p.get("se") is None or not math.isfinite(p["se"])}
+
+
 def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
     """(f)'s ranges around the identified ``centre``: each identified parameter's factor range
     exp(±:data:`NARROW_SIGMAS` · SE) from ``run``'s ``identify/identifiability.json`` (or ``identifiability.json``),
     at least ±:data:`NARROW_FLOOR` and never wider than (e)'s; a parameter without a finite error
     ±:data:`NARROW_DEFAULT`. Dry friction and delay the same way around their identified values; the CoM offsets
     :data:`NARROW_DEFAULT` of (e)'s (the report does not cover them); the floor friction (e)'s (the stand's data say
-    nothing of the floor). Returns the ranges and one line saying where the widths came from."""
+    nothing of the floor). With ``cfg.unseen="wide"`` a parameter the report marks unseen (:func:`unseen_parameters`)
+    gets (e)'s range instead, an unseen link's mass ``cfg.unseen_mass_add_kg`` where set, and the CoM offset is
+    (e)'s (or ``cfg.unseen_com_offset``) when ``com_body``'s mass is unseen. Returns the ranges and one line saying
+    where the widths came from."""
     wide = wide_ranges(cfg, robot, centre)
     run = Path(run)
     path = next((p for p in (run / "identify" / "identifiability.json", run / "identifiability.json")
                  if p.is_file()), None)
-    se = {}
+    se, unseen = {}, set()
     if path is not None:
-        for p in json.loads(path.read_text())["parameters"]:
+        report = json.loads(path.read_text())
+        for p in report["parameters"]:
             if p.get("se") is not None and p.get("se_pct") is not None and math.isfinite(p["se"]):
                 se[p["name"]] = float(p["se"])
+        if cfg.unseen == "wide":
+            unseen = unseen_parameters(report)
     names = {"body_mass": list(robot.body_names)}
-    scale, half = {}, {}
+    scale, half, is_unseen = {}, {}, {}
     for f in (*SCALED, "friction", "delay"):
         labels = names.get(f, list(robot.joint_names))
         h = np.array([NARROW_SIGMAS * se[f"{f}:{x}"] if f"{f}:{x}" in se else math.log1p(NARROW_DEFAULT)
                       for x in labels])
         half[f] = np.maximum(h, math.log1p(NARROW_FLOOR))
+        is_unseen[f] = np.array([f"{f}:{x}" in unseen for x in labels], dtype=bool)
     for f in SCALED:  # never wider than (e)
         lo, hi = wide.scale[f]
         scale[f] = (np.maximum(np.exp(-half[f]), lo), np.minimum(np.exp(half[f]), hi))
+        scale[f] = (np.where(is_unseen[f], lo, scale[f][0]), np.where(is_unseen[f], hi, scale[f][1]))
+    if cfg.unseen_mass_add_kg is not None and is_unseen["body_mass"].any():
+        m = np.asarray(centre.body_mass, dtype=np.float64)
+        # a light link keeps a tenth of its mass: IsaacLab adds to the base only
+        lo, hi = (np.maximum(m + a, 0.1 * m) / np.where(m > 0, m, 1.0) for a in cfg.unseen_mass_add_kg)
+        scale["body_mass"] = (np.where(is_unseen["body_mass"], lo, scale["body_mass"][0]),
+                              np.where(is_unseen["body_mass"], hi, scale["body_mass"][1]))
     fr, de = np.asarray(centre.friction, float), np.asarray(centre.delay, float)
     friction = (fr * np.exp(-half["friction"]), np.minimum(fr * np.exp(half["friction"]), wide.friction[1] + fr))
     delay = (de * np.exp(-half["delay"]), np.minimum(de * np.exp(half["delay"]), de + wide.delay[1][0]))
+    # the unseen: (e)'s width either side of the identified value, as the data bound neither side
+    friction = (np.where(is_unseen["friction"], np.maximum(fr - wide.friction[1], 0.0), friction[0]),
+                np.where(is_unseen["friction"], fr + wide.friction[1], friction[1]))
+    delay = (np.where(is_unseen["delay"], np.maximum(de - wide.delay[1], 0.0), delay[0]),
+             np.where(is_unseen["delay"], de + wide.delay[1], delay[1]))
+    com = NARROW_DEFAULT * wide.com_offset
+    com_unseen = f"body_mass:{wide.com_body}" in unseen
+    if com_unseen:
+        com = np.asarray(cfg.unseen_com_offset if cfg.unseen_com_offset is not None else wide.com_offset, float)
     source = (f"widths from {path} ({len(se)} parameters with a finite error, ±{NARROW_SIGMAS:g} SE, at least "
               f"±{100 * NARROW_FLOOR:g} %, others ±{100 * NARROW_DEFAULT:g} %)" if path is not None else
               f"no identifiability report in {run}: ±{100 * NARROW_DEFAULT:g} % of every identified value")
-    return Ranges(scale, friction, delay, NARROW_DEFAULT * wide.com_offset, wide.com_body,
-                  wide.floor_friction), source
+    if cfg.unseen == "wide":
+        source += (f"; {len(unseen)} unseen in the report with (e)'s ranges"
+                   + (f", an unseen link's mass {cfg.unseen_mass_add_kg} kg" if cfg.unseen_mass_add_kg else "")
+                   + (f", {wide.com_body}'s CoM ±{tuple(float(x) for x in com)} m" if com_unseen else ""))
+    return Ranges(scale, friction, delay, com, wide.com_body, wide.floor_friction), source
 
 
 class Randomizer:
