@@ -21,7 +21,7 @@ import tyro
 
 from ..experiments.deploy_config import DeployConfig, FloorDeployConfig
 from ..paths import DEFAULT_DATASET
-from ..skills.randomize import Randomization
+from ..skills.randomization_config import Randomization
 from ..skills.skill_config import FloorTaskConfig, SkillConfig, SkillPPOConfig
 from .command import FLAT, Command, CommandLineError, list_flags
 
