@@ -47,9 +47,7 @@ t_start=$(date +%s)
 stage() { echo "$(date -u +%T) $*" >> "$out/STAGES"; }
 left() { echo $(( total - ($(date +%s) - t_start) )); }
 
-{ date -u; nvidia-smi 2>&1 | head -20; nproc; uptime
-  "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)" 2>&1
-  git log -1 --format='%H %s' 2>&1; git status --porcelain --untracked-files=no 2>&1 | head -20; } > "$out/machine.txt"
+bash "$(dirname "$0")/machine_info.sh" "$py" > "$out/machine.txt"
 
 timed() {  # timed STEP CMD...: the whole command under the budget left, its log and the shell's clock
   local step=$1; shift

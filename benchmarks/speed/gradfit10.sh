@@ -33,9 +33,7 @@ total=${TOTAL:-235}
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1
 t_start=$(date +%s)
 
-{ date -u; nvidia-smi 2>&1 | head -20; nproc; uptime
-  "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)" 2>&1
-  git log -1 --format='%H %s' 2>&1; git status --porcelain --untracked-files=no 2>&1 | head -20; } > "$out/machine.txt"
+bash "$(dirname "$0")/machine_info.sh" "$py" > "$out/machine.txt"
 
 run() {  # run NAME [ARGS...]: gradfit_2000.py under the budget left, its log and the shell's clock
   local name=$1; shift

@@ -91,6 +91,11 @@ def unseen_parameters(report: dict) -> set[str]:
             if p.get("sensitivity") == 0 or p.get("se") is None or not math.isfinite(p["se"])}
 
 
+def _where(mask, unseen: tuple, seen: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The range ``(lo, hi)`` taken from ``unseen`` where ``mask`` holds, from ``seen`` elsewhere."""
+    return np.where(mask, unseen[0], seen[0]), np.where(mask, unseen[1], seen[1])
+
+
 def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
     """(f)'s ranges around the identified ``centre``: each identified parameter's factor range
     exp(±:data:`NARROW_SIGMAS` · SE) from ``run``'s ``identify/identifiability.json`` (or ``identifiability.json``),
@@ -123,22 +128,18 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
         is_unseen[f] = np.array([f"{f}:{x}" in unseen for x in labels], dtype=bool)
     for f in SCALED:  # never wider than (e)
         lo, hi = wide.scale[f]
-        scale[f] = (np.maximum(np.exp(-half[f]), lo), np.minimum(np.exp(half[f]), hi))
-        scale[f] = (np.where(is_unseen[f], lo, scale[f][0]), np.where(is_unseen[f], hi, scale[f][1]))
+        scale[f] = _where(is_unseen[f], (lo, hi), (np.maximum(np.exp(-half[f]), lo), np.minimum(np.exp(half[f]), hi)))
     if cfg.unseen_mass_add_kg is not None and is_unseen["body_mass"].any():
         m = np.asarray(centre.body_mass, dtype=np.float64)
         # a light link keeps a tenth of its mass: IsaacLab adds to the base only
         lo, hi = (np.maximum(m + a, 0.1 * m) / np.where(m > 0, m, 1.0) for a in cfg.unseen_mass_add_kg)
-        scale["body_mass"] = (np.where(is_unseen["body_mass"], lo, scale["body_mass"][0]),
-                              np.where(is_unseen["body_mass"], hi, scale["body_mass"][1]))
+        scale["body_mass"] = _where(is_unseen["body_mass"], (lo, hi), scale["body_mass"])
     fr, de = np.asarray(centre.friction, float), np.asarray(centre.delay, float)
     friction = (fr * np.exp(-half["friction"]), np.minimum(fr * np.exp(half["friction"]), wide.friction[1] + fr))
     delay = (de * np.exp(-half["delay"]), np.minimum(de * np.exp(half["delay"]), de + wide.delay[1][0]))
     # the unseen: (e)'s width either side of the identified value, as the data bound neither side
-    friction = (np.where(is_unseen["friction"], np.maximum(fr - wide.friction[1], 0.0), friction[0]),
-                np.where(is_unseen["friction"], fr + wide.friction[1], friction[1]))
-    delay = (np.where(is_unseen["delay"], np.maximum(de - wide.delay[1], 0.0), delay[0]),
-             np.where(is_unseen["delay"], de + wide.delay[1], delay[1]))
+    friction = _where(is_unseen["friction"], (np.maximum(fr - wide.friction[1], 0.0), fr + wide.friction[1]), friction)
+    delay = _where(is_unseen["delay"], (np.maximum(de - wide.delay[1], 0.0), de + wide.delay[1]), delay)
     com = NARROW_DEFAULT * wide.com_offset
     com_unseen = f"body_mass:{wide.com_body}" in unseen
     if com_unseen:

@@ -4,7 +4,7 @@
 #     them the opt-in CUDA-graph paths' CUDA tests (correctness only: they share the GPUs with the floors);
 #  2. when the floors have ended or been stopped at FLOOR_S and packed: the residual PPO's rounds with the graph update
 #     (ITERS=50 BASELINE=0 GRAPH=1 ppo90.sh) on idle GPUs if its check passed; otherwise the identification schedule
-#     sweep (benchmarks/speed/gpu_schedule.sh) on both GPUs.
+#     sweep (benchmarks/speed/identify_schedules.sh) on both GPUs.
 # Usage (repository root; run folders in .dev/data*): bash job.sh FLOOR_SECONDS
 set -u
 FLOOR_S=${1:-780}
@@ -31,7 +31,7 @@ if grep -q "check ppo_graph rc=0" $R/checks/STAGES; then
   stage ppo ended rc=$?
 else
   stage sweep start
-  bash benchmarks/speed/gpu_schedule.sh $R/sweep > $R/sweep.log 2>&1
+  bash benchmarks/speed/identify_schedules.sh $R/sweep > $R/sweep.log 2>&1
   stage sweep ended rc=$?
 fi
 stage done

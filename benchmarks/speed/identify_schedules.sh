@@ -6,7 +6,7 @@
 # (the figure the targets name; its held-out is the default configuration's, reported already). Two GPUs, three runs
 # each, one after the other on its GPU; each GPU has its own Warp cache, filled from the shipped prebuilt kernels.
 #
-#   bash benchmarks/speed/gpu_schedule.sh OUT     # ~5 min on an idle 2-GPU host
+#   bash benchmarks/speed/identify_schedules.sh OUT     # ~5 min on an idle 2-GPU host
 #
 # Runs (GPU 0 / GPU 1); the identification's CUDA graph is named in every run, eager where not said (the default
 # on CUDA is the graph since this script measured it; base is the default command of the tree it measured):
@@ -19,15 +19,13 @@
 # (the validation split's metrics), OUT/STAGES, OUT/machine.txt, OUT/table.txt (one line a run: whole command,
 # first iteration, identification iterations, validation mean |dq| of PD + residual).
 set -uo pipefail
-out=${1:?usage: gpu_schedule.sh OUT}
+out=${1:?usage: identify_schedules.sh OUT}
 mkdir -p "$out"; out=$(cd "$out" && pwd)
 py=${PYTHON:-python3}; data=${DATA:-data/dataset.npz}; extra=${FIT_EXTRA:-}; dev=${DEVICE:-cuda:0}
 read -r -a gpus <<< "${GPUS:-0 1}"
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 WRESDYN_LOG_CLOCK=1
 stage() { echo "$(date -u +%T) $* (load $(cut -d' ' -f1-3 /proc/loadavg))" >> "$out/STAGES"; }
-{ date -u; nvidia-smi 2>&1 | head -20; nproc; uptime
-  "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)" 2>&1
-  git log -1 --format='%H %s' 2>&1; } > "$out/machine.txt"
+bash "$(dirname "$0")/machine_info.sh" "$py" > "$out/machine.txt"
 
 one() {  # one GPU NAME [ARGS...]: a whole fit, then its validation score
   local gpu=$1 name=$2; shift 2
