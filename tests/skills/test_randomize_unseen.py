@@ -1,5 +1,6 @@
 """(f)'s ranges of the parameters the identification could not see (``Randomization.unseen``): the switch off keeps
-every range as before; on, an unseen parameter (read from the report) gets (e)'s range and a seen one keeps its own."""
+the narrow ranges (±2 SE, ±10 % without a finite error); on, an unseen parameter (read from the report) gets (e)'s
+range and a seen one keeps its own."""
 
 from __future__ import annotations
 
@@ -64,8 +65,8 @@ def test_wide_gives_the_unseen_the_wide_ranges_and_keeps_the_seen(tmp_path, huma
     lo, hi = ranges.scale["kp"]
     assert (lo[0], hi[0]) == pytest.approx((math.exp(-0.06), math.exp(0.06)))  # seen: 2 SE
     assert (lo[1], hi[1]) == pytest.approx(cfg.kp_scale)  # unseen: (e)'s
-    assert hi[2] == pytest.approx(1 + NARROW_DEFAULT)  # not in the report: as before
-    assert ranges.scale["armature"][1][3] == pytest.approx(1 + NARROW_DEFAULT)  # an absolute error: seen, as before
+    assert hi[2] == pytest.approx(1 + NARROW_DEFAULT)  # not in the report: ±10 %
+    assert ranges.scale["armature"][1][3] == pytest.approx(1 + NARROW_DEFAULT)  # an absolute error: seen, ±10 %
     torso = list(humanoid.body_names).index("torso")
     m_lo, m_hi = ranges.scale["body_mass"]
     assert (m_lo[torso], m_hi[torso]) == pytest.approx(cfg.mass_scale)
