@@ -12,6 +12,7 @@ from wresdyn.data.dataset import Dataset, Trajectory, derive_qdd
 from wresdyn.data.mismatch import Mismatch
 from wresdyn.data.real_robot import RealRobot
 from wresdyn.identify.identifiability import identifiability, write_identifiability
+from wresdyn.identify.unexcited_limits import demanded_torque
 from wresdyn.identify.sysid_config import SysIdConfig
 from wresdyn.sim.parity import multisine_command
 from wresdyn.sim.physics import PhysicalParams
@@ -73,6 +74,14 @@ def test_unexcited_limit_and_still_joint_are_flagged_and_excited_ones_are_not(hu
     assert all(f["advice"] for f in data["flags"])
     assert "--probe-saturation" in next(f["advice"] for f in data["flags"] if f["kind"] == "unexcited_effort")
     assert "What the data can identify" in (tmp_path / "identifiability.md").read_text()
+    # the training data's demand: the never-saturated knee's is its largest demanded torque (the data's lower bound
+    # on its limit), the always-saturated knee's stays at or below its limit; every fitted limited joint is listed
+    demand, share = data["demanded_effort_nm"], data["effort_saturated"]
+    tau = demanded_torque(params, still_data.split("train"), 1.0 / still_data.rate_hz)
+    assert share["right_knee"] == 0.0 and demand["right_knee"] == pytest.approx(tau[:, right].max())
+    assert demand["right_knee"] < params.effort[right]
+    assert share["left_knee"] > 0.5 and 0 < demand["left_knee"] <= params.effort[left]
+    assert set(demand) == set(share) == set(names) and data["effort_saturated_min"] == SMALL.saturated_min
 
 
 def test_identify_and_fit_write_identifiability_in_their_run_folders(humanoid, still_data, tmp_path):

@@ -22,7 +22,10 @@ effort limits whose drive never saturates (:func:`~wresdyn.identify.unexcited_li
 rule identification applies: the validation windows of a robot on a stand rarely saturate a drive either, so the
 information there says nothing about the limit a probe's training trajectories do identify), joints that barely
 move, command delays below one sample period, and parameters with tiny sensitivity (|J_i| < σ: a 100 % error even
-with every other parameter known). Written as ``identifiability.json`` and ``identifiability.md``
+with every other parameter known). The same pass over the training data records, per limited fitted joint, the
+largest torque the identified drive is asked for without saturating (``demanded_effort_nm``) and the share of
+samples that ask for more (``effort_saturated``): a limit saturated on fewer than ``saturated_min`` of them is bounded
+by the data from below only, by that torque. Written as ``identifiability.json`` and ``identifiability.md``
 (:func:`write_identifiability`).
 """
 
@@ -116,6 +119,9 @@ class Identifiability:
     steps: int
     seconds: float
     """Wall-clock of the report [s]."""
+    effort_demand: dict | None = None
+    """``{"demanded_effort_nm": {joint: N·m}, "effort_saturated": {joint: share}, "effort_saturated_min": share}``
+    over the training data, for each limited fitted joint (``None``: the effort limit not fitted)."""
 
     def to_dict(self) -> dict:
         params = [{"name": n, "value": float(v), "coordinate": "relative" if r else f"absolute ({u:.3g} SI)",
@@ -126,7 +132,7 @@ class Identifiability:
         return {"windows": self.windows, "steps": self.steps, "n_residuals": self.n_residuals, "sigma": self.sigma,
                 "seconds": round(self.seconds, 3), "correlated_above": CORRELATED, "parameters": params,
                 "groups": self.groups, "flags": self.flags, "names": self.names,
-                "correlation": np.round(self.corr, 4).tolist()}
+                "correlation": np.round(self.corr, 4).tolist(), **(self.effort_demand or {})}
 
     def markdown(self) -> str:
         """The run report's section."""
@@ -270,13 +276,18 @@ def _groups(names, corr, valid) -> list[list[str]]:
     return sorted((c for c in comps.values() if len(c) > 1), key=len, reverse=True)
 
 
-def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> list[dict]:
-    """Flags from the training recordings: unsaturated effort limits, still joints, delays below a sample."""
-    flags = []
+def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> tuple[list[dict], dict | None]:
+    """Flags from the training recordings: unsaturated effort limits, still joints, delays below a sample; and the
+    effort demand (:attr:`Identifiability.effort_demand`)."""
+    flags, demand = [], None
     if "effort" in fields:
         _, found = limit_unexcited_efforts(params, robot.effort, train, dt, fitted=fitted,
                                            saturated_min=cfg.saturated_min)
         effort = np.asarray(params.effort)
+        limited = [j for j in range(robot.n_dof) if fitted[j] and np.isfinite(effort[j]) and effort[j] > 0]
+        demand = {"demanded_effort_nm": {robot.joint_names[j]: float(found.applied[j]) for j in limited},
+                  "effort_saturated": {robot.joint_names[j]: float(found.saturated[j]) for j in limited},
+                  "effort_saturated_min": float(cfg.saturated_min)}
         never = [j for j in range(robot.n_dof) if fitted[j] and np.isfinite(effort[j])
                  and found.saturated[j] < cfg.saturated_min]
         if never:
@@ -301,7 +312,7 @@ def _excitation_flags(robot, params, train, dt, fitted, fields, cfg) -> list[dic
                           "detail": ", ".join(f"{1e3 * params.delay[j]:.2g} ms" for j in short)
                                     + f" < the sample period {1e3 * dt:.3g} ms",
                           "advice": ADVICE["delay_below_sample"]})
-    return flags
+    return flags, demand
 
 
 def identifiability(robot, dataset, params, cfg) -> Identifiability | None:
@@ -332,7 +343,7 @@ def identifiability(robot, dataset, params, cfg) -> Identifiability | None:
         corr = np.where(np.outer(valid, valid), cov / np.outer(d, d), 0.0)
     names = [x[0] for x in plist]
     groups = _groups(names, corr, valid)
-    flags = _excitation_flags(robot, params, train, dt, fitted, fields, cfg)
+    flags, demand = _excitation_flags(robot, params, train, dt, fitted, fields, cfg)
     weak = [i for i in range(p) if se_alone[i] > 1.0 and plist[i][1] != "effort"]
     for f in dict.fromkeys(plist[i][1] for i in weak):
         members = [i for i in weak if plist[i][1] == f]
@@ -347,7 +358,7 @@ def identifiability(robot, dataset, params, cfg) -> Identifiability | None:
                       "advice": ADVICE["correlated"]})
     return Identifiability(names, np.array([x[3] for x in plist]), np.array([x[3] > 0 for x in plist]),
                            np.array([x[4] for x in plist]), norm / np.sqrt(n), se, se_alone, corr,
-                           float(np.sqrt(sigma2)), n, groups, flags, b, steps, time.perf_counter() - t0)
+                           float(np.sqrt(sigma2)), n, groups, flags, b, steps, time.perf_counter() - t0, demand)
 
 
 def write_identifiability(out, found: Identifiability) -> Path:

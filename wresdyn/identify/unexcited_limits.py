@@ -58,6 +58,10 @@ class UnexcitedLimits:
     """Fraction of training samples on which each joint's demanded torque exceeds its identified limit, (n,)."""
     bound: np.ndarray
     """Lower bound of each joint's limit from the data: the largest demanded torque [N·m], (n,)."""
+    applied: np.ndarray
+    """The largest demanded torque at or below the identified limit [N·m], (n,): the largest torque the data ask of
+    the drive without saturating it, what bounds a limit the data do not saturate from below; ``bound`` where the
+    data never saturate it."""
     ratio: float | None
     """Median identified / file limit over the saturating joints (``None``: no joint saturates)."""
     changed: tuple[str, ...]
@@ -114,17 +118,18 @@ def limit_unexcited_efforts(params: PhysicalParams, file_effort, trajectories, d
     limited = fitted & np.isfinite(before) & np.isfinite(file_effort) & (file_effort > 0)
     saturated = (tau > before).mean(0)
     bound = tau.max(0)
+    applied = np.where(tau <= before, tau, 0.0).max(0)
     seen = limited & (saturated >= saturated_min)
     out = params.copy()
     if not seen.any():
-        return out, UnexcitedLimits(saturated, bound, None, (), before, before.copy())
+        return out, UnexcitedLimits(saturated, bound, applied, None, (), before, before.copy())
     ratio = float(np.median(before[seen] / file_effort[seen]))
     unseen = limited & ~seen
     after = before.copy()
     after[unseen] = np.maximum(ratio * file_effort[unseen], bound[unseen])
     out.effort = after
     changed = tuple(name for name, u in zip(params.joint_names, unseen) if u)
-    return out, UnexcitedLimits(saturated, bound, ratio, changed, before, after.copy())
+    return out, UnexcitedLimits(saturated, bound, applied, ratio, changed, before, after.copy())
 
 
 def share_effort_ratio(cfg, robot, dataset, train, dt, params, score, validation, log):

@@ -75,6 +75,16 @@ class Randomization:
     instead of ``com_offset`` (``None``). Sourced value (0.05, 0.05, 0.01): IsaacLab ``velocity_env_cfg.py``
     ``base_com`` (x, y ±0.05, z ±0.01 m)."""
 
+    effort_from_data: bool = False
+    """(f) only: draw the effort limit of each joint whose drive the identification's training data saturate on fewer
+    than the report's ``effort_saturated_min`` of the samples (1 %) uniformly from the torque those data demand of it
+    without saturating (the report's ``demanded_effort_nm``) up to the upper end of its range otherwise, instead of
+    that range. Source: the data's lower bound. The drive delivered every torque the data demand of it, so its limit is
+    at least the largest of them (:mod:`wresdyn.identify.unexcited_limits`); where it (almost) never saturates, the
+    data say nothing of how far above that bound the limit lies, and the identified value there is the fit's start
+    or the shared derating. A limit the data saturate on more samples keeps its range. Needs a report that records
+    the demand; an older one is refused."""
+
     def __post_init__(self) -> None:
         if self.unseen not in ("narrow", "wide"):
             raise WresdynError(f"randomization.unseen: 'narrow' or 'wide', got {self.unseen!r}")
@@ -90,12 +100,14 @@ class Randomization:
 
     def record(self, narrow: bool = True) -> dict:
         """The fields as a run records them (``config.json``, ``results.json``): the :data:`UNSEEN_FIELDS` only with
-        ``unseen="wide"`` and for (f) (``narrow``; (e) never reads them), so that every run recorded before them reads
-        the same and resumes, (e)'s whatever they are."""
+        ``unseen="wide"`` and ``effort_from_data`` only when on, both for (f) alone (``narrow``; (e) never reads them),
+        so that every run recorded before them reads the same and resumes, (e)'s whatever they are."""
         out = asdict(self)
         if self.unseen == "narrow" or not narrow:
             for f in UNSEEN_FIELDS:
                 del out[f]
+        if not (self.effort_from_data and narrow):
+            del out["effort_from_data"]
         return out
 
 

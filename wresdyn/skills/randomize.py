@@ -57,6 +57,9 @@ class Ranges:
     com_body: str
     floor_friction: tuple[float, float]
     """Robot-floor friction range [-]."""
+    effort_uniform: np.ndarray | None = None
+    """Per joint, whether its effort factor is drawn uniformly instead of log-uniformly, (n,) bool (``None``: none):
+    a range bounded from below by the data (:attr:`Randomization.effort_from_data`)."""
 
 
 def _pair(r, n) -> tuple[np.ndarray, np.ndarray]:
@@ -104,8 +107,9 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
     :data:`NARROW_DEFAULT` of (e)'s (the report does not cover them); the floor friction (e)'s (the stand's data say
     nothing of the floor). With ``cfg.unseen="wide"`` a parameter the report marks unseen (:func:`unseen_parameters`)
     gets (e)'s range instead, an unseen link's mass ``cfg.unseen_mass_add_kg`` where set, and the CoM offset is
-    (e)'s (or ``cfg.unseen_com_offset``) when ``com_body``'s mass is unseen. Returns the ranges and one line saying
-    where the widths came from."""
+    (e)'s (or ``cfg.unseen_com_offset``) when ``com_body``'s mass is unseen. With ``cfg.effort_from_data`` the effort
+    limits the training data barely saturate are drawn uniformly from the data's demand up (:func:`_effort_from_data`).
+    Returns the ranges and one line saying where the widths came from."""
     wide = wide_ranges(cfg, robot, centre)
     run = Path(run)
     path = next((p for p in (run / "identify" / "identifiability.json", run / "identifiability.json")
@@ -147,11 +151,36 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
     source = (f"widths from {path} ({len(se)} parameters with a finite error, ±{NARROW_SIGMAS:g} SE, at least "
               f"±{100 * NARROW_FLOOR:g} %, others ±{100 * NARROW_DEFAULT:g} %)" if path is not None else
               f"no identifiability report in {run}: ±{100 * NARROW_DEFAULT:g} % of every identified value")
+    uniform = None
+    if cfg.effort_from_data:
+        uniform = _effort_from_data(scale["effort"], robot, centre, run, None if path is None else report)
+        source += (f"; the effort limits of {int(uniform.sum())} joints saturated on too few training samples from "
+                   "the data's demand up")
     if cfg.unseen == "wide":
         source += (f"; {len(unseen)} unseen in the report with (e)'s ranges"
                    + (f", an unseen link's mass {cfg.unseen_mass_add_kg} kg" if cfg.unseen_mass_add_kg else "")
                    + (f", {wide.com_body}'s CoM ±{tuple(float(x) for x in com)} m" if com_unseen else ""))
-    return Ranges(scale, friction, delay, com, wide.com_body, wide.floor_friction), source
+    return Ranges(scale, friction, delay, com, wide.com_body, wide.floor_friction, uniform), source
+
+
+def _effort_from_data(effort: tuple, robot, centre, run, report: dict | None) -> np.ndarray:
+    """:attr:`Randomization.effort_from_data`: the factor range ``effort`` (lo, hi) set in place, for each joint the
+    ``report``'s training data saturate on fewer than its ``effort_saturated_min`` of the samples, to (demanded /
+    identified, hi), never above 1 (the identified value stays inside); returns those joints, (n,) bool."""
+    missing = "no identifiability report" if report is None else next(
+        (f"no `{k}` in its identifiability report (written before it: recompute the report)"
+         for k in ("demanded_effort_nm", "effort_saturated", "effort_saturated_min") if k not in report), None)
+    if missing:
+        raise WresdynError(f"randomization.effort-from-data: {run} has {missing}")
+    demanded, share = report["demanded_effort_nm"], report["effort_saturated"]
+    identified = np.asarray(centre.effort, dtype=np.float64)
+    lo = effort[0]
+    uniform = np.zeros(robot.n_dof, dtype=bool)
+    for j, name in enumerate(robot.joint_names):
+        if (name in demanded and share[name] < report["effort_saturated_min"] and demanded[name] > 0
+                and np.isfinite(identified[j]) and identified[j] > 0):
+            lo[j], uniform[j] = min(demanded[name] / identified[j], 1.0), True
+    return uniform
 
 
 class Randomizer:
@@ -202,12 +231,15 @@ class Randomizer:
             self._shapes = torch.as_tensor(np.flatnonzero(per_world >= 0), device=self._mu.device)
             self._shape_world = torch.as_tensor(per_world[per_world >= 0], device=self._mu.device)
 
-    def _uniform(self, lo, hi, k: int, log: bool = False) -> np.ndarray:
+    def _uniform(self, lo, hi, k: int, log=False) -> np.ndarray:
+        """``k`` draws in (lo, hi), log-uniform where ``log`` (a bool, or one per entry)."""
         lo, hi = np.broadcast_to(lo, np.shape(hi)), np.asarray(hi)
         u = self.rng.random((k, *hi.shape))
-        if log:
+        if log is True:
             return np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))
-        return lo + u * (hi - lo)
+        if log is False:
+            return lo + u * (hi - lo)
+        return np.where(log, np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo))), lo + u * (hi - lo))
 
     def draw(self, ids=None) -> np.ndarray:
         """Draw new physics for worlds ``ids`` (long (k,), ``None``: all) and write theirs into the model (in place);
@@ -222,7 +254,8 @@ class Randomizer:
         idx = torch.as_tensor(ids, device=dev)
         # the draws in one fixed order (the seed's stream): gains, armature, effort, friction, masses, CoM, delay, floor
         for f in ("kp", "kd", "armature", "effort"):
-            self.values[f][idx] = self.centre[f] * t(self._uniform(*r.scale[f], k, log=True))
+            log = True if f != "effort" or r.effort_uniform is None else ~r.effort_uniform
+            self.values[f][idx] = self.centre[f] * t(self._uniform(*r.scale[f], k, log=log))
         self.values["friction"][idx] = t(self._uniform(*r.friction, k))
         s = t(self._uniform(*r.scale["body_mass"], k, log=True))
         self.values["body_mass"][idx] = self.centre["body_mass"] * s
