@@ -15,8 +15,8 @@ __all__ = ["usd_notes"]
 
 def usd_notes(robot, physics, friction_kappa: float | None) -> list[str]:
     """One line per change: the damper law's friction (``friction_kappa`` [1/s], ``None``: the default law) and each
-    servo joint's dropped stiction [N m] and load friction [-] (``physics``: :class:`~wresdyn.sim.physics.PhysicalParams`
-    on ``robot``)."""
+    servo joint's dropped stiction [N m] and load friction [-] (``physics``:
+    :class:`~wresdyn.sim.physics.PhysicalParams` on ``robot``)."""
     notes = []
     if friction_kappa is not None:
         notes.append(f"friction: identified under the damper law -clamp(kappa H_ii v, -mu, mu), kappa = "

@@ -33,8 +33,9 @@ On a servo joint (:mod:`wresdyn.robot.servo`) ``kp``, ``kd`` are the servo's pos
 
 - gains, armature, mass, no-load speed, goal acceleration: ``nominal · exp(u)`` (positive, scale-free steps; a
   nominal 0 stays 0: no torque-speed line, no profile);
-- damping, friction, effort, delay, dead band, startup torque, stiction, backlash and load friction: ``reference · u`` with ``u``
-  projected onto ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
+- damping, friction, effort, delay, dead band, startup torque, stiction, backlash and load friction: ``reference · u``
+  with ``u`` projected onto ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached
+  again;
 - the encoder offset: ``reference · u``, signed (not projected);
 - each link's mass, centre of mass and inertia through the log-Cholesky factor of its 4×4 pseudo-inertia
   ``J = [[Σ, h], [hᵀ, m]] = U Uᵀ`` (Rucker & Wensing 2022), ``Σ = ∫ r rᵀ dm`` about the body origin and

@@ -49,13 +49,13 @@ semi-implicit Euler, all differentiable by Warp's Tape. One step, with ``H`` the
   ``m0_i`` the DoF's effective inertia ``1 / (M^-1)_ii`` at the reference pose of the model as built (MuJoCo's
   ``1 / dof_invweight0``; default ``solref``/``solimp``: ``d0 = 0.9``, ``dmax = 0.95``, ``timeconst = 0.02``).
   Below ``mu_i`` the joint creeps (a virtual inertia ``1 / R_i`` and damper ``b / R_i``), above it slides
-  against ``mu_i``. On a servo DoF the bound is ``mu_i + s_i max(1 - |qd_i| / v_s, 0)`` with the stiction
-  ``s_i = Model.joint_servo_stiction`` (:func:`wresdyn.robot.servo.friction_bound`): a static friction while the
-  joint rests, falling to ``mu_i`` once it moves (``qd`` the velocity before the step), plus ``eta_i |tau_i|``, the
-  gear friction of the step's drive torque (``eta_i = Model.joint_servo_load_friction``). The problem is solved by ``friction_sweeps`` symmetric Gauss-Seidel sweeps, each
-  coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the damper law instead, a saturated
-  damper ``-clamp(kappa H_ii v_i, -mu_i, mu_i)`` on the new velocity (``kappa = inf``: hard Coulomb friction,
-  exact sticking).
+  against ``mu_i``. On a servo DoF the bound is ``mu_i + s_i max(1 - |qd_i| / v_s, 0)`` with the stiction ``s_i =
+  Model.joint_servo_stiction`` (:func:`wresdyn.robot.servo.friction_bound`): a static friction while the joint rests,
+  falling to ``mu_i`` once it moves (``qd`` the velocity before the step), plus ``eta_i |tau_i|``, the gear friction of
+  the step's drive torque (``eta_i = Model.joint_servo_load_friction``). The problem is solved by ``friction_sweeps``
+  symmetric Gauss-Seidel sweeps, each coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the damper
+  law instead, a saturated damper ``-clamp(kappa H_ii v_i, -mu_i, mu_i)`` on the new velocity (``kappa = inf``: hard
+  Coulomb friction, exact sticking).
 
 Why the soft law is the default: against MuJoCo C (``frictionloss``, default ``solref``/``solimp``,
 ``implicitfast``, dt = 2 ms) it creeps and slides as MuJoCo does to float32 round-off on one hinge, and the
