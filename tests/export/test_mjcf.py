@@ -132,7 +132,8 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     print(trip, plain, bare)
     # play_mujoco's servo law follows wresdyn closer than the position actuators do (measured 4.1e-4 against 5.6e-4)
     assert trip["between"] < 0.85 * plain["between"], (trip, plain)
-    assert set(json.loads((out / "servo.json").read_text())["law"]) >= {"deadband", "backlash", "stiction", "mask"}
+    assert set(json.loads((out / "servo.json").read_text())["law"]) >= {"deadband", "backlash", "stiction", "mask",
+                                                                         "load_friction"}
     assert abs(trip["mujoco"] - trip["wresdyn"]) <= 0.1 * trip["wresdyn"], trip
     assert bare["mujoco"] > 1.3 * trip["mujoco"], (bare, trip)
     servo_notes = [n for n in report["notes"] if not n.startswith("friction:")]
