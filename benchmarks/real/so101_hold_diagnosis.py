@@ -1,6 +1,7 @@
 """Where an identified servo model ends a hold and where the real arm does, per joint: which term is missing.
 
-For every command hold of >= 1 s on the validation runs (:func:`so101_servo_holds.hold_ends`), the run's identified
+For every command hold of >= 1 s on the validation runs (``--split train``: the training runs, where a model term is
+looked for without reading validation) (:func:`so101_servo_holds.hold_ends`), the run's identified
 model (``physics.json``) is replayed open loop over the whole run, and at each hold's end (averaged over its last
 0.1 s) per joint:
 
@@ -26,7 +27,7 @@ TICK = 2.0 * np.pi / 4096.0
 """One encoder tick of the STS3215 [rad]."""
 
 
-def main(path: str, run: str) -> None:
+def main(path: str, run: str, split: str = "validation") -> None:
     import dataclasses
 
     import pinocchio as pin
@@ -40,7 +41,7 @@ def main(path: str, run: str) -> None:
     ds, robot = load_data(path, None, None)
     rate, settle = ds.rate_hz, int(SETTLE_S * ds.rate_hz)
     keep = np.flatnonzero(ds.fit_weights() > 0)
-    val = list(ds.split("validation"))
+    val = list(ds.split(split))
     policy, meta, physics, solver, substeps = load_run_model(run, robot, rate)
     model_q = replay_trajectories(robot, val, rate, policy, kind=meta["kind"], solver=solver, substeps=substeps,
                                   physics=physics, friction_kappa=run_friction_kappa(run))["residual"].q
@@ -63,7 +64,7 @@ def main(path: str, run: str) -> None:
                          g_file))
     e_r, e_m, d, g, tau, g_file = (np.array(x) for x in zip(*rows))
     r = tau - g
-    print(f"{path}, run {run}: {len(e_r)} holds of >= 1 s on {len(val)} validation runs; offsets [rad] at each "
+    print(f"{path}, run {run}: {len(e_r)} holds of >= 1 s on {len(val)} {split} runs; offsets [rad] at each "
           f"hold's end (mean over its last {SETTLE_S:g} s), e = q - c, 'along' = e * dir (< 0: short of the target)")
     rest_bound = physics.friction + physics.stiction
     print(f"{'joint':14s} {'kp':>6s} {'b':>7s} {'u0':>5s} {'U':>5s} {'f':>6s} {'s':>6s} | {'|e_r|':>7s} {'ticks':>6s} {'along_r':>8s} "
@@ -103,5 +104,7 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("dataset", help="dataset of real runs (.npz)")
     parser.add_argument("--run", required=True, help="identify run folder (its physics.json)")
+    parser.add_argument("--split", default="validation", choices=("train", "validation"),
+                        help="whose holds (held-out and OOD are never read)")
     args = parser.parse_args()
-    main(args.dataset, args.run)
+    main(args.dataset, args.run, args.split)

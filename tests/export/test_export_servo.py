@@ -295,8 +295,8 @@ def test_a_servo_robot_from_mjcf_names_the_conversion_step(tmp_path, capsys, mon
 
 
 def test_a_damper_law_run_with_stiction_exports_and_says_so(servo_export, tmp_path):
-    """A run identified under the damper friction law with a servo stiction: exit 0, the friction amplitudes as
-    Newton's joint friction (without the stiction) and ``export.json``'s notes naming both changes."""
+    """A run identified under the damper friction law with a servo stiction and load friction: exit 0, the friction
+    amplitudes as Newton's joint friction (without either) and ``export.json``'s notes naming the three changes."""
     import shutil
 
     from pxr import Usd
@@ -308,12 +308,14 @@ def test_a_damper_law_run_with_stiction_exports_and_says_so(servo_export, tmp_pa
     (copy / "config.json").write_text(json.dumps({**cfg, "friction_kappa": 500.0}))
     p = _servo_physics(robot)
     p.stiction[1] = 0.07
+    p.load_friction[1] = 0.12
     p.save(copy / "physics.json")
     assert main(["export", str(copy), "--out", str(tmp_path / "calibrated")]) == 0
     record = json.loads((tmp_path / "calibrated" / "export.json").read_text())
-    assert record["friction_kappa"] == 500.0 and len(record["notes"]) == 2, record["notes"]
+    assert record["friction_kappa"] == 500.0 and len(record["notes"]) == 3, record["notes"]
     assert "damper law" in record["notes"][0] and "kappa = 500" in record["notes"][0]
     assert record["notes"][1].startswith("elbow: servo stiction 0.07 N m dropped")
+    assert record["notes"][2].startswith("elbow: servo load friction 0.12 x |drive torque| dropped")
     stage = Usd.Stage.Open(str(tmp_path / "calibrated" / "robot.usda"))
     got = [stage.GetPrimAtPath(f"/arm/joints/{n}").GetAttribute("newton:friction").Get() for n in robot.joint_names]
     np.testing.assert_allclose(got, p.friction, rtol=1e-6)

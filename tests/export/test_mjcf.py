@@ -132,7 +132,8 @@ def test_the_so101_servo_model_round_trips_through_mujoco_actuators(tmp_path, re
     print(trip, plain, bare)
     # play_mujoco's servo law follows wresdyn closer than the position actuators do (measured 4.1e-4 against 5.6e-4)
     assert trip["between"] < 0.85 * plain["between"], (trip, plain)
-    assert set(json.loads((out / "servo.json").read_text())["law"]) >= {"deadband", "backlash", "stiction", "mask"}
+    assert set(json.loads((out / "servo.json").read_text())["law"]) >= {"deadband", "backlash", "stiction", "mask",
+                                                                         "load_friction"}
     assert abs(trip["mujoco"] - trip["wresdyn"]) <= 0.1 * trip["wresdyn"], trip
     assert bare["mujoco"] > 1.3 * trip["mujoco"], (bare, trip)
     servo_notes = [n for n in report["notes"] if not n.startswith("friction:")]
@@ -295,7 +296,7 @@ def test_an_identified_inertia_off_the_triangle_inequality_is_moved_onto_it_and_
 def test_play_mujoco_servo_law_is_wresdyns_servo_law():
     """play_mujoco.py carries its own copy of the servo law (it runs without wresdyn): the same torques as
     :func:`wresdyn.robot.servo.servo_torque` and :func:`~wresdyn.robot.servo.friction_bound` on random states, with
-    every term on (dead band, startup torque, backlash, encoder offset, back-EMF, stiction)."""
+    every term on (dead band, startup torque, backlash, encoder offset, back-EMF, stiction, load friction)."""
     from wresdyn.export.play_mujoco import ServoLaw
     from wresdyn.robot.servo import STARTUP_RAMP, STICTION_SPEED, friction_bound, servo_torque
 
@@ -305,7 +306,7 @@ def test_play_mujoco_servo_law_is_wresdyns_servo_law():
          "deadband": rng.uniform(0, 0.01, n), "noload_speed": rng.uniform(3, 8, n),
          "startup_torque": rng.uniform(0, 0.2, n), "backlash": rng.uniform(0, 0.01, n),
          "encoder_offset": rng.uniform(-0.02, 0.02, n), "friction": rng.uniform(0, 0.1, n),
-         "stiction": rng.uniform(0, 0.1, n), "damping": rng.uniform(0, 0.5, n)}
+         "stiction": rng.uniform(0, 0.1, n), "damping": rng.uniform(0, 0.5, n), "load_friction": rng.uniform(0, 0.3, n)}
     law = ServoLaw({**{k: v.tolist() for k, v in p.items()}, "mask": [1.0] * n, "ramp": STARTUP_RAMP,
                     "stiction_speed": STICTION_SPEED}, None)
     for _ in range(200):
@@ -315,4 +316,6 @@ def test_play_mujoco_servo_law_is_wresdyns_servo_law():
                             startup_torque=p["startup_torque"], backlash=p["backlash"],
                             encoder_offset=p["encoder_offset"])
         np.testing.assert_allclose(law.torque(goal, q, qd), want, rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(law.friction(qd), friction_bound(qd, p["friction"], p["stiction"]), rtol=1e-12)
+        np.testing.assert_allclose(law.friction(qd, want), friction_bound(qd, p["friction"], p["stiction"],
+                                                                         p["load_friction"], want), rtol=1e-12)
+        assert (law.friction(qd, want) > friction_bound(qd, p["friction"], p["stiction"])).any()

@@ -86,9 +86,9 @@ def zoo() -> list[str]:
 
 
 FLOOR = "floor_fair/summary.json"
-SO101 = "so101_servo/effort/summary.txt"
-SERVO = r"^effort/k3e4_reset{}: .*{} [\d.]+ \(([\d.]+)x\)"
-"""A servo run's ratio to PD only in the SO-101 summary: the seed's suffix, then the split."""
+SO101 = "so101_servo/hybrid/summary.txt"
+SERVO = r"^{}: .*{} [\d.]+ \(([\d.]+)x\)"
+"""A run's ratio to PD only in the SO-101 summary: the run, then the split."""
 SWEEP = r"^\| frac025 \| [^|]+ \| [\d.]+ \(([\d.]+)x\)"
 PPO_HELDOUT = r"^heldout .*\(([\d.]+)x\)"
 TTF_GPU = r"^\| gradient \| 1024 \| [^|]+ \| ([\d.]+) \|"
@@ -121,9 +121,10 @@ ROWS = {
         f"{pd('heldout', PD_UNEVEN) / js(UNEVEN, 'wresdyn', 'final', 'heldout'):.1f}× held-out",
         f"{pd('ood', PD_UNEVEN) / js(UNEVEN, 'wresdyn', 'final', 'ood'):.1f}× OOD"]),
     "real SO-101 arm": ([SO101], lambda: [
-        f"{rx(SO101, SERVO.format('', 'heldout')):.2f}× held-out", f"{rx(SO101, SERVO.format('', 'ood')):.2f}× OOD",
-        f"seed 1: {rx(SO101, SERVO.format('_seed1', 'heldout')):.2f}×",
-        f"{rx(SO101, SERVO.format('_seed1', 'ood')):.2f}×"]),
+        f"{rx(SO101, SERVO.format('hybrid/gru_delta', 'heldout')):.2f}× held-out",
+        f"{rx(SO101, SERVO.format('hybrid/gru_delta', 'ood')):.2f}× OOD",
+        f"the servo model alone: {rx(SO101, SERVO.format('effort/k1e5_reset', 'heldout')):.2f}×",
+        f"{rx(SO101, SERVO.format('effort/k1e5_reset', 'ood')):.2f}×"]),
     "skills on the stand": (["deploy/default/results.json", "deploy/seed1/results.json", "deploy/seed2/results.json",
                              "deploy/full_h200/results.json"], stand),
     "skills on the floor, full size": ([FLOOR], lambda: floor("default")),

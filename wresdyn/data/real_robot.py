@@ -93,7 +93,7 @@ class RealRobot:
                "effort": m.actuator_forcerange[:n, 1].copy(), "deadband": servo.deadband,
                "noload_speed": servo.noload_speed, "goal_accel": servo.goal_accel,
                "startup_torque": servo.startup_torque, "stiction": servo.stiction, "backlash": servo.backlash,
-               "encoder_offset": servo.encoder_offset,
+               "encoder_offset": servo.encoder_offset, "load_friction": servo.load_friction,
                "friction": m.dof_frictionloss[:n].copy()}
         idx = np.flatnonzero(s)
         m.actuator_gainprm[idx, 0] = 1.0
@@ -118,9 +118,12 @@ class RealRobot:
         ctrl = contact * np.where(free, position, np.sign(raw) * law["effort"])
         s = law["mask"]
         m.actuator_biasprm[:n, 2] = np.where(s, -contact * (free * law["kd"] + emf), m.actuator_biasprm[:n, 2])
-        if law["stiction"].any():  # the static friction on the velocity before the step, as SolverReplay's
-            m.dof_frictionloss[:n] = np.where(s, friction_bound(d.qvel[:n], law["friction"], law["stiction"]),
-                                              m.dof_frictionloss[:n])
+        if law["stiction"].any() or law["load_friction"].any():
+            # the static friction on the velocity before the step and the load friction on the law's torque there,
+            # as SolverReplay's
+            drive = np.clip(ctrl + m.actuator_biasprm[:n, 2] * d.qvel[:n], -law["effort"], law["effort"])
+            m.dof_frictionloss[:n] = np.where(s, friction_bound(d.qvel[:n], law["friction"], law["stiction"],
+                                                                law["load_friction"], drive), m.dof_frictionloss[:n])
         return np.where(s, ctrl, command)
 
     def physics(self):
@@ -142,7 +145,7 @@ class RealRobot:
             law = self._servo
             kp, kd = np.where(law["mask"], law["kp"], kp), np.where(law["mask"], law["kd"], kd)
             servo = {f: np.array(law[f], dtype=np.float64) for f in SERVO_FIELDS}
-            if law["stiction"].any():  # the sliding friction, not the last step's bound
+            if law["stiction"].any() or law["load_friction"].any():  # the sliding friction, not a step's bound
                 friction = np.where(law["mask"], law["friction"], friction)
         return PhysicalParams(list(r.joint_names), list(r.body_names), kp, kd, m.dof_armature[dof].copy(),
                               m.dof_damping[dof].copy(), friction, effort,

@@ -131,7 +131,7 @@ def converted_robot(robot, physics, dest: str | Path):
     p = physics.copy()
     p.joint_names, p.body_names = list(usd.joint_names), list(usd.body_names)
     for f in ("kp", "kd", "armature", "damping", "friction", "effort", "delay", "deadband", "noload_speed",
-              "goal_accel", "startup_torque", "stiction", "backlash", "encoder_offset"):
+              "goal_accel", "startup_torque", "stiction", "backlash", "encoder_offset", "load_friction"):
         v = getattr(physics, f)
         if v is not None:
             setattr(p, f, np.asarray(v)[j].copy())

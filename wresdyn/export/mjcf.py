@@ -88,7 +88,8 @@ def mjcf_spec(robot, physics, rate_hz: float, friction_kappa: float | None = Non
             emf = effort / w0 if w0 > 0 else 0.0
             damping += emf  # the back-EMF U / w0 acts on the joint whether the PD saturates or not: not clamped
             dropped = [f"{f} {float(getattr(physics, f)[i]):.4g}" for f in ("deadband", "stiction", "startup_torque",
-                                                                            "backlash") if getattr(physics, f)[i] > 0]
+                                                                            "backlash", "load_friction")
+                       if getattr(physics, f)[i] > 0]
             notes.append(f"{name}: servo drive as a position actuator (kp, kv = kd, force range +-{effort:.4g} N m) "
                          f"and its back-EMF U/w0 = {emf:.4g} N m s/rad in the joint damping"
                          + (f"; goal profile {float(physics.goal_accel[i]):.4g} rad/s^2 in servo.json (play_mujoco.py "
@@ -244,7 +245,7 @@ def servo_law(robot, physics) -> dict | None:
     on = np.asarray(servo.mask, dtype=bool)
     law = {"mask": on.astype(float).tolist(), "ramp": STARTUP_RAMP, "stiction_speed": STICTION_SPEED}
     for f in ("kp", "kd", "effort", "damping", "friction", "deadband", "noload_speed", "startup_torque", "stiction",
-              "backlash", "encoder_offset"):
+              "backlash", "encoder_offset", "load_friction"):
         law[f] = np.where(on, np.nan_to_num(np.asarray(getattr(physics, f), dtype=np.float64), posinf=0.0),
                           0.0).tolist()
     return law
@@ -338,6 +339,7 @@ def _mapping() -> dict:
             "friction": "joint frictionloss [N m] with solreffriction, solimpfriction (the replay's friction law)",
             "encoder_offset": "actuator biasprm[0] = -kp o [N m]",
             "backlash": "servo.json's law, applied by play_mujoco.py --servo (no gear play in MuJoCo)",
+            "load_friction": "servo.json's law, applied by play_mujoco.py --servo (MuJoCo's frictionloss is constant)",
             "body_mass": "body inertial mass [kg]",
             "body_com": "body inertial pos [m]", "body_inertia": "body inertial diaginertia + quat [kg m^2]",
             "residual": "residual.onnx, applied through qfrc_applied by play_mujoco.py"}

@@ -80,7 +80,7 @@ class ServoLaw:
         e_b = e_m - clip(e_m, -deadband, deadband)
         u = clip(kp e_b + startup_torque clip(e_b / ramp, -1, 1) - kd qd, -effort, effort)
         tau = g clip(u - (effort / noload_speed) qd, -effort, effort)  into qfrc_applied
-        frictionloss = friction + stiction max(1 - |qd| / stiction_speed, 0)
+        frictionloss = friction + stiction max(1 - |qd| / stiction_speed, 0) + load_friction |tau|
 
     With it the servo joints' actuators are silenced (their gains set to 0 in the replay's copy of the model) but keep
     recording the commands, so the delayed goal is the actuator's own (``mj_readCtrl``); the back-EMF leaves the
@@ -89,6 +89,7 @@ class ServoLaw:
     def __init__(self, law: dict, model) -> None:
         self.p = {k: np.asarray(v, dtype=np.float64) for k, v in law.items() if k not in ("ramp", "stiction_speed")}
         self.mask = self.p["mask"] > 0
+        self.p.setdefault("load_friction", np.zeros(len(self.mask)))  # a servo.json written before the field
         self.ramp, self.v_s = float(law["ramp"]), float(law["stiction_speed"])
         self.emf = np.divide(self.p["effort"], self.p["noload_speed"], out=np.zeros(len(self.mask)),
                              where=self.p["noload_speed"] > 0)
@@ -110,8 +111,10 @@ class ServoLaw:
                     -p["effort"], p["effort"])
         return np.where(self.mask, g * np.clip(u - self.emf * qd, -p["effort"], p["effort"]), 0.0)
 
-    def friction(self, qd) -> np.ndarray:
-        return self.p["friction"] + self.p["stiction"] * np.maximum(1.0 - np.abs(qd) / self.v_s, 0.0)
+    def friction(self, qd, tau=0.0) -> np.ndarray:
+        """The frictionloss of the step at velocity ``qd`` and the law's drive torque ``tau`` [N m]."""
+        return (self.p["friction"] + self.p["stiction"] * np.maximum(1.0 - np.abs(qd) / self.v_s, 0.0)
+                + self.p["load_friction"] * np.abs(tau))
 
 
 def joint_addresses(model) -> tuple[np.ndarray, np.ndarray]:
@@ -165,8 +168,9 @@ def replay(model, q_cmd, q0=None, qd0=None, residual: Residual | None = None, qd
                     r = mujoco.mj_readCtrl(model, d, int(i), d.time - model.actuator_delay[i], delayed,
                                            int(model.actuator_history[i, 1]))
                     goal[i] = (delayed if r is None else r)[0]
-            tau = tau + servo.torque(goal, q[k], qd[k])
-            model.dof_frictionloss[va[sa]] = servo.friction(qd[k])[sa]
+            drive = servo.torque(goal, q[k], qd[k])
+            tau = tau + drive
+            model.dof_frictionloss[va[sa]] = servo.friction(qd[k], drive)[sa]
         if residual is not None or servo is not None:
             d.qfrc_applied[va] = tau
         mujoco.mj_step(model, d)

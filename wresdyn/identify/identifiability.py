@@ -223,7 +223,7 @@ def _jacobian(robot, params, plist, validation, dt, cfg, weights):
     window = bank.window(traj, first, steps)
     rows = bank.rows(traj, first, steps)[:, :-1]
     servo = () if goal is None else ("deadband", "noload_speed", "startup_torque", "stiction", "backlash",
-                                   "encoder_offset")  # kept as identified
+                                   "encoder_offset", "load_friction")  # kept as identified
     base = {f: torch.as_tensor(np.asarray(getattr(params, f), dtype=np.float64))
             for f in ("kp", "kd", "armature", "damping", "friction", "effort", "body_mass", "body_inertia", *servo)}
     r_all = []

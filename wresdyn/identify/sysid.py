@@ -163,7 +163,7 @@ class IdentifyLearner:
         groups = [[model.u_kp, model.u_kd, model.u_armature, model.u_noload_speed, model.u_goal_accel],
                   [model.u_damping, model.u_friction, model.u_effort, model.u_delay, model.u_deadband,
                    model.u_startup_torque, model.u_stiction,
-                   model.u_backlash, model.u_encoder_offset],
+                   model.u_backlash, model.u_encoder_offset, model.u_load_friction],
                   [model.u_body_logdiag, model.u_body_off]]
         self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
                                        for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)

@@ -21,7 +21,8 @@ __all__ = ["JOINT_FIELDS", "SERVO_FIELDS", "BODY_FIELDS", "PhysicalParams", "Phy
 
 JOINT_FIELDS = ("kp", "kd", "armature", "damping", "friction", "effort", "delay")
 """Per-joint fields of :class:`PhysicalParams`, each (n_dof,)."""
-SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel", "startup_torque", "stiction", "backlash", "encoder_offset")
+SERVO_FIELDS = ("deadband", "noload_speed", "goal_accel", "startup_torque", "stiction", "backlash", "encoder_offset",
+                "load_friction")
 """Per-joint fields of the servo drive law (:mod:`wresdyn.robot.servo`), each (n_dof,); read only on joints whose
 drive is a servo, 0 elsewhere. Files written before they existed load with zeros."""
 BODY_FIELDS = ("body_mass", "body_com", "body_inertia")
@@ -64,6 +65,8 @@ class PhysicalParams:
     """Servo gear train's play, half-width [rad] (0: none)."""
     encoder_offset: np.ndarray | None = None
     """Servo encoder's zero offset [rad], signed: its loop sees q + offset (0: none)."""
+    load_friction: np.ndarray | None = None
+    """Servo gear friction per unit of drive torque [-] (0: none)."""
 
     def __post_init__(self) -> None:
         for f in SERVO_FIELDS:

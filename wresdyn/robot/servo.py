@@ -20,9 +20,13 @@ line out. Gear friction is the joint's ``friction`` (dry) and ``damping`` (visco
 the dry one while the joint rests (a Stribeck curve, linear in the speed, over the joint's previous velocity)::
 
     mu(qd) = friction + stiction max(1 - |qd| / v_s, 0)   the dry friction's bound [N*m], v_s = STICTION_SPEED
+             + eta |tau|                                  load friction, tau the drive torque of the step
 
 so a joint at rest breaks away at ``friction + stiction`` and slides against ``friction`` once it moves faster than
-``v_s``; ``stiction = 0`` leaves it out.
+``v_s``; ``stiction = 0`` leaves it out. ``eta`` (``load_friction``, dimensionless) is the gear train's friction
+that grows with the torque it carries (a spur gear's mesh losses are a share of the tooth load, which is why BAM
+models the STS3215's friction as load-dependent: Duclusaud & Passault 2025): a servo holding against gravity then
+rests anywhere within a band that widens with the load; ``eta = 0`` leaves it out.
 
 Two optional fields (0 by default, the law then exactly the one without them) describe the transmission and the
 encoder:
@@ -58,7 +62,7 @@ __all__ = ["SERVO_KEYS", "STARTUP_RAMP", "STICTION_SPEED", "STS3215", "GoalProfi
            "friction_bound", "play", "profile_step", "read_servo", "servo_torque"]
 
 SERVO_KEYS = ("drive", "deadband", "noload_speed", "goal_accel", "startup_torque", "stiction", "backlash",
-              "encoder_offset")
+              "encoder_offset", "load_friction")
 """Keys of a gains config's ``[[joint]]`` table that set the drive law (the others are
 :func:`wresdyn.robot.description.apply_overrides`')."""
 
@@ -123,6 +127,8 @@ class ServoDrives:
     """Half-width beta of the gear train's play between motor and link [rad] (0: none), shape (n_dof,)."""
     encoder_offset: np.ndarray
     """Encoder zero offset o [rad], signed: the servo's loop sees q + o (0: none), shape (n_dof,)."""
+    load_friction: np.ndarray
+    """Gear friction per unit of drive torque eta [-] (0: none), shape (n_dof,)."""
 
 
 def read_servo(config: dict | None, joint_names, effort, where: str = "gains config") -> ServoDrives | None:
@@ -130,7 +136,7 @@ def read_servo(config: dict | None, joint_names, effort, where: str = "gains con
     or ``None`` when it selects none.
 
     ``deadband``, ``backlash``, ``encoder_offset`` (signed) [rad], ``noload_speed`` [rad/s], ``goal_accel``
-    [rad/s²], ``startup_torque`` and ``stiction`` [N*m] may be set in any entry; a servo
+    [rad/s²], ``startup_torque`` and ``stiction`` [N*m], ``load_friction`` [-] may be set in any entry; a servo
     joint not given one takes zero (no band, no torque-speed line, no profile). A servo needs a finite effort
     limit (its stall torque).
 
@@ -172,8 +178,8 @@ def attach_servo(model, servo: ServoDrives, qd_index, num_worlds: int) -> None:
     """Give a finalized Newton model the servo arrays :class:`~wresdyn.sim.solver_replay.SolverReplay` reads, per
     DoF of every world (Newton's flat layout, zeros on the DoFs of other joints): ``joint_servo`` (int32, 1 on a
     servo), ``joint_servo_deadband`` [rad], ``joint_servo_noload_speed`` [rad/s], ``joint_servo_startup_torque`` and
-    ``joint_servo_stiction`` [N*m], ``joint_servo_backlash`` and ``joint_servo_encoder_offset`` [rad] (float32,
-    gradients as the model's)."""
+    ``joint_servo_stiction`` [N*m], ``joint_servo_backlash`` and ``joint_servo_encoder_offset`` [rad],
+    ``joint_servo_load_friction`` [-] (float32, gradients as the model's)."""
     import warp as wp
 
     width = model.joint_dof_count // num_worlds
@@ -192,6 +198,7 @@ def attach_servo(model, servo: ServoDrives, qd_index, num_worlds: int) -> None:
     model.joint_servo_stiction = per_dof(servo.stiction, np.float32)
     model.joint_servo_backlash = per_dof(servo.backlash, np.float32)
     model.joint_servo_encoder_offset = per_dof(servo.encoder_offset, np.float32)
+    model.joint_servo_load_friction = per_dof(servo.load_friction, np.float32)
 
 
 def servo_torque(q_goal, q, qd, kp, kd, deadband, effort, noload_speed, qd_goal=0.0, startup_torque=0.0,
@@ -213,10 +220,11 @@ def play(e, backlash):
     return e_m, np.where(np.asarray(backlash) > 0, np.minimum(np.abs(e_m) / STARTUP_RAMP, 1.0), 1.0)
 
 
-def friction_bound(qd, friction, stiction):
+def friction_bound(qd, friction, stiction, load_friction=0.0, torque=0.0):
     """The dry friction's bound of the module docstring (numpy, broadcastable) at the previous velocity ``qd``
-    [rad/s]: ``friction + stiction max(1 - |qd| / v_s, 0)`` [N*m]."""
-    return friction + stiction * np.maximum(1.0 - np.abs(qd) / STICTION_SPEED, 0.0)
+    [rad/s] and the step's drive torque ``torque`` [N*m]: ``friction + stiction max(1 - |qd| / v_s, 0) + eta |tau|``
+    [N*m]."""
+    return friction + stiction * np.maximum(1.0 - np.abs(qd) / STICTION_SPEED, 0.0) + load_friction * np.abs(torque)
 
 
 def profile_step(xp, goal, pos, vel, accel):

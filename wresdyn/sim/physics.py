@@ -19,6 +19,7 @@ field                     shape, unit                model array (per world)
 ``stiction``              (n,) N·m                   ``joint_servo_stiction`` (servo joints: static friction above dry)
 ``backlash``              (n,) rad                   ``joint_servo_backlash`` (servo joints: gear play beta)
 ``encoder_offset``        (n,) rad                   ``joint_servo_encoder_offset`` (servo joints: encoder zero o)
+``load_friction``         (n,) -                     ``joint_servo_load_friction`` (servo joints: friction / torque)
 ``body_mass``             (nb,) kg                   ``body_mass``
 ``body_com``              (nb, 3) m, body frame      ``body_com``
 ``body_inertia``          (nb, 3, 3) kg·m², at com   ``body_inertia``
@@ -32,8 +33,9 @@ On a servo joint (:mod:`wresdyn.robot.servo`) ``kp``, ``kd`` are the servo's pos
 
 - gains, armature, mass, no-load speed, goal acceleration: ``nominal · exp(u)`` (positive, scale-free steps; a
   nominal 0 stays 0: no torque-speed line, no profile);
-- damping, friction, effort, delay, dead band, startup torque, stiction and backlash: ``reference · u`` with ``u``
-  projected onto ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached again;
+- damping, friction, effort, delay, dead band, startup torque, stiction, backlash and load friction: ``reference · u``
+  with ``u`` projected onto ``u ≥ 0`` (:meth:`PhysicsModel.project`) so a zero nominal value can be left and reached
+  again;
 - the encoder offset: ``reference · u``, signed (not projected);
 - each link's mass, centre of mass and inertia through the log-Cholesky factor of its 4×4 pseudo-inertia
   ``J = [[Σ, h], [hᵀ, m]] = U Uᵀ`` (Rucker & Wensing 2022), ``Σ = ∫ r rᵀ dm`` about the body origin and
@@ -57,11 +59,15 @@ MODEL_ARRAYS = {"kp": "joint_target_ke", "kd": "joint_target_kd", "armature": "j
 """Newton model array of each field (``delay`` is the command path's, not the model's)."""
 SERVO_ARRAYS = {"deadband": "joint_servo_deadband", "noload_speed": "joint_servo_noload_speed",
                 "startup_torque": "joint_servo_startup_torque", "stiction": "joint_servo_stiction",
-                "backlash": "joint_servo_backlash", "encoder_offset": "joint_servo_encoder_offset"}
+                "backlash": "joint_servo_backlash", "encoder_offset": "joint_servo_encoder_offset",
+                "load_friction": "joint_servo_load_friction"}
 """Model array of each servo field, present on models of robots with servo joints
 (:func:`wresdyn.robot.servo.attach_servo`; ``goal_accel`` is the command path's)."""
 DEADBAND_REF = 0.01
 """Unit of the dead band's coordinate [rad] (the SO-101's joints stop 8-36 mrad short of a target)."""
+LOAD_FRICTION_REF = 0.1
+"""Unit of the load friction's coordinate [-]: a tenth of the carried torque, a geared servo's mesh losses at 90 %
+efficiency."""
 _LOG_FIELDS = ("kp", "kd", "armature", "noload_speed", "goal_accel")
 """Joint fields with the coordinate ``nominal · exp(u)``."""
 
@@ -182,12 +188,17 @@ class PhysicsModel(torch.nn.Module):
             self.register_buffer(f"ref_{f}", torch.as_tensor(self.ref[f], **f64))
             self.register_parameter(f"u_{f}", torch.nn.Parameter(
                 torch.as_tensor(getattr(start, f) / DEADBAND_REF, **f64), f in self.fit))
+        self.ref["load_friction"] = np.full(n, LOAD_FRICTION_REF)
+        self.register_buffer("ref_load_friction", torch.as_tensor(self.ref["load_friction"], **f64))
+        self.register_parameter("u_load_friction", torch.nn.Parameter(
+            torch.as_tensor(start.load_friction / LOAD_FRICTION_REF, **f64), "load_friction" in self.fit))
 
     def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
-        """As torch's; a state saved before the startup torque, the stiction, the backlash or the encoder offset
-        existed takes this module's (the start's)."""
+        """As torch's; a state saved before the startup torque, the stiction, the backlash, the encoder offset or the
+        load friction existed takes this module's (the start's)."""
         state_dict = dict(state_dict)
-        for k in (f"{p}_{f}" for f in ("startup_torque", "stiction", "backlash", "encoder_offset") for p in ("u", "ref")):
+        for k in (f"{p}_{f}" for f in ("startup_torque", "stiction", "backlash", "encoder_offset", "load_friction")
+                  for p in ("u", "ref")):
             state_dict.setdefault(k, getattr(self, k).detach().clone())
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 

@@ -34,9 +34,9 @@ __all__ = ["generate_source"]
 
 _PARAMS = ("ke", "kd", "arm", "fric", "damp", "eff", "lo", "hi", "lke", "lkd")
 """Per-DoF model arrays the kernels read: drive gains, armature, friction, damping, effort, limits."""
-_SERVO_PARAMS = ("sdb", "sw0", "su0", "sfs", "sbl", "sof")
+_SERVO_PARAMS = ("sdb", "sw0", "su0", "sfs", "sbl", "sof", "sle")
 """Per-DoF arrays the kernels of a robot with servo drives also read: dead band, no-load speed, startup torque,
-stiction, backlash, encoder offset."""
+stiction, backlash, encoder offset, load friction."""
 _SCALARS = ("dt", "fric_c", "fric_k", "fric_shift", "kp_implicit")
 """Scalar kernel arguments the step statements read."""
 
@@ -60,13 +60,15 @@ def _load_params(e: Emitter, tree: ReplayTree, friction: bool, servo: np.ndarray
         # != rather than >: a NaN friction runs the solve and shows in the state. The flag is added, not or-ed: with
         # `or` (a branch in the C++) Clang's build of the humanoid's rollout loop kept 3x as many values on the stack
         # and ran 2-3x slower (benchmarks/results/compile/forward_spills.txt)
-        dry = out["fric"] + [x for x in out.get("sfs", ()) if x is not None]  # a servo's stiction needs the solve too
+        # a servo's stiction and load friction need the solve too
+        dry = out["fric"] + [x for name in ("sfs", "sle") for x in out.get(name, ()) if x is not None]
         e.lines.append(_friction_flag(dry))
     return out
 
 
 def _friction_flag(dry: list[str]) -> str:
-    """The statement of ``fric_on`` (:func:`_load_params`) from every DoF's dry friction and servo stiction."""
+    """The statement of ``fric_on`` (:func:`_load_params`) from every DoF's dry friction, servo stiction and load
+    friction."""
     return f"fric_on = {' + '.join(f'wp.abs({x})' for x in dry)} + S(fric_grad[0]) != S(0.0)"
 
 
@@ -77,7 +79,7 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
     friction it returns ``v*`` exactly), as a :func:`~.emit.gate` region."""
     n = tree.n_dof
     bias, m_diag, m_off = dynamics(e, tree, groups, q, qd, g)
-    rhs, h_diag = [], []
+    rhs, h_diag, drive = [], [], [None] * n
     for k in range(n):
         e.mark(f"dof {k}: drive, passive and limit torques; implicit diagonal")
         ke, kd, arm, _, damp, eff, lo, hi, lke, lkd = (p[name][k] for name in _PARAMS)
@@ -85,7 +87,7 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
             eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")
             pd, drive_d, drive_k = servo_drive(e, ke, kd, eff, p["sdb"][k], p["sw0"][k], p["su0"][k], q[k], qd[k],
                                                 tq[k], tqd[k], p["sbl"][k], p["sof"][k])
-            free = None
+            free, drive[k] = None, pd
         else:
             raw = e.let(f"{ke} * ({tq[k]} - {q[k]}) + {kd} * ({tqd[k]} - {qd[k]})")
             eff = e.let(f"wp.where({eff} > S(0.0), {eff}, S(1.0e30))")  # importers write 0 for "no limit"
@@ -112,9 +114,10 @@ def _step(e: Emitter, tree: ReplayTree, p: dict, groups: list, q, qd, tq, tqd, j
         start = len(e.lines)
         mu = list(p["fric"])
         for k in range(n) if servo is not None else ():
-            if servo[k]:  # static friction at rest (wresdyn.robot.servo.friction_bound), on the previous velocity
+            if servo[k]:  # static friction at rest (wresdyn.robot.servo.friction_bound), on the previous velocity,
+                # and the gear friction of the load the drive carries this step
                 ramp = f"wp.max(S(1.0) - wp.abs({qd[k]}) * S({1.0 / STICTION_SPEED!r}), S(0.0))"
-                mu[k] = e.let(f"{mu[k]} + {p['sfs'][k]} * {ramp}")
+                mu[k] = e.let(f"{mu[k]} + {p['sfs'][k]} * {ramp} + {p['sle'][k]} * wp.abs({drive[k]})")
         vf = friction_solve(e, tree, h_diag, m_off, v, mu, p["m0"], sweeps, qd)
         e.lines[start:] = gate(e.lines[start:] + [f"{v[k]} = {vf[k]}" for k in range(n)], "fric_on")
     e.mark("semi-implicit Euler")

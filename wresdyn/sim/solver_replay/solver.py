@@ -49,12 +49,13 @@ semi-implicit Euler, all differentiable by Warp's Tape. One step, with ``H`` the
   ``m0_i`` the DoF's effective inertia ``1 / (M^-1)_ii`` at the reference pose of the model as built (MuJoCo's
   ``1 / dof_invweight0``; default ``solref``/``solimp``: ``d0 = 0.9``, ``dmax = 0.95``, ``timeconst = 0.02``).
   Below ``mu_i`` the joint creeps (a virtual inertia ``1 / R_i`` and damper ``b / R_i``), above it slides
-  against ``mu_i``. On a servo DoF the bound is ``mu_i + s_i max(1 - |qd_i| / v_s, 0)`` with the stiction
-  ``s_i = Model.joint_servo_stiction`` (:func:`wresdyn.robot.servo.friction_bound`): a static friction while the
-  joint rests, falling to ``mu_i`` once it moves (``qd`` the velocity before the step). The problem is solved by ``friction_sweeps`` symmetric Gauss-Seidel sweeps, each
-  coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the damper law instead, a saturated
-  damper ``-clamp(kappa H_ii v_i, -mu_i, mu_i)`` on the new velocity (``kappa = inf``: hard Coulomb friction,
-  exact sticking).
+  against ``mu_i``. On a servo DoF the bound is ``mu_i + s_i max(1 - |qd_i| / v_s, 0)`` with the stiction ``s_i =
+  Model.joint_servo_stiction`` (:func:`wresdyn.robot.servo.friction_bound`): a static friction while the joint rests,
+  falling to ``mu_i`` once it moves (``qd`` the velocity before the step), plus ``eta_i |tau_i|``, the gear friction of
+  the step's drive torque (``eta_i = Model.joint_servo_load_friction``). The problem is solved by ``friction_sweeps``
+  symmetric Gauss-Seidel sweeps, each coordinate in closed form (:mod:`.codegen`). ``friction_kappa`` selects the damper
+  law instead, a saturated damper ``-clamp(kappa H_ii v_i, -mu_i, mu_i)`` on the new velocity (``kappa = inf``: hard
+  Coulomb friction, exact sticking).
 
 Why the soft law is the default: against MuJoCo C (``frictionloss``, default ``solref``/``solimp``,
 ``implicitfast``, dt = 2 ms) it creeps and slides as MuJoCo does to float32 round-off on one hinge, and the
@@ -106,7 +107,8 @@ _JOINT_PARAMS = ("joint_target_ke", "joint_target_kd", "joint_armature", "joint_
                  "joint_effort_limit", "joint_limit_lower", "joint_limit_upper", "joint_limit_ke", "joint_limit_kd")
 """Per-DoF model arrays the kernels read, in the order of their arguments."""
 _SERVO_PARAMS = ("joint_servo_deadband", "joint_servo_noload_speed", "joint_servo_startup_torque",
-                 "joint_servo_stiction", "joint_servo_backlash", "joint_servo_encoder_offset")
+                 "joint_servo_stiction", "joint_servo_backlash", "joint_servo_encoder_offset",
+                 "joint_servo_load_friction")
 """Per-DoF model arrays the kernels of a model with servo drives also read."""
 _BODY_PARAMS = ("body_mass", "body_com", "body_inertia")
 """Per-body model arrays the kernels read."""

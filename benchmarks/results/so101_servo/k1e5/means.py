@@ -1,5 +1,6 @@
 """Per run the mean |dq| [rad] of each split its eval_metrics.json holds, then the mean validation of each setting
-over its seeds: the choices of this folder and of ../hybrid/ (run from benchmarks/results/so101_servo/).
+over its seeds: the choices of this folder, of ../hybrid/, ../load_friction/ and ../profile_k1e5/ (run from
+benchmarks/results/so101_servo/).
 
     python k1e5/means.py
 """
@@ -19,6 +20,14 @@ SETTINGS = {
     "hybrid, delta action (MLP)": ["hybrid/delta", "hybrid/delta_seed1"],
     "hybrid, torque residual (GRU)": ["hybrid/gru", "hybrid/gru_seed1"],
     "hybrid, delta action (GRU)": ["hybrid/gru_delta", "hybrid/gru_delta_seed1"],
+    "kappa 1e5, effort reset, load friction (load_friction/)": [
+        "load_friction/lf_seed0", "load_friction/lf_seed1", "load_friction/lf_seed2"],
+    "the reported recipe on three seeds: hybrid, delta action (GRU) on effort/k1e5_reset": [
+        "hybrid/gru_delta", "hybrid/gru_delta_seed1", "hybrid/gru_delta_seed2"],
+    "kappa 1e5, effort reset, the goal profile at LeRobot's 38.96 rad/s^2 (profile_k1e5/)": [
+        "profile_k1e5/ga_seed0", "profile_k1e5/ga_seed1", "profile_k1e5/ga_seed2"],
+    "load friction + hybrid, delta action (GRU) on load_friction/lf_seed0": [
+        "load_friction/lf_gru_delta", "load_friction/lf_gru_delta_seed1", "load_friction/lf_gru_delta_seed2"],
 }
 
 
