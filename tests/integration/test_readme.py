@@ -98,6 +98,11 @@ LANES = "speed_paths/lanes/bench_lanes.txt"
 ROLLOUT = r"^\| replay rollout \| ([\d.]+)M \| ([\d.]+)M \| ([\d.]+)M \| ([\d.]+)M \|"
 ZOO_RUN = "peers/humanoid/default/wresdyn_cpu.json"
 UNEVEN = "peer_sysid/uneven/summary.json"
+SPEED = "speed/summary.json"
+EAGER = "speed/h200_20261130g/coldfit/fit_warm_eager.log"
+"""The default fit warm with the identification stepped eagerly: the baseline of its CUDA graph."""
+COLD = "speed/h200x2_20261130/coldfit/fit_cold.log"
+"""The default fit of an earlier tree from an empty Warp cache without the shipped kernels."""
 
 ROWS = {
     "gap to close on the shipped data": ([PD], lambda: [
@@ -136,9 +141,12 @@ ROWS = {
                               lambda: [
         f"{gradient_cpu():.1f} s (2 CPU cores)", f"{rx('speed_paths/lanes/ttf_lanes.txt', TTF_GPU):.1f} s"]),
     "the first `wresdyn fit --device cuda:0`": (["first_fit/h200_lanes/pieces_laned/fit_first.log",
-                                                 "speed_paths/lanes/fit_lanes.log"], lambda: [
+                                                 "speed_paths/lanes/fit_lanes.log", SPEED, EAGER, COLD], lambda: [
         f"{rx('first_fit/h200_lanes/pieces_laned/fit_first.log', WHOLE):.1f} s",
-        f"{rx('speed_paths/lanes/fit_lanes.log', TRAINING):.0f} s"]),
+        f"{rx('speed_paths/lanes/fit_lanes.log', TRAINING):.0f} s",
+        f"{js(SPEED, 'first_fit_cold_s'):.1f} s", f"first iteration {js(SPEED, 'first_iteration_cold_s'):.1f} s",
+        f"{js(SPEED, 'first_fit_warm_s'):.1f} s warm", f"{rx(EAGER, WHOLE):.1f} s warm",
+        f"{rx(COLD, WHOLE):.1f} s without"]),
 }
 
 
