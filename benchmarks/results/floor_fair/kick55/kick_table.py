@@ -15,17 +15,18 @@ VARIANTS = (("cal_cand1_end", "candidate 1's far end"), ("cal_wide_torso_effort"
 """The calibrated folders of ``variants.py`` and ``range_ends.py`` and their labels, the longest name first."""
 
 
-def main() -> None:
+def main(here: Path = HERE, variants: tuple = VARIANTS) -> None:
+    """The table of ``here``'s outputs, the calibrated simulator's rows labelled by ``variants``."""
     got = defaultdict(dict)  # (policy, condition) -> {run: [0/1 per kick]}
     for prefix in sys.argv[1:] or [""]:
-        for path in sorted(HERE.glob(f"{prefix}*.txt")):
+        for path in sorted(here.glob(f"{prefix}*.txt")):
             text = path.read_text()
             if "\nsummary " not in text:  # still running
                 continue
             run = re.search(r"floor_unvp\w*_s\d", text).group(0)
             line = next(x for x in text.splitlines() if x.startswith("summary "))
             cal_line = next(x for x in text.splitlines() if ": 16 validation motions" in x)
-            cal = next((label for key, label in VARIANTS if key in cal_line), "")
+            cal = next((label for key, label in variants if key in cal_line), "")
             for key, ok in json.loads(line[len("summary "):]).items():
                 policy, cond = key.split(" | ")
                 if cond == "calibrated sim" and cal:

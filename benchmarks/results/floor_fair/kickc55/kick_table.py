@@ -1,11 +1,8 @@
 """The kick successes of every ``floor_kick_gap.py`` output here, per policy and condition, summed over the runs
-that played it (their ``summary`` lines): ``python kick_table.py PREFIX... > table.md``; a PREFIX picks the files
-(``f_``, ``c_``, ...), and a run's figure is read from the first file that has it."""
+that played it: ``../kick55/kick_table.py``'s table of this folder's files, with this folder's calibrated variants
+(``python kick_table.py PREFIX... > table.md``)."""
 
-import json
-import re
-import sys
-from collections import defaultdict
+import importlib.util
 from pathlib import Path
 
 HERE = Path(__file__).parent
@@ -14,31 +11,8 @@ VARIANTS = (("cal_torso_hiproll", "torso+hip roll limits true"), ("cal_torso_eff
 """The calibrated folders of ``../kick55/variants.py`` and ``variants_hip.py`` and their labels, the longest name
 first."""
 
-
-def main() -> None:
-    got = defaultdict(dict)  # (policy, condition) -> {run: [0/1 per kick]}
-    for prefix in sys.argv[1:] or [""]:
-        for path in sorted(HERE.glob(f"{prefix}*.txt")):
-            text = path.read_text()
-            if "\nsummary " not in text:  # still running
-                continue
-            run = re.search(r"floor_unvp\w*_s\d", text).group(0)
-            line = next(x for x in text.splitlines() if x.startswith("summary "))
-            cal_line = next(x for x in text.splitlines() if ": 16 validation motions" in x)
-            cal = next((label for key, label in VARIANTS if key in cal_line), "")
-            for key, ok in json.loads(line[len("summary "):]).items():
-                policy, cond = key.split(" | ")
-                if cond == "calibrated sim" and cal:
-                    cond = f"calibrated sim, {cal}"
-                got[(policy, cond)].setdefault(run, ok)
-    runs = sorted({r for v in got.values() for r in v})
-    print("| policy | condition | kicks won | " + " | ".join(runs) + " |")
-    print("|---|---|---|" + "---|" * len(runs))
-    for (policy, cond), per in got.items():
-        won, n = sum(sum(v) for v in per.values()), sum(len(v) for v in per.values())
-        cells = [f"{sum(per[r])}/{len(per[r])}" if r in per else "" for r in runs]
-        print(f"| {policy} | {cond} | {won}/{n} | " + " | ".join(cells) + " |")
-
-
 if __name__ == "__main__":
-    main()
+    spec = importlib.util.spec_from_file_location("kick55_table", HERE.parent / "kick55" / "kick_table.py")
+    table = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(table)
+    table.main(HERE, VARIANTS)
