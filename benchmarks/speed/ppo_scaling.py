@@ -14,6 +14,9 @@ splits them); an option sets a PPO field (:data:`OPTIONS`): ``+one_sync`` the up
 (``ppo.graph_update``, :class:`~wresdyn.ppo.graph_update.GraphPPO`, the residual's default on CUDA), ``+packed`` the
 same update run eagerly (``ppo.graph_update`` false: :class:`~wresdyn.ppo.packed_update.PackedPPO`), ``+bf16``
 rsl-rl's mixed precision, ``+compile`` rsl-rl's ``torch.compile``, ``+mbK`` K mini-batches, ``+epK`` K epochs;
+``+pin`` (residual only) each process bound to the CPU cores local to its GPU (``ppo.pin_cpus``,
+:func:`wresdyn.ppo.affinity.pin_process`), ``+defer_log`` (residual only) rsl-rl's episode bookkeeping copied to the
+host once per iteration instead of a host wait at every rollout step on rank 0 (``ppo.deferred_episode_log``);
 ``+rsl_update`` (residual only) runs rsl-rl's own ``PPO.update`` instead of the residual's update, which is
 :class:`~wresdyn.ppo.packed_update.PackedPPO`'s bit for bit with fewer collectives and host waits (on the CPU, or
 eagerly with ``+packed``): the baseline of that change in the same run.
@@ -41,6 +44,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -49,7 +53,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 OPTIONS = {"one_sync": ("one_sync_update", True), "graph": ("graph_update", True), "packed": ("graph_update", False),
-           "bf16": ("mixed_precision", True), "compile": ("compile_mode", "default")}
+           "bf16": ("mixed_precision", True), "compile": ("compile_mode", "default"), "pin": ("pin_cpus", True),
+           "defer_log": ("deferred_episode_log", True)}
 """A case's ``+OPTION``: the PPO config field it sets (``+mbK`` sets ``num_mini_batches`` = K, ``+epK``
 ``num_learning_epochs`` = K); the skill's config has ``one_sync``, ``mbK`` and ``epK``."""
 
@@ -75,9 +80,10 @@ def _parse_case(text: str) -> tuple[str, int, dict]:
         raise SystemExit(f"ppo_scaling.py: case {text!r} is not residual|skill:ENVS[+OPTION...]")
     if learner == "skill" and RSL_UPDATE in fields:
         raise SystemExit(f"ppo_scaling.py: case {text!r}: the skill's PPO runs rsl-rl's own update already")
-    if learner == "skill" and set(fields) & {"mixed_precision", "compile_mode", "graph_update"}:
-        raise SystemExit(f"ppo_scaling.py: case {text!r}: the skill's PPO has no mixed precision, compile or graph "
-                         "option")
+    if learner == "skill" and set(fields) & {"mixed_precision", "compile_mode", "graph_update", "pin_cpus",
+                                             "deferred_episode_log"}:
+        raise SystemExit(f"ppo_scaling.py: case {text!r}: the skill's PPO has no mixed precision, compile, graph, "
+                         "pin or defer_log option")
     return learner, int(envs), fields
 
 
@@ -93,6 +99,10 @@ def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Pat
     cfg = set_fields(default_config(), {"env.num_worlds": envs, "ppo.device": device,
                                         **{f"ppo.{k}": v for k, v in fields.items() if k != RSL_UPDATE}})
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
+    if cfg.ppo.pin_cpus:  # as wresdyn.ppo.trainer.train does; _throughput gives the cores back after the case
+        from wresdyn.ppo.affinity import pin_process
+
+        pin_process(ranks.local_rank, ranks.world, device)
     trajs = data.split("train")
     mean, std = obs_stats(trajs)
     env = ReplayEnv(robot, trajs, data.rate_hz, ranks.num_worlds(envs), cfg.env, cfg.residual, cfg.rewards,
@@ -133,11 +143,23 @@ def _skill(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Path, 
 
 def _throughput(ranks, robot, data, case: str, device: str, warmup: int, iterations: int, motions_cache,
                 per_family: int | None) -> dict:
+    from wresdyn.ppo.affinity import set_affinity
+
+    learner, envs, fields = _parse_case(case)
+    cores = os.sched_getaffinity(0)  # a +pin case binds the process: the next case starts unbound again
+    try:
+        return _timed(ranks, robot, data, case, learner, envs, fields, device, warmup, iterations, motions_cache,
+                      per_family)
+    finally:
+        set_affinity(cores)
+
+
+def _timed(ranks, robot, data, case, learner, envs, fields, device, warmup, iterations, motions_cache,
+           per_family) -> dict:
     import torch
 
     from wresdyn.progress import into_file
 
-    learner, envs, fields = _parse_case(case)
     t_build = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp, into_file(Path(tmp) / "rsl_rl.log"):  # rsl-rl's tables
         if learner == "residual":
@@ -167,7 +189,7 @@ def _throughput(ranks, robot, data, case: str, device: str, warmup: int, iterati
         collect, learn = sum(times["collect"][warmup:]), sum(times["learn"][warmup:])
         row = {"case": case, "learner": learner, "options": "+".join(case.split("+")[1:]), "processes": ranks.world,
                "envs": envs, "envs_per_process": env.num_envs, "device": str(env.device), "iterations": iterations,
-               "update": type(runner.alg).__name__,
+               "update": type(runner.alg).__name__, "cores": sorted(os.sched_getaffinity(0)),
                "build_s": build, "warmup_s": warm, "collect_s": collect / iterations, "learn_s": learn / iterations,
                "s_per_iteration": (collect + learn) / iterations,
                "training_steps_per_s": envs * steps * iterations / (collect + learn),

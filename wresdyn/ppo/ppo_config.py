@@ -94,6 +94,15 @@ class PPOConfig:
     """rsl-rl's ``torch.compile`` of the actor and critic: ``""`` (off), ``"default"`` or
     ``"max-autotune-no-cudagraphs"`` (rsl-rl refuses the CUDA-graph modes)."""
 
+    pin_cpus: bool = False
+    """Bind each training process to the CPU cores local to its GPU (:func:`wresdyn.ppo.affinity.pin_process`:
+    sysfs's ``local_cpulist``, split among the ranks that share it; else an even split of the allowed cores by local
+    rank). Off: the scheduler places the processes."""
+    deferred_episode_log: bool = False
+    """Keep rsl-rl's episode reward and length bookkeeping on the device and copy it to the host once per iteration
+    (:func:`wresdyn.ppo.episode_log.defer_episode_log`) instead of a host wait at every rollout step on the logging
+    rank; the same logged numbers, the same learning."""
+
     def __post_init__(self) -> None:
         for name in ("num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
                      "num_mini_batches"):
@@ -116,7 +125,7 @@ class PPOConfig:
 
 
 RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph", "one_sync_update",
-                     "graph_update", "mixed_precision", "compile_mode")
+                     "graph_update", "mixed_precision", "compile_mode", "pin_cpus", "deferred_episode_log")
 """:class:`PPOConfig` fields a resumed run may change: how long, where and how it runs (the arithmetic of the
 update included, as a change of device changes it), not what it learns."""
 

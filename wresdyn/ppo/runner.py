@@ -23,6 +23,7 @@ from rsl_rl.runners import OnPolicyRunner
 
 from ..learn.runs import RunError, RunnerFolder, check_resume, load_checkpoint, save_checkpoint
 from ..progress import into_file
+from .episode_log import defer_episode_log
 
 __all__ = ["Ranks", "Runner", "CHECKPOINT_KEYS", "rsl_runner_cfg", "make_runner", "resume_runner", "learn",
            "on_iteration", "seed_processes", "latest_checkpoint", "UpgradingRunnerFolder"]
@@ -94,6 +95,11 @@ class Runner(OnPolicyRunner):
     save and writes atomically, so a run killed mid-save resumes from the previous checkpoint.
     """
 
+    def __init__(self, env, train_cfg: dict, log_dir: str | None = None, device: str = "cpu") -> None:
+        super().__init__(env, train_cfg, log_dir=log_dir, device=device)
+        if train_cfg.get("deferred_episode_log"):
+            defer_episode_log(self.logger)
+
     def _configure_multi_gpu(self) -> None:
         """rsl-rl's multi-GPU set-up (NCCL, one GPU per process); CPU processes under torchrun (tests, CPU nodes)
         get the same data-parallel PPO over gloo, NCCL being GPU-only. A later runner of the same process (the
@@ -143,7 +149,7 @@ class Runner(OnPolicyRunner):
 def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, critic: dict,
                    critic_groups=("critic",), run_name: str = "", one_sync_update: bool = False,
                    packed_update: bool = False, graph_update: bool = False, compile_mode: str = "",
-                   **algorithm) -> dict:
+                   deferred_episode_log: bool = False, **algorithm) -> dict:
     """The rsl-rl ``OnPolicyRunner`` configuration dict: PPO with the adaptive learning rate, its settings
     ``algorithm`` (``num_learning_epochs``, ``num_mini_batches``, ``clip_param``, ``gamma``, ``lam``,
     ``value_loss_coef``, ``entropy_coef``, ``learning_rate``, ``max_grad_norm``, ``desired_kl``,
@@ -153,10 +159,14 @@ def rsl_runner_cfg(*, num_steps_per_env: int, save_interval: int, actor: dict, c
     ``packed_update`` (without ``one_sync_update``): :class:`~wresdyn.ppo.packed_update.PackedPPO`, rsl-rl's update
     bit for bit with fewer collectives and host waits; ``graph_update`` (without ``one_sync_update``):
     :class:`~wresdyn.ppo.graph_update.GraphPPO`, the packed update with each mini-batch's step one CUDA graph replay;
-    ``compile_mode``: rsl-rl's ``torch.compile`` of the actor and critic (``""``: none)."""
+    ``compile_mode``: rsl-rl's ``torch.compile`` of the actor and critic (``""``: none); ``deferred_episode_log``:
+    the episode bookkeeping copied to the host once per iteration (:mod:`~wresdyn.ppo.episode_log`; the key is set only
+    when true)."""
     ppo = ("wresdyn.ppo.update:OneSyncPPO" if one_sync_update else "wresdyn.ppo.graph_update:GraphPPO" if graph_update
            else "wresdyn.ppo.packed_update:PackedPPO" if packed_update else "PPO")
+    extra = {"deferred_episode_log": True} if deferred_episode_log else {}
     return {
+        **extra,
         "num_steps_per_env": num_steps_per_env,
         "save_interval": save_interval,
         "obs_groups": {"actor": ["policy"], "critic": list(critic_groups)},

@@ -32,6 +32,7 @@ from ..learn.runs import RunError, RunnerFolder, check_resume, load_checkpoint, 
 from ..learn.selection import ValidationScore
 from ..progress import bar
 from ..sim.physics import PhysicalParams
+from .affinity import pin_process
 from .ppo_config import DATASET_IDENTITY, RESUME_MAY_CHANGE, TrainConfig, upgrade_config_dict
 from .replay_env import ReplayEnv
 from .runner import (Ranks, Runner, UpgradingRunnerFolder, latest_checkpoint, learn, make_runner, on_iteration,
@@ -148,7 +149,8 @@ def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
         clip_param=p.clip_param, gamma=p.gamma, lam=p.lam, value_loss_coef=p.value_loss_coef,
         entropy_coef=p.entropy_coef, learning_rate=p.learning_rate, max_grad_norm=p.max_grad_norm,
         desired_kl=p.desired_kl, use_mixed_precision=p.mixed_precision, one_sync_update=p.one_sync_update,
-        packed_update=True, graph_update=p.graph_update is not False, compile_mode=p.compile_mode)
+        packed_update=True, graph_update=p.graph_update is not False, compile_mode=p.compile_mode,
+        deferred_episode_log=p.deferred_episode_log)
 
 
 def _run_record(dataset, robot, cfg: TrainConfig, ranks: Ranks, data_path) -> dict:
@@ -190,6 +192,8 @@ def _start(dataset, robot, cfg: TrainConfig, run_dir: Path, ranks: Ranks, log, p
     into ``train.log``); rank 0 makes the run folder."""
     seed = cfg.ppo.seed + ranks.rank
     seed_processes(seed, cfg.ppo.torch_threads)
+    if cfg.ppo.pin_cpus:
+        pin_process(ranks.local_rank, ranks.world, cfg.ppo.device)
     train_trajs = dataset.split("train")
     num_worlds = ranks.num_worlds(cfg.env.num_worlds)
     mean, std = obs_stats(train_trajs)
