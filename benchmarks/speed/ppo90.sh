@@ -6,6 +6,8 @@
 #   ITERS=50 BASELINE=0 GRAPH=1 bash benchmarks/speed/ppo90.sh OUT  # the packed and the CUDA-graph update (~6 min)
 #   DEVICE=cpu N=16 ITERS=1 bash benchmarks/speed/ppo90.sh OUT  # a check of the script on the CPU (gloo; no figure)
 #   FOUR=1 ...                     # each round also on four GPUs (0-3), 4096 worlds each (a 4-GPU host)
+#   VARIANTS="+graph +graph+pin +graph+defer_log +graph+pin+defer_log" bash benchmarks/speed/ppo90.sh OUT
+#                                  # these case options side by side instead of BASELINE's and GRAPH's (~9 min)
 #
 # Each round: one GPU (torchrun, 1 process) at 4096 worlds, then two GPUs (torchrun, 2 processes) at 4096 worlds
 # each, 2 untimed and 15 timed iterations per case (benchmarks/speed/ppo_scaling.py): the packed update run eagerly
@@ -13,7 +15,10 @@
 # PPO.update (+rsl_update), the same update bit for bit (tests/ppo/test_packed_update.py), and with GRAPH=1 the
 # update replayed from one CUDA graph per mini-batch (+graph, ppo.graph_update: wresdyn.ppo.graph_update.GraphPPO,
 # the residual's default on CUDA since these rounds measured it), in one process per launch, their order rotated
-# from round to round so that none always runs first. GRAPH=1 first checks the captured update against the packed
+# from round to round so that none always runs first. VARIANTS (space-separated case options of
+# benchmarks/speed/ppo_scaling.py, e.g. +pin: each process bound to its GPU's cores; +defer_log: no host wait per
+# rollout step for rsl-rl's episode logging) replaces that list, rotated the same way. A list with +graph (GRAPH=1,
+# or a VARIANTS entry) first checks the captured update against the packed
 # one on one GPU and on two over NCCL (tests/ppo/test_graph_update.py's CUDA tests, where pytest is installed). Then
 # the update's profile on 2 GPUs once (the packed update: the profile's synchronisations cannot run inside a
 # capture).
@@ -27,6 +32,7 @@
 set -u
 OUT=${1:?usage: ppo90.sh OUT}
 BASELINE=${BASELINE:-1} GRAPH=${GRAPH:-0} FOUR=${FOUR:-0} DEVICE=${DEVICE:-cuda} N=${N:-4096} ITERS=${ITERS:-15}
+VARIANTS=${VARIANTS:-}
 mkdir -p "$OUT"
 PY=python3
 TORCHRUN=(python3 -m torch.distributed.run --standalone)
@@ -67,11 +73,13 @@ graph_check() {  # the captured update against the default one on GPU 0 and on G
   CUDA_VISIBLE_DEVICES=0,1 $PY -m pytest -p no:cacheprovider -q tests/ppo/test_graph_update.py -k cuda \
     > "$OUT/graph_check.txt" 2>&1
 }
-if [[ $GRAPH == 1 && $DEVICE == cuda* ]]; then step "graph check, 1 GPU" graph_check; fi
-
 variants=("+packed")  # each case's options: the packed update, then the switched-on comparisons
 [[ $BASELINE == 1 ]] && variants+=("+rsl_update")
 [[ $GRAPH == 1 ]] && variants+=("+graph")
+if [[ -n $VARIANTS ]]; then read -r -a variants <<< "$VARIANTS"; fi
+graphed=0
+for v in "${variants[@]}"; do [[ $v == *+graph* ]] && graphed=1; done
+if [[ $graphed == 1 && $DEVICE == cuda* ]]; then step "graph check, 1 GPU" graph_check; fi
 for r in 1 2 3; do
   k=$(( (r - 1) % ${#variants[@]} ))
   one=() two=() four=()
