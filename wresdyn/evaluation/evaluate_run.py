@@ -5,6 +5,7 @@ from __future__ import annotations
 from ..learn.run_residual import MeanResidual, load_policy
 from ..learn.runs import RunError, run_physics
 from ..ppo.ppo_config import config_from_dict
+from ..robot.physical import PhysicalParams
 from ..sim.warmup import compile_kernels
 from .open_loop import evaluate_splits, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves
@@ -105,7 +106,7 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
 def load_ensemble(run_dirs, robot, rate_hz: float, solver: str | None = None):
     """:func:`load_run_model` of a seed ensemble of ``run_dirs``, as one model: residuals fitted on one identified
     model are averaged at every step (:class:`~wresdyn.learn.run_residual.MeanResidual`) on that model; runs of
-    identified physics alone give their parameters' mean (:meth:`~wresdyn.sim.physics.PhysicalParams.mean`). The
+    identified physics alone give their parameters' mean (:meth:`~wresdyn.robot.physical.PhysicalParams.mean`). The
     first run's meta, solver and substeps.
 
     Raises:
@@ -114,8 +115,6 @@ def load_ensemble(run_dirs, robot, rate_hz: float, solver: str | None = None):
             alone differ in their solver or friction law.
     """
     from pathlib import Path
-
-    from ..sim.physics import PhysicalParams
 
     loaded = [load_run_model(r, robot, rate_hz, solver) for r in run_dirs]
     kappas = [run_friction_kappa(r) for r in run_dirs]
