@@ -161,3 +161,55 @@ def test_eval_command_reports_a_residual_that_diverges_everywhere(robot, data, t
     metrics = json.loads((run / "eval" / "metrics.json").read_text())["splits"]
     assert metrics["heldout"]["pd_residual"]["diverged_names"] == [t.name for t in data.split("heldout")]
     assert np.isfinite(metrics["heldout"]["pd_residual"]["mean_abs_dq"])
+
+
+def test_eval_of_a_seed_ensemble(robot, data, tmp_path, capsys):
+    """`wresdyn eval RUN --ensemble ...`: RUN averaged with itself replays exactly as RUN alone (the mean of equal
+    residuals is each of them, bit for bit), the report names the members, and a member fitted on another model
+    (here one with a physics.json, RUN without) is refused."""
+    from wresdyn.cli import main
+    from wresdyn.fit.gradfit import GradFitConfig, build_policy, export_run
+    from wresdyn.learn.residual import ResidualConfig, obs_stats
+    from wresdyn.robot.physical import PhysicalParams
+
+    path = tmp_path / "data.npz"
+    data.save(path)
+    cfg = GradFitConfig(residual=ResidualConfig(kind="delta_action", arch="gru", hidden_dims=(8,), gru_hidden_dim=8,
+                                                output_gain=1.0))
+    torch.manual_seed(0)
+    run, other = tmp_path / "run", tmp_path / "other"
+    export_run(build_policy(robot, cfg.residual, *obs_stats(data.trajectories)), run, cfg, data, data_path=path)
+    export_run(build_policy(robot, cfg.residual, *obs_stats(data.trajectories)), other, cfg, data, data_path=path,
+               physics=PhysicalParams.nominal(robot))
+    assert main(["eval", str(run), "--splits", "heldout", "--out", str(tmp_path / "alone")]) == 0
+    assert main(["eval", str(run), "--splits", "heldout", "--ensemble", str(run), "--out", str(tmp_path / "ens")]) == 0
+    alone, ens = (json.loads((tmp_path / d / "metrics.json").read_text()) for d in ("alone", "ens"))
+    assert ens["splits"] == alone["splits"]
+    assert ens["info"]["ensemble"] == [str(run)] and "ensemble" not in alone["info"]
+    capsys.readouterr()
+    assert main(["eval", str(run), "--splits", "heldout", "--ensemble", str(other), "--out", str(tmp_path / "no")]) != 0
+    assert "its physics.json differs" in capsys.readouterr().err
+
+
+def test_eval_of_an_ensemble_of_identified_models_replays_their_mean_parameters(robot, data, tmp_path, capsys):
+    """`wresdyn eval RUN --ensemble ...` on runs of identified physics alone replays one model, the parameters'
+    mean: the same figures as a run holding that mean."""
+    from wresdyn.cli import main
+    from wresdyn.robot.physical import PhysicalParams
+
+    path = tmp_path / "data.npz"
+    data.save(path)
+    a = PhysicalParams.nominal(robot)
+    b = a.copy()
+    b.kp, b.damping = 0.6 * a.kp, a.damping + 0.5 * a.kd
+    for name, physics in (("a", a), ("b", b), ("mean", PhysicalParams.mean([a, b]))):
+        (tmp_path / name).mkdir()
+        physics.save(tmp_path / name / "physics.json")
+        (tmp_path / name / "config.json").write_text(json.dumps({"rate_hz": data.rate_hz, "solver": "auto",
+                                                                 "data_path": str(path)}))
+    for args in (["mean"], ["a", "--ensemble", str(tmp_path / "b")], ["a"]):
+        assert main(["eval", str(tmp_path / args[0]), *args[1:], "--splits", "heldout",
+                     "--out", str(tmp_path / f"eval_{len(args)}{args[0]}")]) == 0
+    mean, ens, alone = (json.loads((tmp_path / f"eval_{d}" / "metrics.json").read_text())["splits"]["heldout"]
+                        for d in ("1mean", "3a", "1a"))
+    assert ens == mean and ens["pd_residual"] != alone["pd_residual"]

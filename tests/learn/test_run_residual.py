@@ -43,3 +43,47 @@ def test_loading_a_residual_imports_no_learner(tmp_path):
 def test_a_run_without_an_exported_residual_is_a_run_error(tmp_path):
     with pytest.raises(RunError, match="no exported residual"):
         load_policy(tmp_path)
+
+
+def _gru(seed: int, n: int = 2, kind: str = "delta_action"):
+    from wresdyn.learn.residual import EluMLP, GRUResidualPolicy
+
+    torch.manual_seed(seed)
+    return GRUResidualPolicy(torch.nn.GRU(4 * n, 8), EluMLP(8, n, [8]), np.zeros(4 * n), np.ones(4 * n),
+                             np.full(n, 0.1), kind).eval()
+
+
+def _steps(policy, obs):
+    policy.reset()
+    with torch.no_grad():
+        return torch.stack([policy(o) for o in obs])
+
+
+def test_an_ensemble_of_one_is_its_member_bit_for_bit():
+    from wresdyn.learn.run_residual import MeanResidual
+
+    obs = torch.randn(20, 5, 8)
+    alone, ensemble = _gru(0), MeanResidual([_gru(0)])
+    assert torch.equal(_steps(ensemble, obs), _steps(alone, obs))
+    assert torch.equal(ensemble.scale, alone.scale) and ensemble.residual_kind() == "delta_action"
+
+
+def test_an_ensemble_steps_the_mean_of_its_members_each_with_its_own_state():
+    """Each member's GRU carries its own hidden state through the steps (a shared or reset state would change every
+    step after the first), and ``reset`` starts every member again."""
+    from wresdyn.learn.run_residual import MeanResidual
+
+    obs = torch.randn(20, 5, 8)
+    a, b = _steps(_gru(0), obs), _steps(_gru(1), obs)
+    assert not torch.allclose(a, b, atol=1e-4)  # the members differ, else the mean would prove nothing
+    ensemble = MeanResidual([_gru(0), _gru(1)])
+    first = _steps(ensemble, obs)
+    torch.testing.assert_close(first, (a + b) / 2, rtol=0, atol=1e-7)
+    assert torch.equal(_steps(ensemble, obs), first)
+
+
+def test_residuals_of_different_kinds_are_not_averaged():
+    from wresdyn.learn.run_residual import MeanResidual
+
+    with pytest.raises(ValueError, match="different kinds"):
+        MeanResidual([_gru(0), _gru(1, kind="torque")])

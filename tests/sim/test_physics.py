@@ -58,6 +58,29 @@ def test_json_round_trip_and_bad_files(humanoid, tmp_path):
         PhysicalParams.load(tmp_path / "names.json", humanoid)
 
 
+def test_the_mean_of_parameters_is_each_field_s_mean_and_stays_physical(humanoid):
+    """An ensemble's model: the mean of one set is that set bit for bit; of two, each field's midpoint (an
+    unlimited effort stays unlimited), which passes the robot's checks as both sets do."""
+    a = PhysicsModel(humanoid).values()
+    a.effort[0] = np.inf
+    b = a.copy()
+    b.kp, b.body_mass, b.stiction = 2.0 * a.kp, 3.0 * a.body_mass, a.stiction + 0.1
+    b.body_inertia = 0.5 * a.body_inertia
+    one = PhysicalParams.mean([a])
+    assert all(np.array_equal(getattr(one, f), getattr(a, f)) for f in ("kp", "effort", "body_inertia", "stiction"))
+    two = PhysicalParams.mean([a, b])
+    np.testing.assert_allclose(two.kp, 1.5 * a.kp)
+    np.testing.assert_allclose(two.body_mass, 2.0 * a.body_mass)
+    np.testing.assert_allclose(two.body_inertia, 0.75 * a.body_inertia)
+    np.testing.assert_allclose(two.stiction, a.stiction + 0.05)
+    assert two.effort[0] == np.inf
+    two.check(humanoid)
+    other = a.copy()
+    other.joint_names = other.joint_names[::-1]
+    with pytest.raises(PhysicsError, match="different robots"):
+        PhysicalParams.mean([a, other])
+
+
 def test_real_robot_truth_is_the_mujoco_model(humanoid):
     """The true parameters read back from the perturbed MuJoCo model: nominal when the mismatch is off, the
     configured scales when on."""

@@ -39,6 +39,11 @@ class Eval(Command):
     """Joints in the Fig. 3 plot (largest PD-only error first)."""
     compare: tuple[str, ...] = ()
     """Other runs to overlay in the learning curves."""
+    ensemble: tuple[str, ...] = ()
+    """Other runs averaged with RUN into one model (a seed ensemble): residuals fitted on RUN's physics.json
+    are averaged at every step, each seeing the ensemble's replay (same kind, solver and friction law); runs of
+    identified physics alone give their parameters' mean. Pass --out: the report is the ensemble's, not RUN's.
+    Empty: RUN alone."""
 
 
 COMMAND = Eval
@@ -61,5 +66,5 @@ def run(args: Eval) -> int:
     ds, robot = load_data(data, args.robot, args.gains)
     evaluate_run(args.run, ds, robot, list(args.splits), args.out, args.solver, args.device, args.joints,
                  list(args.compare),
-                 data_label=str(data))
+                 data_label=str(data), ensemble=list(args.ensemble))
     return 0

@@ -2,24 +2,27 @@
 
 from __future__ import annotations
 
-from ..learn.run_residual import load_policy
+from ..learn.run_residual import MeanResidual, load_policy
 from ..learn.runs import RunError, run_physics
 from ..ppo.ppo_config import config_from_dict
+from ..robot.physical import PhysicalParams
 from ..sim.warmup import compile_kernels
 from .open_loop import evaluate_splits, summary_line, write_report
 from .plots import plot_fig3, plot_learning_curves
 
-__all__ = ["evaluate_run", "load_run_model", "run_friction_kappa"]
+__all__ = ["evaluate_run", "load_run_model", "load_ensemble", "run_friction_kappa"]
 
 
 def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
-                 device: str = "cpu", joints: int = 6, compare=(), data_label: str = "", mark=None) -> dict:
+                 device: str = "cpu", joints: int = 6, compare=(), data_label: str = "", mark=None,
+                 ensemble=()) -> dict:
     """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
     per-split summaries. A run with ``physics.json`` (``wresdyn identify``, or a residual fitted on top of
     identified physics) replays its model with those parameters; a run with no residual evaluates the
     calibrated model under PD alone. Every replay runs under the run's own dry-friction law
     (:func:`run_friction_kappa`). ``mark``: called with a short note as each part ends (the model loaded, the splits
-    replayed), for a clocked log; ``None``: nothing."""
+    replayed), for a clocked log; ``None``: nothing. ``ensemble``: other run folders whose residuals are averaged
+    with ``run``'s at every step (:func:`load_ensemble`); ``()``: ``run``'s residual alone."""
     import json
     from pathlib import Path
 
@@ -27,7 +30,10 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
 
     torch.set_num_threads(1)
     run_dir = Path(run)
-    policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
+    if ensemble:
+        policy, meta, physics, solver, substeps = load_ensemble([run_dir, *ensemble], robot, ds.rate_hz, solver)
+    else:
+        policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
     kappa = run_friction_kappa(run_dir)
     out_dir = Path(out) if out else run_dir / "eval"
 
@@ -57,7 +63,9 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
     plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
     law = {} if kappa is None else {"friction_kappa": kappa}  # the soft default's reports stay as they were
-    write_report(out_dir, robot, results, {"run": str(run_dir), "residual": meta["kind"], "arch": meta["arch"],
+    members = {"ensemble": [str(r) for r in ensemble]} if ensemble else {}
+    write_report(out_dir, robot, results, {"run": str(run_dir), **members, "residual": meta["kind"],
+                                           "arch": meta["arch"],
                                            "physics": "physics.json" if physics is not None else "robot file",
                                            "solver": solver, **law, "dataset": data_label, "robot": str(robot.source)})
     print(f"wrote {out_dir / 'metrics.json'} and {out_dir / 'report.md'}")
@@ -93,6 +101,38 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
     if abs(meta["rate_hz"] - rate_hz) > 1e-9:
         raise RunError(f"{run_dir}: trained at {meta['rate_hz']:g} Hz, the data is at {rate_hz:g} Hz")
     return policy, meta, physics, solver, substeps
+
+
+def load_ensemble(run_dirs, robot, rate_hz: float, solver: str | None = None):
+    """:func:`load_run_model` of a seed ensemble of ``run_dirs``, as one model: residuals fitted on one identified
+    model are averaged at every step (:class:`~wresdyn.learn.run_residual.MeanResidual`) on that model; runs of
+    identified physics alone give their parameters' mean (:meth:`~wresdyn.robot.physical.PhysicalParams.mean`). The
+    first run's meta, solver and substeps.
+
+    Raises:
+        RunError: the runs mix residuals and physics alone; or residuals' physics, kind, solver, substeps or
+            dry-friction law differ from the first run's (members must be fits on one model); or runs of physics
+            alone differ in their solver or friction law.
+    """
+    from pathlib import Path
+
+    loaded = [load_run_model(r, robot, rate_hz, solver) for r in run_dirs]
+    kappas = [run_friction_kappa(r) for r in run_dirs]
+    first, name = loaded[0], Path(run_dirs[0])
+    if len({p is None for p, *_ in loaded}) != 1:
+        raise RunError(f"{name}: an ensemble averages residuals or identified physics, not both")
+    for r, (policy, meta, physics, s, sub), kappa in zip(run_dirs, loaded, kappas):
+        if (meta["kind"], s, sub, kappa) != (first[1]["kind"], first[3], first[4], kappas[0]):
+            raise RunError(f"{r}: residual kind, solver, substeps or friction law differ from {name}'s")
+        if policy is not None and _physics_json(physics) != _physics_json(first[2]):
+            raise RunError(f"{r}: its physics.json differs from {name}'s")
+    if first[0] is None:
+        return None, first[1], PhysicalParams.mean(p for _, _, p, *_ in loaded), *first[3:]
+    return MeanResidual(p for p, *_ in loaded), *first[1:]
+
+
+def _physics_json(physics) -> dict | None:
+    return None if physics is None else physics.to_json()
 
 
 def run_friction_kappa(run_dir) -> float | None:

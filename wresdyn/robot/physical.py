@@ -84,6 +84,20 @@ class PhysicalParams:
                    np.array(robot.body_inertia, dtype=np.float64),
                    **({} if servo is None else {f: np.array(getattr(servo, f), dtype=np.float64) for f in SERVO_FIELDS}))
 
+    @classmethod
+    def mean(cls, params) -> "PhysicalParams":
+        """The field-by-field mean of parameters of one robot (an ensemble of identifications, one model). It stays
+        physical: every field's admissible set is convex (signs; a body's inertia about its centre of mass, whose
+        triangle inequalities are linear in it)."""
+        params = list(params)
+        first = params[0]
+        for p in params[1:]:
+            if (p.joint_names, p.body_names) != (first.joint_names, first.body_names):
+                raise PhysicsError("parameters of different robots cannot be averaged")
+        return cls(list(first.joint_names), list(first.body_names),
+                   **{f: np.mean([getattr(p, f) for p in params], axis=0)
+                      for f in (*JOINT_FIELDS, *BODY_FIELDS, *SERVO_FIELDS)})
+
     def copy(self) -> "PhysicalParams":
         return PhysicalParams(**{f.name: (list(v) if isinstance(v := getattr(self, f.name), list) else v.copy())
                                  for f in fields(self)})
