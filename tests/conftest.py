@@ -7,6 +7,9 @@ check command :func:`wresdyn.sim.parity.multisine_command`.
 """
 
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,6 +39,17 @@ def tiny_ppo_config(arch="mlp", iterations=2, kind="torque"):
         ppo=PPOConfig(num_steps_per_env=8, iterations=iterations, save_interval=1, num_mini_batches=2,
                       num_learning_epochs=2),
     )
+
+
+def torchrun_two(script: str, *args: str) -> None:
+    """``script`` as a worker on two processes under torchrun (gloo on the CPU), one thread each, the repository and
+    the script's folder on the path; fails the test with the workers' error output if either exits non-zero."""
+    root = Path(__file__).resolve().parent.parent
+    path = os.pathsep.join([str(root), str(Path(script).parent), os.environ.get("PYTHONPATH", "")])
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=path)
+    res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+                          str(script), *args], capture_output=True, text=True, env=env, timeout=600, cwd=root)
+    assert res.returncode == 0, res.stderr[-3000:]
 
 
 def check_directional_gradients(loss, params: dict, grads: dict, eps: float, rtol: float = 2e-2) -> None:

@@ -4,7 +4,6 @@ process and in two over gloo through torchrun."""
 
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -21,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TESTS = Path(__file__).resolve().parents[1]
 if str(TESTS) not in sys.path:  # run as torchrun's script: conftest's helpers
     sys.path.insert(0, str(TESTS))
-from conftest import tiny_ppo_config as tiny  # noqa: E402
+from conftest import tiny_ppo_config as tiny, torchrun_two  # noqa: E402
 
 ITERATIONS = 3
 
@@ -66,11 +65,7 @@ def test_deferred_episode_log_learns_and_logs_the_same(robot, data, tmp_path):
 
 
 def test_deferred_episode_log_on_two_processes(tmp_path):
-    path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=path)
-    res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-                          __file__, str(tmp_path)], capture_output=True, text=True, env=env, timeout=600, cwd=ROOT)
-    assert res.returncode == 0, res.stderr[-3000:]
+    torchrun_two(__file__, str(tmp_path))
     for rank in (0, 1):
         r = json.loads((tmp_path / f"rank{rank}.json").read_text())
         assert r["equal"] and r["lr"][0] == r["lr"][1], (rank, r)

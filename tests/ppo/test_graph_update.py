@@ -10,7 +10,6 @@ warm-up, the replay, capturable Adam's rounding, NCCL inside the graph) is check
 import copy
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -29,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TESTS = Path(__file__).resolve().parents[1]
 if str(TESTS) not in sys.path:  # run as torchrun's script: conftest's helpers
     sys.path.insert(0, str(TESTS))
-from conftest import tiny_ppo_config as tiny  # noqa: E402
+from conftest import tiny_ppo_config as tiny, torchrun_two  # noqa: E402
 
 UPDATES = 2
 """Consecutive updates compared: the second reads the normalisers' std pinned after the first and reuses the kept
@@ -205,12 +204,7 @@ def test_graph_update_config():
 
 def _torchrun_two(tmp_path, device: str) -> None:
     """This file's worker on two processes (gloo on the CPU, NCCL on two GPUs), its results in ``tmp_path``."""
-    path = os.pathsep.join([str(ROOT), str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=path)
-    res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-                          __file__, str(tmp_path), device], capture_output=True, text=True, env=env, timeout=600,
-                         cwd=ROOT)
-    assert res.returncode == 0, res.stderr[-3000:]
+    torchrun_two(__file__, str(tmp_path), device)
 
 
 def test_graph_step_equals_the_packed_update_on_two_processes(tmp_path):

@@ -4,7 +4,6 @@ bit for bit: in one process, and in two over gloo through torchrun (rsl-rl's mul
 import copy
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -23,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TESTS = Path(__file__).resolve().parents[1]
 if str(TESTS) not in sys.path:  # run as torchrun's script: conftest's helpers
     sys.path.insert(0, str(TESTS))
-from conftest import tiny_ppo_config as tiny  # noqa: E402
+from conftest import tiny_ppo_config as tiny, torchrun_two  # noqa: E402
 
 KLS = (0.03, 1e-6, 10.0)
 """Targets of the adaptive rate: the default (the rate moves where the KL says), one that lowers it at every
@@ -107,11 +106,7 @@ def test_packed_update_equals_rsl_rls_update_bit_for_bit(robot, data, tmp_path, 
 def test_packed_update_equals_rsl_rls_on_two_processes(tmp_path):
     """Two ranks over gloo, each its own rollout: the KL packed with the gradients, the rate adapted on every rank,
     against rsl-rl's KL all-reduce, rank 0's broadcast rate and the gradients' bucket."""
-    path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=path)
-    res = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-                          __file__, str(tmp_path)], capture_output=True, text=True, env=env, timeout=600, cwd=ROOT)
-    assert res.returncode == 0, res.stderr[-3000:]
+    torchrun_two(__file__, str(tmp_path))
     for rank in (0, 1):
         for kl in KLS:
             r = json.loads((tmp_path / f"rank{rank}_kl{kl}.json").read_text())
