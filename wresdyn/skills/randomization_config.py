@@ -62,7 +62,8 @@ class Randomization:
     unseen: Literal["narrow", "wide"] = "narrow"
     """(f)'s range of a parameter its identifiability report marks unseen (no finite error: the stand's data carry
     no trace of it), read from the report alone: ``"narrow"`` ±:data:`NARROW_DEFAULT` like any parameter without an
-    error; ``"wide"`` (e)'s range (``unseen_mass_add_kg`` for a link's mass, where set) and, when ``com_body``'s
+    error; ``"wide"`` (e)'s range (``unseen_mass_add_kg`` for a link's mass, ``unseen_effort_scale`` for an effort
+    limit, where set) and, when ``com_body``'s
     mass is unseen, (e)'s whole CoM offset (``unseen_com_offset``, where set) instead of :data:`NARROW_DEFAULT` of
     it. (e) is untouched."""
     unseen_mass_add_kg: tuple[float, float] | None = None
@@ -74,6 +75,12 @@ class Randomization:
     """With ``unseen="wide"`` and ``com_body``'s mass unseen: the half-ranges of its CoM offset along x, y, z [m]
     instead of ``com_offset`` (``None``). Sourced value (0.05, 0.05, 0.01): IsaacLab ``velocity_env_cfg.py``
     ``base_com`` (x, y ±0.05, z ±0.01 m)."""
+    unseen_effort_scale: tuple[float, float] | None = None
+    """With ``unseen="wide"``: the factor range of an effort limit the report marks unseen, instead of
+    ``effort_scale`` (``None``), drawn as effort factors are (log-uniform, uniform where ``effort_from_data`` sets a
+    joint so). Sourced value (0.8, 1.2): TWIST's humanoid motion-tracking recipe (``g1_mimic_distill_config.py``:
+    ``randomize_motor = True``, ``motor_strength_range = [0.8, 1.2]``, a factor on every motor's torque), here on
+    the limits the stand's data cannot see."""
 
     effort_from_data: bool = False
     """(f) only: draw the effort limit of each joint whose drive the identification's training data saturate on fewer
@@ -88,28 +95,36 @@ class Randomization:
     def __post_init__(self) -> None:
         if self.unseen not in ("narrow", "wide"):
             raise WresdynError(f"randomization.unseen: 'narrow' or 'wide', got {self.unseen!r}")
-        if self.unseen == "narrow" and (self.unseen_mass_add_kg, self.unseen_com_offset) != (None, None):
-            raise WresdynError("randomization.unseen-mass-add-kg / unseen-com-offset act only with "
-                               "--randomization.unseen wide")
+        if self.unseen == "narrow" and (self.unseen_mass_add_kg, self.unseen_com_offset,
+                                        self.unseen_effort_scale) != (None, None, None):
+            raise WresdynError("randomization.unseen-mass-add-kg / unseen-com-offset / unseen-effort-scale act only "
+                               "with --randomization.unseen wide")
         add = self.unseen_mass_add_kg
         if add is not None and not (len(add) == 2 and all(math.isfinite(x) for x in add) and add[0] < add[1]):
             raise WresdynError(f"randomization.unseen_mass_add_kg: (lo, hi) kg with lo < hi, got {add}")
         com = self.unseen_com_offset
         if com is not None and not (len(com) == 3 and all(math.isfinite(x) and x >= 0 for x in com)):
             raise WresdynError(f"randomization.unseen_com_offset: three half-ranges >= 0 m, got {com}")
+        eff = self.unseen_effort_scale
+        if eff is not None and not (len(eff) == 2 and all(math.isfinite(x) and x > 0 for x in eff)
+                                    and eff[0] < eff[1]):
+            raise WresdynError(f"randomization.unseen_effort_scale: (lo, hi) factors with 0 < lo < hi, got {eff}")
 
     def record(self, narrow: bool = True) -> dict:
         """The fields as a run records them (``config.json``, ``results.json``): the :data:`UNSEEN_FIELDS` only with
-        ``unseen="wide"`` and ``effort_from_data`` only when on, both for (f) alone (``narrow``; (e) never reads them),
-        so that every run recorded before them reads the same and resumes, (e)'s whatever they are."""
+        ``unseen="wide"`` (``unseen_effort_scale`` only when set) and ``effort_from_data`` only when on, all for (f)
+        alone (``narrow``; (e) never reads them), so that every run recorded before them reads the same and resumes,
+        (e)'s whatever they are."""
         out = asdict(self)
         if self.unseen == "narrow" or not narrow:
             for f in UNSEEN_FIELDS:
                 del out[f]
+        elif self.unseen_effort_scale is None:
+            del out["unseen_effort_scale"]
         if not (self.effort_from_data and narrow):
             del out["effort_from_data"]
         return out
 
 
-UNSEEN_FIELDS = ("unseen", "unseen_mass_add_kg", "unseen_com_offset")
+UNSEEN_FIELDS = ("unseen", "unseen_mass_add_kg", "unseen_com_offset", "unseen_effort_scale")
 """The fields of :class:`Randomization` that change only (f)'s ranges of unseen parameters."""

@@ -106,7 +106,8 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
     ±:data:`NARROW_DEFAULT`. Dry friction and delay the same way around their identified values; the CoM offsets
     :data:`NARROW_DEFAULT` of (e)'s (the report does not cover them); the floor friction (e)'s (the stand's data say
     nothing of the floor). With ``cfg.unseen="wide"`` a parameter the report marks unseen (:func:`unseen_parameters`)
-    gets (e)'s range instead, an unseen link's mass ``cfg.unseen_mass_add_kg`` where set, and the CoM offset is
+    gets (e)'s range instead, an unseen link's mass ``cfg.unseen_mass_add_kg`` and an unseen effort limit
+    ``cfg.unseen_effort_scale`` where set, and the CoM offset is
     (e)'s (or ``cfg.unseen_com_offset``) when ``com_body``'s mass is unseen. With ``cfg.effort_from_data`` the effort
     limits the training data barely saturate are drawn uniformly from the data's demand up (:func:`_effort_from_data`).
     Returns the ranges and one line saying where the widths came from."""
@@ -138,6 +139,8 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
         # a light link keeps a tenth of its mass: IsaacLab adds to the base only
         lo, hi = (np.maximum(m + a, 0.1 * m) / np.where(m > 0, m, 1.0) for a in cfg.unseen_mass_add_kg)
         scale["body_mass"] = _where(is_unseen["body_mass"], (lo, hi), scale["body_mass"])
+    if cfg.unseen_effort_scale is not None and is_unseen["effort"].any():
+        scale["effort"] = _where(is_unseen["effort"], _pair(cfg.unseen_effort_scale, robot.n_dof), scale["effort"])
     fr, de = np.asarray(centre.friction, float), np.asarray(centre.delay, float)
     friction = (fr * np.exp(-half["friction"]), np.minimum(fr * np.exp(half["friction"]), wide.friction[1] + fr))
     delay = (de * np.exp(-half["delay"]), np.minimum(de * np.exp(half["delay"]), de + wide.delay[1][0]))
@@ -159,6 +162,8 @@ def narrow_ranges(cfg: Randomization, robot, centre, run) -> tuple[Ranges, str]:
     if cfg.unseen == "wide":
         source += (f"; {len(unseen)} unseen in the report with (e)'s ranges"
                    + (f", an unseen link's mass {cfg.unseen_mass_add_kg} kg" if cfg.unseen_mass_add_kg else "")
+                   + (f", {int(is_unseen['effort'].sum())} unseen effort limits ×{cfg.unseen_effort_scale}"
+                      if cfg.unseen_effort_scale else "")
                    + (f", {wide.com_body}'s CoM ±{tuple(float(x) for x in com)} m" if com_unseen else ""))
     return Ranges(scale, friction, delay, com, wide.com_body, wide.floor_friction, uniform), source
 
