@@ -16,13 +16,15 @@ same update run eagerly (``ppo.graph_update`` false: :class:`~wresdyn.ppo.packed
 rsl-rl's mixed precision, ``+compile`` rsl-rl's ``torch.compile``, ``+mbK`` K mini-batches, ``+epK`` K epochs;
 ``+pin`` (residual only) each process bound to the CPU cores local to its GPU (``ppo.pin_cpus``,
 :func:`wresdyn.ppo.affinity.pin_process`), ``+defer_log`` (residual only) rsl-rl's episode bookkeeping copied to the
-host once per iteration instead of a host wait at every rollout step on rank 0 (``ppo.deferred_episode_log``);
+host once per iteration instead of a host wait at every rollout step on rank 0 (``ppo.deferred_episode_log``, on by
+default on CUDA in training; a residual case without ``+defer_log`` turns it off, as every case ran before);
 ``+rsl_update`` (residual only) runs rsl-rl's own ``PPO.update`` instead of the residual's update, which is
 :class:`~wresdyn.ppo.packed_update.PackedPPO`'s bit for bit with fewer collectives and host waits (on the CPU, or
 eagerly with ``+packed``): the baseline of that change in the same run.
 
 - ``residual``: the default residual PPO on the shipped benchmark (:func:`wresdyn.ppo.trainer.runner_cfg`, 24 steps per
-  world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph.
+  world, 5 epochs x 4 mini-batches), the environment step from a CUDA graph; the training default on CUDA is
+  ``residual:N+graph+defer_log``.
 - ``skill``: policy (a) of the floor benchmark (``wresdyn deploy --floor --full``'s sizes: 16 training motions per
   family of 4 s; :class:`~wresdyn.skills.env.TrackingEnv` on the nominal simulator with a floor,
   :func:`wresdyn.skills.skill_ppo.runner_cfg` with the default :class:`~wresdyn.skills.skill_config.SkillPPOConfig`).
@@ -96,7 +98,9 @@ def _residual(ranks, robot, data, envs: int, device: str, fields: dict, tmp: Pat
     from wresdyn.ppo.replay_env import ReplayEnv
     from wresdyn.learn.residual import obs_stats
 
-    cfg = set_fields(default_config(), {"env.num_worlds": envs, "ppo.device": device,
+    # rsl-rl's per-step episode bookkeeping unless the case says +defer_log, although the deferred one is the
+    # default on CUDA: a case keeps meaning what it measured in the rounds recorded before that default
+    cfg = set_fields(default_config(), {"env.num_worlds": envs, "ppo.device": device, "ppo.deferred_episode_log": False,
                                         **{f"ppo.{k}": v for k, v in fields.items() if k != RSL_UPDATE}})
     seed_processes(cfg.ppo.seed + ranks.rank, cfg.ppo.torch_threads)
     if cfg.ppo.pin_cpus:  # as wresdyn.ppo.trainer.train does; _throughput gives the cores back after the case

@@ -150,8 +150,8 @@ def test_set_comma_lists_none_and_bare_optional_switches_are_rewritten():
 
 
 def test_switches_of_old_that_became_optional_are_rewritten():
-    """``SysIdConfig.cuda_graph`` and ``PPOConfig.graph_update`` were switches and are ``bool | None`` now: their
-    negatives and ``--set`` spellings of old still parse, to ``False`` or ``True``."""
+    """``SysIdConfig.cuda_graph``, ``PPOConfig.graph_update`` and ``deferred_episode_log`` were switches and are
+    ``bool | None`` now: their negatives and ``--set`` spellings of old still parse, to ``False`` or ``True``."""
     notes = []
     assert rewrite("fit", command_flags("fit"), ["--identify.no-cuda-graph"], notes.append) == [
         "--identify.cuda-graph", "False"]
@@ -163,6 +163,8 @@ def test_switches_of_old_that_became_optional_are_rewritten():
     assert _config(["fit", "d.npz", "--identify.no-cuda-graph"]).cuda_graph  # the gradient fit's own graph stays
     assert _parse(["fit", "d.npz", "--identify.no-cuda-graph"]).identify.cuda_graph is False
     assert _config(["train", "d.npz"]).ppo.graph_update is None
+    assert _config(["train", "d.npz", "--ppo.no-deferred-episode-log"]).ppo.deferred_episode_log is False
+    assert _config(["train", "d.npz"]).ppo.deferred_episode_log is None
 
 
 def test_a_spelling_of_today_is_left_alone():

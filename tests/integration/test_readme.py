@@ -101,6 +101,8 @@ UNEVEN = "peer_sysid/uneven/summary.json"
 SPEED = "speed/summary.json"
 EAGER = "speed/h200_20261130g/coldfit/fit_warm_eager.log"
 """The default fit warm with the identification stepped eagerly: the baseline of its CUDA graph."""
+FUSED = "speed/h200x4_20261130i/gradfit10/fused.json"
+"""The gradient fit's 2000 iterations with the opt-in fused MLP, warm, in the run of ``summary.json``'s figure."""
 COLD = "speed/h200x2_20261130/coldfit/fit_cold.log"
 """The default fit of an earlier tree from an empty Warp cache without the shipped kernels."""
 
@@ -137,9 +139,10 @@ ROWS = {
     "SolverReplay on an H200": ([LANES], lambda: [
         f"{rx(LANES, ROLLOUT, 3):.0f}M / {rx(LANES, ROLLOUT, 4):.1f}M at 16,384 worlds",
         f"{rx(LANES, ROLLOUT, 1):.0f}M / {rx(LANES, ROLLOUT, 2):.1f}M at 1024"]),
-    "gradient fit: to 2.5×": (["speed_paths/cpu_2core_time_to_fidelity.json", "speed_paths/lanes/ttf_lanes.txt"],
-                              lambda: [
-        f"{gradient_cpu():.1f} s (2 CPU cores)", f"{rx('speed_paths/lanes/ttf_lanes.txt', TTF_GPU):.1f} s"]),
+    "gradient fit: to 2.5×": (["speed_paths/cpu_2core_time_to_fidelity.json", "speed_paths/lanes/ttf_lanes.txt",
+                               SPEED, FUSED], lambda: [
+        f"{gradient_cpu():.1f} s (2 CPU cores)", f"{js(SPEED, 'gradfit_2000_s'):.1f} s",
+        f"fused MLP {js(FUSED, 'train_s'):.1f} s", f"{rx('speed_paths/lanes/ttf_lanes.txt', TTF_GPU):.1f} s"]),
     "the first `wresdyn fit --device cuda:0`": (["first_fit/h200_lanes/pieces_laned/fit_first.log",
                                                  "speed_paths/lanes/fit_lanes.log", SPEED, EAGER, COLD], lambda: [
         f"{rx('first_fit/h200_lanes/pieces_laned/fit_first.log', WHOLE):.1f} s",

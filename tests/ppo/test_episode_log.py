@@ -1,6 +1,6 @@
 """The deferred episode bookkeeping (:mod:`wresdyn.ppo.episode_log`, ``ppo.deferred_episode_log``) against rsl-rl's
 per-step one: the same weights bit for bit after training and the same logged episode rewards and lengths, in one
-process and in two over gloo through torchrun."""
+process and in two over gloo through torchrun; and its default, on where the run's device is CUDA."""
 
 import json
 import os
@@ -12,9 +12,10 @@ import torch
 from wresdyn.config_fields import set_fields
 from wresdyn.learn.residual import obs_stats
 from wresdyn.ppo.episode_log import flush_episode_log
+from wresdyn.ppo.ppo_config import RESUME_MAY_CHANGE, PPOConfig
 from wresdyn.ppo.replay_env import ReplayEnv
 from wresdyn.ppo.runner import make_runner, seed_processes
-from wresdyn.ppo.trainer import runner_cfg
+from wresdyn.ppo.trainer import runner_cfg, train
 
 ROOT = Path(__file__).resolve().parents[2]
 TESTS = Path(__file__).resolve().parents[1]
@@ -71,6 +72,28 @@ def test_deferred_episode_log_on_two_processes(tmp_path):
         assert r["equal"] and r["lr"][0] == r["lr"][1], (rank, r)
         if rank == 0:  # the rank that logs
             assert r["episodes"] > 0 and r["logged_equal"], r
+
+
+def test_deferred_by_default_on_cuda_only():
+    """``None`` resolves by the device string alone (no GPU needed): on for ``cuda`` and ``cuda:N``, off for ``cpu``;
+    ``True``/``False`` win on either."""
+    assert PPOConfig().deferred_episode_log is None and "deferred_episode_log" in RESUME_MAY_CHANGE
+    for device, forced, on in (("cpu", None, False), ("cuda", None, True), ("cuda:0", None, True),
+                               ("cpu", True, True), ("cuda:0", False, False)):
+        assert PPOConfig(device=device, deferred_episode_log=forced).defers_episode_log() is on, (device, forced)
+        cfg = set_fields(tiny(), {"ppo.device": device, "ppo.deferred_episode_log": forced})
+        assert runner_cfg(cfg).get("deferred_episode_log", False) is on, (device, forced)
+
+
+def test_a_run_that_recorded_false_resumes_with_the_default(robot, data, tmp_path):
+    """A run folder of before the default (``config.json``: ``false``) goes on with ``None``, and the reverse."""
+    run = tmp_path / "run"
+    train(data, robot, set_fields(tiny(), {"ppo.iterations": 1, "ppo.deferred_episode_log": False}), run)
+    assert json.loads((run / "config.json").read_text())["config"]["ppo"]["deferred_episode_log"] is False
+    assert train(data, robot, set_fields(tiny(), {"ppo.iterations": 2}), run)["iterations_this_session"] == 1
+    assert json.loads((run / "config.json").read_text())["config"]["ppo"]["deferred_episode_log"] is None
+    forced = set_fields(tiny(), {"ppo.iterations": 3, "ppo.deferred_episode_log": False})
+    assert train(data, robot, forced, run)["iterations_this_session"] == 1
 
 
 def _two_process_worker(out: Path) -> None:

@@ -98,10 +98,15 @@ class PPOConfig:
     """Bind each training process to the CPU cores local to its GPU (:func:`wresdyn.ppo.affinity.pin_process`:
     sysfs's ``local_cpulist``, split among the ranks that share it; else an even split of the allowed cores by local
     rank). Off: the scheduler places the processes."""
-    deferred_episode_log: bool = False
+    deferred_episode_log: bool | None = None
     """Keep rsl-rl's episode reward and length bookkeeping on the device and copy it to the host once per iteration
     (:func:`wresdyn.ppo.episode_log.defer_episode_log`) instead of a host wait at every rollout step on the logging
-    rank; the same logged numbers, the same learning."""
+    rank; the same logged numbers and the same learning bit for bit (``tests/ppo/test_episode_log.py``, one process
+    and two). ``None`` (the default): on where ``device`` is CUDA, off on the CPU (:meth:`defers_episode_log`), so
+    every CPU run stays bit for bit what it was; ``True``/``False`` force it. On by default on CUDA because the
+    rounds of ``benchmarks/results/speed/h200x2_20261130h`` and ``h200x4_20261130i`` ran faster with it in every
+    round on 1, 2 and 4 H200s (one GPU of the latter: 1.45-1.50M -> 1.66-1.72M env-steps/s); nothing measured it on
+    the CPU, where the demo and CI run."""
 
     def __post_init__(self) -> None:
         for name in ("num_steps_per_env", "iterations", "save_interval", "num_learning_epochs",
@@ -122,6 +127,13 @@ class PPOConfig:
             raise WresdynError("ppo.graph_update and ppo.one_sync_update are two updates; choose one")
         if self.compile_mode not in COMPILE_MODES:
             raise WresdynError(f"ppo.compile_mode = {self.compile_mode!r}; choose from {COMPILE_MODES}")
+
+    def defers_episode_log(self) -> bool:
+        """Whether the run keeps its episode bookkeeping on the device (``deferred_episode_log`` with ``None``
+        resolved by ``device``: on for ``cuda`` and ``cuda:N``, off for ``cpu``)."""
+        if self.deferred_episode_log is not None:
+            return self.deferred_episode_log
+        return self.device.startswith("cuda")
 
 
 RESUME_MAY_CHANGE = ("iterations", "device", "save_interval", "torch_threads", "cuda_graph", "one_sync_update",

@@ -150,7 +150,7 @@ def runner_cfg(cfg: TrainConfig, run_name: str = "") -> dict:
         entropy_coef=p.entropy_coef, learning_rate=p.learning_rate, max_grad_norm=p.max_grad_norm,
         desired_kl=p.desired_kl, use_mixed_precision=p.mixed_precision, one_sync_update=p.one_sync_update,
         packed_update=True, graph_update=p.graph_update is not False, compile_mode=p.compile_mode,
-        deferred_episode_log=p.deferred_episode_log)
+        deferred_episode_log=p.defers_episode_log())
 
 
 def _run_record(dataset, robot, cfg: TrainConfig, ranks: Ranks, data_path) -> dict:
