@@ -9,12 +9,12 @@
 # The command (DRY=1 prints it):
 #   python3 -m wresdyn.cli deploy data/dataset.npz --floor --full --device cuda:0 --mismatch data/mismatch_default.toml
 #     --seed SEED --nominal floor_nominal --policies a_nominal b_calibrated c_delta_action d_oracle e_randomized
-#     f_calibrated_narrow --no-animation --out OUT/run
+#     f_calibrated_narrow --no-animation --out OUT/floor_seed_sSEED
 # as the reported runs (`benchmarks/results/floor_fair/full/MANIFEST.md`), but not --quiet: the progress lines every
 # 30 s land in OUT/deploy.log, where a polling session reads them.
 #
 # Environment: SEED (default 3: seeds 0-2 are the reported runs; a new seed draws its own motions, so its held-out
-# scoring is one more configuration scored on held-out motions of seed 3, recorded in OUT/run/heldout_ledger.jsonl,
+# scoring is one more configuration scored on held-out motions of seed 3, recorded in the run's heldout_ledger.jsonl,
 # to be listed wherever this run is reported); GPU (default 0: CUDA_VISIBLE_DEVICES, the command then says cuda:0);
 # PYTHON (default python3; the caller's PYTHONPATH and caches); CAL and DELT (default none: fitted inside the run)
 # pass corrections instead, which takes their fit out of the time. WRESDYN_LOG_CLOCK=1 is set: every line of the
@@ -27,11 +27,12 @@
 # floor_def_s0's committed corrections (fitted for this dataset; `CAL= DELT=`, set empty, fits them inside as the
 # GPU run does, many minutes on a CPU).
 #
-# Outputs: OUT/run (the run folder: report.md, results.json, heldout_ledger.jsonl, skills/, calibrated/,
-# delta_action/), OUT/deploy.log (the process's output, appended), OUT/machine.txt (benchmarks/speed/machine_info.sh
-# and the GPU's compute processes before each call, appended), OUT/time.txt (one line a call: its start, wall
-# seconds by the shell, rc), OUT/time_v.txt (`/usr/bin/time -v` of each call, where present), OUT/load.log (load and
-# GPU use every 30 s). Resumable: stopped mid-run (`kill -TERM PID` of this script records the call's seconds with
+# Outputs: OUT/floor_seed_sSEED, the run folder (report.md, results.json, heldout_ledger.jsonl, skills/,
+# calibrated/, delta_action/; named floor_* so that `python3 benchmarks/skills/floor_fair_pack.py PACK OUT` packs it
+# for a resume); OUT/deploy.log (the process's output, appended); OUT/machine.txt (benchmarks/speed/machine_info.sh
+# and the GPU's compute processes before each call, appended); OUT/time.txt (one line a call: its start, wall seconds
+# by the shell, rc); OUT/time_v.txt (`/usr/bin/time -v` of each call, where present); OUT/load.log (load and GPU use
+# every 30 s). Resumable: stopped mid-run (`kill -TERM PID` of this script records the call's seconds with
 # rc=stopped and stops the deploy), the same command with the same absolute OUT resumes (the skills' config.json
 # files record OUT's absolute paths; finished corrections, policies and deployments are reused), and the seed's time
 # is the sum of OUT/time.txt's seconds (printed at the end of each call).
@@ -57,7 +58,7 @@ head -c 100 $DATA | grep -q "git-lfs" && fail "$DATA is a Git LFS pointer: fetch
 [ -f $SHIP/shipped.json ] && ls $SHIP/model_*.pt > /dev/null 2>&1 || fail "$SHIP is missing or incomplete"
 for c in $CAL $DELT; do [ -f "$c/policy.pt" ] || fail "$c/policy.pt is missing"; done
 CMD="$PY -m wresdyn.cli deploy $DATA --floor --full --device $DEV --mismatch $MISMATCH --seed $SEED"
-CMD="$CMD --nominal floor_nominal --policies $P --no-animation --out $OUT/run"
+CMD="$CMD --nominal floor_nominal --policies $P --no-animation --out $OUT/floor_seed_s$SEED"
 CMD="$CMD${CAL:+ --calibrated $CAL}${DELT:+ --delta $DELT}${SIZES:+ $SIZES}"
 if [ "${DRY:-0}" = 1 ]; then
   echo "CUDA_VISIBLE_DEVICES=$GPU WRESDYN_LOG_CLOCK=1 $CMD"

@@ -20,7 +20,7 @@ def test_dry_prints_the_whole_seed_on_gpu_0_fitting_the_corrections_and_touches_
     assert done.stdout == (
         "CUDA_VISIBLE_DEVICES=0 WRESDYN_LOG_CLOCK=1 python3 -m wresdyn.cli deploy data/dataset.npz --floor --full "
         "--device cuda:0 --mismatch data/mismatch_default.toml --seed 3 --nominal floor_nominal "
-        f"--policies {SIX} --no-animation --out {tmp_path}/out/run\n")
+        f"--policies {SIX} --no-animation --out {tmp_path}/out/floor_seed_s3\n")
     assert not (tmp_path / "out").exists()
     done = _run(tmp_path / "out", {"DRY": "1", "SEED": "4", "GPU": "2"})
     assert done.stdout.startswith("CUDA_VISIBLE_DEVICES=2 ") and "--device cuda:0 " in done.stdout
@@ -62,4 +62,4 @@ def test_each_call_appends_its_seconds_and_rc(tmp_path):
     assert done.stdout == f"calls so far: 2, {int(times[0][1]) + int(times[1][1])} s in all; last rc=0\n"
     assert (tmp_path / "out/machine.txt").read_text().count("== call at ") == 2
     args = (tmp_path / "args").read_text().splitlines()
-    assert len(args) == 2 and args[0] == args[1] and f"--out {tmp_path}/out/run" in args[0]
+    assert len(args) == 2 and args[0] == args[1] and f"--out {tmp_path}/out/floor_seed_s3" in args[0]
