@@ -25,17 +25,18 @@
 # screening stay those (a) was trained on, which the deploy checks), the oracle on MuJoCo C, (e) and (f) left out
 # (the deploy refuses them on a CPU: their per-world physics needs a GPU), and CAL and DELT by default
 # floor_def_s0's committed corrections (fitted for this dataset; `CAL= DELT=`, set empty, fits them inside as the
-# GPU run does, many minutes on a CPU).
+# GPU run does: about 4 min on 2 CPU cores).
 #
 # Outputs: OUT/floor_seed_sSEED, the run folder (report.md, results.json, heldout_ledger.jsonl, skills/,
 # calibrated/, delta_action/; named floor_* so that `python3 benchmarks/skills/floor_fair_pack.py PACK OUT` packs it
 # for a resume); OUT/deploy.log (the process's output, appended); OUT/machine.txt (benchmarks/speed/machine_info.sh
 # and the GPU's compute processes before each call, appended); OUT/time.txt (one line a call: its start, wall seconds
-# by the shell, rc); OUT/time_v.txt (`/usr/bin/time -v` of each call, where present); OUT/load.log (load and GPU use
-# every 30 s). Resumable: stopped mid-run (`kill -TERM PID` of this script records the call's seconds with
-# rc=stopped and stops the deploy), the same command with the same absolute OUT resumes (the skills' config.json
-# files record OUT's absolute paths; finished corrections, policies and deployments are reused), and the seed's time
-# is the sum of OUT/time.txt's seconds (printed at the end of each call).
+# by the shell, rc); OUT/time_v.txt (`/usr/bin/time -v` of each call that ends by itself, where present: a stopped
+# call's time is stopped with it); OUT/load.log (load and GPU use every 30 s). Resumable: stopped mid-run
+# (`kill -TERM PID` of this script records the call's seconds with rc=stopped and stops the deploy), the same command
+# with the same absolute OUT resumes (the skills' config.json files record OUT's absolute paths; finished
+# corrections, policies and deployments are reused), and the seed's time is the sum of OUT/time.txt's seconds
+# (printed at the end of each call).
 set -u
 [ $# -eq 1 ] || { echo "usage: floor_seed_timing.sh OUT" >&2; exit 2; }
 OUT=$1
