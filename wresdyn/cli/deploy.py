@@ -5,7 +5,8 @@ Writes ``OUT/report.md`` (the table, gap closed), ``OUT/results.json``, ``OUT/tr
 ``OUT/deployed_heldout.usda``; the corrections (``OUT/calibrated``, ``OUT/delta_action``) are fitted on DATA unless
 given, and the four policies live in ``OUT/skills/``. Rerunning the same command resumes. Every line printed is also
 in ``OUT/deploy.log`` (rsl-rl's tables in each policy's ``train.log``); on a terminal a progress bar per policy shows
-the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing.
+the elapsed and remaining time (:mod:`wresdyn.progress`), ``--quiet`` prints nothing. With ``WRESDYN_LOG_CLOCK=1``
+each line starts with the seconds since the process started (:mod:`wresdyn.cli.clock`).
 
 The sizes are ``DeployConfig`` (``FloorDeployConfig`` with ``--floor``), the task ``--task.*`` is ``SkillConfig``
 (``FloorTaskConfig`` with ``--floor``) and the PPO of every policy ``--ppo.*`` is ``SkillPPOConfig``
@@ -132,9 +133,10 @@ def run(args: Deploy) -> int:
     from ..experiments.skills import run_benchmark as bench
     ds, robot = load_data(args.data)
     mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
-    from ..progress import Log
+    from .clock import ClockLog
 
-    log = Log(Path(args.out) / "deploy.log", quiet=args.quiet)
+    # WRESDYN_LOG_CLOCK=1 stamps the lines with the seconds since the process started (a whole seed's time, split)
+    log = ClockLog(Path(args.out) / "deploy.log", quiet=args.quiet)
     log(f"wresdyn deploy: skills {'on the floor' if args.floor else 'on the stand'} on {robot.source.name} ({robot.n_dof} joints), corrections from {args.data}, "
           f"real robot {'from ' + args.mismatch if args.mismatch else 'as recorded in the dataset'} -> {args.out}")
     from ..sim.warmup import compile_kernels

@@ -1,0 +1,65 @@
+"""``benchmarks/skills/floor_seed_timing.sh``: one floor seed's command, its input checks, and the time of each call
+appended (the deploy itself a stand-in script here)."""
+
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "benchmarks/skills/floor_seed_timing.sh"
+SIX = "a_nominal b_calibrated c_delta_action d_oracle e_randomized f_calibrated_narrow"
+
+
+def _run(out, env: dict, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run(["bash", str(SCRIPT), str(out)], cwd=cwd, env={"PATH": "/usr/bin:/bin", **env},
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_dry_prints_the_whole_seed_on_gpu_0_fitting_the_corrections_and_touches_nothing(tmp_path):
+    done = _run(tmp_path / "out", {"DRY": "1"})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == (
+        "CUDA_VISIBLE_DEVICES=0 WRESDYN_LOG_CLOCK=1 python3 -m wresdyn.cli deploy data/dataset.npz --floor --full "
+        "--device cuda:0 --mismatch data/mismatch_default.toml --seed 3 --nominal floor_nominal "
+        f"--policies {SIX} --no-animation --out {tmp_path}/out/floor_seed_s3\n")
+    assert not (tmp_path / "out").exists()
+    done = _run(tmp_path / "out", {"DRY": "1", "SEED": "4", "GPU": "2"})
+    assert done.stdout.startswith("CUDA_VISIBLE_DEVICES=2 ") and "--device cuda:0 " in done.stdout
+    assert " --seed 4 " in done.stdout
+
+
+def test_tiny_is_the_same_command_small_on_the_cpu(tmp_path):
+    done = _run(tmp_path / "out", {"DRY": "1", "TINY": "1"})
+    cmd = done.stdout
+    assert done.returncode == 0 and "--device cpu " in cmd and "--num-worlds 4 " in cmd and "--finetune 1 " in cmd
+    assert "--policies a_nominal b_calibrated c_delta_action d_oracle --no-animation " in cmd
+    assert "--calibrated benchmarks/results/floor_fair/full/floor_def_s0/calibrated " in cmd
+    # set empty: the corrections fitted inside, as on the GPU
+    done = _run(tmp_path / "out", {"DRY": "1", "TINY": "1", "CAL": "", "DELT": ""})
+    assert done.returncode == 0 and "--calibrated" not in done.stdout and "--delta" not in done.stdout
+
+
+def test_missing_inputs_are_refused(tmp_path):
+    done = _run(tmp_path / "out", {"DRY": "1"}, cwd=tmp_path)
+    assert done.returncode == 2 and done.stderr == "error: data/dataset.npz is missing (tracked: check out the " \
+                                                   "repository)\n"
+    done = _run(tmp_path / "out", {"DRY": "1", "CAL": str(tmp_path / "none")})
+    assert done.returncode == 2 and f"{tmp_path}/none/policy.pt is missing" in done.stderr
+
+
+def test_each_call_appends_its_seconds_and_rc(tmp_path):
+    stub = tmp_path / "python"
+    stub.write_text(f'#!/bin/bash\n[ "$1" = -c ] && exit 0\necho "$@" >> {tmp_path}/args\nexit $(cat {tmp_path}/rc)\n')
+    stub.chmod(0o755)
+    env = {"PYTHON": str(stub)}
+    for rc in (3, 0):
+        (tmp_path / "rc").write_text(str(rc))
+        done = _run(tmp_path / "out", env)
+        assert done.returncode == rc, done.stderr
+    times = [ln.split() for ln in (tmp_path / "out/time.txt").read_text().splitlines()]
+    assert [t[2:] for t in times] == [["s", "rc=3"], ["s", "rc=0"]]
+    # whole seconds by the shell's clock: a call of the stand-in may straddle one tick
+    assert all(int(t[1]) <= 5 for t in times)
+    assert done.stdout == f"calls so far: 2, {int(times[0][1]) + int(times[1][1])} s in all; last rc=0\n"
+    assert (tmp_path / "out/machine.txt").read_text().count("== call at ") == 2
+    args = (tmp_path / "args").read_text().splitlines()
+    assert len(args) == 2 and args[0] == args[1] and f"--out {tmp_path}/out/floor_seed_s3" in args[0]
