@@ -90,25 +90,3 @@ def test_the_clock_moves(tmp_path):
     a, b = (float(STAMP.match(ln)[1]) for ln in (tmp_path / "fit.log").read_text().splitlines())
     assert 0.2 <= b - a <= 5.0, (a, b)
 
-
-@pytest.mark.parametrize("clock", ["1", ""], ids=["on", "off"])
-def test_deploy_log_is_stamped_only_with_the_clock(clock, tmp_path, monkeypatch):
-    """``wresdyn deploy``'s log takes the clock from the environment (a whole floor seed's time split by phase),
-    stopped before the benchmark: nothing loaded, compiled or trained."""
-    from types import SimpleNamespace
-
-    import wresdyn.data.loading
-    import wresdyn.experiments.skills
-    import wresdyn.sim.warmup
-    from wresdyn.cli import main
-
-    robot = SimpleNamespace(source=Path("humanoid.usda"), n_dof=3)
-    monkeypatch.setattr(wresdyn.data.loading, "load_data", lambda path: (SimpleNamespace(rate_hz=500.0), robot))
-    monkeypatch.setattr(wresdyn.sim.warmup, "compile_kernels", lambda *a, say, **k: say("compiled"))
-    monkeypatch.setattr(wresdyn.experiments.skills, "run_benchmark", lambda *a, log, **k: log("trained"))
-    monkeypatch.setenv(CLOCK_ENV, clock)
-    assert main(["deploy", "d.npz", "--floor", "--out", str(tmp_path), "--quiet"]) == 0
-    lines = (tmp_path / "deploy.log").read_text().splitlines()
-    assert [bool(STAMP.match(ln)) for ln in lines] == [bool(clock)] * 3
-    text = [STAMP.match(ln)[2] if clock else ln for ln in lines]
-    assert text[0].startswith("wresdyn deploy: skills on the floor") and text[1:] == ["compiled", "trained"]

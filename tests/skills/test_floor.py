@@ -5,12 +5,14 @@ real robot, rsl-rl's PPO)."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 import torch
 
 from wresdyn.cli import main
+from wresdyn.cli.clock import CLOCK_ENV
 from wresdyn.skills.env import TrackingEnv
 from wresdyn.skills.evaluate import deploy, gaps_or_why_not, metrics
 from wresdyn.skills.motions import TASK_FAMILIES, make_motions
@@ -136,7 +138,7 @@ def test_floor_env_observes_no_base_position_and_counts_a_fall(floating, motions
     assert 0.0 < res["mean"]["g_mpjpe"] < 1.0
 
 
-def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, capsys):
+def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, capsys, monkeypatch):
     data_path = tmp_path / "dataset.npz"
     data.save(data_path)
     cal = fit_run(tmp_path, humanoid, data, "torque", physics=True)
@@ -149,7 +151,9 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
             "--policies", "a_nominal", "b_calibrated", "c_delta_action", "d_oracle"]  # (c) too, as on a GPU
     # the oracle in a process of its own beside (b), as on a GPU, and (c) in another, as on a second GPU
     ledger = tmp_path / "bench" / "heldout_ledger.jsonl"
+    monkeypatch.setenv(CLOCK_ENV, "1")  # the deploy's own lines stamped with the process's seconds (a seed's phases)
     assert main(args + ["--oracle-beside", "True", "--beside-devices", "cpu", "--heldout-ledger", str(ledger)]) == 0
+    monkeypatch.delenv(CLOCK_ENV)
     res = json.loads((out / "results.json").read_text())
     # the held-out scoring went into the run's ledger and the one given, and the report lists it
     for path in (out / "heldout_ledger.jsonl", ledger):
@@ -161,6 +165,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
             assert {"success", "falls", "failures", "mpjpe", "g_mpjpe", "orientation_error", "action_rate"} \
                 <= set(r["mean"])
     log = (out / "deploy.log").read_text()
+    assert re.match(r"\[ *\d+\.\d s\] wresdyn deploy: skills on the floor", log), log[:80]
     assert "d_oracle: 1 PPO iterations x 3 worlds" in log
     # it starts once (a) is trained, before (b)
     assert log.index("d_oracle: training on the real robot beside") < log.index("policy b_calibrated:")
@@ -197,6 +202,7 @@ def test_wresdyn_deploy_floor_end_to_end_and_resume(tmp_path, humanoid, data, ca
     for name in ("a_nominal", "b_calibrated", "c_delta_action", "d_oracle"):
         assert f"[3/4] policy {name}: done earlier ({2 if name == 'a_nominal' else 1} iterations), reused" in again
     assert "beside" not in again and "resuming" not in again, again
+    assert again.startswith("wresdyn deploy: skills on the floor"), again[:80]  # no clock asked: no stamps
     assert len(summaries) == 4 and all(p.read_bytes() == b for p, b in summaries.items())
 
 
