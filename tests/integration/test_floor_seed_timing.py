@@ -1,7 +1,8 @@
 """``benchmarks/skills/floor_seed_timing.sh``: one floor seed's command, its input checks, and the time of each call
-appended (the deploy itself a stand-in script here)."""
+appended (the deploy refusing a bad seed at once in the call test)."""
 
 import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -47,19 +48,18 @@ def test_missing_inputs_are_refused(tmp_path):
 
 
 def test_each_call_appends_its_seconds_and_rc(tmp_path):
-    stub = tmp_path / "python"
-    stub.write_text(f'#!/bin/bash\n[ "$1" = -c ] && exit 0\necho "$@" >> {tmp_path}/args\nexit $(cat {tmp_path}/rc)\n')
-    stub.chmod(0o755)
-    env = {"PYTHON": str(stub)}
-    for rc in (3, 0):
-        (tmp_path / "rc").write_text(str(rc))
+    """Two real calls of the deploy that refuse their seed at once (nothing trained): each call's seconds and exit
+    status appended to time.txt, the deploy's own error in deploy.log, the machine recorded before each call."""
+    env = {"PYTHON": sys.executable, "SEED": "-1"}
+    for _ in range(2):
         done = _run(tmp_path / "out", env)
-        assert done.returncode == rc, done.stderr
+        assert done.returncode == 2, done.stderr
     times = [ln.split() for ln in (tmp_path / "out/time.txt").read_text().splitlines()]
-    assert [t[2:] for t in times] == [["s", "rc=3"], ["s", "rc=0"]]
-    # whole seconds by the shell's clock: a call of the stand-in may straddle one tick
+    assert [t[2:] for t in times] == [["s", "rc=2"], ["s", "rc=2"]]
+    # whole seconds by the shell's clock: a refused call may straddle one tick
     assert all(int(t[1]) <= 5 for t in times)
-    assert done.stdout == f"calls so far: 2, {int(times[0][1]) + int(times[1][1])} s in all; last rc=0\n"
+    assert done.stdout == f"calls so far: 2, {int(times[0][1]) + int(times[1][1])} s in all; last rc=2\n"
     assert (tmp_path / "out/machine.txt").read_text().count("== call at ") == 2
-    args = (tmp_path / "args").read_text().splitlines()
-    assert len(args) == 2 and args[0] == args[1] and f"--out {tmp_path}/out/floor_seed_s3" in args[0]
+    log = (tmp_path / "out/deploy.log").read_text().splitlines()
+    assert log == ["wresdyn deploy: error: floor.seed = -1 must be >= 0"] * 2
+    assert not (tmp_path / "out/floor_seed_s-1").exists()
