@@ -17,7 +17,10 @@
 # scoring is one more configuration scored on held-out motions of seed 3, recorded in the run's heldout_ledger.jsonl,
 # to be listed wherever this run is reported); GPU (default 0: CUDA_VISIBLE_DEVICES, the command then says cuda:0);
 # PYTHON (default python3; the caller's PYTHONPATH and caches); CAL and DELT (default none: fitted inside the run)
-# pass corrections instead, which takes their fit out of the time. WRESDYN_LOG_CLOCK=1 is set: every line of the
+# pass corrections instead, which takes their fit out of the time. BESIDE (default 0): that many of the simulated
+# fine-tunings after (b), (c) (e) (f) in order, each in a process of its own on the same GPU beside (b)
+# (`--beside-devices cuda:0 ...`): one floor PPO leaves the H200 idle 25-60 % of the time (`load.log`), so they share
+# it; the oracle (d) trains after (b) in the run's own process. WRESDYN_LOG_CLOCK=1 is set: every line of the
 # run's log starts with the seconds since the process started, so each phase's seconds are read off it.
 # DRY=1 checks the inputs (data/dataset.npz, the mismatch file, the shipped floor_nominal, CAL and DELT) and prints
 # the command, running nothing. TINY=1 is a check of the script on a CPU, never a figure: the same command with
@@ -51,7 +54,11 @@ if [ "${TINY:-0}" = 1 ]; then
   FITS=benchmarks/results/floor_fair/full/floor_def_s0
   CAL=${CAL-$FITS/calibrated}; DELT=${DELT-$FITS/delta_action}  # set empty: fitted inside, as on the GPU
 fi
-CAL=${CAL:-}; DELT=${DELT:-}
+CAL=${CAL:-}; DELT=${DELT:-}; BESIDE=${BESIDE:-0}
+case $BESIDE in [0-3]) ;; *) echo "error: BESIDE=$BESIDE: 0 to 3 (the simulated fine-tunings after (b))" >&2; exit 2;; esac
+if [ "$BESIDE" -gt 0 ]; then  # the run's own device, once per fine-tuning beside (b)
+  SIZES="$SIZES${SIZES:+ }--beside-devices$(for ((i = 0; i < BESIDE; i++)); do printf ' %s' $DEV; done)"
+fi
 fail() { echo "error: $*" >&2; exit 2; }
 [ -f $DATA ] || fail "$DATA is missing (tracked: check out the repository)"
 head -c 100 $DATA | grep -q "git-lfs" && fail "$DATA is a Git LFS pointer: fetch the file"

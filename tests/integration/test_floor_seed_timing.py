@@ -28,6 +28,18 @@ def test_dry_prints_the_whole_seed_on_gpu_0_fitting_the_corrections_and_touches_
     assert " --seed 4 " in done.stdout
 
 
+def test_beside_shares_the_gpu_with_that_many_fine_tunings_and_refuses_more_than_there_are(tmp_path):
+    done = _run(tmp_path / "out", {"DRY": "1", "BESIDE": "3"})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.endswith(" --beside-devices cuda:0 cuda:0 cuda:0\n")
+    done = _run(tmp_path / "out", {"DRY": "1", "BESIDE": "1", "TINY": "1"})
+    assert done.stdout.endswith(" --beside-devices cpu\n")
+    for bad in ("4", "x"):
+        done = _run(tmp_path / "out", {"DRY": "1", "BESIDE": bad})
+        assert done.returncode == 2 and done.stdout == ""
+        assert done.stderr == f"error: BESIDE={bad}: 0 to 3 (the simulated fine-tunings after (b))\n"
+
+
 def test_tiny_is_the_same_command_small_on_the_cpu(tmp_path):
     done = _run(tmp_path / "out", {"DRY": "1", "TINY": "1"})
     cmd = done.stdout
