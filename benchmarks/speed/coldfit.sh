@@ -27,7 +27,10 @@
 # step cut short says so: rc=124; with STEP_GRAPH=1 give it about 80 s more), GPU (the CUDA_VISIBLE_DEVICES of every
 # step, 0), STEP_GRAPH (1: run step e), NO_GRAPH (1: d again with `--identify.cuda-graph False`, fit_warm_eager: the
 # identification stepped eagerly, the baseline of a default that replays its graph), SHIPPED (1: skip a and b; c
-# from an empty cache with the kernels the package ships, WRESDYN_PREBUILT_KERNELS unset: ~3 min for c, d and one more).
+# from an empty cache with the kernels the package ships, WRESDYN_PREBUILT_KERNELS unset: ~3 min for c, d and one more),
+# HELPER_PAIRS (N: after d, N pairs of d again, alternating, fit_warm_h0_I with WRESDYN_FIT_HELPERS=0, the tail in
+# one process, and fit_warm_hx_I with the helper processes of wresdyn.cli.fit.helper_count; about 55 s a step on an
+# H200: raise TOTAL).
 # Output: OUT/<step>.log (stdout and stderr, its last line `whole command: S s rc=RC`), OUT/<step>.fitlog (the run's
 # fit.log), OUT/STAGES (the clock of each step), OUT/machine.txt, OUT/summary.txt (each step's whole command and
 # first-iteration times, read off the logs).
@@ -42,7 +45,7 @@ robot=${ROBOT:-scenes/humanoid.usda}
 extra=${FIT_EXTRA:-}
 total=${TOTAL:-355}
 export CUDA_VISIBLE_DEVICES=${GPU:-0} CUDA_CACHE_DISABLE=1 PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 WRESDYN_LOG_CLOCK=1
-unset WRESDYN_PREBUILT_KERNELS
+unset WRESDYN_PREBUILT_KERNELS WRESDYN_FIT_HELPERS
 t_start=$(date +%s)
 stage() { echo "$(date -u +%T) $*" >> "$out/STAGES"; }
 left() { echo $(( total - ($(date +%s) - t_start) )); }
@@ -106,6 +109,13 @@ if [ "${NO_GRAPH:-0}" = 1 ]; then
   fit fit_warm_eager "$out/wc_prebuilt" --identify.cuda-graph False
   steps="$steps fit_warm_eager"
 fi
+for i in $(seq 1 "${HELPER_PAIRS:-0}"); do
+  # d again, alternating: the fit's tail in this process (WRESDYN_FIT_HELPERS=0) and in its helper processes (the
+  # rule of wresdyn.cli.fit.helper_count: three from 8 cores)
+  WRESDYN_FIT_HELPERS=0 fit "fit_warm_h0_$i" "$out/wc_prebuilt"
+  fit "fit_warm_hx_$i" "$out/wc_prebuilt"
+  steps="$steps fit_warm_h0_$i fit_warm_hx_$i"
+done
 
 for step in $steps; do
   whole=$(grep -h "^whole command:" "$out/$step.log" 2>/dev/null | tail -1)

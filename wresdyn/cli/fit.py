@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import gc
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Annotated
 
@@ -28,6 +28,7 @@ from ..fit.gradfit_config import GradFitConfig
 from ..identify.sysid_config import SysIdConfig
 from .clock import ClockLog
 from .command import FLAT, Command
+from .fit_tail import Helper
 
 IDENTIFY_SHARED = ("device", "seed", "solver", "friction_kappa")
 """Fields of the hybrid's identification (``--identify.*``) that are the fit's own: both stages run alike."""
@@ -146,14 +147,43 @@ def long_lived():
             gc.freeze()
 
 
+HELPER_CORES = 4
+"""Cores this process may run on from which ``--eval``'s exported residual and figures go to a helper process: it
+needs a core of its own; on 2 cores shared with other work it took the fit's and made the command slower
+(``benchmarks/results/speed/warm57_cpu/pairs.txt``)."""
+HELPERS_CORES = 8
+"""Cores from which there are three helpers (:class:`~wresdyn.cli.fit_tail.Helper`'s turns: the exported residual,
+Fig. 4 and one Fig. 3 each), so that the three Fig. 3 figures drawn after the replays are drawn side by side."""
+HELPERS_ENV = "WRESDYN_FIT_HELPERS"
+"""Environment variable that sets the number of helper processes of ``--eval`` whatever the cores (0: none, the
+export and figures in this process), for tests and measurements; unset: :data:`HELPER_CORES`' rule."""
+
+
+def helper_count(cores: int | None = None) -> int:
+    """Helper processes for ``--eval`` on ``cores`` cores (default: this process's), or as :data:`HELPERS_ENV`
+    says."""
+    import os
+
+    if os.environ.get(HELPERS_ENV, "").strip():
+        return max(0, int(os.environ[HELPERS_ENV]))
+    if cores is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return 0 if cores < HELPER_CORES else 3 if cores >= HELPERS_CORES else 1
+
+
 def run(args: Fit) -> int:
     with long_lived():
         cfg, identify_first, sysid, ds, robot, out, log, physics = _set_up(args)
-    policy, curve, cfg, id_wall, physics = _fit(args, cfg, identify_first, sysid, ds, robot, out, log, physics)
-    # the export and the evaluation import the exporters and matplotlib and leave a few figures' cycles, which the
-    # command's end frees: no collector passes over them on the way
-    with without_collector():
-        _finish(args, cfg, ds, robot, out, log, policy, curve, id_wall, physics)
+    # with --eval the exported residual and the figures are written by helper processes (wresdyn.cli.fit_tail) that
+    # import their libraries while the fit runs (started after the set-up, whose imports they would slow on a small
+    # host) and write them while the evaluation replays the residual in memory
+    helpers = helper_count() if args.eval else 0
+    with Helper(helpers) if helpers else nullcontext() as helper:
+        policy, curve, cfg, id_wall, physics = _fit(args, cfg, identify_first, sysid, ds, robot, out, log, physics)
+        # the export and the evaluation import the exporters and leave a few cycles, which the command's end frees:
+        # no collector passes over them on the way
+        with without_collector():
+            _finish(args, cfg, ds, robot, out, log, policy, curve, id_wall, physics, helper)
     return 0
 
 
@@ -230,8 +260,10 @@ def _fit(args: Fit, cfg, identify_first, sysid, ds, robot, out, log, physics):
     return policy, curve, cfg, id_wall, physics
 
 
-def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics) -> None:
-    """The run's files (export, parameters, summary) and, with ``--eval``, the evaluation."""
+def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics, helper=None) -> None:
+    """The run's files (export, parameters, summary) and, with ``--eval``, the evaluation; ``helper``
+    (:class:`~wresdyn.cli.fit_tail.Helper`, with ``--eval``): what writes ``policy.pt``, ``policy.onnx`` and the
+    figures, waited for here; ``None``: written in this process."""
     import json
     from dataclasses import asdict
 
@@ -239,7 +271,11 @@ def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics
 
     from ..fit.gradfit import export_run
 
-    write_onnx = export_run(policy, out, cfg, ds, args.data, physics=physics, onnx_later=args.eval)
+    write_onnx = export_run(policy, out, cfg, ds, args.data, physics=physics, onnx_later=args.eval,
+                            archive_later=helper is not None)
+    if helper is not None:
+        # the files of one export of the trained module, as here; the evaluation replays that module meanwhile
+        helper.submit(write_onnx.args[1:], write_onnx.func, *write_onnx.args)
     if cfg.model == "parametric":
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
         (out / "parameters.json").write_text(json.dumps(params, indent=1))
@@ -253,19 +289,25 @@ def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics
     if args.eval:
         from ..evaluation.evaluate_run import evaluate_run
 
-        if log.clock:
-            log("evaluating the run (wresdyn eval)")
+        if log.clock:  # the helpers say which way the measured run went
+            log("evaluating the run (wresdyn eval)" + (f"; {helper.processes} helper process(es) write policy.pt, "
+                                                       "policy.onnx and the figures" if helper is not None else ""))
+        draw = residual = None
+        if helper is not None:
+            write_onnx, draw, residual = (lambda: None), helper.submit, policy
 
         def evaluate():
             # on the fit's device: its forward kernels are compiled already (a GPU fit's evaluation on the CPU would
             # wait for Clang's first compile of them)
             evaluate_run(str(out), ds, robot, data_label=str(args.data), device=cfg.device,
-                         mark=log if log.clock else None)
+                         mark=log if log.clock else None, draw=draw, residual=residual)
             if log.clock:
                 log("evaluation done")
 
         # the ONNX file (most of the export's time) is the same file from the same program whenever it is written:
         # the evaluation reads policy.pt only
         onnx_with_evaluation(write_onnx, evaluate, cfg.device)
+        if helper is not None:
+            helper.close()
         if log.clock:
             log(f"wrote {out / 'policy.onnx'}")

@@ -15,14 +15,18 @@ __all__ = ["evaluate_run", "load_run_model", "load_ensemble", "run_friction_kapp
 
 def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), out: str | None = None, solver: str | None = None,
                  device: str = "cpu", joints: int = 6, compare=(), data_label: str = "", mark=None,
-                 ensemble=()) -> dict:
+                 ensemble=(), draw=None, residual=None) -> dict:
     """Evaluate the exported residual of ``run`` on ``splits`` of ``ds`` and write the report; returns the
     per-split summaries. A run with ``physics.json`` (``wresdyn identify``, or a residual fitted on top of
     identified physics) replays its model with those parameters; a run with no residual evaluates the
     calibrated model under PD alone. Every replay runs under the run's own dry-friction law
     (:func:`run_friction_kappa`). ``mark``: called with a short note as each part ends (the model loaded, the splits
     replayed), for a clocked log; ``None``: nothing. ``ensemble``: other run folders whose residuals are averaged
-    with ``run``'s at every step (:func:`load_ensemble`); ``()``: ``run``'s residual alone."""
+    with ``run``'s at every step (:func:`load_ensemble`); ``()``: ``run``'s residual alone. ``draw``: called as
+    ``draw(path, function, *args, **kwargs)`` for each figure (``function`` writes ``path``), with picklable copies
+    of what it plots (:func:`_plotted`), e.g. to draw them in another process; ``None``: drawn here, in order.
+    ``residual``: the run's residual in memory (the module its ``policy.pt`` is being exported from, e.g. by another
+    process), replayed instead of reading ``policy.pt``; ``None``: read from ``policy.pt``."""
     import json
     from pathlib import Path
 
@@ -33,13 +37,18 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     if ensemble:
         policy, meta, physics, solver, substeps = load_ensemble([run_dir, *ensemble], robot, ds.rate_hz, solver)
     else:
-        policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver)
+        policy, meta, physics, solver, substeps = load_run_model(run_dir, robot, ds.rate_hz, solver, residual)
     kappa = run_friction_kappa(run_dir)
     out_dir = Path(out) if out else run_dir / "eval"
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
     mark = mark or (lambda _: None)
+    draw = draw or (lambda _, function, *args, **kwargs: function(*args, **kwargs))
+    curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
+    figures = ["fig4_learning_curves.png"]
     mark("evaluation: the model loaded")
+    # the run's files only: drawn before the replays
+    draw(out_dir / figures[0], plot_learning_curves, curves, out_dir / figures[0])
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)
@@ -57,25 +66,36 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
     for split, (summary, runs) in done.items():
         trajs = todo[split]
         results[split] = summary
-        plot_fig3(robot, trajs[0], runs, out_dir / f"fig3_{split}.png", ds.rate_hz, joints,
-                  title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)
+        figures.append(f"fig3_{split}.png")
+        path = out_dir / figures[-1]
+        draw(path, plot_fig3, *_plotted(robot, trajs[0], runs), path, ds.rate_hz, joints,
+             title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)
         print(summary_line(split, summary), flush=True)
-    curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
-    plot_learning_curves(curves, out_dir / "fig4_learning_curves.png")
     law = {} if kappa is None else {"friction_kappa": kappa}  # the soft default's reports stay as they were
     members = {"ensemble": [str(r) for r in ensemble]} if ensemble else {}
     write_report(out_dir, robot, results, {"run": str(run_dir), **members, "residual": meta["kind"],
                                            "arch": meta["arch"],
                                            "physics": "physics.json" if physics is not None else "robot file",
-                                           "solver": solver, **law, "dataset": data_label, "robot": str(robot.source)})
+                                           "solver": solver, **law, "dataset": data_label, "robot": str(robot.source)},
+                 figures=figures)
     print(f"wrote {out_dir / 'metrics.json'} and {out_dir / 'report.md'}")
     return results
 
 
-def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
+def _plotted(robot, traj, runs):
+    """What :func:`~wresdyn.evaluation.plots.plot_fig3` reads of its robot, trajectory and replays: ``(robot, traj,
+    runs)`` as light, picklable copies (joint names; the recording's ``q`` and name; each replay's first ``q``)."""
+    from types import SimpleNamespace
+
+    return (SimpleNamespace(joint_names=list(robot.joint_names)), SimpleNamespace(q=traj.q, name=traj.name),
+            {k: SimpleNamespace(q=r.q[:1]) for k, r in runs.items()})
+
+
+def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None, residual=None):
     """What a run folder replays: ``(policy, meta, physics, solver, substeps)``.
 
-    ``policy`` is the run's residual (``None`` for identified physics alone), ``meta`` its ``residual.json``
+    ``policy`` is the run's residual (``None`` for identified physics alone; ``residual`` where given: the module
+    its ``policy.pt`` holds, in memory), ``meta`` its ``residual.json``
     (kind, arch, joint names, rate), ``physics`` the :class:`~wresdyn.sim.physics.PhysicalParams` of
     ``physics.json`` (``None``: the robot file's), ``solver`` the one given or the run's, ``substeps`` the run's.
 
@@ -87,13 +107,13 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None):
 
     run_dir = Path(run_dir)
     physics = run_physics(run_dir, robot)
-    if physics is not None and not (run_dir / "policy.pt").exists():  # identified physics alone
+    if residual is None and physics is not None and not (run_dir / "policy.pt").exists():  # physics alone
         config = json.loads((run_dir / "config.json").read_text())
         policy, meta = None, {"kind": None, "arch": "none", "joint_names": physics.joint_names,
                               "rate_hz": float(config["rate_hz"])}
         solver, substeps = solver or config["solver"], 1
     else:
-        policy, meta = load_policy(run_dir)
+        policy, meta = load_policy(run_dir) if residual is None else (residual, _residual_meta(run_dir))
         cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
         solver, substeps = solver or cfg.env.solver, cfg.env.substeps
     if list(meta["joint_names"]) != list(robot.joint_names):
@@ -129,6 +149,14 @@ def load_ensemble(run_dirs, robot, rate_hz: float, solver: str | None = None):
     if first[0] is None:
         return None, first[1], PhysicalParams.mean(p for _, _, p, *_ in loaded), *first[3:]
     return MeanResidual(p for p, *_ in loaded), *first[1:]
+
+
+def _residual_meta(run_dir) -> dict:
+    """A run's ``residual.json``."""
+    import json
+    from pathlib import Path
+
+    return json.loads((Path(run_dir) / "residual.json").read_text())
 
 
 def _physics_json(physics) -> dict | None:

@@ -188,8 +188,9 @@ def _fmt(m: dict | None) -> str:
     return "—" if not m else f"{m['mean_abs_dq']:.4f} ± {m['std_abs_dq']:.4f}"
 
 
-def write_report(out_dir: str | Path, robot, results: dict, info: dict | None = None) -> Path:
-    """Write ``metrics.json`` and ``report.md`` for ``results`` = {split: summary of :func:`evaluate_split`}."""
+def write_report(out_dir: str | Path, robot, results: dict, info: dict | None = None, figures=()) -> Path:
+    """Write ``metrics.json`` and ``report.md`` for ``results`` = {split: summary of :func:`evaluate_split`}; the
+    report shows the folder's figures and ``figures`` (names of those still being drawn)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     excluded = sorted({j for s in results.values() for j in s.get("excluded_joints", [])},
@@ -227,7 +228,8 @@ def write_report(out_dir: str | Path, robot, results: dict, info: dict | None = 
             b = s["pd_residual"]["per_joint_rmse"][j] if s["pd_residual"] else float("nan")
             cells.append(f"{a:.4f} → {b:.4f}")
         lines.append(f"| {name}{' (excluded)' if name in excluded else ''} | " + " | ".join(cells) + " |")
-    figs = sorted(p.name for p in out.glob("*.png"))
+    # a hidden one is a figure another process is still writing under a temporary name (wresdyn.cli.fit_tail)
+    figs = sorted({p.name for p in out.glob("*.png") if not p.name.startswith(".")} | set(figures))
     if figs:
         lines += [""] + [f"![{f}]({f})" for f in figs]
     (out / "report.md").write_text("\n".join(lines) + "\n")

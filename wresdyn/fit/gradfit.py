@@ -271,17 +271,20 @@ def run_record(cfg: GradFitConfig) -> dict:
 
 
 def export_run(policy, out: str | Path, cfg: GradFitConfig, dataset, data_path: str | Path | None = None,
-               physics: PhysicalParams | None = None, onnx_later: bool = False):
+               physics: PhysicalParams | None = None, onnx_later: bool = False, archive_later: bool = False):
     """Write the run files ``wresdyn eval`` reads: ``config.json`` (:func:`run_record`, the gradient-fit config
     under ``gradfit``, ``data_path``), ``policy.pt``, ``policy.onnx``, ``residual.json``, and ``physics.json`` when
     the residual was fitted on ``physics`` (evaluation replays with them). With ``onnx_later`` every file but
-    ``policy.onnx`` is written and the function that writes it is returned (``export_run_files``'s), else ``None``."""
+    ``policy.onnx`` is written and the function that writes it is returned (``export_run_files``'s), with
+    ``archive_later`` neither ``policy.pt`` nor ``policy.onnx`` (the picklable call that writes both is returned),
+    else ``None``."""
     out = Path(out)
     policy = policy.cpu().eval()
     record = {**run_record(cfg), "data_path": str(data_path) if data_path else None}
     RunFolder(out, dataclasses.asdict(cfg), key="gradfit", record=record).write_config()
     arch = "parametric" if cfg.model == "parametric" else cfg.residual.arch
-    write_onnx = export_run_files(policy, out, dataset, onnx_later=onnx_later, arch=arch, learner=record["learner"])
+    write_onnx = export_run_files(policy, out, dataset, onnx_later=onnx_later, archive_later=archive_later, arch=arch,
+                                  learner=record["learner"])
     if physics is not None:
         physics.save(out / "physics.json")
     return write_onnx

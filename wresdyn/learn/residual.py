@@ -273,25 +273,39 @@ def _save_archive(policy: ResidualPolicy, path: str | Path):
     return save_program(module, args, shapes, path, meta), names_in, names_out
 
 
-def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, onnx_later: bool = False, **meta):
+def export_run_files(policy: ResidualPolicy, run_dir: str | Path, dataset, onnx_later: bool = False,
+                     archive_later: bool = False, **meta):
     """Write what ``wresdyn eval`` and a deployment read from a run folder: ``policy.pt`` (the ``torch.export``
     archive of :func:`export_policy`, under the name tools check for a trained run), ``policy.onnx`` and
     ``residual.json`` (kind, joints, rate, scale, I/O units, plus ``meta``).
 
     With ``onnx_later`` the ONNX file is left to the caller: the function that writes it (the same file, from the
     same program) is returned, so that it can run beside other work (the evaluation reads ``policy.pt`` only, and
-    the ONNX export is most of the export's time); otherwise it is written here and ``None`` is returned.
+    the ONNX export is most of the export's time); otherwise it is written here and ``None`` is returned. With
+    ``archive_later`` both ``policy.pt`` and ``policy.onnx`` are left to the caller: the picklable call that writes
+    them (:func:`export_archive_and_onnx` of ``policy``, e.g. for another process) is returned.
     """
     import json
 
     run_dir = Path(run_dir)
-    program, names_in, names_out = _save_archive(policy, run_dir / "policy.pt")
-    write_onnx = functools.partial(export_onnx, program, run_dir / "policy.onnx", names_in, names_out)
-    if not onnx_later:
-        write_onnx()
+    if archive_later:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_onnx = functools.partial(export_archive_and_onnx, policy, run_dir / "policy.pt", run_dir / "policy.onnx")
+    else:
+        program, names_in, names_out = _save_archive(policy, run_dir / "policy.pt")
+        write_onnx = functools.partial(export_onnx, program, run_dir / "policy.onnx", names_in, names_out)
+        if not onnx_later:
+            write_onnx()
     info = {"kind": policy.kind, "joint_names": list(dataset.joint_names), "rate_hz": float(dataset.rate_hz),
             "scale": [float(s) for s in policy.scale], **meta,
             "observation": "[q, qd, qdd, q_cmd] raw SI units, (N, 4 n_dof)",
             "output": "N*m added to the PD torque" if policy.kind == "torque" else "rad added to q_cmd"}
     (run_dir / "residual.json").write_text(json.dumps(info, indent=2))
-    return write_onnx if onnx_later else None
+    return write_onnx if onnx_later or archive_later else None
+
+
+def export_archive_and_onnx(policy: ResidualPolicy, archive: str | Path, onnx_path: str | Path) -> None:
+    """Write ``policy``'s archive at ``archive`` and its ONNX twin at ``onnx_path`` from that one program: the two
+    files of :func:`export_run_files`."""
+    program, names_in, names_out = _save_archive(policy, archive)
+    export_onnx(program, onnx_path, names_in, names_out)
