@@ -141,3 +141,21 @@ def test_a_fit_with_its_evaluation_writes_the_files_of_one_process(tmp_path, car
                 assert _same(*(torch.load(p, map_location="cpu", weights_only=False) for p in (a, b))), name
             else:
                 pytest.fail(f"{name} differs")
+
+
+def test_a_failed_helper_fails_the_fit_in_one_line_and_leaves_no_half_written_file(tmp_path, cartpole, record,
+                                                                                   monkeypatch, capfd):
+    data = record(cartpole, Mismatch(), {"train": 2, "validation": 1, "heldout": 1, "ood": 1}, 0.4)
+    data.gains = cartpole.gains_record()
+    data.save(tmp_path / "cart.npz")
+    run = tmp_path / "fit"
+    (run / "policy.onnx").mkdir(parents=True)  # the helper's ONNX file cannot take its place
+    monkeypatch.setenv(HELPERS_ENV, "1")
+    capfd.readouterr()
+    assert main(["fit", str(tmp_path / "cart.npz"), "--out", str(run), "--iterations", "2", "--identify.iterations",
+                 "2", "--eval", "--quiet"]) == 2
+    errors = [ln for ln in capfd.readouterr().err.splitlines() if "rror" in ln]
+    assert len(errors) == 1 and errors[0].startswith("wresdyn fit: error: the fit's helper process"), errors
+    assert "IsADirectoryError" in errors[0] and "policy.onnx" in errors[0]
+    assert not [p for p in run.rglob("*") if ".part" in p.name]
+    assert (run / "policy.onnx").is_dir()

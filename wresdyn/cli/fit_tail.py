@@ -30,9 +30,10 @@ _HEAD = 8
 
 
 class Helper:
-    """``processes`` helper processes: ``submit(target, function, *args, **kwargs)`` queues the job that writes the
-    file ``target`` on the next one in turn (:func:`write_into_place`), ``close()`` waits for all of them. Several
-    let the figures drawn after the replays be drawn side by side."""
+    """``processes`` helper processes: ``submit(targets, function, *args, **kwargs)`` queues the job that writes the
+    files ``targets`` (:func:`write_into_place`), ``close()`` waits for all of them. Several let the figures drawn
+    after the replays be drawn side by side: then the first job (the fit's export, the longest) has the first helper
+    to itself and the later ones take the others in turn; one helper runs every job in order."""
 
     def __init__(self, processes: int = 1):
         # what a helper prints goes to a file, read at the end: an error's last line becomes the command's, anything
@@ -51,7 +52,8 @@ class Helper:
         targets = tuple(map(Path, targets)) if isinstance(targets, (tuple, list)) else (Path(targets),)
         self._targets += targets
         frame = pickle.dumps((write_into_place, (targets, function, *args), kwargs))
-        proc = self._procs[self._submitted % len(self._procs)]
+        n = len(self._procs)
+        proc = self._procs[0 if n == 1 or not self._submitted else 1 + (self._submitted - 1) % (n - 1)]
         self._submitted += 1
         try:
             proc.stdin.write(len(frame).to_bytes(_HEAD, "little") + frame)

@@ -43,12 +43,12 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
 
     compile_kernels(robot, ds.rate_hz, ("forward",), solver=solver, device=device)
     mark = mark or (lambda _: None)
-    draw = draw or (lambda _, function, *args, **kwargs: function(*args, **kwargs))
     curves = {run_dir.name: run_dir, **{Path(c).name: Path(c) for c in compare}}
-    figures = ["fig4_learning_curves.png"]
+    fig4 = out_dir / "fig4_learning_curves.png"
+    figures = [fig4.name]
     mark("evaluation: the model loaded")
-    # the run's files only: drawn before the replays
-    draw(out_dir / figures[0], plot_learning_curves, curves, out_dir / figures[0])
+    if draw is not None:  # from the run's files only: drawn elsewhere while the splits replay
+        draw(fig4, plot_learning_curves, curves, fig4)
     weights = ds.fit_weights()  # joints the dataset excludes from fitting count in no metric
     if ds.excluded_joints:
         print(f"excluded from fitting and from the metrics: {', '.join(ds.excluded_joints)}", flush=True)
@@ -68,9 +68,15 @@ def evaluate_run(run: str, ds, robot, splits=("validation", "heldout", "ood"), o
         results[split] = summary
         figures.append(f"fig3_{split}.png")
         path = out_dir / figures[-1]
-        draw(path, plot_fig3, *_plotted(robot, trajs[0], runs), path, ds.rate_hz, joints,
-             title=f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)", weights=weights)
+        title = f"{split}: {trajs[0].name} (red: real, green: PD only, blue: PD + residual)"
+        if draw is None:
+            plot_fig3(robot, trajs[0], runs, path, ds.rate_hz, joints, title=title, weights=weights)
+        else:
+            draw(path, plot_fig3, *_plotted(robot, trajs[0], runs), path, ds.rate_hz, joints, title=title,
+                 weights=weights)
         print(summary_line(split, summary), flush=True)
+    if draw is None:
+        plot_learning_curves(curves, fig4)
     law = {} if kappa is None else {"friction_kappa": kappa}  # the soft default's reports stay as they were
     members = {"ensemble": [str(r) for r in ensemble]} if ensemble else {}
     write_report(out_dir, robot, results, {"run": str(run_dir), **members, "residual": meta["kind"],
