@@ -289,9 +289,13 @@ def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics
     if args.eval:
         from ..evaluation.evaluate_run import evaluate_run
 
-        if log.clock:  # the helpers say which way the measured run went
-            log("evaluating the run (wresdyn eval)" + (f"; {helper.processes} helper process(es) write policy.pt, "
-                                                       "policy.onnx and the figures" if helper is not None else ""))
+        if log.clock:
+            log("evaluating the run (wresdyn eval)")
+            if helper is not None:  # which way a measured run went, on stderr: the run's files stay the same
+                import sys
+
+                print(f"{helper.processes} helper process(es) write policy.pt, policy.onnx and the figures",
+                      file=sys.stderr, flush=True)
         draw = residual = None
         if helper is not None:
             write_onnx, draw, residual = (lambda: None), helper.submit, policy
