@@ -152,8 +152,9 @@ HELPER_CORES = 4
 needs a core of its own; on 2 cores shared with other work it took the fit's and made the command slower
 (``benchmarks/results/speed/warm57_cpu/pairs.txt``)."""
 HELPERS_CORES = 8
-"""Cores from which there are three helpers (:class:`~wresdyn.cli.fit_tail.Helper`'s turns: the exported residual,
-Fig. 4 and one Fig. 3 each), so that the three Fig. 3 figures drawn after the replays are drawn side by side."""
+"""Cores from which there are three helpers (:class:`~wresdyn.cli.fit_tail.Helper`'s turns: the exported residual
+alone on one, the figures in turn on the other two), so that the Fig. 3 figures drawn after the replays are drawn
+side by side and beside the export."""
 HELPERS_ENV = "WRESDYN_FIT_HELPERS"
 """Environment variable that sets the number of helper processes of ``--eval`` whatever the cores (0: none, the
 export and figures in this process), for tests and measurements; unset: :data:`HELPER_CORES`' rule."""
@@ -275,7 +276,8 @@ def _finish(args: Fit, cfg, ds, robot, out, log, policy, curve, id_wall, physics
                             archive_later=helper is not None)
     if helper is not None:
         # the files of one export of the trained module, as here; the evaluation replays that module meanwhile
-        helper.submit(write_onnx.args[1:], write_onnx.func, *write_onnx.args)
+        _, archive, onnx = write_onnx.args
+        helper.submit((archive, onnx), write_onnx.func, *write_onnx.args)
     if cfg.model == "parametric":
         params = {k: dict(zip(robot.joint_names, np.round(v, 6).tolist())) for k, v in policy.parameters_physical().items()}
         (out / "parameters.json").write_text(json.dumps(params, indent=1))
