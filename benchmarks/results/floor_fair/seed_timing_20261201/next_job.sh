@@ -4,9 +4,12 @@
 #         a process of its own on GPU 0 beside (b)), seed 3, default mismatch, a fresh folder;
 #  GPU 1 (its own Warp cache): `wresdyn warmup`, then the gradient fit's 2000 iterations, fused against plain
 #         (benchmarks/speed/gradfit10.sh), then the warm fit's tail in one process against the helpers, three pairs
-#         (benchmarks/results/speed/tail57_plan.md: coldfit.sh with HELPER_PAIRS=3, each step its own cache);
+#         (benchmarks/results/speed/tail57_plan.md: coldfit.sh with HELPER_PAIRS=3, each step its own cache), then
+#         the gradient fit again with 16 and with 8 threads per block of the replay kernels (32 by default:
+#         speed_paths/block_dim/ measured 256, 64 and 32, the adjoint fastest at 32);
 #  host:  the two mujoco.sysid peers resumed from their committed checkpoints at nice 19 (16 threads each),
 #         their --max-seconds ending 150 s before END.
+#  On a 1-GPU host (the kind nvidia-h200) GPU 1's legs are left out.
 #  At END (epoch seconds) whatever still runs is stopped (the seed's script records its seconds with rc=stopped) and
 #  the seed is packed for a resume.
 # Usage (repository root; inputs in .dev/data: uneven.npz, peer_default/, peer_uneven/, COMMIT, read_logs.py and
@@ -32,7 +35,7 @@ for m in default uneven; do
       peer --threads 16 --max-seconds $PEER_S --resume > $R/peer_$m.log 2>&1; stage "peer $m ended rc=$?" ) &
 done
 stage "peers launched (--max-seconds $PEER_S)"
-( export CUDA_VISIBLE_DEVICES=1 WARP_CACHE_PATH=/root/wc_gpu1
+[ "$(nvidia-smi -L | wc -l)" -ge 2 ] && ( export CUDA_VISIBLE_DEVICES=1 WARP_CACHE_PATH=/root/wc_gpu1
   { time python3 -m wresdyn.cli warmup --device cuda:0; } > $R/gradfit_warmup.log 2>&1
   stage "warmup ended rc=$?"
   TOTAL=300 bash benchmarks/speed/gradfit10.sh $R/gradfit10 > $R/gradfit10.log 2>&1
@@ -41,7 +44,10 @@ stage "peers launched (--max-seconds $PEER_S)"
   stage "coldfit ended rc=$?"
   python3 .dev/data/read_logs.py $R/coldfit/fit_warm_h*.log > $R/coldfit/tail.txt 2>&1
   for i in 1 2 3; do python3 .dev/data/compare.py $R/coldfit/runs/fit_warm_h0_$i \
-    $R/coldfit/runs/fit_warm_hx_$i fit_warm_h0_$i fit_warm_hx_$i; done > $R/coldfit/compare.txt 2>&1 ) &
+    $R/coldfit/runs/fit_warm_hx_$i fit_warm_h0_$i fit_warm_hx_$i; done > $R/coldfit/compare.txt 2>&1
+  for B in 16 8; do  # fewer threads per block than the default 32: the adjoint's worlds over more multiprocessors
+    WRESDYN_REPLAY_BLOCK_DIM=$B TOTAL=240 bash benchmarks/speed/gradfit10.sh $R/gradfit_b$B > $R/gradfit_b$B.log 2>&1
+    stage "gradfit block_dim $B ended rc=$?"; done ) &
 stage "GPU 1 legs launched"
 while [ $(date +%s) -lt $END ] && { kill -0 $SEED 2>/dev/null || pgrep -f "[h]umanoid.py peer" > /dev/null; }; do
   sleep 5; done
