@@ -55,6 +55,9 @@ def run(args: Identify) -> int:
 
     cfg = args.config
     ds, robot = load_data(args.data, args.robot, args.gains)
+    from ..sim.devices import require_device
+
+    require_device(cfg.device)  # before OUT is made: a refused device leaves nothing behind
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     from ..progress import Log

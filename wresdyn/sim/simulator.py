@@ -4,17 +4,15 @@ Every consumer steps the robot through :class:`Simulator`: data collection's PD-
 (through :func:`wresdyn.sim.rollout.rollout`), the PPO environment (:class:`wresdyn.ppo.replay_env.ReplayEnv`)
 and the gradient fit (``rollout(..., grad=True)``). It owns the Newton model, the solver
 (:func:`wresdyn.sim.solvers.make_solver`), the states and the control, the torch views of them, the device
-stream, CUDA graphs of the solver steps and, for gradients, one state per step so each step's ``wp.Tape``
-stays valid.
+stream, CUDA graphs of the solver steps and, for gradients, one state per step so each step's ``wp.Tape`` stays valid.
 
 - Fast path, :meth:`Simulator.step`: writes the PD target and joint torque into ``control``, advances
   ``substeps`` solver steps in place (on CUDA replayed from a captured graph on the simulator's own stream,
   ordered against torch's current stream).
 - Differentiable path, :meth:`Simulator.step_diff`: the same step as a ``torch.autograd.Function``
   (:class:`~wresdyn.sim.tape_step.TapeStep`) whose backward runs the Warp tape, so gradients reach the previous
-  state, the PD target and the torque. On CUDA its
-  Warp work runs on torch's current stream when that is a stream of its own (the gradient fit's CUDA graph,
-  :meth:`Simulator._tape_stream`), else on Warp's device stream.
+  state, the PD target and the torque. On CUDA its Warp work runs on torch's current stream when that is a stream
+  of its own (the gradient fit's CUDA graph, :meth:`Simulator._tape_stream`), else on Warp's device stream.
 
 Divergence (:class:`DivergenceLimits`, :meth:`Simulator.diverged`) is judged in one place: a non-finite state,
 a runaway joint speed, a joint far past its limit, or (when a reference is given) far from the recording.
@@ -31,6 +29,7 @@ import torch
 
 from ..errors import SimulationDiverged
 from ..robot.ground import base_index
+from .devices import require_device
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 from .tape_step import TapeBuffers, TapeStep
@@ -114,6 +113,7 @@ class Simulator:
             raise ValueError(f"{robot.source.name}: servo drives (drive = \"servo\") run on the replay solver only, "
                              f"not {self.solver_kind}")
         self.requires_grad = bool(requires_grad)
+        require_device(device)
         self.model = robot.build_model(self.num_worlds, device, requires_grad=self.requires_grad, ground=self.ground,
                                        contact=contact)
         self.solver = make_solver(self.model, robot, self.dt_sub, self.solver_kind, ground=self.ground,

@@ -1,0 +1,23 @@
+"""Whether a device named on the command line is one this machine's Warp and torch can both use."""
+
+from __future__ import annotations
+
+import torch
+
+from ..errors import WresdynError
+
+
+def require_device(device: str | None) -> None:
+    """Refuse, in one line, a CUDA device that this machine's Warp or torch cannot use (no GPU, a CPU build of
+    torch, an index past the last GPU), before any model is built on it."""
+    if device is None or not str(device).startswith("cuda"):
+        return
+    import warp as wp
+
+    index = int(str(device).partition(":")[2] or 0)
+    n_warp = wp.get_cuda_device_count()
+    n_torch = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    if index >= min(n_warp, n_torch):
+        raise WresdynError(f"device {device!r} is not available here: Warp {wp.config.version} sees {n_warp} CUDA "
+                           f"device(s), torch {torch.__version__} sees {n_torch}; use --device cpu, or on a GPU "
+                           "machine a CUDA build of torch (the README's set-up)")
