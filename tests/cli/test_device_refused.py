@@ -15,10 +15,13 @@ REFUSED = "error: device 'cuda:99' is not available here: Warp "
     ["identify", "data/dataset.npz", "--iterations", "1"],
     ["train", "data/dataset.npz", "--iterations", "1"],
     ["deploy", "data/dataset.npz", "--floor"],
+    ["bench", "--worlds", "4", "--json"],
+    ["warmup", "--export"],
 ])
 def test_a_missing_cuda_device_is_one_line_and_leaves_no_output(command, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main([*command, "--device", "cuda:99", "--out", str(out)]) == 2
+    written = [str(out)] if command[-1] in ("--json", "--export") else ["--out", str(out)]
+    assert main([*command, *written, "--device", "cuda:99"]) == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("Warp CUDA warning")]
     assert lines[-1].startswith(f"wresdyn {command[0]}: {REFUSED}")
     assert "CUDA device(s), torch " in lines[-1] and "use --device cpu" in lines[-1]

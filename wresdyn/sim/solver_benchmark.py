@@ -30,6 +30,7 @@ import time
 
 from ..robot.description import DEFAULT_ROBOT, load_robot
 from ..robot.mujoco_model import build_mujoco
+from .devices import require_device
 from .solver_replay.kernels import ADJOINT_PIECES, background_compiles, branch_lanes, cuda_launch
 
 __all__ = ["SOLVERS", "run_bench"]
@@ -228,6 +229,7 @@ def run_bench(args) -> int:
     wp.config.quiet = True
     robot = load_robot(args.robot or DEFAULT_ROBOT, gains=args.gains)
     robot.check_gains()
+    require_device(args.device)
     cuda = str(args.device).startswith("cuda")
     worlds = [int(x) for x in (args.worlds or ("1024,4096,16384" if cuda else "1,16,128")).split(",")]
     solvers = args.solvers

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ..errors import WresdynError
 from ..robot.description import load_robot
+from .devices import require_device
 from .first_steps import check_newton
 from .goal_profile import profile_modules
 from .prebuilt import enable as enable_prebuilt
@@ -192,10 +193,8 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None, e
     wp.config.quiet = True  # no banner: the lines below say what happens
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     wp.init()
-    try:
-        dev = wp.get_device(device)
-    except (RuntimeError, ValueError) as e:
-        raise WresdynError(f"device {device!r}: {str(e).splitlines()[0]}") from None
+    require_device(device)
+    dev = wp.get_device(device)
     before = _cache_entries()
     t0 = time.perf_counter()
     given = os.environ.get("WRESDYN_ADJOINT_PIECES")
