@@ -27,3 +27,10 @@ def test_a_missing_cuda_device_is_one_line_and_leaves_no_output(command, tmp_pat
     assert "CUDA device(s), torch " in lines[-1] and "use --device cpu" in lines[-1]
     assert not any("Traceback" in line for line in lines)
     assert not out.exists()
+
+
+def test_a_missing_beside_device_is_refused_before_the_corrections_are_fitted(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["deploy", "data/dataset.npz", "--floor", "--beside-devices", "cuda:99", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.splitlines()[-1].startswith(f"wresdyn deploy: {REFUSED}")
+    assert not out.exists()

@@ -108,7 +108,12 @@ def test_missing_and_garbage_files(tmp_path):
     _expect(tmp_path / "nope.npz", "not found")
     junk = tmp_path / "junk.npz"
     junk.write_bytes(b"this is not a zip file")
-    _expect(junk, "not a wresdyn dataset")
+    msg = _expect(junk, "not a wresdyn dataset")
+    assert "not a NumPy .npz archive" in msg and "allow_pickle" not in msg  # NumPy's hint to unpickle is not passed on
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, header=np.array([{"a": 1}], dtype=object))
+    msg = _expect(pickled, "not a wresdyn dataset")
+    assert "pickled objects, which are never loaded" in msg and "allow_pickle" not in msg
     np.savez(tmp_path / "other.npz", x=np.zeros(3))
     _expect(tmp_path / "other.npz", "no header")
 

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import WresdynError
-from .dataset_header import (FORMAT, READ_VERSIONS, SCHEMA_VERSION, DatasetError, check_gains, first_line,
-                             header_from, read_header)
+from .dataset_header import (FORMAT, READ_VERSIONS, SCHEMA_VERSION, DatasetError, check_gains, header_from,
+                             npz_failure, read_header)
 from .savgol import savgol_filter  # scipy.signal's filter without importing scipy.signal (most of SciPy)
 
 __all__ = ["SCHEMA_VERSION", "READ_VERSIONS", "SPLITS", "UNITS", "DatasetError", "Trajectory", "Dataset",
@@ -297,7 +297,7 @@ class Dataset:
             with np.load(path, allow_pickle=False) as z:
                 files = {k: z[k] for k in z.files}
         except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
-            raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {first_line(e)}") from None
+            raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {npz_failure(e)}") from None
         h = header_from(files, path)
         splits = READ_VERSIONS[h["schema_version"]]
         trajs = []

@@ -37,7 +37,7 @@ def read_header(path) -> dict:
         with np.load(path, allow_pickle=False) as z:
             files = {"header": z["header"]} if "header" in z.files else {}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
-        raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {first_line(e)}") from None
+        raise DatasetError(f"{path}: not a wresdyn dataset (.npz) file: {npz_failure(e)}") from None
     return header_from(files, path)
 
 
@@ -78,6 +78,15 @@ def check_gains(gains, where: str) -> None:
     joints = gains["config"].get("joint")
     if not isinstance(joints, list) or not all(isinstance(e, dict) for e in joints):
         raise DatasetError(f"{where}: gains config needs a list of [[joint]] tables")
+
+
+def npz_failure(e: Exception) -> str:
+    """Why ``np.load(allow_pickle=False)`` refused a file, in words for a user: NumPy reads anything that is neither
+    a zip archive nor an ``.npy`` file as pickled data, and its hint to allow pickles is not one to follow with a file
+    from elsewhere."""
+    if "allow_pickle" in str(e):
+        return "not a NumPy .npz archive (or one holding pickled objects, which are never loaded)"
+    return first_line(e)
 
 
 def first_line(e: Exception) -> str:
