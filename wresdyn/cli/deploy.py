@@ -133,10 +133,6 @@ def run(args: Deploy) -> int:
     from ..experiments.skills import run_benchmark as bench
     ds, robot = load_data(args.data)
     mismatch = Mismatch.load(args.mismatch) if args.mismatch else None
-    from ..sim.devices import require_device
-
-    for device in (cfg.device, *getattr(cfg, "beside_devices", ())):  # before the fits, not minutes into them
-        require_device(device)
     from .clock import ClockLog
 
     # WRESDYN_LOG_CLOCK=1 stamps the lines with the seconds since the process started (a whole seed's time, split)

@@ -15,6 +15,7 @@ from ..data.mismatch import Mismatch
 from ..fit.gradfit import GradFitConfig, export_run, fit
 from ..fit.hybrid import fit_hybrid
 from ..identify.sysid import SysIdConfig
+from ..sim.devices import require_device
 from ..skills.skill_config import SkillPPOConfig
 
 __all__ = ["POLICIES", "BASE_POLICIES", "RANDOMIZED", "BenchmarkStart", "start_benchmark", "fit_corrections",
@@ -47,7 +48,10 @@ def start_benchmark(out: Path, cfg, ppo, mismatch, dataset, policies) -> Benchma
     """Create ``out``, resolve what a benchmark's arguments leave to their defaults (``ppo``: a default
     :class:`~wresdyn.skills.skill_config.SkillPPOConfig`; ``mismatch``: the dataset's) and pin torch's threads to
     ``ppo.torch_threads``. ``cfg``: the benchmark's :class:`~wresdyn.experiments.deploy_config.DeployConfig` or
-    :class:`~wresdyn.experiments.deploy_config.FloorDeployConfig`."""
+    :class:`~wresdyn.experiments.deploy_config.FloorDeployConfig`. The devices the floor's fine-tunings take beside
+    the others are checked first, not minutes later when the corrections are fitted."""
+    for device in getattr(cfg, "beside_devices", ()):
+        require_device(device)
     policies = [p for p in POLICIES if p in policies or p == "a_nominal"]
     out.mkdir(parents=True, exist_ok=True)
     ppo = replace(ppo or SkillPPOConfig(), seed=cfg.seed, device=cfg.device)
