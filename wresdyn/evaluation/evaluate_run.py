@@ -119,7 +119,8 @@ def load_run_model(run_dir, robot, rate_hz: float, solver: str | None = None, re
                               "rate_hz": float(config["rate_hz"])}
         solver, substeps = solver or config["solver"], 1
     else:
-        policy, meta = load_policy(run_dir) if residual is None else (residual, _residual_meta(run_dir))
+        policy, meta = (load_policy(run_dir) if residual is None
+                        else (residual, json.loads((run_dir / "residual.json").read_text())))
         cfg = config_from_dict(json.loads((run_dir / "config.json").read_text())["config"])
         solver, substeps = solver or cfg.env.solver, cfg.env.substeps
     if list(meta["joint_names"]) != list(robot.joint_names):
@@ -155,14 +156,6 @@ def load_ensemble(run_dirs, robot, rate_hz: float, solver: str | None = None):
     if first[0] is None:
         return None, first[1], PhysicalParams.mean(p for _, _, p, *_ in loaded), *first[3:]
     return MeanResidual(p for p, *_ in loaded), *first[1:]
-
-
-def _residual_meta(run_dir) -> dict:
-    """A run's ``residual.json``."""
-    import json
-    from pathlib import Path
-
-    return json.loads((Path(run_dir) / "residual.json").read_text())
 
 
 def _physics_json(physics) -> dict | None:
