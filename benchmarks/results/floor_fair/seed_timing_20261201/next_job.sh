@@ -9,7 +9,9 @@
 #         speed_paths/block_dim/ measured 256, 64 and 32, the adjoint fastest at 32);
 #  host:  the two mujoco.sysid peers resumed from their committed checkpoints at nice 19 (16 threads each),
 #         their --max-seconds ending 150 s before END.
-#  On a 1-GPU host (the kind nvidia-h200) GPU 1's legs are left out.
+#  On a 1-GPU host (the kind nvidia-h200) GPU 1's legs are left out while the seed runs; when it has ended and more
+#  than 150 s are left before END, the warm fit's three pairs with and without the helpers (coldfit.sh, SHIPPED=1
+#  HELPER_PAIRS=3) run on GPU 0 in the time left, so the seed's seconds are measured with nothing else on the GPU.
 #  At END (epoch seconds) whatever still runs is stopped (the seed's script records its seconds with rc=stopped) and
 #  the seed is packed for a resume.
 # Usage (repository root; inputs in .dev/data: uneven.npz, peer_default/, peer_uneven/, COMMIT, read_logs.py and
@@ -49,7 +51,23 @@ stage "peers launched (--max-seconds $PEER_S)"
     WRESDYN_REPLAY_BLOCK_DIM=$B TOTAL=240 bash benchmarks/speed/gradfit10.sh $R/gradfit_b$B > $R/gradfit_b$B.log 2>&1
     stage "gradfit block_dim $B ended rc=$?"; done ) &
 stage "GPU 1 legs launched"
-while [ $(date +%s) -lt $END ] && { kill -0 $SEED 2>/dev/null || pgrep -f "[h]umanoid.py peer" > /dev/null; }; do
+LEGS=0
+if [ "$(nvidia-smi -L | wc -l)" -lt 2 ]; then
+  ( while kill -0 $SEED 2>/dev/null; do sleep 5; done
+    LEFT=$(( END - $(date +%s) - 30 ))
+    if [ $LEFT -gt 150 ]; then
+      stage "GPU 0 after the seed: coldfit with TOTAL=$LEFT"
+      WARP_CACHE_PATH=/root/wc_after GPU=0 SHIPPED=1 HELPER_PAIRS=3 TOTAL=$LEFT \
+        bash benchmarks/speed/coldfit.sh $R/coldfit > $R/coldfit.log 2>&1
+      stage "coldfit ended rc=$?"
+      python3 .dev/data/read_logs.py $R/coldfit/fit_warm_h*.log > $R/coldfit/tail.txt 2>&1
+      for i in 1 2 3; do python3 .dev/data/compare.py $R/coldfit/runs/fit_warm_h0_$i \
+        $R/coldfit/runs/fit_warm_hx_$i fit_warm_h0_$i fit_warm_hx_$i; done > $R/coldfit/compare.txt 2>&1
+    else stage "GPU 0 after the seed: $LEFT s left, coldfit not run"; fi ) &
+  LEGS=$!
+fi
+while [ $(date +%s) -lt $END ] && { kill -0 $SEED 2>/dev/null || pgrep -f "[h]umanoid.py peer" > /dev/null \
+  || { [ $LEGS != 0 ] && kill -0 $LEGS 2>/dev/null; }; }; do
   sleep 5; done
 if kill -0 $SEED 2>/dev/null; then stage "seed stopped at END"; pkill -TERM -f "[f]loor_seed_timing.sh"; fi
 if pgrep -f "[h]umanoid.py peer" > /dev/null; then stage "peers stopped at END"; pkill -TERM -f "[h]umanoid.py peer"; fi
