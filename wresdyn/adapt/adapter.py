@@ -34,6 +34,7 @@ import torch
 from ..errors import WresdynError
 from ..export.usd import check_usd_robot, write_export
 from ..identify.sysid import physics_window_loss
+from ..learn.adam import Adam
 from ..robot.physical import PhysicalParams
 from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.fused import can_fuse, fused_rollout
@@ -82,7 +83,7 @@ class Adapter:
         m = self.model
         groups = [[m.u_kp, m.u_kd, m.u_armature], [m.u_damping, m.u_friction, m.u_effort],
                   [m.u_body_logdiag, m.u_body_off]]
-        self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "lr": cfg.lr * f}
+        self.optim = Adam([{"params": [p for p in g if p.requires_grad], "lr": cfg.lr * f}
                                        for g, f in zip(groups, cfg.lr_scale) if any(p.requires_grad for p in g)],
                                       lr=cfg.lr)
         self._lrs = [g["lr"] for g in self.optim.param_groups]

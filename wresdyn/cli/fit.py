@@ -198,12 +198,6 @@ def _set_up(args: Fit):
     from .clock import since_start
 
     imported = since_start()
-    # every optimiser's constructor and step import torch._dynamo, so any fit's first iteration does; imported here,
-    # its 167,000 objects (sympy's, the ONNX exporter's modules) are frozen with the set-up's instead of costing about
-    # 390 collections while it imports and a walk in every full collection after
-    import torch._dynamo  # noqa: F401
-
-    dynamo = since_start() - imported
     cfg = args.config
     identify_first = args.model == "hybrid" and not cfg.physics
     sysid = args.identify_config if identify_first else None
@@ -220,8 +214,8 @@ def _set_up(args: Fit):
     from ..learn.schedule import describe_length
 
     if log.clock:  # the start's seconds split
-        log(f"start: imports {imported:.1f} s, torch._dynamo {dynamo:.1f} s, the dataset and robot (Warp's and "
-            f"Newton's imports with them) {loaded - imported - dynamo:.1f} s")
+        log(f"start: imports {imported:.1f} s, the dataset and robot (Warp's and Newton's imports with them) "
+            f"{loaded - imported:.1f} s")
     log(f"gradient fit of a {what} on {len(ds.split('train'))} trajectories of {args.data}: {describe_length(cfg)} "
         f"x {cfg.windows} windows, horizons {cfg.horizon_curriculum or (cfg.horizon,)} -> {out}")
     from ..sim.physics import PhysicalParams

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import torch
 
+from ..learn.adam import Adam
 from ..learn.fused_mlp import FusedMLPRollout
 from ..learn.graph_step import StepGraphs, adopt_optimiser, set_lr
 from ..learn.parametric import ParametricResidual
@@ -141,7 +142,7 @@ class _FitLearner:
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
         self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
-        self.optim = torch.optim.Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred,
+        self.optim = Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred,
                                       fused=cfg.fused_network or None)
         self.map_location = cfg.device
         delay = 0.0

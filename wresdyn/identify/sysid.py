@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from ..errors import WresdynError
+from ..learn.adam import Adam
 from ..learn.graph_step import StepGraphs, adopt_optimiser, set_lr
 from ..learn.runs import RunFolder
 from ..learn.selection import ValidationScore
@@ -165,7 +166,7 @@ class IdentifyLearner:
                    model.u_startup_torque, model.u_stiction,
                    model.u_backlash, model.u_encoder_offset, model.u_load_friction],
                   [model.u_body_logdiag, model.u_body_off]]
-        self.optim = torch.optim.Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
+        self.optim = Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
                                        for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
         self.effort_from = math.inf  # the iteration where the effort limit joins the fit (never, unless fitted)
         if "effort" in cfg.fit and cfg.iterations is not None:

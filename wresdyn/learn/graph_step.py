@@ -26,7 +26,7 @@ import torch
 __all__ = ["StepGraphs", "adopt_optimiser", "set_lr"]
 
 
-def adopt_optimiser(optim: torch.optim.Optimizer, device, capturable: bool, fused: bool = False) -> None:
+def adopt_optimiser(optim, device, capturable: bool, fused: bool = False) -> None:
     """Put Adam's learning rate and step count where a captured step wants them (``capturable``: a device tensor
     each) or where an eager one does (a float, a CPU tensor; on the device for ``fused``); again after a checkpoint's
     optimiser state is loaded, which brings its own flags."""
