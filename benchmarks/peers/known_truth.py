@@ -381,8 +381,6 @@ def main() -> None:
     args = p.parse_args()
 
     import torch
-    import torch._dynamo  # noqa: F401  imported with torch, outside the timers (as the peer's mujoco): torch.optim's
-    # first optimiser imports it lazily, 2.2 s of a 3.8 s identification of the spring-mass on 2 cores
     from absl import logging as absl_logging
 
     torch.set_num_threads(1)
