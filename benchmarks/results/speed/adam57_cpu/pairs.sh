@@ -1,10 +1,12 @@
 #!/bin/bash
-# three alternating rounds: the small fit with its evaluation, one helper forced, on the tree before and after
+# three alternating rounds: the small fit with its evaluation, HELPERS helper processes (1 by default) forced, on the
+# tree before (/tmp/adam_before) and after (/tmp/adam_after), worktrees of 04d56e8~1 and 04d56e8;
+# usage: [HELPERS=N] pairs.sh OUT
 out=${1:?OUT}; mkdir -p $out
 for i in 1 2 3; do for t in before after; do
   d=/tmp/adam_$t; rm -rf /tmp/adam57_run_$t
   s=$(date +%s.%N)
-  (cd $d && PYTHONPATH=$d OMP_NUM_THREADS=1 WRESDYN_FIT_HELPERS=1 WRESDYN_LOG_CLOCK=1 /work/main/.venv/bin/python -X importtime \
+  (cd $d && PYTHONPATH=$d OMP_NUM_THREADS=1 WRESDYN_FIT_HELPERS=${HELPERS:-1} WRESDYN_LOG_CLOCK=1 /work/main/.venv/bin/python -X importtime \
     -m wresdyn.cli fit /work/main/data/dataset.npz --out /tmp/adam57_run_$t --device cpu --eval --iterations 4 \
     --identify.iterations 4 --windows 4 > $out/${t}_$i.log 2> $out/${t}_$i.importtime)
   rc=$?
