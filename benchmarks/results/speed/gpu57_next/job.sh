@@ -3,7 +3,9 @@
 # GPU 0, nothing else on the GPU, each leg given what is left before END:
 #   1. the warm fit's tail in one process against its helper processes, three alternating pairs after a cold fit with
 #      the shipped kernels (benchmarks/speed/coldfit.sh, SHIPPED=1 HELPER_PAIRS=3; each step its own Warp cache);
-#   2. `wresdyn warmup`, then the gradient fit's 2000 iterations, fused against plain (benchmarks/speed/gradfit10.sh);
+#   2. the CUDA tests of the fits' Adam inside CUDA graphs (identification's and the gradient fit's captured steps),
+#      at most 180 s; then `wresdyn warmup`, the gradient fit's 2000 iterations, fused against plain
+#      (benchmarks/speed/gradfit10.sh);
 #   3. the gradient fit again with 16 and with 8 threads per block of the replay kernels (32 by default).
 #  host: the two mujoco.sysid peers resumed from their committed checkpoints at nice 19 (16 threads each), their
 #  --max-seconds ending 150 s before END.
@@ -37,6 +39,10 @@ stage "coldfit ended rc=$?"
 python3 .dev/data/read_logs.py $R/coldfit/fit_warm_h*.log > $R/coldfit/tail.txt 2>&1
 for i in 1 2 3; do python3 .dev/data/compare.py $R/coldfit/runs/fit_warm_h0_$i \
   $R/coldfit/runs/fit_warm_hx_$i fit_warm_h0_$i fit_warm_hx_$i; done > $R/coldfit/compare.txt 2>&1
+T=$(left); [ $T -gt 180 ] && T=180
+[ $T -gt 60 ] && { timeout $T python3 -m pytest -p no:cacheprovider -q -rA tests/learn/test_adam.py \
+  tests/identify/test_sysid_graph.py tests/learn/test_learner_speed_paths.py -k "cuda or graph or adam" \
+  > $R/pytest_cuda.log 2>&1; stage "pytest (the optimiser's CUDA graph paths) ended rc=$?"; }
 T=$(left)
 if [ $T -gt 120 ]; then
   { time timeout $T python3 -m wresdyn.cli warmup --device cuda:0; } > $R/gradfit_warmup.log 2>&1
