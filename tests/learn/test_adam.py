@@ -125,3 +125,16 @@ def test_it_never_imports_dynamo():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def test_zero_grad_sets_to_none_or_zeroes_in_place_as_torch():
+    groups, loss = _problem(3)
+    opt = Adam(groups)
+    loss().backward()
+    grad = groups[0]["params"][0].grad
+    opt.zero_grad(set_to_none=False)
+    assert groups[0]["params"][0].grad is grad and not grad.any()  # the same tensor, zeroed
+    assert groups[1]["params"][1].grad is None  # never had one
+    loss().backward()
+    opt.zero_grad()
+    assert all(p.grad is None for g in groups for p in g["params"])

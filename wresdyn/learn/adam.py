@@ -66,9 +66,12 @@ class Adam:
                     continue
                 if set_to_none:
                     p.grad = None
+                    continue
+                if p.grad.grad_fn is not None:
+                    p.grad.detach_()
                 else:
-                    p.grad.detach_() if p.grad.grad_fn is not None else p.grad.requires_grad_(False)
-                    p.grad.zero_()
+                    p.grad.requires_grad_(False)
+                p.grad.zero_()
 
     def _new_state(self, p: torch.Tensor, group: dict) -> dict:
         # the step count on the host unless a capture or the fused kernel reads it (torch's "special device hosting")
