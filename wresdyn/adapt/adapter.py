@@ -84,8 +84,7 @@ class Adapter:
         groups = [[m.u_kp, m.u_kd, m.u_armature], [m.u_damping, m.u_friction, m.u_effort],
                   [m.u_body_logdiag, m.u_body_off]]
         self.optim = Adam([{"params": [p for p in g if p.requires_grad], "lr": cfg.lr * f}
-                                       for g, f in zip(groups, cfg.lr_scale) if any(p.requires_grad for p in g)],
-                                      lr=cfg.lr)
+                           for g, f in zip(groups, cfg.lr_scale) if any(p.requires_grad for p in g)], lr=cfg.lr)
         self._lrs = [g["lr"] for g in self.optim.param_groups]
         self.detector = ChangeDetector(cfg.detect_factor, round(cfg.detect_history / cfg.update_every),
                                        cfg.track_for, cfg.detect_confirm, cfg.effort_overall,

@@ -143,7 +143,7 @@ class _FitLearner:
                              friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
         self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
         self.optim = Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred,
-                                      fused=cfg.fused_network or None)
+                          fused=cfg.fused_network or None)
         self.map_location = cfg.device
         delay = 0.0
         if physics is not None:

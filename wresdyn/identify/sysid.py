@@ -167,7 +167,7 @@ class IdentifyLearner:
                    model.u_backlash, model.u_encoder_offset, model.u_load_friction],
                   [model.u_body_logdiag, model.u_body_off]]
         self.optim = Adam([{"params": [p for p in g if p.requires_grad], "scale": f}
-                                       for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
+                           for g, f in zip(groups, cfg.lr_scale)], lr=cfg.lr)
         self.effort_from = math.inf  # the iteration where the effort limit joins the fit (never, unless fitted)
         if "effort" in cfg.fit and cfg.iterations is not None:
             self.effort_from = int(round(cfg.effort_after * cfg.iterations))
