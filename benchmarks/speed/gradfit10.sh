@@ -4,7 +4,9 @@
 #   a. fused_cold: the fused path, first run (loads and, on a fresh machine, compiles the Warp kernels; its seconds
 #                  include that: not the figure to report);
 #   b. fused:      the fused path again, warm: the figure;
-#   c. plain:      the plain path (the default), warm: the baseline of this run.
+#   c. plain:      the plain path (the default), warm: the baseline of this run;
+#   d. plain_sN:   the plain path with seed N for each N in EXTRA_SEEDS (none by default): how far another seed moves
+#                  the same path's result, the scale against which the fused path's difference is read.
 # Then summary.txt: each run's training seconds and ms/iteration per window length, and b against c (the loss after
 # the last iteration, relative; the validation error after it and the best one [rad]; their difference must stay at
 # float32 noise grown over 2000 iterations: the plan's bounds are 1e-3 relative and 1e-4 rad).
@@ -17,7 +19,8 @@
 # machine run `wresdyn warmup --device cuda:0` before it, or give TOTAL more.
 #
 # Environment: PYTHON (python3), DEVICE (cuda:0), DATA (data/dataset.npz), ITERATIONS (2000), WINDOWS (1024),
-# TOTAL (the whole script's budget [s], 235: each run gets what is left; one cut short says so, rc=124).
+# TOTAL (the whole script's budget [s], 235: each run gets what is left; one cut short says so, rc=124),
+# EXTRA_SEEDS (space-separated seeds for the runs d, none by default).
 # Output: OUT/<run>.json (gradfit_2000.py's figures), OUT/<run>.log (its output, last line `whole command: S s rc=RC`),
 # OUT/machine.txt, OUT/summary.txt.
 set -uo pipefail
@@ -51,14 +54,15 @@ run() {  # run NAME [ARGS...]: gradfit_2000.py under the budget left, its log an
 run fused_cold --fused
 run fused --fused
 run plain
+for seed in ${EXTRA_SEEDS:-}; do run "plain_s$seed" --seed "$seed"; done
 
 "$py" - "$out" > "$out/summary.txt" 2>&1 <<'EOF'
 import json, sys
 from pathlib import Path
 
 out = Path(sys.argv[1])
-runs = {n: json.loads((out / f"{n}.json").read_text()) for n in ("fused_cold", "fused", "plain")
-        if (out / f"{n}.json").exists()}
+names = ["fused_cold", "fused", "plain"] + sorted(p.stem for p in out.glob("plain_s*.json"))
+runs = {n: json.loads((out / f"{n}.json").read_text()) for n in names if (out / f"{n}.json").exists()}
 for name, r in runs.items():
     rates = ", ".join(f"H={x['horizon']}: {x['ms_per_iteration']:.2f}" if x["ms_per_iteration"] is not None
                       else f"H={x['horizon']}: -" for x in r["per_length"])
@@ -76,5 +80,11 @@ if "fused" in runs and "plain" in runs:
             print(f"{key} difference {abs(f[key] - p[key]):.2e} rad (bound 1e-4)")
 else:
     print("fused or plain missing: see their logs")
+for name in (n for n in runs if n.startswith("plain_s") and "plain" in runs):
+    s, p = runs[name], runs["plain"]
+    parts = [f"final loss relative {abs(s['final_loss'] - p['final_loss']) / abs(p['final_loss']):.2e}"]
+    parts += [f"{key} {abs(s[key] - p[key]):.2e} rad" for key in ("final_validation", "best_validation")
+              if s[key] is not None and p[key] is not None]
+    print(f"{name} against plain (another seed, the same path): " + ", ".join(parts))
 EOF
 cat "$out/summary.txt"
