@@ -1,7 +1,7 @@
 """Where one gradient-fit iteration's time goes on a GPU: kernels per iteration by kind, their GPU time, and the
 wall-clock of the iteration eager and replayed from its CUDA graph.
 
-    python benchmarks/speed/profile_gradfit.py --device cuda:0 --windows 1024 --horizon 64
+    python benchmarks/speed/profile_gradfit.py --device cuda:0 --windows 1024 --horizon 64 [--fused] [--top 30]
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF), the default gradient-fit
 configuration at ``--windows`` windows of ``--horizon`` steps, built as :func:`wresdyn.fit.gradfit.fit` builds it
@@ -9,7 +9,9 @@ configuration at ``--windows`` windows of ``--horizon`` steps, built as :func:`w
 Warp's kernels as well as torch's); kernels are grouped as the solver's forward step, its adjoint, Warp copies and
 memsets, and torch (the residual network, the loss, autograd, Adam). Then ``--repeat`` iterations are timed eagerly
 and replayed from the graph. The graph's wall-clock against the kernels' summed GPU time shows how much of it is
-the GPU's per-node overhead (launch-bound) rather than work.
+the GPU's per-node overhead (launch-bound) rather than work. ``--fused`` profiles the opt-in fused MLP path
+(``GradFitConfig.fused_network``); ``--top N`` also lists the N kernels of most GPU time by name, with their count per
+step, to show which kernels a further fusion would have to remove.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ def main() -> None:
 
     from wresdyn.data.dataset import load_dataset
     from wresdyn.fit.gradfit import GradFitConfig, GradFitIteration, build_policy
+    from wresdyn.learn.adam import Adam
     from wresdyn.learn.residual import obs_stats
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
     from wresdyn.sim import Simulator, TrajectoryBank
@@ -55,6 +58,8 @@ def main() -> None:
     p.add_argument("--windows", type=int, default=1024)
     p.add_argument("--horizon", type=int, default=64)
     p.add_argument("--repeat", type=int, default=20, help="iterations timed per mode")
+    p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network: the fused MLP path and Adam")
+    p.add_argument("--top", type=int, default=0, help="also list the N kernels of most GPU time by name")
     p.add_argument("--json", default=None)
     args = p.parse_args()
     if not args.device.startswith("cuda"):
@@ -63,7 +68,8 @@ def main() -> None:
     torch.set_num_threads(1)
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
-    cfg = GradFitConfig(windows=args.windows, horizon=args.horizon, horizon_curriculum=(), device=args.device)
+    cfg = GradFitConfig(windows=args.windows, horizon=args.horizon, horizon_curriculum=(), device=args.device,
+                        fused_network=args.fused)
     train = dataset.split("train")
     policy = build_policy(robot, cfg.residual, *obs_stats(train)).to(args.device)
     sim = Simulator(robot, cfg.windows, 1.0 / dataset.rate_hz, device=args.device, requires_grad=True)
@@ -85,7 +91,7 @@ def main() -> None:
 
     rows = {}
     for graph in (False, True):
-        optim = torch.optim.Adam(policy.parameters(), lr=cfg.lr, capturable=graph)
+        optim = Adam(policy.parameters(), lr=cfg.lr, capturable=graph, fused=args.fused or None)
         step = GradFitIteration(cfg, sim, bank, policy, optim, cfg.obs_noise, graph)
         timed(step, 3)  # compile, warm up; with graphs: the eager warm-up, the capture, a replay
         if not graph:
@@ -93,11 +99,17 @@ def main() -> None:
                 step(*inputs())
                 torch.cuda.synchronize()
             count, busy = defaultdict(int), defaultdict(float)
+            by_name = defaultdict(lambda: [0, 0.0])  # kernel name -> [count, GPU seconds]
             for e in prof.events():
                 if e.device_type == torch.autograd.DeviceType.CUDA:
                     count[kernel_kind(e.name)] += 1
                     busy[kernel_kind(e.name)] += e.device_time * 1e-6  # us -> s
+                    by_name[e.name][0] += 1
+                    by_name[e.name][1] += e.device_time * 1e-6
             rows["kernels"] = {k: {"count": count[k], "gpu_ms": 1e3 * busy[k]} for k in sorted(count)}
+            top = sorted(by_name.items(), key=lambda kv: -kv[1][1])[:args.top]
+            rows["top"] = [{"name": k[:160], "kind": kernel_kind(k), "count": c, "gpu_ms": 1e3 * t}
+                           for k, (c, t) in top]
         rows["graph" if graph else "eager"] = {"ms_per_iteration": 1e3 * timed(step, args.repeat)}
     kernels = rows["kernels"]
     total = sum(v["count"] for v in kernels.values())
@@ -109,11 +121,18 @@ def main() -> None:
     for k, v in sorted(kernels.items(), key=lambda kv: -kv[1]["gpu_ms"]):
         print(f"| {k} | {v['count']} | {v['count'] / h:.1f} | {v['gpu_ms']:.2f} |")
     print(f"| all | {total} | {total / h:.1f} | {busy:.2f} |")
+    if rows.get("top"):
+        print(f"\nthe {len(rows['top'])} kernels of most GPU time (fused_network {args.fused}):")
+        print("| kernel | kind | count | per step | GPU time [ms] |")
+        print("|---|---|---|---|---|")
+        for r in rows["top"]:
+            print(f"| {r['name'][:90]} | {r['kind']} | {r['count']} | {r['count'] / h:.2f} | {r['gpu_ms']:.3f} |")
     g, e = rows["graph"]["ms_per_iteration"], rows["eager"]["ms_per_iteration"]
     print(f"\niteration wall-clock: eager {e:.1f} ms, CUDA graph {g:.1f} ms ({e / g:.1f}x); kernels busy {busy:.1f} ms "
           f"= {100 * busy / g:.0f} % of the graph's time; {1e3 * (g - busy) / total:.1f} us per kernel beyond its work")
     if args.json:
-        Path(args.json).write_text(json.dumps({"device": name, "windows": b, "horizon": h, **rows,
+        Path(args.json).write_text(json.dumps({"device": name, "windows": b, "horizon": h, "fused_network": args.fused,
+                                               **rows,
                                                "kernels_total": total, "gpu_busy_ms": busy}, indent=1))
 
 
