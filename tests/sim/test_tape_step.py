@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from wresdyn.sim import Simulator
-from wresdyn.sim.tape_step import TapeGradients
+from wresdyn.sim.tape_step import StepRows, stage_targets
 
 DT = 0.002
 
@@ -46,7 +46,8 @@ class _CopiedStep(torch.autograd.Function):
         return (*out, None, None)
 
 
-def _inputs(robot, b, h, seed):
+def _inputs(robot, b, h, seed, staged):
+    """Start state, PD targets and torques; the targets without gradients where a rollout stages them."""
     rng = np.random.default_rng(seed)
     lo = np.where(np.isfinite(robot.lower), robot.lower, -0.5)
     hi = np.where(np.isfinite(robot.upper), robot.upper, 0.5)
@@ -54,7 +55,7 @@ def _inputs(robot, b, h, seed):
     f = lambda x: torch.tensor(x, dtype=torch.float32, requires_grad=True)  # noqa: E731
     return {"q0": f(mid + 0.3 * half * rng.uniform(-1, 1, (b, robot.n_dof))),
             "qd0": f(rng.uniform(-1, 1, (b, robot.n_dof))),
-            "target": f(mid + 0.3 * half * rng.uniform(-1, 1, (b, h, robot.n_dof))),
+            "target": f(mid + 0.3 * half * rng.uniform(-1, 1, (b, h, robot.n_dof))).requires_grad_(not staged),
             "tau": f(0.03 * np.minimum(robot.effort, 100.0) * rng.uniform(-1, 1, (b, h, robot.n_dof)))}
 
 
@@ -63,8 +64,10 @@ def _run(sim, x, copied: bool):
     (several consumers each, as the gradient fit's), with a detached state half-way (truncation)."""
     q, qd, qs, total = x["q0"], x["qd0"], [], 0.0
     h = x["target"].shape[1]
+    staged = None if copied else stage_targets(sim, x["target"])
     for k in range(h):
-        args = (q, qd, x["target"][:, k], x["tau"][:, k] * (1.0 + 0.1 * q.sin()))
+        target = x["target"][:, k] if staged is None else staged[k]
+        args = (q, qd, target, x["tau"][:, k] * (1.0 + 0.1 * q.sin()))
         q_new, qd_new = _CopiedStep.apply(*args, sim, k) if copied else sim.step_diff(k, *args)
         total = total + (((qd_new - qd) / DT) ** 2).sum() * 1e-6
         q, qd = q_new, qd_new
@@ -74,13 +77,14 @@ def _run(sim, x, copied: bool):
     q_all = torch.stack(qs, 1)
     loss = total + (q_all ** 2).sum() + 0.01 * (qd ** 2).sum()
     loss.backward()
-    return [q_all.detach(), loss.detach(), *(v.grad for v in x.values())]
+    return [q_all.detach(), loss.detach(), *(v.grad for v in x.values() if v.requires_grad)]
 
 
-@pytest.mark.parametrize("b, h", [(3, 10), (2, 26)])  # 26 steps: rows in the second and third gradient arrays
-def test_buffers_in_place_give_the_copied_results_bit_for_bit(humanoid, b, h):
+# 26 steps: rows in the second and third arrays; targets with gradients are copied in a step at a time, without staged
+@pytest.mark.parametrize("b, h, staged", [(3, 10, False), (2, 26, True)])
+def test_buffers_in_place_give_the_copied_results_bit_for_bit(humanoid, b, h, staged):
     sim = Simulator(humanoid, b, DT, solver="replay", requires_grad=True)
-    first, second = _inputs(humanoid, b, h, 0), _inputs(humanoid, b, h, 1)
+    first, second = _inputs(humanoid, b, h, 0, staged), _inputs(humanoid, b, h, 1, staged)
     fast = _run(sim, first, copied=False)
     kept = [t.clone() for t in fast]
     fast2 = _run(sim, second, copied=False)  # the buffers' values and gradients all change
@@ -88,18 +92,19 @@ def test_buffers_in_place_give_the_copied_results_bit_for_bit(humanoid, b, h):
         assert torch.equal(a, b_)
     ref_sim = Simulator(humanoid, b, DT, solver="replay", requires_grad=True)
     for x, out in ((first, fast), (second, fast2)):
-        ref = _run(ref_sim, {k: v.detach().clone().requires_grad_() for k, v in x.items()}, copied=True)
-        assert len(ref) == len(out) == 6
+        ref = _run(ref_sim, {k: v.detach().clone().requires_grad_(v.requires_grad) for k, v in x.items()}, copied=True)
+        assert len(ref) == len(out) == 6 - staged
         for i, (a, r) in enumerate(zip(out, ref)):
             assert torch.equal(a, r), i
     # the layout these savings rest on: each step after the first reads the last one's output arrays in place
     bufs = sim._tape_buffers
     assert not bufs[0].chained and all(buf.chained for buf in bufs[1:])
     assert bufs[1].inputs[0].data_ptr() == bufs[0].outputs[0].data_ptr()
+    assert (stage_targets(sim, first["target"]) is None) == (not staged)
 
 
 def test_gradient_rows_lie_in_arrays_of_doubling_length():
-    where = [TapeGradients._where(k) for k in range(120)]
+    where = [StepRows._where(k) for k in range(120)]
     assert where[0] == (0, 0) and where[7] == (0, 7) and where[8] == (1, 0) and where[23] == (1, 15)
     assert where[24] == (2, 0) and where[55] == (2, 31) and where[56] == (3, 0) and where[63] == (3, 7)
     assert len({c for c, _ in where[:64]}) == 4  # 64 steps: four memsets a rollout instead of five a step

@@ -22,6 +22,7 @@ from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .rollout_graph import capture_blocker, rollout_key, run_captured
 from .simulator import DivergenceLimits, Simulator
+from .tape_step import stage_targets
 
 __all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "replay_setup", "run_replay",
            "ReplaySetup", "policy_device"]
@@ -148,6 +149,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     if not grad:
         sim.set_state(None, q, qd)
         bounds = (sim.lower - limits.limit_margin, sim.upper + limits.limit_margin)  # once, not at every step
+    # a differentiable step reads targets staged in its buffers without a copy of its own (one copy, not one a step)
+    targets = stage_targets(sim, window.target) if grad and (not active or kind == "torque") else None
     for k in range(steps):
         res = None
         if policy is not None:
@@ -166,7 +169,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                 (torch.arange(b, device=sim.device)[pw],), r)
         elif residual is not None:
             res = residual[:, k]
-        target, tau = apply_residual(window.target[:, k], res, kind) if active else (window.target[:, k], None)
+        target = window.target[:, k] if targets is None else targets[k]
+        target, tau = apply_residual(target, res, kind) if active else (target, None)
         if grad:
             q_new, qd_new = sim.step_diff(k, q, qd, target, tau)
         else:

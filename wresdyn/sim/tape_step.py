@@ -14,21 +14,24 @@ buffers are laid out for fewer of them:
 * the forward returns views of the output arrays and the backward views of the input gradients, not copies: both
   hold until the step runs again (the next rollout), longer than autograd needs them (it copies a leaf's gradient
   into ``.grad``; do not keep the gradients ``torch.autograd.grad`` returns for the step's inputs across rollouts);
-* the gradients SolverReplay's adjoint adds into (the inputs') are rows of a few arrays (:class:`TapeGradients`),
-  each zeroed in one memset by the first step of a rollout that finds it used, not five memsets a step.
+* the gradients SolverReplay's adjoint adds into (the inputs') are rows of a few arrays (:class:`StepRows`), each
+  zeroed in one memset by the first step of a rollout that finds it used, not five memsets a step;
+* with a fixed base the PD targets are rows of such arrays too: a rollout copies all its targets in at once
+  (:func:`stage_targets`), not one copy a step.
 """
 
 from __future__ import annotations
 
 import torch
 
-__all__ = ["TapeBuffers", "TapeGradients", "TapeStep"]
+__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets"]
 
 
-class TapeGradients:
-    """The gradient arrays of the steps' inputs, float32 rows of ``width`` values, one row per step, in arrays of
-    doubling length (steps 0-7, 8-23, 24-55, ...: four at 64 steps). An array whose rows a backward pass used is zeroed
-    before the next forward step in it; the adjoint then adds into zeros, as it needs."""
+class StepRows:
+    """Float32 rows of ``width`` values, one per step of a rollout, in Warp arrays of doubling length (steps 0-7, 8-23,
+    24-55, ...: four at 64 steps), so that one memset or copy covers many steps. For the input gradients an array whose
+    rows a backward pass used is zeroed before the next forward step in it (the adjoint adds into zeros, as it
+    needs); for the PD targets a rollout copies its targets into the rows in one copy per array."""
 
     FIRST = 8
     """Rows of the first array; the ``c``-th holds ``FIRST · 2^c``."""
@@ -54,8 +57,16 @@ class TapeGradients:
                                         device=self.device))
             self.used.append(False)
         if self.arrays[c].shape[1] != width:
-            raise ValueError(f"step {k}: gradient row of {width} values, the arrays have {self.arrays[c].shape[1]}")
+            raise ValueError(f"step {k}: a row of {width} values, the arrays have {self.arrays[c].shape[1]}")
         return self.arrays[c][r]
+
+    def spans(self, steps: int):
+        """(array, first step, end step) of each array holding steps 0 .. ``steps`` − 1."""
+        c, k = 0, 0
+        while k < steps:
+            end = min(steps, k + (self.FIRST << c))
+            yield c, k, end
+            c, k = c + 1, k + (self.FIRST << c)
 
     def clear(self, k: int) -> None:
         """Before step ``k``'s forward: zero its array if a backward pass used it (on the current Warp stream)."""
@@ -69,11 +80,19 @@ class TapeGradients:
         self.used[self._where(k)[0]] = True
 
 
-def _alias(a):
-    """A Warp array on ``a``'s memory with a gradient array of its own."""
+class TapeRows:
+    """A simulator's :class:`StepRows`: the input gradients SolverReplay's adjoint adds into, and the PD targets."""
+
+    def __init__(self, device) -> None:
+        self.grads, self.targets = StepRows(device), StepRows(device)
+
+
+def _alias(a, like=None):
+    """A Warp array on ``a``'s memory (shaped as ``like``) with a gradient array of its own."""
     import warp as wp
 
-    return wp.array(ptr=a.ptr, dtype=a.dtype, shape=a.shape, device=a.device, requires_grad=True)
+    like = a if like is None else like
+    return wp.array(ptr=a.ptr, dtype=like.dtype, shape=like.shape, device=like.device, requires_grad=True)
 
 
 class TapeBuffers:
@@ -82,24 +101,28 @@ class TapeBuffers:
     ``index``: where the actuated joints' values sit in each of the four (``Simulator.q_index``/``qd_index``). The
     entries outside it are never written (zeros, as allocated).
 
-    ``grads``: where the gradients the adjoint adds into live (step ``k``'s row); ``prev``: the previous step's
-    buffers, whose output q, q̇ this step reads in place where ``index`` covers the whole state (``chained``)."""
+    ``rows``: where the gradients the adjoint adds into live (step ``k``'s rows), and where the actuated joints are
+    the whole state (``whole``), the PD target; ``prev``: the previous step's buffers, whose output q, q̇ this step
+    then reads in place (``chained``)."""
 
     def __init__(self, model, substeps: int, num_worlds: int, nq: int, nqd: int, q_index, qd_index,
-                 grads: TapeGradients | None = None, k: int = 0, prev: TapeBuffers | None = None) -> None:
+                 rows: TapeRows | None = None, k: int = 0, prev: TapeBuffers | None = None) -> None:
         import warp as wp
 
         self.states = [model.state(requires_grad=True) for _ in range(substeps + 1)]
         self.control = model.control(requires_grad=True)
         first, last, ctrl = self.states[0], self.states[-1], self.control
-        whole = isinstance(q_index, slice) and isinstance(qd_index, slice) \
+        self.whole = isinstance(q_index, slice) and isinstance(qd_index, slice) \
             and (q_index, qd_index) == (slice(0, nq), slice(0, nqd))
-        self.chained = whole and prev is not None
+        self.chained = self.whole and prev is not None
         if self.chained:
             first.joint_q, first.joint_qd = _alias(prev.states[-1].joint_q), _alias(prev.states[-1].joint_qd)
-        if grads is not None:
+        if rows is not None and self.whole:
+            t = ctrl.joint_target_q
+            ctrl.joint_target_q = _alias(rows.targets.row(k, t.size), t)
+        if rows is not None:
             added = self.accumulated()
-            row = grads.row(k, sum(a.size for a in added))
+            row = rows.grads.row(k, sum(a.size for a in added))
             start = 0
             for a in added:
                 a.grad = row[start:start + a.size]
@@ -119,14 +142,15 @@ class TapeBuffers:
         self.grad_views = [g[:, i] if isinstance(i, slice) else None for g, i in zip(self.input_grads, self.index)]
 
     @classmethod
-    def up_to(cls, sim, k: int) -> None:
-        """Make ``sim``'s buffers of the steps up to ``k`` where missing, and zero step ``k``'s input gradients if a
-        backward pass used them (on the current Warp stream)."""
+    def up_to(cls, sim, k: int, clear: bool = True) -> None:
+        """Make ``sim``'s buffers of the steps up to ``k`` where missing, and (``clear``) zero step ``k``'s input
+        gradients if a backward pass used them (on the current Warp stream)."""
         bufs = sim._tape_buffers
         while len(bufs) <= k:
             bufs.append(cls(sim.model, sim.substeps, sim.num_worlds, sim.nq, sim.nqd, sim.q_index, sim.qd_index,
-                            sim._tape_grads, len(bufs), bufs[-1] if bufs else None))
-        sim._tape_grads.clear(k)
+                            sim._tape_rows, len(bufs), bufs[-1] if bufs else None))
+        if clear:
+            sim._tape_rows.grads.clear(k)
 
     def accumulated(self) -> list:
         """The arrays whose gradients SolverReplay's adjoint adds into: every state's q, q̇ but the last's (the last
@@ -142,6 +166,28 @@ class TapeBuffers:
         if v is None:
             return self.input_grads[i][:, self.index[i]]
         return v.clone() if copy else v
+
+
+def stage_targets(sim, target: torch.Tensor) -> list | None:
+    """Copy a differentiable rollout's PD targets (B, H, n) into its steps' buffers at once, one copy per array of
+    rows instead of one a step; the H (B, n) views to pass to :meth:`~wresdyn.sim.Simulator.step_diff` in their
+    place, which then copies nothing. ``None`` (pass the targets themselves) where the actuated joints are not the
+    whole state or the targets carry gradients."""
+    h = target.shape[1]
+    if h == 0 or target.requires_grad:
+        return None
+    with sim._tape_stream():
+        TapeBuffers.up_to(sim, h - 1, clear=False)
+    bufs = sim._tape_buffers[:h]
+    if not bufs[0].whole:
+        return None
+    import warp as wp
+
+    rows = sim._tape_rows.targets
+    for c, k0, k1 in rows.spans(h):
+        dst = wp.to_torch(rows.arrays[c], requires_grad=False).view(-1, *target[:, 0].shape)
+        dst[:k1 - k0] = target[:, k0:k1].transpose(0, 1)
+    return [b.inputs[2] for b in bufs]
 
 
 def _same(x: torch.Tensor, view: torch.Tensor) -> bool:
@@ -160,8 +206,8 @@ class TapeStep(torch.autograd.Function):
         import warp as wp
 
         buf = sim._tape_buffers[k]
-        for i, (dst, x, index) in enumerate(zip(buf.inputs, (q, qd, target, tau), buf.index)):
-            if i < 2 and buf.chained and _same(x, dst):  # the previous step's output, in place already
+        for dst, x, index in zip(buf.inputs, (q, qd, target, tau), buf.index):
+            if _same(x, dst):  # in place already: the previous step's output, a staged target
                 continue
             dst[:, index] = x  # on torch's current stream, which step_diff's Warp work follows (_tape_stream)
         tape = wp.Tape()
@@ -188,14 +234,14 @@ class TapeStep(torch.autograd.Function):
         with sim._tape_stream():
             tape.backward()
         # SolverReplay adds into the inputs' gradients only (the outputs' are overwritten next time), and those are
-        # zeroed before the next rollout (TapeGradients): hand out views of them. Other solvers, and parameter
+        # zeroed before the next rollout (StepRows): hand out views of them. Other solvers, and parameter
         # gradients, zero the whole tape after each step: copies.
         kept = not ctx.names and sim.solver_kind == "replay" and not getattr(sim.solver, "update_body_q", False)
         need = ctx.needs_input_grad[:4]
         out = tuple(buf.input_grad(i, copy=not kept) if n else None for i, n in enumerate(need))
         physics = sim._physics_grads(ctx.names, ctx.physics_meta)
         if kept:
-            sim._tape_grads.mark(ctx.k)
+            sim._tape_rows.grads.mark(ctx.k)
         else:
             with sim._tape_stream():
                 tape.zero()
