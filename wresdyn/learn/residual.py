@@ -150,6 +150,24 @@ def actor_critic_cfg(cfg: ResidualConfig) -> tuple[dict, dict]:
     return actor, critic
 
 
+class MaskedClip(torch.autograd.Function):
+    """``clamp(a, −1, 1)`` whose backward is one ``where`` on the mask ``clamp(a) == a`` kept from the forward pass
+    (an eq there), where autograd's own runs five kernels a call (a 0-dim zero, ``a >= −1``, ``a <= 1``, their and, a
+    where). The same mask (NaN: outside, as for the comparisons), values and gradients, bit for bit."""
+
+    @staticmethod
+    def forward(ctx, a):
+        c = a.clamp(-1.0, 1.0)
+        ctx.save_for_backward(torch.eq(c, a))
+        return c
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, grad):
+        (inside,) = ctx.saved_tensors
+        return torch.where(inside, grad, 0.0)  # +0 outside, as torch's clamp backward writes
+
+
 class ResidualPolicy(nn.Module):
     """Deterministic residual: raw observation (N, 4n) -> physical residual (N, n) [N*m or rad].
 
@@ -169,7 +187,11 @@ class ResidualPolicy(nn.Module):
     def _to_residual(self, a: torch.Tensor) -> torch.Tensor:
         # at gain 1 (every residual but PPO's with an action gain) the product is ``a`` itself, bit for bit: skip it,
         # one kernel forward and one backward per step of a differentiable rollout
-        return (a if self.gain == 1.0 else self.gain * a).clamp(-1.0, 1.0) * self.scale
+        a = a if self.gain == 1.0 else self.gain * a
+        # training with gradients (the gradient fit's plain path): the clip with a backward of one kernel; evaluation,
+        # export and no-grad calls keep torch's own clamp
+        clip = self.training and torch.is_grad_enabled() and a.requires_grad
+        return (MaskedClip.apply(a) if clip else a.clamp(-1.0, 1.0)) * self.scale
 
     def residual_kind(self) -> str:
         """``"torque"`` or ``"delta_action"`` (the exported residual has it too)."""
