@@ -88,7 +88,7 @@ class FusedMLPRollout(nn.Module):
         self._token = torch.ones((), device=dev, requires_grad=True)
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
-        self._x = self._z = self._g = self._mask = None
+        self._x = self._z = self._g = self._mask = self._into = None
 
     @property
     def scale(self) -> torch.Tensor:
@@ -98,10 +98,11 @@ class FusedMLPRollout(nn.Module):
     def obs_std(self) -> torch.Tensor:
         return self.policy.obs_std
 
-    def begin(self, steps: int, batch: int) -> None:
+    def begin(self, steps: int, batch: int, into: list | None = None) -> None:
         """Buffers for a rollout of ``steps`` steps over ``batch`` windows: per layer its input (H, B, in), each hidden
         layer's pre-activation, the gradients at the layer outputs (zeros: a step whose backward never runs adds
-        nothing) and the clip's mask."""
+        nothing) and the clip's mask. ``into``: a (B, n) tensor per step to write the residual into (the simulator's
+        joint torque input, :func:`~wresdyn.sim.tape_step.step_forces`), or ``None``."""
         w = self.policy.obs_mean
         ins = [m.in_features for m in self.linears]
         outs = [m.out_features for m in self.linears]
@@ -109,7 +110,7 @@ class FusedMLPRollout(nn.Module):
         self._z = [torch.empty(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs[:-1]]
         self._g = [torch.zeros(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs]
         self._mask = torch.empty(steps, batch, outs[-1], device=w.device, dtype=torch.bool)
-        self._steps, self._k = steps, 0
+        self._steps, self._k, self._into = steps, 0, into
 
     def reset(self) -> None:
         """The rollout's start (:func:`wresdyn.sim.rollout` calls it): the next call is step 0."""
@@ -136,7 +137,10 @@ class FusedMLPRollout(nn.Module):
         c = y.clamp(-1.0, 1.0)
         # clamp's backward passes the gradient where min <= y <= max; c == y is that set in one kernel (NaN: neither)
         torch.eq(c, y, out=self._mask[k])
-        return c * p.scale
+        if self._into is None:
+            return c * p.scale
+        # a fresh view as the step's output: autograd marks it, not the tensor the caller handed in
+        return torch.mul(c, p.scale, out=self._into[k]).view(c.shape)
 
     def _backward(self, grad: torch.Tensor, k: int, need_obs: bool) -> torch.Tensor | None:
         p = self.policy
@@ -163,5 +167,5 @@ class FusedMLPRollout(nn.Module):
                     param.grad = new
                 else:
                     param.grad.add_(new)
-        self._x = self._z = self._g = self._mask = None
+        self._x = self._z = self._g = self._mask = self._into = None
         self._steps = self._k = 0

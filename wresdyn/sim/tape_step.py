@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets"]
+__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets", "step_forces"]
 
 
 class StepRows:
@@ -188,6 +188,17 @@ def stage_targets(sim, target: torch.Tensor) -> list | None:
         dst = wp.to_torch(rows.arrays[c], requires_grad=False).view(-1, *target[:, 0].shape)
         dst[:k1 - k0] = target[:, k0:k1].transpose(0, 1)
     return [b.inputs[2] for b in bufs]
+
+
+def step_forces(sim, steps: int) -> list | None:
+    """Where steps 0 .. ``steps`` − 1 of a differentiable rollout read their joint torque: (B, n) views that a
+    residual can be written into (``out=``), so that :meth:`~wresdyn.sim.Simulator.step_diff` given that tensor
+    copies nothing; valid until the next rollout writes them. ``None`` where the actuated joints are not the whole
+    state."""
+    with sim._tape_stream():
+        TapeBuffers.up_to(sim, steps - 1, clear=False)
+    bufs = sim._tape_buffers[:steps]
+    return [b.inputs[3] for b in bufs] if bufs and bufs[0].whole else None
 
 
 def _same(x: torch.Tensor, view: torch.Tensor) -> bool:
