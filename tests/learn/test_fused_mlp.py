@@ -23,7 +23,8 @@ def _policy(dtype, gain=1.0):
                              gain=gain).to(dtype)
 
 
-def _chain(policy, fused: bool, dtype, into=None):
+def _chain(policy, fused: bool, dtype, into=None, both=False):
+    """``both``: the residual and the action from ``residual_and_action``, else the action r / scale by autograd."""
     net = policy
     if fused:
         net = FusedMLPRollout(policy)
@@ -32,17 +33,18 @@ def _chain(policy, fused: bool, dtype, into=None):
     g = torch.Generator().manual_seed(1)
     s0 = (torch.randn(B, N, generator=g, dtype=dtype) * 3).requires_grad_()
     mix = torch.randn(4 * N, N, generator=g, dtype=dtype) * 0.5
-    s, outs = s0, []
+    s, outs, acts = s0, [], []
     for k in range(H):
         if k == 3:  # truncation: the observations after it carry no gradient to the start
             s = s.detach()
         cmd = torch.randn(B, N, generator=g, dtype=dtype)
         obs = torch.cat([s, 2 * s, s.sin(), cmd], -1) * 2 if k else torch.cat([s0.detach()] * 3 + [cmd], -1)
-        r = net(obs)
+        r, a = net.residual_and_action(obs) if both else (net(obs), None)
         outs.append(r)
+        acts.append(r / policy.scale if a is None else a)
         s = s + 0.1 * r + 0.05 * (obs @ mix)
     actions = torch.stack(outs, 1)
-    loss = (s ** 2).sum() + ((actions / policy.scale) ** 2).sum()
+    loss = (s ** 2).sum() + (torch.stack(acts, 1) ** 2).sum()
     loss.backward()
     if fused:
         net.finish()
@@ -69,6 +71,15 @@ def test_residuals_written_into_given_tensors_give_the_same_results_bit_for_bit(
     assert torch.equal(plain[0], written[0]) and torch.equal(plain[1], written[1])
     assert all(torch.equal(plain[2][k], written[2][k]) for k in plain[2])
     assert torch.equal(torch.stack(into, 1), written[0])
+
+
+@pytest.mark.parametrize("fused", [False, True])
+def test_residual_and_action_in_one_node_give_the_two_nodes_results_bit_for_bit(fused):
+    # the rollout takes (r, r / scale) from one node (ClipScale, the fused step) whose backward sums the two gradients
+    # in one addcdiv: the values, the gradient at the chain's start and the parameters' gradients are autograd's
+    two, one = (_chain(_policy(torch.float32), fused, torch.float32, both=both) for both in (False, True))
+    assert torch.equal(two[0], one[0]) and torch.equal(two[1], one[1])
+    assert all(torch.equal(two[2][k], one[2][k]) for k in two[2])
 
 
 def test_finish_adds_to_existing_gradients_as_autograd_does():

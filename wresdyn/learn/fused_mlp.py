@@ -45,19 +45,22 @@ def fusable(policy) -> str | None:
 
 
 class _Step(torch.autograd.Function):
-    """One step of :class:`FusedMLPRollout`: raw observation -> residual. ``token`` is a leaf that requires grad so the
-    step is in the backward graph even where the observation carries no gradient (a window's first step, a step after
-    truncation): its backward is what stores the gradients at the layer outputs."""
+    """One step of :class:`FusedMLPRollout`: raw observation -> residual, and with ``both`` the action residual / scale
+    too. ``token`` is a leaf that requires grad so the step is in the backward graph even where the observation
+    carries no gradient (a window's first step, a step after truncation): its backward is what stores the gradients at
+    the layer outputs."""
 
     @staticmethod
-    def forward(ctx, obs, token, run, k):
+    def forward(ctx, obs, token, run, k, both):
         ctx.run, ctx.k = run, k
-        return run._forward(obs, k)
+        ctx.set_materialize_grads(False)
+        r = run._forward(obs, k)
+        return (r, r / run.policy.scale) if both else r
 
     @staticmethod
     @torch.autograd.function.once_differentiable
-    def backward(ctx, grad):
-        return ctx.run._backward(grad, ctx.k, ctx.needs_input_grad[0]), None, None, None
+    def backward(ctx, g_r, g_a=None):
+        return ctx.run._backward(g_r, g_a, ctx.k, ctx.needs_input_grad[0]), None, None, None, None
 
 
 class FusedMLPRollout(nn.Module):
@@ -117,10 +120,18 @@ class FusedMLPRollout(nn.Module):
         self._k = 0
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self._call(obs, False)
+
+    def residual_and_action(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(residual, residual / scale) of one step, as :meth:`MLPResidualPolicy.residual_and_action
+        <wresdyn.learn.residual.MLPResidualPolicy.residual_and_action>` (the rollout's action in the same node)."""
+        return self._call(obs, True)
+
+    def _call(self, obs: torch.Tensor, both: bool):
         if self._x is None or self._k >= self._steps:
             raise RuntimeError("FusedMLPRollout: call begin(steps, batch) before each rollout, one call per step")
         self._k += 1
-        return _Step.apply(obs, self._token, self, self._k - 1)
+        return _Step.apply(obs, self._token, self, self._k - 1, both)
 
     def _forward(self, obs: torch.Tensor, k: int) -> torch.Tensor:
         # the plain path's operations in its order: (obs - mean) / std, then per layer addmm (what F.linear runs on a
@@ -142,8 +153,14 @@ class FusedMLPRollout(nn.Module):
         # a fresh view as the step's output: autograd marks it, not the tensor the caller handed in
         return torch.mul(c, p.scale, out=self._into[k]).view(c.shape)
 
-    def _backward(self, grad: torch.Tensor, k: int, need_obs: bool) -> torch.Tensor | None:
+    def _backward(self, grad, g_action, k: int, need_obs: bool) -> torch.Tensor | None:
         p = self.policy
+        # the residual's gradient and the action's through its division, summed in one kernel (addcdiv: the same
+        # g + g_a / scale that the division's backward and autograd's addition form)
+        if g_action is not None:
+            grad = g_action / p.scale if grad is None else torch.addcdiv(grad, g_action, p.scale)
+        elif grad is None:
+            grad = torch.zeros_like(self._g[-1][k])
         g = torch.where(self._mask[k], grad * p.scale, self._zero, out=self._g[-1][k])
         for i in range(len(self.linears) - 1, -1, -1):
             w = self.linears[i].weight

@@ -168,6 +168,31 @@ class MaskedClip(torch.autograd.Function):
         return torch.where(inside, grad, 0.0)  # +0 outside, as torch's clamp backward writes
 
 
+class ClipScale(torch.autograd.Function):
+    """(a, scale) -> (clamp(a, −1, 1) · scale, that / scale): a residual and its normalised action (what a
+    differentiable rollout keeps for the loss) in one node, with :class:`MaskedClip`'s mask. Its backward sums the two
+    gradients in one ``addcdiv`` (g_r + g_a / scale, the sum autograd forms from the division's backward and an
+    addition), then the product's and the clip's backward; the same values and gradients bit for bit."""
+
+    @staticmethod
+    def forward(ctx, a, scale):
+        c = a.clamp(-1.0, 1.0)
+        ctx.save_for_backward(torch.eq(c, a), scale)
+        ctx.set_materialize_grads(False)
+        r = c * scale
+        return r, r / scale
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_r, g_a):
+        inside, scale = ctx.saved_tensors
+        if g_a is None:
+            g = torch.zeros_like(inside, dtype=scale.dtype) if g_r is None else g_r
+        else:
+            g = g_a / scale if g_r is None else torch.addcdiv(g_r, g_a, scale)
+        return torch.where(inside, g * scale, 0.0), None
+
+
 class ResidualPolicy(nn.Module):
     """Deterministic residual: raw observation (N, 4n) -> physical residual (N, n) [N*m or rad].
 
@@ -190,8 +215,18 @@ class ResidualPolicy(nn.Module):
         a = a if self.gain == 1.0 else self.gain * a
         # training with gradients (the gradient fit's plain path): the clip with a backward of one kernel; evaluation,
         # export and no-grad calls keep torch's own clamp
-        clip = self.training and torch.is_grad_enabled() and a.requires_grad
-        return (MaskedClip.apply(a) if clip else a.clamp(-1.0, 1.0)) * self.scale
+        return (MaskedClip.apply(a) if self._masked(a) else a.clamp(-1.0, 1.0)) * self.scale
+
+    def _masked(self, a: torch.Tensor) -> bool:
+        return self.training and torch.is_grad_enabled() and a.requires_grad
+
+    def _to_residual_action(self, a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(residual, residual / scale) of network output ``a``, the second what a rollout records as the action."""
+        a = a if self.gain == 1.0 else self.gain * a
+        if self._masked(a):
+            return ClipScale.apply(a, self.scale)
+        r = a.clamp(-1.0, 1.0) * self.scale
+        return r, r / self.scale
 
     def residual_kind(self) -> str:
         """``"torque"`` or ``"delta_action"`` (the exported residual has it too)."""
@@ -208,6 +243,11 @@ class MLPResidualPolicy(ResidualPolicy):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self._to_residual(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)))
+
+    def residual_and_action(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(residual, residual / scale): :meth:`forward` and the normalised action a rollout records
+        (:func:`wresdyn.sim.rollout`), in one node where gradients flow (:class:`ClipScale`)."""
+        return self._to_residual_action(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)))
 
     def reset(self) -> None:
         pass

@@ -73,7 +73,8 @@ def rollout(sim: Simulator, window: Window, policy=None, *, kind: str | None = N
         sim: The simulator, ``sim.num_worlds`` equal to the window batch B.
         window: Start states, commands and PD targets (:meth:`~wresdyn.sim.bank.TrajectoryBank.window`).
         policy: Residual ``policy(obs (N, 4n)) -> residual (N, n)`` [N*m or rad] (attributes ``kind`` or a
-            ``residual_kind()`` of an exported one, optional ``reset()``, ``scale``, ``obs_std``), or ``None``.
+            ``residual_kind()`` of an exported one, optional ``reset()``, ``scale``, ``obs_std``, and
+            ``residual_and_action(obs) -> (residual, residual / scale)``), or ``None``.
         kind: Residual kind; default the policy's.
         policy_worlds: Worlds the policy acts on (default all); the others run PD only in the same batch.
         residual: Instead of a policy, a precomputed open-loop residual of ``kind`` (B, L, n).
@@ -161,10 +162,13 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
             if obs_noise > 0.0:
                 obs = obs + (noise[k] if noise is not None else obs_noise * policy.obs_std * torch.randn(
                     obs.shape, generator=generator, device=obs.device))
-            with torch.set_grad_enabled(grad and torch.is_grad_enabled()):
-                r = policy(obs if pdev is None else obs.to(pdev)).to(sim.device)
+            x = obs if pdev is None else obs.to(pdev)
+            both = getattr(policy, "residual_and_action", None) if scale is not None else None
+            with torch.set_grad_enabled(grad and torch.is_grad_enabled()):  # both: (r, r / scale) in one node
+                r, a = both(x) if both is not None else (policy(x), None)
+            r = r.to(sim.device)
             if scale is not None:
-                actions.append(r / scale.to(r.device))
+                actions.append(r / scale.to(r.device) if a is None else a.to(sim.device))
             res = r if policy_worlds is None else torch.zeros_like(q).index_put_(
                 (torch.arange(b, device=sim.device)[pw],), r)
         elif residual is not None:
