@@ -24,11 +24,12 @@ def _policy(dtype, gain=1.0):
 
 
 def _chain(policy, fused: bool, dtype, into=None, both=False):
-    """``both``: the residual and the action from ``residual_and_action``, else the action r / scale by autograd."""
+    """``both``: the residual and the action from ``residual_and_action`` (the residual written into ``into``'s
+    tensors where given), else the action r / scale by autograd."""
     net = policy
     if fused:
         net = FusedMLPRollout(policy)
-        net.begin(H, B, into)
+        net.begin(H, B)
     net.reset()
     g = torch.Generator().manual_seed(1)
     s0 = (torch.randn(B, N, generator=g, dtype=dtype) * 3).requires_grad_()
@@ -39,7 +40,7 @@ def _chain(policy, fused: bool, dtype, into=None, both=False):
             s = s.detach()
         cmd = torch.randn(B, N, generator=g, dtype=dtype)
         obs = torch.cat([s, 2 * s, s.sin(), cmd], -1) * 2 if k else torch.cat([s0.detach()] * 3 + [cmd], -1)
-        r, a = net.residual_and_action(obs) if both else (net(obs), None)
+        r, a = net.residual_and_action(obs, None if into is None else into[k]) if both else (net(obs), None)
         outs.append(r)
         acts.append(r / policy.scale if a is None else a)
         s = s + 0.1 * r + 0.05 * (obs @ mix)
@@ -62,12 +63,13 @@ def test_fused_steps_give_the_plain_values_and_gradients(dtype, rtol):
         torch.testing.assert_close(fused[2][name], g, rtol=rtol, atol=rtol * g.abs().max().item(), msg=name)
 
 
-def test_residuals_written_into_given_tensors_give_the_same_results_bit_for_bit():
-    # the gradient fit hands the simulator's joint-torque inputs (step_forces): the residuals land there, the values
-    # and gradients are those of the fused path without them
+@pytest.mark.parametrize("fused", [False, True])
+def test_residuals_written_into_given_tensors_give_the_same_results_bit_for_bit(fused):
+    # a differentiable rollout hands the simulator's joint-torque inputs (step_forces): the residuals land there, the
+    # values and gradients are those without them
     into = [torch.full((B, N), float("nan"), dtype=torch.float32) for _ in range(H)]
-    plain, written = _chain(_policy(torch.float32), True, torch.float32), \
-        _chain(_policy(torch.float32), True, torch.float32, into)
+    plain, written = _chain(_policy(torch.float32), fused, torch.float32, both=True), \
+        _chain(_policy(torch.float32), fused, torch.float32, into, both=True)
     assert torch.equal(plain[0], written[0]) and torch.equal(plain[1], written[1])
     assert all(torch.equal(plain[2][k], written[2][k]) for k in plain[2])
     assert torch.equal(torch.stack(into, 1), written[0])

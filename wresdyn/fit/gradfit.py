@@ -39,7 +39,6 @@ from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
-from ..sim.tape_step import step_forces
 from .gradfit_config import GradFitConfig
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
@@ -233,9 +232,8 @@ class GradFitIteration:
 
     def _run(self, traj, start, h: int, noise) -> torch.Tensor:
         window = self.bank.window(traj, start, h)
-        if self.fused is not None:  # a torque residual goes straight where the simulator reads it
-            into = step_forces(self.sim, h) if self.policy.kind == "torque" else None
-            self.fused.begin(h, window.cmd.shape[0], into)
+        if self.fused is not None:
+            self.fused.begin(h, window.cmd.shape[0])
         run = rollout(self.sim, window, self.policy if self.fused is None else self.fused, grad=True,
                       truncation=self.cfg.grad_truncation or 0, obs_noise=self.obs_noise, noise=noise)
         loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],

@@ -51,16 +51,16 @@ class _Step(torch.autograd.Function):
     the layer outputs."""
 
     @staticmethod
-    def forward(ctx, obs, token, run, k, both):
+    def forward(ctx, obs, token, run, k, both, out):
         ctx.run, ctx.k = run, k
         ctx.set_materialize_grads(False)
-        r = run._forward(obs, k)
+        r = run._forward(obs, k, out)
         return (r, r / run.policy.scale) if both else r
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_r, g_a=None):
-        return ctx.run._backward(g_r, g_a, ctx.k, ctx.needs_input_grad[0]), None, None, None, None
+        return ctx.run._backward(g_r, g_a, ctx.k, ctx.needs_input_grad[0]), None, None, None, None, None
 
 
 class FusedMLPRollout(nn.Module):
@@ -91,7 +91,7 @@ class FusedMLPRollout(nn.Module):
         self._token = torch.ones((), device=dev, requires_grad=True)
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
-        self._x = self._z = self._g = self._mask = self._into = None
+        self._x = self._z = self._g = self._mask = None
 
     @property
     def scale(self) -> torch.Tensor:
@@ -101,11 +101,10 @@ class FusedMLPRollout(nn.Module):
     def obs_std(self) -> torch.Tensor:
         return self.policy.obs_std
 
-    def begin(self, steps: int, batch: int, into: list | None = None) -> None:
+    def begin(self, steps: int, batch: int) -> None:
         """Buffers for a rollout of ``steps`` steps over ``batch`` windows: per layer its input (H, B, in), each hidden
         layer's pre-activation, the gradients at the layer outputs (zeros: a step whose backward never runs adds
-        nothing) and the clip's mask. ``into``: a (B, n) tensor per step to write the residual into (the simulator's
-        joint torque input, :func:`~wresdyn.sim.tape_step.step_forces`), or ``None``."""
+        nothing) and the clip's mask."""
         w = self.policy.obs_mean
         ins = [m.in_features for m in self.linears]
         outs = [m.out_features for m in self.linears]
@@ -113,27 +112,28 @@ class FusedMLPRollout(nn.Module):
         self._z = [torch.empty(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs[:-1]]
         self._g = [torch.zeros(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs]
         self._mask = torch.empty(steps, batch, outs[-1], device=w.device, dtype=torch.bool)
-        self._steps, self._k, self._into = steps, 0, into
+        self._steps, self._k = steps, 0
 
     def reset(self) -> None:
         """The rollout's start (:func:`wresdyn.sim.rollout` calls it): the next call is step 0."""
         self._k = 0
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self._call(obs, False)
+        return self._call(obs, False, None)
 
-    def residual_and_action(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def residual_and_action(self, obs: torch.Tensor, out: torch.Tensor | None = None):
         """(residual, residual / scale) of one step, as :meth:`MLPResidualPolicy.residual_and_action
-        <wresdyn.learn.residual.MLPResidualPolicy.residual_and_action>` (the rollout's action in the same node)."""
-        return self._call(obs, True)
+        <wresdyn.learn.residual.MLPResidualPolicy.residual_and_action>` (the rollout's action in the same node, the
+        residual written into ``out`` where given)."""
+        return self._call(obs, True, out)
 
-    def _call(self, obs: torch.Tensor, both: bool):
+    def _call(self, obs: torch.Tensor, both: bool, out):
         if self._x is None or self._k >= self._steps:
             raise RuntimeError("FusedMLPRollout: call begin(steps, batch) before each rollout, one call per step")
         self._k += 1
-        return _Step.apply(obs, self._token, self, self._k - 1, both)
+        return _Step.apply(obs, self._token, self, self._k - 1, both, out)
 
-    def _forward(self, obs: torch.Tensor, k: int) -> torch.Tensor:
+    def _forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None) -> torch.Tensor:
         # the plain path's operations in its order: (obs - mean) / std, then per layer addmm (what F.linear runs on a
         # 2-D input) and ELU, then the clip and the scale
         p = self.policy
@@ -148,10 +148,10 @@ class FusedMLPRollout(nn.Module):
         c = y.clamp(-1.0, 1.0)
         # clamp's backward passes the gradient where min <= y <= max; c == y is that set in one kernel (NaN: neither)
         torch.eq(c, y, out=self._mask[k])
-        if self._into is None:
+        if out is None:
             return c * p.scale
         # a fresh view as the step's output: autograd marks it, not the tensor the caller handed in
-        return torch.mul(c, p.scale, out=self._into[k]).view(c.shape)
+        return torch.mul(c, p.scale, out=out).view(c.shape)
 
     def _backward(self, grad, g_action, k: int, need_obs: bool) -> torch.Tensor | None:
         p = self.policy
@@ -184,5 +184,5 @@ class FusedMLPRollout(nn.Module):
                     param.grad = new
                 else:
                     param.grad.add_(new)
-        self._x = self._z = self._g = self._mask = self._into = None
+        self._x = self._z = self._g = self._mask = None
         self._steps = self._k = 0

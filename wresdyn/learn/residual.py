@@ -175,11 +175,11 @@ class ClipScale(torch.autograd.Function):
     addition), then the product's and the clip's backward; the same values and gradients bit for bit."""
 
     @staticmethod
-    def forward(ctx, a, scale):
+    def forward(ctx, a, scale, out=None):
         c = a.clamp(-1.0, 1.0)
         ctx.save_for_backward(torch.eq(c, a), scale)
         ctx.set_materialize_grads(False)
-        r = c * scale
+        r = c * scale if out is None else torch.mul(c, scale, out=out).view(c.shape)  # a fresh view: the output
         return r, r / scale
 
     @staticmethod
@@ -190,7 +190,7 @@ class ClipScale(torch.autograd.Function):
             g = torch.zeros_like(inside, dtype=scale.dtype) if g_r is None else g_r
         else:
             g = g_a / scale if g_r is None else torch.addcdiv(g_r, g_a, scale)
-        return torch.where(inside, g * scale, 0.0), None
+        return torch.where(inside, g * scale, 0.0), None, None
 
 
 class ResidualPolicy(nn.Module):
@@ -220,11 +220,12 @@ class ResidualPolicy(nn.Module):
     def _masked(self, a: torch.Tensor) -> bool:
         return self.training and torch.is_grad_enabled() and a.requires_grad
 
-    def _to_residual_action(self, a: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(residual, residual / scale) of network output ``a``, the second what a rollout records as the action."""
+    def _to_residual_action(self, a: torch.Tensor, out=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(residual, residual / scale) of network output ``a``, the second what a rollout records as the action;
+        with gradients the residual written into ``out`` where given."""
         a = a if self.gain == 1.0 else self.gain * a
         if self._masked(a):
-            return ClipScale.apply(a, self.scale)
+            return ClipScale.apply(a, self.scale, out)
         r = a.clamp(-1.0, 1.0) * self.scale
         return r, r / self.scale
 
@@ -244,10 +245,11 @@ class MLPResidualPolicy(ResidualPolicy):
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self._to_residual(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)))
 
-    def residual_and_action(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def residual_and_action(self, obs: torch.Tensor, out: torch.Tensor | None = None):
         """(residual, residual / scale): :meth:`forward` and the normalised action a rollout records
-        (:func:`wresdyn.sim.rollout`), in one node where gradients flow (:class:`ClipScale`)."""
-        return self._to_residual_action(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)))
+        (:func:`wresdyn.sim.rollout`), in one node where gradients flow (:class:`ClipScale`, which writes the residual
+        into ``out`` where given: the simulator's torque input, :func:`~wresdyn.sim.tape_step.step_forces`)."""
+        return self._to_residual_action(self.mlp(self.norm((obs - self.obs_mean) / self.obs_std)), out)
 
     def reset(self) -> None:
         pass

@@ -22,7 +22,7 @@ from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .rollout_graph import capture_blocker, rollout_key, run_captured
 from .simulator import DivergenceLimits, Simulator
-from .tape_step import stage_targets
+from .tape_step import stage_targets, step_forces
 
 __all__ = ["Rollout", "Replays", "rollout", "replay", "replay_trajectories", "replay_setup", "run_replay",
            "ReplaySetup", "policy_device"]
@@ -150,8 +150,12 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     if not grad:
         sim.set_state(None, q, qd)
         bounds = (sim.lower - limits.limit_margin, sim.upper + limits.limit_margin)  # once, not at every step
-    # a differentiable step reads targets staged in its buffers without a copy of its own (one copy, not one a step)
+    # a differentiable step reads targets staged in its buffers without a copy of its own (one copy, not one a step),
+    # and a torque residual its policy wrote straight into them (residual_and_action's out)
     targets = stage_targets(sim, window.target) if grad and (not active or kind == "torque") else None
+    both = getattr(policy, "residual_and_action", None) if scale is not None else None
+    forces = step_forces(sim, steps) if grad and both is not None and kind == "torque" and policy_worlds is None \
+        and pdev in (None, sim.device) else None
     for k in range(steps):
         res = None
         if policy is not None:
@@ -163,9 +167,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                 obs = obs + (noise[k] if noise is not None else obs_noise * policy.obs_std * torch.randn(
                     obs.shape, generator=generator, device=obs.device))
             x = obs if pdev is None else obs.to(pdev)
-            both = getattr(policy, "residual_and_action", None) if scale is not None else None
             with torch.set_grad_enabled(grad and torch.is_grad_enabled()):  # both: (r, r / scale) in one node
-                r, a = both(x) if both is not None else (policy(x), None)
+                r, a = (policy(x), None) if both is None else both(x) if forces is None else both(x, forces[k])
             r = r.to(sim.device)
             if scale is not None:
                 actions.append(r / scale.to(r.device) if a is None else a.to(sim.device))
