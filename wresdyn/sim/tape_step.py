@@ -40,6 +40,7 @@ class StepRows:
         self.device = device
         self.arrays: list = []
         self.used: list[bool] = []
+        self.views: list = []  # torch views of the arrays, where a caller wants them
 
     @classmethod
     def _where(cls, k: int) -> tuple[int, int]:
@@ -185,8 +186,9 @@ def stage_targets(sim, target: torch.Tensor) -> list | None:
 
     rows = sim._tape_rows.targets
     for c, k0, k1 in rows.spans(h):
-        dst = wp.to_torch(rows.arrays[c], requires_grad=False).view(-1, *target[:, 0].shape)
-        dst[:k1 - k0] = target[:, k0:k1].transpose(0, 1)
+        if len(rows.views) == c:  # made once, by the first (eager, not captured) rollout that reaches the array
+            rows.views.append(wp.to_torch(rows.arrays[c], requires_grad=False))
+        rows.views[c].view(-1, *target[:, 0].shape)[:k1 - k0] = target[:, k0:k1].transpose(0, 1)
     return [b.inputs[2] for b in bufs]
 
 
