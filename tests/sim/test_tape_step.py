@@ -108,3 +108,29 @@ def test_gradient_rows_lie_in_arrays_of_doubling_length():
     assert where[0] == (0, 0) and where[7] == (0, 7) and where[8] == (1, 0) and where[23] == (1, 15)
     assert where[24] == (2, 0) and where[55] == (2, 31) and where[56] == (3, 0) and where[63] == (3, 7)
     assert len({c for c, _ in where[:64]}) == 4  # 64 steps: four memsets a rollout instead of five a step
+
+
+@pytest.mark.parametrize("b, h, staged", [(2, 26, True), (3, 10, False)])
+def test_a_simulator_without_rows_gives_the_same_rollouts(humanoid, b, h, staged):
+    """The layout a CUDA simulator keeps until its graph tests have run with rows (``tape_rows`` gives ``None``: each
+    step's own buffers, every value copied, the adjoint's gradients zeroed after each step), taken on the CPU: two
+    rollouts in a row give the rows' results bit for bit, and nothing is chained or staged."""
+    rows, plain = (Simulator(humanoid, b, DT, solver="replay", requires_grad=True) for _ in range(2))
+    plain._tape_rows = None  # what tape_rows returns on CUDA without WRESDYN_TAPE_ROWS=1, before any step is made
+    for seed in (0, 1):
+        x = _inputs(humanoid, b, h, seed, staged)
+        a = _run(rows, x, copied=False)
+        r = _run(plain, {k: v.detach().clone().requires_grad_(v.requires_grad) for k, v in x.items()}, copied=False)
+        for i, (u, v) in enumerate(zip(a, r)):
+            assert torch.equal(u, v), (seed, i)
+    assert not any(buf.chained for buf in plain._tape_buffers)
+    assert stage_targets(plain, x["target"]) is None
+
+
+def test_tape_rows_are_off_on_cuda_unless_asked(monkeypatch):
+    from wresdyn.sim.tape_step import CUDA_ROWS_ENV, TapeRows, tape_rows
+
+    monkeypatch.delenv(CUDA_ROWS_ENV, raising=False)
+    assert isinstance(tape_rows("cpu"), TapeRows) and tape_rows("cuda:0") is None
+    monkeypatch.setenv(CUDA_ROWS_ENV, "1")
+    assert isinstance(tape_rows("cuda:0"), TapeRows)

@@ -32,7 +32,7 @@ from ..robot.ground import base_index
 from .devices import require_device
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
-from .tape_step import TapeBuffers, TapeRows, TapeStep
+from .tape_step import TapeBuffers, TapeStep, tape_rows
 from .world_physics import model_flags, model_values, refresh, write_world_physics
 
 __all__ = ["DivergenceLimits", "Simulator", "SimulationDiverged"]
@@ -141,7 +141,7 @@ class Simulator:
         self.refresh_graph, self._refresh_graphs = self._cuda and refresh_graph is not False, {}  # world_physics
         self._side = self._wp_side = None  # CUDA: the solver's stream (see _stream)
         self._wp_streams: dict[int, tuple] = {}  # torch stream handle -> (torch stream, Warp stream): _tape_stream
-        self._tape_buffers, self._tape_rows = [], TapeRows(self.model.device)  # step_diff's, per step
+        self._tape_buffers, self._tape_rows = [], tape_rows(self.model.device)  # step_diff's, per step
         self._needs_fk = self.solver_kind != "replay"  # SolverReplay integrates joint coordinates only
         self.param_grads = bool(param_grads)
         self._physics: dict[str, torch.Tensor] = {}  # field -> tensor carrying gradients (set_physics)

@@ -22,9 +22,24 @@ buffers are laid out for fewer of them:
 
 from __future__ import annotations
 
+import os
+
 import torch
 
-__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets", "step_forces"]
+__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets", "step_forces", "tape_rows"]
+
+CUDA_ROWS_ENV = "WRESDYN_TAPE_ROWS"
+"""Set to 1 to lay a CUDA simulator's tape out in rows (chained states, rows of gradients zeroed once per rollout,
+staged targets and torques) as on the CPU. Off on CUDA until the CUDA-graph tests of the fits have run with it on a GPU
+(``tests/learn/test_learner_speed_paths.py``, ``tests/identify/test_sysid_graph.py``): a captured rollout replays only
+the zeroing it saw at capture."""
+
+
+def tape_rows(device) -> TapeRows | None:
+    """The :class:`TapeRows` of a simulator on ``device``, or ``None`` for each step's own buffers and a copy of each
+    input, output and gradient (on CUDA unless :data:`CUDA_ROWS_ENV` is 1)."""
+    cuda = str(device).startswith("cuda")
+    return TapeRows(device) if not cuda or os.environ.get(CUDA_ROWS_ENV) == "1" else None
 
 
 class StepRows:
@@ -115,7 +130,7 @@ class TapeBuffers:
         first, last, ctrl = self.states[0], self.states[-1], self.control
         self.whole = isinstance(q_index, slice) and isinstance(qd_index, slice) \
             and (q_index, qd_index) == (slice(0, nq), slice(0, nqd))
-        self.chained = self.whole and prev is not None
+        self.chained = self.whole and prev is not None and rows is not None
         if self.chained:
             first.joint_q, first.joint_qd = _alias(prev.states[-1].joint_q), _alias(prev.states[-1].joint_qd)
         if rows is not None and self.whole:
@@ -150,7 +165,7 @@ class TapeBuffers:
         while len(bufs) <= k:
             bufs.append(cls(sim.model, sim.substeps, sim.num_worlds, sim.nq, sim.nqd, sim.q_index, sim.qd_index,
                             sim._tape_rows, len(bufs), bufs[-1] if bufs else None))
-        if clear:
+        if clear and sim._tape_rows is not None:
             sim._tape_rows.grads.clear(k)
 
     def accumulated(self) -> list:
@@ -175,7 +190,7 @@ def stage_targets(sim, target: torch.Tensor) -> list | None:
     place, which then copies nothing. ``None`` (pass the targets themselves) where the actuated joints are not the
     whole state or the targets carry gradients."""
     h = target.shape[1]
-    if h == 0 or target.requires_grad:
+    if h == 0 or target.requires_grad or sim._tape_rows is None:
         return None
     with sim._tape_stream():
         TapeBuffers.up_to(sim, h - 1, clear=False)
@@ -196,7 +211,9 @@ def step_forces(sim, steps: int) -> list | None:
     """Where steps 0 .. ``steps`` − 1 of a differentiable rollout read their joint torque: (B, n) views that a
     residual can be written into (``out=``), so that :meth:`~wresdyn.sim.Simulator.step_diff` given that tensor
     copies nothing; valid until the next rollout writes them. ``None`` where the actuated joints are not the whole
-    state."""
+    state, or without :class:`TapeRows`."""
+    if sim._tape_rows is None:
+        return None
     with sim._tape_stream():
         TapeBuffers.up_to(sim, steps - 1, clear=False)
     bufs = sim._tape_buffers[:steps]
@@ -233,7 +250,8 @@ class TapeStep(torch.autograd.Function):
         ctx.tape, ctx.sim, ctx.k, ctx.names = tape, sim, k, names
         ctx.physics_meta = [(p.dtype, p.device) for p in physics]
         # views: the outputs stay until this step runs again (a gather where the index is not a slice)
-        return tuple(out[:, index] for out, index in zip(buf.outputs, buf.index))
+        views = tuple(out[:, index] for out, index in zip(buf.outputs, buf.index))
+        return views if sim._tape_rows is not None else tuple(v.clone() for v in views)
 
     @staticmethod
     def backward(ctx, g_q, g_qd):
@@ -249,7 +267,8 @@ class TapeStep(torch.autograd.Function):
         # SolverReplay adds into the inputs' gradients only (the outputs' are overwritten next time), and those are
         # zeroed before the next rollout (StepRows): hand out views of them. Other solvers, and parameter
         # gradients, zero the whole tape after each step: copies.
-        kept = not ctx.names and sim.solver_kind == "replay" and not getattr(sim.solver, "update_body_q", False)
+        replay = not ctx.names and sim.solver_kind == "replay" and not getattr(sim.solver, "update_body_q", False)
+        kept = replay and sim._tape_rows is not None
         need = ctx.needs_input_grad[:4]
         out = tuple(buf.input_grad(i, copy=not kept) if n else None for i, n in enumerate(need))
         physics = sim._physics_grads(ctx.names, ctx.physics_meta)
@@ -257,6 +276,10 @@ class TapeStep(torch.autograd.Function):
             sim._tape_rows.grads.mark(ctx.k)
         else:
             with sim._tape_stream():
-                tape.zero()
+                if replay:  # without rows: zero the gradients the adjoint adds into, not the whole tape's
+                    for a in buf.accumulated():
+                        a.grad.zero_()
+                else:
+                    tape.zero()
         ctx.tape = None
         return (*out, None, None, None, *physics)
