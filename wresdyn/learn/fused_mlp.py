@@ -23,7 +23,7 @@ from __future__ import annotations
 import torch
 import torch.nn as nn
 
-from .residual import MLPResidualPolicy
+from .residual import MLPResidualPolicy, residual_grad
 
 __all__ = ["FusedMLPRollout", "fusable"]
 
@@ -155,12 +155,7 @@ class FusedMLPRollout(nn.Module):
 
     def _backward(self, grad, g_action, k: int, need_obs: bool) -> torch.Tensor | None:
         p = self.policy
-        # the residual's gradient and the action's through its division, summed in one kernel (addcdiv: the same
-        # g + g_a / scale that the division's backward and autograd's addition form)
-        if g_action is not None:
-            grad = g_action / p.scale if grad is None else torch.addcdiv(grad, g_action, p.scale)
-        elif grad is None:
-            grad = torch.zeros_like(self._g[-1][k])
+        grad = residual_grad(grad, g_action, p.scale, self._g[-1][k])
         g = torch.where(self._mask[k], grad * p.scale, self._zero, out=self._g[-1][k])
         for i in range(len(self.linears) - 1, -1, -1):
             w = self.linears[i].weight

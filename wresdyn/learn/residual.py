@@ -168,6 +168,15 @@ class MaskedClip(torch.autograd.Function):
         return torch.where(inside, grad, 0.0)  # +0 outside, as torch's clamp backward writes
 
 
+def residual_grad(g_r, g_a, scale: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """The gradient at a residual r from those of r and of its action r / scale (either ``None``: no gradient), summed
+    in one ``addcdiv``: the same g_r + g_a / scale that the division's backward and autograd's addition form; zeros
+    shaped as ``like`` where neither came."""
+    if g_a is not None:
+        return g_a / scale if g_r is None else torch.addcdiv(g_r, g_a, scale)
+    return torch.zeros_like(like, dtype=scale.dtype) if g_r is None else g_r
+
+
 class ClipScale(torch.autograd.Function):
     """(a, scale) -> (clamp(a, −1, 1) · scale, that / scale): a residual and its normalised action (what a
     differentiable rollout keeps for the loss) in one node, with :class:`MaskedClip`'s mask. Its backward sums the two
@@ -186,11 +195,7 @@ class ClipScale(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, g_r, g_a):
         inside, scale = ctx.saved_tensors
-        if g_a is None:
-            g = torch.zeros_like(inside, dtype=scale.dtype) if g_r is None else g_r
-        else:
-            g = g_a / scale if g_r is None else torch.addcdiv(g_r, g_a, scale)
-        return torch.where(inside, g * scale, 0.0), None, None
+        return torch.where(inside, residual_grad(g_r, g_a, scale, inside) * scale, 0.0), None, None
 
 
 class ResidualPolicy(nn.Module):

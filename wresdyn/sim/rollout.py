@@ -168,7 +168,7 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                     obs.shape, generator=generator, device=obs.device))
             x = obs if pdev is None else obs.to(pdev)
             with torch.set_grad_enabled(grad and torch.is_grad_enabled()):  # both: (r, r / scale) in one node
-                r, a = (policy(x), None) if both is None else both(x) if forces is None else both(x, forces[k])
+                r, a = (policy(x), None) if both is None else both(x, None if forces is None else forces[k])
             r = r.to(sim.device)
             if scale is not None:
                 actions.append(r / scale.to(r.device) if a is None else a.to(sim.device))
