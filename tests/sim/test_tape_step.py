@@ -112,11 +112,11 @@ def test_gradient_rows_lie_in_arrays_of_doubling_length():
 
 @pytest.mark.parametrize("b, h, staged", [(2, 26, True), (3, 10, False)])
 def test_a_simulator_without_rows_gives_the_same_rollouts(humanoid, b, h, staged):
-    """The layout a CUDA simulator keeps until its graph tests have run with rows (``tape_rows`` gives ``None``: each
-    step's own buffers, every value copied, the adjoint's gradients zeroed after each step), taken on the CPU: two
+    """The layout a CUDA simulator takes with WRESDYN_TAPE_ROWS=0 (``tape_rows`` gives ``None``: each step's own
+    buffers, every value copied, the adjoint's gradients zeroed after each step), taken on the CPU: two
     rollouts in a row give the rows' results bit for bit, and nothing is chained or staged."""
     rows, plain = (Simulator(humanoid, b, DT, solver="replay", requires_grad=True) for _ in range(2))
-    plain._tape_rows = None  # what tape_rows returns on CUDA without WRESDYN_TAPE_ROWS=1, before any step is made
+    plain._tape_rows = None  # what tape_rows returns on CUDA with WRESDYN_TAPE_ROWS=0, before any step is made
     for seed in (0, 1):
         x = _inputs(humanoid, b, h, seed, staged)
         a = _run(rows, x, copied=False)
@@ -127,10 +127,10 @@ def test_a_simulator_without_rows_gives_the_same_rollouts(humanoid, b, h, staged
     assert stage_targets(plain, x["target"]) is None
 
 
-def test_tape_rows_are_off_on_cuda_unless_asked(monkeypatch):
+def test_tape_rows_are_on_everywhere_unless_switched_off_on_cuda(monkeypatch):
     from wresdyn.sim.tape_step import CUDA_ROWS_ENV, TapeRows, tape_rows
 
     monkeypatch.delenv(CUDA_ROWS_ENV, raising=False)
-    assert isinstance(tape_rows("cpu"), TapeRows) and tape_rows("cuda:0") is None
-    monkeypatch.setenv(CUDA_ROWS_ENV, "1")
-    assert isinstance(tape_rows("cuda:0"), TapeRows)
+    assert isinstance(tape_rows("cpu"), TapeRows) and isinstance(tape_rows("cuda:0"), TapeRows)
+    monkeypatch.setenv(CUDA_ROWS_ENV, "0")
+    assert tape_rows("cuda:0") is None and isinstance(tape_rows("cpu"), TapeRows)

@@ -29,17 +29,18 @@ import torch
 __all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets", "step_forces", "tape_rows"]
 
 CUDA_ROWS_ENV = "WRESDYN_TAPE_ROWS"
-"""Set to 1 to lay a CUDA simulator's tape out in rows (chained states, rows of gradients zeroed once per rollout,
-staged targets and torques) as on the CPU. Off on CUDA until the CUDA-graph tests of the fits have run with it on a GPU
-(``tests/learn/test_learner_speed_paths.py``, ``tests/identify/test_sysid_graph.py``): a captured rollout replays only
-the zeroing it saw at capture."""
+"""Set to 0 to give each step of a CUDA simulator its own buffers and a copy of each input, output and gradient
+instead of the rows (chained states, rows of gradients zeroed once per rollout, staged targets and torques): the layout
+to compare against, the same results to the last digit (``benchmarks/results/speed/h200_20261201c/``). A captured
+rollout replays only the zeroing it saw at capture, which the fits' CUDA-graph tests check with rows on
+(``tests/learn/test_learner_speed_paths.py``, ``tests/identify/test_sysid_graph.py``)."""
 
 
 def tape_rows(device) -> TapeRows | None:
     """The :class:`TapeRows` of a simulator on ``device``, or ``None`` for each step's own buffers and a copy of each
-    input, output and gradient (on CUDA unless :data:`CUDA_ROWS_ENV` is 1)."""
+    input, output and gradient (on CUDA with :data:`CUDA_ROWS_ENV` set to 0)."""
     cuda = str(device).startswith("cuda")
-    return TapeRows(device) if not cuda or os.environ.get(CUDA_ROWS_ENV) == "1" else None
+    return None if cuda and os.environ.get(CUDA_ROWS_ENV) == "0" else TapeRows(device)
 
 
 class StepRows:
