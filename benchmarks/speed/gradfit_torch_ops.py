@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import os
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,6 +36,7 @@ def main() -> None:
     from wresdyn.fit.gradfit import GradFitConfig, _FitLearner
     from wresdyn.learn.window_fit import start_window_fit
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+    from wresdyn.sim.observe import ENV
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--horizon", type=int, default=16, help="window length [steps]")
@@ -51,10 +53,10 @@ def main() -> None:
     rng, train, dt = start_window_fit(cfg, data)
     learner = _FitLearner(robot, data, cfg, None, rng, train, dt, print)
     learner.step(0, h, cfg.lr)  # loads the kernels
-    memsets = _count_calls(wp.array, "zero_")
+    memsets, launches = _count_calls(wp.array, "zero_"), _count_calls(wp, "launch")
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         learner.step(1, h, cfg.lr)
-    zeroed = memsets()
+    zeroed, launched = memsets(), launches()
     events = [e for e in prof.events() if e.name.startswith("aten::")]
     top = [e for e in events if e.cpu_parent is None or not e.cpu_parent.name.startswith("aten::")]
     count = collections.Counter(e.name for e in top)
@@ -64,6 +66,8 @@ def main() -> None:
           f"operators in one iteration, {total / h:.1f} per step; {kernels} ({kernels / h:.1f} per step) that "
           "launch work on CUDA (views, empty allocations, same-device casts and host reads excluded)")
     print(f"Warp memsets (array.zero_): {zeroed} in one iteration, {zeroed / h:.2f} per step")
+    print(f"Warp launches through wp.launch (a kernel on CUDA each; {ENV}={os.environ.get(ENV, '')!r}): {launched} in "
+          f"one iteration, {launched / h:.2f} per step")
     print("| operator | count | per step | a kernel on CUDA |")
     print("|---|---|---|---|")
     for name, c in count.most_common():
