@@ -7,7 +7,10 @@ are (on CUDA most operators here are one kernel each; views such as ``t``, ``vie
 The shipped humanoid (21 DoF) and data, the gradient fit's defaults at one window length, on the CPU: one iteration
 warms up, the next runs under torch's profiler. Counted: the operators called from Python or autograd (an operator
 another one calls is not counted again), and of them those that launch work on CUDA (:data:`NO_KERNEL` are not);
-beside them the Warp memsets (``wp.array.zero_`` calls, a ``Memset`` on CUDA each) are counted.
+beside them the Warp memsets (``wp.array.zero_`` calls, a ``Memset`` on CUDA each) and the ``wp.launch`` calls (a
+kernel on CUDA each: the observation node's, :mod:`wresdyn.sim.observe`; the simulator's and the fused MLP's Warp work
+launches otherwise and is not counted). ``WRESDYN_OBS_NODE=warp`` runs the node's Warp kernels on the CPU, what a CUDA
+step launches once the node is on there; unset, the CPU runs the node's torch operators.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ for the difference, so the engine accumulates the slice and then +g/dt, as it di
 the subtraction's gradient.
 
 :data:`ENV` switches it. On the CPU the node runs the same torch operators inside it by default (a CPU Warp launch
-costs ~0.1 ms of Python, more than the operators it replaces; the node's gradients and their order are the same); on
+costs ~50 µs of Python, more than the operators it replaces; the node's gradients and their order are the same); on
 CUDA it is off unless set to 1, until its bits are checked on a GPU; ``warp`` runs the Warp kernels on the CPU too, to
 check their bits there (``tests/sim/test_observe.py``) and to count what a CUDA step launches
 (``benchmarks/speed/gradfit_torch_ops.py``).
@@ -105,6 +105,7 @@ def observe_modules(dtype: torch.dtype = torch.float32) -> list:
     return [k.module for k in _kernels(dtype)]
 
 
+@functools.lru_cache(maxsize=64)
 def _scale(dt: float, device: torch.device, dtype: torch.dtype) -> tuple[float, int]:
     """What the kernels divide by (``recip`` 0) or multiply with (``recip`` 1): torch's own operand for a tensor
     divided by the Python float ``dt`` on ``device``. On the CPU torch divides by ``dt`` rounded to the tensor's
@@ -117,7 +118,8 @@ def _scale(dt: float, device: torch.device, dtype: torch.dtype) -> tuple[float, 
 def _launch(kernel, dim, device: torch.device, *args) -> None:
     import warp as wp
 
-    wargs = [wp.from_torch(a) if isinstance(a, torch.Tensor) else a for a in args]
+    # array descriptors, not wp.array objects: a few microseconds each instead of ~10 (Python on the launch path)
+    wargs = [wp.from_torch(a, return_ctype=True) if isinstance(a, torch.Tensor) else a for a in args]
     if device.type == "cuda":
         cur = torch.cuda.current_stream(device)
         stream = _streams.get(cur.cuda_stream)
