@@ -115,12 +115,18 @@ def _scale(dt: float, device: torch.device, dtype: torch.dtype) -> tuple[float, 
     return (float(np_dtype(1.0) / d), 1) if device.type == "cuda" else (float(d), 0)
 
 
-def _launch(kernel, dim, device: torch.device, *args) -> None:
+def _launch(kernel, dim, device: torch.device, stream, *args) -> None:
+    """Launch ``kernel`` on the CPU, or on CUDA in ``stream()`` (a context in which Warp's current stream is ordered
+    with torch's: :meth:`~wresdyn.sim.simulator.Simulator._tape_stream`, where the simulator's own Warp work runs) or,
+    without one, on torch's current stream."""
     import warp as wp
 
     # array descriptors, not wp.array objects: a few microseconds each instead of ~10 (Python on the launch path)
     wargs = [wp.from_torch(a, return_ctype=True) if isinstance(a, torch.Tensor) else a for a in args]
-    if device.type == "cuda":
+    if device.type == "cuda" and stream is not None:
+        with stream():
+            wp.launch(kernel, dim=dim, inputs=wargs, device=wp.device_from_torch(device))
+    elif device.type == "cuda":
         cur = torch.cuda.current_stream(device)
         stream = _streams.get(cur.cuda_stream)
         if stream is None:
@@ -136,16 +142,16 @@ class _Observe(torch.autograd.Function):
     or q̈ itself, cmd and noise (N, 4n) or ``None``; with the Warp kernels (``kernel``) or the torch operators."""
 
     @staticmethod
-    def forward(ctx, q, qd, qd_again, prev, cmd, noise, dt: float, diff: bool, kernel: bool):
+    def forward(ctx, q, qd, qd_again, prev, cmd, noise, dt: float, diff: bool, kernel: bool, stream):
         n, dtype = q.shape[1], q.dtype
-        ctx.n, ctx.diff, ctx.dt, ctx.kernel = n, diff, dt, kernel
+        ctx.n, ctx.diff, ctx.dt, ctx.kernel, ctx.stream = n, diff, dt, kernel, stream
         if not kernel:
             obs = torch.cat([q, qd, (qd - prev) / dt if diff else prev, cmd], dim=-1)
             return obs if noise is None else obs.add_(noise)
         forward, _ = _kernels(dtype)
         scale, recip = _scale(dt, q.device, dtype)
         obs = torch.empty((q.shape[0], 4 * n), dtype=dtype, device=q.device)
-        _launch(forward, (q.shape[0], n), q.device, q.detach(), qd.detach(), prev.detach(), cmd.detach(),
+        _launch(forward, (q.shape[0], n), q.device, stream, q.detach(), qd.detach(), prev.detach(), cmd.detach(),
                 None if noise is None else noise.detach(), scale, recip, int(diff), int(noise is not None), obs)
         return obs
 
@@ -164,14 +170,14 @@ class _Observe(torch.autograd.Function):
             _, backward = _kernels(adj_obs.dtype)
             scale, recip = _scale(ctx.dt, adj_obs.device, adj_obs.dtype)
             out = torch.empty((2, adj_obs.shape[0], n), dtype=adj_obs.dtype, device=adj_obs.device)
-            _launch(backward, (adj_obs.shape[0], n), adj_obs.device, adj_obs, scale, recip, out)
+            _launch(backward, (adj_obs.shape[0], n), adj_obs.device, ctx.stream, adj_obs, scale, recip, out)
             adj_again, adj_prev = out[0], out[1]
         return (adj_q, adj_qd, adj_again if need_again else None, adj_prev if need_prev else None,
-                None, None, None, None, None)
+                None, None, None, None, None, None)
 
 
 def observe(q: torch.Tensor, qd: torch.Tensor, prev: torch.Tensor, cmd: torch.Tensor, noise: torch.Tensor | None,
-            dt: float, diff: bool = True, kernel: bool = True) -> torch.Tensor:
+            dt: float, diff: bool = True, kernel: bool = True, stream=None) -> torch.Tensor:
     """The observation ``observation(q, qd, (qd - prev) / dt, cmd) + noise`` as one autograd node, the same values and
     gradients (bit for bit); with ``kernel`` in one Warp kernel each way.
 
@@ -185,8 +191,10 @@ def observe(q: torch.Tensor, qd: torch.Tensor, prev: torch.Tensor, cmd: torch.Te
         dt: Sample period [s] the accelerations are differences over.
         diff: Whether ``prev`` is the previous velocity (q̈ = (q̇ − prev) / dt) or q̈.
         kernel: The Warp kernels (one launch each way), else the torch operators inside the node.
+        stream: On CUDA, a callable giving the context to launch the kernels in (a rollout's
+            ``sim._tape_stream``, the simulator's own Warp streams); ``None``: torch's current stream.
 
     Returns:
         The observation (N, 4n), differentiable in ``q``, ``qd`` and ``prev``.
     """
-    return _Observe.apply(q, qd, qd, prev, cmd, noise, float(dt), bool(diff), bool(kernel))
+    return _Observe.apply(q, qd, qd, prev, cmd, noise, float(dt), bool(diff), bool(kernel), stream)

@@ -170,7 +170,8 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
             # all worlds: the tensors themselves, not a full slice of each, whose backward would allocate and fill a
             # copy of every step's gradient (three per step)
             if node:
-                obs = observe(q, qd, qdd, window.cmd[:, k], draw, sim.dt, diff=k > 0, kernel=node == "warp")
+                obs = observe(q, qd, qdd, window.cmd[:, k], draw, sim.dt, diff=k > 0, kernel=node == "warp",
+                              stream=sim._tape_stream)
             else:
                 obs = (observation(q, qd, qdd, window.cmd[:, k]) if policy_worlds is None
                        else observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k]))
