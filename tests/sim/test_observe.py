@@ -18,8 +18,9 @@ same, unchecked where no GPU is."""
 
 def _inputs(seed: int, n_worlds: int = 7, n: int = 5, device: str = "cpu"):
     g = torch.Generator().manual_seed(seed)
-    q, qd, prev = (torch.randn(n_worlds, n, generator=g).to(device).requires_grad_() for _ in range(3))
-    prev.data *= 1.0 + 1e-3 * torch.rand(n_worlds, n, generator=g).to(device)  # q̇ near the previous one: a small q̈
+    q, qd = (torch.randn(n_worlds, n, generator=g).to(device).requires_grad_() for _ in range(2))
+    # the previous q̇ near this one, as in a rollout: a difference that cancels most digits
+    prev = (qd.detach() * (1.0 + 1e-3 * torch.rand(n_worlds, n, generator=g).to(device))).requires_grad_()
     cmd = torch.randn(n_worlds, 3, n, generator=g).to(device)[:, 1]  # strided, as a window's command of one step
     noise = torch.randn(n_worlds, 4 * n, generator=g).to(device)
     return q, qd, prev, cmd, noise
