@@ -96,7 +96,7 @@ def test_a_truncated_chain_has_the_same_gradients_bit_for_bit(kernel, device):
 
 
 def test_the_switch(monkeypatch):
-    expected = {None: ("torch", None), "1": ("torch", "warp"), "warp": ("warp", "warp"), "0": (None, None)}
+    expected = {None: (None, None), "1": ("torch", "warp"), "warp": ("warp", "warp"), "0": (None, None)}
     for given, (cpu, cuda) in expected.items():
         if given is None:
             monkeypatch.delenv(ENV, raising=False)

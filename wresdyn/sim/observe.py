@@ -33,7 +33,8 @@ __all__ = ["ENV", "mode", "observe", "observe_modules"]
 ENV = "WRESDYN_OBS_NODE"
 """``1``: the rollout's observation node (:func:`observe`) on every device, the Warp kernels on CUDA and the torch
 operators on the CPU; ``warp``: the node with the Warp kernels on every device; ``0``: no node (the torch operators
-as autograd records them); unset: the node on the CPU only."""
+as autograd records them); unset: no node (on the CPU the node, a Python autograd function, costs 2-3 % of an
+iteration, ``benchmarks/results/speed/obsnode_cpu/``; on CUDA it waits for a GPU check of the fits' captured graphs)."""
 
 _streams: dict[int, object] = {}  # torch stream handle -> its Warp stream, made once per stream
 
@@ -43,7 +44,7 @@ def mode(device) -> str | None:
     with the Warp kernels), ``"torch"`` (:func:`observe` with the torch operators) or ``None`` (no node)."""
     given = os.environ.get(ENV, "").strip()
     cuda = str(device).startswith("cuda")
-    if given == "0" or (given not in ("1", "warp") and cuda):
+    if given not in ("1", "warp"):
         return None
     return "warp" if given == "warp" or cuda else "torch"
 
