@@ -75,14 +75,15 @@ def _pad(d: int, chunk: int) -> int:
 
 
 def _matmul_lines(x: str, w: str, n_in: int, n_out: int, chunk: int, transpose: bool) -> list[str]:
-    """``acc`` = x @ w.T (``transpose``, w (n_out, n_in)) or x @ w (w (n_in, n_out)), reading w in chunks of the
+    """``acc_<w>`` = x @ w.T (``transpose``, w (n_out, n_in)) or x @ w (w (n_in, n_out)), reading w in chunks of the
     reduction dimension n_in."""
     shape, off = ((n_out, chunk), "(0, c * KC)") if transpose else ((chunk, n_out), "(c * KC, 0)")
-    wt = "wp.tile_transpose(wc)" if transpose else "wc"
-    return [f"acc = wp.tile_zeros(shape=(TB, {n_out}), dtype=float)",
+    wt = f"wp.tile_transpose(wc_{w})" if transpose else f"wc_{w}"
+    # one name per product: Warp merges a name assigned in a branch with its value before, which needs one shape
+    return [f"acc_{w} = wp.tile_zeros(shape=(TB, {n_out}), dtype=float)",
             f"for c in range({n_in // chunk}):",
-            f"    wc = wp.tile_load({w}, shape={shape}, offset={off}, storage='shared')",
-            f"    wp.tile_matmul(wp.tile_view({x}, offset=(0, c * KC), shape=(TB, KC)), {wt}, acc)"]
+            f"    wc_{w} = wp.tile_load({w}, shape={shape}, offset={off}, storage='shared')",
+            f"    wp.tile_matmul(wp.tile_view({x}, offset=(0, c * KC), shape=(TB, KC)), {wt}, acc_{w})"]
 
 
 def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
@@ -103,7 +104,8 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
            "wp.tile_store(x0[k], x, offset=(r0, 0))"]
     for i in range(n):
         fwd += _matmul_lines("x", f"w{i}", p[i], p[i + 1], chunk, True)
-        fwd.append(f"y = acc + wp.tile_broadcast(wp.tile_load(b{i}, shape=({p[i + 1]},)), shape=(TB, {p[i + 1]}))")
+        fwd.append(f"y = acc_w{i} + wp.tile_broadcast(wp.tile_load(b{i}, shape=({p[i + 1]},)), "
+                   f"shape=(TB, {p[i + 1]}))")
         if i < n - 1:
             fwd += [f"wp.tile_store(z{i}[k], y, offset=(r0, 0))", "x = wp.tile_map(_elu, y)",
                     f"wp.tile_store(x{i + 1}[k], x, offset=(r0, 0))"]
@@ -124,12 +126,13 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
            f"wp.tile_store(g{n - 1}[k], g, offset=(r0, 0))"]
     for i in range(n - 1, 0, -1):
         bwd += _matmul_lines("g", f"w{i}", p[i + 1], p[i], chunk, False)
-        bwd += [f"g = wp.tile_map(_elu_backward, acc, wp.tile_load(z{i - 1}[k], shape=(TB, {p[i]}), offset=(r0, 0)))",
+        bwd += [f"zt = wp.tile_load(z{i - 1}[k], shape=(TB, {p[i]}), offset=(r0, 0))",
+                f"g = wp.tile_map(_elu_backward, acc_w{i}, zt)",
                 f"wp.tile_store(g{i - 1}[k], g, offset=(r0, 0))"]
     # the normalisation's backward: sub passes the gradient through, div divides by std
     bwd += ["if need_obs != 0:"] + ["    " + line for line in _matmul_lines("g", "w0", p[1], p[0], chunk, False)]
     bwd += [f"    sd = wp.tile_broadcast(wp.tile_load(std, shape=({p[0]},)), shape=(TB, {p[0]}))",
-            "    wp.tile_store(g_obs, wp.tile_map(wp.div, acc, sd), offset=(r0, 0))"]
+            "    wp.tile_store(g_obs, wp.tile_map(wp.div, acc_w0, sd), offset=(r0, 0))"]
     body = lambda lines: "\n".join([lines[0]] + ["    " + line for line in lines[1:]])  # noqa: E731
     return body(fwd), body(bwd)
 
@@ -144,11 +147,13 @@ def _kernels(dims: tuple[int, ...], alpha: float, rows: int, chunk: int):
         import warp as wp
 
         fwd, bwd = _sources(list(dims), chunk)
-        src = _FUNCS + "\n\n@wp.kernel(module='unique')\n" + fwd + "\n\n\n@wp.kernel(module='unique')\n" + bwd + "\n"
+        head = "\n\n\n@wp.kernel(module='unique', enable_backward=False, module_options=OPTIONS)\n"
+        src = _FUNCS + head + fwd + head + bwd + "\n"
         # Warp reads a kernel's source back through inspect: register the generated text under its own file name
         name = f"<wresdyn.tile_mlp {'-'.join(map(str, dims))} a{alpha} tb{rows} kc{chunk}>"
         linecache.cache[name] = (len(src), None, src.splitlines(True), name)
-        scope = {"wp": wp, "TB": rows, "KC": chunk, "ALPHA": float(alpha)}
+        # max_unroll 0: an unrolled chunk loop would hold every chunk of a weight in shared memory at once
+        scope = {"wp": wp, "TB": rows, "KC": chunk, "ALPHA": float(alpha), "OPTIONS": {"max_unroll": 0}}
         exec(compile(src, name, "exec"), scope)  # noqa: S102 (source built above from integers only)
         _KERNELS[key] = scope["tile_mlp_forward"], scope["tile_mlp_backward"]
     return _KERNELS[key]
