@@ -3,7 +3,7 @@
 #   a. tests: tests/learn/test_tile_mlp.py (CPU and cuda:0, the graph-replayed fit with tiles against the fused one)
 #      and tests/learn/test_fused_mlp.py;
 #   b. one step, forward + backward, torch fused against tiles (benchmarks/speed/tile_mlp_step.py, 1024 windows,
-#      H = 64, eager and replayed from a CUDA graph);
+#      H = 64, eager and replayed from a CUDA graph; the fit's blocks of 16 windows and two other splits);
 #   c. the gradient fit's 2000 iterations at 1024 windows (benchmarks/speed/gradfit_2000.py): a short warm-up run with
 #      tiles (loads or compiles the kernels, captures every window length once), then `--fused` and
 #      `--fused --tiles` once each; training seconds and the final and best validation of both.
@@ -41,10 +41,10 @@ fit=("$py" benchmarks/speed/gradfit_2000.py --device "$dev" --windows 1024)
 { nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; git rev-parse --short HEAD
   "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)"
 } > "$res/machine.txt" 2>&1
-leg tests.txt 180 90 "$py" -m pytest -q -rA -p no:cacheprovider tests/learn/test_tile_mlp.py \
+leg tests.txt 190 80 "$py" -m pytest -q -rA -p no:cacheprovider tests/learn/test_tile_mlp.py \
   tests/learn/test_fused_mlp.py
-leg tile_step.txt 150 30 "$py" benchmarks/speed/tile_mlp_step.py --device "$dev" --windows 1024 \
-  --json "$res/tile_step.json"
+leg tile_step.txt 150 40 "$py" benchmarks/speed/tile_mlp_step.py --device "$dev" --windows 1024 \
+  --blocks 16x32x128,8x32x128,32x32x256 --json "$res/tile_step.json"
 leg warmup.log 100 50 "${fit[@]}" --iterations 20 --fused --tiles --json "$res/warmup.json"
 leg fused.log 50 50 "${fit[@]}" --iterations 2000 --fused --json "$res/fused.json"
 leg tiles.log 0 50 "${fit[@]}" --iterations 2000 --fused --tiles --json "$res/tiles.json"
@@ -58,11 +58,10 @@ tests = (res / "tests.txt").read_text().splitlines() if (res / "tests.txt").exis
 print("tests:", next((line for line in reversed(tests) if " passed" in line or " failed" in line), "no summary"))
 if (res / "tile_step.json").exists():
     s = json.loads((res / "tile_step.json").read_text())
-    for mode in ("eager", "graph"):
-        if f"torch_{mode}_us_per_step" in s:
-            print(f"one step ({mode}): torch fused {s[f'torch_{mode}_us_per_step']:.1f} µs, "
-                  f"tiles {s[f'tiles_{mode}_us_per_step']:.1f} µs")
-    print("max |tiles - torch|:", {k: f"{v:.1e}" for k, v in s["max_abs_diff"].items()})
+    for name, fig in [("torch fused", s["torch"])] + [(str(t["block"]), t) for t in s["tiles"]]:
+        print(f"one step, {name}: graph {fig.get('graph_us_per_step', float('nan')):.1f} µs, eager "
+              f"{fig['eager_us_per_step']:.1f} µs" + (f"; max |tiles - torch| {max(fig['max_abs_diff'].values()):.1e}"
+                                                     if "max_abs_diff" in fig else ""))
 runs = {n: json.loads((res / f"{n}.json").read_text()) for n in ("fused", "tiles") if (res / f"{n}.json").exists()}
 for name, r in runs.items():
     print(f"{name}: train_s {r['train_s']:.2f}, final validation {r['final_validation']}, best validation "

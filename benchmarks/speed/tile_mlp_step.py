@@ -2,6 +2,7 @@
 its Warp tile kernels (``FusedMLPRollout(policy, tiles=True)``, ``GradFitConfig.network_tiles``).
 
     python benchmarks/speed/tile_mlp_step.py --device cuda:0 --windows 1024
+    python benchmarks/speed/tile_mlp_step.py --device cuda:0 --windows 1024 --blocks 16x32x128,8x32x128,32x32x256
     python benchmarks/speed/tile_mlp_step.py --device cpu --windows 1024 --horizon 8 --repeats 3
 
 Workload: the fit's residual network (:class:`wresdyn.learn.residual.ResidualConfig`'s hidden widths, ELU, the
@@ -11,12 +12,14 @@ formed), as in a rollout of that length. On CUDA the H forward and H backward st
 replayed (the fit replays its iterations so; no Python between kernels), timed with CUDA events, and also run eagerly;
 on the CPU eagerly, by wall-clock. Printed: µs per step (forward + backward) of each path, and the largest absolute
 difference between the paths' residuals, observation gradients and gradients at the layer outputs (float32 rounding:
-the kernels sum each GEMM in another order). ``--rows``, ``--chunk`` and ``--threads`` set the kernels' block shape.
+the kernels sum each GEMM in another order). ``--blocks`` lists the kernels' splits to time
+(:class:`~wresdyn.learn.tile_mlp.TileBlock`).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -45,7 +48,41 @@ def _steps(net, obs, grads, horizon: int):
     return rs[0][0], g_obs
 
 
-def run(device: str, windows: int, horizon: int, repeats: int, rows: int, chunk: int, threads: int) -> dict:
+def _time(net, obs, grads, horizon: int, repeats: int, cuda: bool) -> tuple[dict, list]:
+    """One path's figures: first call, eager and (CUDA) graph-replayed µs per step; and its step-0 outputs."""
+    import torch
+
+    fig = {}
+    net.begin(horizon, obs.shape[0])
+    t = time.perf_counter()
+    r, g_obs = _steps(net, obs, grads, horizon)  # the first call loads (and may compile) the kernels
+    if cuda:
+        torch.cuda.synchronize(obs.device)
+    fig["first_call_s"] = time.perf_counter() - t
+    outputs = [r, g_obs] + [b[0] for b in net._g]
+    t = time.perf_counter()
+    for _ in range(repeats):
+        _steps(net, obs, grads, horizon)
+    if cuda:
+        torch.cuda.synchronize(obs.device)
+    fig["eager_us_per_step"] = 1e6 * (time.perf_counter() - t) / (repeats * horizon)
+    if cuda:
+        graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(graph):
+            _steps(net, obs, grads, horizon)
+        graph.replay()
+        start, end = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+        start.record()
+        for _ in range(repeats):
+            graph.replay()
+        end.record()
+        end.synchronize()
+        fig["graph_us_per_step"] = 1e3 * start.elapsed_time(end) / (repeats * horizon)
+    return fig, [o.clone() for o in outputs]
+
+
+def run(device: str, windows: int, horizon: int, repeats: int, blocks: list) -> dict:
+    """The torch fused path, then the tile path at each :class:`~wresdyn.learn.tile_mlp.TileBlock` of ``blocks``."""
     import torch
 
     from wresdyn.learn.fused_mlp import FusedMLPRollout
@@ -55,40 +92,17 @@ def run(device: str, windows: int, horizon: int, repeats: int, rows: int, chunk:
     obs = (torch.randn(windows, 4 * N_DOF, generator=g) * 4).to(device)
     grads = [torch.randn(windows, N_DOF, generator=g).to(device) for _ in range(2)]
     cuda = device.startswith("cuda")
-    out = {"device": torch.cuda.get_device_name(device) if cuda else "cpu", "windows": windows, "horizon": horizon,
-           "rows": rows, "chunk": chunk, "threads": threads}
-    results = {}
-    for name, tiles in (("torch", False), ("tiles", True)):
-        net = FusedMLPRollout(_policy(device), tiles=tiles, tile_block=(rows, chunk, threads))
-        net.begin(horizon, windows)
-        t = time.perf_counter()
-        r, g_obs = _steps(net, obs, grads, horizon)  # the first call loads (and may compile) the kernels
-        if cuda:
-            torch.cuda.synchronize(device)
-        out[f"{name}_first_call_s"] = time.perf_counter() - t
-        results[name] = [r, g_obs] + [b[0] for b in net._g]
-        t = time.perf_counter()
-        for _ in range(repeats):
-            _steps(net, obs, grads, horizon)
-        if cuda:
-            torch.cuda.synchronize(device)
-        out[f"{name}_eager_us_per_step"] = 1e6 * (time.perf_counter() - t) / (repeats * horizon)
-        if cuda:
-            graph = torch.cuda.CUDAGraph()
-            with torch.cuda.graph(graph):
-                _steps(net, obs, grads, horizon)
-            graph.replay()
-            start, end = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
-            start.record()
-            for _ in range(repeats):
-                graph.replay()
-            end.record()
-            end.synchronize()
-            out[f"{name}_graph_us_per_step"] = 1e3 * start.elapsed_time(end) / (repeats * horizon)
-    labels = ["residual", "obs_grad"] + [f"g{i}" for i in range(len(results["torch"]) - 2)]
-    out["max_abs_diff"] = {k: float((a - b).abs().max()) for k, a, b in zip(labels, results["tiles"],
-                                                                          results["torch"], strict=True)}
-    out["max_abs"] = {k: float(b.abs().max()) for k, b in zip(labels, results["torch"], strict=True)}
+    out = {"device": torch.cuda.get_device_name(device) if cuda else "cpu", "windows": windows, "horizon": horizon}
+    out["torch"], ref = _time(FusedMLPRollout(_policy(device)), obs, grads, horizon, repeats, cuda)
+    labels = ["residual", "obs_grad"] + [f"g{i}" for i in range(len(ref) - 2)]
+    out["max_abs"] = {k: float(b.abs().max()) for k, b in zip(labels, ref, strict=True)}
+    out["tiles"] = []
+    for block in blocks:
+        fig, got = _time(FusedMLPRollout(_policy(device), tiles=True, tile_block=block), obs, grads, horizon, repeats,
+                         cuda)
+        fig["block"] = dataclasses.asdict(block)
+        fig["max_abs_diff"] = {k: float((a - b).abs().max()) for k, a, b in zip(labels, got, ref, strict=True)}
+        out["tiles"].append(fig)
     return out
 
 
@@ -98,25 +112,30 @@ def main(argv=None) -> dict:
     p.add_argument("--windows", type=int, default=1024)
     p.add_argument("--horizon", type=int, default=64, help="steps per timed rollout (the curriculum's longest)")
     p.add_argument("--repeats", type=int, default=20)
-    p.add_argument("--rows", type=int, default=16, help="windows per block of the tile kernels")
-    p.add_argument("--chunk", type=int, default=32, help="weight columns read at a time (and the tiles' padding)")
-    p.add_argument("--threads", type=int, default=128, help="threads per block")
+    p.add_argument("--blocks", default="16x32x128",
+                   help="comma list of ROWSxCHUNKxTHREADS (windows per block, weight columns read at a time, threads "
+                        "per block), each with suffix 'm' for MathDx's GEMMs (a long first compile)")
     p.add_argument("--json", default="")
     args = p.parse_args(argv)
     import warp as wp
 
+    from wresdyn.learn.tile_mlp import TileBlock
+
     wp.config.quiet = True
-    out = run(args.device, args.windows, args.horizon, args.repeats, args.rows, args.chunk, args.threads)
-    print(f"{out['device']}: {args.windows} windows, H = {args.horizon}, tiles of {args.rows} rows, chunk "
-          f"{args.chunk}, {args.threads} threads")
-    for mode in ("eager", "graph"):
-        if f"torch_{mode}_us_per_step" in out:
-            t, w = out[f"torch_{mode}_us_per_step"], out[f"tiles_{mode}_us_per_step"]
-            print(f"{mode}: torch fused {t:.1f} µs/step, tiles {w:.1f} µs/step ({w / t:.2f}x)")
-    print("first call (loads or compiles the kernels): " + ", ".join(
-        f"{k} {out[f'{k}_first_call_s']:.1f} s" for k in ("torch", "tiles")))
-    print("max |tiles - torch|: " + ", ".join(f"{k} {v:.2e} (of {out['max_abs'][k]:.2e})"
-                                              for k, v in out["max_abs_diff"].items()))
+    blocks = []
+    for b in args.blocks.split(","):
+        rows, chunk, threads = (int(v) for v in b.rstrip("m").split("x"))
+        blocks.append(TileBlock(rows, chunk, threads, b.endswith("m")))
+    out = run(args.device, args.windows, args.horizon, args.repeats, blocks)
+    print(f"{out['device']}: {args.windows} windows, H = {args.horizon}")
+    rows = [("torch fused", out["torch"])] + [(str(t["block"]), t) for t in out["tiles"]]
+    for name, fig in rows:
+        times = [f"{mode} {fig[f'{mode}_us_per_step']:.1f} µs/step" for mode in ("graph", "eager")
+                 if f"{mode}_us_per_step" in fig]
+        print(f"{name}: " + ", ".join(times) + f"; first call {fig['first_call_s']:.1f} s")
+        if "max_abs_diff" in fig:
+            print("  max |tiles - torch|: " + ", ".join(f"{k} {v:.2e} (of {out['max_abs'][k]:.2e})"
+                                                       for k, v in fig["max_abs_diff"].items()))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(out, indent=1))

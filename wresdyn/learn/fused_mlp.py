@@ -69,8 +69,9 @@ class FusedMLPRollout(nn.Module):
     autograd would (set where ``None``, added otherwise). Its calls outside that order are refused.
 
     With ``tiles`` (float32 networks) each step's forward and backward run as one Warp tile kernel each
-    (:class:`~wresdyn.learn.tile_mlp.TileMLP`, blocks of ``tile_block`` = (rows, chunk, threads)) instead of the torch
-    operations below: the same buffers, equal to float32 rounding.
+    (:class:`~wresdyn.learn.tile_mlp.TileMLP`, split as ``tile_block`` says, a
+    :class:`~wresdyn.learn.tile_mlp.TileBlock`, its defaults where ``None``) instead of the torch operations below: the
+    same buffers, equal to float32 rounding.
 
     Example::
 
@@ -81,7 +82,7 @@ class FusedMLPRollout(nn.Module):
         fused.finish()
     """
 
-    def __init__(self, policy, tiles: bool = False, tile_block: tuple[int, int, int] = (16, 32, 128)) -> None:
+    def __init__(self, policy, tiles: bool = False, tile_block=None) -> None:
         super().__init__()
         why = fusable(policy)
         if why is not None:
@@ -102,7 +103,7 @@ class FusedMLPRollout(nn.Module):
             if policy.obs_mean.dtype != torch.float32:
                 raise ValueError("the tile kernels run float32 networks")
             dims = [self.linears[0].in_features] + [m.out_features for m in self.linears]
-            self._tiles = TileMLP(dims, self.alpha, dev, *tile_block)
+            self._tiles = TileMLP(dims, self.alpha, dev, tile_block)
 
     @property
     def scale(self) -> torch.Tensor:

@@ -18,11 +18,29 @@ they launch on torch's current stream, so a CUDA graph torch captures includes t
 
 from __future__ import annotations
 
+import dataclasses
 import linecache
 
 import torch
 
-__all__ = ["TileMLP"]
+__all__ = ["TileBlock", "TileMLP"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TileBlock:
+    """How :class:`TileMLP`'s kernels split the work."""
+
+    rows: int = 16
+    """Windows per block (the GEMMs' M)."""
+    chunk: int = 32
+    """Columns of the reduction dimension read from a weight at a time; every tile dimension is padded to a multiple
+    of it. 256x32 float32 is 32 KB: the largest shared tiles stay ~130 KB a block (an H200 has ~227 KB)."""
+    threads: int = 128
+    """Threads per block."""
+    mathdx: bool = False
+    """On CUDA, the GEMMs through MathDx (cuBLASDx) rather than Warp's own tile GEMM. Off: NVRTC's compile of the
+    network's two kernels with MathDx took 162 + 135 s on a 2-core CPU (sm_90, the fit's network), a first run's wait
+    on a fresh machine."""
 
 _FUNCS = '''
 @wp.func
@@ -140,9 +158,9 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
 _KERNELS: dict[tuple, tuple] = {}
 
 
-def _kernels(dims: tuple[int, ...], alpha: float, rows: int, chunk: int):
+def _kernels(dims: tuple[int, ...], alpha: float, rows: int, chunk: int, mathdx: bool):
     """(forward, backward) Warp kernels for this shape, built once per process (Warp caches their binaries)."""
-    key = (dims, alpha, rows, chunk)
+    key = (dims, alpha, rows, chunk, mathdx)
     if key not in _KERNELS:
         import warp as wp
 
@@ -150,10 +168,11 @@ def _kernels(dims: tuple[int, ...], alpha: float, rows: int, chunk: int):
         head = "\n\n\n@wp.kernel(module='unique', enable_backward=False, module_options=OPTIONS)\n"
         src = _FUNCS + head + fwd + head + bwd + "\n"
         # Warp reads a kernel's source back through inspect: register the generated text under its own file name
-        name = f"<wresdyn.tile_mlp {'-'.join(map(str, dims))} a{alpha} tb{rows} kc{chunk}>"
+        name = f"<wresdyn.tile_mlp {'-'.join(map(str, dims))} a{alpha} tb{rows} kc{chunk} dx{int(mathdx)}>"
         linecache.cache[name] = (len(src), None, src.splitlines(True), name)
         # max_unroll 0: an unrolled chunk loop would hold every chunk of a weight in shared memory at once
-        scope = {"wp": wp, "TB": rows, "KC": chunk, "ALPHA": float(alpha), "OPTIONS": {"max_unroll": 0}}
+        options = {"max_unroll": 0, "enable_mathdx_gemm": mathdx}
+        scope = {"wp": wp, "TB": rows, "KC": chunk, "ALPHA": float(alpha), "OPTIONS": options}
         exec(compile(src, name, "exec"), scope)  # noqa: S102 (source built above from integers only)
         _KERNELS[key] = scope["tile_mlp_forward"], scope["tile_mlp_backward"]
     return _KERNELS[key]
@@ -167,19 +186,21 @@ def _wp(t: torch.Tensor):
 
 
 class TileMLP:
-    """The forward and backward of one rollout step of an ELU MLP residual (float32) as one Warp kernel each, over
-    blocks of ``rows`` windows with ``threads`` threads, weights read ``chunk`` columns at a time."""
+    """The forward and backward of one rollout step of an ELU MLP residual (float32) of layer widths ``dims`` (input
+    first) as one Warp kernel each, split as ``block`` says."""
 
-    def __init__(self, dims: list[int], alpha: float, device: torch.device, rows: int = 16, chunk: int = 32,
-                 threads: int = 128) -> None:
+    def __init__(self, dims: list[int], alpha: float, device: torch.device, block: TileBlock | None = None) -> None:
         import warp as wp
 
         wp.init()
-        self.dims, self.rows, self.threads = list(dims), rows, threads
-        self.forward_kernel, self.backward_kernel = _kernels(tuple(dims), float(alpha), rows, chunk)
+        block = block or TileBlock()
+        self.dims, self.rows, self.threads = list(dims), block.rows, block.threads
+        self.forward_kernel, self.backward_kernel = _kernels(tuple(dims), float(alpha), block.rows, block.chunk,
+                                                             block.mathdx)
         self.device = wp.device_from_torch(device)
         self._empty = _wp(torch.zeros(0, dims[-1], device=device))
         self._bufs = None
+        self._streams: dict[int, tuple] = {}
 
     def bind(self, x: list | None, z: list = (), g: list = (), mask: torch.Tensor | None = None) -> None:
         """The rollout's (H, B, ·) buffers (:meth:`FusedMLPRollout.begin`), viewed once per rollout; ``None``: let
@@ -190,11 +211,23 @@ class TileMLP:
     def _launch(self, kernel, batch: int, args: list) -> None:
         import warp as wp
 
-        stream = None
-        if self.device.is_cuda:
-            stream = wp.stream_from_torch(torch.cuda.current_stream(self.device.ordinal))
-        wp.launch_tiled(kernel, dim=[-(-batch // self.rows)], inputs=args, block_dim=self.threads,
-                        device=self.device, stream=stream)
+        wp.launch_tiled(kernel, dim=[-(-batch // self.rows)], inputs=args, block_dim=self.threads, device=self.device,
+                        stream=self._stream())
+
+    def _stream(self):
+        """Torch's current stream as a Warp stream (one object per stream), so that a CUDA graph torch captures holds
+        the launches; ``None`` (Warp's device stream, which torch's legacy default stream synchronises with) where
+        torch runs on that default stream, as :class:`~wresdyn.sim.Simulator` does."""
+        if not self.device.is_cuda:
+            return None
+        import warp as wp
+
+        cur = torch.cuda.current_stream(self.device.ordinal)
+        if cur == torch.cuda.default_stream(self.device.ordinal):
+            return None
+        if cur.cuda_stream not in self._streams:
+            self._streams[cur.cuda_stream] = (cur, wp.stream_from_torch(cur))
+        return self._streams[cur.cuda_stream][1]
 
     def forward(self, policy, linears, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
         """Step ``k``'s residual (into ``out`` where given) and with ``both`` its action residual / scale."""
