@@ -3,11 +3,11 @@
 #   a. tests: tests/learn/test_tile_mlp.py (CPU and cuda:0, the graph-replayed fit with tiles against the fused one)
 #      and tests/learn/test_fused_mlp.py;
 #   b. one step, forward + backward, torch fused against tiles (benchmarks/speed/tile_mlp_step.py, 1024 windows,
-#      H = 64, eager and replayed from a CUDA graph; the fit's blocks of 16 windows and two other splits);
+#      H = 64, eager and replayed from a CUDA graph; the fit's blocks of 16 windows and three other splits);
 #   c. the gradient fit's 2000 iterations at 1024 windows (benchmarks/speed/gradfit_2000.py): a short warm-up run with
 #      tiles (loads or compiles the kernels, captures every window length once), then `--fused` and
 #      `--fused --tiles` once each; training seconds and the final and best validation of both.
-# Every leg runs under `timeout`, capped by what is left before END less what the later legs need (270 s in all).
+# Every leg runs under `timeout`, capped by what is left before END less what the later legs need (280 s in all).
 #
 #   bash benchmarks/speed/gpu_tiles_job.sh END      # END: epoch seconds, e.g. $(( $(date +%s) + 300 ))
 #
@@ -41,10 +41,10 @@ fit=("$py" benchmarks/speed/gradfit_2000.py --device "$dev" --windows 1024)
 { nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; git rev-parse --short HEAD
   "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)"
 } > "$res/machine.txt" 2>&1
-leg tests.txt 190 80 "$py" -m pytest -q -rA -p no:cacheprovider tests/learn/test_tile_mlp.py \
+leg tests.txt 200 80 "$py" -m pytest -q -rA -p no:cacheprovider tests/learn/test_tile_mlp.py \
   tests/learn/test_fused_mlp.py
-leg tile_step.txt 150 40 "$py" benchmarks/speed/tile_mlp_step.py --device "$dev" --windows 1024 \
-  --blocks 16x32x128,8x32x128,32x32x256 --json "$res/tile_step.json"
+leg tile_step.txt 150 50 "$py" benchmarks/speed/tile_mlp_step.py --device "$dev" --windows 1024 \
+  --blocks 16x32x128,8x32x128,8x32x256,32x32x256 --json "$res/tile_step.json"
 leg warmup.log 100 50 "${fit[@]}" --iterations 20 --fused --tiles --json "$res/warmup.json"
 leg fused.log 50 50 "${fit[@]}" --iterations 2000 --fused --json "$res/fused.json"
 leg tiles.log 0 50 "${fit[@]}" --iterations 2000 --fused --tiles --json "$res/tiles.json"

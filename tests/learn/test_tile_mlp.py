@@ -1,10 +1,11 @@
 """:class:`wresdyn.learn.fused_mlp.FusedMLPRollout` with ``tiles=True`` (each step's network forward and backward as one
 Warp tile kernel each, :mod:`wresdyn.learn.tile_mlp`) against its torch operations, on the CPU and, where there is one,
-a GPU. The kernels sum each GEMM in another order, so the two agree to float32 rounding, not bit for bit: the residuals
-and per-step buffers to a few ulps of their largest entries (measured ~2e-7 relative), the gradients after a chain of
-steps to 1e-5 relative (measured ~2e-7), a wrong term or a missed mask entry would show at 1e-3 or more. The buffers
-are checked directly on one step (the clip's mask, the gradient variants the rollout hands back: the residual's, the
-action's, both, none), on the chain of ``tests/learn/test_fused_mlp.py`` and on a short gradient fit."""
+a GPU. The kernels sum each GEMM in another order, so the two agree to float32 rounding, not bit for bit: every buffer,
+residual and gradient within 1e-5 of its largest entry. Measured on the CPU (``benchmarks/results/speed/tiles_cpu/``):
+up to 2.3e-6 on one step, whose outputs go far past the clip (the pre-clip sums' rounding, relative to the larger sums),
+7e-7 after the chain of steps; a wrong term or a missed mask entry would show at 1e-3 or more. The buffers are checked
+directly on one step (the clip's mask, the gradient variants the rollout hands back: the residual's, the action's,
+both, none), on the chain of ``tests/learn/test_fused_mlp.py`` and on a short gradient fit."""
 
 import dataclasses
 

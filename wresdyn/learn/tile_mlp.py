@@ -4,7 +4,7 @@ On a GPU the fused path's step is still ~24 small torch kernels (normalise, an a
 clip's mask and the scale; in the backward pass the gradients' sum, the mask, a GEMM and an ELU backward per layer),
 each ~2-3 µs of launch latency whatever its size. :class:`TileMLP` runs the forward as one kernel and the backward as
 one: a block of ``rows`` windows carries its activations through every layer in shared memory (Warp's tile API,
-``wp.tile_matmul``; MathDx on CUDA). Weights larger than a block's shared memory (256x128 float32 is 128 KB) are read
+``wp.tile_matmul``: Warp's own tile GEMM, or MathDx's with :attr:`TileBlock.mathdx`). Weights larger than a block's shared memory (256x128 float32 is 128 KB) are read
 in chunks of ``chunk`` columns of the reduction dimension; every tile dimension is padded to a multiple of ``chunk``
 (loads out of bounds read zeros, stores out of bounds are skipped), so the padding adds zeros to each sum.
 
@@ -39,7 +39,7 @@ class TileBlock:
     """Threads per block."""
     mathdx: bool = False
     """On CUDA, the GEMMs through MathDx (cuBLASDx) rather than Warp's own tile GEMM. Off: NVRTC's compile of the
-    network's two kernels with MathDx took 162 + 135 s on a 2-core CPU (sm_90, the fit's network), a first run's wait
+    network's two kernels with MathDx took 124 + 136 s on a 2-core CPU (sm_90, the fit's network), a first run's wait
     on a fresh machine."""
 
 _FUNCS = '''
