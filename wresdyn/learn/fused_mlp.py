@@ -24,6 +24,7 @@ import torch
 import torch.nn as nn
 
 from .residual import MLPResidualPolicy, residual_grad
+from .tile_mlp import TileMLP
 
 __all__ = ["FusedMLPRollout", "fusable"]
 
@@ -98,8 +99,6 @@ class FusedMLPRollout(nn.Module):
         self._x = self._z = self._g = self._mask = None
         self._tiles = None
         if tiles:
-            from .tile_mlp import TileMLP
-
             if policy.obs_mean.dtype != torch.float32:
                 raise ValueError("the tile kernels run float32 networks")
             dims = [self.linears[0].in_features] + [m.out_features for m in self.linears]
