@@ -103,6 +103,23 @@ def test_one_step_writes_the_torch_buffers(device, hidden, batch):
             assert not tile[4][-1].any()
 
 
+@pytest.mark.parametrize("device", DEVICES)
+def test_strided_inputs_give_the_torch_buffers(device):
+    # autograd hands gradients expanded (stride 0) or transposed, a rollout may hand a strided observation: the
+    # kernels read them through their strides
+    policy = _policy(device)
+    policy.mlp[-1].weight.data.mul_(10)
+    g = torch.Generator().manual_seed(3)
+    obs = (torch.randn(19, 8 * N, generator=g) * 4).to(device)[:, ::2]
+    g_r = torch.randn(1, N, generator=g).to(device).expand(19, N)
+    g_a = torch.randn(N, 19, generator=g).to(device).t()
+    ref, tile = (_one_step(tiles, policy, obs, g_r, g_a, True) for tiles in (False, True))
+    assert torch.equal(tile[5], ref[5])
+    for a, b in zip([tile[0], tile[1]] + tile[2] + tile[3] + tile[4], [ref[0], ref[1]] + ref[2] + ref[3] + ref[4],
+                    strict=True):
+        _close(a, b)
+
+
 def _figures(policy, curve):
     checks = [(r["iteration"], r["validation"]) for r in curve if "validation" in r]
     params = torch.cat([p.detach().flatten() for p in policy.parameters()])
