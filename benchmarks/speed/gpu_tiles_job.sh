@@ -41,13 +41,13 @@ fit=("$py" benchmarks/speed/gradfit_2000.py --device "$dev" --windows 1024)
 { nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; git rev-parse --short HEAD
   "$py" -c "import torch, warp; print('torch', torch.__version__, 'warp', warp.__version__)"
 } > "$res/machine.txt" 2>&1
-leg tests.txt 200 80 "$py" -m pytest -q -rA -p no:cacheprovider tests/learn/test_tile_mlp.py \
+leg tests.txt 205 75 "$py" -m pytest -q -rA -p no:cacheprovider tests/learn/test_tile_mlp.py \
   tests/learn/test_fused_mlp.py
-leg tile_step.txt 150 50 "$py" benchmarks/speed/tile_mlp_step.py --device "$dev" --windows 1024 \
+leg tile_step.txt 160 45 "$py" benchmarks/speed/tile_mlp_step.py --device "$dev" --windows 1024 \
   --blocks 16x32x128,8x32x128,8x32x256,32x32x256 --json "$res/tile_step.json"
-leg warmup.log 100 50 "${fit[@]}" --iterations 20 --fused --tiles --json "$res/warmup.json"
-leg fused.log 50 50 "${fit[@]}" --iterations 2000 --fused --json "$res/fused.json"
-leg tiles.log 0 50 "${fit[@]}" --iterations 2000 --fused --tiles --json "$res/tiles.json"
+leg warmup.log 110 50 "${fit[@]}" --iterations 20 --fused --tiles --json "$res/warmup.json"
+leg fused.log 55 55 "${fit[@]}" --iterations 2000 --fused --json "$res/fused.json"
+leg tiles.log 0 55 "${fit[@]}" --iterations 2000 --fused --tiles --json "$res/tiles.json"
 
 "$py" - "$res" > "$res/summary.txt" 2>&1 <<'EOF'
 import json, sys
