@@ -233,7 +233,7 @@ class TileMLP:
         """Step ``k``'s residual (into ``out`` where given) and with ``both`` its action residual / scale."""
         x, z, _, mask = self._bufs
         batch = obs.shape[0]
-        r = torch.empty(batch, self.dims[-1], device=obs.device) if out is None else out
+        r = torch.empty(batch, self.dims[-1], device=obs.device, dtype=torch.float32) if out is None else out
         a = torch.empty_like(r) if both else r
         params = [_wp(t) for lin in linears for t in (lin.weight, lin.bias)]
         self._launch(self.forward_kernel, batch, [_wp(obs), k, _wp(policy.obs_mean), _wp(policy.obs_std),
@@ -246,7 +246,8 @@ class TileMLP:
         ``need_obs``."""
         _, z, g, mask = self._bufs
         batch = g[0].shape[1]
-        g_obs = torch.empty(batch, self.dims[0], device=policy.obs_std.device) if need_obs else None
+        dev = policy.obs_std.device
+        g_obs = torch.empty(batch, self.dims[0], device=dev, dtype=torch.float32) if need_obs else None
         grads = [self._empty if t is None else _wp(t) for t in (g_r, g_a)]
         self._launch(self.backward_kernel, batch, [*grads, k, _wp(policy.scale), _wp(policy.obs_std), int(need_obs),
                                                    *[_wp(lin.weight) for lin in linears], *z, *g, mask,
