@@ -4,9 +4,10 @@ On a GPU the fused path's step is still ~24 small torch kernels (normalise, an a
 clip's mask and the scale; in the backward pass the gradients' sum, the mask, a GEMM and an ELU backward per layer),
 each ~2-3 µs of launch latency whatever its size. :class:`TileMLP` runs the forward as one kernel and the backward as
 one: a block of ``rows`` windows carries its activations through every layer in shared memory (Warp's tile API,
-``wp.tile_matmul``: Warp's own tile GEMM, or MathDx's with :attr:`TileBlock.mathdx`). Weights larger than a block's shared memory (256x128 float32 is 128 KB) are read
-in chunks of ``chunk`` columns of the reduction dimension; every tile dimension is padded to a multiple of ``chunk``
-(loads out of bounds read zeros, stores out of bounds are skipped), so the padding adds zeros to each sum.
+``wp.tile_matmul``: Warp's own tile GEMM, or MathDx's with :attr:`TileBlock.mathdx`). Weights larger than a block's
+shared memory (256x128 float32 is 128 KB) are read in chunks of ``chunk`` columns of the reduction dimension; every
+tile dimension is padded to a multiple of ``chunk`` (loads out of bounds read zeros, stores out of bounds are
+skipped), so the padding adds zeros to each sum.
 
 The kernels write the per-step buffers :meth:`FusedMLPRollout.finish` reads (each layer's input, each hidden layer's
 pre-activation, the gradients at the layer outputs, the clip's mask) and compute the same operations as the torch
