@@ -137,6 +137,15 @@ def test_tile_fit_gives_the_fused_fit(robot, data):
     torch.testing.assert_close(tiles[2], fused[2], rtol=1e-4, atol=1e-6)
 
 
+def test_fused_checkpoint_resumes_with_tiles(robot, data, tmp_path):
+    # network_tiles changes only the rounding: a resumed fit may switch it on (RESUME_MAY_CHANGE)
+    fused = dataclasses.replace(TINY, fused_network=True)
+    fit(robot, data, fused, out=tmp_path, until=4, log=lambda *_: None)
+    _, curve = fit(robot, data, dataclasses.replace(fused, network_tiles=True), out=tmp_path, log=lambda *_: None)
+    assert [r["iteration"] for r in curve] == list(range(1, 10))
+    assert all(torch.isfinite(torch.tensor(r["loss"])) for r in curve)
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")
 def test_graph_replayed_tile_fit_gives_the_graph_replayed_fused_fit(robot, data):
     # the tile kernels launched on torch's stream inside the captured iteration: the bounds of the graph-against-eager
