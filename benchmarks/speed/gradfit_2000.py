@@ -4,6 +4,7 @@ the validation error at the end.
     python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --json OUT.json
     python benchmarks/speed/gradfit_2000.py --device cpu --iterations 12 --windows 4 --curriculum 2,4   # tiny
     python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --fused --json OUT.json
+    python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --fused --tiles
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF, dt = 2 ms) and the gradient fit's
 defaults (:class:`wresdyn.fit.gradfit.GradFitConfig`: MLP residual, horizon curriculum 2 ... 64 in equal parts,
@@ -18,7 +19,9 @@ and validation rows on CUDA, every row on the CPU), skipping each length's first
 ``overhead_s``, what ``train_s`` holds beyond those rates times the iterations (warm-ups, captures, waits); the loss
 of the last iteration and the validation error after it (a faster path must give the same), the best validation and
 its iteration (what ``fit`` returns). ``--no-graph`` runs CUDA eagerly (the peer); ``--fused`` sets
-``GradFitConfig.fused_network`` (the MLP's step in fewer kernels, fused Adam). The held-out split is never read.
+``GradFitConfig.fused_network`` (the MLP's step in fewer kernels, fused Adam), ``--tiles`` with it
+``GradFitConfig.network_tiles`` (the step's network forward and backward as one Warp tile kernel each). The held-out
+split is never read.
 """
 
 from __future__ import annotations
@@ -96,7 +99,7 @@ def measure(robot, dataset, cfg, log=print) -> dict:
     best = min(checks, key=lambda r: r["validation"]) if checks else None
     params = torch.cat([p.detach().flatten().double().cpu() for p in policy.parameters()])
     return {"iterations": len(curve), "windows": cfg.windows, "device": cfg.device, "cuda_graph": deferred,
-            "fused_network": cfg.fused_network,
+            "fused_network": cfg.fused_network, "network_tiles": cfg.network_tiles,
             "train_s": train, "process_s": process, "ms_per_iteration_mean": 1e3 * train / len(curve),
             "per_length": lengths,
             "overhead_s": train - rated if all(x["ms_per_iteration"] is not None for x in lengths) else None,
@@ -131,6 +134,7 @@ def main(argv=None) -> dict:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-graph", action="store_true", help="CUDA: run each iteration eagerly")
     p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network: the fused MLP path and Adam")
+    p.add_argument("--tiles", action="store_true", help="GradFitConfig.network_tiles (with --fused): Warp tile kernels")
     p.add_argument("--json", default="", help="write the figures here")
     args = p.parse_args(argv)
     wp.config.quiet = True
@@ -138,7 +142,8 @@ def main(argv=None) -> dict:
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
     cfg = GradFitConfig(windows=args.windows, device=args.device, iterations=args.iterations, seed=args.seed,
-                        cuda_graph=not args.no_graph, fused_network=args.fused)
+                        cuda_graph=not args.no_graph, fused_network=args.fused,
+                        network_tiles=args.tiles)
     if args.curriculum:
         cfg = dataclasses.replace(cfg, horizon_curriculum=tuple(int(h) for h in args.curriculum.split(",")))
     result = measure(robot, dataset, cfg, log=lambda m: print(m, flush=True))
@@ -146,7 +151,8 @@ def main(argv=None) -> dict:
     result.update({"machine": name, "commit": _commit(), "command": " ".join(["python", *sys.argv]),
                    "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())})
     print(f"\n{name}, {args.device}; {result['iterations']} iterations x {args.windows} windows; "
-          f"graph {result['cuda_graph']}; fused_network {result['fused_network']}")
+          f"graph {result['cuda_graph']}; fused_network {result['fused_network']}; "
+          f"network_tiles {result['network_tiles']}")
     print(f"training {result['train_s']:.2f} s ({result['ms_per_iteration_mean']:.2f} ms/iteration on average); "
           f"process {result['process_s']:.1f} s; overhead beyond the rates "
           + (f"{result['overhead_s']:.2f} s" if result["overhead_s"] is not None else "-"))

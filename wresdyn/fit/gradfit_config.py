@@ -103,6 +103,10 @@ class GradFitConfig(WindowFitStop):
     mask kept from the forward pass) and Adam as torch's fused kernel. The same fit to float32 rounding, not bit for
     bit (the gradients' sums run in another order), so off by default; for the launch-bound GPU iteration
     (``benchmarks/speed/gradfit10.sh``). MLP networks only. May change on resume."""
+    network_tiles: bool = False
+    """With ``fused_network``: each rollout step's network forward as one Warp tile kernel and its backward as one
+    (:mod:`wresdyn.learn.tile_mlp`) instead of ~24 small torch kernels. The same fit to float32 rounding (the GEMMs'
+    sums in another order). May change on resume."""
     physics: str = ""
     """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
     identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
@@ -116,3 +120,5 @@ class GradFitConfig(WindowFitStop):
             check_number(getattr(self, name), name, ge=0)
         if self.fused_network and (self.model != "network" or self.residual.arch != "mlp"):
             raise WresdynError("fused_network runs the MLP network only (model 'network', residual.arch 'mlp')")
+        if self.network_tiles and not self.fused_network:
+            raise WresdynError("network_tiles runs the fused network's steps: set fused_network too")

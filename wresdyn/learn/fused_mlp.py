@@ -24,6 +24,7 @@ import torch
 import torch.nn as nn
 
 from .residual import MLPResidualPolicy, residual_grad
+from .tile_mlp import TileMLP
 
 __all__ = ["FusedMLPRollout", "fusable"]
 
@@ -54,8 +55,7 @@ class _Step(torch.autograd.Function):
     def forward(ctx, obs, token, run, k, both, out):
         ctx.run, ctx.k = run, k
         ctx.set_materialize_grads(False)
-        r = run._forward(obs, k, out)
-        return (r, r / run.policy.scale) if both else r
+        return run._forward(obs, k, out, both)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
@@ -69,6 +69,11 @@ class FusedMLPRollout(nn.Module):
     the loss's ``backward()``, then :meth:`finish`, which adds the parameters' gradients to their ``.grad`` as
     autograd would (set where ``None``, added otherwise). Its calls outside that order are refused.
 
+    With ``tiles`` (float32 networks) each step's forward and backward run as one Warp tile kernel each
+    (:class:`~wresdyn.learn.tile_mlp.TileMLP`, split as ``tile_block`` says, a
+    :class:`~wresdyn.learn.tile_mlp.TileBlock`, its defaults where ``None``) instead of the torch operations below: the
+    same buffers, equal to float32 rounding.
+
     Example::
 
         fused = FusedMLPRollout(policy)
@@ -78,7 +83,7 @@ class FusedMLPRollout(nn.Module):
         fused.finish()
     """
 
-    def __init__(self, policy) -> None:
+    def __init__(self, policy, tiles: bool = False, tile_block=None) -> None:
         super().__init__()
         why = fusable(policy)
         if why is not None:
@@ -92,6 +97,12 @@ class FusedMLPRollout(nn.Module):
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
         self._x = self._z = self._g = self._mask = None
+        self._tiles = None
+        if tiles:
+            if policy.obs_mean.dtype != torch.float32:
+                raise ValueError("the tile kernels run float32 networks")
+            dims = [self.linears[0].in_features] + [m.out_features for m in self.linears]
+            self._tiles = TileMLP(dims, self.alpha, dev, tile_block)
 
     @property
     def scale(self) -> torch.Tensor:
@@ -113,6 +124,8 @@ class FusedMLPRollout(nn.Module):
         self._g = [torch.zeros(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs]
         self._mask = torch.empty(steps, batch, outs[-1], device=w.device, dtype=torch.bool)
         self._steps, self._k = steps, 0
+        if self._tiles is not None:
+            self._tiles.bind(self._x, self._z, self._g, self._mask)
 
     def reset(self) -> None:
         """The rollout's start (:func:`wresdyn.sim.rollout` calls it): the next call is step 0."""
@@ -133,7 +146,13 @@ class FusedMLPRollout(nn.Module):
         self._k += 1
         return _Step.apply(obs, self._token, self, self._k - 1, both, out)
 
-    def _forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None) -> torch.Tensor:
+    def _forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
+        if self._tiles is not None:
+            return self._tiles.forward(self.policy, self.linears, obs, k, out, both)
+        r = self._torch_forward(obs, k, out)
+        return (r, r / self.policy.scale) if both else r
+
+    def _torch_forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None) -> torch.Tensor:
         # the plain path's operations in its order: (obs - mean) / std, then per layer addmm (what F.linear runs on a
         # 2-D input) and ELU, then the clip and the scale
         p = self.policy
@@ -154,6 +173,8 @@ class FusedMLPRollout(nn.Module):
         return torch.mul(c, p.scale, out=out).view(c.shape)
 
     def _backward(self, grad, g_action, k: int, need_obs: bool) -> torch.Tensor | None:
+        if self._tiles is not None:
+            return self._tiles.backward(self.policy, self.linears, grad, g_action, k, need_obs)
         p = self.policy
         grad = residual_grad(grad, g_action, p.scale, self._g[-1][k])
         g = torch.where(self._mask[k], grad * p.scale, self._zero, out=self._g[-1][k])
@@ -181,3 +202,5 @@ class FusedMLPRollout(nn.Module):
                     param.grad.add_(new)
         self._x = self._z = self._g = self._mask = None
         self._steps = self._k = 0
+        if self._tiles is not None:
+            self._tiles.bind(None)
