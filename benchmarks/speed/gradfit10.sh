@@ -20,13 +20,7 @@
 #
 # Environment: PYTHON (python3), DEVICE (cuda:0), DATA (data/dataset.npz), ITERATIONS (2000), WINDOWS (1024),
 # TOTAL (the whole script's budget [s], 235: each run gets what is left; one cut short says so, rc=124),
-# EXTRA_SEEDS (space-separated seeds for the runs d, none by default). WRESDYN_OBS_NODE reaches every run: 1 builds
-# each rollout step's observation and q̈ as one node of one Warp kernel each way (wresdyn.sim.observe; off on CUDA
-# by default, the same results bit for bit on the CPU); to compare, run the script twice into two folders:
-#   WRESDYN_OBS_NODE=0 bash benchmarks/speed/gradfit10.sh OUT0
-#   WRESDYN_OBS_NODE=1 bash benchmarks/speed/gradfit10.sh OUT1
-# and compare the two summary.txt (the same final losses and validation errors to the last digit where CUDA's
-# arithmetic is the torch operators', as the node's is meant to be).
+# EXTRA_SEEDS (space-separated seeds for the runs d, none by default).
 # Output: OUT/<run>.json (gradfit_2000.py's figures), OUT/<run>.log (its output, last line `whole command: S s rc=RC`),
 # OUT/machine.txt, OUT/summary.txt.
 set -uo pipefail

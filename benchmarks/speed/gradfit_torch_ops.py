@@ -7,17 +7,13 @@ are (on CUDA most operators here are one kernel each; views such as ``t``, ``vie
 The shipped humanoid (21 DoF) and data, the gradient fit's defaults at one window length, on the CPU: one iteration
 warms up, the next runs under torch's profiler. Counted: the operators called from Python or autograd (an operator
 another one calls is not counted again), and of them those that launch work on CUDA (:data:`NO_KERNEL` are not);
-beside them the Warp memsets (``wp.array.zero_`` calls, a ``Memset`` on CUDA each) and the ``wp.launch`` calls (a
-kernel on CUDA each: the observation node's, :mod:`wresdyn.sim.observe`; the simulator's and the fused MLP's Warp work
-launches otherwise and is not counted). ``WRESDYN_OBS_NODE=warp`` runs the node's Warp kernels on the CPU, what a CUDA
-step launches once the node is on there; unset, the CPU runs the node's torch operators.
+beside them the Warp memsets (``wp.array.zero_`` calls, a ``Memset`` on CUDA each) are counted.
 """
 
 from __future__ import annotations
 
 import argparse
 import collections
-import os
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,7 +35,6 @@ def main() -> None:
     from wresdyn.fit.gradfit import GradFitConfig, _FitLearner
     from wresdyn.learn.window_fit import start_window_fit
     from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
-    from wresdyn.sim.observe import ENV
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--horizon", type=int, default=16, help="window length [steps]")
@@ -56,10 +51,10 @@ def main() -> None:
     rng, train, dt = start_window_fit(cfg, data)
     learner = _FitLearner(robot, data, cfg, None, rng, train, dt, print)
     learner.step(0, h, cfg.lr)  # loads the kernels
-    memsets, launches = _count_calls(wp.array, "zero_"), _count_calls(wp, "launch")
+    memsets = _count_calls(wp.array, "zero_")
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         learner.step(1, h, cfg.lr)
-    zeroed, launched = memsets(), launches()
+    zeroed = memsets()
     events = [e for e in prof.events() if e.name.startswith("aten::")]
     top = [e for e in events if e.cpu_parent is None or not e.cpu_parent.name.startswith("aten::")]
     count = collections.Counter(e.name for e in top)
@@ -69,8 +64,6 @@ def main() -> None:
           f"operators in one iteration, {total / h:.1f} per step; {kernels} ({kernels / h:.1f} per step) that "
           "launch work on CUDA (views, empty allocations, same-device casts and host reads excluded)")
     print(f"Warp memsets (array.zero_): {zeroed} in one iteration, {zeroed / h:.2f} per step")
-    print(f"Warp launches through wp.launch (a kernel on CUDA each; {ENV}={os.environ.get(ENV, '')!r}): {launched} in "
-          f"one iteration, {launched / h:.2f} per step")
     print("| operator | count | per step | a kernel on CUDA |")
     print("|---|---|---|---|")
     for name, c in count.most_common():

@@ -18,8 +18,6 @@ import torch
 
 from ..errors import SimulationDiverged
 from .bank import TrajectoryBank, Window, servo_goal_accel
-from .observe import mode as observe_mode
-from .observe import observe
 from .physics import PhysicalParams
 from .residual_kinds import apply_residual, observation
 from .rollout_graph import capture_blocker, rollout_key, run_captured
@@ -158,24 +156,16 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     both = getattr(policy, "residual_and_action", None) if scale is not None else None
     forces = step_forces(sim, steps) if grad and both is not None and kind == "torque" and policy_worlds is None \
         and pdev in (None, sim.device) else None
-    # a differentiable rollout of all worlds observes through one node (observe: on CUDA one kernel each way, the same
-    # bits); qdd is then the previous step's q̇ (the recorded q̈ at step 0)
-    node = observe_mode(sim.device) if grad and policy is not None and policy_worlds is None else None
-    rows = len(range(b)[pw])
     for k in range(steps):
         res = None
         if policy is not None:
-            draw = None if obs_noise <= 0.0 else noise[k] if noise is not None else obs_noise * policy.obs_std * \
-                torch.randn((rows, 4 * q.shape[1]), generator=generator, device=sim.device)
             # all worlds: the tensors themselves, not a full slice of each, whose backward would allocate and fill a
             # copy of every step's gradient (three per step)
-            if node:
-                obs = observe(q, qd, qdd, window.cmd[:, k], draw, sim.dt, diff=k > 0, kernel=node == "warp",
-                              stream=sim._tape_stream)
-            else:
-                obs = (observation(q, qd, qdd, window.cmd[:, k]) if policy_worlds is None
-                       else observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k]))
-                obs = obs if draw is None else obs + draw
+            obs = (observation(q, qd, qdd, window.cmd[:, k]) if policy_worlds is None
+                   else observation(q[pw], qd[pw], qdd[pw], window.cmd[pw, k]))
+            if obs_noise > 0.0:
+                obs = obs + (noise[k] if noise is not None else obs_noise * policy.obs_std * torch.randn(
+                    obs.shape, generator=generator, device=obs.device))
             x = obs if pdev is None else obs.to(pdev)
             with torch.set_grad_enabled(grad and torch.is_grad_enabled()):  # both: (r, r / scale) in one node
                 r, a = (policy(x), None) if both is None else both(x, None if forces is None else forces[k])
@@ -210,9 +200,7 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                     q_new = torch.where(dead[:, None], q, q_new)
                     qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
                     sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
-        if node:
-            qdd = qd
-        elif policy is not None:  # the policy's observation is what reads it
+        if policy is not None:  # the policy's observation is what reads it
             qdd = (qd_new - qd) / sim.dt
         q, qd = q_new, qd_new
         qs.append(q)

@@ -27,8 +27,6 @@ from ..robot.description import load_robot
 from .devices import require_device
 from .first_steps import check_newton
 from .goal_profile import profile_modules
-from .observe import mode as observe_mode
-from .observe import observe_modules
 from .prebuilt import enable as enable_prebuilt
 from .prebuilt import export as export_prebuilt
 from .simulator import Simulator
@@ -211,9 +209,7 @@ def warm_up(targets, *, device: str = "cpu", rate_hz: float = 500.0, say=None, e
             t1 = time.perf_counter()
             # a servo robot's commands pass through the goal profile's kernels first
             servo = getattr(sims[0].solver, "servo", None) is not None
-            # and the gradient fit's observation node where it launches Warp kernels (wresdyn.sim.observe.ENV)
-            node = observe_modules() if observe_mode(device) == "warp" else []
-            compile_batch(_solver_modules(sims) + (profile_modules() if servo else []) + node, dev)
+            compile_batch(_solver_modules(sims) + (profile_modules() if servo else []), dev)
             # the check every fit runs first: one world stepped under the data's commands, Newton's kernels with it
             check_newton(robot, rate_hz, robot.q0, device=device)
             say(f"... every replay kernel of {Path(str(robot.source)).name} and the check a fit starts with in "
