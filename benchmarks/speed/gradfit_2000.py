@@ -150,6 +150,10 @@ def main(argv=None) -> dict:
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     result.update({"machine": name, "commit": _commit(), "command": " ".join(["python", *sys.argv]),
                    "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())})
+    if args.tiles:  # the split the kernels ran (WRESDYN_TILE_BLOCK where set)
+        from wresdyn.learn.tile_mlp import TileBlock
+
+        result["tile_block"] = dataclasses.asdict(TileBlock.from_env())
     print(f"\n{name}, {args.device}; {result['iterations']} iterations x {args.windows} windows; "
           f"graph {result['cuda_graph']}; fused_network {result['fused_network']}; "
           f"network_tiles {result['network_tiles']}")

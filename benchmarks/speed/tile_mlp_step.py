@@ -122,10 +122,7 @@ def main(argv=None) -> dict:
     from wresdyn.learn.tile_mlp import TileBlock
 
     wp.config.quiet = True
-    blocks = []
-    for b in args.blocks.split(","):
-        rows, chunk, threads = (int(v) for v in b.rstrip("m").split("x"))
-        blocks.append(TileBlock(rows, chunk, threads, b.endswith("m")))
+    blocks = [TileBlock.parse(b) for b in args.blocks.split(",")]
     out = run(args.device, args.windows, args.horizon, args.repeats, blocks)
     print(f"{out['device']}: {args.windows} windows, H = {args.horizon}")
     rows = [("torch fused", out["torch"])] + [(str(t["block"]), t) for t in out["tiles"]]

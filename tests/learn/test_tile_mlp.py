@@ -13,8 +13,10 @@ import pytest
 import torch
 
 from wresdyn.fit.gradfit import GradFitConfig, fit
+from wresdyn.learn import tile_mlp
 from wresdyn.learn.fused_mlp import FusedMLPRollout
 from wresdyn.learn.residual import EluMLP, MLPResidualPolicy, ResidualConfig
+from wresdyn.learn.tile_mlp import ENV_BLOCK, TileBlock
 
 # the humanoid's 21 joints, its 4n observation; hidden widths of TINY's network below (one shape, one compile)
 N, HIDDEN, H = 21, (32, 32), 6
@@ -163,3 +165,36 @@ def test_tiles_need_the_fused_network():
 
     with pytest.raises(WresdynError, match="set fused_network too"):
         dataclasses.replace(TINY, network_tiles=True)
+
+
+def test_tile_block_parses_rows_chunk_threads_and_mathdx():
+    assert TileBlock.parse("16x32x128m") == TileBlock(16, 32, 128, True)
+    assert TileBlock.parse(" 8x64x256 ") == TileBlock(8, 64, 256, False)
+    for bad in ("16x32", "16x32x128M", "16x32x0", "a6x32x128", "16x32x128mm", ""):
+        with pytest.raises(ValueError, match="ROWSxCHUNKxTHREADS"):
+            TileBlock.parse(bad)
+
+
+def test_tile_block_from_env(monkeypatch):
+    monkeypatch.delenv(ENV_BLOCK, raising=False)
+    assert TileBlock.from_env() == TileBlock()
+    monkeypatch.setenv(ENV_BLOCK, "32x32x256m")
+    assert TileBlock.from_env() == TileBlock(32, 32, 256, True)
+    monkeypatch.setenv(ENV_BLOCK, "16x32")
+    with pytest.raises(ValueError, match=f"^{ENV_BLOCK}: '16x32' is not") as err:
+        TileBlock.from_env()
+    assert "\n" not in str(err.value)
+
+
+def test_env_block_reaches_the_kernels(monkeypatch):
+    # TileMLP's default block is the variable's: the kernels' cache key (rows, chunk, MathDx) and the launch's threads;
+    # building the kernels compiles nothing (that happens on the first launch)
+    monkeypatch.setenv(ENV_BLOCK, "8x16x64m")
+    net = FusedMLPRollout(_policy("cpu"), tiles=True)
+    dims = (4 * N, *HIDDEN, N)
+    assert (net._tiles.rows, net._tiles.threads) == (8, 64)
+    assert (net._tiles.forward_kernel, net._tiles.backward_kernel) == tile_mlp._KERNELS[(dims, 1.0, 8, 16, True)]
+    assert net._tiles.forward_kernel.module.options["enable_mathdx_gemm"] is True
+    monkeypatch.setenv(ENV_BLOCK, "")
+    assert FusedMLPRollout(_policy("cpu"), tiles=True)._tiles.forward_kernel == \
+        tile_mlp._KERNELS[(dims, 1.0, 16, 32, False)][0]

@@ -21,10 +21,17 @@ from __future__ import annotations
 
 import dataclasses
 import linecache
+import os
+import re
 
 import torch
 
-__all__ = ["TileBlock", "TileMLP"]
+from ..sim import prebuilt
+
+__all__ = ["ENV_BLOCK", "TileBlock", "TileMLP"]
+
+ENV_BLOCK = "WRESDYN_TILE_BLOCK"
+"""The environment variable that picks :class:`TileMLP`'s default block (:meth:`TileBlock.from_env`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +49,26 @@ class TileBlock:
     """On CUDA, the GEMMs through MathDx (cuBLASDx) rather than Warp's own tile GEMM. Off: NVRTC's compile of the
     network's two kernels with MathDx took 124 + 136 s on a 2-core CPU (sm_90, the fit's network), a first run's wait
     on a fresh machine."""
+
+    @classmethod
+    def parse(cls, text: str) -> TileBlock:
+        """``ROWSxCHUNKxTHREADS`` with an optional ``m`` for :attr:`mathdx` (``16x32x128m``)."""
+        match = re.fullmatch(r"\s*(\d+)x(\d+)x(\d+)(m?)\s*", text)
+        if match is None or 0 in (rows := int(match[1]), chunk := int(match[2]), threads := int(match[3])):
+            raise ValueError(f"{text!r} is not ROWSxCHUNKxTHREADS[m] of positive integers (e.g. 16x32x128m)")
+        return cls(rows, chunk, threads, match[4] == "m")
+
+    @classmethod
+    def from_env(cls) -> TileBlock:
+        """The block ``$WRESDYN_TILE_BLOCK`` names (:meth:`parse`'s format), the defaults where it is unset or empty:
+        the benchmarks and the fit pick a split without a config field."""
+        given = os.environ.get(ENV_BLOCK, "").strip()
+        if not given:
+            return cls()
+        try:
+            return cls.parse(given)
+        except ValueError as e:
+            raise ValueError(f"{ENV_BLOCK}: {e}") from None
 
 _FUNCS = '''
 @wp.func
@@ -188,13 +215,15 @@ def _wp(t: torch.Tensor):
 
 class TileMLP:
     """The forward and backward of one rollout step of an ELU MLP residual (float32) of layer widths ``dims`` (input
-    first) as one Warp kernel each, split as ``block`` says."""
+    first) as one Warp kernel each, split as ``block`` says (:meth:`TileBlock.from_env` where ``None``). Modules the
+    prebuilt kernels (:mod:`wresdyn.sim.prebuilt`) hold exactly are copied into Warp's cache, not compiled."""
 
     def __init__(self, dims: list[int], alpha: float, device: torch.device, block: TileBlock | None = None) -> None:
         import warp as wp
 
         wp.init()
-        block = block or TileBlock()
+        prebuilt.enable()  # a MathDx module compiled ahead (benchmarks/speed/prebuild_tiles.py) skips minutes of NVRTC
+        block = block or TileBlock.from_env()
         self.dims, self.rows, self.threads = list(dims), block.rows, block.threads
         self.forward_kernel, self.backward_kernel = _kernels(tuple(dims), float(alpha), block.rows, block.chunk,
                                                              block.mathdx)
