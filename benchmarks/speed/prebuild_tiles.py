@@ -7,19 +7,22 @@ without a GPU, as a prebuilt-kernel folder (:mod:`wresdyn.sim.prebuilt`) a GPU p
     WRESDYN_PREBUILT_KERNELS=DEST PYTHONPATH=. python benchmarks/speed/prebuild_tiles.py DEST --load cuda:0 --which 0
 
 Each block (``ROWSxCHUNKxTHREADS[m]``, :meth:`TileBlock.parse`) gives two modules (forward, backward) for the
-network of ``--widths`` (the fit's by default). A module's full hash covers the generated source, the resolved options
-(``block_dim``: the block's threads, as ``wp.launch_tiled`` loads it) and Warp's version, none of them the host's, so
-the hash computed here is the one a GPU process computes. Each module is compiled (NVRTC, and MathDx's link-time GEMMs
-with ``m``) into a scratch cache as ``<identifier>.sm<arch>.cubin`` and its ``.meta``, the names a GPU of that
-architecture loads when Warp emits CUBIN (a driver older than Warp's NVRTC; with a newer driver Warp asks for PTX,
-finds no entry and compiles as without one). DEST gets ``<Warp version>/sm<arch>/`` with :func:`prebuilt.export`'s
-index format, merged with an index already there. ``--jobs`` modules compile at once (one process each).
-``--check`` recomputes every entry's hash and file names in a fresh process (what :func:`prebuilt.fetch` compares)
-and the files' SHA-256, and exits 1 on a mismatch. ``--merge SRC`` copies SRC's entries of the same Warp version and
-architecture into DEST (the shipped replay kernels and these in one ``WRESDYN_PREBUILT_KERNELS`` folder).
-``--load DEVICE`` loads the modules on DEVICE as a run would (the prebuilt folder in use first, else a compile),
-``--which`` 0 the forward modules only, 1 the backward ones (two processes compile both halves at once), and prints
-per module whether the prebuilt entry was taken and the seconds.
+network of ``--widths`` (the fit's by default; ``BLOCK@WIDTHS``, the widths joined by ``-``, for another network:
+``16x32x128m@84-32-32-21`` is the small one of ``tests/learn/test_tile_mlp.py``). A module's full hash covers the
+generated source, the resolved options (``block_dim``: the block's threads, as ``wp.launch_tiled`` loads it) and
+Warp's version, none of them the host's, so the hash computed here is the one a GPU process computes. Each module is
+compiled (NVRTC, and MathDx's link-time GEMMs with ``m``) into a scratch cache as ``<identifier>.sm<arch>.cubin``
+and its ``.meta``, the names a GPU of that architecture loads when Warp emits CUBIN (a driver older than Warp's
+NVRTC, as on the H200s so far; with a newer driver Warp asks for PTX, finds no entry and compiles as without one).
+DEST gets ``<Warp version>/sm<arch>/`` in :func:`prebuilt.export`'s index format, merged with an index already
+there. ``--jobs`` modules compile at once, one process each.
+
+``--check`` recomputes in a fresh process every module's identifier, full hash, ``block_dim`` and file names (what
+:func:`prebuilt.fetch` compares) and the files' SHA-256, and exits 1 on a mismatch. ``--merge SRC`` copies SRC's
+entries of this Warp version into DEST (the shipped replay kernels and these in one ``WRESDYN_PREBUILT_KERNELS``
+folder, which replaces the shipped one). ``--load DEVICE`` loads the modules on DEVICE as a run does (an exact
+prebuilt entry copied into Warp's cache, else a compile), ``--which`` 0 the forward modules only, 1 the backward
+ones, and prints per module whether the prebuilt entry was taken and the seconds.
 """
 
 from __future__ import annotations
@@ -34,14 +37,16 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 FIT_WIDTHS = "84,256,128,64,21"  # the humanoid's observation 4 x 21, ResidualConfig's hidden widths, 21 joints
-BLOCKS = "16x32x128m,8x32x128m,16x32x256m,32x32x256m"
+BLOCKS = "16x32x128m,8x32x128m,16x32x256m,32x32x256m,16x32x128m@84-32-32-21"  # the last: the tests' small network
 
 
 def _modules(widths: str, alpha: float, text: str):
     """(forward, backward) Warp modules of the block ``text`` and its threads (the modules' ``block_dim``)."""
     from wresdyn.learn import tile_mlp
 
+    text, _, other = text.partition("@")  # BLOCK@WIDTHS: this block for another network
     block = tile_mlp.TileBlock.parse(text)
+    widths = other.replace("-", ",") or widths
     dims = tuple(int(w) for w in widths.split(","))
     kernels = tile_mlp._kernels(dims, float(alpha), block.rows, block.chunk, block.mathdx)
     return [k.module for k in kernels], block.threads
@@ -192,7 +197,7 @@ def main(argv=None) -> int:
     p.add_argument("dest", type=Path)
     p.add_argument("--widths", default=FIT_WIDTHS)
     p.add_argument("--alpha", type=float, default=1.0)
-    p.add_argument("--blocks", default=BLOCKS, help="comma list of ROWSxCHUNKxTHREADS[m]")
+    p.add_argument("--blocks", default=BLOCKS, help="comma list of ROWSxCHUNKxTHREADS[m][@WIDTHS]")
     p.add_argument("--arch", type=int, default=90)
     p.add_argument("--jobs", type=int, default=2, help="modules compiled at once")
     p.add_argument("--check", action="store_true", help="compare the index with fresh hashes; compile nothing")
