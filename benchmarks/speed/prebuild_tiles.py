@@ -18,11 +18,12 @@ DEST gets ``<Warp version>/sm<arch>/`` in :func:`prebuilt.export`'s index format
 there. ``--jobs`` modules compile at once, one process each.
 
 ``--check`` recomputes in a fresh process every module's identifier, full hash, ``block_dim`` and file names (what
-:func:`prebuilt.fetch` compares) and the files' SHA-256, and exits 1 on a mismatch. ``--merge SRC`` copies SRC's
-entries of this Warp version into DEST (the shipped replay kernels and these in one ``WRESDYN_PREBUILT_KERNELS``
-folder, which replaces the shipped one). ``--load DEVICE`` loads the modules on DEVICE as a run does (an exact
-prebuilt entry copied into Warp's cache, else a compile), ``--which`` 0 the forward modules only, 1 the backward
-ones, and prints per module whether the prebuilt entry was taken and the seconds.
+:func:`prebuilt.fetch` compares) and the files' SHA-256, and exits 1 on a mismatch. ``--device cuda:0`` (on a GPU
+host) builds or checks for what that device loads: its architecture, CUBIN or PTX as Warp picks for its driver.
+``--merge SRC`` copies SRC's entries of this Warp version into DEST (the shipped replay kernels and these in one
+``WRESDYN_PREBUILT_KERNELS`` folder, which replaces the shipped one). ``--load DEVICE`` loads the modules on DEVICE
+as a run does (an exact prebuilt entry copied into Warp's cache, else a compile), ``--which`` 0 the forward modules
+only, 1 the backward ones, and prints per module whether the prebuilt entry was taken and the seconds.
 """
 
 from __future__ import annotations
@@ -52,13 +53,27 @@ def _modules(widths: str, alpha: float, text: str):
     return [k.module for k in kernels], block.threads
 
 
-def _names(module, bd: int, arch: int) -> dict:
+def _target(arch: int, device: str) -> tuple[int, int, bool]:
+    """(the prebuilt folder's architecture, the one compiled for, PTX rather than CUBIN): ``arch``'s CUBIN, or where a
+    CUDA ``device`` is given what Warp builds for it (PTX for an older architecture under a newer driver)."""
+    import warp as wp
+
+    if not device:
+        return arch, arch, False
+    wp.init()
+    dev = wp.get_device(device)
+    if dev.is_cpu:
+        raise ValueError("--device: a CUDA device (the entries are CUDA binaries)")
+    return dev.arch, dev.get_cuda_compile_arch(), dev.get_cuda_output_format() == "ptx"
+
+
+def _names(module, bd: int, arch: int, ptx: bool = False) -> dict:
     return {"identifier": module.get_module_identifier(block_dim=bd), "name": module.name, "block_dim": bd,
             "hash": module.get_module_hash(bd).hex(), "meta": module._get_meta_name(block_dim=bd),
-            "binary": module._get_compile_output_name(None, output_arch=arch, use_ptx=False, block_dim=bd)}
+            "binary": module._get_compile_output_name(None, output_arch=arch, use_ptx=ptx, block_dim=bd)}
 
 
-def _compile_one(widths: str, alpha: float, text: str, which: int, arch: int, scratch: str) -> dict:
+def _compile_one(widths: str, alpha: float, text: str, which: int, arch: int, ptx: bool, scratch: str) -> dict:
     """One module compiled for ``arch`` into ``scratch``; its index entry (without hashes of files) and seconds."""
     import warp as wp
 
@@ -67,9 +82,9 @@ def _compile_one(widths: str, alpha: float, text: str, which: int, arch: int, sc
     wp.init()
     modules, bd = _modules(widths, alpha, text)
     module = modules[which]
-    entry = _names(module, bd, arch)
+    entry = _names(module, bd, arch, ptx)
     t = time.perf_counter()
-    module._compile(None, output_dir=os.path.join(scratch, entry["identifier"]), output_arch=arch, use_ptx=False,
+    module._compile(None, output_dir=os.path.join(scratch, entry["identifier"]), output_arch=arch, use_ptx=ptx,
                     options=module.resolve_options(wp.config, block_dim=bd))
     entry["compile_s"] = round(time.perf_counter() - t, 1)
     entry["block"] = text
@@ -95,14 +110,15 @@ def _write(folder: Path, new: list, device: str, arch: int) -> None:
     prebuilt._read_index.cache_clear()
 
 
-def build(dest: Path, widths: str, alpha: float, blocks: list, arch: int, jobs: int) -> list:
+def build(dest: Path, widths: str, alpha: float, blocks: list, arch: int, jobs: int, device: str = "") -> list:
     from wresdyn.paths import file_sha256
     from wresdyn.sim import prebuilt
 
+    arch, out_arch, ptx = _target(arch, device)
     folder = _folder(dest, arch)
     folder.mkdir(parents=True, exist_ok=True)
     scratch = tempfile.mkdtemp(prefix="prebuild_tiles_")
-    work = [(widths, alpha, b, which, arch, scratch) for b in blocks for which in (0, 1)]
+    work = [(widths, alpha, b, which, out_arch, ptx, scratch) for b in blocks for which in (0, 1)]
     import multiprocessing
 
     with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -116,12 +132,13 @@ def build(dest: Path, widths: str, alpha: float, blocks: list, arch: int, jobs: 
         e["bytes"] = sum((folder / ident / n).stat().st_size for n in (e["binary"], e["meta"]))
         print(f"{e['block']} {e['name']}: {e['compile_s']} s, {e['bytes'] / 1e6:.2f} MB -> {ident}", flush=True)
     _write(folder, [{k: e[k] for k in ("identifier", "name", "block_dim", "hash", "binary", "meta", "sha256")}
-                    for e in entries], f"sm_{arch} compiled ahead on a host without a GPU", arch)
+                    for e in entries], device or f"sm_{arch} compiled ahead on a host without a GPU", arch)
     return entries
 
 
-def check(dest: Path, widths: str, alpha: float, blocks: list, arch: int) -> int:
-    """Mismatches between the index and what this process computes for ``blocks`` (0: every entry as fetch wants)."""
+def check(dest: Path, widths: str, alpha: float, blocks: list, arch: int, device: str = "") -> int:
+    """Mismatches between the index and what this process computes for ``blocks`` (0: every entry as fetch wants),
+    the binary named as ``device`` would load it where given (its architecture, CUBIN or PTX)."""
     import warp as wp
 
     from wresdyn.paths import file_sha256
@@ -129,13 +146,14 @@ def check(dest: Path, widths: str, alpha: float, blocks: list, arch: int) -> int
 
     wp.config.quiet = True
     wp.init()
+    arch, out_arch, ptx = _target(arch, device)
     folder = _folder(dest, arch)
     entries = prebuilt._read_index(str(folder), wp.config.version)
     bad = 0
     for text in blocks:
         modules, bd = _modules(widths, alpha, text)
         for module in modules:
-            want = _names(module, bd, arch)
+            want = _names(module, bd, out_arch, ptx)
             got = entries.get(want["identifier"], {})
             same = {k: got.get(k) == v for k, v in want.items()}
             files = got.get("sha256", {})
@@ -202,6 +220,7 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=2, help="modules compiled at once")
     p.add_argument("--check", action="store_true", help="compare the index with fresh hashes; compile nothing")
     p.add_argument("--merge", type=Path, default=None, help="copy this prebuilt folder's entries into DEST")
+    p.add_argument("--device", default="", help="build or check for this CUDA device (its arch, CUBIN or PTX)")
     p.add_argument("--load", default="", help="load the modules on this device (prebuilt folder first)")
     p.add_argument("--which", type=int, choices=(0, 1), default=None, help="--load: forward (0) or backward (1)")
     args = p.parse_args(argv)
@@ -213,9 +232,9 @@ def main(argv=None) -> int:
         load(args.widths, args.alpha, blocks, args.load, args.which)
         return 0
     if args.check:
-        return int(check(args.dest, args.widths, args.alpha, blocks, args.arch) > 0)
+        return int(check(args.dest, args.widths, args.alpha, blocks, args.arch, args.device) > 0)
     t = time.perf_counter()
-    entries = build(args.dest, args.widths, args.alpha, blocks, args.arch, args.jobs)
+    entries = build(args.dest, args.widths, args.alpha, blocks, args.arch, args.jobs, args.device)
     print(f"{len(entries)} modules, {sum(e['bytes'] for e in entries) / 1e6:.2f} MB, "
           f"{time.perf_counter() - t:.0f} s wall-clock ({args.jobs} at once)")
     return 0

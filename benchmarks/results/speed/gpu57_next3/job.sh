@@ -53,7 +53,8 @@ prebuilt() {
 leg prebuilt.txt 420 40 bash -c "$(declare -p pb PB HERE); $(declare -f prebuilt); prebuilt"
 export WRESDYN_PREBUILT_KERNELS=$PB
 ready() {  # compile what the folder lacks (every module at once), then both halves loaded at once
-  if ! "${pb[@]}" --check > /dev/null 2>&1; then echo "compiling here"; "${pb[@]}" --jobs "$JOBS" || return; fi
+  local on=(); [[ $DEVICE == cuda* ]] && on=(--device "$DEVICE")  # the names this GPU loads (CUBIN or PTX)
+  if ! "${pb[@]}" --check "${on[@]}"; then echo "compiling here"; "${pb[@]}" --jobs "$JOBS" "${on[@]}" || return; fi
   "${pb[@]}" --load "$DEVICE" --which 0 > "$R/ready_fwd.txt" 2>&1 &
   "${pb[@]}" --load "$DEVICE" --which 1 > "$R/ready_bwd.txt" 2>&1; local a=$?
   wait $!; return $(( a | $? ))
