@@ -15,7 +15,7 @@ compiled (NVRTC, and MathDx's link-time GEMMs with ``m``) into a scratch cache a
 and its ``.meta``, the names a GPU of that architecture loads when Warp emits CUBIN (a driver older than Warp's
 NVRTC, as on the H200s so far; with a newer driver Warp asks for PTX, finds no entry and compiles as without one).
 DEST gets ``<Warp version>/sm<arch>/`` in :func:`prebuilt.export`'s index format, merged with an index already
-there. ``--jobs`` modules compile at once, one process each.
+there. ``--jobs`` modules compile at once, one process each (1: in this process).
 
 ``--check`` recomputes in a fresh process every module's identifier, full hash, ``block_dim`` and file names (what
 :func:`prebuilt.fetch` compares) and the files' SHA-256, and exits 1 on a mismatch. ``--device cuda:0`` (on a GPU
@@ -78,7 +78,6 @@ def _compile_one(widths: str, alpha: float, text: str, which: int, arch: int, pt
     import warp as wp
 
     wp.config.quiet = True
-    wp.config.kernel_cache_dir = scratch
     wp.init()
     modules, bd = _modules(widths, alpha, text)
     module = modules[which]
@@ -121,8 +120,11 @@ def build(dest: Path, widths: str, alpha: float, blocks: list, arch: int, jobs: 
     work = [(widths, alpha, b, which, out_arch, ptx, scratch) for b in blocks for which in (0, 1)]
     import multiprocessing
 
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        entries = list(pool.map(_compile_one, *zip(*work, strict=True)))
+    if jobs <= 1:  # in this process (its Warp cache keeps MathDx's link-time pieces, as a worker's does)
+        entries = [_compile_one(*w) for w in work]
+    else:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            entries = list(pool.map(_compile_one, *zip(*work, strict=True)))
     for e in entries:
         ident = e["identifier"]
         (folder / ident).mkdir(exist_ok=True)
