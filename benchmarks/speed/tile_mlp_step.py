@@ -98,8 +98,12 @@ def run(device: str, windows: int, horizon: int, repeats: int, blocks: list) -> 
     out["max_abs"] = {k: float(b.abs().max()) for k, b in zip(labels, ref, strict=True)}
     out["tiles"] = []
     for block in blocks:
-        fig, got = _time(FusedMLPRollout(_policy(device), tiles=True, tile_block=block), obs, grads, horizon, repeats,
-                         cuda)
+        try:
+            fig, got = _time(FusedMLPRollout(_policy(device), tiles=True, tile_block=block), obs, grads, horizon,
+                             repeats, cuda)
+        except RuntimeError as e:  # a split the device refuses (shared memory, a compile): the others still run
+            out["tiles"].append({"block": dataclasses.asdict(block), "error": str(e).splitlines()[0]})
+            continue
         fig["block"] = dataclasses.asdict(block)
         fig["max_abs_diff"] = {k: float((a - b).abs().max()) for k, a, b in zip(labels, got, ref, strict=True)}
         out["tiles"].append(fig)
@@ -127,6 +131,9 @@ def main(argv=None) -> dict:
     print(f"{out['device']}: {args.windows} windows, H = {args.horizon}")
     rows = [("torch fused", out["torch"])] + [(str(t["block"]), t) for t in out["tiles"]]
     for name, fig in rows:
+        if "error" in fig:
+            print(f"{name}: failed: {fig['error']}")
+            continue
         times = [f"{mode} {fig[f'{mode}_us_per_step']:.1f} µs/step" for mode in ("graph", "eager")
                  if f"{mode}_us_per_step" in fig]
         print(f"{name}: " + ", ".join(times) + f"; first call {fig['first_call_s']:.1f} s")

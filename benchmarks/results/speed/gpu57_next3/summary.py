@@ -28,6 +28,9 @@ if (r / "step.json").exists():
     for name, fig in [("torch fused", step["torch"])] + [
             ("{rows}x{chunk}x{threads}{m}".format(**t["block"], m="m" if t["block"]["mathdx"] else ""), t)
             for t in step["tiles"]]:
+        if "error" in fig:
+            print(f"  {name}: failed: {fig['error']}")
+            continue
         graph = fig.get("graph_us_per_step")
         diff = max(fig.get("max_abs_diff", {0: 0.0}).values())
         print(f"  {name}: graph {graph if graph is None else round(graph, 1)} µs, eager "
@@ -41,5 +44,6 @@ for n in ("fused", "tiles_m"):
     ms = ", ".join(f"H{p['horizon']} {p['ms_per_iteration']:.2f}" if p["ms_per_iteration"] is not None
                    else f"H{p['horizon']} -" for p in x["per_length"])
     val = x["final_validation"]
+    apart = "-" if val is None else f"{val - PLAIN:+.3e}"
     print(f"{n}: block {x.get('tile_block', '-')}; train_s {x['train_s']:.2f}; ms/iteration {ms}; final validation "
-          f"{val!r} ({val - PLAIN:+.3e} rad against the plain path's {PLAIN})")
+          f"{val!r} ({apart} rad against the plain path's {PLAIN})")
