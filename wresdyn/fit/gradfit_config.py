@@ -106,7 +106,8 @@ class GradFitConfig(WindowFitStop):
     network_tiles: bool = False
     """With ``fused_network``: each rollout step's network forward as one Warp tile kernel and its backward as one
     (:mod:`wresdyn.learn.tile_mlp`) instead of ~24 small torch kernels. The same fit to float32 rounding (the GEMMs'
-    sums in another order). May change on resume."""
+    sums in another order); the kernels' split is ``$WRESDYN_TILE_BLOCK``'s where set (:meth:`TileBlock.from_env`).
+    May change on resume."""
     physics: str = ""
     """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
     identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot

@@ -71,8 +71,8 @@ class FusedMLPRollout(nn.Module):
 
     With ``tiles`` (float32 networks) each step's forward and backward run as one Warp tile kernel each
     (:class:`~wresdyn.learn.tile_mlp.TileMLP`, split as ``tile_block`` says, a
-    :class:`~wresdyn.learn.tile_mlp.TileBlock`, its defaults where ``None``) instead of the torch operations below: the
-    same buffers, equal to float32 rounding.
+    :class:`~wresdyn.learn.tile_mlp.TileBlock`; where ``None``, ``$WRESDYN_TILE_BLOCK``'s or the defaults) instead of
+    the torch operations below: the same buffers, equal to float32 rounding.
 
     Example::
 
