@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -133,6 +134,7 @@ def build(dest: Path, widths: str, alpha: float, blocks: list, arch: int, jobs: 
         e["sha256"] = {n: file_sha256(folder / ident / n) for n in (e["binary"], e["meta"])}
         e["bytes"] = sum((folder / ident / n).stat().st_size for n in (e["binary"], e["meta"]))
         print(f"{e['block']} {e['name']}: {e['compile_s']} s, {e['bytes'] / 1e6:.2f} MB -> {ident}", flush=True)
+    shutil.rmtree(scratch, ignore_errors=True)
     _write(folder, [{k: e[k] for k in ("identifier", "name", "block_dim", "hash", "binary", "meta", "sha256")}
                     for e in entries], device or f"sm_{arch} compiled ahead on a host without a GPU", arch)
     return entries
@@ -169,8 +171,6 @@ def check(dest: Path, widths: str, alpha: float, blocks: list, arch: int, device
 
 def merge(dest: Path, src: Path) -> int:
     """SRC's entries of this Warp version (every architecture) copied into DEST; returns how many."""
-    import shutil
-
     import warp as wp
 
     from wresdyn.sim import prebuilt
