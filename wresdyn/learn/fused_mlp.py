@@ -125,7 +125,7 @@ class FusedMLPRollout(nn.Module):
         self._mask = torch.empty(steps, batch, outs[-1], device=w.device, dtype=torch.bool)
         self._steps, self._k = steps, 0
         if self._tiles is not None:
-            self._tiles.bind(self._x, self._z, self._g, self._mask)
+            self._tiles.bind(self.policy, self.linears, self._x, self._z, self._g, self._mask)
 
     def reset(self) -> None:
         """The rollout's start (:func:`wresdyn.sim.rollout` calls it): the next call is step 0."""
@@ -148,7 +148,7 @@ class FusedMLPRollout(nn.Module):
 
     def _forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
         if self._tiles is not None:
-            return self._tiles.forward(self.policy, self.linears, obs, k, out, both)
+            return self._tiles.forward(obs, k, out, both)
         r = self._torch_forward(obs, k, out)
         return (r, r / self.policy.scale) if both else r
 
@@ -174,7 +174,7 @@ class FusedMLPRollout(nn.Module):
 
     def _backward(self, grad, g_action, k: int, need_obs: bool) -> torch.Tensor | None:
         if self._tiles is not None:
-            return self._tiles.backward(self.policy, self.linears, grad, g_action, k, need_obs)
+            return self._tiles.backward(grad, g_action, k, need_obs)
         p = self.policy
         grad = residual_grad(grad, g_action, p.scale, self._g[-1][k])
         g = torch.where(self._mask[k], grad * p.scale, self._zero, out=self._g[-1][k])
@@ -203,4 +203,4 @@ class FusedMLPRollout(nn.Module):
         self._x = self._z = self._g = self._mask = None
         self._steps = self._k = 0
         if self._tiles is not None:
-            self._tiles.bind(None)
+            self._tiles.bind()

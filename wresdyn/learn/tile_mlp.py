@@ -27,6 +27,7 @@ import re
 import torch
 
 from ..sim import prebuilt
+from ..sim.devices import torch_stream_for_warp
 
 __all__ = ["ENV_BLOCK", "TileBlock", "TileMLP"]
 
@@ -229,14 +230,20 @@ class TileMLP:
                                                              block.mathdx)
         self.device = wp.device_from_torch(device)
         self._empty = _wp(torch.zeros(0, dims[-1], device=device))
-        self._bufs = None
+        self.torch_device = torch.device(device)
+        self._bufs = self._policy = None
         self._streams: dict[int, tuple] = {}
 
-    def bind(self, x: list | None, z: list = (), g: list = (), mask: torch.Tensor | None = None) -> None:
-        """The rollout's (H, B, ·) buffers (:meth:`FusedMLPRollout.begin`), viewed once per rollout; ``None``: let
-        them go."""
-        self._bufs = None if x is None else \
-            ([_wp(t) for t in x], [_wp(t) for t in z], [_wp(t) for t in g], _wp(mask.view(torch.uint8)))
+    def bind(self, policy=None, linears=(), x=(), z=(), g=(), mask: torch.Tensor | None = None) -> None:
+        """The rollout's policy, its linear layers and (H, B, ·) buffers (:meth:`FusedMLPRollout.begin`), viewed for
+        Warp once per rollout, not at every step; no ``policy``: let them go."""
+        if policy is None:
+            self._bufs = self._policy = None
+            return
+        self._bufs = [_wp(t) for t in x], [_wp(t) for t in z], [_wp(t) for t in g], _wp(mask.view(torch.uint8))
+        self._policy = ([_wp(t) for lin in linears for t in (lin.weight, lin.bias)],
+                        [_wp(lin.weight) for lin in linears],
+                        *(_wp(t) for t in (policy.obs_mean, policy.obs_std, policy.scale)))
 
     def _launch(self, kernel, batch: int, args: list) -> None:
         import warp as wp
@@ -245,41 +252,30 @@ class TileMLP:
                         stream=self._stream())
 
     def _stream(self):
-        """Torch's current stream as a Warp stream (one object per stream), so that a CUDA graph torch captures holds
-        the launches; ``None`` (Warp's device stream, which torch's legacy default stream synchronises with) where
-        torch runs on that default stream, as :class:`~wresdyn.sim.Simulator` does."""
-        if not self.device.is_cuda:
-            return None
-        import warp as wp
+        """Torch's current stream as a Warp stream, so that a CUDA graph torch captures holds the launches (``None``
+        on the CPU and on torch's default stream, as :class:`~wresdyn.sim.Simulator` runs its steps)."""
+        return torch_stream_for_warp(self.device.ordinal, self._streams) if self.device.is_cuda else None
 
-        cur = torch.cuda.current_stream(self.device.ordinal)
-        if cur == torch.cuda.default_stream(self.device.ordinal):
-            return None
-        if cur.cuda_stream not in self._streams:
-            self._streams[cur.cuda_stream] = (cur, wp.stream_from_torch(cur))
-        return self._streams[cur.cuda_stream][1]
-
-    def forward(self, policy, linears, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
+    def forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
         """Step ``k``'s residual (into ``out`` where given) and with ``both`` its action residual / scale."""
         x, z, _, mask = self._bufs
+        params, _, mean, std, scale = self._policy
         batch = obs.shape[0]
         r = torch.empty(batch, self.dims[-1], device=obs.device, dtype=torch.float32) if out is None else out
         a = torch.empty_like(r) if both else r
-        params = [_wp(t) for lin in linears for t in (lin.weight, lin.bias)]
-        self._launch(self.forward_kernel, batch, [_wp(obs), k, _wp(policy.obs_mean), _wp(policy.obs_std),
-                                                  _wp(policy.scale), int(both), *params, *x, *z, mask, _wp(r), _wp(a)])
+        self._launch(self.forward_kernel, batch, [_wp(obs), k, mean, std, scale, int(both), *params, *x, *z, mask,
+                                                  _wp(r), _wp(a)])
         r = r.view(r.shape)  # a fresh view as the step's output: autograd marks it, not the tensor handed in
         return (r, a) if both else r
 
-    def backward(self, policy, linears, g_r, g_a, k: int, need_obs: bool) -> torch.Tensor | None:
+    def backward(self, g_r, g_a, k: int, need_obs: bool) -> torch.Tensor | None:
         """The gradients at step ``k``'s layer outputs into the rollout's buffers, and the observation's gradient when
         ``need_obs``."""
         _, z, g, mask = self._bufs
+        _, weights, _, std, scale = self._policy
         batch = g[0].shape[1]
-        dev = policy.obs_std.device
-        g_obs = torch.empty(batch, self.dims[0], device=dev, dtype=torch.float32) if need_obs else None
+        g_obs = torch.empty(batch, self.dims[0], device=self.torch_device, dtype=torch.float32) if need_obs else None
         grads = [self._empty if t is None else _wp(t) for t in (g_r, g_a)]
-        self._launch(self.backward_kernel, batch, [*grads, k, _wp(policy.scale), _wp(policy.obs_std), int(need_obs),
-                                                   *[_wp(lin.weight) for lin in linears], *z, *g, mask,
+        self._launch(self.backward_kernel, batch, [*grads, k, scale, std, int(need_obs), *weights, *z, *g, mask,
                                                    _wp(g_obs) if need_obs else self._empty])
         return g_obs

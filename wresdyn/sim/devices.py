@@ -1,4 +1,5 @@
-"""Whether a device named on the command line is one this machine's Warp and torch can both use."""
+"""Whether a device named on the command line is one this machine's Warp and torch can both use, and which Warp
+stream runs beside torch's current one."""
 
 from __future__ import annotations
 
@@ -21,3 +22,18 @@ def require_device(device: str | None) -> None:
         raise WresdynError(f"device {device!r} is not available here: Warp {wp.config.version} sees {n_warp} CUDA "
                            f"device(s), torch {torch.__version__} sees {n_torch}; use --device cpu, or on a GPU "
                            "machine a CUDA build of torch (the README's set-up)")
+
+
+def torch_stream_for_warp(device, streams: dict):
+    """Torch's current stream on CUDA ``device`` as a Warp stream where it is a stream of its own (a CUDA graph being
+    captured or warmed up on it), so that torch's and Warp's launches are ordered by the stream itself; ``None`` on
+    torch's legacy default stream, which Warp's device stream synchronises with. ``streams`` (torch stream handle ->
+    (torch stream, Warp stream)) keeps one Warp object per stream, and the torch stream alive beside it."""
+    import warp as wp
+
+    cur = torch.cuda.current_stream(device)
+    if cur == torch.cuda.default_stream(device):
+        return None
+    if cur.cuda_stream not in streams:
+        streams[cur.cuda_stream] = (cur, wp.stream_from_torch(cur))
+    return streams[cur.cuda_stream][1]

@@ -29,7 +29,7 @@ import torch
 
 from ..errors import SimulationDiverged
 from ..robot.ground import base_index
-from .devices import require_device
+from .devices import require_device, torch_stream_for_warp
 from .physics import MODEL_ARRAYS, SERVO_ARRAYS, PhysicalParams
 from .solvers import make_solver, resolve_solver
 from .tape_step import TapeBuffers, TapeStep, tape_rows
@@ -312,13 +312,8 @@ class Simulator:
             return contextlib.nullcontext()
         import warp as wp
 
-        cur = torch.cuda.current_stream(self.device)
-        if cur == torch.cuda.default_stream(self.device):
-            return contextlib.nullcontext()
-        ws = self._wp_streams.get(cur.cuda_stream)
-        if ws is None:
-            ws = self._wp_streams[cur.cuda_stream] = (cur, wp.stream_from_torch(cur))
-        return wp.ScopedStream(ws[1], sync_enter=False, sync_exit=False)
+        ws = torch_stream_for_warp(self.device, self._wp_streams)
+        return contextlib.nullcontext() if ws is None else wp.ScopedStream(ws, sync_enter=False, sync_exit=False)
 
     def side_stream(self):
         """The simulator's own CUDA stream (torch), created on first use; CUDA only."""
