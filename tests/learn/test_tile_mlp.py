@@ -62,7 +62,7 @@ def _chain(tiles: bool, device, batch: int, both: bool):
 
 
 @pytest.mark.parametrize("device", DEVICES)
-@pytest.mark.parametrize("batch, both", [(8, False), (8, True), (37, True)])  # 37: blocks of 16 rows and a part
+@pytest.mark.parametrize("batch, both", [(8, False), (8, True), (37, True)])  # 37: full blocks and a part
 def test_tile_chain_gives_the_torch_chain(device, batch, both):
     ref, tile = _chain(False, device, batch, both), _chain(True, device, batch, both)
     assert ((ref[0].abs() - ref[3]).abs() < 1e-6).any(), "the clip never cut: the test misses its mask"
@@ -177,7 +177,7 @@ def test_tile_block_parses_rows_chunk_threads_and_mathdx():
 
 def test_tile_block_from_env(monkeypatch):
     monkeypatch.delenv(ENV_BLOCK, raising=False)
-    assert TileBlock.from_env() == TileBlock()
+    assert TileBlock.from_env() == TileBlock() == TileBlock(8, 32, 256, False)
     monkeypatch.setenv(ENV_BLOCK, "32x32x256m")
     assert TileBlock.from_env() == TileBlock(32, 32, 256, True)
     monkeypatch.setenv(ENV_BLOCK, "16x32")
@@ -197,4 +197,4 @@ def test_env_block_reaches_the_kernels(monkeypatch):
     assert net._tiles.forward_kernel.module.options["enable_mathdx_gemm"] is True
     monkeypatch.setenv(ENV_BLOCK, "")
     assert FusedMLPRollout(_policy("cpu"), tiles=True)._tiles.forward_kernel == \
-        tile_mlp._KERNELS[(dims, 1.0, 16, 32, False)][0]
+        tile_mlp._KERNELS[(dims, 1.0, 8, 32, False)][0]

@@ -39,12 +39,14 @@ ENV_BLOCK = "WRESDYN_TILE_BLOCK"
 class TileBlock:
     """How :class:`TileMLP`'s kernels split the work."""
 
-    rows: int = 16
-    """Windows per block (the GEMMs' M)."""
+    rows: int = 8
+    """Windows per block (the GEMMs' M). 8 with 256 threads was the fastest of 14 splits on an H200 at 1024 windows
+    (one step forward + backward replayed from a CUDA graph: 91 µs against 166 at 16 rows and 128 threads;
+    ``benchmarks/results/speed/h200_20261201f/``): fewer rows a block put more of the GPU's multiprocessors to work."""
     chunk: int = 32
     """Columns of the reduction dimension read from a weight at a time; every tile dimension is padded to a multiple
     of it. 256x32 float32 is 32 KB: the largest shared tiles stay ~130 KB a block (an H200 has ~227 KB)."""
-    threads: int = 128
+    threads: int = 256
     """Threads per block."""
     mathdx: bool = False
     """On CUDA, the GEMMs through MathDx (cuBLASDx) rather than Warp's own tile GEMM. Off: NVRTC's compile of the

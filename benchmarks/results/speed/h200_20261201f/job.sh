@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# One H200: the tile MLP step over more splits (Warp's own tile GEMM, compiled here), then the 2000 iterations at
+# 1024 windows with the fastest split against the torch fused path in the same run.
+set -u
+END=$1; R=/root/res; mkdir -p $R
+export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1
+stage() { echo "$(date -u +%T) $*" >> $R/STAGES; }
+{ date -u; nvidia-smi -L; python3 -c "import torch,warp;print('torch',torch.__version__,'warp',warp.__version__)"; \
+  echo "tree: $(cat .dev/COMMIT)"; } > $R/machine.txt 2>&1
+stage start
+BLOCKS=8x32x256,8x64x256,4x32x128,4x32x256,8x16x128,8x32x64,16x64x256,4x64x256,8x32x128
+timeout 200 python3 benchmarks/speed/tile_mlp_step.py --device cuda:0 --windows 1024 --blocks $BLOCKS \
+  --json $R/step.json > $R/step.txt 2>&1; stage "step rc=$?"
+BEST=$(python3 - <<'P'
+import json
+d = json.load(open("/root/res/step.json"))
+ok = [t for t in d["tiles"] if "graph_us_per_step" in t]
+b = min(ok, key=lambda t: t["graph_us_per_step"])["block"]
+print(f"{b['rows']}x{b['chunk']}x{b['threads']}" + ("m" if b["mathdx"] else ""))
+P
+)
+echo "$BEST" > $R/best.txt; stage "best $BEST"
+fit=(python3 benchmarks/speed/gradfit_2000.py --device cuda:0 --windows 1024)
+WRESDYN_TILE_BLOCK=$BEST timeout 40 "${fit[@]}" --iterations 20 --fused --tiles --json $R/warmup.json > $R/warmup.log 2>&1
+stage "warmup rc=$?"
+left() { echo $(( END - $(date +%s) )); }
+timeout 55 "${fit[@]}" --iterations 2000 --fused --json $R/fused.json > $R/fused.log 2>&1; stage "fused rc=$?"
+WRESDYN_TILE_BLOCK=$BEST timeout 55 "${fit[@]}" --iterations 2000 --fused --tiles --json $R/tiles_m.json \
+  > $R/tiles_m.log 2>&1; stage "tiles rc=$?"
+python3 .dev/next3/summary.py $R > $R/summary.txt 2>&1 || true
+echo done > $R/DONE
