@@ -3,7 +3,7 @@
 #   a. tests: tests/learn/test_tile_mlp.py (CPU and cuda:0, the graph-replayed fit with tiles against the fused one)
 #      and tests/learn/test_fused_mlp.py;
 #   b. one step, forward + backward, torch fused against tiles (benchmarks/speed/tile_mlp_step.py, 1024 windows,
-#      H = 64, eager and replayed from a CUDA graph; the fit's blocks of 16 windows and three other splits);
+#      H = 64, eager and replayed from a CUDA graph; TileBlock's default 8x32x256 and three other splits);
 #   c. the gradient fit's 2000 iterations at 1024 windows (benchmarks/speed/gradfit_2000.py): a short warm-up run with
 #      tiles (loads or compiles the kernels, captures every window length once), then `--fused` and
 #      `--fused --tiles` once each; training seconds and the final and best validation of both.

@@ -116,9 +116,10 @@ def main(argv=None) -> dict:
     p.add_argument("--windows", type=int, default=1024)
     p.add_argument("--horizon", type=int, default=64, help="steps per timed rollout (the curriculum's longest)")
     p.add_argument("--repeats", type=int, default=20)
-    p.add_argument("--blocks", default="16x32x128",
+    p.add_argument("--blocks", default="",
                    help="comma list of ROWSxCHUNKxTHREADS (windows per block, weight columns read at a time, threads "
-                        "per block), each with suffix 'm' for MathDx's GEMMs (a long first compile)")
+                        "per block), each with suffix 'm' for MathDx's GEMMs (a long first compile); default: the "
+                        "split the fit runs ($WRESDYN_TILE_BLOCK's or TileBlock's defaults)")
     p.add_argument("--json", default="")
     args = p.parse_args(argv)
     import warp as wp
@@ -126,7 +127,7 @@ def main(argv=None) -> dict:
     from wresdyn.learn.tile_mlp import TileBlock
 
     wp.config.quiet = True
-    blocks = [TileBlock.parse(b) for b in args.blocks.split(",")]
+    blocks = [TileBlock.parse(b) for b in args.blocks.split(",")] if args.blocks else [TileBlock.from_env()]
     out = run(args.device, args.windows, args.horizon, args.repeats, blocks)
     print(f"{out['device']}: {args.windows} windows, H = {args.horizon}")
     rows = [("torch fused", out["torch"])] + [(str(t["block"]), t) for t in out["tiles"]]

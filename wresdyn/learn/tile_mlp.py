@@ -49,9 +49,10 @@ class TileBlock:
     threads: int = 256
     """Threads per block."""
     mathdx: bool = False
-    """On CUDA, the GEMMs through MathDx (cuBLASDx) rather than Warp's own tile GEMM. Off: NVRTC's compile of the
-    network's two kernels with MathDx took 124 + 136 s on a 2-core CPU (sm_90, the fit's network), a first run's wait
-    on a fresh machine."""
+    """On CUDA, the GEMMs through MathDx (cuBLASDx) rather than Warp's own tile GEMM. Off: on an H200 it is no faster at
+    the fit's shapes (172 against 166 µs a step, ``benchmarks/results/speed/h200_20261201e/``), and NVRTC's compile of
+    the network's two kernels with MathDx took 124 + 136 s on a 2-core CPU (sm_90), a first run's wait on a fresh
+    machine."""
 
     @classmethod
     def parse(cls, text: str) -> TileBlock:
