@@ -20,8 +20,7 @@ and validation rows on CUDA, every row on the CPU), skipping each length's first
 of the last iteration and the validation error after it (a faster path must give the same), the best validation and
 its iteration (what ``fit`` returns). ``--no-graph`` runs CUDA eagerly (the peer); ``--fused`` sets
 ``GradFitConfig.fused_network`` (the MLP's step in fewer kernels, fused Adam), ``--tiles`` with it
-``GradFitConfig.network_tiles`` (the step's network forward and backward as one Warp tile kernel each), ``--layers``
-``GradFitConfig.network_layers`` (one plain Warp kernel per layer each way). The held-out
+``GradFitConfig.network_tiles`` (the step's network forward and backward as one Warp tile kernel each). The held-out
 split is never read.
 """
 
@@ -101,7 +100,6 @@ def measure(robot, dataset, cfg, log=print) -> dict:
     params = torch.cat([p.detach().flatten().double().cpu() for p in policy.parameters()])
     return {"iterations": len(curve), "windows": cfg.windows, "device": cfg.device, "cuda_graph": deferred,
             "fused_network": cfg.fused_network, "network_tiles": cfg.network_tiles,
-            "network_layers": cfg.network_layers,
             "train_s": train, "process_s": process, "ms_per_iteration_mean": 1e3 * train / len(curve),
             "per_length": lengths,
             "overhead_s": train - rated if all(x["ms_per_iteration"] is not None for x in lengths) else None,
@@ -137,8 +135,6 @@ def main(argv=None) -> dict:
     p.add_argument("--no-graph", action="store_true", help="CUDA: run each iteration eagerly")
     p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network: the fused MLP path and Adam")
     p.add_argument("--tiles", action="store_true", help="GradFitConfig.network_tiles (with --fused): Warp tile kernels")
-    p.add_argument("--layers", action="store_true",
-                   help="GradFitConfig.network_layers (with --fused): one Warp kernel per layer")
     p.add_argument("--json", default="", help="write the figures here")
     args = p.parse_args(argv)
     wp.config.quiet = True
@@ -147,7 +143,7 @@ def main(argv=None) -> dict:
     dataset = load_dataset(args.data, robot=robot)
     cfg = GradFitConfig(windows=args.windows, device=args.device, iterations=args.iterations, seed=args.seed,
                         cuda_graph=not args.no_graph, fused_network=args.fused,
-                        network_tiles=args.tiles, network_layers=args.layers)
+                        network_tiles=args.tiles)
     if args.curriculum:
         cfg = dataclasses.replace(cfg, horizon_curriculum=tuple(int(h) for h in args.curriculum.split(",")))
     result = measure(robot, dataset, cfg, log=lambda m: print(m, flush=True))
@@ -160,7 +156,7 @@ def main(argv=None) -> dict:
         result["tile_block"] = dataclasses.asdict(TileBlock.from_env())
     print(f"\n{name}, {args.device}; {result['iterations']} iterations x {args.windows} windows; "
           f"graph {result['cuda_graph']}; fused_network {result['fused_network']}; "
-          f"network_tiles {result['network_tiles']}; network_layers {result['network_layers']}")
+          f"network_tiles {result['network_tiles']}")
     print(f"training {result['train_s']:.2f} s ({result['ms_per_iteration_mean']:.2f} ms/iteration on average); "
           f"process {result['process_s']:.1f} s; overhead beyond the rates "
           + (f"{result['overhead_s']:.2f} s" if result["overhead_s"] is not None else "-"))

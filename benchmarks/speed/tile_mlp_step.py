@@ -1,6 +1,5 @@
 """One rollout step of the gradient fit's network, forward and backward: the fused MLP path's torch operations against
-its Warp tile kernels (``FusedMLPRollout(policy, tiles=True)``, ``GradFitConfig.network_tiles``) and its one Warp
-kernel per layer (``layers=True``, ``GradFitConfig.network_layers``).
+its Warp tile kernels (``FusedMLPRollout(policy, tiles=True)``, ``GradFitConfig.network_tiles``).
 
     python benchmarks/speed/tile_mlp_step.py --device cuda:0 --windows 1024
     python benchmarks/speed/tile_mlp_step.py --device cuda:0 --windows 1024 --blocks 16x32x128,8x32x128,32x32x256
@@ -82,19 +81,8 @@ def _time(net, obs, grads, horizon: int, repeats: int, cuda: bool) -> tuple[dict
     return fig, [o.clone() for o in outputs]
 
 
-def _layers(device, rows: int):
-    """The fused path with one Warp kernel per layer (``layers=True``), each thread ``rows`` windows."""
-    from wresdyn.learn.fused_mlp import FusedMLPRollout
-    from wresdyn.learn.layer_mlp import LayerMLP
-
-    net = FusedMLPRollout(_policy(device), layers=True)
-    net._kernels = LayerMLP(net._kernels.dims, net.alpha, device, rows)
-    return net
-
-
-def run(device: str, windows: int, horizon: int, repeats: int, blocks: list, layer_rows: list = ()) -> dict:
-    """The torch fused path, then the tile path at each :class:`~wresdyn.learn.tile_mlp.TileBlock` of ``blocks``, then
-    the layer kernels at each of ``layer_rows`` windows a thread."""
+def run(device: str, windows: int, horizon: int, repeats: int, blocks: list) -> dict:
+    """The torch fused path, then the tile path at each :class:`~wresdyn.learn.tile_mlp.TileBlock` of ``blocks``."""
     import torch
 
     from wresdyn.learn.fused_mlp import FusedMLPRollout
@@ -119,12 +107,6 @@ def run(device: str, windows: int, horizon: int, repeats: int, blocks: list, lay
         fig["block"] = dataclasses.asdict(block)
         fig["max_abs_diff"] = {k: float((a - b).abs().max()) for k, a, b in zip(labels, got, ref, strict=True)}
         out["tiles"].append(fig)
-    out["layers"] = []
-    for rows in layer_rows:
-        fig, got = _time(_layers(device, rows), obs, grads, horizon, repeats, cuda)
-        fig["rows"] = rows
-        fig["max_abs_diff"] = {k: float((a - b).abs().max()) for k, a, b in zip(labels, got, ref, strict=True)}
-        out["layers"].append(fig)
     return out
 
 
@@ -138,8 +120,6 @@ def main(argv=None) -> dict:
                    help="comma list of ROWSxCHUNKxTHREADS (windows per block, weight columns read at a time, threads "
                         "per block), each with suffix 'm' for MathDx's GEMMs (a long first compile); default: the "
                         "split the fit runs ($WRESDYN_TILE_BLOCK's or TileBlock's defaults)")
-    p.add_argument("--layer-rows", default="8",
-                   help="comma list of windows a thread of the layer kernels (GradFitConfig.network_layers); '' none")
     p.add_argument("--json", default="")
     args = p.parse_args(argv)
     import warp as wp
@@ -148,11 +128,9 @@ def main(argv=None) -> dict:
 
     wp.config.quiet = True
     blocks = [TileBlock.parse(b) for b in args.blocks.split(",")] if args.blocks else [TileBlock.from_env()]
-    layer_rows = [int(r) for r in args.layer_rows.split(",")] if args.layer_rows else []
-    out = run(args.device, args.windows, args.horizon, args.repeats, blocks, layer_rows)
+    out = run(args.device, args.windows, args.horizon, args.repeats, blocks)
     print(f"{out['device']}: {args.windows} windows, H = {args.horizon}")
-    rows = [("torch fused", out["torch"])] + [(str(t["block"]), t) for t in out["tiles"]] \
-        + [(f"layers, {t['rows']} windows a thread", t) for t in out["layers"]]
+    rows = [("torch fused", out["torch"])] + [(str(t["block"]), t) for t in out["tiles"]]
     for name, fig in rows:
         if "error" in fig:
             print(f"{name}: failed: {fig['error']}")
@@ -161,7 +139,7 @@ def main(argv=None) -> dict:
                  if f"{mode}_us_per_step" in fig]
         print(f"{name}: " + ", ".join(times) + f"; first call {fig['first_call_s']:.1f} s")
         if "max_abs_diff" in fig:
-            print("  max |kernels - torch|: " + ", ".join(f"{k} {v:.2e} (of {out['max_abs'][k]:.2e})"
+            print("  max |tiles - torch|: " + ", ".join(f"{k} {v:.2e} (of {out['max_abs'][k]:.2e})"
                                                        for k, v in fig["max_abs_diff"].items()))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)

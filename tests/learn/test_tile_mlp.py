@@ -21,7 +21,6 @@ from wresdyn.learn.tile_mlp import ENV_BLOCK, TileBlock
 # the humanoid's 21 joints, its 4n observation; hidden widths of TINY's network below (one shape, one compile)
 N, HIDDEN, H = 21, (32, 32), 6
 DEVICES = ["cpu", pytest.param("cuda:0", marks=pytest.mark.skipif(not torch.cuda.is_available(), reason="no GPU"))]
-KINDS = ["tiles", "layers"]  # the kernel families: FusedMLPRollout's tiles (tile_mlp) and layers (layer_mlp)
 TINY = GradFitConfig(residual=ResidualConfig(fraction=0.25, hidden_dims=HIDDEN), windows=4,
                      horizon_curriculum=(2, 4, 8), iterations=9, select_every=3)
 
@@ -38,14 +37,9 @@ def _close(a, b, rtol=1e-5):
     torch.testing.assert_close(a, b, rtol=rtol, atol=rtol * b.abs().max().item())
 
 
-def _fused(policy, kind: str | None) -> FusedMLPRollout:
-    """The fused path with the torch operations (``kind`` None) or a family of Warp kernels (:data:`KINDS`)."""
-    return FusedMLPRollout(policy, tiles=kind == "tiles", layers=kind == "layers")
-
-
-def _chain(kind: str | None, device, batch: int, both: bool):
+def _chain(tiles: bool, device, batch: int, both: bool):
     policy = _policy(device)
-    net = _fused(policy, kind)
+    net = FusedMLPRollout(policy, tiles=tiles)
     net.begin(H, batch)
     net.reset()
     g = torch.Generator().manual_seed(1)
@@ -67,11 +61,10 @@ def _chain(kind: str | None, device, batch: int, both: bool):
     return residuals.detach(), s0.grad, {k: p.grad.clone() for k, p in policy.named_parameters()}, policy.scale
 
 
-@pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("batch, both", [(8, False), (8, True), (37, True)])  # 37: full blocks and a part
-def test_tile_chain_gives_the_torch_chain(kind, device, batch, both):
-    ref, tile = _chain(None, device, batch, both), _chain(kind, device, batch, both)
+def test_tile_chain_gives_the_torch_chain(device, batch, both):
+    ref, tile = _chain(False, device, batch, both), _chain(True, device, batch, both)
     assert ((ref[0].abs() - ref[3]).abs() < 1e-6).any(), "the clip never cut: the test misses its mask"
     _close(tile[0], ref[0])
     _close(tile[1], ref[1])
@@ -81,18 +74,17 @@ def test_tile_chain_gives_the_torch_chain(kind, device, batch, both):
 
 
 @torch.no_grad()  # as inside the step's autograd node
-def _one_step(kind: str | None, policy, obs, g_r, g_a, need_obs: bool):
-    net = _fused(policy, kind)
+def _one_step(tiles: bool, policy, obs, g_r, g_a, need_obs: bool):
+    net = FusedMLPRollout(policy, tiles=tiles)
     net.begin(2, obs.shape[0])
     r = net._forward(obs, 1, None, True)[0]
     g_obs = net._backward(g_r, g_a, 1, need_obs)
     return r, g_obs, [t[1] for t in net._x], [t[1] for t in net._z], [t[1] for t in net._g], net._mask[1]
 
 
-@pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("hidden, batch", [(HIDDEN, 19), ((256, 128, 64), 64)])  # the second: the fit's network
-def test_one_step_writes_the_torch_buffers(kind, device, hidden, batch):
+def test_one_step_writes_the_torch_buffers(device, hidden, batch):
     policy = _policy(device, hidden)
     policy.mlp[-1].weight.data.mul_(10)  # outputs past the clip at the fit's network's initial weights too
     g = torch.Generator().manual_seed(2)
@@ -100,7 +92,7 @@ def test_one_step_writes_the_torch_buffers(kind, device, hidden, batch):
     grads = [(torch.randn(batch, N, generator=g)).to(device) for _ in range(2)]
     cases = [(grads[0], grads[1], True), (grads[0], None, False), (None, grads[1], True), (None, None, True)]
     for g_r, g_a, need_obs in cases:
-        ref, tile = (_one_step(k, policy, obs, g_r, g_a, need_obs) for k in (None, kind))
+        ref, tile = (_one_step(tiles, policy, obs, g_r, g_a, need_obs) for tiles in (False, True))
         assert 0 < int(ref[5].sum()) < ref[5].numel(), "the clip cuts some entries and passes others"
         assert torch.equal(tile[5], ref[5])
         _close(tile[0], ref[0])
@@ -113,9 +105,8 @@ def test_one_step_writes_the_torch_buffers(kind, device, hidden, batch):
             assert not tile[4][-1].any()
 
 
-@pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("device", DEVICES)
-def test_strided_inputs_give_the_torch_buffers(kind, device):
+def test_strided_inputs_give_the_torch_buffers(device):
     # autograd hands gradients expanded (stride 0) or transposed, a rollout may hand a strided observation: the
     # kernels read them through their strides
     policy = _policy(device)
@@ -124,7 +115,7 @@ def test_strided_inputs_give_the_torch_buffers(kind, device):
     obs = (torch.randn(19, 8 * N, generator=g) * 4).to(device)[:, ::2]
     g_r = torch.randn(1, N, generator=g).to(device).expand(19, N)
     g_a = torch.randn(N, 19, generator=g).to(device).t()
-    ref, tile = (_one_step(k, policy, obs, g_r, g_a, True) for k in (None, kind))
+    ref, tile = (_one_step(tiles, policy, obs, g_r, g_a, True) for tiles in (False, True))
     assert torch.equal(tile[5], ref[5])
     for a, b in zip([tile[0], tile[1]] + tile[2] + tile[3] + tile[4], [ref[0], ref[1]] + ref[2] + ref[3] + ref[4],
                     strict=True):
@@ -137,11 +128,10 @@ def _figures(policy, curve):
     return [r["loss"] for r in curve], checks, params
 
 
-@pytest.mark.parametrize("kind", KINDS)
-def test_tile_fit_gives_the_fused_fit(robot, data, kind):
+def test_tile_fit_gives_the_fused_fit(robot, data):
     # the fused fit's own bound against the plain one (tests/fit/test_fused_network.py): ~1e-7 relative measured
     fused = _figures(*fit(robot, data, dataclasses.replace(TINY, fused_network=True), log=lambda *_: None))
-    tiles = _figures(*fit(robot, data, dataclasses.replace(TINY, fused_network=True, **{f"network_{kind}": True}),
+    tiles = _figures(*fit(robot, data, dataclasses.replace(TINY, fused_network=True, network_tiles=True),
                           log=lambda *_: None))
     assert tiles[0] == pytest.approx(fused[0], rel=1e-5)
     assert [c[0] for c in tiles[1]] == [c[0] for c in fused[1]]
@@ -149,25 +139,22 @@ def test_tile_fit_gives_the_fused_fit(robot, data, kind):
     torch.testing.assert_close(tiles[2], fused[2], rtol=1e-4, atol=1e-6)
 
 
-@pytest.mark.parametrize("kind", KINDS)
-def test_fused_checkpoint_resumes_with_tiles(robot, data, tmp_path, kind):
-    # network_tiles and network_layers change only the rounding: a resumed fit may switch either on (RESUME_MAY_CHANGE)
+def test_fused_checkpoint_resumes_with_tiles(robot, data, tmp_path):
+    # network_tiles changes only the rounding: a resumed fit may switch it on (RESUME_MAY_CHANGE)
     fused = dataclasses.replace(TINY, fused_network=True)
     fit(robot, data, fused, out=tmp_path, until=4, log=lambda *_: None)
-    _, curve = fit(robot, data, dataclasses.replace(fused, **{f"network_{kind}": True}), out=tmp_path,
-                   log=lambda *_: None)
+    _, curve = fit(robot, data, dataclasses.replace(fused, network_tiles=True), out=tmp_path, log=lambda *_: None)
     assert [r["iteration"] for r in curve] == list(range(1, 10))
     assert all(torch.isfinite(torch.tensor(r["loss"])) for r in curve)
 
 
-@pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")
-def test_graph_replayed_tile_fit_gives_the_graph_replayed_fused_fit(robot, data, kind):
+def test_graph_replayed_tile_fit_gives_the_graph_replayed_fused_fit(robot, data):
     # the tile kernels launched on torch's stream inside the captured iteration: the bounds of the graph-against-eager
     # test of the fused path (tests/fit/test_fused_network.py)
     cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0", fused_network=True)
     fused = _figures(*fit(robot, data, cfg, log=lambda *_: None))
-    tiles = _figures(*fit(robot, data, dataclasses.replace(cfg, **{f"network_{kind}": True}), log=lambda *_: None))
+    tiles = _figures(*fit(robot, data, dataclasses.replace(cfg, network_tiles=True), log=lambda *_: None))
     assert tiles[0][-1] == pytest.approx(fused[0][-1], rel=1e-3)
     assert tiles[1][-1][1] == pytest.approx(fused[1][-1][1], abs=1e-5)
     torch.testing.assert_close(tiles[2].cpu(), fused[2].cpu(), rtol=1e-3, atol=1e-5)
@@ -176,11 +163,8 @@ def test_graph_replayed_tile_fit_gives_the_graph_replayed_fused_fit(robot, data,
 def test_tiles_need_the_fused_network():
     from wresdyn.errors import WresdynError
 
-    for kind in KINDS:
-        with pytest.raises(WresdynError, match="set fused_network too"):
-            dataclasses.replace(TINY, **{f"network_{kind}": True})
-    with pytest.raises(WresdynError, match="not both"):
-        dataclasses.replace(TINY, fused_network=True, network_tiles=True, network_layers=True)
+    with pytest.raises(WresdynError, match="set fused_network too"):
+        dataclasses.replace(TINY, network_tiles=True)
 
 
 def test_tile_block_parses_rows_chunk_threads_and_mathdx():
@@ -208,9 +192,9 @@ def test_env_block_reaches_the_kernels(monkeypatch):
     monkeypatch.setenv(ENV_BLOCK, "8x16x64m")
     net = FusedMLPRollout(_policy("cpu"), tiles=True)
     dims = (4 * N, *HIDDEN, N)
-    assert (net._kernels.rows, net._kernels.threads) == (8, 64)
-    assert (net._kernels.forward_kernel, net._kernels.backward_kernel) == tile_mlp._KERNELS[(dims, 1.0, 8, 16, True)]
-    assert net._kernels.forward_kernel.module.options["enable_mathdx_gemm"] is True
+    assert (net._tiles.rows, net._tiles.threads) == (8, 64)
+    assert (net._tiles.forward_kernel, net._tiles.backward_kernel) == tile_mlp._KERNELS[(dims, 1.0, 8, 16, True)]
+    assert net._tiles.forward_kernel.module.options["enable_mathdx_gemm"] is True
     monkeypatch.setenv(ENV_BLOCK, "")
-    assert FusedMLPRollout(_policy("cpu"), tiles=True)._kernels.forward_kernel == \
+    assert FusedMLPRollout(_policy("cpu"), tiles=True)._tiles.forward_kernel == \
         tile_mlp._KERNELS[(dims, 1.0, 8, 32, False)][0]

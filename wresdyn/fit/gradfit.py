@@ -87,10 +87,10 @@ def window_loss(cfg: GradFitConfig, q, qd, actions, q_ref, qd_ref, scale,
 
 
 RESUME_MAY_CHANGE = ("device", "torch_threads", "sim_threads", "cuda_graph", "fused_network", "network_tiles",
-                     "network_layers", "max_iterations", "max_seconds", "beat_start_within")
-""":class:`GradFitConfig` fields a resumed fit may change: where and how it runs (``fused_network``,
-``network_tiles`` and ``network_layers`` change only the rounding) and the ceilings and early stop of a run until
-convergence, not what it learns (``iterations`` shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
+                     "max_iterations", "max_seconds", "beat_start_within")
+""":class:`GradFitConfig` fields a resumed fit may change: where and how it runs (``fused_network`` and
+``network_tiles`` change only the rounding) and the ceilings and early stop of a run until convergence, not what it
+learns (``iterations`` shapes the learning-rate and horizon schedule, so it is part of what it learns)."""
 
 
 def fit(robot, dataset, cfg: GradFitConfig, out: str | Path | None = None, log=print, until: int | None = None,
@@ -221,8 +221,7 @@ class GradFitIteration:
         self.cfg, self.sim, self.bank, self.policy, self.optim = cfg, sim, bank, policy, optim
         self.obs_noise, self.graph, self.weights = obs_noise, graph, weights
         self.torque_scale = policy.scale if policy.kind == "torque" else None
-        self.fused = FusedMLPRollout(policy, tiles=cfg.network_tiles, layers=cfg.network_layers) \
-            if cfg.fused_network else None
+        self.fused = FusedMLPRollout(policy, tiles=cfg.network_tiles) if cfg.fused_network else None
         self._graphs = StepGraphs(sim)
         self.adopt_optimiser()
 

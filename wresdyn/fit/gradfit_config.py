@@ -108,11 +108,6 @@ class GradFitConfig(WindowFitStop):
     (:mod:`wresdyn.learn.tile_mlp`) instead of ~24 small torch kernels. The same fit to float32 rounding (the GEMMs'
     sums in another order); the kernels' split is ``$WRESDYN_TILE_BLOCK``'s where set (:meth:`TileBlock.from_env`).
     May change on resume."""
-    network_layers: bool = False
-    """With ``fused_network``: each rollout step's network as one plain Warp kernel per layer, forward and backward
-    (:mod:`wresdyn.learn.layer_mlp`: eight kernels a step for four layers, the normalisation, the ELUs and the clip folded
-    in) instead of ~24 small torch kernels. The same fit to float32 rounding (each sum in another order). May change on
-    resume."""
     physics: str = ""
     """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
     identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
@@ -126,8 +121,5 @@ class GradFitConfig(WindowFitStop):
             check_number(getattr(self, name), name, ge=0)
         if self.fused_network and (self.model != "network" or self.residual.arch != "mlp"):
             raise WresdynError("fused_network runs the MLP network only (model 'network', residual.arch 'mlp')")
-        for name in ("network_tiles", "network_layers"):
-            if getattr(self, name) and not self.fused_network:
-                raise WresdynError(f"{name} runs the fused network's steps: set fused_network too")
-        if self.network_tiles and self.network_layers:
-            raise WresdynError("network_tiles or network_layers, not both: each runs the whole step")
+        if self.network_tiles and not self.fused_network:
+            raise WresdynError("network_tiles runs the fused network's steps: set fused_network too")

@@ -24,7 +24,6 @@ import torch
 import torch.nn as nn
 
 from .residual import MLPResidualPolicy, residual_grad
-from .layer_mlp import LayerMLP
 from .tile_mlp import TileMLP
 
 __all__ = ["FusedMLPRollout", "fusable"]
@@ -72,8 +71,7 @@ class FusedMLPRollout(nn.Module):
 
     With ``tiles`` (float32 networks) each step's forward and backward run as one Warp tile kernel each
     (:class:`~wresdyn.learn.tile_mlp.TileMLP`, split as ``tile_block`` says, a
-    :class:`~wresdyn.learn.tile_mlp.TileBlock`; where ``None``, ``$WRESDYN_TILE_BLOCK``'s or the defaults), with
-    ``layers`` as one plain Warp kernel per layer each way (:class:`~wresdyn.learn.layer_mlp.LayerMLP`), instead of
+    :class:`~wresdyn.learn.tile_mlp.TileBlock`; where ``None``, ``$WRESDYN_TILE_BLOCK``'s or the defaults) instead of
     the torch operations below: the same buffers, equal to float32 rounding.
 
     Example::
@@ -85,7 +83,7 @@ class FusedMLPRollout(nn.Module):
         fused.finish()
     """
 
-    def __init__(self, policy, tiles: bool = False, tile_block=None, layers: bool = False) -> None:
+    def __init__(self, policy, tiles: bool = False, tile_block=None) -> None:
         super().__init__()
         why = fusable(policy)
         if why is not None:
@@ -99,14 +97,12 @@ class FusedMLPRollout(nn.Module):
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
         self._x = self._z = self._g = self._mask = None
-        self._kernels = None
-        if tiles and layers:
-            raise ValueError("tiles or layers, not both: each runs the whole step")
-        if tiles or layers:
+        self._tiles = None
+        if tiles:
             if policy.obs_mean.dtype != torch.float32:
-                raise ValueError("the Warp kernels run float32 networks")
+                raise ValueError("the tile kernels run float32 networks")
             dims = [self.linears[0].in_features] + [m.out_features for m in self.linears]
-            self._kernels = TileMLP(dims, self.alpha, dev, tile_block) if tiles else LayerMLP(dims, self.alpha, dev)
+            self._tiles = TileMLP(dims, self.alpha, dev, tile_block)
 
     @property
     def scale(self) -> torch.Tensor:
@@ -128,8 +124,8 @@ class FusedMLPRollout(nn.Module):
         self._g = [torch.zeros(steps, batch, d, device=w.device, dtype=w.dtype) for d in outs]
         self._mask = torch.empty(steps, batch, outs[-1], device=w.device, dtype=torch.bool)
         self._steps, self._k = steps, 0
-        if self._kernels is not None:
-            self._kernels.bind(self.policy, self.linears, self._x, self._z, self._g, self._mask)
+        if self._tiles is not None:
+            self._tiles.bind(self.policy, self.linears, self._x, self._z, self._g, self._mask)
 
     def reset(self) -> None:
         """The rollout's start (:func:`wresdyn.sim.rollout` calls it): the next call is step 0."""
@@ -151,8 +147,8 @@ class FusedMLPRollout(nn.Module):
         return _Step.apply(obs, self._token, self, self._k - 1, both, out)
 
     def _forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
-        if self._kernels is not None:
-            return self._kernels.forward(obs, k, out, both)
+        if self._tiles is not None:
+            return self._tiles.forward(obs, k, out, both)
         r = self._torch_forward(obs, k, out)
         return (r, r / self.policy.scale) if both else r
 
@@ -177,8 +173,8 @@ class FusedMLPRollout(nn.Module):
         return torch.mul(c, p.scale, out=out).view(c.shape)
 
     def _backward(self, grad, g_action, k: int, need_obs: bool) -> torch.Tensor | None:
-        if self._kernels is not None:
-            return self._kernels.backward(grad, g_action, k, need_obs)
+        if self._tiles is not None:
+            return self._tiles.backward(grad, g_action, k, need_obs)
         p = self.policy
         grad = residual_grad(grad, g_action, p.scale, self._g[-1][k])
         g = torch.where(self._mask[k], grad * p.scale, self._zero, out=self._g[-1][k])
@@ -206,5 +202,5 @@ class FusedMLPRollout(nn.Module):
                     param.grad.add_(new)
         self._x = self._z = self._g = self._mask = None
         self._steps = self._k = 0
-        if self._kernels is not None:
-            self._kernels.bind()
+        if self._tiles is not None:
+            self._tiles.bind()
