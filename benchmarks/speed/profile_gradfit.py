@@ -10,7 +10,7 @@ Warp's kernels as well as torch's); kernels are grouped as the solver's forward 
 memsets, and torch (the residual network, the loss, autograd, Adam). Then ``--repeat`` iterations are timed eagerly
 and replayed from the graph. The graph's wall-clock against the kernels' summed GPU time shows how much of it is
 the GPU's per-node overhead (launch-bound) rather than work. ``--fused`` profiles the opt-in fused MLP path
-(``GradFitConfig.fused_network``); ``--top N`` also lists the N kernels of most GPU time by name, with their count per
+(``GradFitConfig.fused_network``), ``--tiles`` with it its Warp tile kernels (``network_tiles``); ``--top N`` also lists the N kernels of most GPU time by name, with their count per
 step, to show which kernels a further fusion would have to remove.
 """
 
@@ -59,6 +59,7 @@ def main() -> None:
     p.add_argument("--horizon", type=int, default=64)
     p.add_argument("--repeat", type=int, default=20, help="iterations timed per mode")
     p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network: the fused MLP path and Adam")
+    p.add_argument("--tiles", action="store_true", help="GradFitConfig.network_tiles (with --fused): Warp tile kernels")
     p.add_argument("--top", type=int, default=0, help="also list the N kernels of most GPU time by name")
     p.add_argument("--json", default=None)
     args = p.parse_args()
@@ -69,7 +70,7 @@ def main() -> None:
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
     cfg = GradFitConfig(windows=args.windows, horizon=args.horizon, horizon_curriculum=(), device=args.device,
-                        fused_network=args.fused)
+                        fused_network=args.fused, network_tiles=args.tiles)
     train = dataset.split("train")
     policy = build_policy(robot, cfg.residual, *obs_stats(train)).to(args.device)
     sim = Simulator(robot, cfg.windows, 1.0 / dataset.rate_hz, device=args.device, requires_grad=True)
@@ -132,7 +133,7 @@ def main() -> None:
           f"= {100 * busy / g:.0f} % of the graph's time; {1e3 * (g - busy) / total:.1f} us per kernel beyond its work")
     if args.json:
         Path(args.json).write_text(json.dumps({"device": name, "windows": b, "horizon": h, "fused_network": args.fused,
-                                               **rows,
+                                               "network_tiles": args.tiles, **rows,
                                                "kernels_total": total, "gpu_busy_ms": busy}, indent=1))
 
 

@@ -63,6 +63,24 @@ class _Step(torch.autograd.Function):
         return ctx.run._backward(g_r, g_a, ctx.k, ctx.needs_input_grad[0]), None, None, None, None, None
 
 
+class _StateStep(torch.autograd.Function):
+    """:class:`_Step` with the observation formed inside the tile kernel from the rollout's state (q, q̇ and the q̇
+    before, which carry gradients; the first step's q̈, the command and the noise, which do not)."""
+
+    @staticmethod
+    def forward(ctx, q, qd, before, token, run, k, out, rate, cmd, noise, dt):
+        ctx.run, ctx.k, ctx.dt = run, k, dt
+        ctx.set_materialize_grads(False)
+        return run._tiles.forward_state(q, qd, before, rate, cmd, noise, dt, k, out, True)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g_r, g_a=None):
+        needs = ctx.needs_input_grad[:3]
+        grads = ctx.run._tiles.backward_state(g_r, g_a, ctx.k, any(needs), ctx.dt)
+        return (*(g if n else None for g, n in zip(grads, needs)), *[None] * 8)
+
+
 class FusedMLPRollout(nn.Module):
     """Stands in for an :class:`~wresdyn.learn.residual.MLPResidualPolicy` in one differentiable rollout
     (:func:`wresdyn.sim.rollout` with ``grad=True``): :meth:`begin` before it, the rollout's steps (one call each),
@@ -97,6 +115,7 @@ class FusedMLPRollout(nn.Module):
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
         self._x = self._z = self._g = self._mask = None
+        self._ones_row: torch.Tensor | None = None
         self._tiles = None
         if tiles:
             if policy.obs_mean.dtype != torch.float32:
@@ -140,10 +159,26 @@ class FusedMLPRollout(nn.Module):
         residual written into ``out`` where given)."""
         return self._call(obs, True, out)
 
-    def _call(self, obs: torch.Tensor, both: bool, out):
+    @property
+    def takes_state(self) -> bool:
+        """Whether :meth:`residual_and_action_from_state` runs: the tile kernels form the observation themselves."""
+        return self._tiles is not None
+
+    def residual_and_action_from_state(self, q, qd, before, rate, cmd, noise, dt: float, out=None):
+        """:meth:`residual_and_action` of the observation [q, q̇, q̈, q_cmd] + ``noise[k]`` formed inside the tile
+        kernel (:meth:`TileMLP.forward_state <wresdyn.learn.tile_mlp.TileMLP.forward_state>`: ``before`` the q̇ before,
+        ``None`` at the window's first step, whose q̈ is ``rate``), where a rollout would run four torch kernels to
+        form it and autograd four more to take it apart; the gradients reach q, q̇ and ``before``."""
+        self._next()
+        return _StateStep.apply(q, qd, before, self._token, self, self._k - 1, out, rate, cmd, noise, dt)
+
+    def _next(self) -> None:
         if self._x is None or self._k >= self._steps:
             raise RuntimeError("FusedMLPRollout: call begin(steps, batch) before each rollout, one call per step")
         self._k += 1
+
+    def _call(self, obs: torch.Tensor, both: bool, out):
+        self._next()
         return _Step.apply(obs, self._token, self, self._k - 1, both, out)
 
     def _forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
@@ -187,15 +222,28 @@ class FusedMLPRollout(nn.Module):
                                                       grad_input=self._g[i - 1][k])
         return None
 
+    def _ones(self, batch: int) -> torch.Tensor:
+        """A (1, ``batch``) row of ones, made once per size (outside a captured graph's memory: the first, eager
+        iteration makes it)."""
+        if self._ones_row is None or self._ones_row.shape[1] != batch:
+            self._ones_row = torch.ones(1, batch, device=self.policy.obs_mean.device, dtype=self.policy.obs_mean.dtype)
+        return self._ones_row
+
     def finish(self) -> None:
         """After the backward pass: each layer's weight gradient as one GEMM over the steps' and windows' rows, each
         bias's as one sum, added to the parameters' ``.grad`` (set where ``None``); the buffers are released."""
         if self._x is None or self._k != self._steps:
             raise RuntimeError(f"FusedMLPRollout.finish after {self._k} of {self._steps} steps")
+        ones = self._ones(self._x[0].shape[1])
         for lin, x, g in zip(self.linears, self._x, self._g):
-            g = g.view(-1, g.shape[-1])
-            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x): here over all rows at once
-            for param, new in ((lin.weight, torch.mm(g.t(), x.view(-1, x.shape[-1]))), (lin.bias, g.sum(0))):
+            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x) and its bias's g.sum(0): here one batched
+            # GEMM over the steps (H products over B rows, summed), where one GEMM over all H·B rows has a few output
+            # tiles for a whole GPU (89 µs for the first layer at H = 64, B = 1024 on an H200,
+            # benchmarks/results/speed/h200_20261201c/), and the bias's as a product with ones, where the column sum
+            # over H·B rows took 59 µs there
+            weight = torch.bmm(g.transpose(1, 2), x).sum(0)
+            bias = torch.matmul(ones, g).sum(0).view(-1)
+            for param, new in ((lin.weight, weight), (lin.bias, bias)):
                 if param.grad is None:
                     param.grad = new
                 else:

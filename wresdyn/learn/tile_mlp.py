@@ -84,6 +84,12 @@ def _normalise(o: float, m: float, s: float):
 
 
 @wp.func
+def _rate(v: float, before: float, dt: float):
+    # the rollout's q̈ = (q̇ - q̇ before) / dt, as its torch operations
+    return (v - before) / dt
+
+
+@wp.func
 def _elu(z: float):
     if z > 0.0:
         return z
@@ -144,14 +150,27 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
     a1, a2, a3, u3 = f32.format(1), f32.format(2), f32.format(3), "wp.array3d(dtype=wp.uint8)"
     ws = [f"w{i}: {a2}, b{i}: {a1}" for i in range(n)]
     xs, zs, gs = ([f"{c}{i}: {a3}" for i in range(m)] for c, m in (("x", n), ("z", n - 1), ("g", n)))
-    fwd = [f"def tile_mlp_forward(obs: {a2}, k: int, mean: {a1}, std: {a1}, scale: {a1}, both: int, "
+    nj = dims[0] // 4  # the observation's four pieces [q, q̇, q̈, q_cmd], a joint each
+    fwd = [f"def tile_mlp_forward(s_q: {a2}, s_qd: {a2}, s_prev: {a2}, s_rate: {a2}, first: int, s_cmd: {a2}, "
+           f"noise: {a3}, has_noise: int, dt: float, k: int, mean: {a1}, std: {a1}, scale: {a1}, both: int, "
            + ", ".join(ws + xs + zs) + f", mask: {u3}, out: {a2}, action: {a2}):",
            "r0 = wp.tid() * TB",
-           f"o = wp.tile_load(obs, shape=(TB, {p[0]}), offset=(r0, 0))",
-           f"mu = wp.tile_broadcast(wp.tile_load(mean, shape=({p[0]},)), shape=(TB, {p[0]}))",
-           f"sd = wp.tile_broadcast(wp.tile_load(std, shape=({p[0]},)), shape=(TB, {p[0]}))",
-           "x = wp.tile_map(_normalise, o, mu, sd)",
-           "wp.tile_store(x0[k], x, offset=(r0, 0))"]
+           f"x = wp.tile_zeros(shape=(TB, {p[0]}), dtype=float, storage='shared')",
+           f"o0 = wp.tile_load(s_q, shape=(TB, {nj}), offset=(r0, 0))",
+           f"o1 = wp.tile_load(s_qd, shape=(TB, {nj}), offset=(r0, 0))",
+           f"o2 = wp.tile_load(s_rate, shape=(TB, {nj}), offset=(r0, 0))",  # the first step's recorded q̈
+           "if first == 0:",  # later steps: the rollout's (q̇ - q̇ before) / dt
+           f"    o2 = wp.tile_map(_rate, o1, wp.tile_load(s_prev, shape=(TB, {nj}), offset=(r0, 0)), "
+           f"wp.tile_full(shape=(TB, {nj}), value=dt, dtype=float))",
+           f"o3 = wp.tile_load(s_cmd, shape=(TB, {nj}), offset=(r0, 0))"]
+    for i in range(4):
+        fwd += ["if has_noise != 0:",
+                f"    o{i} = wp.tile_map(wp.add, o{i}, "
+                f"wp.tile_load(noise[k], shape=(TB, {nj}), offset=(r0, {i * nj})))",
+                f"mu = wp.tile_broadcast(wp.tile_load(mean, shape=({nj},), offset=({i * nj},)), shape=(TB, {nj}))",
+                f"sd = wp.tile_broadcast(wp.tile_load(std, shape=({nj},), offset=({i * nj},)), shape=(TB, {nj}))",
+                f"wp.tile_assign(x, wp.tile_map(_normalise, o{i}, mu, sd), offset=(0, {i * nj}))"]
+    fwd.append("wp.tile_store(x0[k], x, offset=(r0, 0))")
     for i in range(n):
         fwd += _matmul_lines("x", f"w{i}", p[i], p[i + 1], chunk, True)
         fwd.append(f"y = acc_w{i} + wp.tile_broadcast(wp.tile_load(b{i}, shape=({p[i + 1]},)), "
@@ -166,7 +185,8 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
             "if both != 0:",
             "    wp.tile_store(action, wp.tile_map(wp.div, r, s), offset=(r0, 0))"]
     bwd = [f"def tile_mlp_backward(g_r: {a2}, g_a: {a2}, k: int, scale: {a1}, std: {a1}, need_obs: int, "
-           + ", ".join([f"w{i}: {a2}" for i in range(n)] + zs + gs) + f", mask: {u3}, g_obs: {a2}):",
+           + ", ".join([f"w{i}: {a2}" for i in range(n)] + zs + gs)
+           + f", mask: {u3}, combine: int, dt: float, " + ", ".join(f"o{i}: {a2}" for i in range(4)) + "):",
            "r0 = wp.tid() * TB",
            f"s = wp.tile_broadcast(wp.tile_load(scale, shape=({p[n]},)), shape=(TB, {p[n]}))",
            f"gr = wp.tile_load(g_r, shape=(TB, {p[n]}), offset=(r0, 0))",
@@ -182,7 +202,14 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
     # the normalisation's backward: sub passes the gradient through, div divides by std
     bwd += ["if need_obs != 0:"] + ["    " + line for line in _matmul_lines("g", "w0", p[1], p[0], chunk, False)]
     bwd += [f"    sd = wp.tile_broadcast(wp.tile_load(std, shape=({p[0]},)), shape=(TB, {p[0]}))",
-            "    wp.tile_store(g_obs, wp.tile_map(wp.div, acc_w0, sd), offset=(r0, 0))"]
+            "    go = wp.tile_map(wp.div, acc_w0, sd)"]
+    bwd += [f"    gp{i} = wp.tile_view(go, offset=(0, {i * nj}), shape=(TB, {nj}))" for i in range(4)]
+    # combine: the gradients of the state the pieces came from (q, q̇, the q̇ before; q̈ = (q̇ - q̇ before) / dt)
+    bwd += ["    wp.tile_store(o0, gp0, offset=(r0, 0))", "    if combine != 0:",
+            f"        g2d = wp.tile_map(wp.div, gp2, wp.tile_full(shape=(TB, {nj}), value=dt, dtype=float))",
+            "        wp.tile_store(o1, wp.tile_map(wp.add, gp1, g2d), offset=(r0, 0))",
+            "        wp.tile_store(o2, wp.tile_map(wp.neg, g2d), offset=(r0, 0))", "    else:"]
+    bwd += [f"        wp.tile_store(o{i}, gp{i}, offset=(r0, 0))" for i in (1, 2, 3)]
     body = lambda lines: "\n".join([lines[0]] + ["    " + line for line in lines[1:]])  # noqa: E731
     return body(fwd), body(bwd)
 
@@ -233,6 +260,7 @@ class TileMLP:
                                                              block.mathdx)
         self.device = wp.device_from_torch(device)
         self._empty = _wp(torch.zeros(0, dims[-1], device=device))
+        self._empty3 = _wp(torch.zeros(0, 0, 0, device=device))
         self.torch_device = torch.device(device)
         self._bufs = self._policy = None
         self._streams: dict[int, tuple] = {}
@@ -260,25 +288,53 @@ class TileMLP:
         return torch_stream_for_warp(self.device.ordinal, self._streams) if self.device.is_cuda else None
 
     def forward(self, obs: torch.Tensor, k: int, out: torch.Tensor | None, both: bool):
-        """Step ``k``'s residual (into ``out`` where given) and with ``both`` its action residual / scale."""
+        """Step ``k``'s residual (into ``out`` where given) and with ``both`` its action residual / scale, of the raw
+        observation ``obs`` (N, 4n)."""
+        q, qd, rate, cmd = self._pieces(obs)
+        return self.forward_state(q, qd, None, rate, cmd, None, 1.0, k, out, both)
+
+    def forward_state(self, q, qd, before, rate, cmd, noise, dt: float, k: int, out: torch.Tensor | None, both: bool):
+        """:meth:`forward` of the observation [q, q̇, q̈, q_cmd] (+ ``noise[k]``) the kernel forms from the rollout's
+        tensors: q, q̇ (N, n), the q̇ before (``None``: the window's first step, whose q̈ is ``rate``, else
+        q̈ = (q̇ - before) / ``dt``), the command (N, n) and the scaled noise (H, N, 4n) or ``None``."""
         x, z, _, mask = self._bufs
         params, _, mean, std, scale = self._policy
-        batch = obs.shape[0]
-        r = torch.empty(batch, self.dims[-1], device=obs.device, dtype=torch.float32) if out is None else out
+        batch, first = q.shape[0], before is None
+        r = torch.empty(batch, self.dims[-1], device=q.device, dtype=torch.float32) if out is None else out
         a = torch.empty_like(r) if both else r
-        self._launch(self.forward_kernel, batch, [_wp(obs), k, mean, std, scale, int(both), *params, *x, *z, mask,
-                                                  _wp(r), _wp(a)])
+        pieces = [_wp(q), _wp(qd), self._empty if first else _wp(before), _wp(rate) if first else self._empty,
+                  int(first), _wp(cmd), self._empty3 if noise is None else _wp(noise), int(noise is not None)]
+        self._launch(self.forward_kernel, batch, [*pieces, float(dt), k, mean, std, scale, int(both), *params, *x, *z,
+                                                  mask, _wp(r), _wp(a)])
         r = r.view(r.shape)  # a fresh view as the step's output: autograd marks it, not the tensor handed in
         return (r, a) if both else r
+
+    def _pieces(self, t: torch.Tensor) -> list[torch.Tensor]:
+        n = self.dims[0] // 4
+        return [t[:, i * n:(i + 1) * n] for i in range(4)]
 
     def backward(self, g_r, g_a, k: int, need_obs: bool) -> torch.Tensor | None:
         """The gradients at step ``k``'s layer outputs into the rollout's buffers, and the observation's gradient when
         ``need_obs``."""
+        g_obs = torch.empty(self._batch(), self.dims[0], device=self.torch_device) if need_obs else None
+        self._backward(g_r, g_a, k, need_obs, False, 1.0, self._pieces(g_obs) if need_obs else [None] * 4)
+        return g_obs
+
+    def backward_state(self, g_r, g_a, k: int, need: bool, dt: float):
+        """:meth:`backward` of :meth:`forward_state`: the gradients of q, q̇ and the q̇ before, (N, n) each (``None``
+        without ``need``)."""
+        outs = [torch.empty(self._batch(), self.dims[0] // 4, device=self.torch_device) for _ in range(3)] if need \
+            else [None] * 3
+        self._backward(g_r, g_a, k, need, True, dt, outs + [None])
+        return tuple(outs)
+
+    def _batch(self) -> int:
+        return self._bufs[2][0].shape[1]
+
+    def _backward(self, g_r, g_a, k: int, need: bool, combine: bool, dt: float, outs: list) -> None:
         _, z, g, mask = self._bufs
         _, weights, _, std, scale = self._policy
-        batch = g[0].shape[1]
-        g_obs = torch.empty(batch, self.dims[0], device=self.torch_device, dtype=torch.float32) if need_obs else None
         grads = [self._empty if t is None else _wp(t) for t in (g_r, g_a)]
-        self._launch(self.backward_kernel, batch, [*grads, k, scale, std, int(need_obs), *weights, *z, *g, mask,
-                                                   _wp(g_obs) if need_obs else self._empty])
-        return g_obs
+        self._launch(self.backward_kernel, self._batch(), [*grads, k, scale, std, int(need), *weights, *z, *g, mask,
+                                                           int(combine), float(dt),
+                                                           *(self._empty if t is None else _wp(t) for t in outs)])

@@ -156,9 +156,17 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     both = getattr(policy, "residual_and_action", None) if scale is not None else None
     forces = step_forces(sim, steps) if grad and both is not None and kind == "torque" and policy_worlds is None \
         and pdev in (None, sim.device) else None
+    # a policy that forms its observation from the state itself (the tile kernels), where its torque goes in place
+    state = forces is not None and getattr(policy, "takes_state", False) and (obs_noise == 0.0 or noise is not None)
+    before = None  # q̇ of the step before, for such a policy's q̈
     for k in range(steps):
         res = None
-        if policy is not None:
+        if state:
+            r, a = policy.residual_and_action_from_state(q, qd, before, qdd, window.cmd[:, k],
+                                                         noise if obs_noise > 0.0 else None, sim.dt, forces[k])
+            actions.append(a)
+            res = r
+        elif policy is not None:
             # all worlds: the tensors themselves, not a full slice of each, whose backward would allocate and fill a
             # copy of every step's gradient (three per step)
             obs = (observation(q, qd, qdd, window.cmd[:, k]) if policy_worlds is None
@@ -200,13 +208,13 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
                     q_new = torch.where(dead[:, None], q, q_new)
                     qd_new = torch.where(dead[:, None], torch.zeros_like(qd_new), qd_new)
                     sim.set_state(dead.nonzero().squeeze(-1), q_new[dead], qd_new[dead])
-        if policy is not None:  # the policy's observation is what reads it
+        if policy is not None and not state:  # the policy's observation is what reads it
             qdd = (qd_new - qd) / sim.dt
-        q, qd = q_new, qd_new
+        q, qd, before = q_new, qd_new, qd
         qs.append(q)
         qds.append(qd)
         if grad and truncation and (k + 1) % truncation == 0:
-            q, qd, qdd = q.detach(), qd.detach(), qdd.detach()
+            q, qd, qdd, before = q.detach(), qd.detach(), qdd.detach(), before.detach()
             if isinstance(getattr(policy, "hidden", None), torch.Tensor):
                 policy.hidden = policy.hidden.detach()
     return Rollout(torch.stack(qs, 1), torch.stack(qds, 1), torch.stack(actions, 1) if actions else None, diverged_at)
