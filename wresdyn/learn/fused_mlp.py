@@ -115,7 +115,6 @@ class FusedMLPRollout(nn.Module):
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
         self._x = self._z = self._g = self._mask = None
-        self._ones_row: torch.Tensor | None = None
         self._tiles = None
         if tiles:
             if policy.obs_mean.dtype != torch.float32:
@@ -222,28 +221,15 @@ class FusedMLPRollout(nn.Module):
                                                       grad_input=self._g[i - 1][k])
         return None
 
-    def _ones(self, batch: int) -> torch.Tensor:
-        """A (1, ``batch``) row of ones, made once per size (outside a captured graph's memory: the first, eager
-        iteration makes it)."""
-        if self._ones_row is None or self._ones_row.shape[1] != batch:
-            self._ones_row = torch.ones(1, batch, device=self.policy.obs_mean.device, dtype=self.policy.obs_mean.dtype)
-        return self._ones_row
-
     def finish(self) -> None:
         """After the backward pass: each layer's weight gradient as one GEMM over the steps' and windows' rows, each
         bias's as one sum, added to the parameters' ``.grad`` (set where ``None``); the buffers are released."""
         if self._x is None or self._k != self._steps:
             raise RuntimeError(f"FusedMLPRollout.finish after {self._k} of {self._steps} steps")
-        ones = self._ones(self._x[0].shape[1])
         for lin, x, g in zip(self.linears, self._x, self._g):
-            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x) and its bias's g.sum(0): here one batched
-            # GEMM over the steps (H products over B rows, summed), where one GEMM over all H·B rows has a few output
-            # tiles for a whole GPU (89 µs for the first layer at H = 64, B = 1024 on an H200,
-            # benchmarks/results/speed/h200_20261201c/), and the bias's as a product with ones, where the column sum
-            # over H·B rows took 59 µs there
-            weight = torch.bmm(g.transpose(1, 2), x).sum(0)
-            bias = torch.matmul(ones, g).sum(0).view(-1)
-            for param, new in ((lin.weight, weight), (lin.bias, bias)):
+            g = g.view(-1, g.shape[-1])
+            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x): here over all rows at once
+            for param, new in ((lin.weight, torch.mm(g.t(), x.view(-1, x.shape[-1]))), (lin.bias, g.sum(0))):
                 if param.grad is None:
                     param.grad = new
                 else:

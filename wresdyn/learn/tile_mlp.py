@@ -130,16 +130,17 @@ def _pad(d: int, chunk: int) -> int:
     return -(-d // chunk) * chunk
 
 
-def _matmul_lines(x: str, w: str, n_in: int, n_out: int, chunk: int, transpose: bool) -> list[str]:
-    """``acc_<w>`` = x @ w.T (``transpose``, w (n_out, n_in)) or x @ w (w (n_in, n_out)), reading w in chunks of the
-    reduction dimension n_in."""
-    shape, off = ((n_out, chunk), "(0, c * KC)") if transpose else ((chunk, n_out), "(c * KC, 0)")
-    wt = f"wp.tile_transpose(wc_{w})" if transpose else f"wc_{w}"
+def _matmul_lines(x: str, w: str, n_in: int, n_out: int, chunk: int) -> list[str]:
+    """``acc_<w>`` = x @ w, w (n_in, n_out), reading w in chunks of ``chunk`` rows (the reduction dimension n_in).
+
+    w is read as stored, never through a transposed view: the scalar GEMM's threads read adjacent columns of a chunk,
+    adjacent shared-memory banks, where through a transposed view of an (n_out, chunk) chunk they read addresses a
+    multiple of 32 floats apart, one bank, one at a time."""
     # one name per product: Warp merges a name assigned in a branch with its value before, which needs one shape
     return [f"acc_{w} = wp.tile_zeros(shape=(TB, {n_out}), dtype=float)",
             f"for c in range({n_in // chunk}):",
-            f"    wc_{w} = wp.tile_load({w}, shape={shape}, offset={off}, storage='shared')",
-            f"    wp.tile_matmul(wp.tile_view({x}, offset=(0, c * KC), shape=(TB, KC)), {wt}, acc_{w})"]
+            f"    wc_{w} = wp.tile_load({w}, shape=({chunk}, {n_out}), offset=(c * KC, 0), storage='shared')",
+            f"    wp.tile_matmul(wp.tile_view({x}, offset=(0, c * KC), shape=(TB, KC)), wc_{w}, acc_{w})"]
 
 
 def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
@@ -148,7 +149,7 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
     n = len(dims) - 1
     f32 = "wp.array{}d(dtype=float)"
     a1, a2, a3, u3 = f32.format(1), f32.format(2), f32.format(3), "wp.array3d(dtype=wp.uint8)"
-    ws = [f"w{i}: {a2}, b{i}: {a1}" for i in range(n)]
+    ws = [f"wt{i}: {a2}, b{i}: {a1}" for i in range(n)]  # each weight transposed, (in, out)
     xs, zs, gs = ([f"{c}{i}: {a3}" for i in range(m)] for c, m in (("x", n), ("z", n - 1), ("g", n)))
     nj = dims[0] // 4  # the observation's four pieces [q, q̇, q̈, q_cmd], a joint each
     fwd = [f"def tile_mlp_forward(s_q: {a2}, s_qd: {a2}, s_prev: {a2}, s_rate: {a2}, first: int, s_cmd: {a2}, "
@@ -172,8 +173,8 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
                 f"wp.tile_assign(x, wp.tile_map(_normalise, o{i}, mu, sd), offset=(0, {i * nj}))"]
     fwd.append("wp.tile_store(x0[k], x, offset=(r0, 0))")
     for i in range(n):
-        fwd += _matmul_lines("x", f"w{i}", p[i], p[i + 1], chunk, True)
-        fwd.append(f"y = acc_w{i} + wp.tile_broadcast(wp.tile_load(b{i}, shape=({p[i + 1]},)), "
+        fwd += _matmul_lines("x", f"wt{i}", p[i], p[i + 1], chunk)
+        fwd.append(f"y = acc_wt{i} + wp.tile_broadcast(wp.tile_load(b{i}, shape=({p[i + 1]},)), "
                    f"shape=(TB, {p[i + 1]}))")
         if i < n - 1:
             fwd += [f"wp.tile_store(z{i}[k], y, offset=(r0, 0))", "x = wp.tile_map(_elu, y)",
@@ -195,12 +196,12 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
            "g = wp.tile_map(_out_grad, gr, ga, s, m)",
            f"wp.tile_store(g{n - 1}[k], g, offset=(r0, 0))"]
     for i in range(n - 1, 0, -1):
-        bwd += _matmul_lines("g", f"w{i}", p[i + 1], p[i], chunk, False)
+        bwd += _matmul_lines("g", f"w{i}", p[i + 1], p[i], chunk)
         bwd += [f"zt = wp.tile_load(z{i - 1}[k], shape=(TB, {p[i]}), offset=(r0, 0))",
                 f"g = wp.tile_map(_elu_backward, acc_w{i}, zt)",
                 f"wp.tile_store(g{i - 1}[k], g, offset=(r0, 0))"]
     # the normalisation's backward: sub passes the gradient through, div divides by std
-    bwd += ["if need_obs != 0:"] + ["    " + line for line in _matmul_lines("g", "w0", p[1], p[0], chunk, False)]
+    bwd += ["if need_obs != 0:"] + ["    " + line for line in _matmul_lines("g", "w0", p[1], p[0], chunk)]
     bwd += [f"    sd = wp.tile_broadcast(wp.tile_load(std, shape=({p[0]},)), shape=(TB, {p[0]}))",
             "    go = wp.tile_map(wp.div, acc_w0, sd)"]
     bwd += [f"    gp{i} = wp.tile_view(go, offset=(0, {i * nj}), shape=(TB, {nj}))" for i in range(4)]
@@ -262,17 +263,20 @@ class TileMLP:
         self._empty = _wp(torch.zeros(0, dims[-1], device=device))
         self._empty3 = _wp(torch.zeros(0, 0, 0, device=device))
         self.torch_device = torch.device(device)
-        self._bufs = self._policy = None
+        self._bufs = self._policy = self._wt = None
         self._streams: dict[int, tuple] = {}
 
     def bind(self, policy=None, linears=(), x=(), z=(), g=(), mask: torch.Tensor | None = None) -> None:
         """The rollout's policy, its linear layers and (H, B, ·) buffers (:meth:`FusedMLPRollout.begin`), viewed for
         Warp once per rollout, not at every step; no ``policy``: let them go."""
         if policy is None:
-            self._bufs = self._policy = None
+            self._bufs = self._policy = self._wt = None
             return
         self._bufs = [_wp(t) for t in x], [_wp(t) for t in z], [_wp(t) for t in g], _wp(mask.view(torch.uint8))
-        self._policy = ([_wp(t) for lin in linears for t in (lin.weight, lin.bias)],
+        # the forward reads each weight transposed (_matmul_lines): copied here, once per rollout (a captured
+        # iteration copies the weights Adam left)
+        self._wt = [lin.weight.detach().t().contiguous() for lin in linears]
+        self._policy = ([_wp(t) for wt, lin in zip(self._wt, linears) for t in (wt, lin.bias)],
                         [_wp(lin.weight) for lin in linears],
                         *(_wp(t) for t in (policy.obs_mean, policy.obs_std, policy.scale)))
 
