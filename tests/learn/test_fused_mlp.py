@@ -9,6 +9,7 @@ float32 ulps, 1.2e-7 each, times the largest entries)."""
 import pytest
 import torch
 
+from wresdyn.learn import fused_mlp
 from wresdyn.learn.fused_mlp import FusedMLPRollout, fusable
 from wresdyn.learn.residual import EluMLP, GRUResidualPolicy, MLPResidualPolicy
 
@@ -52,8 +53,10 @@ def _chain(policy, fused: bool, dtype, into=None, both=False):
     return actions.detach(), s0.grad, {k: p.grad.clone() for k, p in policy.named_parameters()}
 
 
+@pytest.mark.parametrize("split", [False, True])  # the weights' gradients as one product over all rows, or per step
 @pytest.mark.parametrize("dtype, rtol", [(torch.float64, 1e-12), (torch.float32, 1e-5)])
-def test_fused_steps_give_the_plain_values_and_gradients(dtype, rtol):
+def test_fused_steps_give_the_plain_values_and_gradients(dtype, rtol, split, monkeypatch):
+    monkeypatch.setattr(fused_mlp, "SPLIT_ROWS", H * B if split else H * B + 1)
     plain, fused = _chain(_policy(dtype), False, dtype), _chain(_policy(dtype), True, dtype)
     assert ((plain[0].abs() - _policy(dtype).scale).abs() < 1e-6).any(), "the clip never cut: the test misses its mask"
     assert torch.equal(plain[0], fused[0])

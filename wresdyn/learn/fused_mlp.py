@@ -26,7 +26,11 @@ import torch.nn as nn
 from .residual import MLPResidualPolicy, residual_grad
 from .tile_mlp import TileMLP
 
-__all__ = ["FusedMLPRollout", "fusable"]
+__all__ = ["FusedMLPRollout", "SPLIT_ROWS", "fusable"]
+
+SPLIT_ROWS = 32768
+"""Rows (steps x windows) from which :meth:`FusedMLPRollout.finish` forms each weight's gradient as one product per
+step, summed (at 1024 windows: windows of 32 and 64 steps)."""
 
 
 def fusable(policy) -> str | None:
@@ -115,6 +119,7 @@ class FusedMLPRollout(nn.Module):
         self._zero = torch.zeros((), device=dev)  # clamp's backward writes this 0-dim zero where the clip holds
         self._steps, self._k = 0, 0
         self._x = self._z = self._g = self._mask = None
+        self._ones: dict[int, torch.Tensor] = {}  # the bias gradients' vectors of ones, per row count
         self._tiles = None
         if tiles:
             if policy.obs_mean.dtype != torch.float32:
@@ -226,10 +231,19 @@ class FusedMLPRollout(nn.Module):
         bias's as one sum, added to the parameters' ``.grad`` (set where ``None``); the buffers are released."""
         if self._x is None or self._k != self._steps:
             raise RuntimeError(f"FusedMLPRollout.finish after {self._k} of {self._steps} steps")
+        rows = self._x[0].shape[0] * self._x[0].shape[1]
+        ones = self._ones.get(rows)
+        if ones is None:  # one per row count, made by the first (eager) iteration at it and kept: a graph reads it
+            ones = self._ones[rows] = torch.ones(rows, device=self._x[0].device, dtype=self._x[0].dtype)
         for lin, x, g in zip(self.linears, self._x, self._g):
-            g = g.view(-1, g.shape[-1])
-            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x): here over all rows at once
-            for param, new in ((lin.weight, torch.mm(g.t(), x.view(-1, x.shape[-1]))), (lin.bias, g.sum(0))):
+            # autograd's weight gradient of addmm(b, x, W.t()) is mm(g.t(), x), its bias's g.sum(0): here over all
+            # rows at once. From SPLIT_ROWS rows on the weight's as H products of B rows, summed, where one product
+            # over all rows has a few output tiles for a whole GPU (89 µs for the first layer at H = 64, B = 1024 on an
+            # H200, benchmarks/results/speed/h200_20261201c/); the bias's as a matrix-vector product, where torch's
+            # column sum over those rows took 58 µs
+            weight = torch.bmm(g.transpose(1, 2), x).sum(0) if rows >= SPLIT_ROWS else \
+                torch.mm(g.view(rows, -1).t(), x.view(rows, -1))
+            for param, new in ((lin.weight, weight), (lin.bias, torch.mv(g.view(rows, -1).t(), ones))):
                 if param.grad is None:
                     param.grad = new
                 else:
