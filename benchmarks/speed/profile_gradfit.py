@@ -10,8 +10,9 @@ Warp's kernels as well as torch's); kernels are grouped as the solver's forward 
 memsets, and torch (the residual network, the loss, autograd, Adam). Then ``--repeat`` iterations are timed eagerly
 and replayed from the graph. The graph's wall-clock against the kernels' summed GPU time shows how much of it is
 the GPU's per-node overhead (launch-bound) rather than work. ``--fused`` profiles the opt-in fused MLP path
-(``GradFitConfig.fused_network``), ``--tiles`` with it its Warp tile kernels (``network_tiles``); ``--top N`` also lists the N kernels of most GPU time by name, with their count per
-step, to show which kernels a further fusion would have to remove.
+(``GradFitConfig.fused_network``), ``--tiles`` with it its Warp tile kernels (``network_tiles``); ``--top N`` also
+lists the N kernels of most GPU time by name, with their count per step, to show which kernels a further fusion would
+have to remove.
 """
 
 from __future__ import annotations

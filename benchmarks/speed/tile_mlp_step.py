@@ -117,7 +117,7 @@ def main(argv=None) -> dict:
     p.add_argument("--horizon", type=int, default=64, help="steps per timed rollout (the curriculum's longest)")
     p.add_argument("--repeats", type=int, default=20)
     p.add_argument("--blocks", default="",
-                   help="comma list of ROWSxCHUNKxTHREADS (windows per block, weight columns read at a time, threads "
+                   help="comma list of ROWSxCHUNKxTHREADS (windows per block, weight rows read at a time, threads "
                         "per block), each with suffix 'm' for MathDx's GEMMs (a long first compile); default: the "
                         "split the fit runs ($WRESDYN_TILE_BLOCK's or TileBlock's defaults)")
     p.add_argument("--json", default="")

@@ -9,13 +9,16 @@ kernels a step at ~2.4 µs each). :class:`FusedMLPRollout` runs the same network
 
 * the parameters' gradients formed once per iteration: each step writes its layers' inputs and the gradients at their
   outputs into (H, B, ·) buffers, and :meth:`FusedMLPRollout.finish` turns them into each weight's gradient with one
-  GEMM over all H·B rows and each bias's with one sum (8 kernels an iteration instead of 16 a step);
+  GEMM over all H·B rows (from :data:`SPLIT_ROWS` rows one per step, summed) and each bias's with one matrix-vector
+  product (8 to 12 kernels an iteration instead of 16 a step);
 * the clip's mask kept from the forward pass (one comparison), its backward one ``where``.
 
 The forward values, the residual and the gradient each step passes back to the simulated state are the plain path's
 operations on the same operands (equal bit for bit on the CPU, ``tests/learn/test_fused_mlp.py``). The parameters'
 gradients are the same sums in another order (one GEMM over H·B rows instead of H GEMMs over B rows added up step by
-step), so they agree with autograd's to float32 rounding only; that is why the path is opt-in.
+step), so they agree with autograd's to float32 rounding only; that is why the path is opt-in. With the tile kernels
+(``tiles``) a rollout hands the state itself (:meth:`FusedMLPRollout.residual_and_action_from_state`), from which the
+forward kernel forms the observation.
 """
 
 from __future__ import annotations

@@ -5,9 +5,12 @@ clip's mask and the scale; in the backward pass the gradients' sum, the mask, a 
 each ~2-3 µs of launch latency whatever its size. :class:`TileMLP` runs the forward as one kernel and the backward as
 one: a block of ``rows`` windows carries its activations through every layer in shared memory (Warp's tile API,
 ``wp.tile_matmul``: Warp's own tile GEMM, or MathDx's with :attr:`TileBlock.mathdx`). Weights larger than a block's
-shared memory (256x128 float32 is 128 KB) are read in chunks of ``chunk`` columns of the reduction dimension; every
-tile dimension is padded to a multiple of ``chunk`` (loads out of bounds read zeros, stores out of bounds are
-skipped), so the padding adds zeros to each sum.
+shared memory (256x128 float32 is 128 KB) are read in chunks of ``chunk`` rows of the reduction dimension, as stored
+(the forward reads each weight from a transposed copy); every tile dimension is padded to a multiple of ``chunk``
+(loads out of bounds read zeros, stores out of bounds are skipped), so the padding adds zeros to each sum. The forward
+forms the observation [q, q̇, q̈, q_cmd] (+ noise) from the rollout's tensors (:meth:`TileMLP.forward_state`), and the
+backward hands the gradients back to them (:meth:`TileMLP.backward_state`): a rollout runs no kernel of its own for
+them.
 
 The kernels write the per-step buffers :meth:`FusedMLPRollout.finish` reads (each layer's input, each hidden layer's
 pre-activation, the gradients at the layer outputs, the clip's mask) and compute the same operations as the torch
@@ -44,8 +47,9 @@ class TileBlock:
     (one step forward + backward replayed from a CUDA graph: 91 µs against 166 at 16 rows and 128 threads;
     ``benchmarks/results/speed/h200_20261201f/``): fewer rows a block put more of the GPU's multiprocessors to work."""
     chunk: int = 32
-    """Columns of the reduction dimension read from a weight at a time; every tile dimension is padded to a multiple
-    of it. 256x32 float32 is 32 KB: the largest shared tiles stay ~130 KB a block (an H200 has ~227 KB)."""
+    """Rows of the reduction dimension read from a weight (or its transposed copy) at a time; every tile dimension is
+    padded to a multiple of it. 256x32 float32 is 32 KB: the largest shared tiles stay ~130 KB a block (an H200 has
+    ~227 KB)."""
     threads: int = 256
     """Threads per block."""
     mathdx: bool = False
