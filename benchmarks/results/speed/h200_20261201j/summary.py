@@ -22,7 +22,7 @@ if (r / "step.json").exists():
         diff = max(fig.get("max_abs_diff", {0: 0.0}).values())
         print(f"  {name}: graph {fig.get('graph_us_per_step', float('nan')):.1f} µs, eager "
               f"{fig['eager_us_per_step']:.1f} µs, first call {fig['first_call_s']:.1f} s, max |diff| {diff:.1e}")
-for n in ("tiles", "fused", "tiles2"):
+for n in ("tiles", "fused", "tiles2", "plain"):  # the 2000-iteration runs of h200_20261201i, j and k
     if not (r / f"{n}.json").exists():
         print(f"{n}: no result")
         continue
