@@ -324,15 +324,16 @@ class TileMLP:
     def backward(self, g_r, g_a, k: int, need_obs: bool) -> torch.Tensor | None:
         """The gradients at step ``k``'s layer outputs into the rollout's buffers, and the observation's gradient when
         ``need_obs``."""
-        g_obs = torch.empty(self._batch(), self.dims[0], device=self.torch_device) if need_obs else None
+        g_obs = torch.empty(self._batch(), self.dims[0], device=self.torch_device, dtype=torch.float32) \
+            if need_obs else None
         self._backward(g_r, g_a, k, need_obs, False, 1.0, self._pieces(g_obs) if need_obs else [None] * 4)
         return g_obs
 
     def backward_state(self, g_r, g_a, k: int, need: bool, dt: float):
         """:meth:`backward` of :meth:`forward_state`: the gradients of q, q̇ and the q̇ before, (N, n) each (``None``
         without ``need``)."""
-        outs = [torch.empty(self._batch(), self.dims[0] // 4, device=self.torch_device) for _ in range(3)] if need \
-            else [None] * 3
+        outs = [torch.empty(self._batch(), self.dims[0] // 4, device=self.torch_device, dtype=torch.float32)
+                for _ in range(3)] if need else [None] * 3
         self._backward(g_r, g_a, k, need, True, dt, outs + [None])
         return tuple(outs)
 
