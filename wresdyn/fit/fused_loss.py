@@ -4,10 +4,10 @@
 Through torch the loss and its backward are about forty small kernels an iteration (slices, differences, squares,
 weighted sums and means, and the slices' backward filling zeros), whatever the window length; on a GPU each is a few
 microseconds of a graph whose iteration at short windows is well under a millisecond. Here one kernel forms each window
-and joint's four sums over the steps (position and velocity error, residual torque, action rate), torch adds them up
+and step's four sums over the joints (position and velocity error, residual torque, action rate), torch adds them up
 (one reduction, deterministic) and weighs them, and one kernel writes the gradients of the simulated q, q̇ (the whole
-(B, H + 1, n) rollout, zero at the recorded start) and of the actions. The same loss to float32 rounding: the sums run
-over the steps first, then the joints and windows.
+(B, H + 1, n) rollout, zero at the recorded start) and of the actions, one thread an element. The same loss to float32
+rounding: the sums run over the joints first, then the steps and windows.
 """
 
 from __future__ import annotations
@@ -24,28 +24,24 @@ __all__ = ["FusedWindowLoss"]
 def _window_sums(q: wp.array3d(dtype=float), qd: wp.array3d(dtype=float), q_ref: wp.array3d(dtype=float),
                  qd_ref: wp.array3d(dtype=float), a: wp.array3d(dtype=float), scale: wp.array(dtype=float),
                  w: wp.array(dtype=float), sums: wp.array3d(dtype=float)):
-    # one thread per window b and joint j: its sums over the steps, weighted by the joint's fit weight
-    b, j = wp.tid()
-    steps = a.shape[1]
-    s = scale[j]
+    # one thread per window b and step k: its four sums over the joints
+    b, k = wp.tid()
     pos, vel, tau, rate = float(0.0), float(0.0), float(0.0), float(0.0)
-    prev = float(0.0)
-    for k in range(steps):
+    for j in range(a.shape[2]):
         e = q[b, k + 1, j] - q_ref[b, k + 1, j]
         ev = qd[b, k + 1, j] - qd_ref[b, k + 1, j]
         x = a[b, k, j]
-        t = x * s
-        pos += e * e
-        vel += ev * ev
+        t = x * scale[j]
+        pos += w[j] * (e * e)
+        vel += w[j] * (ev * ev)
         tau += t * t
         if k > 0:
-            d = x - prev
+            d = x - a[b, k - 1, j]
             rate += d * d
-        prev = x
-    sums[b, j, 0] = w[j] * pos
-    sums[b, j, 1] = w[j] * vel
-    sums[b, j, 2] = tau
-    sums[b, j, 3] = rate
+    sums[b, k, 0] = pos
+    sums[b, k, 1] = vel
+    sums[b, k, 2] = tau
+    sums[b, k, 3] = rate
 
 
 @wp.kernel
@@ -53,27 +49,26 @@ def _window_grads(q: wp.array3d(dtype=float), qd: wp.array3d(dtype=float), q_ref
                   qd_ref: wp.array3d(dtype=float), a: wp.array3d(dtype=float), scale: wp.array(dtype=float),
                   w: wp.array(dtype=float), coef: wp.array(dtype=float), g_loss: wp.array(dtype=float),
                   g_q: wp.array3d(dtype=float), g_qd: wp.array3d(dtype=float), g_a: wp.array3d(dtype=float)):
+    # one thread per window b, sample i (0: the recorded start; i >= 1: the state after step i - 1) and joint j;
     # coef: the loss's weight of each of the four sums (its term's weight over the term's count)
-    b, j = wp.tid()
+    b, i, j = wp.tid()
+    if i == 0:
+        g_q[b, 0, j] = 0.0
+        g_qd[b, 0, j] = 0.0
+        return
+    g = 2.0 * g_loss[0]
+    g_q[b, i, j] = g * coef[0] * w[j] * (q[b, i, j] - q_ref[b, i, j])
+    g_qd[b, i, j] = g * coef[1] * w[j] * (qd[b, i, j] - qd_ref[b, i, j])
+    k = i - 1
     steps = a.shape[1]
-    g = g_loss[0]
-    cq = 2.0 * g * coef[0] * w[j]
-    cqd = 2.0 * g * coef[1] * w[j]
+    x = a[b, k, j]
+    d = float(0.0)
+    if k > 0:
+        d += x - a[b, k - 1, j]
+    if k + 1 < steps:
+        d -= a[b, k + 1, j] - x
     s = scale[j]
-    ct = 2.0 * g * coef[2] * s * s
-    cr = 2.0 * g * coef[3]
-    g_q[b, 0, j] = 0.0
-    g_qd[b, 0, j] = 0.0
-    for k in range(steps):
-        g_q[b, k + 1, j] = cq * (q[b, k + 1, j] - q_ref[b, k + 1, j])
-        g_qd[b, k + 1, j] = cqd * (qd[b, k + 1, j] - qd_ref[b, k + 1, j])
-        x = a[b, k, j]
-        d = float(0.0)
-        if k > 0:
-            d += x - a[b, k - 1, j]
-        if k + 1 < steps:
-            d -= a[b, k + 1, j] - x
-        g_a[b, k, j] = ct * x + cr * d
+    g_a[b, k, j] = g * (coef[2] * s * s * x + coef[3] * d)
 
 
 def _wp(t: torch.Tensor):
@@ -133,11 +128,11 @@ class _Loss(torch.autograd.Function):
     def forward(ctx, q, qd, a, q_ref, qd_ref, scale, w, mean, coef, owner):
         b, h, n = a.shape
         q, qd, a = q.contiguous(), qd.contiguous(), a.contiguous()
-        sums = torch.empty(b, n, 4, device=q.device, dtype=torch.float32)
+        sums = torch.empty(b, h, 4, device=q.device, dtype=torch.float32)
         ins = [_wp(t) for t in (q, qd, q_ref, qd_ref, a, scale, w)]
         wdev = wp.device_from_torch(q.device)
-        wp.launch(_window_sums, dim=(b, n), inputs=[*ins, _wp(sums)], device=wdev, stream=owner.stream(q.device))
-        total = sums.view(b * n, 4).sum(0)
+        wp.launch(_window_sums, dim=(b, h), inputs=[*ins, _wp(sums)], device=wdev, stream=owner.stream(q.device))
+        total = sums.view(b * h, 4).sum(0)
         ctx.save_for_backward(q, qd, a, q_ref, qd_ref, scale, w, coef)
         ctx.owner = owner
         parts = total * mean
@@ -152,6 +147,6 @@ class _Loss(torch.autograd.Function):
         g_q, g_qd, g_a = torch.empty_like(q), torch.empty_like(qd), torch.empty_like(a)
         g = g_loss.reshape(1).to(torch.float32).contiguous()
         args = [_wp(t) for t in (q, qd, q_ref, qd_ref, a, scale, w, coef, g, g_q, g_qd, g_a)]
-        wp.launch(_window_grads, dim=(b, n), inputs=args, device=wp.device_from_torch(q.device),
+        wp.launch(_window_grads, dim=(b, h + 1, n), inputs=args, device=wp.device_from_torch(q.device),
                   stream=ctx.owner.stream(q.device))
         return g_q, g_qd, g_a, *[None] * 7

@@ -232,7 +232,10 @@ class GradFitIteration:
         float and a CPU tensor without); again after a resumed optimiser state is loaded."""
         adopt_optimiser(self.optim, self.sim.device, self.graph, self.fused is not None)
 
-    def _run(self, traj, start, h: int, noise) -> torch.Tensor:
+    def gradients(self, traj, start, h: int, noise) -> tuple[torch.Tensor, dict]:
+        """The rollout of the windows at (``traj``, ``start``) (B,) of ``h`` steps, its loss and the backward pass: the
+        parameters' ``.grad`` hold the loss's gradient (added to what they held), before the clip. Returns ``(loss,
+        parts)`` as :func:`window_loss`."""
         window = self.bank.window(traj, start, h)
         if self.fused is not None:
             self.fused.begin(h, window.cmd.shape[0])
@@ -247,6 +250,10 @@ class GradFitIteration:
         loss.backward()
         if self.fused is not None:
             self.fused.finish()
+        return loss, parts
+
+    def _run(self, traj, start, h: int, noise) -> torch.Tensor:
+        loss, parts = self.gradients(traj, start, h, noise)
         torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.cfg.grad_clip)
         self.optim.step()
         return torch.stack([loss.detach(), *(parts[k] for k in _FitLearner.parts[1:])])
