@@ -1,5 +1,5 @@
 """Where the gradient fit's fused paths part from the plain one, one piece at a time: the parameters' gradients of one
-window batch, one Adam step from the same gradients, and the loss's time.
+window batch, and Adam steps from the same gradients.
 
     python benchmarks/speed/gradfit_paths.py --device cuda:0 --windows 1024 --horizons 2,17,64 --json OUT.json
 
@@ -13,8 +13,6 @@ window batch, one Adam step from the same gradients, and the loss's time.
    :class:`wresdyn.learn.adam.Adam` as the fused path runs it (torch's fused kernel) and as the plain path does
    (``capturable``, torch's foreach kernels), with the same gradients each step: the largest difference of the weights
    over the largest change the steps made.
-3. **Loss.** :func:`~wresdyn.fit.gradfit.window_loss` through torch against
-   :class:`~wresdyn.fit.fused_loss.FusedWindowLoss`, forward and backward on the last length's rollout, µs each (CUDA events over ``--repeat`` calls, eagerly).
 
 Float32 rounding alone moves a gradient by about 1e-6 of its largest magnitude; a difference far above that is a
 different computation, not another order of the same sums. The held-out split is never read.
@@ -108,44 +106,6 @@ def compare_adam(plain, steps: int) -> dict:
     return {"steps": steps, "largest_change": change, "largest_difference": diff, "relative": diff / change}
 
 
-def time_loss(plain, h: int, repeat: int) -> dict:
-    """µs of the loss forward and backward through torch and through the fused kernels, on one rollout at ``h``."""
-    import numpy as np
-    import torch
-
-    from wresdyn.fit.fused_loss import FusedWindowLoss
-    from wresdyn.fit.gradfit import window_loss
-    from wresdyn.sim import rollout
-
-    cfg, it = plain.cfg, plain._iteration
-    traj, start = plain.bank.draw(np.random.default_rng(1), cfg.windows, h)
-    window = plain.bank.window(traj, start, h)
-    with torch.no_grad():
-        run = rollout(it.sim, window, plain.policy)
-    q, qd, a = (x.detach().clone().requires_grad_(True) for x in (run.q, run.qd, run.actions))
-    fused = FusedWindowLoss(cfg)
-
-    def torch_loss():
-        return window_loss(cfg, q[:, 1:], qd[:, 1:], a, window.q[:, 1:], window.qd[:, 1:], it.torque_scale, it.weights)
-
-    def fused_loss():
-        return fused(q, qd, a, window.q, window.qd, it.torque_scale, it.weights)
-
-    out = {"horizon": h, "windows": cfg.windows}
-    for name, fn in (("torch", torch_loss), ("fused", fused_loss)):
-        for _ in range(3):
-            fn()[0].backward()
-        start_ev, end_ev = (torch.cuda.Event(enable_timing=True) for _ in range(2))
-        torch.cuda.synchronize()
-        start_ev.record()
-        for _ in range(repeat):
-            fn()[0].backward()
-        end_ev.record()
-        torch.cuda.synchronize()
-        out[f"{name}_us"] = 1e3 * start_ev.elapsed_time(end_ev) / repeat
-    return out
-
-
 def main(argv=None) -> dict:
     import torch
     import warp as wp
@@ -161,7 +121,6 @@ def main(argv=None) -> dict:
     p.add_argument("--horizons", default="2,17,64")
     p.add_argument("--tiles", action="store_true", help="also the tile path (network_tiles)")
     p.add_argument("--adam-steps", type=int, default=5)
-    p.add_argument("--repeat", type=int, default=50, help="calls timed per loss (CUDA only)")
     p.add_argument("--json", default="")
     args = p.parse_args(argv)
     wp.config.quiet = True
@@ -177,8 +136,6 @@ def main(argv=None) -> dict:
     result = {"device": args.device, "windows": args.windows, "gradients": rows,
               "adam": compare_adam(plain, args.adam_steps),
               "command": " ".join(["python", *sys.argv]), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
-    if args.device.startswith("cuda"):
-        result["loss_time"] = time_loss(plain, horizons[-1], args.repeat)
     for row in rows:
         for name, x in row["paths"].items():
             worst = max(x["gradient_relative"].items(), key=lambda kv: kv[1])
@@ -187,10 +144,6 @@ def main(argv=None) -> dict:
     a = result["adam"]
     print(f"Adam, {a['steps']} steps from the same gradients: fused against capturable foreach {a['relative']:.2e} of "
           f"the largest change ({a['largest_difference']:.2e} of {a['largest_change']:.2e})")
-    if "loss_time" in result:
-        t = result["loss_time"]
-        print(f"loss forward + backward at H = {t['horizon']}, {t['windows']} windows: torch {t['torch_us']:.1f} µs, "
-              f"fused {t['fused_us']:.1f} µs")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(result, indent=1))

@@ -39,7 +39,6 @@ from ..sim import Simulator, TrajectoryBank, rollout
 from ..sim.bank import servo_goal_accel
 from ..sim.physics import PhysicalParams
 from ..sim.residual_kinds import residual_scale
-from .fused_loss import FusedWindowLoss
 from .gradfit_config import GradFitConfig
 
 __all__ = ["GradFitConfig", "build_policy", "window_loss", "fit", "export_run", "RESUME_MAY_CHANGE"]
@@ -223,7 +222,6 @@ class GradFitIteration:
         self.obs_noise, self.graph, self.weights = obs_noise, graph, weights
         self.torque_scale = policy.scale if policy.kind == "torque" else None
         self.fused = FusedMLPRollout(policy, tiles=cfg.network_tiles) if cfg.fused_network else None
-        self.fused_loss = FusedWindowLoss(cfg) if cfg.fused_network else None
         self._graphs = StepGraphs(sim)
         self.adopt_optimiser()
 
@@ -241,12 +239,8 @@ class GradFitIteration:
             self.fused.begin(h, window.cmd.shape[0])
         run = rollout(self.sim, window, self.policy if self.fused is None else self.fused, grad=True,
                       truncation=self.cfg.grad_truncation or 0, obs_noise=self.obs_noise, noise=noise)
-        if self.fused_loss is not None:
-            loss, parts = self.fused_loss(run.q, run.qd, run.actions, window.q, window.qd, self.torque_scale,
-                                          self.weights)
-        else:
-            loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],
-                                      window.qd[:, 1:], self.torque_scale, self.weights)
+        loss, parts = window_loss(self.cfg, run.q[:, 1:], run.qd[:, 1:], run.actions, window.q[:, 1:],
+                                  window.qd[:, 1:], self.torque_scale, self.weights)
         loss.backward()
         if self.fused is not None:
             self.fused.finish()
