@@ -117,15 +117,9 @@ def _commit() -> str:
         return "unknown"
 
 
-def main(argv=None) -> dict:
-    import torch
-    import warp as wp
-
-    from wresdyn.data.dataset import load_dataset
-    from wresdyn.fit.gradfit import GradFitConfig
-    from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
-
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def workload_arguments(p: argparse.ArgumentParser) -> None:
+    """The workload's options (this script's and ``rounding_floor.py``'s): device, data, schedule, windows, seed and
+    the fit's opt-in paths."""
     p.add_argument("--device", default="cpu")
     p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
     p.add_argument("--iterations", type=int, default=2000, help="fixed schedule length (no plateau stop)")
@@ -135,17 +129,37 @@ def main(argv=None) -> dict:
     p.add_argument("--no-graph", action="store_true", help="CUDA: run each iteration eagerly")
     p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network: the fused MLP path and Adam")
     p.add_argument("--tiles", action="store_true", help="GradFitConfig.network_tiles (with --fused): Warp tile kernels")
-    p.add_argument("--json", default="", help="write the figures here")
-    args = p.parse_args(argv)
+
+
+def workload(args):
+    """``(robot, dataset, cfg)`` of :func:`workload_arguments`' options: the shipped humanoid and data, the fit's
+    defaults at those settings (torch on one thread, Warp quiet)."""
+    import torch
+    import warp as wp
+
+    from wresdyn.data.dataset import load_dataset
+    from wresdyn.fit.gradfit import GradFitConfig
+    from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+
     wp.config.quiet = True
     torch.set_num_threads(1)
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
     cfg = GradFitConfig(windows=args.windows, device=args.device, iterations=args.iterations, seed=args.seed,
-                        cuda_graph=not args.no_graph, fused_network=args.fused,
-                        network_tiles=args.tiles)
+                        cuda_graph=not args.no_graph, fused_network=args.fused, network_tiles=args.tiles)
     if args.curriculum:
         cfg = dataclasses.replace(cfg, horizon_curriculum=tuple(int(h) for h in args.curriculum.split(",")))
+    return robot, dataset, cfg
+
+
+def main(argv=None) -> dict:
+    import torch
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    workload_arguments(p)
+    p.add_argument("--json", default="", help="write the figures here")
+    args = p.parse_args(argv)
+    robot, dataset, cfg = workload(args)
     result = measure(robot, dataset, cfg, log=lambda m: print(m, flush=True))
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     result.update({"machine": name, "commit": _commit(), "command": " ".join(["python", *sys.argv]),

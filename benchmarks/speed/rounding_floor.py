@@ -17,7 +17,6 @@ defaults at ``--windows`` windows, a fixed ``--iterations``). The held-out split
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import platform
 import sys
@@ -85,33 +84,16 @@ def floor(robot, dataset, cfg, nudges, at: int = 1, log=None) -> dict:
 
 def main(argv=None) -> dict:
     import torch
-    import warp as wp
 
-    from wresdyn.data.dataset import load_dataset
-    from wresdyn.fit.gradfit import GradFitConfig
-    from wresdyn.robot.description import DEFAULT_ROBOT, load_robot
+    from gradfit_2000 import workload, workload_arguments  # this folder: the same workload and options
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--device", default="cpu")
-    p.add_argument("--data", default=str(ROOT / "data" / "dataset.npz"))
-    p.add_argument("--iterations", type=int, default=2000, help="fixed schedule length (no plateau stop)")
-    p.add_argument("--windows", type=int, default=1024)
-    p.add_argument("--curriculum", default="", help="comma list of window lengths; default: the config's")
-    p.add_argument("--seed", type=int, default=0)
+    workload_arguments(p)
     p.add_argument("--nudges", default="1,2,3", help="comma list of the nudges' generator seeds")
     p.add_argument("--at", type=int, default=1, help="the iteration after which the weights are nudged")
-    p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network")
-    p.add_argument("--tiles", action="store_true", help="GradFitConfig.network_tiles (with --fused)")
     p.add_argument("--json", default="", help="write the figures here")
     args = p.parse_args(argv)
-    wp.config.quiet = True
-    torch.set_num_threads(1)
-    robot = load_robot(DEFAULT_ROBOT)
-    dataset = load_dataset(args.data, robot=robot)
-    cfg = GradFitConfig(windows=args.windows, device=args.device, iterations=args.iterations, seed=args.seed,
-                        fused_network=args.fused, network_tiles=args.tiles)
-    if args.curriculum:
-        cfg = dataclasses.replace(cfg, horizon_curriculum=tuple(int(h) for h in args.curriculum.split(",")))
+    robot, dataset, cfg = workload(args)
     nudges = [int(s) for s in args.nudges.split(",") if s]
     result = floor(robot, dataset, cfg, nudges, args.at)
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
