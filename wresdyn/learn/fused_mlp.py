@@ -244,9 +244,10 @@ class FusedMLPRollout(nn.Module):
             # over all rows has a few output tiles for a whole GPU (89 µs for the first layer at H = 64, B = 1024 on an
             # H200, benchmarks/results/speed/h200_20261201c/); the bias's as a matrix-vector product, where torch's
             # column sum over those rows took 58 µs
+            g_rows = g.view(rows, -1)
             weight = torch.bmm(g.transpose(1, 2), x).sum(0) if rows >= SPLIT_ROWS else \
-                torch.mm(g.view(rows, -1).t(), x.view(rows, -1))
-            for param, new in ((lin.weight, weight), (lin.bias, torch.mv(g.view(rows, -1).t(), ones))):
+                torch.mm(g_rows.t(), x.view(rows, -1))
+            for param, new in ((lin.weight, weight), (lin.bias, torch.mv(g_rows.t(), ones))):
                 if param.grad is None:
                     param.grad = new
                 else:
