@@ -179,6 +179,13 @@ class FusedMLPRollout(nn.Module):
         self._next()
         return _StateStep.apply(q, qd, before, self._token, self, self._k - 1, out, rate, cmd, noise, dt)
 
+    def backward_state_into(self, k: int, g_r, g_a, need: bool, dt: float, q_grad, qd_grad, before_grad) -> None:
+        """Step ``k``'s backward of :meth:`residual_and_action_from_state` from the gradients of its residual and
+        action (N, n) each, adding those of q, q̇ and the q̇ before into ``q_grad``, ``qd_grad``, ``before_grad``
+        where ``need`` (:meth:`TileMLP.backward_state_into <wresdyn.learn.tile_mlp.TileMLP.backward_state_into>`):
+        the rollout of :mod:`wresdyn.sim.tape_chain`, which sums the state's gradients in place."""
+        self._tiles.backward_state_into(g_r, g_a, k, need, dt, q_grad, qd_grad, before_grad)
+
     def _next(self) -> None:
         if self._x is None or self._k >= self._steps:
             raise RuntimeError("FusedMLPRollout: call begin(steps, batch) before each rollout, one call per step")

@@ -191,7 +191,8 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
             "    wp.tile_store(action, wp.tile_map(wp.div, r, s), offset=(r0, 0))"]
     bwd = [f"def tile_mlp_backward(g_r: {a2}, g_a: {a2}, k: int, scale: {a1}, std: {a1}, need_obs: int, "
            + ", ".join([f"w{i}: {a2}" for i in range(n)] + zs + gs)
-           + f", mask: {u3}, combine: int, dt: float, " + ", ".join(f"o{i}: {a2}" for i in range(4)) + "):",
+           + f", mask: {u3}, combine: int, add: int, dt: float, " + ", ".join(f"o{i}: {a2}" for i in range(4))
+           + "):",
            "r0 = wp.tid() * TB",
            f"s = wp.tile_broadcast(wp.tile_load(scale, shape=({p[n]},)), shape=(TB, {p[n]}))",
            f"gr = wp.tile_load(g_r, shape=(TB, {p[n]}), offset=(r0, 0))",
@@ -209,11 +210,17 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
     bwd += [f"    sd = wp.tile_broadcast(wp.tile_load(std, shape=({p[0]},)), shape=(TB, {p[0]}))",
             "    go = wp.tile_map(wp.div, acc_w0, sd)"]
     bwd += [f"    gp{i} = wp.tile_view(go, offset=(0, {i * nj}), shape=(TB, {nj}))" for i in range(4)]
-    # combine: the gradients of the state the pieces came from (q, q̇, the q̇ before; q̈ = (q̇ - q̇ before) / dt)
-    bwd += ["    wp.tile_store(o0, gp0, offset=(r0, 0))", "    if combine != 0:",
+    # combine: the gradients of the state the pieces came from (q, q̇, the q̇ before; q̈ = (q̇ - q̇ before) / dt); add
+    # (with combine): added to what o0, o1, o2 hold (each block its own rows), not stored over it
+    def store(i: int, tile: str, pad: str) -> list[str]:
+        return [f"{pad}if add != 0:", f"{pad}    {tile} = wp.tile_map(wp.add, {tile}, "
+                f"wp.tile_load(o{i}, shape=(TB, {nj}), offset=(r0, 0)))", f"{pad}wp.tile_store(o{i}, {tile}, "
+                "offset=(r0, 0))"]
+
+    bwd += ["    u0 = gp0", *store(0, "u0", "    "), "    if combine != 0:",
             f"        g2d = wp.tile_map(wp.div, gp2, wp.tile_full(shape=(TB, {nj}), value=dt, dtype=float))",
-            "        wp.tile_store(o1, wp.tile_map(wp.add, gp1, g2d), offset=(r0, 0))",
-            "        wp.tile_store(o2, wp.tile_map(wp.neg, g2d), offset=(r0, 0))", "    else:"]
+            "        u1 = wp.tile_map(wp.add, gp1, g2d)", *store(1, "u1", "        "),
+            "        u2 = wp.tile_map(wp.neg, g2d)", *store(2, "u2", "        "), "    else:"]
     bwd += [f"        wp.tile_store(o{i}, gp{i}, offset=(r0, 0))" for i in (1, 2, 3)]
     body = lambda lines: "\n".join([lines[0]] + ["    " + line for line in lines[1:]])  # noqa: E731
     return body(fwd), body(bwd)
@@ -337,13 +344,21 @@ class TileMLP:
         self._backward(g_r, g_a, k, need, True, dt, outs + [None])
         return tuple(outs)
 
+    def backward_state_into(self, g_r, g_a, k: int, need: bool, dt: float, q_grad, qd_grad, before_grad) -> None:
+        """:meth:`backward_state` adding the gradients of q, q̇ and the q̇ before into ``q_grad``, ``qd_grad`` and
+        ``before_grad`` (N, n) each (``before_grad`` ``None`` at the window's first step), where the state's gradient
+        is summed in place (:mod:`wresdyn.sim.tape_chain`); nothing is added without ``need``."""
+        if need and before_grad is None:
+            raise ValueError("the window's first step forms q̈ from the recording: its q̇ before has no gradient")
+        self._backward(g_r, g_a, k, need, True, dt, [q_grad, qd_grad, before_grad, None], add=True)
+
     def _batch(self) -> int:
         return self._bufs[2][0].shape[1]
 
-    def _backward(self, g_r, g_a, k: int, need: bool, combine: bool, dt: float, outs: list) -> None:
+    def _backward(self, g_r, g_a, k: int, need: bool, combine: bool, dt: float, outs: list, add: bool = False) -> None:
         _, z, g, mask = self._bufs
         _, weights, _, std, scale = self._policy
         grads = [self._empty if t is None else _wp(t) for t in (g_r, g_a)]
         self._launch(self.backward_kernel, self._batch(), [*grads, k, scale, std, int(need), *weights, *z, *g, mask,
-                                                           int(combine), float(dt),
+                                                           int(combine), int(add), float(dt),
                                                            *(self._empty if t is None else _wp(t) for t in outs)])

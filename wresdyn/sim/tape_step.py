@@ -26,7 +26,8 @@ import os
 
 import torch
 
-__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "stage_targets", "step_forces", "tape_rows"]
+__all__ = ["StepRows", "TapeBuffers", "TapeRows", "TapeStep", "record_step", "stage_targets", "step_forces",
+           "tape_rows"]
 
 CUDA_ROWS_ENV = "WRESDYN_TAPE_ROWS"
 """Set to 0 to give each step of a CUDA simulator its own buffers and a copy of each input, output and gradient
@@ -132,6 +133,8 @@ class TapeBuffers:
         self.whole = isinstance(q_index, slice) and isinstance(qd_index, slice) \
             and (q_index, qd_index) == (slice(0, nq), slice(0, nqd))
         self.chained = self.whole and prev is not None and rows is not None
+        self.shared_out = False
+        """Whether the output's gradients are rows of step ``k + 1``'s input gradients (:class:`StepRows`)."""
         if self.chained:
             first.joint_q, first.joint_qd = _alias(prev.states[-1].joint_q), _alias(prev.states[-1].joint_qd)
         if rows is not None and self.whole:
@@ -139,11 +142,17 @@ class TapeBuffers:
             ctrl.joint_target_q = _alias(rows.targets.row(k, t.size), t)
         if rows is not None:
             added = self.accumulated()
-            row = rows.grads.row(k, sum(a.size for a in added))
+            width = sum(a.size for a in added)
+            row = rows.grads.row(k, width)
             start = 0
             for a in added:
                 a.grad = row[start:start + a.size]
                 start += a.size
+            if self.whole:  # the output's gradient is the next step's input's: one array, read where it is added
+                self.shared_out = True
+                after = rows.grads.row(k + 1, width)
+                last.joint_q.grad = after[:last.joint_q.size]
+                last.joint_qd.grad = after[last.joint_q.size:last.joint_q.size + last.joint_qd.size]
         inputs = (first.joint_q, first.joint_qd, ctrl.joint_target_q, ctrl.joint_f)
         widths = (nq, nqd, nq, nqd)
         self.index = (q_index, qd_index, q_index, qd_index)
@@ -227,6 +236,27 @@ def _same(x: torch.Tensor, view: torch.Tensor) -> bool:
             and x.dtype == view.dtype and x.device == view.device)
 
 
+def record_step(sim, k: int, q, qd, target, tau):
+    """Step ``k`` of ``sim`` from (q, q̇) (N, n) with the PD target and joint torque, its inputs copied into the step's
+    buffers where they are not there already, recorded on a Warp tape: ``(tape, (q', q̇'))``, the outputs as views of
+    the step's buffers (they stay until this step runs again; a gather where the index is not a slice)."""
+    import warp as wp
+
+    buf = sim._tape_buffers[k]
+    for dst, x, index in zip(buf.inputs, (q, qd, target, tau), buf.index):
+        if _same(x, dst):  # in place already: the previous step's output, a staged target
+            continue
+        dst[:, index] = x  # on torch's current stream, which step_diff's Warp work follows (_tape_stream)
+    tape = wp.Tape()
+    with sim._tape_stream():
+        with tape:
+            if sim._needs_fk:
+                sim._eval_fk(buf.states[0])
+            for s in range(sim.substeps):
+                sim.solver.step(buf.states[s], buf.states[s + 1], buf.control, None, sim.dt_sub)
+    return tape, tuple(out[:, index] for out, index in zip(buf.outputs, buf.index))
+
+
 class TapeStep(torch.autograd.Function):
     """One differentiable sample period: (q, q̇, PD target, joint torque) -> (q', q̇'), each (N, n)."""
 
@@ -234,24 +264,9 @@ class TapeStep(torch.autograd.Function):
     def forward(ctx, q, qd, target, tau, sim, k: int, names: tuple = (), *physics):
         """Step ``k`` of ``sim`` from (q, q̇) with the PD target and joint torque, recorded on a Warp tape; ``names``:
         the model fields in ``physics`` whose gradients the backward returns."""
-        import warp as wp
-
-        buf = sim._tape_buffers[k]
-        for dst, x, index in zip(buf.inputs, (q, qd, target, tau), buf.index):
-            if _same(x, dst):  # in place already: the previous step's output, a staged target
-                continue
-            dst[:, index] = x  # on torch's current stream, which step_diff's Warp work follows (_tape_stream)
-        tape = wp.Tape()
-        with sim._tape_stream():
-            with tape:
-                if sim._needs_fk:
-                    sim._eval_fk(buf.states[0])
-                for s in range(sim.substeps):
-                    sim.solver.step(buf.states[s], buf.states[s + 1], buf.control, None, sim.dt_sub)
-        ctx.tape, ctx.sim, ctx.k, ctx.names = tape, sim, k, names
+        ctx.tape, views = record_step(sim, k, q, qd, target, tau)
+        ctx.sim, ctx.k, ctx.names = sim, k, names
         ctx.physics_meta = [(p.dtype, p.device) for p in physics]
-        # views: the outputs stay until this step runs again (a gather where the index is not a slice)
-        views = tuple(out[:, index] for out, index in zip(buf.outputs, buf.index))
         return views if sim._tape_rows is not None else tuple(v.clone() for v in views)
 
     @staticmethod
@@ -263,6 +278,8 @@ class TapeStep(torch.autograd.Function):
             sim._model_view(f, grad=True).zero_()
         for dst, g, index in zip(buf.output_grads, (g_q, g_qd), buf.index):
             dst[:, index] = g
+        if buf.shared_out:  # the next step's row holds them now: zeroed before a step adds into it again
+            sim._tape_rows.grads.mark(ctx.k + 1)
         with sim._tape_stream():
             tape.backward()
         # SolverReplay adds into the inputs' gradients only (the outputs' are overwritten next time), and those are
