@@ -212,16 +212,17 @@ def _sources(dims: list[int], chunk: int) -> tuple[str, str]:
     bwd += [f"    gp{i} = wp.tile_view(go, offset=(0, {i * nj}), shape=(TB, {nj}))" for i in range(4)]
     # combine: the gradients of the state the pieces came from (q, q̇, the q̇ before; q̈ = (q̇ - q̇ before) / dt); add
     # (with combine): added to what o0, o1, o2 hold (each block its own rows), not stored over it
-    def store(i: int, tile: str, pad: str) -> list[str]:
-        return [f"{pad}if add != 0:", f"{pad}    {tile} = wp.tile_map(wp.add, {tile}, "
-                f"wp.tile_load(o{i}, shape=(TB, {nj}), offset=(r0, 0)))", f"{pad}wp.tile_store(o{i}, {tile}, "
-                "offset=(r0, 0))"]
-
-    bwd += ["    u0 = gp0", *store(0, "u0", "    "), "    if combine != 0:",
-            f"        g2d = wp.tile_map(wp.div, gp2, wp.tile_full(shape=(TB, {nj}), value=dt, dtype=float))",
-            "        u1 = wp.tile_map(wp.add, gp1, g2d)", *store(1, "u1", "        "),
-            "        u2 = wp.tile_map(wp.neg, g2d)", *store(2, "u2", "        "), "    else:"]
-    bwd += [f"        wp.tile_store(o{i}, gp{i}, offset=(r0, 0))" for i in (1, 2, 3)]
+    load = [f"wp.tile_load(o{i}, shape=(TB, {nj}), offset=(r0, 0))" for i in range(3)]
+    bwd += ["    if add != 0:",
+            f"        wp.tile_store(o0, wp.tile_map(wp.add, gp0, {load[0]}), offset=(r0, 0))",
+            f"        h2d = wp.tile_map(wp.div, gp2, wp.tile_full(shape=(TB, {nj}), value=dt, dtype=float))",
+            f"        wp.tile_store(o1, wp.tile_map(wp.add, wp.tile_map(wp.add, gp1, h2d), {load[1]}), offset=(r0, 0))",
+            f"        wp.tile_store(o2, wp.tile_map(wp.sub, {load[2]}, h2d), offset=(r0, 0))",
+            "    else:", "        wp.tile_store(o0, gp0, offset=(r0, 0))", "        if combine != 0:",
+            f"            g2d = wp.tile_map(wp.div, gp2, wp.tile_full(shape=(TB, {nj}), value=dt, dtype=float))",
+            "            wp.tile_store(o1, wp.tile_map(wp.add, gp1, g2d), offset=(r0, 0))",
+            "            wp.tile_store(o2, wp.tile_map(wp.neg, g2d), offset=(r0, 0))", "        else:"]
+    bwd += [f"            wp.tile_store(o{i}, gp{i}, offset=(r0, 0))" for i in (1, 2, 3)]
     body = lambda lines: "\n".join([lines[0]] + ["    " + line for line in lines[1:]])  # noqa: E731
     return body(fwd), body(bwd)
 
