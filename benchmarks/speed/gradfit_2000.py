@@ -3,8 +3,8 @@ the validation error at the end.
 
     python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --json OUT.json
     python benchmarks/speed/gradfit_2000.py --device cpu --iterations 12 --windows 4 --curriculum 2,4   # tiny
+    python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --plain --json OUT.json
     python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --fused --json OUT.json
-    python benchmarks/speed/gradfit_2000.py --device cuda:0 --iterations 2000 --windows 1024 --fused --tiles
 
 Workload: the shipped benchmark (``data/dataset.npz``, the project humanoid, 21 DoF, dt = 2 ms) and the gradient fit's
 defaults (:class:`wresdyn.fit.gradfit.GradFitConfig`: MLP residual, horizon curriculum 2 ... 64 in equal parts,
@@ -18,10 +18,12 @@ per iteration, measured between rows whose wall-clock is exact (rows where the l
 and validation rows on CUDA, every row on the CPU), skipping each length's first two iterations (warm-up and capture);
 ``overhead_s``, what ``train_s`` holds beyond those rates times the iterations (warm-ups, captures, waits); the loss
 of the last iteration and the validation error after it (a faster path must give the same), the best validation and
-its iteration (what ``fit`` returns). ``--no-graph`` runs CUDA eagerly (the peer); ``--fused`` sets
-``GradFitConfig.fused_network`` (the MLP's step in fewer kernels, fused Adam), ``--tiles`` with it
-``GradFitConfig.network_tiles`` (the step's network forward and backward as one Warp tile kernel each). The held-out
-split is never read.
+its iteration (what ``fit`` returns). ``--no-graph`` runs CUDA eagerly (the peer). Without ``--plain``, ``--fused``
+or ``--tiles`` the fit runs its default network path (:meth:`~wresdyn.fit.gradfit.GradFitConfig.network_paths`: the
+tile path on CUDA, the plain one on the CPU); ``--plain`` turns ``GradFitConfig.fused_network`` and
+``network_tiles`` off, ``--fused`` runs the fused path (the MLP's step in fewer kernels, fused Adam) and ``--tiles``
+with it its tile kernels (the step's network forward and backward as one Warp tile kernel each). ``fused_network`` and
+``network_tiles`` in the figures are the paths that ran. The held-out split is never read.
 """
 
 from __future__ import annotations
@@ -99,7 +101,7 @@ def measure(robot, dataset, cfg, log=print) -> dict:
     best = min(checks, key=lambda r: r["validation"]) if checks else None
     params = torch.cat([p.detach().flatten().double().cpu() for p in policy.parameters()])
     return {"iterations": len(curve), "windows": cfg.windows, "device": cfg.device, "cuda_graph": deferred,
-            "fused_network": cfg.fused_network, "network_tiles": cfg.network_tiles,
+            **dict(zip(("fused_network", "network_tiles"), cfg.network_paths())),
             "train_s": train, "process_s": process, "ms_per_iteration_mean": 1e3 * train / len(curve),
             "per_length": lengths,
             "overhead_s": train - rated if all(x["ms_per_iteration"] is not None for x in lengths) else None,
@@ -127,8 +129,19 @@ def workload_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--curriculum", default="", help="comma list of window lengths; default: the config's")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-graph", action="store_true", help="CUDA: run each iteration eagerly")
+    p.add_argument("--plain", action="store_true", help="the plain path (fused_network and network_tiles off)")
     p.add_argument("--fused", action="store_true", help="GradFitConfig.fused_network: the fused MLP path and Adam")
     p.add_argument("--tiles", action="store_true", help="GradFitConfig.network_tiles (with --fused): Warp tile kernels")
+
+
+def network_arguments(args) -> dict:
+    """``GradFitConfig``'s ``fused_network`` and ``network_tiles`` of the options: ``--plain`` both off, ``--fused``
+    the fused path (``--tiles`` its tile kernels), none of them the config's defaults (on CUDA the tile path)."""
+    if args.plain and (args.fused or args.tiles):
+        raise SystemExit("--plain runs neither the fused path nor its tiles")
+    if args.plain or args.fused:
+        return {"fused_network": args.fused, "network_tiles": args.tiles}
+    return {"network_tiles": True} if args.tiles else {}
 
 
 def workload(args):
@@ -146,7 +159,7 @@ def workload(args):
     robot = load_robot(DEFAULT_ROBOT)
     dataset = load_dataset(args.data, robot=robot)
     cfg = GradFitConfig(windows=args.windows, device=args.device, iterations=args.iterations, seed=args.seed,
-                        cuda_graph=not args.no_graph, fused_network=args.fused, network_tiles=args.tiles)
+                        cuda_graph=not args.no_graph, **network_arguments(args))
     if args.curriculum:
         cfg = dataclasses.replace(cfg, horizon_curriculum=tuple(int(h) for h in args.curriculum.split(",")))
     return robot, dataset, cfg

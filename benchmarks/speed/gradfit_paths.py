@@ -128,7 +128,8 @@ def main(argv=None) -> dict:
     robot = load_robot(DEFAULT_ROBOT)
     data = load_dataset(args.data, robot=robot)
     cfg = GradFitConfig(windows=args.windows, device=args.device, iterations=10, cuda_graph=False)
-    paths = {"plain": {}, "fused": {"fused_network": True}}
+    paths = {"plain": {"fused_network": False, "network_tiles": False},
+             "fused": {"fused_network": True, "network_tiles": False}}
     if args.tiles:
         paths["tiles"] = {"fused_network": True, "network_tiles": True}
     horizons = [int(h) for h in args.horizons.split(",")]

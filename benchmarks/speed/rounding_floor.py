@@ -2,12 +2,13 @@
 weights moved by one unit in the last place each (up or down at random, one generator per ``--nudges`` seed), then
 resumed to the end; the final validation error of each against the same run resumed untouched (the control).
 
-    python benchmarks/speed/rounding_floor.py --device cuda:0 --windows 1024 --iterations 2000 --nudges 1,2,3
+    python benchmarks/speed/rounding_floor.py --device cuda:0 --windows 1024 --iterations 2000 --nudges 1,2,3 --plain
     python benchmarks/speed/rounding_floor.py --device cpu --windows 32 --iterations 240 --nudges 1,2
 
 A faster path whose sums run in another order (``--fused``, ``--tiles``: :class:`wresdyn.fit.gradfit.GradFitConfig`'s
 ``fused_network`` and ``network_tiles``) changes every iteration's gradients by about that much; how far the fit then
-ends from the plain path can be read against how far a single such change moves the plain path itself. The nudge
+ends from the plain path (``--plain``; without a path option the fit's default, the tile path on CUDA) can be read
+against how far a single such change moves the plain path itself. The nudge
 goes through the fit's own checkpoint and resume (:func:`wresdyn.fit.gradfit.fit` with a run folder and ``until``),
 so the control must end bit for bit where an uninterrupted fit does (the resume's promise; reported as
 ``control_final_validation``). Workload and schedule as ``gradfit_2000.py`` (the shipped humanoid and data, the fit's
@@ -98,11 +99,11 @@ def main(argv=None) -> dict:
     result = floor(robot, dataset, cfg, nudges, args.at)
     name = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else platform.processor() or "cpu"
     result.update({"machine": name, "device": args.device, "windows": args.windows, "iterations": args.iterations,
-                   "fused_network": args.fused, "network_tiles": args.tiles,
+                   **dict(zip(("fused_network", "network_tiles"), cfg.network_paths())),
                    "command": " ".join(["python", *sys.argv]),
                    "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())})
-    print(f"{name}, {args.device}; {args.iterations} iterations x {args.windows} windows; fused_network {args.fused}; "
-          f"network_tiles {args.tiles}; weights nudged after iteration {args.at}")
+    print(f"{name}, {args.device}; {args.iterations} iterations x {args.windows} windows; fused_network "
+          f"{result['fused_network']}; network_tiles {result['network_tiles']}; weights nudged after iteration {args.at}")
     print(f"control (resumed untouched): final validation {result['control_final_validation']!r} rad")
     for r in result["nudged"]:
         print(f"nudge seed {r['nudge_seed']}: final validation {r['final_validation']!r} rad, "

@@ -40,6 +40,21 @@ def test_fused_network_runs_the_mlp_only():
         dataclasses.replace(TINY, fused_network=True, model="parametric")
 
 
+def test_network_paths_run_the_tiles_on_cuda_by_default():
+    assert TINY.network_paths() == (False, False)  # the CPU: the plain path, whose results stay bit for bit
+    cuda = dataclasses.replace(TINY, device="cuda:0")
+    assert cuda.network_paths() == (True, True)
+    assert cuda.network_paths(fusable=False) == (False, False)  # a residual the fused path cannot run
+    assert dataclasses.replace(cuda, residual=ResidualConfig(arch="gru")).network_paths() == (False, False)
+    assert dataclasses.replace(cuda, model="parametric").network_paths() == (False, False)
+    assert dataclasses.replace(cuda, network_tiles=False).network_paths() == (True, False)
+    assert dataclasses.replace(cuda, fused_network=False).network_paths() == (False, False)
+    assert dataclasses.replace(TINY, fused_network=True).network_paths() == (True, False)
+    assert dataclasses.replace(TINY, network_tiles=True).network_paths() == (True, True)  # tiles imply the fused path
+    with pytest.raises(WresdynError, match="MLP network only"):
+        dataclasses.replace(cuda, network_tiles=True, model="parametric")
+
+
 def test_plain_checkpoint_resumes_fused(robot, data, tmp_path):
     fit(robot, data, TINY, out=tmp_path, until=4, log=lambda *_: None)
     _, curve = fit(robot, data, dataclasses.replace(TINY, fused_network=True), out=tmp_path, log=lambda *_: None)
@@ -51,7 +66,8 @@ def test_plain_checkpoint_resumes_fused(robot, data, tmp_path):
 def test_graph_replayed_fused_fit_gives_the_eager_plain_fit(robot, data):
     # the fused step, its deferred gradients and fused Adam inside the CUDA graph against the plain path run eagerly:
     # the bounds of the graph-against-eager test of the plain path (tests/learn/test_gradfit_2000.py)
-    cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0")
+    cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0", fused_network=False,
+                              network_tiles=False)  # the plain path, which CUDA runs only when told
     fused = _figures(*fit(robot, data, dataclasses.replace(cfg, fused_network=True), log=lambda *_: None))
     plain = _figures(*fit(robot, data, dataclasses.replace(cfg, cuda_graph=False), log=lambda *_: None))
     assert fused[0][-1] == pytest.approx(plain[0][-1], rel=1e-3)

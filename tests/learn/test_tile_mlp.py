@@ -152,7 +152,8 @@ def test_fused_checkpoint_resumes_with_tiles(robot, data, tmp_path):
 def test_graph_replayed_tile_fit_gives_the_graph_replayed_fused_fit(robot, data):
     # the tile kernels launched on torch's stream inside the captured iteration: the bounds of the graph-against-eager
     # test of the fused path (tests/fit/test_fused_network.py)
-    cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0", fused_network=True)
+    cfg = dataclasses.replace(TINY, windows=64, iterations=12, select_every=6, device="cuda:0", fused_network=True,
+                              network_tiles=False)
     fused = _figures(*fit(robot, data, cfg, log=lambda *_: None))
     tiles = _figures(*fit(robot, data, dataclasses.replace(cfg, network_tiles=True), log=lambda *_: None))
     assert tiles[0][-1] == pytest.approx(fused[0][-1], rel=1e-3)
@@ -164,7 +165,7 @@ def test_tiles_need_the_fused_network():
     from wresdyn.errors import WresdynError
 
     with pytest.raises(WresdynError, match="set fused_network too"):
-        dataclasses.replace(TINY, network_tiles=True)
+        dataclasses.replace(TINY, fused_network=False, network_tiles=True)
 
 
 def test_tile_block_parses_rows_chunk_threads_and_mathdx():

@@ -28,7 +28,7 @@ from pathlib import Path
 import torch
 
 from ..learn.adam import Adam
-from ..learn.fused_mlp import FusedMLPRollout
+from ..learn.fused_mlp import FusedMLPRollout, fusable
 from ..learn.graph_step import StepGraphs, adopt_optimiser, set_lr
 from ..learn.parametric import ParametricResidual
 from ..learn.residual import EluMLP, GRUResidualPolicy, MLPResidualPolicy, ResidualConfig, export_run_files, obs_stats
@@ -142,8 +142,8 @@ class _FitLearner:
         self.sim = Simulator(robot, cfg.windows, dt, solver=cfg.solver, device=cfg.device, requires_grad=True,
                              friction_kappa=cfg.friction_kappa, solver_threads=cfg.sim_threads)
         self.deferred = cfg.cuda_graph and self.sim.device.type == "cuda"
-        self.optim = Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred,
-                          fused=cfg.fused_network or None)
+        fused = cfg.network_paths(fusable(self.policy) is None)[0]
+        self.optim = Adam(self.policy.parameters(), lr=cfg.lr, capturable=self.deferred, fused=fused or None)
         self.map_location = cfg.device
         delay = 0.0
         if physics is not None:
@@ -212,7 +212,8 @@ class GradFitIteration:
     torch's workspaces, which a capture must not). The window indices and the observation noise enter through
     fixed buffers; the gradients live in each graph's memory pool (:class:`~wresdyn.learn.graph_step.StepGraphs`,
     shared with identification). Without ``graph`` the same code runs eagerly.
-    With ``cfg.fused_network`` the rollout runs the MLP as :class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`, whose
+    Where ``cfg.fused_network`` resolves on (:meth:`GradFitConfig.network_paths`: on CUDA by default) the rollout runs
+    the MLP as :class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`, whose
     :meth:`~wresdyn.learn.fused_mlp.FusedMLPRollout.finish` forms the parameters' gradients after the backward pass.
     """
 
@@ -221,7 +222,8 @@ class GradFitIteration:
         self.cfg, self.sim, self.bank, self.policy, self.optim = cfg, sim, bank, policy, optim
         self.obs_noise, self.graph, self.weights = obs_noise, graph, weights
         self.torque_scale = policy.scale if policy.kind == "torque" else None
-        self.fused = FusedMLPRollout(policy, tiles=cfg.network_tiles) if cfg.fused_network else None
+        fused, tiles = cfg.network_paths(fusable(policy) is None)
+        self.fused = FusedMLPRollout(policy, tiles=tiles) if fused else None
         self._graphs = StepGraphs(sim)
         self.adopt_optimiser()
 

@@ -97,17 +97,20 @@ class GradFitConfig(WindowFitStop):
     through torch and each step's Warp tape, gradient clipping, Adam) from a CUDA graph captured once per window
     length, with no host synchronisation inside (:class:`GradFitIteration`). The CPU runs the same code eagerly; off,
     CUDA does too. May change on resume."""
-    fused_network: bool = False
+    fused_network: bool | None = None
     """Run the MLP residual of the training rollouts in fewer torch kernels per step
     (:class:`~wresdyn.learn.fused_mlp.FusedMLPRollout`: the parameters' gradients formed once per iteration, the clip's
     mask kept from the forward pass) and Adam as torch's fused kernel. The same fit to float32 rounding, not bit for
-    bit (the gradients' sums run in another order), so off by default; for the launch-bound GPU iteration
-    (``benchmarks/speed/gradfit10.sh``). MLP networks only. May change on resume."""
-    network_tiles: bool = False
+    bit (the gradients' sums run in another order). ``None`` (the default): on CUDA where the residual is an MLP
+    network the fused path runs (the GPU iteration is launch-bound: ``benchmarks/speed/gradfit_2000.py``), off on the
+    CPU, whose results stay those of the plain path bit for bit (:meth:`network_paths`). MLP networks only. May change
+    on resume."""
+    network_tiles: bool | None = None
     """With ``fused_network``: each rollout step's network forward as one Warp tile kernel and its backward as one
-    (:mod:`wresdyn.learn.tile_mlp`) instead of ~24 small torch kernels. The same fit to float32 rounding (the GEMMs'
-    sums in another order); the kernels' split is ``$WRESDYN_TILE_BLOCK``'s where set (:meth:`TileBlock.from_env`).
-    May change on resume."""
+    (:mod:`wresdyn.learn.tile_mlp`) instead of ~24 small torch kernels, and the rollout one autograd node
+    (:mod:`wresdyn.sim.tape_chain`). The same fit to float32 rounding (the GEMMs' sums in another order); the kernels'
+    split is ``$WRESDYN_TILE_BLOCK``'s where set (:meth:`TileBlock.from_env`). ``None`` (the default): on CUDA with
+    the fused path, off on the CPU. May change on resume."""
     physics: str = ""
     """Where the physical parameters the residual is learned on came from (``physics.json`` of ``wresdyn
     identify``; the hybrid's ``identify/``), recorded in the run's config and compared on resume; "" = the robot
@@ -119,7 +122,18 @@ class GradFitConfig(WindowFitStop):
         check_number(self.horizon, "horizon", integer=True, ge=1)
         for name in ("w_torque", "w_action_rate", "obs_noise"):
             check_number(getattr(self, name), name, ge=0)
-        if self.fused_network and (self.model != "network" or self.residual.arch != "mlp"):
+        mlp = self.model == "network" and self.residual.arch == "mlp"
+        if (self.fused_network or self.network_tiles) and not mlp:
             raise WresdynError("fused_network runs the MLP network only (model 'network', residual.arch 'mlp')")
-        if self.network_tiles and not self.fused_network:
+        if self.network_tiles and self.fused_network is False:
             raise WresdynError("network_tiles runs the fused network's steps: set fused_network too")
+
+    def network_paths(self, fusable: bool = True) -> tuple[bool, bool]:
+        """``(fused_network, network_tiles)`` as the fit runs them on :attr:`device`: a value given is kept (tiles
+        given on imply the fused path); ``None`` is on for CUDA where the residual is an MLP network the fused path
+        can run (``fusable``: :func:`wresdyn.learn.fused_mlp.fusable` of the built residual), else off."""
+        auto = str(self.device).startswith("cuda") and self.model == "network" and self.residual.arch == "mlp" \
+            and fusable
+        fused = (auto or bool(self.network_tiles)) if self.fused_network is None else self.fused_network
+        tiles = (auto and fused) if self.network_tiles is None else self.network_tiles
+        return fused, tiles
