@@ -102,7 +102,9 @@ SPEED = "speed/summary.json"
 EAGER = "speed/h200_20261130g/coldfit/fit_warm_eager.log"
 """The default fit warm with the identification stepped eagerly: the baseline of its CUDA graph."""
 FUSED = "speed/h200_20261201c/gradfit10_rows1/fused.json"
-"""The gradient fit's 2000 iterations with the opt-in fused MLP, warm, in the run of ``summary.json``'s figure."""
+"""The gradient fit's 2000 iterations with the fused MLP alone (no tile kernels), warm."""
+PLAIN = "speed/h200_20261201q/plain.json"
+"""The gradient fit's 2000 iterations on the plain path, in the run of ``summary.json``'s figure (the CUDA default)."""
 COLD = "speed/h200x2_20261130/coldfit/fit_cold.log"
 """The default fit of an earlier tree from an empty Warp cache without the shipped kernels."""
 
@@ -140,9 +142,9 @@ ROWS = {
         f"{rx(LANES, ROLLOUT, 3):.0f}M / {rx(LANES, ROLLOUT, 4):.1f}M at 16,384 worlds",
         f"{rx(LANES, ROLLOUT, 1):.0f}M / {rx(LANES, ROLLOUT, 2):.1f}M at 1024"]),
     "gradient fit: to 2.5×": (["speed_paths/cpu_2core_time_to_fidelity.json", "speed_paths/lanes/ttf_lanes.txt",
-                               SPEED, FUSED], lambda: [
+                               SPEED, PLAIN, FUSED], lambda: [
         f"{gradient_cpu():.1f} s (2 CPU cores)", f"{js(SPEED, 'gradfit_2000_s'):.1f} s",
-        f"fused MLP {js(FUSED, 'train_s'):.1f} s", f"{rx('speed_paths/lanes/ttf_lanes.txt', TTF_GPU):.1f} s"]),
+        f"plain path {js(PLAIN, 'train_s'):.1f} s", f"fused MLP alone {js(FUSED, 'train_s'):.1f} s", f"{rx('speed_paths/lanes/ttf_lanes.txt', TTF_GPU):.1f} s"]),
     "the first `wresdyn fit --device cuda:0`": (["first_fit/h200_lanes/pieces_laned/fit_first.log",
                                                  "speed_paths/lanes/fit_lanes.log", SPEED, EAGER, COLD], lambda: [
         f"{rx('first_fit/h200_lanes/pieces_laned/fit_first.log', WHOLE):.1f} s",

@@ -11,11 +11,15 @@ buffers are laid out for fewer of them:
 
 * where the actuated joints are the whole state (a fixed base), step ``k + 1`` reads its q, q̇ from step ``k``'s
   output arrays (Warp aliases, with gradients of their own): the value a rollout hands on is already in place;
-* the forward returns views of the output arrays and the backward views of the input gradients, not copies: both
-  hold until the step runs again (the next rollout), longer than autograd needs them (it copies a leaf's gradient
-  into ``.grad``; do not keep the gradients ``torch.autograd.grad`` returns for the step's inputs across rollouts);
+* the forward returns views of the output arrays and the backward views of the input gradients, not copies: the
+  outputs hold until the step runs again (the next rollout), an input gradient until the step before writes its
+  output's gradient into the same row (below) or the step runs again, longer than autograd needs them (it copies a
+  leaf's gradient into ``.grad``; do not keep the gradients ``torch.autograd.grad`` returns for the step's inputs
+  across rollouts);
 * the gradients SolverReplay's adjoint adds into (the inputs') are rows of a few arrays (:class:`StepRows`), each
-  zeroed in one memset by the first step of a rollout that finds it used, not five memsets a step;
+  zeroed in one memset by the first step of a rollout that finds it used, not five memsets a step; with a fixed base
+  a step's output gradient is the next step's input-gradient row (the same memory), so a rollout that sums a state's
+  gradient in place (:mod:`wresdyn.sim.tape_chain`) hands it to the step before without a copy;
 * with a fixed base the PD targets are rows of such arrays too: a rollout copies all its targets in at once
   (:func:`stage_targets`), not one copy a step.
 """
@@ -120,8 +124,9 @@ class TapeBuffers:
     entries outside it are never written (zeros, as allocated).
 
     ``rows``: where the gradients the adjoint adds into live (step ``k``'s rows), and where the actuated joints are
-    the whole state (``whole``), the PD target; ``prev``: the previous step's buffers, whose output q, q̇ this step
-    then reads in place (``chained``)."""
+    the whole state (``whole``), the PD target and the last state's q, q̇ gradients (step ``k + 1``'s row,
+    ``shared_out``); ``prev``: the previous step's buffers, whose output q, q̇ this step then reads in place
+    (``chained``)."""
 
     def __init__(self, model, substeps: int, num_worlds: int, nq: int, nqd: int, q_index, qd_index,
                  rows: TapeRows | None = None, k: int = 0, prev: TapeBuffers | None = None) -> None:
