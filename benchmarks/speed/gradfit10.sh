@@ -4,7 +4,7 @@
 #   a. fused_cold: the fused path, first run (loads and, on a fresh machine, compiles the Warp kernels; its seconds
 #                  include that: not the figure to report);
 #   b. fused:      the fused path again, warm: the figure;
-#   c. plain:      the plain path (the default), warm: the baseline of this run;
+#   c. plain:      the plain path (`--plain`; on the CPU the default), warm: the baseline of this run;
 #   d. plain_sN:   the plain path with seed N for each N in EXTRA_SEEDS (none by default): how far another seed moves
 #                  the same path's result, the scale against which the fused path's difference is read.
 # Then summary.txt: each run's training seconds and ms/iteration per window length, and b against c (the loss after
@@ -53,8 +53,8 @@ run() {  # run NAME [ARGS...]: gradfit_2000.py under the budget left, its log an
 
 run fused_cold --fused
 run fused --fused
-run plain
-for seed in ${EXTRA_SEEDS:-}; do run "plain_s$seed" --seed "$seed"; done
+run plain --plain
+for seed in ${EXTRA_SEEDS:-}; do run "plain_s$seed" --plain --seed "$seed"; done
 
 "$py" - "$out" > "$out/summary.txt" 2>&1 <<'EOF'
 import json, sys
