@@ -160,7 +160,7 @@ def _loop(sim: Simulator, window: Window, policy, kind: str, policy_worlds: slic
     # a policy that forms its observation from the state itself (the tile kernels), where its torque goes in place
     state = forces is not None and getattr(policy, "takes_state", False) and (obs_noise == 0.0 or noise is not None)
     before = None  # q̇ of the step before, for such a policy's q̈
-    if state and targets is not None and chains(sim, policy, truncation):  # one autograd node for the whole window
+    if state and targets is not None and chains(sim, policy):  # one autograd node for the whole window
         q_all, qd_all, act = chained_rollout(sim, window, policy, targets, forces, noise if obs_noise > 0.0 else None,
                                              truncation)
         return Rollout(q_all, qd_all, act, diverged_at)

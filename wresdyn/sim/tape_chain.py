@@ -32,11 +32,11 @@ CHAIN_ENV = "WRESDYN_ROLLOUT_CHAIN"
 _TOKENS: dict = {}  # device -> a leaf that requires grad: puts the rollout's node into the backward graph
 
 
-def chains(sim, policy, truncation: int) -> bool:
+def chains(sim, policy) -> bool:
     """Whether :func:`chained_rollout` runs ``sim``'s differentiable rollout with ``policy`` (module docstring)."""
     rows = sim._tape_rows
     return (os.environ.get(CHAIN_ENV) != "0" and rows is not None and sim.solver_kind == "replay"
-            and not getattr(sim.solver, "update_body_q", False) and not sim._physics and truncation >= 0
+            and not getattr(sim.solver, "update_body_q", False) and not sim._physics
             and getattr(policy, "takes_state", False) and hasattr(policy, "backward_state_into"))
 
 
