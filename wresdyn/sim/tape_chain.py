@@ -90,8 +90,8 @@ class _Chain(torch.autograd.Function):
             need = j > 0 and not (t and j % t == 0)  # the state the residual read carries a gradient
             policy.backward_state_into(j, grads[3], g_a[:, j], need, sim.dt, grads[0], grads[1],
                                        bufs[j - 1].input_grads[1] if j else None)
-        for k in range(h + 1):
-            rows.mark(k)  # zeroed before a step adds into them again
+        for _, k0, _ in rows.spans(h + 1):
+            rows.mark(k0)  # each array of rows zeroed before a step adds into it again
         ctx.tapes = None
         return (None,) * 8
 
@@ -100,15 +100,11 @@ def _rows_from(rows, buf, g_q: torch.Tensor, g_qd: torch.Tensor, h: int) -> None
     """Copy the loss's gradients of states 1 .. ``h`` (B, h + 1, n) into their rows of ``rows``, one copy of each per
     array of rows; the rows of steps 1 .. h - 1 are zero (the forward's steps cleared them) and row h is written
     nowhere else."""
-    import warp as wp
-
     b, nq, nqd = g_q.shape[0], buf.inputs[0].shape[1], buf.inputs[1].shape[1]
     for c, k0, k1 in rows.spans(h + 1):
-        while len(rows.views) <= c:  # made once, by the first (eager, not captured) rollout that reaches the array
-            rows.views.append(wp.to_torch(rows.arrays[len(rows.views)], requires_grad=False))
         lo = max(k0, 1)
         if lo >= k1:
             continue
-        part = rows.views[c][lo - k0:k1 - k0]
+        part = rows.view(c)[lo - k0:k1 - k0]
         part[:, :b * nq].view(-1, b, nq).copy_(g_q[:, lo:k1].transpose(0, 1))
         part[:, b * nq:b * (nq + nqd)].view(-1, b, nqd).copy_(g_qd[:, lo:k1].transpose(0, 1))

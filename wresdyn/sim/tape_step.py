@@ -101,6 +101,15 @@ class StepRows:
         """Step ``k``'s backward pass left gradients in its row."""
         self.used[self._where(k)[0]] = True
 
+    def view(self, c: int) -> torch.Tensor:
+        """Array ``c`` as a torch tensor (rows, width), made once: by the first (eager, not captured) rollout that
+        reaches the array."""
+        import warp as wp
+
+        while len(self.views) <= c:
+            self.views.append(wp.to_torch(self.arrays[len(self.views)], requires_grad=False))
+        return self.views[c]
+
 
 class TapeRows:
     """A simulator's :class:`StepRows`: the input gradients SolverReplay's adjoint adds into, and the PD targets."""
@@ -212,13 +221,9 @@ def stage_targets(sim, target: torch.Tensor) -> list | None:
     bufs = sim._tape_buffers[:h]
     if not bufs[0].whole:
         return None
-    import warp as wp
-
     rows = sim._tape_rows.targets
     for c, k0, k1 in rows.spans(h):
-        if len(rows.views) == c:  # made once, by the first (eager, not captured) rollout that reaches the array
-            rows.views.append(wp.to_torch(rows.arrays[c], requires_grad=False))
-        rows.views[c].view(-1, *target[:, 0].shape)[:k1 - k0] = target[:, k0:k1].transpose(0, 1)
+        rows.view(c).view(-1, *target[:, 0].shape)[:k1 - k0] = target[:, k0:k1].transpose(0, 1)
     return [b.inputs[2] for b in bufs]
 
 
